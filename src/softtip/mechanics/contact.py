@@ -1,0 +1,359 @@
+"""Unilateral contact of the elastomer body with a rigid indenter.
+
+Both solvers enforce non-penetration of the body's outer nodes with a penalty
+that is stiff compared to the body (``penalty`` times the mean diagonal of the
+stiffness, so penetration is ~1/penalty of the local displacement) and find
+the contact set by a semi-smooth Newton (primal-dual active-set) iteration:
+the contact area is an outcome, not an input.
+
+* :func:`solve_linear_contact` - small strain, gaps measured along the
+  approach direction (see :mod:`softtip.mechanics.indenters`). Every active-set iteration is
+  one numerical Cholesky factorisation that reuses the ordering and symbolic
+  analysis of the first; the first active set is the indenter's geometric
+  overlap with the body, which is nearly the converged one, so two or three
+  factorisations usually suffice. Quadratic elements carry little (sometimes
+  slightly negative) consistent pressure at their corner nodes, so a node can
+  flip in and out of contact; once a cycle is seen, nodes are only added.
+* :func:`solve_hyperelastic_contact` - neo-Hookean, large deformation; Newton's
+  method with load steps and a backtracking line search on the total energy.
+
+Friction is either ``"none"`` or ``"stick"`` (contact nodes move with the
+indenter tangentially from where they touched). The indenter is lowered until
+it touches the undeformed body, then pushed ``depth`` down, then moved
+``tangential`` (x, y) sideways, in load steps.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from softtip.mechanics.fe import BodyModel, MagnetPose
+from softtip.mechanics.indenters import Indenter
+from softtip.mechanics.linsolve import NotPositiveDefinite, SPDSolver
+
+FRICTION_MODES = ("none", "stick")
+
+
+@dataclass(frozen=True)
+class LoadCase:
+    indenter: Indenter
+    depth: float  # m, normal travel after first touch
+    tangential: tuple[float, float] = (0.0, 0.0)  # m, travel along x and y after the normal push
+    position: tuple[float, float] = (0.0, 0.0)  # m, (x, y) of the indenter's axis on the fingertip
+    friction: str = "none"
+
+    def __post_init__(self):
+        if not self.depth >= 0:
+            raise ValueError(f"depth = {self.depth}: expected a non-negative length in metres")
+        if self.friction not in FRICTION_MODES:
+            raise ValueError(f"friction = {self.friction!r}: expected one of {', '.join(FRICTION_MODES)}")
+
+
+@dataclass
+class ContactResult:
+    unknowns: np.ndarray
+    magnet_poses: list[MagnetPose]
+    force: np.ndarray  # (3,) N, force of the body on the indenter (its reaction); Fz > 0 when pushing down
+    contact_nodes: np.ndarray  # indices of nodes in contact at the end
+    displacements: np.ndarray  # (n_nodes, 3) m
+    iterations: int
+    factorizations: int
+    timings: dict = field(default_factory=dict)
+
+
+def _touch_offset(indenter: Indenter, position: tuple[float, float], points: np.ndarray) -> np.ndarray:
+    """Where the indenter's frame sits when it first touches the undeformed body."""
+    offset = np.array([position[0], position[1], 0.0])
+    gap = indenter.vertical_gap(points - offset)[0].min()
+    if not np.isfinite(gap):
+        raise ValueError(f"the indenter at position {position} m does not reach the fingertip")
+    offset[2] = -gap
+    return offset
+
+
+def _load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list[np.ndarray]:
+    path = [np.array([0.0, 0.0, -load.depth * k / normal_steps]) for k in range(1, normal_steps + 1)]
+    if any(load.tangential):
+        path += [np.array([load.tangential[0] * k / tangential_steps, load.tangential[1] * k / tangential_steps,
+                           -load.depth]) for k in range(1, tangential_steps + 1)]
+    return path
+
+
+def _contact_candidates(body: BodyModel) -> np.ndarray:
+    outer = body.space.boundary_nodes["outer"]
+    return outer[body.node_unknown[outer] >= 0]
+
+
+def _penalty_blocks(body: BodyModel, nodes: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
+    """A block-diagonal matrix over the unknowns with 3x3 ``blocks`` at ``nodes``."""
+    dof = body.node_unknown[nodes][:, None] + np.arange(3)
+    rows = np.repeat(dof, 3, axis=1).ravel()
+    cols = np.tile(dof, (1, 3)).ravel()
+    return sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(body.size, body.size))
+
+
+class _StickAnchors:
+    """Where each sticking node holds on to the indenter, in the indenter's frame."""
+
+    def __init__(self):
+        self.points: dict[int, np.ndarray] = {}
+
+    def targets(self, nodes: np.ndarray, current: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """Target positions of ``nodes``; nodes without an anchor anchor at ``current`` now."""
+        out = np.empty((len(nodes), 3))
+        for k, node in enumerate(nodes):
+            anchor = self.points.setdefault(int(node), current[k] - frame)
+            out[k] = anchor + frame
+        return out
+
+    def keep_only(self, nodes: np.ndarray) -> None:
+        keep = set(int(n) for n in nodes)
+        self.points = {n: p for n, p in self.points.items() if n in keep}
+
+
+class _ActiveSetSystem:
+    """Solves (K + sum of penalty blocks of the active nodes) u = f for changing active sets.
+
+    One Cholesky factorisation serves many active sets: the blocks of nodes that
+    joined or left the set since the factorisation form a low-rank correction
+    applied with the Woodbury identity, using K0^-1 columns cached per node.
+    When the correction grows past ``max_columns`` it is cheaper to refactorise.
+    """
+
+    def __init__(self, body: BodyModel, stiffness: sp.csr_matrix, nodes: np.ndarray, blocks: np.ndarray,
+                 solver: SPDSolver, max_columns: int = 120):
+        self.body, self.stiffness, self.nodes, self.blocks, self.solver = body, stiffness, nodes, blocks, solver
+        self.max_columns = max_columns
+        self.dofs = body.node_unknown[nodes][:, None] + np.arange(3)
+        # each 3x3 block as a sum of rank-one terms: coefficient * v v^T
+        values, vectors = np.linalg.eigh(blocks)
+        self.rank_terms = [[(values[i, k], vectors[i, :, k]) for k in range(3) if values[i, k] > 1e-12 * values[i].max()]
+                           for i in range(len(nodes))]
+        self.base: np.ndarray | None = None
+        self.columns: dict[int, np.ndarray] = {}
+
+    def _factorize(self, active: np.ndarray) -> None:
+        penalty = _penalty_blocks(self.body, self.nodes[active], self.blocks[active])
+        self.solver.factorize(self.stiffness + penalty)
+        self.base, self.columns = active.copy(), {}
+
+    def solve(self, active: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        changed = np.flatnonzero(active != self.base) if self.base is not None else None
+        if changed is None or sum(len(self.rank_terms[i]) for i in changed) > self.max_columns:
+            self._factorize(active)
+            return self.solver.solve(rhs)
+        if len(changed) == 0:
+            return self.solver.solve(rhs)
+        missing = [i for i in changed if i not in self.columns]
+        if missing:
+            vectors = [self._vectors(i) for i in missing]
+            solved = self.solver.solve(np.hstack(vectors))
+            start = 0
+            for i, v in zip(missing, vectors):
+                self.columns[i] = solved[:, start:start + v.shape[1]]
+                start += v.shape[1]
+        update = np.hstack([self._vectors(i) for i in changed])
+        inverse_update = np.hstack([self.columns[i] for i in changed])
+        signs = np.concatenate([[1.0 if active[i] else -1.0] * len(self.rank_terms[i]) for i in changed])
+        coefficients = signs * np.concatenate([[c for c, _ in self.rank_terms[i]] for i in changed])
+        y = self.solver.solve(rhs)
+        capacitance = np.diag(1 / coefficients) + update.T @ inverse_update
+        return y - inverse_update @ np.linalg.solve(capacitance, update.T @ y)
+
+    def _vectors(self, i: int) -> np.ndarray:
+        out = np.zeros((self.body.size, len(self.rank_terms[i])))
+        for k, (_, v) in enumerate(self.rank_terms[i]):
+            out[self.dofs[i], k] = v
+        return out
+
+
+def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, normal_steps: int | None = None,
+                         tangential_steps: int = 4, max_iterations: int = 30,
+                         solver: SPDSolver | None = None) -> ContactResult:
+    """Small-strain contact; gaps are linearised about the undeformed body."""
+    t0 = time.perf_counter()
+    stiffness = body.stiffness
+    t_assembly = time.perf_counter() - t0
+    solver = solver or SPDSolver()
+    factorizations0 = solver.factorizations
+    candidates = _contact_candidates(body)
+    x = body.space.nodes[candidates]
+    epsilon = penalty * stiffness.diagonal()[: body.n_free].mean()
+    touch = _touch_offset(load.indenter, load.position, x)
+    stick = load.friction == "stick"
+    if normal_steps is None:
+        normal_steps = 2 if stick else 1
+    # approach-direction gaps share one normal per node for the whole load path
+    normal = load.indenter.vertical_gap(x - touch)[1]
+    blocks = epsilon * (np.broadcast_to(np.eye(3), (len(x), 3, 3)) if stick
+                        else np.einsum("ni,nj->nij", normal, normal))
+    system = _ActiveSetSystem(body, stiffness, candidates, blocks, solver)
+    anchors = _StickAnchors()
+    unknowns = np.zeros(body.size)
+    u_candidates = np.zeros_like(x)
+    nodal_force = np.zeros_like(x)
+    previous_frame = touch.copy()
+    active = np.zeros(len(candidates), dtype=bool)
+    iterations = 0
+    for travel in _load_path(load, normal_steps, tangential_steps):
+        frame = touch + travel
+        gap = load.indenter.vertical_gap(x - frame)[0]
+        active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
+        seen: set[bytes] = set()
+        only_add = False
+        for _ in range(max_iterations):
+            iterations += 1
+            if stick:
+                # contact nodes follow the indenter tangentially; the normal gap closes
+                held = anchors.targets(candidates[active], x[active] + u_candidates[active], previous_frame)
+                target = held + (frame - previous_frame) - x[active]
+                target -= np.einsum("ij,ij->i", target, normal[active])[:, None] * normal[active]
+                target -= gap[active, None] * normal[active]
+                rhs_nodal = epsilon * target
+            else:
+                rhs_nodal = -epsilon * gap[active, None] * normal[active]
+            rhs = np.zeros(body.size)
+            rhs[body.node_unknown[candidates[active]][:, None] + np.arange(3)] = rhs_nodal
+            unknowns = system.solve(active, rhs)
+            u_now = unknowns[body.node_unknown[candidates][:, None] + np.arange(3)]
+            nodal_force = np.zeros_like(x)  # force of the indenter on each candidate node
+            nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
+            pressure = np.einsum("ij,ij->i", nodal_force, normal)
+            linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
+            tolerance = 1e-6 * max(load.depth, 1e-6)
+            new_active = np.where(active, pressure > 0, linear_gap < -tolerance)
+            if only_add:
+                new_active |= active
+            if np.array_equal(new_active, active):
+                break
+            if new_active.tobytes() in seen:
+                only_add = True
+                new_active |= active
+            seen.add(active.tobytes())
+            active = new_active
+        u_candidates = u_now
+        if stick:
+            anchors.keep_only(candidates[active])
+            anchors.targets(candidates[active], x[active] + u_now[active], frame)
+        previous_frame = frame
+    t_total = time.perf_counter() - t0
+    return ContactResult(
+        unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-nodal_force.sum(axis=0),
+        contact_nodes=candidates[active], displacements=body.nodal_displacements(unknowns), iterations=iterations,
+        factorizations=solver.factorizations - factorizations0,
+        timings={"assembly_s": t_assembly, "contact_solve_s": t_total - t_assembly})
+
+
+class _RegularizedNewton:
+    """Newton steps with the tangent shifted towards its diagonal where it is indefinite
+    (near snap-through of the roof), so each step stays a descent direction for the
+    line search. The last shift that worked is remembered and relaxed tenfold per step."""
+
+    def __init__(self, solver: SPDSolver):
+        self.solver, self.shift = solver, 0.0
+
+    def step(self, matrix: sp.csr_matrix, residual: np.ndarray) -> np.ndarray:
+        diagonal = sp.diags(matrix.diagonal())
+        shift = self.shift / 10 if self.shift > 1e-4 else 0.0
+        while True:
+            try:
+                self.solver.factorize(matrix + shift * diagonal if shift else matrix)
+                self.shift = shift
+                return -self.solver.solve(residual)
+            except NotPositiveDefinite:
+                shift = 1e-3 if shift == 0 else shift * 10
+                if shift > 1e3:
+                    raise
+
+
+def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 6, tangential_steps: int = 4,
+                               penalty: float = 1e3, tolerance: float = 1e-7, max_newton: int = 40,
+                               progress=None) -> ContactResult:
+    """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
+    t0 = time.perf_counter()
+    solver = SPDSolver()
+    candidates = _contact_candidates(body)
+    cand_dofs = body.node_unknown[candidates][:, None] + np.arange(3)
+    x = body.space.nodes[candidates]
+    epsilon = penalty * body.stiffness.diagonal()[: body.n_free].mean()
+    touch = _touch_offset(load.indenter, load.position, x)
+    stick = load.friction == "stick"
+    anchors = _StickAnchors()
+    unknowns = np.zeros(body.size)
+    iterations = 0
+
+    def contact_terms(q: np.ndarray, frame: np.ndarray, with_matrix: bool):
+        p = x + q[cand_dofs]
+        gap, normal = load.indenter.signed_distance(p - frame)
+        active = gap < 0
+        nodes = candidates[active]
+        if stick:
+            anchors.keep_only(nodes)
+            surface = p[active] - gap[active, None] * normal[active]  # anchor where the node meets the surface
+            target = anchors.targets(nodes, surface, frame)
+            residual = p[active] - target
+            energy = 0.5 * epsilon * np.sum(residual**2)
+            force = -epsilon * residual
+            blocks = epsilon * np.broadcast_to(np.eye(3), (len(nodes), 3, 3))
+        else:
+            energy = 0.5 * epsilon * np.sum(gap[active] ** 2)
+            force = -epsilon * gap[active, None] * normal[active]
+            blocks = epsilon * np.einsum("ni,nj->nij", normal[active], normal[active])
+        gradient = np.zeros(body.size)
+        np.add.at(gradient, cand_dofs[active].ravel(), -force.ravel())
+        matrix = _penalty_blocks(body, nodes, blocks) if with_matrix else None
+        return energy, gradient, matrix, force, nodes
+
+    def total_energy(q: np.ndarray, frame: np.ndarray) -> float:
+        elastic = body.hyperelastic(q, with_tangent=False)[0]
+        if not np.isfinite(elastic):
+            return np.inf
+        saved = dict(anchors.points)
+        energy = contact_terms(q, frame, False)[0]
+        anchors.points = saved
+        return elastic + energy
+
+    path = _load_path(load, load_steps, tangential_steps)
+    force = np.zeros((0, 3))
+    nodes = np.zeros(0, dtype=int)
+    newton = _RegularizedNewton(solver)
+    previous = unknowns
+    for step, travel in enumerate(path):
+        frame = touch + travel
+        if step > 0:  # secant predictor along the load path
+            predicted = 2 * unknowns - previous
+            previous = unknowns
+            if np.isfinite(total_energy(predicted, frame)):
+                unknowns = predicted
+        reference = None
+        for _ in range(max_newton):
+            iterations += 1
+            elastic, gradient, tangent = body.hyperelastic(unknowns)
+            c_energy, c_gradient, c_matrix, force, nodes = contact_terms(unknowns, frame, True)
+            residual = gradient + c_gradient
+            norm = np.linalg.norm(residual)
+            reference = reference or max(norm, 1e-30)
+            if norm < tolerance * reference:
+                break
+            step_vector = newton.step(tangent + c_matrix, residual)
+            energy0 = elastic + c_energy
+            slope = residual @ step_vector
+            alpha = 1.0
+            while alpha > 1e-4:
+                if total_energy(unknowns + alpha * step_vector, frame) <= energy0 + 1e-4 * alpha * slope:
+                    break
+                alpha *= 0.5
+            unknowns = unknowns + alpha * step_vector
+            if alpha * np.abs(step_vector).max() < tolerance * max(load.depth, 1e-6):
+                break
+        if progress is not None:
+            progress(step + 1, len(path))
+    t_total = time.perf_counter() - t0
+    return ContactResult(
+        unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-force.sum(axis=0),
+        contact_nodes=nodes, displacements=body.nodal_displacements(unknowns), iterations=iterations,
+        factorizations=solver.factorizations, timings={"contact_solve_s": t_total})

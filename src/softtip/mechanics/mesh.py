@@ -1,0 +1,206 @@
+"""Tetrahedral meshes of fingertip bodies, built with gmsh and cached on disk.
+
+The body is meshed with holes where the magnets sit: magnets are rigid and tied
+to the elastomer, so only their surfaces enter the finite-element model (as
+rigid-body constraints). Boundary triangles are grouped by role:
+
+``base``      the face bonded to the rigid base (fixed),
+``cavity``    the walls of the hollow (free),
+``outer``     top surface, fillet and sides (free; where contact can happen),
+``magnet<i>`` the surface of magnet i's hole (moves rigidly with the magnet).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from softtip.design.model import MM, Design
+
+MESH_FORMAT = 1  # bump when the meshing recipe changes, so cached meshes are rebuilt
+_GMSH_LOCK = threading.Lock()  # gmsh keeps global state
+
+
+@dataclass(frozen=True)
+class TetMesh:
+    points: np.ndarray  # (n, 3) m
+    tets: np.ndarray  # (4, nt) vertex indices
+    boundaries: dict[str, np.ndarray]  # name -> (3, k) triangles (vertex indices)
+    key: str  # hash of what produced it
+
+    @property
+    def magnet_count(self) -> int:
+        return sum(1 for name in self.boundaries if name.startswith("magnet"))
+
+
+def cache_dir() -> Path:
+    """Where meshes and other derived data are kept (``SOFTTIP_CACHE_DIR`` overrides)."""
+    root = os.environ.get("SOFTTIP_CACHE_DIR") or Path.home() / ".cache" / "softtip"
+    return Path(root)
+
+
+def mesh_key(design: Design, size: float, curvature_points: int) -> str:
+    import gmsh
+
+    payload = json.dumps({"geometry": design.geometry_key, "size": size, "curvature_points": curvature_points,
+                          "format": MESH_FORMAT, "gmsh": gmsh.__version__}, sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()[:20]
+
+
+def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 10,
+                use_cache: bool = True) -> TetMesh:
+    """Mesh the design's body; ``size`` is the largest element edge (m).
+
+    Element size near the magnets follows their curvature (``curvature_points``
+    elements around a circle) so the small holes are resolved at any ``size``.
+    """
+    if size <= 0:
+        raise ValueError(f"mesh size = {size}: expected a positive length in metres")
+    key = mesh_key(design, size, curvature_points)
+    path = cache_dir() / "meshes" / f"{key}.npz"
+    if use_cache and path.exists():
+        try:
+            return _load(path, key)
+        except (OSError, ValueError, KeyError):
+            path.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
+    with _GMSH_LOCK:
+        mesh = _build(design, size, curvature_points, key)
+    if use_cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+        np.savez(tmp, points=mesh.points, tets=mesh.tets,
+                 names=np.array(json.dumps(sorted(mesh.boundaries))),
+                 **{f"boundary_{name}": tris for name, tris in mesh.boundaries.items()})
+        tmp.replace(path)
+    return mesh
+
+
+def _load(path: Path, key: str) -> TetMesh:
+    with np.load(path, allow_pickle=False) as data:
+        names = json.loads(str(data["names"]))
+        return TetMesh(points=data["points"], tets=data["tets"],
+                       boundaries={name: data[f"boundary_{name}"] for name in names}, key=key)
+
+
+def _build(design: Design, size: float, curvature_points: int, key: str) -> TetMesh:
+    import gmsh
+
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("fingertip")
+        occ = gmsh.model.occ
+        body, cavity_box = _body_and_cavity(design, occ)
+        magnet_tags = []
+        for magnet in design.magnets:
+            cx, cy, cz = magnet.center
+            magnet_tags.append(occ.addCylinder(cx, cy, cz - magnet.height / 2, 0, 0, magnet.height,
+                                               magnet.diameter / 2))
+        occ.cut([(3, body)], [(3, t) for t in magnet_tags], removeObject=True, removeTool=True)
+        occ.synchronize()
+
+        volumes = gmsh.model.getEntities(3)
+        if len(volumes) != 1:
+            raise RuntimeError(f"meshing {design.name}: expected one body volume, got {len(volumes)}")
+        groups = _classify_surfaces(design, cavity_box)
+
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size / 20)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", curvature_points)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        gmsh.option.setNumber("Mesh.ElementOrder", 1)
+        gmsh.model.mesh.generate(3)
+
+        node_tags, coords, _ = gmsh.model.mesh.getNodes()
+        coords = coords.reshape(-1, 3)
+        _, elem_nodes = gmsh.model.mesh.getElementsByType(4)  # 4-node tetrahedra
+        tets_tags = elem_nodes.reshape(-1, 4)
+        used = np.unique(tets_tags)
+        index_of = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
+        index_of[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+        keep = index_of[used]
+        renumber = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
+        renumber[used] = np.arange(len(used))
+        points = coords[keep]
+        tets = renumber[tets_tags].T.copy()
+        boundaries = {}
+        for name, surfaces in groups.items():
+            tris = [gmsh.model.mesh.getElementsByType(2, tag=s)[1].reshape(-1, 3) for s in surfaces]
+            boundaries[name] = renumber[np.vstack(tris)].T.copy()
+    finally:
+        gmsh.finalize()
+    tets = _positive_orientation(points, tets)
+    return TetMesh(points=points, tets=tets, boundaries=boundaries, key=key)
+
+
+def _body_and_cavity(design: Design, occ) -> tuple[int, tuple[float, ...]]:
+    """Create the filleted body minus its hollow; return its tag and the hollow's bounding box."""
+    body_spec, cavity_spec = design.spec["body"], design.spec["cavity"]
+    h = design.height
+    fillet = body_spec.get("fillet_mm", 0.0) * MM
+    if design.kind == "cylindrical":
+        radius = body_spec["diameter_mm"] * MM / 2
+        body = occ.addCylinder(0, 0, 0, 0, 0, h, radius)
+        top_edges = lambda: [e for _, e in occ.getEntitiesInBoundingBox(  # noqa: E731
+            -radius * 1.01, -radius * 1.01, h * 0.999, radius * 1.01, radius * 1.01, h * 1.001, 1)]
+        c_radius, c_height = cavity_spec["radius_mm"] * MM, cavity_spec["height_mm"] * MM
+        cavity = occ.addCylinder(0, 0, 0, 0, 0, c_height, c_radius)
+        cavity_box = (-c_radius, -c_radius, 0.0, c_radius, c_radius, c_height)
+    else:
+        w, l = body_spec["width_mm"] * MM, body_spec["length_mm"] * MM
+        body = occ.addBox(-w / 2, -l / 2, 0, w, l, h)
+        top_edges = lambda: [e for _, e in occ.getEntitiesInBoundingBox(  # noqa: E731
+            -w, -l, h * 0.999, w, l, h * 1.001, 1)]
+        cw, cl, ch = (cavity_spec[k] * MM for k in ("width_mm", "length_mm", "height_mm"))
+        cavity = occ.addBox(-cw / 2, -cl / 2, 0, cw, cl, ch)
+        cavity_box = (-cw / 2, -cl / 2, 0.0, cw / 2, cl / 2, ch)
+    occ.synchronize()
+    if fillet > 0:
+        body = occ.fillet([body], top_edges(), [fillet])[0][1]
+    out, _ = occ.cut([(3, body)], [(3, cavity)])
+    occ.synchronize()
+    return out[0][1], cavity_box
+
+
+def _classify_surfaces(design: Design, cavity_box: tuple[float, ...]) -> dict[str, list[int]]:
+    import gmsh
+
+    tol = 1e-6
+    groups: dict[str, list[int]] = {"base": [], "cavity": [], "outer": []}
+    groups.update({f"magnet{i}": [] for i in range(len(design.magnets))})
+    for _, tag in gmsh.model.getEntities(2):
+        x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, tag)
+        if z1 < tol:
+            groups["base"].append(tag)
+            continue
+        for i, magnet in enumerate(design.magnets):
+            cx, cy, cz = magnet.center
+            r, hh = magnet.diameter / 2 + tol, magnet.height / 2 + tol
+            if cx - r <= x0 and x1 <= cx + r and cy - r <= y0 and y1 <= cy + r and cz - hh <= z0 and z1 <= cz + hh:
+                groups[f"magnet{i}"].append(tag)
+                break
+        else:
+            bx0, by0, bz0, bx1, by1, bz1 = cavity_box
+            inside = bx0 - tol <= x0 and x1 <= bx1 + tol and by0 - tol <= y0 and y1 <= by1 + tol and z1 <= bz1 + tol
+            groups["cavity" if inside else "outer"].append(tag)
+    empty = [name for name, tags in groups.items() if not tags]
+    if empty:
+        raise RuntimeError(f"meshing {design.name}: no surface classified as {empty[0]}")
+    return groups
+
+
+def _positive_orientation(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Order every tetrahedron's vertices so its signed volume is positive."""
+    a, b, c, d = (points[tets[i]] for i in range(4))
+    volume = np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)
+    flipped = volume < 0
+    tets = tets.copy()
+    tets[[1, 2]] = np.where(flipped, tets[[2, 1]], tets[[1, 2]])
+    return tets

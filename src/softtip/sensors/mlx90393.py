@@ -1,0 +1,363 @@
+"""Melexis MLX90393 3-axis Hall magnetometer: settings, datasheet facts, readout model.
+
+The model turns the flux density at the sensitive point (tesla) into the raw
+16-bit register words the chip returns for the configured GAIN_SEL, RES_XYZ,
+OSR and DIG_FILT, and back again the way a host driver does. Everything is
+vectorised over arrays of shape (..., 3) holding x, y, z.
+
+Sources, cited by table in the comments below:
+  [DS]  Melexis MLX90393 datasheet, rev. 006 (2020-01-08), document 3901090393.
+  [AN]  Melexis MLX90393 application note "Getting Started" (2015), as quoted
+        in the public issue trackers of the Adafruit and tedyapo drivers.
+Temperature compensation (TCMP_EN = 1), which changes the output format, is
+not modelled: TCMP_EN = 0 throughout.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+# --------------------------------------------------------------------------
+# Datasheet facts
+# --------------------------------------------------------------------------
+
+
+def _read_only(values: ArrayLike) -> np.ndarray:
+    array = np.array(values, dtype=np.float64)
+    array.setflags(write=False)
+    return array
+
+
+# [DS] section 15.1.4, Table 17: sensitivity in uT/LSB for HALLCONF = 0xC,
+# rows GAIN_SEL 0..7, columns RES 0..3. Each RES step selects the next bit of
+# the 19-bit ADC word, so a column is exactly twice the previous one up to the
+# table's 3-decimal rounding. The printed XY entry GAIN_SEL 1 / RES 3 reads
+# 4.840 (the Z value of the row above), a misprint: 2 x 2.403 = 4.806 is used.
+SENSITIVITY_XY_HALLCONF_C_UT = _read_only([
+    [0.751, 1.502, 3.004, 6.009],
+    [0.601, 1.202, 2.403, 4.806],
+    [0.451, 0.901, 1.803, 3.605],
+    [0.376, 0.751, 1.502, 3.004],
+    [0.300, 0.601, 1.202, 2.403],
+    [0.250, 0.501, 1.001, 2.003],
+    [0.200, 0.401, 0.801, 1.602],
+    [0.150, 0.300, 0.601, 1.202],
+])
+SENSITIVITY_Z_HALLCONF_C_UT = _read_only([
+    [1.210, 2.420, 4.840, 9.680],
+    [0.968, 1.936, 3.872, 7.744],
+    [0.726, 1.452, 2.904, 5.808],
+    [0.605, 1.210, 2.420, 4.840],
+    [0.484, 0.968, 1.936, 3.872],
+    [0.403, 0.807, 1.613, 3.227],
+    [0.323, 0.645, 1.291, 2.581],
+    [0.242, 0.484, 0.968, 1.936],
+])
+# [DS] footnote to Table 17: "For HALLCONF = 0x0, the sensitivity scales with
+# a factor 98/75" (0.150 -> 0.196 uT/LSB for XY at GAIN_SEL 7, RES 0).
+HALLCONF_0_SENSITIVITY_FACTOR = 98.0 / 75.0
+HALLCONF_DEFAULT = 0xC
+SENSITIVITY_UT: dict[int, tuple[np.ndarray, np.ndarray]] = {
+    0xC: (SENSITIVITY_XY_HALLCONF_C_UT, SENSITIVITY_Z_HALLCONF_C_UT),
+    0x0: (
+        _read_only(SENSITIVITY_XY_HALLCONF_C_UT * HALLCONF_0_SENSITIVITY_FACTOR),
+        _read_only(SENSITIVITY_Z_HALLCONF_C_UT * HALLCONF_0_SENSITIVITY_FACTOR),
+    ),
+}
+
+# [DS] Table 21, output data format with TCMP_EN = 0, indexed by RES 0..3.
+# RES 0 and 1: signed 16-bit two's complement. RES 2 and 3: unsigned, the zero
+# field sits at 2^15 (RES 2) and 2^14 (RES 3). The valid ranges of RES 2 and 3,
+# +-22000 and +-11000 counts, are the same field span (88000 RES-0 counts);
+# the model saturates the ADC there, and RES 0 and 1 saturate earlier, at the
+# 16-bit limits of their signed word. Inferred from the table: the datasheet
+# does not describe what the chip outputs beyond these ranges.
+OUTPUT_ZERO_FIELD_COUNTS = (0, 0, 1 << 15, 1 << 14)
+OUTPUT_LOWEST_COUNTS = (-(1 << 15), -(1 << 15), -22000, -11000)
+OUTPUT_HIGHEST_COUNTS = ((1 << 15) - 1, (1 << 15) - 1, 22000, 11000)
+
+# [DS] Table 8, timing of one single-measurement (SM) conversion:
+#   T_CONV = T_STBY + T_ACTIVE + m * T_CONVM + T_CONVT (if T measured) + T_CONV_END
+#   T_CONVM = 67 + 64 * 2^OSR * (2 + 2^DIG_FILT) us  per magnetic axis (m axes)
+#   T_CONVT = 67 + 192 * 2^OSR2 us                     temperature
+# The datasheet's own table of XYZ conversion times (reproduced in the
+# Adafruit driver) equals T_STBY + T_ACTIVE + 3 * 64 * 2^OSR * (2 + 2^DIG_FILT),
+# i.e. it leaves out the 67 us per axis and T_CONV_END; the full sum is used here.
+STANDBY_TIME_S = 264e-6         # T_STBY: IDLE to STBY
+ACTIVE_TIME_S = 432e-6          # T_ACTIVE: STBY to ACTIVE
+CONVERSION_END_TIME_S = 120e-6  # T_CONV_END: end of analog active mode
+AXIS_FIXED_TIME_S = 67e-6
+AXIS_SAMPLE_TIME_S = 64e-6
+TEMPERATURE_FIXED_TIME_S = 67e-6
+TEMPERATURE_SAMPLE_TIME_S = 192e-6
+
+# [DS] conversion-time table and [AN]: these (OSR, DIG_FILT) pairs are not
+# permitted (HALLCONF = 0xC); they are refused for HALLCONF = 0x0 as well.
+FORBIDDEN_OSR_DIG_FILT = frozenset({(0, 0), (0, 1), (1, 0)})
+
+# RMS noise. ASSUMPTION, not a datasheet figure: the datasheet's noise data
+# could not be retrieved for this model. The anchor is 0.25 uT RMS on X and Y
+# at the longest averaging (OSR 3, DIG_FILT 7), about 1.7 LSB of the finest
+# range (0.150 uT/LSB), i.e. the finest LSB is assumed to sit at the noise
+# floor. Scaling to other settings:
+#   * noise proportional to 1/sqrt(averaging), averaging = 2^OSR * (2 + 2^DIG_FILT),
+#     the sample count that also sets T_CONVM (white noise averaged);
+#   * Z has the same noise in ADC counts as X and Y, so its noise in uT is
+#     larger by the Z/XY sensitivity ratio of Table 17 (0.242 / 0.150);
+#   * independent of GAIN_SEL and RES: the gain scales signal and front-end
+#     noise alike, so in uT the noise is fixed while it is above the LSB; below
+#     it the rounding to counts (LSB^2/12 variance) dominates, which to_counts
+#     reproduces by rounding;
+#   * HALLCONF 0x0 is assumed to have the same noise in uT.
+NOISE_XY_REFERENCE_UT = 0.25
+NOISE_REFERENCE_AVERAGING = (1 << 3) * (2 + (1 << 7))
+NOISE_Z_TO_XY_RATIO = SENSITIVITY_Z_HALLCONF_C_UT[7, 0] / SENSITIVITY_XY_HALLCONF_C_UT[7, 0]
+
+_UINT16_MODULUS = 1 << 16
+
+# --------------------------------------------------------------------------
+# Settings
+# --------------------------------------------------------------------------
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_range(name: str, value: Any, highest: int) -> int:
+    if not _is_integer(value) or not 0 <= value <= highest:
+        raise ValueError(f"sensor.{name} = {value!r}: expected an integer 0..{highest}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class MLX90393Settings:
+    """Register settings of one MLX90393 (TCMP_EN = 0).
+
+    gain_sel: GAIN_SEL 0..7 (0 is the highest gain, the finest LSB is at 7).
+    res_xyz: RES_X, RES_Y, RES_Z, each 0..3 (which 16 of the 19 ADC bits are output).
+    osr, dig_filt: magnetic oversampling 0..3 and digital filter 0..7.
+    osr2: temperature oversampling 0..3, used when temperature is measured.
+    hallconf: HALLCONF 0xC (chip default) or 0x0.
+    temperature: whether each conversion also measures the temperature.
+    The defaults are the power-on register values except DIG_FILT, whose
+    power-on value 0 is a forbidden combination with OSR 0; 2 is the fastest
+    permitted filter.
+    """
+
+    gain_sel: int = 7
+    res_xyz: tuple[int, int, int] = (0, 0, 0)
+    osr: int = 0
+    dig_filt: int = 2
+    osr2: int = 0
+    hallconf: int = HALLCONF_DEFAULT
+    temperature: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gain_sel", _check_range("gain_sel", self.gain_sel, 7))
+        object.__setattr__(self, "res_xyz", _checked_resolutions(self.res_xyz))
+        object.__setattr__(self, "osr", _check_range("osr", self.osr, 3))
+        object.__setattr__(self, "dig_filt", _check_range("dig_filt", self.dig_filt, 7))
+        object.__setattr__(self, "osr2", _check_range("osr2", self.osr2, 3))
+        if not _is_integer(self.hallconf) or int(self.hallconf) not in SENSITIVITY_UT:
+            raise ValueError(f"sensor.hallconf = {self.hallconf!r}: expected 0xC (12) or 0x0 (0)")
+        object.__setattr__(self, "hallconf", int(self.hallconf))
+        if not isinstance(self.temperature, (bool, np.bool_)):
+            raise ValueError(f"sensor.temperature = {self.temperature!r}: expected true or false")
+        object.__setattr__(self, "temperature", bool(self.temperature))
+        if (self.osr, self.dig_filt) in FORBIDDEN_OSR_DIG_FILT:
+            raise ValueError(
+                f"sensor.osr = {self.osr} with sensor.dig_filt = {self.dig_filt}: not permitted "
+                "by the datasheet; use dig_filt >= 2 with osr 0 and dig_filt >= 1 with osr 1"
+            )
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> MLX90393Settings:
+        """Settings from a mapping such as a parsed [sensor] table; unknown keys are refused."""
+        if not isinstance(d, Mapping):
+            raise ValueError(f"sensor = {d!r}: expected a table of settings")
+        known = cls.__dataclass_fields__.keys()
+        for key in d:
+            if key not in known:
+                raise ValueError(f"sensor.{key}: unknown key; expected one of {', '.join(known)}")
+        return cls(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain mapping (lists, ints, bool) that from_dict turns back into equal settings."""
+        return {
+            "gain_sel": self.gain_sel,
+            "res_xyz": list(self.res_xyz),
+            "osr": self.osr,
+            "dig_filt": self.dig_filt,
+            "osr2": self.osr2,
+            "hallconf": self.hallconf,
+            "temperature": self.temperature,
+        }
+
+
+def _checked_resolutions(value: Any) -> tuple[int, int, int]:
+    if (
+        not isinstance(value, (tuple, list, np.ndarray))
+        or len(value) != 3
+        or not all(_is_integer(res) and 0 <= res <= 3 for res in value)
+    ):
+        raise ValueError(f"sensor.res_xyz = {value!r}: expected 3 integers, each 0..3")
+    return tuple(int(res) for res in value)
+
+
+# --------------------------------------------------------------------------
+# Pure functions of the settings
+# --------------------------------------------------------------------------
+
+
+def lsb_uT(settings: MLX90393Settings) -> np.ndarray:
+    """Microtesla per count for x, y, z, shape (3,)."""
+    xy, z = SENSITIVITY_UT[settings.hallconf]
+    res_x, res_y, res_z = settings.res_xyz
+    gain = settings.gain_sel
+    return np.array([xy[gain, res_x], xy[gain, res_y], z[gain, res_z]])
+
+
+def _per_axis(settings: MLX90393Settings, by_res: tuple[int, ...]) -> np.ndarray:
+    return np.array([by_res[res] for res in settings.res_xyz])
+
+
+def full_scale_uT(settings: MLX90393Settings) -> np.ndarray:
+    """Largest |B| in uT per axis (x, y, z) that is output without clipping, shape (3,)."""
+    return _per_axis(settings, OUTPUT_HIGHEST_COUNTS) * lsb_uT(settings)
+
+
+def averaging_count(settings: MLX90393Settings) -> int:
+    """ADC samples averaged per magnetic axis: 2^OSR * (2 + 2^DIG_FILT)."""
+    return (1 << settings.osr) * (2 + (1 << settings.dig_filt))
+
+
+def conversion_time_s(settings: MLX90393Settings, axes: int = 3) -> float:
+    """Single-measurement conversion time in seconds for `axes` magnetic axes (1..3).
+
+    Includes the start-up from IDLE (T_STBY + T_ACTIVE), the end of the analog
+    phase (T_CONV_END) and the temperature conversion when settings.temperature.
+    Excludes the bus traffic of the SM and RM commands.
+    """
+    if not _is_integer(axes) or not 1 <= axes <= 3:
+        raise ValueError(f"axes = {axes!r}: expected an integer 1..3")
+    axis_time = AXIS_FIXED_TIME_S + AXIS_SAMPLE_TIME_S * averaging_count(settings)
+    temperature_time = 0.0
+    if settings.temperature:
+        temperature_samples = 1 << settings.osr2
+        temperature_time = (
+            TEMPERATURE_FIXED_TIME_S + TEMPERATURE_SAMPLE_TIME_S * temperature_samples
+        )
+    return (
+        STANDBY_TIME_S + ACTIVE_TIME_S + axes * axis_time + temperature_time + CONVERSION_END_TIME_S
+    )
+
+
+def max_output_rate_hz(settings: MLX90393Settings, axes: int = 3) -> float:
+    """Readings per second in single-measurement mode: 1 / conversion_time_s."""
+    return 1.0 / conversion_time_s(settings, axes)
+
+
+def noise_rms_uT(settings: MLX90393Settings) -> np.ndarray:
+    """RMS noise in uT per axis (x, y, z) before rounding to counts, shape (3,)."""
+    xy = NOISE_XY_REFERENCE_UT * np.sqrt(NOISE_REFERENCE_AVERAGING / averaging_count(settings))
+    return np.array([xy, xy, xy * NOISE_Z_TO_XY_RATIO])
+
+
+# --------------------------------------------------------------------------
+# Readout model
+# --------------------------------------------------------------------------
+
+
+class MLX90393:
+    """One MLX90393: flux density to register words and back.
+
+    Register words are returned as uint16, as read from the bus: RES 0/1 axes
+    hold two's complement (a field of -1 count reads 0xFFFF), RES 2/3 axes hold
+    the unsigned word with the zero field at 0x8000 / 0x4000.
+    """
+
+    def __init__(self, settings: MLX90393Settings | None = None) -> None:
+        self._settings = MLX90393Settings() if settings is None else settings
+        lsb = lsb_uT(self._settings)
+        self._lsb_uT = lsb
+        self._counts_per_tesla = 1e6 / lsb
+        self._noise_counts = noise_rms_uT(self._settings) / lsb
+        self._lowest = _per_axis(self._settings, OUTPUT_LOWEST_COUNTS).astype(np.float64)
+        self._highest = _per_axis(self._settings, OUTPUT_HIGHEST_COUNTS).astype(np.float64)
+        self._zero_field = _per_axis(self._settings, OUTPUT_ZERO_FIELD_COUNTS).astype(np.int32)
+        self._twos_complement = np.array([res <= 1 for res in self._settings.res_xyz])
+
+    @property
+    def settings(self) -> MLX90393Settings:
+        return self._settings
+
+    def to_counts(
+        self,
+        b_tesla: ArrayLike,
+        rng: np.random.Generator | None = None,
+        noise: bool = True,
+    ) -> np.ndarray:
+        """Register words (uint16, shape of b_tesla) for fields b_tesla of shape (..., 3).
+
+        Adds Gaussian noise of noise_rms_uT when noise is true (rng defaults to a
+        fresh default_rng()), rounds to the nearest count and saturates at the
+        output range of each axis's RES.
+        """
+        b = np.asarray(b_tesla, dtype=np.float64)
+        _check_last_axis("b_tesla", b)
+        counts = b * self._counts_per_tesla
+        if noise:
+            generator = np.random.default_rng() if rng is None else rng
+            noise_counts = generator.standard_normal(b.shape)
+            noise_counts *= self._noise_counts
+            counts += noise_counts
+        np.rint(counts, out=counts)
+        np.clip(counts, self._lowest, self._highest, out=counts)
+        if np.isnan(counts).any():
+            raise ValueError("b_tesla contains NaN")
+        words = counts.astype(np.int32)
+        words += self._zero_field
+        # int32 -> uint16 wraps modulo 2^16: negative RES 0/1 counts become two's complement.
+        return words.astype(np.uint16)
+
+    def counts_to_uT(self, counts: ArrayLike) -> np.ndarray:
+        """Field in uT from register words of shape (..., 3), as a host driver decodes them."""
+        return self._signed_counts(counts) * self._lsb_uT
+
+    def read_uT(
+        self,
+        b_tesla: ArrayLike,
+        rng: np.random.Generator | None = None,
+        noise: bool = True,
+    ) -> np.ndarray:
+        """What the host reads in uT for fields b_tesla (..., 3): counts_to_uT(to_counts(...))."""
+        return self.counts_to_uT(self.to_counts(b_tesla, rng=rng, noise=noise))
+
+    def saturated(self, counts: ArrayLike) -> np.ndarray:
+        """Boolean mask, shape of counts, of words at the saturation limit of their axis."""
+        signed = self._signed_counts(counts)
+        return (signed <= self._lowest) | (signed >= self._highest)
+
+    def _signed_counts(self, counts: ArrayLike) -> np.ndarray:
+        words = np.asarray(counts)
+        _check_last_axis("counts", words)
+        if not np.issubdtype(words.dtype, np.integer):
+            raise ValueError(f"counts has dtype {words.dtype}: expected integer register words")
+        if words.dtype != np.uint16 and words.size:
+            if words.min() < 0 or words.max() >= _UINT16_MODULUS:
+                raise ValueError("counts outside 0..65535: expected 16-bit register words")
+        signed = words.astype(np.int32)
+        signed -= self._zero_field
+        signed -= _UINT16_MODULUS * ((signed >= 1 << 15) & self._twos_complement)
+        return signed
+
+
+def _check_last_axis(name: str, array: np.ndarray) -> None:
+    if array.ndim == 0 or array.shape[-1] != 3:
+        raise ValueError(f"{name} has shape {array.shape}: expected (..., 3) for x, y, z")
