@@ -247,3 +247,19 @@ def test_from_dict_round_trips_to_dict():
     assert as_dict["res_xyz"] == [1, 2, 3]
     assert MLX90393Settings.from_dict(as_dict) == settings
     assert MLX90393Settings.from_dict({"res_xyz": [2, 2, 2]}).res_xyz == (2, 2, 2)
+
+
+@pytest.mark.parametrize(
+    ("osr", "dig_filt", "low_uT", "high_uT"),
+    [(3, 7, 0.15, 0.25), (1, 7, 0.5, 0.8), (0, 6, 0.9, 1.2)],
+)
+def test_xy_noise_matches_published_readings_of_the_datasheet_noise_graph(osr, dig_filt, low_uT, high_uT) -> None:
+    # Readings of the datasheet's Figure 2 (XY noise vs conversion time, GAIN_SEL 7).
+    noise = noise_rms_uT(MLX90393Settings(gain_sel=7, osr=osr, dig_filt=dig_filt))
+    assert low_uT <= noise[0] <= high_uT
+    assert noise[0] == noise[1]
+
+
+def test_z_noise_at_longest_averaging_matches_the_datasheet_graph() -> None:
+    # Figure 3 read at OSR 3 / DIG_FILT 7: about 4 mGauss = 0.4 uT.
+    assert noise_rms_uT(MLX90393Settings(osr=3, dig_filt=7))[2] == pytest.approx(0.4, rel=0.05)

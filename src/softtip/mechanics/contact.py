@@ -121,13 +121,15 @@ class _ActiveSetSystem:
     One Cholesky factorisation serves many active sets: the blocks of nodes that
     joined or left the set since the factorisation form a low-rank correction
     applied with the Woodbury identity, using K0^-1 columns cached per node.
-    When the correction grows past ``max_columns`` it is cheaper to refactorise.
+    When solving for the missing columns would take longer than a new
+    factorisation (both timed as they happen), it refactorises instead.
     """
 
     def __init__(self, body: BodyModel, stiffness: sp.csr_matrix, nodes: np.ndarray, blocks: np.ndarray,
-                 solver: SPDSolver, max_columns: int = 120):
+                 solver: SPDSolver):
         self.body, self.stiffness, self.nodes, self.blocks, self.solver = body, stiffness, nodes, blocks, solver
-        self.max_columns = max_columns
+        self.factorize_seconds = np.inf
+        self.column_seconds = 0.0
         self.dofs = body.node_unknown[nodes][:, None] + np.arange(3)
         # each 3x3 block as a sum of rank-one terms: coefficient * v v^T
         values, vectors = np.linalg.eigh(blocks)
@@ -137,21 +139,32 @@ class _ActiveSetSystem:
         self.columns: dict[int, np.ndarray] = {}
 
     def _factorize(self, active: np.ndarray) -> None:
+        start = time.perf_counter()
         penalty = _penalty_blocks(self.body, self.nodes[active], self.blocks[active])
         self.solver.factorize(self.stiffness + penalty)
         self.base, self.columns = active.copy(), {}
+        self.factorize_seconds = time.perf_counter() - start
 
     def solve(self, active: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        changed = np.flatnonzero(active != self.base) if self.base is not None else None
-        if changed is None or sum(len(self.rank_terms[i]) for i in changed) > self.max_columns:
+        if self.base is None:
             self._factorize(active)
             return self.solver.solve(rhs)
+        changed = np.flatnonzero(active != self.base)
         if len(changed) == 0:
             return self.solver.solve(rhs)
         missing = [i for i in changed if i not in self.columns]
+        new_columns = sum(len(self.rank_terms[i]) for i in missing)
+        changed_columns = sum(len(self.rank_terms[i]) for i in changed)
+        # a first guess of a column's cost before any was timed: 1/100 of a factorisation
+        per_column = self.column_seconds or self.factorize_seconds / 100
+        if new_columns * per_column > self.factorize_seconds or changed_columns > 600:
+            self._factorize(active)
+            return self.solver.solve(rhs)
         if missing:
             vectors = [self._vectors(i) for i in missing]
+            start = time.perf_counter()
             solved = self.solver.solve(np.hstack(vectors))
+            self.column_seconds = (time.perf_counter() - start) / new_columns
             start = 0
             for i, v in zip(missing, vectors):
                 self.columns[i] = solved[:, start:start + v.shape[1]]
@@ -185,8 +198,8 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     epsilon = penalty * stiffness.diagonal()[: body.n_free].mean()
     touch = _touch_offset(load.indenter, load.position, x)
     stick = load.friction == "stick"
-    if normal_steps is None:
-        normal_steps = 2 if stick else 1
+    if normal_steps is None:  # sticking nodes that touch late hold where they touched
+        normal_steps = 2 if stick and any(load.tangential) else 1
     # approach-direction gaps share one normal per node for the whole load path
     normal = load.indenter.vertical_gap(x - touch)[1]
     blocks = epsilon * (np.broadcast_to(np.eye(3), (len(x), 3, 3)) if stick
@@ -203,6 +216,8 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
         active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
+        if stick:  # nodes held by the indenter travel with it, even past the edge of its footprint
+            gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
         seen: set[bytes] = set()
         only_add = False
         for _ in range(max_iterations):

@@ -7,7 +7,9 @@ origin and offers two gap measures:
     inside) and the unit normal pointing from the indenter to the point; used
     at deformed positions by the large-deformation solver.
 ``vertical_gap(points)``     height of the indenter's lower surface above each
-    point (inf where it has none), with the approach direction -z as normal;
+    point (inf where it has none, unless ``extend``: then the surface is continued
+    beyond its edge, for nodes that stick to it and are carried sideways), with
+    the approach direction -z as normal;
     the small-strain gap of classical contact mechanics (Hertz, flat punch),
     valid however deep the indenter is pushed in one step.
 
@@ -57,7 +59,9 @@ class Board:
         normal = np.sign(s + (s == 0))[:, None] * gx[:, None] * across - gz[:, None] * np.array([0, 0, 1.0])
         return distance, normal
 
-    def vertical_gap(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def vertical_gap(self, points: np.ndarray, extend: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        if extend:
+            return _downward(points, -points[:, 2])
         across = np.array([-math.sin(self.angle), math.cos(self.angle), 0.0])
         under = np.abs(points @ across) <= self.thickness / 2
         return _downward(points, np.where(under, -points[:, 2], np.inf))
@@ -70,7 +74,8 @@ class Plate:
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return _downward(points, -points[:, 2])
 
-    vertical_gap = signed_distance
+    def vertical_gap(self, points: np.ndarray, extend: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        return self.signed_distance(points)
 
 
 @dataclass(frozen=True)
@@ -89,11 +94,11 @@ class Sphere:
         normal = offset / np.where(distance > 0, distance, 1)[:, None]
         return distance - self.radius, normal
 
-    def vertical_gap(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def vertical_gap(self, points: np.ndarray, extend: bool = False) -> tuple[np.ndarray, np.ndarray]:
         r2 = points[:, 0] ** 2 + points[:, 1] ** 2
         inside = r2 <= self.radius**2
         lower = self.radius - np.sqrt(np.where(inside, self.radius**2 - r2, 0.0))
-        return _downward(points, np.where(inside, lower - points[:, 2], np.inf))
+        return _downward(points, np.where(inside | extend, lower - points[:, 2], np.inf))
 
 
 Indenter = Board | Plate | Sphere

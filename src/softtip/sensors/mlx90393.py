@@ -100,20 +100,21 @@ TEMPERATURE_SAMPLE_TIME_S = 192e-6
 # permitted (HALLCONF = 0xC); they are refused for HALLCONF = 0x0 as well.
 FORBIDDEN_OSR_DIG_FILT = frozenset({(0, 0), (0, 1), (1, 0)})
 
-# RMS noise. ASSUMPTION, not a datasheet figure: the datasheet's noise data
-# could not be retrieved for this model. The anchor is 0.25 uT RMS on X and Y
-# at the longest averaging (OSR 3, DIG_FILT 7), about 1.7 LSB of the finest
-# range (0.150 uT/LSB), i.e. the finest LSB is assumed to sit at the noise
-# floor. Scaling to other settings:
+# RMS noise. The datasheet gives noise only as graphs (rev. 011, section 13.1,
+# Figures 2 and 3: XY and Z RMS noise versus conversion time per OSR, GAIN_SEL 7,
+# y axes 0-60 and 0-90 mGauss); no table. Published readings of those graphs
+# (a magnetic-field logger built on the chip): OSR 3 / DIG_FILT 7 -> XY 0.2 uT,
+# Z 0.4 uT; OSR 1 / DIG_FILT 7 -> 0.5-0.8 uT; OSR 0 / DIG_FILT 6 -> 0.9-1.2 uT.
+# The model below reproduces all three within their reading spread:
+#   * 0.25 uT RMS on XY at OSR 3 / DIG_FILT 7;
 #   * noise proportional to 1/sqrt(averaging), averaging = 2^OSR * (2 + 2^DIG_FILT),
 #     the sample count that also sets T_CONVM (white noise averaged);
 #   * Z has the same noise in ADC counts as X and Y, so its noise in uT is
-#     larger by the Z/XY sensitivity ratio of Table 17 (0.242 / 0.150);
-#   * independent of GAIN_SEL and RES: the gain scales signal and front-end
-#     noise alike, so in uT the noise is fixed while it is above the LSB; below
-#     it the rounding to counts (LSB^2/12 variance) dominates, which to_counts
-#     reproduces by rounding;
-#   * HALLCONF 0x0 is assumed to have the same noise in uT.
+#     larger by the Z/XY sensitivity ratio (0.242 / 0.150 = 1.61; the graphs
+#     show 4 vs 2 mGauss at the longest averaging);
+#   * the gain scales signal and noise alike, so in uT the noise is fixed while
+#     it is above the LSB; below the LSB, rounding to counts dominates;
+#   * HALLCONF 0x0 is assumed to have the same noise in uT (the datasheet is silent).
 NOISE_XY_REFERENCE_UT = 0.25
 NOISE_REFERENCE_AVERAGING = (1 << 3) * (2 + (1 << 7))
 NOISE_Z_TO_XY_RATIO = SENSITIVITY_Z_HALLCONF_C_UT[7, 0] / SENSITIVITY_XY_HALLCONF_C_UT[7, 0]

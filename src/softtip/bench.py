@@ -1,0 +1,101 @@
+"""Benchmarks of the twin, each reported with a baseline measured in the same run."""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from softtip.design.model import MM, load_design
+from softtip.mechanics.contact import LoadCase, _penalty_blocks
+from softtip.mechanics.indenters import Board
+from softtip.mechanics.linsolve import SPDSolver
+from softtip.mechanics.mesh import mesh_design
+from softtip.twin import FingertipTwin
+
+
+def _timed(function, *args, **kwargs):
+    start = time.perf_counter()
+    value = function(*args, **kwargs)
+    return value, time.perf_counter() - start
+
+
+def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, poses: int = 200_000,
+               include_neo_hookean: bool = True, log: Callable[[str], None] | None = None) -> dict:
+    from threadpoolctl import threadpool_limits
+
+    say = log or (lambda message: None)
+    design = load_design(design_name)
+    size = mesh_size_mm * MM
+    report: dict = {"design": design_name, "mesh_size_mm": mesh_size_mm}
+    with threadpool_limits(2):
+        mesh, t_cold = _timed(mesh_design, design, size, use_cache=False)
+        mesh_design(design, size)  # make sure the cache holds it
+        report["mesh"] = {"cold_s": t_cold, "tetrahedra": int(mesh.tets.shape[1])}
+        say(f"mesh (cold, no cache): {t_cold:.2f} s, {mesh.tets.shape[1]} tetrahedra")
+
+        load = LoadCase(Board(1.6e-3, 0.0), 1e-3, friction="stick")
+        start = time.perf_counter()
+        twin = FingertipTwin(design, mesh_size=size)
+        result = twin.simulate(load, noise=True, rng=np.random.default_rng(0))
+        t_push = time.perf_counter() - start
+        body = twin.body
+        # baseline: one linear solve with the converged contact area prescribed
+        nodes = result.contact.contact_nodes
+        epsilon = 1e4 * body.stiffness.diagonal()[: body.n_free].mean()
+        fixed_area = body.stiffness + _penalty_blocks(body, nodes, epsilon * np.broadcast_to(np.eye(3), (len(nodes), 3, 3)))
+        solver = SPDSolver()
+        start = time.perf_counter()
+        solver.factorize(fixed_area)
+        solver.solve(np.ones(body.size))
+        t_linear = time.perf_counter() - start
+        t_contact = result.timings["contact_solve_s"]
+        report["board_push_1mm"] = {
+            "total_s_mesh_cached": t_push, "unknowns": int(body.size), "contact_nodes": int(len(nodes)),
+            "contact_solve_s": t_contact, "fixed_area_linear_solve_s": t_linear,
+            "contact_over_linear": t_contact / t_linear, "factorizations": result.contact.factorizations,
+            "feature_dz_mm": [float(v) for v in result.feature_displacements[:, 2] * 1e3],
+            "force_N": [float(v) for v in result.force], "timings_s": result.timings}
+        say(f"1 mm board push (stick), mesh cached: {t_push:.2f} s total; contact solve {t_contact:.2f} s = "
+            f"{t_contact / t_linear:.2f} x one fixed-area linear solve ({t_linear:.2f} s); "
+            f"{result.contact.factorizations} factorisation(s)")
+
+        if include_neo_hookean:
+            deep = LoadCase(Board(1.6e-3, 0.0), 3e-3, friction="stick")
+            neo, t_neo = _timed(twin.simulate, deep, model="neo-hookean", noise=False)
+            report["neo_hookean_push_3mm"] = {"total_s": t_neo, "newton_iterations": neo.contact.iterations,
+                                              "factorizations": neo.contact.factorizations,
+                                              "force_N": [float(v) for v in neo.force],
+                                              "feature_dz_mm": [float(v) for v in neo.feature_displacements[:, 2] * 1e3]}
+            say(f"neo-Hookean 3 mm board push: {t_neo:.1f} s, {neo.contact.iterations} Newton iterations")
+
+        report["magnetics_sensor"] = _bench_readings(twin, poses, say)
+    return report
+
+
+def _bench_readings(twin: FingertipTwin, poses: int, say) -> dict:
+    """Readings per second through the exact field and the sensor model, against magpylib."""
+    import magpylib
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(1)
+    rest = np.array([m.center for m in twin.design.magnets])
+    positions = rest + rng.uniform(-0.5e-3, 0.5e-3, (poses, len(rest), 3))
+    rotvecs = rng.uniform(-0.1, 0.1, (poses, len(rest), 3))
+    twin.readings(positions[:100], rotvecs[:100])  # warm-up
+    _, t_ours = _timed(twin.readings, positions, rotvecs, noise=True, rng=rng)
+    sensors = twin.design.sensor_positions
+    readings = poses * len(sensors)
+    # baseline: magpylib's vectorised path API on a sub-batch, field only (no sensor model)
+    sub = min(poses, 20_000)
+    magnets = [magpylib.magnet.Cylinder(polarization=(0, 0, m.polarization), dimension=(m.diameter, m.height),
+                                        position=positions[:sub, i], orientation=Rotation.from_rotvec(rotvecs[:sub, i]))
+               for i, m in enumerate(twin.design.magnets)]
+    _, t_magpy = _timed(magpylib.getB, magnets, sensors, sumup=True)
+    ours = readings / t_ours
+    theirs = sub * len(sensors) / t_magpy
+    say(f"magnetics + sensor: {ours:,.0f} readings/s ({poses} poses x {len(sensors)} sensor(s), "
+        f"{len(rest)} magnets); magpylib field alone: {theirs:,.0f} readings/s; ratio {ours / theirs:.1f}x")
+    return {"poses": poses, "readings_per_s": ours, "magpylib_readings_per_s": theirs,
+            "speedup_vs_magpylib": ours / theirs}

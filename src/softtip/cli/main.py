@@ -1,0 +1,284 @@
+"""The ``softtip`` command line: a thin layer over the library."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from softtip import __version__
+
+app = typer.Typer(help="softtip: soft magnetic tactile fingertips, from design to real-time estimates.",
+                  no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+bench_app = typer.Typer(help="Benchmarks measured on this machine (ratios against baselines of the same run).",
+                        no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+console = Console()
+errors = Console(stderr=True)
+
+
+class IndenterKind(str, Enum):
+    board = "board"
+    plate = "plate"
+    sphere = "sphere"
+
+
+class Friction(str, Enum):
+    none = "none"
+    stick = "stick"
+
+
+class Model(str, Enum):
+    linear = "linear"
+    neo_hookean = "neo-hookean"
+
+
+class Switch(str, Enum):
+    on = "on"
+    off = "off"
+
+
+def fail(message: str) -> None:
+    """A user mistake: one line, no traceback, exit code 2."""
+    errors.print(f"[bold red]error:[/] {message}", highlight=False)
+    raise typer.Exit(2)
+
+
+def user_errors(function):
+    """Turn the library's validation errors into one-line messages."""
+    import functools
+
+    from softtip.design.model import DesignError
+
+    @functools.wraps(function)
+    def wrapper(*args, **kwargs):
+        try:
+            return function(*args, **kwargs)
+        except (DesignError, ValueError) as error:
+            fail(str(error))
+
+    return wrapper
+
+
+@app.callback(invoke_without_command=True)
+def main(version: bool = typer.Option(False, "--version", help="Print the version and exit.")) -> None:
+    if version:
+        console.print(f"softtip {__version__}")
+        raise typer.Exit()
+
+
+@app.command()
+@user_errors
+def designs(json_output: bool = typer.Option(False, "--json", help="Print JSON.")) -> None:
+    """List the shipped fingertip designs."""
+    from softtip.design.model import load_design, shipped_designs
+
+    rows = [{"name": name, "kind": (d := load_design(name)).kind, "description": d.spec.get("description", ""),
+             "magnets": len(d.magnets), "sensors": len(d.sensor_positions)} for name in shipped_designs()]
+    if json_output:
+        print(json.dumps(rows, indent=2))
+        return
+    table = Table(title="shipped designs")
+    for column in ("name", "kind", "magnets", "sensors", "description"):
+        table.add_column(column)
+    for row in rows:
+        table.add_row(*(str(row[c]) for c in ("name", "kind", "magnets", "sensors", "description")))
+    console.print(table)
+
+
+@app.command()
+@user_errors
+def simulate(
+    design: str = typer.Option("cylindrical-A", help="Shipped design name or path to a design TOML file."),
+    indenter: IndenterKind = typer.Option(IndenterKind.board, help="Rigid indenter."),
+    depth: float = typer.Option(1.0, help="Normal travel after first touch (mm)."),
+    angle: float = typer.Option(0.0, help="Board angle about the vertical axis (degrees)."),
+    thickness: float = typer.Option(1.6, help="Board thickness (mm)."),
+    radius: float = typer.Option(5.0, help="Sphere radius (mm)."),
+    shear_x: float = typer.Option(0.0, "--shear-x", help="Tangential travel along x after the push (mm)."),
+    shear_y: float = typer.Option(0.0, "--shear-y", help="Tangential travel along y after the push (mm)."),
+    x: float = typer.Option(0.0, help="Contact position x on the fingertip (mm)."),
+    y: float = typer.Option(0.0, help="Contact position y on the fingertip (mm)."),
+    friction: Friction = typer.Option(Friction.stick, help="Contact friction: none, or stick (no slip)."),
+    model: Model = typer.Option(Model.linear, help="Linear elasticity (fast) or neo-Hookean (large deformation)."),
+    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Largest element edge (mm)."),
+    noise: Switch = typer.Option(Switch.on, help="Sensor noise and quantisation (off: the exact field)."),
+    seed: int = typer.Option(0, help="Seed of the sensor noise."),
+    plot: Path = typer.Option(None, help="Save a section of the deformed body to this PNG file."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
+    from softtip.design.model import MM, load_design
+    from softtip.mechanics.contact import LoadCase
+    from softtip.mechanics.indenters import make_indenter
+    from softtip.twin import FingertipTwin
+
+    for name, value in (("depth", depth), ("thickness", thickness), ("radius", radius), ("mesh-size", mesh_size)):
+        if not np.isfinite(value) or value < 0 or (value == 0 and name != "depth"):
+            fail(f"--{name} = {value}: expected a positive length in mm")
+    if plot is not None and plot.suffix.lower() != ".png":
+        fail(f"--plot {plot}: expected a file name ending in .png")
+    twin = FingertipTwin(load_design(design), mesh_size=mesh_size * MM)
+    load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
+                                           radius=radius * MM),
+                    depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
+                    friction=friction.value)
+    progress = None
+    if model is Model.neo_hookean and not json_output:
+        from rich.progress import Progress
+
+        bar = Progress(console=errors, transient=True)
+        bar.start()
+        task = bar.add_task("Newton load steps", total=None)
+        progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
+    try:
+        result = twin.simulate(load, model=model.value, noise=noise is Switch.on, rng=np.random.default_rng(seed))
+    finally:
+        if progress is not None:
+            bar.stop()
+    report = result_json(result, twin, angle, thickness, radius, mesh_size, noise is Switch.on)
+    if plot is not None:
+        from softtip.report.section import plot_section
+
+        report["plot"] = str(plot_section(result, plot))
+    if json_output:
+        print(json.dumps(report, indent=2))
+    else:
+        print_result(report)
+
+
+def _mm(vector) -> list[float]:
+    return [round(float(v) * 1e3, 6) for v in vector]
+
+
+def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
+    design = result.design
+    saturated = twin.sensor.saturated(result.reading_counts)
+    load = result.load
+    return {
+        "softtip": __version__,
+        "design": design.name,
+        "model": result.model,
+        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth * 1e3,
+                 "angle_deg": angle, "thickness_mm": thickness, "radius_mm": radius,
+                 "tangential_mm": _mm(load.tangential), "position_mm": _mm(load.position),
+                 "friction": load.friction},
+        "magnets": [
+            {"index": i, "position_mm": _mm(result.magnet_positions[i]),
+             "rotvec": [round(float(v), 9) for v in result.magnet_rotvecs[i]],
+             "feature_displacement_mm": _mm(result.feature_displacements[i]),
+             "dimension_mm": _mm([m.diameter, m.height]),
+             "polarization_T": [0.0, 0.0, m.polarization]}
+            for i, m in enumerate(design.magnets)],
+        "sensors": [
+            {"index": j, "position_mm": _mm(design.sensor_positions[j]),
+             "dB_uT": [round(float(v), 4) for v in result.reading_change_uT[j]],
+             "dB_exact_uT": [round(float(v) * 1e6, 4) for v in result.field_change[j]],
+             "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
+            for j in range(len(design.sensor_positions))],
+        "noise": noise,
+        "force_N": [round(float(f), 6) for f in result.force],
+        "contact": {"nodes": int(len(result.contact.contact_nodes)), "iterations": result.contact.iterations,
+                    "factorizations": result.contact.factorizations},
+        "mesh": {"size_mm": mesh_size, "tetrahedra": int(twin.mesh.tets.shape[1]),
+                 "unknowns": int(twin.body.size)},
+        "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
+    }
+
+
+def print_result(report: dict) -> None:
+    load = report["load"]
+    console.print(f"[bold]{report['design']}[/] — {load['indenter']} {load['depth_mm']:.3g} mm, "
+                  f"angle {load['angle_deg']:g}°, friction {load['friction']}, {report['model']} model")
+    magnets = Table(title="magnets after loading")
+    for column in ("#", "position (mm)", "feature displacement (mm)", "rotation vector (mrad)"):
+        magnets.add_column(column, justify="right")
+    for m in report["magnets"]:
+        magnets.add_row(str(m["index"]), _fmt(m["position_mm"], 3), _fmt(m["feature_displacement_mm"], 4),
+                        _fmt([v * 1e3 for v in m["rotvec"]], 2))
+    console.print(magnets)
+    sensors = Table(title="Hall sensors (change from the unloaded state)")
+    for column in ("#", "position (mm)", "ΔB reading (µT)", "ΔB exact (µT)", "saturated"):
+        sensors.add_column(column, justify="right")
+    for s in report["sensors"]:
+        sensors.add_row(str(s["index"]), _fmt(s["position_mm"], 2), _fmt(s["dB_uT"], 1), _fmt(s["dB_exact_uT"], 2),
+                        "yes" if s["saturated"] else "no")
+    console.print(sensors)
+    force = report["force_N"]
+    console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
+    console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
+    if "plot" in report:
+        console.print(f"section plot: {report['plot']}")
+
+
+def _fmt(values, digits: int) -> str:
+    return "  ".join(f"{v:+.{digits}f}" for v in values)
+
+
+@bench_app.command("twin")
+@user_errors
+def bench_twin(
+    design: str = typer.Option("cylindrical-D", help="Design to benchmark."),
+    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Mesh size (mm)."),
+    poses: int = typer.Option(200_000, help="Batch size of magnet poses for the magnetics + sensor stage."),
+    skip_neo_hookean: bool = typer.Option(False, "--skip-neo-hookean", help="Leave out the 3 mm neo-Hookean push."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Time the twin: mesh, 1 mm board push with contact (vs one fixed-area linear solve),
+    neo-Hookean 3 mm push, and magnetics + sensor readings per second (vs magpylib)."""
+    from softtip.bench import bench_twin as run
+
+    report = run(design, mesh_size, poses, include_neo_hookean=not skip_neo_hookean,
+                 log=None if json_output else console.print)
+    if json_output:
+        print(json.dumps(report, indent=2))
+
+
+@app.command()
+@user_errors
+def demo(
+    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Mesh size (mm)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The main job on the built-in simulated sensor: designs A–D under a 1 mm board push at 0° and 45°."""
+    from softtip.design.model import MM, load_design
+    from softtip.mechanics.contact import LoadCase
+    from softtip.mechanics.indenters import Board
+    from softtip.twin import FingertipTwin
+
+    rows = []
+    with console.status("simulating designs A–D") if not json_output else contextlib.nullcontext():
+        for letter in "ABCD":
+            twin = FingertipTwin(load_design(f"cylindrical-{letter}"), mesh_size=mesh_size * MM)
+            for angle in (0.0, 45.0):
+                result = twin.simulate(LoadCase(Board(1.6e-3, np.radians(angle)), 1e-3, friction="stick"),
+                                       noise=True, rng=np.random.default_rng(0))
+                dz = result.feature_displacements[:, 2] * 1e3
+                rows.append({"design": f"cylindrical-{letter}", "angle_deg": angle,
+                             "feature_dz_mm": [round(float(v), 4) for v in dz],
+                             "max_feature_dz_mm": round(float(np.abs(dz).max()), 4),
+                             "force_z_N": round(float(result.force[2]), 4),
+                             "dB_uT": [round(float(v), 2) for v in result.reading_change_uT[0]],
+                             "solve_s": round(result.timings["contact_solve_s"], 3)})
+    if json_output:
+        print(json.dumps(rows, indent=2))
+        return
+    table = Table(title="1 mm board push (stick), feature point = centre of each magnet's top face")
+    for column in ("design", "board angle (°)", "feature dz per magnet (mm)", "Fz (N)", "sensor ΔB x y z (µT)",
+                   "solve (s)"):
+        table.add_column(column, justify="right")
+    for r in rows:
+        table.add_row(r["design"], f"{r['angle_deg']:g}", _fmt(r["feature_dz_mm"], 3), f"{r['force_z_N']:.3f}",
+                      _fmt(r["dB_uT"], 1), f"{r['solve_s']:.2f}")
+    console.print(table)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(app())

@@ -1,0 +1,100 @@
+"""A vertical section through the deformed fingertip, with its magnets and the indenter."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from softtip.mechanics.indenters import Board, Sphere
+
+
+def section_polygons(points: np.ndarray, tets: np.ndarray, origin: np.ndarray, normal: np.ndarray):
+    """Intersections of the tetrahedra with a plane: a list of (k, 3) polygons (k = 3 or 4)
+    and, for each, the barycentric weights of its corners over the cut edges' end points."""
+    distance = (points - origin) @ normal
+    d = distance[tets.T]  # (nt, 4)
+    crossing = np.flatnonzero((d.min(axis=1) < 0) & (d.max(axis=1) > 0))
+    edges = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    polygons = []
+    for t in crossing:
+        corners = []
+        for a, b in edges:
+            da, db = d[t, a], d[t, b]
+            if (da < 0) != (db < 0):
+                s = da / (da - db)
+                corners.append((tets[a, t], tets[b, t], s))
+        polygons.append(corners)
+    return polygons
+
+
+def plot_section(result, path: str | Path) -> Path:
+    """Draw the deformed section of ``result`` (a twin result) across the indenter, coloured by |u|."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    twin_mesh = result.contact
+    design = result.design
+    indenter = result.load.indenter
+    angle = indenter.angle if isinstance(indenter, Board) else 0.0
+    # the section plane contains the vertical axis and is perpendicular to a board's length
+    across = np.array([-math.sin(angle), math.cos(angle), 0.0])
+    along = np.array([math.cos(angle), math.sin(angle), 0.0])
+    origin = np.array([*result.load.position, 0.0])
+    mesh_points = result.mesh.points
+    vertex_u = twin_mesh.displacements[: len(mesh_points)]  # P2 vertex nodes come first
+    polygons, colours = [], []
+    for corners in section_polygons(mesh_points, result.mesh.tets, origin, along):
+        xyz = []
+        mags = []
+        for a, b, s in corners:
+            p = (1 - s) * mesh_points[a] + s * mesh_points[b]
+            u = (1 - s) * vertex_u[a] + s * vertex_u[b]
+            xyz.append(p + u)
+            mags.append(np.linalg.norm(u))
+        xyz = np.array(xyz)
+        h = (xyz - origin) @ across
+        centre = np.array([h.mean(), xyz[:, 2].mean()])
+        order = np.argsort(np.arctan2(xyz[:, 2] - centre[1], h - centre[0]))
+        polygons.append(np.column_stack([h[order], xyz[order, 2]]) * 1e3)
+        colours.append(np.mean(mags) * 1e3)
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    collection = PolyCollection(polygons, array=np.array(colours), cmap="viridis", edgecolors="face", linewidths=0.2)
+    ax.add_collection(collection)
+    fig.colorbar(collection, ax=ax, label="|u| (mm)")
+    for m, position, rotvec in zip(design.magnets, result.magnet_positions, result.magnet_rotvecs):
+        offset = (position - origin) @ along
+        if abs(offset) > m.diameter:  # only magnets the section cuts
+            continue
+        h0 = (position - origin) @ across
+        tilt = rotvec @ along  # (across, z, along) is right-handed: counter-clockwise in the plot
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [m.diameter / 2, m.height / 2]
+        c, s = math.cos(tilt), math.sin(tilt)
+        rotated = corners @ np.array([[c, s], [-s, c]])
+        ax.fill(*((rotated + [h0, position[2]]) * 1e3).T, color="firebrick", alpha=0.85, zorder=3)
+    frame_z = design.height - result.load.depth
+    if isinstance(indenter, Board):
+        t = indenter.thickness / 2
+        ax.fill(np.array([-t, t, t, -t]) * 1e3, np.array([frame_z, frame_z, frame_z + 3e-3, frame_z + 3e-3]) * 1e3,
+                color="0.6", zorder=4)
+    elif isinstance(indenter, Sphere):
+        ax.add_patch(plt.Circle((0, (frame_z + indenter.radius) * 1e3), indenter.radius * 1e3, color="0.6", zorder=4))
+    else:
+        ax.axhspan(frame_z * 1e3, frame_z * 1e3 + 1.5, color="0.6", zorder=4)
+    for position in design.sensor_positions:
+        ax.plot((position - origin) @ across * 1e3, position[2] * 1e3, "ks", ms=6, zorder=5)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xlabel("across the indenter (mm)")
+    ax.set_ylabel("z (mm)")
+    ax.set_title(f"{design.name}: {type(indenter).__name__.lower()} {result.load.depth * 1e3:.2f} mm, "
+                 f"{result.model}; Fz = {result.force[2]:.3f} N")
+    path = Path(path)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path
