@@ -71,7 +71,7 @@ class FingertipTwin:
     def body(self) -> BodyModel:
         if self._body is None:
             start = time.perf_counter()
-            self._body = BodyModel(self.design, self.mesh)
+            self._body = BodyModel.for_design(self.design, self.mesh)
             self.timings["body_model_s"] = time.perf_counter() - start
         return self._body
 

@@ -83,17 +83,31 @@ def _load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list
     return path
 
 
-def _contact_candidates(body: BodyModel) -> np.ndarray:
+def _contact_candidates(body: BodyModel) -> tuple[np.ndarray, np.ndarray]:
+    """Outer nodes with a free displacement component, and their unknowns (-1 where held)."""
     outer = body.space.boundary_nodes["outer"]
-    return outer[body.node_unknown[outer] >= 0]
+    outer = outer[(body.node_dofs[outer] >= 0).any(axis=1)]
+    return outer, body.node_dofs[outer]
 
 
-def _penalty_blocks(body: BodyModel, nodes: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
-    """A block-diagonal matrix over the unknowns with 3x3 ``blocks`` at ``nodes``."""
-    dof = body.node_unknown[nodes][:, None] + np.arange(3)
-    rows = np.repeat(dof, 3, axis=1).ravel()
-    cols = np.tile(dof, (1, 3)).ravel()
-    return sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(body.size, body.size))
+def _gather(vector: np.ndarray, dofs: np.ndarray) -> np.ndarray:
+    """Nodal vectors (k, 3) from the unknowns; held components are zero."""
+    return np.where(dofs >= 0, vector[np.maximum(dofs, 0)], 0.0)
+
+
+def _scatter(size: int, dofs: np.ndarray, nodal: np.ndarray) -> np.ndarray:
+    out = np.zeros(size)
+    keep = dofs >= 0
+    np.add.at(out, dofs[keep], nodal[keep])
+    return out
+
+
+def _penalty_blocks(body: BodyModel, dofs: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
+    """A block-diagonal matrix over the unknowns with 3x3 ``blocks`` on nodes' ``dofs`` (k, 3)."""
+    rows = np.repeat(dofs, 3, axis=1).ravel()
+    cols = np.tile(dofs, (1, 3)).ravel()
+    keep = (rows >= 0) & (cols >= 0)
+    return sp.csr_matrix((blocks.ravel()[keep], (rows[keep], cols[keep])), shape=(body.size, body.size))
 
 
 class _StickAnchors:
@@ -125,22 +139,22 @@ class _ActiveSetSystem:
     factorisation (both timed as they happen), it refactorises instead.
     """
 
-    def __init__(self, body: BodyModel, stiffness: sp.csr_matrix, nodes: np.ndarray, blocks: np.ndarray,
+    def __init__(self, body: BodyModel, stiffness: sp.csr_matrix, dofs: np.ndarray, blocks: np.ndarray,
                  solver: SPDSolver):
-        self.body, self.stiffness, self.nodes, self.blocks, self.solver = body, stiffness, nodes, blocks, solver
+        self.body, self.stiffness, self.dofs, self.solver = body, stiffness, dofs, solver
+        self.blocks = np.where((dofs >= 0)[:, :, None] & (dofs >= 0)[:, None, :], blocks, 0.0)
         self.factorize_seconds = np.inf
         self.column_seconds = 0.0
-        self.dofs = body.node_unknown[nodes][:, None] + np.arange(3)
         # each 3x3 block as a sum of rank-one terms: coefficient * v v^T
-        values, vectors = np.linalg.eigh(blocks)
+        values, vectors = np.linalg.eigh(self.blocks)
         self.rank_terms = [[(values[i, k], vectors[i, :, k]) for k in range(3) if values[i, k] > 1e-12 * values[i].max()]
-                           for i in range(len(nodes))]
+                           for i in range(len(dofs))]
         self.base: np.ndarray | None = None
         self.columns: dict[int, np.ndarray] = {}
 
     def _factorize(self, active: np.ndarray) -> None:
         start = time.perf_counter()
-        penalty = _penalty_blocks(self.body, self.nodes[active], self.blocks[active])
+        penalty = _penalty_blocks(self.body, self.dofs[active], self.blocks[active])
         self.solver.factorize(self.stiffness + penalty)
         self.base, self.columns = active.copy(), {}
         self.factorize_seconds = time.perf_counter() - start
@@ -179,8 +193,9 @@ class _ActiveSetSystem:
 
     def _vectors(self, i: int) -> np.ndarray:
         out = np.zeros((self.body.size, len(self.rank_terms[i])))
+        keep = self.dofs[i] >= 0
         for k, (_, v) in enumerate(self.rank_terms[i]):
-            out[self.dofs[i], k] = v
+            out[self.dofs[i][keep], k] = v[keep]
         return out
 
 
@@ -193,7 +208,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     t_assembly = time.perf_counter() - t0
     solver = solver or SPDSolver()
     factorizations0 = solver.factorizations
-    candidates = _contact_candidates(body)
+    candidates, cand_dofs = _contact_candidates(body)
     x = body.space.nodes[candidates]
     epsilon = penalty * stiffness.diagonal()[: body.n_free].mean()
     touch = _touch_offset(load.indenter, load.position, x)
@@ -204,7 +219,8 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     normal = load.indenter.vertical_gap(x - touch)[1]
     blocks = epsilon * (np.broadcast_to(np.eye(3), (len(x), 3, 3)) if stick
                         else np.einsum("ni,nj->nij", normal, normal))
-    system = _ActiveSetSystem(body, stiffness, candidates, blocks, solver)
+    system = _ActiveSetSystem(body, stiffness, cand_dofs, blocks, solver)
+    blocks = system.blocks  # held components carry no penalty
     anchors = _StickAnchors()
     unknowns = np.zeros(body.size)
     u_candidates = np.zeros_like(x)
@@ -231,16 +247,17 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
                 rhs_nodal = epsilon * target
             else:
                 rhs_nodal = -epsilon * gap[active, None] * normal[active]
-            rhs = np.zeros(body.size)
-            rhs[body.node_unknown[candidates[active]][:, None] + np.arange(3)] = rhs_nodal
-            unknowns = system.solve(active, rhs)
-            u_now = unknowns[body.node_unknown[candidates][:, None] + np.arange(3)]
+            rhs_nodal = np.where(cand_dofs[active] >= 0, rhs_nodal, 0.0)
+            unknowns = system.solve(active, _scatter(body.size, cand_dofs[active], rhs_nodal))
+            u_now = _gather(unknowns, cand_dofs)
             nodal_force = np.zeros_like(x)  # force of the indenter on each candidate node
             nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
             pressure = np.einsum("ij,ij->i", nodal_force, normal)
             linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
             tolerance = 1e-6 * max(load.depth, 1e-6)
-            new_active = np.where(active, pressure > 0, linear_gap < -tolerance)
+            # corner nodes of quadratic faces carry ~zero consistent pressure: release only clear tension
+            release = -1e-3 * max(pressure.max(), 0.0)
+            new_active = np.where(active, pressure > release, linear_gap < -tolerance)
             if only_add:
                 new_active |= active
             if np.array_equal(new_active, active):
@@ -291,8 +308,8 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
     """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
     t0 = time.perf_counter()
     solver = SPDSolver()
-    candidates = _contact_candidates(body)
-    cand_dofs = body.node_unknown[candidates][:, None] + np.arange(3)
+    candidates, cand_dofs = _contact_candidates(body)
+    held = cand_dofs < 0
     x = body.space.nodes[candidates]
     epsilon = penalty * body.stiffness.diagonal()[: body.n_free].mean()
     touch = _touch_offset(load.indenter, load.position, x)
@@ -302,7 +319,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
     iterations = 0
 
     def contact_terms(q: np.ndarray, frame: np.ndarray, with_matrix: bool):
-        p = x + q[cand_dofs]
+        p = x + _gather(q, cand_dofs)
         gap, normal = load.indenter.signed_distance(p - frame)
         active = gap < 0
         nodes = candidates[active]
@@ -318,9 +335,9 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
             energy = 0.5 * epsilon * np.sum(gap[active] ** 2)
             force = -epsilon * gap[active, None] * normal[active]
             blocks = epsilon * np.einsum("ni,nj->nij", normal[active], normal[active])
-        gradient = np.zeros(body.size)
-        np.add.at(gradient, cand_dofs[active].ravel(), -force.ravel())
-        matrix = _penalty_blocks(body, nodes, blocks) if with_matrix else None
+        force = np.where(held[active], 0.0, force)  # supports take the held components
+        gradient = -_scatter(body.size, cand_dofs[active], force)
+        matrix = _penalty_blocks(body, cand_dofs[active], blocks) if with_matrix else None
         return energy, gradient, matrix, force, nodes
 
     def total_energy(q: np.ndarray, frame: np.ndarray) -> float:

@@ -8,7 +8,7 @@ the neo-Hookean model so residual and tangent stay consistent.
 
 Kernels are pure functions of arrays (gradients, weights, nodal displacements);
 :class:`BodyModel` wraps them with the mesh, the material and the constraints:
-the base face is fixed and each magnet's hole surface moves as a rigid body
+the base face is bonded and each magnet's hole surface moves as a rigid body
 (translation t and small rotation theta: u = t + theta x (x - c)).
 """
 
@@ -20,7 +20,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from softtip.design.model import Design
+from softtip.design.model import Design, Material
 from softtip.mechanics.mesh import TetMesh
 
 # --------------------------------------------------------------------------- kernels
@@ -154,41 +154,50 @@ class MagnetPose:
 
 
 class BodyModel:
-    """The elastomer body: P2 space, material, fixed base and rigid magnets.
+    """The elastomer body: P2 space, material, supports and rigid magnets.
 
-    Unknowns are the free nodal displacements followed by 6 rigid-body
-    coordinates (t, theta) per magnet; ``transform`` maps them to all nodal
-    displacements (fixed base dofs are zero).
+    ``supports`` maps boundary names to the displacement components held at
+    zero there: the fingertip's base is bonded ({"base": (0, 1, 2)}); a
+    symmetry plane x = 0 is {"...": (0,)}. Unknowns are the free nodal
+    displacement components followed by 6 rigid-body coordinates (t, theta)
+    per magnet; ``transform`` maps them to all nodal displacements.
     """
 
-    def __init__(self, design: Design, mesh: TetMesh):
-        self.design = design
+    def __init__(self, mesh: TetMesh, material: Material, magnet_centers: np.ndarray,
+                 supports: dict[str, tuple[int, ...]] | None = None):
         self.space = P2Space(mesh)
-        self.lam, self.mu = design.material.lame
+        self.lam, self.mu = material.lame
         n = self.space.node_count
-        fixed = np.zeros(n, dtype=bool)
-        fixed[self.space.boundary_nodes["base"]] = True
+        held = np.zeros((n, 3), dtype=bool)
+        for name, components in (supports or {"base": (0, 1, 2)}).items():
+            held[np.ix_(self.space.boundary_nodes[name], list(components))] = True
+        self.magnet_centers = np.asarray(magnet_centers, dtype=float).reshape(-1, 3)
         magnet_of = np.full(n, -1)
-        for i in range(len(design.magnets)):
+        for i in range(len(self.magnet_centers)):
             nodes = self.space.boundary_nodes[f"magnet{i}"]
-            if fixed[nodes].any():
-                raise ValueError(f"{design.name}: magnet {i} touches the fixed base")
+            if held[nodes].any():
+                raise ValueError(f"magnet {i} touches a supported boundary")
             magnet_of[nodes] = i
-        self.free_nodes = np.flatnonzero(~fixed & (magnet_of < 0))
-        self.magnet_nodes = [np.flatnonzero(magnet_of == i) for i in range(len(design.magnets))]
-        self.magnet_centers = np.array([m.center for m in design.magnets])
-        self.n_free = 3 * len(self.free_nodes)
-        self.size = self.n_free + 6 * len(design.magnets)
+        self.magnet_nodes = [np.flatnonzero(magnet_of == i) for i in range(len(self.magnet_centers))]
+        free = ~held & (magnet_of < 0)[:, None]
+        self.free_dofs = np.flatnonzero(free.ravel())
+        self.n_free = len(self.free_dofs)
+        self.size = self.n_free + 6 * len(self.magnet_centers)
+        # where each node's x, y, z live among the unknowns (-1: held or on a magnet)
+        self.node_dofs = np.full(3 * n, -1)
+        self.node_dofs[self.free_dofs] = np.arange(self.n_free)
+        self.node_dofs = self.node_dofs.reshape(n, 3)
         self.transform = self._transform(n)
         self._assembler = SparseAssembler(self.space.cell_dofs(), 3 * n)
-        # where each node's dofs live among the unknowns (-1: constrained)
-        self.node_unknown = np.full(n, -1)
-        self.node_unknown[self.free_nodes] = 3 * np.arange(len(self.free_nodes))
+
+    @classmethod
+    def for_design(cls, design: Design, mesh: TetMesh) -> "BodyModel":
+        """The fingertip: base bonded to the rigid base, magnets rigid and tied in."""
+        return cls(mesh, design.material, np.array([m.center for m in design.magnets]), {"base": (0, 1, 2)})
 
     def _transform(self, n: int) -> sp.csr_matrix:
         rows, cols, vals = [], [], []
-        free_dofs = (3 * self.free_nodes[:, None] + np.arange(3)).ravel()
-        rows.append(free_dofs)
+        rows.append(self.free_dofs)
         cols.append(np.arange(self.n_free))
         vals.append(np.ones(self.n_free))
         for i, nodes in enumerate(self.magnet_nodes):

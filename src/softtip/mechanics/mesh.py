@@ -118,25 +118,31 @@ def _build(design: Design, size: float, curvature_points: int, key: str) -> TetM
         gmsh.option.setNumber("Mesh.ElementOrder", 1)
         gmsh.model.mesh.generate(3)
 
-        node_tags, coords, _ = gmsh.model.mesh.getNodes()
-        coords = coords.reshape(-1, 3)
-        _, elem_nodes = gmsh.model.mesh.getElementsByType(4)  # 4-node tetrahedra
-        tets_tags = elem_nodes.reshape(-1, 4)
-        used = np.unique(tets_tags)
-        index_of = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
-        index_of[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-        keep = index_of[used]
-        renumber = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
-        renumber[used] = np.arange(len(used))
-        points = coords[keep]
-        tets = renumber[tets_tags].T.copy()
-        boundaries = {}
-        for name, surfaces in groups.items():
-            tris = [gmsh.model.mesh.getElementsByType(2, tag=s)[1].reshape(-1, 3) for s in surfaces]
-            boundaries[name] = renumber[np.vstack(tris)].T.copy()
+        return tet_mesh_from_gmsh(groups, key)
     finally:
         gmsh.finalize()
-    tets = _positive_orientation(points, tets)
+
+
+def tet_mesh_from_gmsh(groups: dict[str, list[int]], key: str) -> TetMesh:
+    """The tetrahedra of the current (meshed) gmsh model, with boundary triangles
+    grouped by name from lists of surface tags; nodes renumbered from 0."""
+    import gmsh
+
+    node_tags, coords, _ = gmsh.model.mesh.getNodes()
+    coords = coords.reshape(-1, 3)
+    _, elem_nodes = gmsh.model.mesh.getElementsByType(4)  # 4-node tetrahedra
+    tets_tags = elem_nodes.reshape(-1, 4)
+    used = np.unique(tets_tags)
+    index_of = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
+    index_of[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    renumber = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    points = coords[index_of[used]]
+    tets = _positive_orientation(points, renumber[tets_tags].T.copy())
+    boundaries = {}
+    for name, surfaces in groups.items():
+        tris = [gmsh.model.mesh.getElementsByType(2, tag=s)[1].reshape(-1, 3) for s in surfaces]
+        boundaries[name] = renumber[np.vstack(tris)].T.copy()
     return TetMesh(points=points, tets=tets, boundaries=boundaries, key=key)
 
 
