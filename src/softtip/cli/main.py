@@ -47,7 +47,7 @@ class Switch(str, Enum):
 
 def fail(message: str) -> None:
     """A user mistake: one line, no traceback, exit code 2."""
-    errors.print(f"[bold red]error:[/] {message}", highlight=False)
+    errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
 
 

@@ -67,8 +67,11 @@ class Design:
 
     @property
     def geometry_key(self) -> dict:
-        """What determines the mesh (not materials or sensors)."""
-        return {k: self.spec[k] for k in ("kind", "body", "cavity", "magnets")}
+        """What determines the mesh: shapes and sizes, not materials, magnetisation or sensors."""
+        physics = {"youngs_modulus_Pa", "poisson_ratio", "density_kg_m3", "polarization_T", "surface_field_T"}
+        return {"kind": self.spec["kind"],
+                **{section: {k: v for k, v in self.spec[section].items() if k not in physics}
+                   for section in ("body", "cavity", "magnets")}}
 
     def with_params(self, **overrides: float) -> "Design":
         """A copy with TOML-level parameters replaced, e.g. ``{"cavity.radius_mm": 8.5}``
@@ -223,7 +226,8 @@ def _cylindrical(spec: dict, source: str) -> Design:
     if fillet > 0 and outer > radius - fillet and top > height - fillet:
         # the magnet's outer top edge must stay inside the rounded edge of the body
         if math.hypot(outer - (radius - fillet), top - (height - fillet)) >= fillet:
-            raise mag.fail("depth_mm", "the magnets cross the filleted top edge of the body")
+            raise mag.fail("circle_radius_mm", f"with magnets.depth_mm = {depth}, the magnets cross the filleted top "
+                           f"edge of the body (move them inwards or deeper)")
     if bottom <= cavity_height and circle - m_radius < cavity_radius:
         raise mag.fail("depth_mm", f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm must be "
                        f"above the cavity top at {cavity_height} mm)")
@@ -277,7 +281,8 @@ def _rectangular(spec: dict, source: str) -> Design:
             raise mag.fail(key, f"the magnets cross the side surface (half pitch + magnet radius must be < {half_side} mm)")
         if fillet > 0 and outer > half_side - fillet and top > height - fillet:
             if math.hypot(outer - (half_side - fillet), top - (height - fillet)) >= fillet:
-                raise mag.fail("depth_mm", "the magnets cross the filleted top edge of the body")
+                raise mag.fail(key, f"with magnets.depth_mm = {depth}, the magnets cross the filleted top edge "
+                               f"of the body (move them inwards or deeper)")
     over_cavity = (pitch_x / 2 - m_radius < c_width / 2) and (pitch_y / 2 - m_radius < c_length / 2)
     if over_cavity and bottom <= c_height:
         raise mag.fail("depth_mm", f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm must be "

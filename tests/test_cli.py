@@ -1,0 +1,114 @@
+"""The softtip command line: output contract, cross-checks, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import magpylib
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from typer.testing import CliRunner
+
+from softtip.cli.main import app
+
+runner = CliRunner()
+FAST = ["--mesh-size", "2.0"]
+
+
+def run(*args: str):
+    return runner.invoke(app, list(args))
+
+
+@pytest.fixture(scope="module")
+def board_push():
+    result = run("simulate", "--design", "cylindrical-D", "--indenter", "board", "--depth", "1.0", "--angle", "45",
+                 "--json", *FAST)
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output)
+
+
+def test_simulate_json_has_the_documented_fields(board_push):
+    assert len(board_push["magnets"]) == 4 and len(board_push["sensors"]) == 1
+    for magnet in board_push["magnets"]:
+        for key, length in (("feature_displacement_mm", 3), ("position_mm", 3), ("rotvec", 3),
+                            ("dimension_mm", 2), ("polarization_T", 3)):
+            assert len(magnet[key]) == length
+    assert len(board_push["sensors"][0]["dB_uT"]) == 3
+    assert len(board_push["force_N"]) == 3 and board_push["force_N"][2] > 0
+    assert "contact_solve_s" in board_push["timings_s"]
+    # a board at 45 degrees presses all four magnets alike (they sit at 0, 90, 180 and 270 degrees)
+    dz = [m["feature_displacement_mm"][2] for m in board_push["magnets"]]
+    assert max(dz) < 0 and np.ptp(dz) < 0.03 * abs(np.mean(dz))
+
+
+def test_printed_poses_reproduce_the_printed_field_in_magpylib(board_push):
+    def field(poses):
+        magnets = [magpylib.magnet.Cylinder(polarization=m["polarization_T"],
+                                            dimension=np.array(m["dimension_mm"]) * 1e-3,
+                                            position=np.array(p) * 1e-3, orientation=Rotation.from_rotvec(r))
+                   for m, (p, r) in zip(board_push["magnets"], poses)]
+        sensor = np.array(board_push["sensors"][0]["position_mm"]) * 1e-3
+        return magpylib.getB(magnets, sensor, sumup=True)
+
+    loaded = field([(m["position_mm"], m["rotvec"]) for m in board_push["magnets"]])
+    from softtip.design.model import load_design
+
+    rest = field([(np.array(m.center) * 1e3, [0, 0, 0]) for m in load_design("cylindrical-D").magnets])
+    np.testing.assert_allclose(board_push["sensors"][0]["dB_exact_uT"], (loaded - rest) * 1e6, atol=0.01)
+
+
+def test_noise_off_gives_the_exact_field_and_noise_on_stays_within_a_few_lsb(board_push):
+    off = json.loads(run("simulate", "--design", "cylindrical-D", "--angle", "45", "--noise", "off", "--json",
+                         *FAST).output)
+    sensor = off["sensors"][0]
+    assert sensor["dB_uT"] == sensor["dB_exact_uT"]
+    noisy = board_push["sensors"][0]
+    # two noisy readings (baseline and loaded) of about 5 uT RMS each on z at OSR 0 / DIG_FILT 2
+    assert np.all(np.abs(np.subtract(noisy["dB_uT"], noisy["dB_exact_uT"])) < 40)
+
+
+def test_plot_writes_a_png(tmp_path):
+    path = tmp_path / "section.png"
+    result = run("simulate", "--design", "cylindrical-A", "--depth", "0.5", "--plot", str(path), *FAST)
+    assert result.exit_code == 0, result.output
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["simulate", "--design", "cylindrical-Q"], "neither a file nor a shipped design"),
+        (["simulate", "--depth", "-1"], "--depth = -1.0"),
+        (["simulate", "--thickness", "0"], "--thickness = 0.0"),
+        (["simulate", "--plot", "out.jpg"], "ending in .png"),
+        (["simulate", "--indenter", "sphere", "--x", "40"], "does not reach the fingertip"),
+    ],
+)
+def test_user_mistakes_give_one_line_and_exit_code_2(args, message):
+    result = run(*args, *FAST)
+    assert result.exit_code == 2
+    assert message in result.output
+    assert "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_a_bad_design_file_gives_one_line(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('kind = "cylindrical"\n[body]\ndiameter_mm = 25\nheight_mm = 9\n[cavity]\nradius_mm = 30\n'
+                    'height_mm = 5\n[magnets]\ncircle_radius_mm = 5\ndiameter_mm = 2\nheight_mm = 1.5\ndepth_mm = 1\n')
+    result = run("simulate", "--design", str(path), *FAST)
+    assert result.exit_code == 2
+    assert "cavity.radius_mm = 30" in result.output and "Traceback" not in result.output
+
+
+def test_designs_lists_the_shipped_designs():
+    rows = json.loads(run("designs", "--json").output)
+    assert [r["name"] for r in rows] == ["cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D",
+                                         "rectangular"]
+
+
+@pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["bench"], ["bench", "twin"]])
+def test_every_command_has_help(command):
+    result = run(*command, "--help")
+    assert result.exit_code == 0 and "Usage" in result.output
