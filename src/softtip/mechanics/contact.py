@@ -302,56 +302,59 @@ class _RegularizedNewton:
                     raise
 
 
-def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 6, tangential_steps: int = 4,
+def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 10, tangential_steps: int = 4,
                                penalty: float = 1e3, tolerance: float = 1e-7, max_newton: int = 40,
-                               progress=None) -> ContactResult:
+                               progress=None, monitor=None) -> ContactResult:
     """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
     t0 = time.perf_counter()
     solver = SPDSolver()
     candidates, cand_dofs = _contact_candidates(body)
-    held = cand_dofs < 0
     x = body.space.nodes[candidates]
     epsilon = penalty * body.stiffness.diagonal()[: body.n_free].mean()
     touch = _touch_offset(load.indenter, load.position, x)
-    stick = load.friction == "stick"
-    anchors = _StickAnchors()
+    anchors: dict[int, np.ndarray] = {}  # sticking nodes (candidate index) -> anchor in the indenter's frame
     unknowns = np.zeros(body.size)
     iterations = 0
 
     def contact_terms(q: np.ndarray, frame: np.ndarray, with_matrix: bool):
+        """Penalty energy, gradient, matrix and nodal forces at ``q``. Nodes held since an earlier
+        load step stick to their anchor; others only may not penetrate (smooth within a step)."""
         p = x + _gather(q, cand_dofs)
         gap, normal = load.indenter.signed_distance(p - frame)
-        active = gap < 0
-        nodes = candidates[active]
-        if stick:
-            anchors.keep_only(nodes)
-            surface = p[active] - gap[active, None] * normal[active]  # anchor where the node meets the surface
-            target = anchors.targets(nodes, surface, frame)
-            residual = p[active] - target
-            energy = 0.5 * epsilon * np.sum(residual**2)
-            force = -epsilon * residual
-            blocks = epsilon * np.broadcast_to(np.eye(3), (len(nodes), 3, 3))
-        else:
-            energy = 0.5 * epsilon * np.sum(gap[active] ** 2)
-            force = -epsilon * gap[active, None] * normal[active]
-            blocks = epsilon * np.einsum("ni,nj->nij", normal[active], normal[active])
-        force = np.where(held[active], 0.0, force)  # supports take the held components
-        gradient = -_scatter(body.size, cand_dofs[active], force)
-        matrix = _penalty_blocks(body, cand_dofs[active], blocks) if with_matrix else None
-        return energy, gradient, matrix, force, nodes
+        held = np.zeros(len(candidates), dtype=bool)
+        held[list(anchors)] = True
+        touching = (gap < 0) & ~held
+        stuck_offset = p[held] - (np.array([anchors[i] for i in np.flatnonzero(held)]).reshape(-1, 3) + frame)
+        energy = 0.5 * epsilon * (np.sum(stuck_offset**2) + np.sum(gap[touching] ** 2))
+        force = np.zeros_like(p)  # force of the indenter on each candidate node
+        force[held] = -epsilon * stuck_offset
+        force[touching] = -epsilon * gap[touching, None] * normal[touching]
+        force = np.where(cand_dofs < 0, 0.0, force)  # supports take the held components
+        gradient = -_scatter(body.size, cand_dofs, force)
+        matrix = None
+        if with_matrix:
+            blocks = np.zeros((len(p), 3, 3))
+            blocks[held] = epsilon * np.eye(3)
+            blocks[touching] = epsilon * np.einsum("ni,nj->nij", normal[touching], normal[touching])
+            in_contact = held | touching
+            matrix = _penalty_blocks(body, cand_dofs[in_contact], blocks[in_contact])
+        return energy, gradient, matrix, force, gap, normal, held | touching
 
     def total_energy(q: np.ndarray, frame: np.ndarray) -> float:
         elastic = body.hyperelastic(q, with_tangent=False)[0]
-        if not np.isfinite(elastic):
-            return np.inf
-        saved = dict(anchors.points)
-        energy = contact_terms(q, frame, False)[0]
-        anchors.points = saved
-        return elastic + energy
+        return elastic + contact_terms(q, frame, False)[0] if np.isfinite(elastic) else np.inf
+
+    def update_anchors(q: np.ndarray, frame: np.ndarray) -> None:
+        """After a converged step: release held nodes under tension, anchor new contacts where they touch."""
+        _, _, _, force, gap, normal, in_contact = contact_terms(q, frame, False)
+        p = x + _gather(q, cand_dofs)
+        for i in list(anchors):
+            if force[i] @ normal[i] <= 0:
+                del anchors[i]
+        for i in np.flatnonzero(in_contact & (gap < 0)):
+            anchors.setdefault(int(i), p[i] - gap[i] * normal[i] - frame)
 
     path = _load_path(load, load_steps, tangential_steps)
-    force = np.zeros((0, 3))
-    nodes = np.zeros(0, dtype=int)
     newton = _RegularizedNewton(solver)
     previous = unknowns
     for step, travel in enumerate(path):
@@ -365,7 +368,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
         for _ in range(max_newton):
             iterations += 1
             elastic, gradient, tangent = body.hyperelastic(unknowns)
-            c_energy, c_gradient, c_matrix, force, nodes = contact_terms(unknowns, frame, True)
+            c_energy, c_gradient, c_matrix, force, _, _, in_contact = contact_terms(unknowns, frame, True)
             residual = gradient + c_gradient
             norm = np.linalg.norm(residual)
             reference = reference or max(norm, 1e-30)
@@ -380,12 +383,17 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
                     break
                 alpha *= 0.5
             unknowns = unknowns + alpha * step_vector
+            if monitor is not None:
+                monitor({"step": step + 1, "iteration": iterations, "residual": norm, "alpha": alpha,
+                         "contact_nodes": int(in_contact.sum()), "shift": newton.shift})
             if alpha * np.abs(step_vector).max() < tolerance * max(load.depth, 1e-6):
                 break
+        if load.friction == "stick":
+            update_anchors(unknowns, frame)
         if progress is not None:
             progress(step + 1, len(path))
     t_total = time.perf_counter() - t0
     return ContactResult(
         unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-force.sum(axis=0),
-        contact_nodes=nodes, displacements=body.nodal_displacements(unknowns), iterations=iterations,
+        contact_nodes=candidates[in_contact], displacements=body.nodal_displacements(unknowns), iterations=iterations,
         factorizations=solver.factorizations, timings={"contact_solve_s": t_total})
