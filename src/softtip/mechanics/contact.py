@@ -302,7 +302,7 @@ class _RegularizedNewton:
                     raise
 
 
-def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 10, tangential_steps: int = 4,
+def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 6, tangential_steps: int = 4,
                                penalty: float = 1e3, tolerance: float = 1e-7, max_newton: int = 40,
                                progress=None, monitor=None) -> ContactResult:
     """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
@@ -359,11 +359,14 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
     previous = unknowns
     for step, travel in enumerate(path):
         frame = touch + travel
-        if step > 0:  # secant predictor along the load path
+        if step == 0:  # the small-strain solution: its approach-direction gaps suit a first deep bite
+            first = LoadCase(load.indenter, -travel[2], position=load.position, friction=load.friction)
+            predicted = solve_linear_contact(body, first, solver=solver).unknowns
+        else:  # secant predictor along the load path
             predicted = 2 * unknowns - previous
             previous = unknowns
-            if np.isfinite(total_energy(predicted, frame)):
-                unknowns = predicted
+        if np.isfinite(total_energy(predicted, frame)):
+            unknowns = predicted
         reference = None
         for _ in range(max_newton):
             iterations += 1
