@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 
 from softtip.design.model import MM, load_design
-from softtip.mechanics.contact import LoadCase, _penalty_blocks
+from softtip.mechanics.contact import LoadCase, penalty_blocks
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.linsolve import SPDSolver
 from softtip.mechanics.mesh import mesh_design
@@ -44,7 +44,7 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
         # baseline: one linear solve with the converged contact area prescribed
         nodes = result.contact.contact_nodes
         epsilon = 1e4 * body.stiffness.diagonal()[: body.n_free].mean()
-        fixed_area = body.stiffness + _penalty_blocks(body, body.node_dofs[nodes],
+        fixed_area = body.stiffness + penalty_blocks(body, body.node_dofs[nodes],
                                                       epsilon * np.broadcast_to(np.eye(3), (len(nodes), 3, 3)))
         solver = SPDSolver()
         start = time.perf_counter()

@@ -102,7 +102,7 @@ def _scatter(size: int, dofs: np.ndarray, nodal: np.ndarray) -> np.ndarray:
     return out
 
 
-def _penalty_blocks(body: BodyModel, dofs: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
+def penalty_blocks(body: BodyModel, dofs: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
     """A block-diagonal matrix over the unknowns with 3x3 ``blocks`` on nodes' ``dofs`` (k, 3)."""
     rows = np.repeat(dofs, 3, axis=1).ravel()
     cols = np.tile(dofs, (1, 3)).ravel()
@@ -154,7 +154,7 @@ class _ActiveSetSystem:
 
     def _factorize(self, active: np.ndarray) -> None:
         start = time.perf_counter()
-        penalty = _penalty_blocks(self.body, self.dofs[active], self.blocks[active])
+        penalty = penalty_blocks(self.body, self.dofs[active], self.blocks[active])
         self.solver.factorize(self.stiffness + penalty)
         self.base, self.columns = active.copy(), {}
         self.factorize_seconds = time.perf_counter() - start
@@ -337,7 +337,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
             blocks[held] = epsilon * np.eye(3)
             blocks[touching] = epsilon * np.einsum("ni,nj->nij", normal[touching], normal[touching])
             in_contact = held | touching
-            matrix = _penalty_blocks(body, cand_dofs[in_contact], blocks[in_contact])
+            matrix = penalty_blocks(body, cand_dofs[in_contact], blocks[in_contact])
         return energy, gradient, matrix, force, gap, normal, held | touching
 
     def total_energy(q: np.ndarray, frame: np.ndarray) -> float:

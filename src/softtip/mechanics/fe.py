@@ -221,10 +221,20 @@ class BodyModel:
         return (self.transform.T @ full_matrix @ self.transform).tocsr()
 
     @cached_property
-    def stiffness(self) -> sp.csr_matrix:
-        """Reduced small-strain stiffness matrix (N/m)."""
+    def full_stiffness(self) -> sp.csr_matrix:
+        """Small-strain stiffness matrix over all nodal displacements (N/m), before constraints."""
         element = linear_elastic_matrices(self.space.grads, self.space.weights, self.lam, self.mu)
-        return self.reduce(self._assembler.assemble(element))
+        return self._assembler.assemble(element)
+
+    @cached_property
+    def stiffness(self) -> sp.csr_matrix:
+        """Reduced small-strain stiffness matrix (N/m) over the unknowns."""
+        return self.reduce(self.full_stiffness)
+
+    def nodal_forces(self, displacements: np.ndarray) -> np.ndarray:
+        """Small-strain internal forces (n_nodes, 3) of nodal ``displacements``: at supported
+        nodes, minus the reactions the supports provide."""
+        return (self.full_stiffness @ displacements.ravel()).reshape(-1, 3)
 
     def nodal_displacements(self, unknowns: np.ndarray) -> np.ndarray:
         return (self.transform @ unknowns).reshape(-1, 3)
