@@ -68,6 +68,33 @@ def test_noise_off_gives_the_exact_field_and_noise_on_stays_within_a_few_lsb(boa
     assert np.all(np.abs(np.subtract(noisy["dB_uT"], noisy["dB_exact_uT"])) < 40)
 
 
+def test_deformed_mesh_is_saved_as_data_only_npz(tmp_path):
+    path = tmp_path / "deformed.npz"
+    result = run("simulate", "--design", "cylindrical-A", "--depth", "0.5", "--deformed-mesh", str(path), *FAST)
+    assert result.exit_code == 0, result.output
+    with np.load(path, allow_pickle=False) as data:
+        points, displacements = data["points_m"], data["displacements_m"]
+        assert points.shape == displacements.shape and data["tetrahedra"].shape[1] == 4
+        top = np.isclose(points[:, 2], 9e-3) & (np.hypot(points[:, 0], points[:, 1]) < 0.8e-3)
+        # the board's bottom face pushed the top surface under it 0.5 mm down
+        np.testing.assert_allclose(displacements[top, 2], -0.5e-3, rtol=1e-3)
+
+
+def test_sensor_model_facts_are_reported(board_push):
+    chip = board_push["sensor_model"]
+    assert chip["lsb_uT"] == pytest.approx([0.150, 0.150, 0.242])  # GAIN_SEL 7, RES 0 (datasheet table 17)
+    assert 1 / chip["max_rate_hz"] == pytest.approx(chip["conversion_time_ms"] * 1e-3)
+
+
+def test_ambient_field_cancels_in_the_change_but_shifts_the_raw_counts():
+    base = json.loads(run("simulate", "--noise", "off", "--json", *FAST).output)["sensors"][0]
+    ambient = json.loads(run("simulate", "--noise", "off", "--ambient", "0", "0", "50", "--json", *FAST).output)
+    ambient = ambient["sensors"][0]
+    np.testing.assert_allclose(ambient["dB_exact_uT"], base["dB_exact_uT"], atol=1e-3)
+    shift = (np.array(ambient["counts"], dtype=np.int64) - np.array(base["counts"], dtype=np.int64)) % 65536
+    assert shift[2] == pytest.approx(50 / 0.242, abs=1)  # 50 uT on z at 0.242 uT/LSB
+
+
 def test_plot_writes_a_png(tmp_path):
     path = tmp_path / "section.png"
     result = run("simulate", "--design", "cylindrical-A", "--depth", "0.5", "--plot", str(path), *FAST)

@@ -113,6 +113,8 @@ def simulate(
     ambient: tuple[float, float, float] = typer.Option((0.0, 0.0, 0.0), help="Uniform ambient field x y z (µT)."),
     seed: int = typer.Option(0, help="Seed of the sensor noise."),
     plot: Path = typer.Option(None, help="Save a section of the deformed body to this PNG file."),
+    deformed_mesh: Path = typer.Option(None, "--deformed-mesh",
+                                       help="Save the mesh and its nodal displacements to this .npz file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
@@ -126,6 +128,8 @@ def simulate(
             fail(f"--{name} = {value}: expected a positive length in mm")
     if plot is not None and plot.suffix.lower() != ".png":
         fail(f"--plot {plot}: expected a file name ending in .png")
+    if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
+        fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
     twin = FingertipTwin(load_design(design), mesh_size=mesh_size * MM, ambient_field=np.array(ambient) * 1e-6)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
@@ -149,6 +153,13 @@ def simulate(
         from softtip.report.section import plot_section
 
         report["plot"] = str(plot_section(result, plot))
+    if deformed_mesh is not None:
+        vertices = len(twin.mesh.points)  # quadratic nodes: vertices first, then edge midpoints
+        np.savez_compressed(deformed_mesh, points_m=twin.mesh.points, tetrahedra=twin.mesh.tets.T,
+                            displacements_m=result.contact.displacements[:vertices],
+                            quadratic_nodes_m=twin.body.space.nodes, quadratic_displacements_m=result.contact.displacements,
+                            contact_nodes=result.contact.contact_nodes)
+        report["deformed_mesh"] = str(deformed_mesh)
     if json_output:
         print(json.dumps(report, indent=2))
     else:
@@ -185,6 +196,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
              "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
             for j in range(len(design.sensor_positions))],
         "noise": noise,
+        "sensor_model": sensor_summary(twin.sensor),
         "force_N": [round(float(f), 6) for f in result.force],
         "contact": {"nodes": int(len(result.contact.contact_nodes)), "iterations": result.contact.iterations,
                     "factorizations": result.contact.factorizations},
@@ -192,6 +204,15 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
                  "unknowns": int(twin.body.size)},
         "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
     }
+
+
+def sensor_summary(sensor) -> dict:
+    from softtip.sensors import conversion_time_s, lsb_uT, max_output_rate_hz, noise_rms_uT
+
+    settings = sensor.settings
+    return {"chip": "MLX90393", "settings": settings.to_dict(),
+            "lsb_uT": [float(v) for v in lsb_uT(settings)], "noise_rms_uT": [float(v) for v in noise_rms_uT(settings)],
+            "conversion_time_ms": conversion_time_s(settings) * 1e3, "max_rate_hz": max_output_rate_hz(settings)}
 
 
 def print_result(report: dict) -> None:
@@ -215,8 +236,12 @@ def print_result(report: dict) -> None:
     force = report["force_N"]
     console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
     console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
-    if "plot" in report:
-        console.print(f"section plot: {report['plot']}")
+    chip = report["sensor_model"]
+    console.print(f"MLX90393: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
+                  f"{chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
+    for key, label in (("plot", "section plot"), ("deformed_mesh", "deformed mesh")):
+        if key in report:
+            console.print(f"{label}: {report[key]}")
 
 
 def _fmt(values, digits: int) -> str:
