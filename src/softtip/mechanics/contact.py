@@ -7,13 +7,10 @@ the contact set by a semi-smooth Newton (primal-dual active-set) iteration:
 the contact area is an outcome, not an input.
 
 * :func:`solve_linear_contact` - small strain, gaps measured along the
-  approach direction (see :mod:`softtip.mechanics.indenters`). Every active-set iteration is
-  one numerical Cholesky factorisation that reuses the ordering and symbolic
-  analysis of the first; the first active set is the indenter's geometric
-  overlap with the body, which is nearly the converged one, so two or three
-  factorisations usually suffice. Quadratic elements carry little (sometimes
-  slightly negative) consistent pressure at their corner nodes, so a node can
-  flip in and out of contact; once a cycle is seen, nodes are only added.
+  approach direction (see :mod:`softtip.mechanics.indenters`). The first
+  active set is the indenter's geometric overlap with the body, which is
+  nearly the converged one; later ones are low-rank updates of that one
+  factorisation (see :class:`_ActiveSetSystem`).
 * :func:`solve_hyperelastic_contact` - neo-Hookean, large deformation; Newton's
   method with load steps and a backtracking line search on the total energy.
 
@@ -129,6 +126,36 @@ class _StickAnchors:
         self.points = {n: p for n, p in self.points.items() if n in keep}
 
 
+class ActiveSetIteration:
+    """The primal-dual active-set update shared by the contact solvers.
+
+    A node in contact stays in while it is compressed; a free node enters when
+    it penetrates. Corner nodes of quadratic faces carry ~zero consistent
+    pressure, so only clear tension (below -1e-3 of the peak nodal pressure)
+    releases a node; once an active set repeats (a cycle), nodes are only added.
+    """
+
+    def __init__(self, active: np.ndarray):
+        self.active = active
+        self._seen: set[bytes] = set()
+        self._only_add = False
+
+    def update(self, pressure: np.ndarray, linear_gap: np.ndarray, tolerance: float) -> bool:
+        """Update ``active`` from nodal pressures and gaps; True when it did not change."""
+        release = -1e-3 * max(pressure.max(initial=0.0), 0.0)
+        new = np.where(self.active, pressure > release, linear_gap < -tolerance)
+        if self._only_add:
+            new |= self.active
+        if np.array_equal(new, self.active):
+            return True
+        if new.tobytes() in self._seen:
+            self._only_add = True
+            new |= self.active
+        self._seen.add(self.active.tobytes())
+        self.active = new
+        return False
+
+
 class _ActiveSetSystem:
     """Solves (K + sum of penalty blocks of the active nodes) u = f for changing active sets.
 
@@ -234,8 +261,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
         active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
         if stick:  # nodes held by the indenter travel with it, even past the edge of its footprint
             gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
-        seen: set[bytes] = set()
-        only_add = False
+        iteration = ActiveSetIteration(active)
         for _ in range(max_iterations):
             iterations += 1
             if stick:
@@ -254,19 +280,9 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
             nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
             pressure = np.einsum("ij,ij->i", nodal_force, normal)
             linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
-            tolerance = 1e-6 * max(load.depth, 1e-6)
-            # corner nodes of quadratic faces carry ~zero consistent pressure: release only clear tension
-            release = -1e-3 * max(pressure.max(), 0.0)
-            new_active = np.where(active, pressure > release, linear_gap < -tolerance)
-            if only_add:
-                new_active |= active
-            if np.array_equal(new_active, active):
+            if iteration.update(pressure, linear_gap, 1e-6 * max(load.depth, 1e-6)):
                 break
-            if new_active.tobytes() in seen:
-                only_add = True
-                new_active |= active
-            seen.add(active.tobytes())
-            active = new_active
+            active = iteration.active
         u_candidates = u_now
         if stick:
             anchors.keep_only(candidates[active])
