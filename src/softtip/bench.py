@@ -100,3 +100,32 @@ def _bench_readings(twin: FingertipTwin, poses: int, say) -> dict:
         f"{len(rest)} magnets); magpylib field alone: {theirs:,.0f} readings/s; ratio {ours / theirs:.1f}x")
     return {"poses": poses, "readings_per_s": ours, "magpylib_readings_per_s": theirs,
             "speedup_vs_magpylib": ours / theirs}
+
+
+def bench_rom(design_name: str = "cylindrical-D", samples: int = 4000, holdout: int = 12, batch: int = 200_000,
+              save: str | None = None, log: Callable[[str], None] | None = None) -> dict:
+    """Build a reduced-order twin (timed), report its held-out FE error and its batch speed,
+    against the FE seconds per load measured on the held-out solves of the same run."""
+    from softtip.rom.surrogate import ReducedTwin
+
+    say = log or (lambda message: None)
+    rom, t_build = _timed(ReducedTwin.build, load_design(design_name), samples=samples, holdout=holdout)
+    holdout_report = rom.report["holdout"]
+    params = rom.ranges.sample(np.random.default_rng(7), batch)
+    rom.readings(params[:100])  # warm-up
+    _, t_batch = _timed(rom.readings, params, noise=True, rng=np.random.default_rng(8))
+    per_second = batch / t_batch
+    fe_seconds = holdout_report["fe_seconds_per_load"]
+    report = {"design": design_name, "build_s": rom.report["timings_s"]["build_s"], "build_and_holdout_s": t_build,
+              "timings_s": rom.report["timings_s"], "holdout": holdout_report, "readings_per_s": per_second,
+              "fe_seconds_per_load": fe_seconds, "speedup_vs_fe": per_second * fe_seconds}
+    if save:
+        report["saved"] = str(rom.save(save))
+    say(f"reduced twin of {design_name}: built in {report['build_s']:.0f} s ({samples} exact contact samples)")
+    say("held-out FE error: sensor axes {} % FS; magnet displacements max {:.2f} % of range; force {} % FS".format(
+        ", ".join(f"{e:.2f}" for e in np.ravel(holdout_report["sensor_error_percent_fs"])),
+        float(np.max(holdout_report["magnet_displacement_error_percent_range"])),
+        ", ".join(f"{e:.2f}" for e in holdout_report["force_error_percent_fs"])))
+    say(f"batch readings: {per_second:,.0f} per second; FE {fe_seconds:.2f} s per load; "
+        f"speed-up {report['speedup_vs_fe']:,.0f}x")
+    return report

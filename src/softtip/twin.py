@@ -46,36 +46,19 @@ class TwinResult:
         return self.contact.force
 
 
-class FingertipTwin:
-    """A design's mesh, body model and sensors, reused across load cases."""
+class Readout:
+    """The sensing stage of a design: the exact field of its magnets at its Hall sensors,
+    read through the MLX90393 model, relative to the unloaded state."""
 
-    def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, use_cache: bool = True,
-                 ambient_field: np.ndarray | None = None):
+    def __init__(self, design: Design, ambient_field: np.ndarray | None = None):
         try:
             self.sensor = MLX90393(MLX90393Settings.from_dict(design.sensor_readout))
         except ValueError as error:
             raise DesignError(f"{design.name}: {error}") from None
         self.design = design
-        self.mesh_size = mesh_size
         self.ambient_field = np.zeros(3) if ambient_field is None else np.asarray(ambient_field, dtype=float)
-        self.timings: dict[str, float] = {}
-        start = time.perf_counter()
-        self.mesh: TetMesh = mesh_design(design, mesh_size, use_cache=use_cache)
-        self.timings["mesh_s"] = time.perf_counter() - start
-        self._body: BodyModel | None = None
-        rest = np.array([m.center for m in design.magnets])
-        self._rest_positions = rest
-        self.rest_field = self.field(rest[None], np.zeros((1, len(rest), 3)))[0]
-
-    @property
-    def body(self) -> BodyModel:
-        if self._body is None:
-            start = time.perf_counter()
-            self._body = BodyModel.for_design(self.design, self.mesh)
-            self.timings["body_model_s"] = time.perf_counter() - start
-        return self._body
-
-    # ------------------------------------------------------------------ magnetics and sensing
+        self.rest_positions = np.array([m.center for m in design.magnets])
+        self.rest_field = self.field(self.rest_positions[None], np.zeros((1, len(design.magnets), 3)))[0]
 
     def field(self, magnet_positions: np.ndarray, magnet_rotvecs: np.ndarray) -> np.ndarray:
         """Absolute flux density (N, S, 3) in T at the sensors for N sets of magnet poses."""
@@ -99,6 +82,28 @@ class FingertipTwin:
         baseline = self.sensor.read_uT(np.broadcast_to(self.rest_field, loaded.shape), rng=rng)
         return self.sensor.counts_to_uT(counts) - baseline, counts
 
+
+class FingertipTwin(Readout):
+    """A design's mesh, body model and sensors, reused across load cases."""
+
+    def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, use_cache: bool = True,
+                 ambient_field: np.ndarray | None = None):
+        super().__init__(design, ambient_field)
+        self.mesh_size = mesh_size
+        self.timings: dict[str, float] = {}
+        start = time.perf_counter()
+        self.mesh: TetMesh = mesh_design(design, mesh_size, use_cache=use_cache)
+        self.timings["mesh_s"] = time.perf_counter() - start
+        self._body: BodyModel | None = None
+
+    @property
+    def body(self) -> BodyModel:
+        if self._body is None:
+            start = time.perf_counter()
+            self._body = BodyModel.for_design(self.design, self.mesh)
+            self.timings["body_model_s"] = time.perf_counter() - start
+        return self._body
+
     # ------------------------------------------------------------------ one load case
 
     def simulate(self, load: LoadCase, model: str = "linear", noise: bool = True,
@@ -110,7 +115,7 @@ class FingertipTwin:
             contact = solve_linear_contact(body, load)
         else:
             contact = solve_hyperelastic_contact(body, load, progress=progress)
-        rest = self._rest_positions
+        rest = self.rest_positions
         translations = np.array([p.translation for p in contact.magnet_poses])
         rotvecs = np.array([p.rotvec for p in contact.magnet_poses])
         arms = np.array([m.top_center for m in self.design.magnets]) - rest

@@ -267,6 +267,26 @@ def bench_twin(
         print(json.dumps(report, indent=2))
 
 
+@bench_app.command("rom")
+@user_errors
+def bench_rom(
+    design: str = typer.Option("cylindrical-D", help="Design to reduce."),
+    samples: int = typer.Option(4000, help="Exact contact samples to fit the interpolator on."),
+    holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
+    save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""
+    from softtip.bench import bench_rom as run
+
+    if samples < 50 or holdout < 2:
+        fail(f"--samples = {samples}, --holdout = {holdout}: expected at least 50 samples and 2 held-out loads")
+    report = run(design, samples, holdout, save=str(save) if save else None,
+                 log=None if json_output else console.print)
+    if json_output:
+        print(json.dumps(report, indent=2))
+
+
 @app.command()
 @user_errors
 def demo(
@@ -306,6 +326,11 @@ def demo(
     best = max(rows, key=lambda r: r["max_feature_dz_mm"])
     console.print(f"largest feature displacement: {best['design']} at {best['angle_deg']:g}° "
                   f"({best['max_feature_dz_mm']:.3f} mm)")
+
+
+from softtip.cli.optimize import optimize  # noqa: E402 - its own module; uses the helpers above
+
+app.command()(user_errors(optimize))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,303 @@
+"""The reduced-order twin: load parameters -> magnet poses and force, in microseconds.
+
+Built automatically for one design and one indenter family, in three stages:
+
+1. influence matrices of the contact surface (:mod:`softtip.rom.influence`),
+   from one factorisation of the finite-element stiffness;
+2. a design of experiments over the load parameters, each solved exactly on
+   those matrices (milliseconds each, on every core);
+3. a smooth interpolator fitted to it: a small tanh network (scikit-learn's
+   MLPRegressor) from the scaled load parameters to the magnets' rigid poses
+   and the force. The network is the right interpolator here because the
+   response is smooth but not separable in six dimensions, and it evaluates
+   as a few small matrix products (fast in batch).
+
+It reports its own error on held-out *finite-element* solves (not on stage-2
+samples), in % of full scale of every sensor axis and of the range of every
+magnet displacement. It is stored as npz (weights) + JSON (everything else)
+and reloaded without rebuilding; nothing is pickled.
+
+Load parameters (SI): contact position x, y (m), indenter angle about the
+vertical axis (rad), normal depth (m), tangential travel tx, ty (m).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from softtip import __version__
+from softtip.design.model import MM, Design, design_from_dict
+from softtip.mechanics.contact import LoadCase, solve_linear_contact
+from softtip.mechanics.indenters import make_indenter
+from softtip.mechanics.motion import Motion
+from softtip.mechanics.viscoelastic import PronySeries, qlv_response
+from softtip.rom.influence import SurfaceInfluence, solve_contact
+from softtip.twin import Readout
+
+SCHEMA = "softtip.reduced-twin/1"
+PARAMETERS = ("x_m", "y_m", "angle_rad", "depth_m", "tx_m", "ty_m")
+
+
+@dataclass(frozen=True)
+class LoadRanges:
+    """The load space the reduced twin covers."""
+
+    position_radius: float = 5 * MM  # contact positions within this radius of the axis
+    depth: float = 3 * MM
+    tangential: float = 2 * MM  # tangential travel within this radius
+    angle: tuple[float, float] = (0.0, math.pi)  # a board is symmetric under a half turn
+    shear_fraction: float = 0.5  # share of samples with tangential travel
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        radius = self.position_radius * np.sqrt(rng.uniform(size=n))
+        phase = rng.uniform(0, 2 * np.pi, n)
+        shear = rng.uniform(size=n) < self.shear_fraction
+        t_radius = self.tangential * np.sqrt(rng.uniform(size=n)) * shear
+        t_phase = rng.uniform(0, 2 * np.pi, n)
+        depth = self.depth * rng.uniform(0.05, 1.0, n)
+        return np.column_stack([radius * np.cos(phase), radius * np.sin(phase), rng.uniform(*self.angle, n), depth,
+                                t_radius * np.cos(t_phase), t_radius * np.sin(t_phase)])
+
+
+@dataclass(frozen=True)
+class IndenterFamily:
+    kind: str = "board"
+    thickness: float = 1.6 * MM
+    radius: float = 5 * MM
+    friction: str = "stick"
+
+    def load(self, p: np.ndarray) -> LoadCase:
+        indenter = make_indenter(self.kind, thickness=self.thickness, angle_deg=math.degrees(p[2]),
+                                 radius=self.radius)
+        return LoadCase(indenter, float(p[3]), tangential=(float(p[4]), float(p[5])),
+                        position=(float(p[0]), float(p[1])), friction=self.friction)
+
+
+def _features(params: np.ndarray) -> np.ndarray:
+    """Inputs of the network: the angle enters as (cos 2a, sin 2a), a board's half-turn symmetry."""
+    return np.column_stack([params[:, 0], params[:, 1], np.cos(2 * params[:, 2]), np.sin(2 * params[:, 2]),
+                            params[:, 3], params[:, 4], params[:, 5]])
+
+
+# stage 2 runs in worker processes that inherit these through fork
+_WORKER: dict = {}
+
+
+def _solve_samples(rows: np.ndarray) -> np.ndarray:
+    influence, family = _WORKER["influence"], _WORKER["family"]
+    out = np.empty((len(rows), influence.magnets.shape[0] + 3))
+    for k, p in enumerate(rows):
+        solution = solve_contact(influence, family.load(p))
+        out[k] = np.concatenate([solution.magnet_rigid.ravel(), solution.force])
+    return out
+
+
+@dataclass
+class ReducedTwin:
+    design: Design
+    family: IndenterFamily
+    ranges: LoadRanges
+    mesh_size: float
+    network: dict  # weights, biases, input/output scaling (arrays)
+    report: dict = field(default_factory=dict)  # build timings and held-out errors
+
+    # ------------------------------------------------------------------ evaluation
+
+    def predict(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 6) load parameters -> magnet rigid poses (N, M, 6) [t (m), rotvec (rad)] and force (N, 3) N."""
+        params = np.atleast_2d(np.asarray(params, dtype=float))
+        net = self.network
+        hidden = (_features(params) - net["x_mean"]) / net["x_scale"]
+        for k in range(len(net["weights"]) - 1):
+            hidden = np.tanh(hidden @ net["weights"][k] + net["biases"][k])
+        out = (hidden @ net["weights"][-1] + net["biases"][-1]) * net["y_scale"] + net["y_mean"]
+        # no contact, no response: the network is exact at zero depth only up to its error
+        out *= (params[:, 3] > 0)[:, None]
+        return out[:, :-3].reshape(len(params), -1, 6), out[:, -3:]
+
+    def magnet_poses(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (N, M, 3), rotation vectors (N, M, 3) and force (N, 3)."""
+        rigid, force = self.predict(params)
+        centers = np.array([m.center for m in self.design.magnets])
+        return centers + rigid[..., :3], rigid[..., 3:], force
+
+    @cached_property
+    def readout(self) -> Readout:
+        return Readout(self.design)
+
+    def readings(self, params: np.ndarray, noise: bool = True, rng: np.random.Generator | None = None):
+        """Sensor readings (change from rest, µT) (N, S, 3), raw counts (N, S, 3) and force (N, 3)."""
+        positions, rotvecs, force = self.magnet_poses(params)
+        change, counts = self.readout.readings(positions, rotvecs, noise=noise, rng=rng)
+        return change, counts, force
+
+    def series(self, motion: Motion, rate_hz: float, position: tuple[float, float] = (0.0, 0.0), angle: float = 0.0,
+               prony: PronySeries | None = None, noise: bool = True, rng: np.random.Generator | None = None) -> dict:
+        """Time series of a motion at ``rate_hz``: times, depth, tangential travel, readings (µT), raw
+        counts and force. With ``prony`` the force is quasi-linear viscoelastic: the magnets follow the
+        imposed motion while the force relaxes (normal force clipped at zero: contact does not pull)."""
+        times, depth, tangential = motion.sample(rate_hz)
+        params = np.column_stack([np.full_like(times, position[0]), np.full_like(times, position[1]),
+                                  np.full_like(times, angle), depth, tangential])
+        change, counts, elastic = self.readings(params, noise=noise, rng=rng)
+        force = elastic if prony is None else qlv_response(times, elastic, prony)
+        if prony is not None:
+            force[:, 2] = np.maximum(force[:, 2], 0.0)
+        return {"times_s": times, "depth_m": depth, "tangential_m": tangential, "readings_uT": change,
+                "counts": counts, "force_N": force, "elastic_force_N": elastic}
+
+    # ------------------------------------------------------------------ storage
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``path`` (.npz, the weights) and ``path`` with .json (everything else)."""
+        path = Path(path).with_suffix(".npz")
+        arrays = {f"weight_{k}": w for k, w in enumerate(self.network["weights"])}
+        arrays |= {f"bias_{k}": b for k, b in enumerate(self.network["biases"])}
+        arrays |= {k: self.network[k] for k in ("x_mean", "x_scale", "y_mean", "y_scale")}
+        np.savez(path, **arrays)
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        meta = {"schema": SCHEMA, "softtip": __version__, "design": self.design.spec, "design_name": self.design.name,
+                "family": vars(self.family), "ranges": {k: v for k, v in vars(self.ranges).items()},
+                "mesh_size_m": self.mesh_size, "layers": len(self.network["weights"]), "parameters": PARAMETERS,
+                "weights_sha256": digest, "report": self.report}
+        path.with_suffix(".json").write_text(json.dumps(meta, indent=2))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ReducedTwin":
+        """Read a saved reduced twin; refuses foreign, truncated or tampered files with one line."""
+        path = Path(path).with_suffix(".npz")
+        meta_path = path.with_suffix(".json")
+        try:
+            meta = json.loads(meta_path.read_text())
+        except (OSError, json.JSONDecodeError) as error:
+            raise ValueError(f"reduced twin {meta_path}: not a readable JSON file ({error})") from None
+        if not isinstance(meta, dict) or meta.get("schema") != SCHEMA:
+            raise ValueError(f"reduced twin {meta_path}: not a softtip reduced twin (expected schema {SCHEMA})")
+        try:
+            raw = path.read_bytes()
+        except OSError as error:
+            raise ValueError(f"reduced twin {path}: cannot be read ({error})") from None
+        if hashlib.sha256(raw).hexdigest() != meta.get("weights_sha256"):
+            raise ValueError(f"reduced twin {path}: weights do not match their JSON (truncated or modified)")
+        with np.load(path, allow_pickle=False) as data:
+            layers = int(meta["layers"])
+            network = {"weights": [data[f"weight_{k}"] for k in range(layers)],
+                       "biases": [data[f"bias_{k}"] for k in range(layers)],
+                       **{k: data[k] for k in ("x_mean", "x_scale", "y_mean", "y_scale")}}
+        ranges = meta["ranges"]
+        ranges["angle"] = tuple(ranges["angle"])
+        return cls(design=design_from_dict(meta["design"], source=meta["design_name"]),
+                   family=IndenterFamily(**meta["family"]), ranges=LoadRanges(**ranges),
+                   mesh_size=float(meta["mesh_size_m"]), network=network, report=meta["report"])
+
+    # ------------------------------------------------------------------ building
+
+    @classmethod
+    def build(cls, design: Design, family: IndenterFamily = IndenterFamily(), ranges: LoadRanges = LoadRanges(),
+              mesh_size: float = 1.5 * MM, samples: int = 6000, holdout: int = 12, hidden: tuple[int, ...] = (64, 64),
+              seed: int = 0, workers: int = 2, progress=None) -> "ReducedTwin":
+        from softtip.mechanics.fe import BodyModel
+        from softtip.mechanics.mesh import mesh_design
+
+        say = progress or (lambda stage, done, total: None)
+        timings = {}
+        start = time.perf_counter()
+        body = BodyModel.for_design(design, mesh_design(design, mesh_size))
+        # contact can reach as low as the deepest push below the top surface, plus a margin
+        lowest = design.height - ranges.depth - 1.5 * MM
+        influence = SurfaceInfluence.build(body, lowest, progress=lambda d, t: say("influence matrices", d, t))
+        timings["influence_s"] = time.perf_counter() - start
+
+        start = time.perf_counter()
+        rng = np.random.default_rng(seed)
+        params = ranges.sample(rng, samples)
+        targets = _solve_in_parallel(influence, family, params, workers, lambda d, t: say("contact samples", d, t))
+        timings["samples_s"] = time.perf_counter() - start
+
+        start = time.perf_counter()
+        network = _fit_network(_features(params), targets, hidden, seed)
+        timings["fit_s"] = time.perf_counter() - start
+        twin = cls(design=design, family=family, ranges=ranges, mesh_size=mesh_size, network=network)
+
+        start = time.perf_counter()
+        twin.report = {"samples": samples, "hidden": list(hidden), "seed": seed, "timings_s": timings,
+                       "surface_nodes": len(influence.nodes)}
+        twin.report["holdout"] = twin._holdout_errors(body, ranges.sample(np.random.default_rng(seed + 1), holdout),
+                                                      lambda d, t: say("held-out FE solves", d, t))
+        timings["holdout_s"] = time.perf_counter() - start
+        timings["build_s"] = sum(v for k, v in timings.items() if k != "holdout_s")
+        return twin
+
+    def _holdout_errors(self, body, params: np.ndarray, progress) -> dict:
+        """Errors against full finite-element solves at loads the network never saw."""
+        fe_rigid, fe_force, fe_seconds = [], [], []
+        for k, p in enumerate(params):
+            start = time.perf_counter()
+            result = solve_linear_contact(body, self.family.load(p))
+            fe_seconds.append(time.perf_counter() - start)
+            fe_rigid.append([np.r_[pose.translation, pose.rotvec] for pose in result.magnet_poses])
+            fe_force.append(result.force)
+            progress(k + 1, len(params))
+        fe_rigid, fe_force = np.array(fe_rigid), np.array(fe_force)
+        start = time.perf_counter()
+        rom_rigid, rom_force = self.predict(params)
+        rom_seconds = (time.perf_counter() - start) / len(params)
+        centers, readout = self.readout.rest_positions, self.readout
+        fe_field = readout.field(centers + fe_rigid[..., :3], fe_rigid[..., 3:]) - readout.rest_field
+        rom_field = readout.field(centers + rom_rigid[..., :3], rom_rigid[..., 3:]) - readout.rest_field
+        # full scale: the largest change over the held-out loads, per sensor axis / per quantity
+        field_scale = np.abs(fe_field).max(axis=0)
+        disp_range = np.ptp(fe_rigid[..., :3], axis=0)
+        force_scale = np.abs(fe_force).max(axis=0)
+        return {
+            "loads": len(params),
+            "sensor_error_percent_fs": (np.abs(rom_field - fe_field).max(axis=0) / field_scale * 100).tolist(),
+            "magnet_displacement_error_percent_range": (np.abs(rom_rigid[..., :3] - fe_rigid[..., :3]).max(axis=0)
+                                                        / disp_range * 100).tolist(),
+            "force_error_percent_fs": (np.abs(rom_force - fe_force).max(axis=0) / force_scale * 100).tolist(),
+            "fe_seconds_per_load": float(np.mean(fe_seconds)),
+            "reduced_seconds_per_load_unbatched": rom_seconds,
+        }
+
+
+def _solve_in_parallel(influence: SurfaceInfluence, family: IndenterFamily, params: np.ndarray, workers: int,
+                       progress) -> np.ndarray:
+    _WORKER.update(influence=influence, family=family)
+    chunks = np.array_split(params, max(1, len(params) // 100))
+    results = []
+    if workers <= 1 or os.name != "posix":
+        for chunk in chunks:
+            results.append(_solve_samples(chunk))
+            progress(sum(len(r) for r in results), len(params))
+    else:
+        import multiprocessing
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            for out in pool.map(_solve_samples, chunks):
+                results.append(out)
+                progress(sum(len(r) for r in results), len(params))
+    _WORKER.clear()
+    return np.vstack(results)
+
+
+def _fit_network(features: np.ndarray, targets: np.ndarray, hidden: tuple[int, ...], seed: int) -> dict:
+    from sklearn.neural_network import MLPRegressor
+
+    x_mean, x_scale = features.mean(axis=0), features.std(axis=0) + 1e-12
+    y_mean, y_scale = targets.mean(axis=0), targets.std(axis=0) + 1e-30
+    model = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", solver="lbfgs", max_iter=3000, tol=1e-9,
+                         random_state=seed)
+    model.fit((features - x_mean) / x_scale, (targets - y_mean) / y_scale)
+    return {"weights": [w.copy() for w in model.coefs_], "biases": [b.copy() for b in model.intercepts_],
+            "x_mean": x_mean, "x_scale": x_scale, "y_mean": y_mean, "y_scale": y_scale}

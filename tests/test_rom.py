@@ -1,0 +1,114 @@
+"""The reduced-order twin: influence-matrix contact against the finite-element solver,
+storage without pickle, and time series of motions."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from softtip.design.model import MM, load_design
+from softtip.mechanics.contact import LoadCase, solve_linear_contact
+from softtip.mechanics.fe import BodyModel
+from softtip.mechanics.indenters import Board, Sphere
+from softtip.mechanics.mesh import mesh_design
+from softtip.mechanics.motion import Motion
+from softtip.mechanics.viscoelastic import PronySeries
+from softtip.rom.influence import SurfaceInfluence, solve_contact
+from softtip.rom.surrogate import IndenterFamily, LoadRanges, ReducedTwin
+
+
+@pytest.fixture(scope="module")
+def coarse():
+    design = load_design("cylindrical-A")
+    body = BodyModel.for_design(design, mesh_design(design, 2.5 * MM))
+    return design, body, SurfaceInfluence.build(body, lowest_z=5 * MM)
+
+
+@pytest.mark.parametrize(
+    "load",
+    [
+        LoadCase(Board(1.6e-3, 0.0), 1e-3, friction="none"),
+        LoadCase(Board(1.6e-3, 0.6), 1.5e-3, position=(1e-3, -2e-3), friction="stick"),
+        LoadCase(Board(1.6e-3, 0.3), 2e-3, tangential=(1e-3, -0.5e-3), friction="stick"),
+        LoadCase(Sphere(5e-3), 1e-3, position=(2e-3, 0.0), friction="none"),
+    ],
+)
+def test_influence_matrix_contact_equals_the_finite_element_solution(coarse, load):
+    _, body, influence = coarse
+    fe = solve_linear_contact(body, load)
+    exact = solve_contact(influence, load)
+    fe_rigid = np.array([np.r_[p.translation, p.rotvec] for p in fe.magnet_poses])
+    # the FE solver enforces contact by a stiff penalty (1e-4 relative), the influence solve exactly
+    np.testing.assert_allclose(exact.force, fe.force, atol=1e-3 * np.abs(fe.force).max())
+    np.testing.assert_allclose(exact.magnet_rigid[:, :3], fe_rigid[:, :3], atol=1e-3 * np.abs(fe_rigid[:, :3]).max())
+
+
+def test_compliance_is_symmetric_positive_definite(coarse):
+    _, _, influence = coarse
+    w = influence.compliance
+    assert np.allclose(w, w.T)
+    assert np.linalg.eigvalsh(w[:300, :300]).min() > 0
+
+
+@pytest.fixture(scope="module")
+def tiny_twin():
+    design = load_design("cylindrical-A")
+    # frictionless normal pushes keep the build to seconds; stick and shear are covered above
+    ranges = LoadRanges(position_radius=2 * MM, depth=1.5 * MM, shear_fraction=0.0)
+    return ReducedTwin.build(design, IndenterFamily("board", friction="none"), ranges, mesh_size=2.5 * MM,
+                             samples=200, holdout=3, hidden=(8,), workers=1)
+
+
+def test_reduced_twin_reports_its_held_out_fe_error(tiny_twin):
+    holdout = tiny_twin.report["holdout"]
+    assert holdout["loads"] == 3
+    assert len(holdout["sensor_error_percent_fs"]) == 1  # one sensor
+    assert np.array(holdout["magnet_displacement_error_percent_range"]).shape == (4, 3)
+    assert holdout["fe_seconds_per_load"] > holdout["reduced_seconds_per_load_unbatched"]
+
+
+def test_reduced_twin_round_trips_through_npz_and_json(tiny_twin, tmp_path):
+    path = tiny_twin.save(tmp_path / "twin")
+    again = ReducedTwin.load(path)
+    params = tiny_twin.ranges.sample(np.random.default_rng(3), 50)
+    for a, b in zip(tiny_twin.predict(params), again.predict(params)):
+        np.testing.assert_array_equal(a, b)
+    assert again.report == json.loads(json.dumps(tiny_twin.report))
+
+
+def test_tampered_truncated_and_foreign_files_are_refused(tiny_twin, tmp_path):
+    path = tiny_twin.save(tmp_path / "twin")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="truncated or modified"):
+        ReducedTwin.load(path)
+    path.with_suffix(".json").write_text(json.dumps({"schema": "someone-else/3"}))
+    with pytest.raises(ValueError, match="not a softtip reduced twin"):
+        ReducedTwin.load(path)
+    path.with_suffix(".json").write_text("{ not json")
+    with pytest.raises(ValueError, match="not a readable JSON"):
+        ReducedTwin.load(path)
+
+
+def test_no_contact_no_response(tiny_twin):
+    rigid, force = tiny_twin.predict(np.array([[0.0, 0.0, 0.3, 0.0, 0.0, 0.0]]))
+    assert not rigid.any() and not force.any()
+
+
+def test_series_of_a_load_unload_cycle_at_any_rate(tiny_twin):
+    motion = Motion().push(1.5e-3, 1e-3).hold(1.0).release(1e-3)
+    slow = tiny_twin.series(motion, 20.0, noise=False)
+    fast = tiny_twin.series(motion, 200.0, noise=False)
+    assert len(slow["times_s"]) == math.floor(motion.duration * 20) + 1
+    peak = np.argmax(slow["depth_m"])
+    assert slow["depth_m"][peak] == pytest.approx(1.5e-3)
+    # readings depend on the pose only, so the two clocks agree where they share a time
+    np.testing.assert_allclose(slow["readings_uT"][peak], fast["readings_uT"][np.argmax(fast["depth_m"])], atol=1e-6)
+    relaxed = tiny_twin.series(motion, 20.0, prony=PronySeries(g=(0.3,), tau=(1.0,)), noise=False)
+    elastic = relaxed["elastic_force_N"][:, 2]
+    force = relaxed["force_N"][:, 2]
+    assert force.max() < elastic.max()  # relaxation during loading
+    assert force.min() >= 0  # the contact does not pull
