@@ -37,6 +37,14 @@ class SPDSolver:
         self.factorizations = 0
         self.solves = 0
 
+    def __del__(self) -> None:
+        # PARDISO keeps its factors outside Python's heap until told to release them
+        if self._pardiso is not None and self._pattern is not None:
+            try:
+                self._pardiso.free_memory(everything=True)
+            except Exception:  # interpreter shutdown: the library may already be gone
+                pass
+
     @property
     def backend(self) -> str:
         return "mkl-pardiso" if self._pardiso is not None else "scipy-superlu"

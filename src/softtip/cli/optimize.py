@@ -1,0 +1,111 @@
+"""``softtip optimize``: run a design study (grid sweep or Bayesian search) from a TOML file.
+
+Registered on the main app at the end of :mod:`softtip.cli.main`; the helpers
+it shares with the other commands (``fail``, the consoles) are imported when it
+runs, so the two modules never import each other half-initialised.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+
+def optimize(
+    config: Path = typer.Option(..., "--config", help="Study file (TOML): design, parameters, objective, method."),
+    scheduler: str = typer.Option(None, "--scheduler",
+                                  help="Run on an existing Dask cluster, e.g. tcp://HOST:8786 "
+                                       "(default: a local process pool)."),
+    workers: int = typer.Option(2, "--workers", help="Local worker processes (1: in this process)."),
+    output: Path = typer.Option(None, "--output", help="Directory for results.csv, results.json and "
+                                                       "objective.png (default: the study's output)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Sweep or search design parameters on the physics twin; FE results are cached, so a killed
+    study resumes where it stopped."""
+    from softtip.cli.main import console, errors
+    from softtip.optimize.config import load_study
+    from softtip.optimize.executors import make_executor
+    from softtip.optimize.report import write_outputs
+    from softtip.optimize.study import run_study
+
+    study = load_study(config)
+    directory = output if output is not None else study.output
+    with make_executor(scheduler, workers) as executor:
+        if json_output:
+            result = run_study(study, executor)
+        else:
+            result = _run_with_progress(study, executor, errors)
+    files = write_outputs(result, directory)
+    if json_output:
+        report = result.to_json()
+        print(json.dumps({key: report[key] for key in ("study", "method", "objective", "best", "evaluations",
+                                                       "executor", "wall_seconds", "table")}
+                         | {"outputs": files}, indent=2))
+    else:
+        print_study(result, files, console)
+
+
+def _run_with_progress(study, executor, errors):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from softtip.optimize.study import run_study
+
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TextColumn("{task.fields[last]}"))
+    with Progress(*columns, console=errors, transient=True) as bar:
+        task = bar.add_task(f"{study.name} ({study.method})", total=None, last="")
+
+        def update(record, done: int, total: int) -> None:
+            value = f"{record.objective:.4g}" if record.objective is not None else record.status
+            bar.update(task, completed=done, total=total, last=f"last: {_params(record.params)} -> {value}")
+
+        return run_study(study, executor, progress=update)
+
+
+MAX_REASONS = 10  # why designs are infeasible or failed: the first few, the rest are in the CSV
+
+
+def _params(params: dict) -> str:
+    return ", ".join(f"{v:g}" for v in params.values())
+
+
+def print_study(result, files: dict[str, str], console) -> None:
+    config, best = result.config, result.best
+    objective = config.objective
+    table = Table(title=f"{config.name}: {config.method}, goal {objective.goal}")
+    names = [p.name for p in config.parameters]
+    rows = result.table
+    table.add_column("#", justify="right", min_width=3)
+    for name in names:  # long names fold in the header; the values stay on one line
+        table.add_column(name, justify="right", overflow="fold", min_width=6)
+    table.add_column(f"{objective.name} ({objective.unit})" if objective.unit else objective.name,
+                     justify="right", overflow="fold", min_width=9)
+    table.add_column("status", min_width=10)
+    table.add_column("source", min_width=8)
+    for r in rows:
+        source = "cache" if r.cached else ("" if r.evaluation is None else "computed")
+        value = "" if r.objective is None else f"{r.objective:.5f}"
+        style = "bold green" if r is best else ("dim" if r.status != "ok" else None)
+        table.add_row(str(r.evaluation or ""), *(f"{r.params[n]:g}" for n in names), value, r.status, source,
+                      style=style)
+    console.print(table)
+    problems = [r for r in rows if r.reason]
+    for r in problems[:MAX_REASONS]:
+        console.print(f"[dim]{r.status}: {_params(r.params)}: {r.reason}[/]", highlight=False)
+    if len(problems) > MAX_REASONS:
+        console.print(f"[dim]... and {len(problems) - MAX_REASONS} more (see results.csv)[/]")
+    counts = result.counts()
+    if best is not None:
+        console.print(f"best: {', '.join(f'{n} = {best.params[n]:g}' for n in names)} -> "
+                      f"{objective.name} = {best.objective:.5f} {objective.unit} (evaluation {best.evaluation})")
+    else:
+        console.print("no feasible design was evaluated")
+    console.print(f"evaluations: {counts['designs']} designs, {counts['fe_runs']} FE runs computed, "
+                  f"{counts['cache_hits']} from the cache, {counts['infeasible']} infeasible, "
+                  f"{counts['failed']} failed; stop: {counts['stop']}")
+    console.print(f"{result.executor}; {result.wall_seconds:.1f} s")
+    console.print("outputs: " + ", ".join(files.values()))

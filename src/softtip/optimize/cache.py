@@ -1,0 +1,85 @@
+"""On-disk cache of finite-element results, one JSON file per (design, simulation).
+
+The key is a hash of everything that determines a result: the design's
+TOML-level spec (its name and description excluded: they do not change the
+physics), the simulation (load case, friction, model, mesh size), the mesh
+recipe's version and this cache's format version. Bump :data:`CACHE_FORMAT`
+whenever the solver changes what it computes, so stale results are not reused.
+
+Entries are written atomically (a temporary file in the same directory, then
+a rename), so a sweep killed at any moment leaves only complete entries, and
+a re-run computes only what is missing. An entry that cannot be read is
+removed and recomputed, never trusted. Nothing is pickled.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import uuid
+from pathlib import Path
+from typing import Any
+
+from softtip.mechanics.mesh import MESH_FORMAT, cache_dir
+from softtip.optimize.runs import FEResult, Simulation
+
+CACHE_FORMAT = 1
+_NOT_PHYSICS = ("name", "description")
+
+
+def _canonical(value: Any) -> Any:
+    """Integers as floats, so ``radius_mm = 9`` and ``9.0`` describe the same design."""
+    if isinstance(value, dict):
+        return {k: _canonical(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v) for v in value]
+    if isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def cache_key(design_spec: dict[str, Any], simulation: Simulation) -> str:
+    physics = {k: v for k, v in design_spec.items() if k not in _NOT_PHYSICS}
+    payload = json.dumps(_canonical({"cache_format": CACHE_FORMAT, "mesh_format": MESH_FORMAT, "design": physics,
+                                     "simulation": simulation.to_dict()}), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(payload.encode()).hexdigest()[:32]
+
+
+class FEResultCache:
+    """FE results under ``root`` (default: ``cache_dir() / "fe"``)."""
+
+    def __init__(self, root: Path | None = None):
+        self.root = Path(root) if root is not None else cache_dir() / "fe"
+
+    def path(self, key: str) -> Path:
+        return self.root / f"{key}.json"
+
+    def get(self, design_spec: dict[str, Any], simulation: Simulation) -> FEResult | None:
+        key = cache_key(design_spec, simulation)
+        path = self.path(key)
+        try:
+            entry = json.loads(path.read_text())
+            if entry["key"] != key:
+                raise ValueError("entry stored under the wrong key")
+            return FEResult.from_dict(entry["result"])
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, KeyError, TypeError):
+            path.unlink(missing_ok=True)  # damaged: recompute rather than trust it
+            return None
+
+    def put(self, design_spec: dict[str, Any], simulation: Simulation, result: FEResult,
+            seconds: float | None = None) -> Path:
+        key = cache_key(design_spec, simulation)
+        path = self.path(key)
+        entry = {"key": key, "cache_format": CACHE_FORMAT, "design": design_spec,
+                 "simulation": simulation.to_dict(), "seconds": seconds, "result": result.to_dict()}
+        self.root.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{key}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+        try:
+            tmp.write_text(json.dumps(entry))
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)
+        return path
