@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import copy
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from softtip.tomlfile import read_toml
 
 MM = 1e-3
 
@@ -337,11 +338,6 @@ def load_design(name_or_path: str | Path) -> Design:
             raise DesignError(f"design {name_or_path!r} is neither a file nor a shipped design "
                               f"({', '.join(shipped_designs())})")
         path = shipped
-    if not path.is_file():
-        raise DesignError(f"design file {path} does not exist")
-    try:
-        spec = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise DesignError(f"design file {path}: not valid TOML ({error})") from None
+    spec = read_toml(path, "design", DesignError)
     spec.setdefault("name", path.stem)
     return design_from_dict(spec, source=str(path.name if path.parent == SHIPPED_DIR else path))

@@ -29,7 +29,6 @@ results.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from softtip.design.model import Design, DesignError, load_design
 from softtip.optimize.objectives import Objective, build_objective
 from softtip.optimize.settings import SettingsReader, StudyError
 from softtip.optimize.space import Constraint, ParameterRange, whole_steps
+from softtip.tomlfile import read_toml
 
 METHODS = ("grid", "bayes")
 MAX_CANDIDATES = 1_000_000  # the candidate list is held in memory
@@ -76,12 +76,7 @@ class StudyConfig:
 
 def load_study(path: str | Path) -> StudyConfig:
     path = Path(path)
-    if not path.is_file():
-        raise StudyError(f"study file {path} does not exist")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise StudyError(f"study file {path}: not valid TOML ({error})") from None
+    data = read_toml(path, "study", StudyError)
     return study_from_dict(data, source=str(path), base_dir=path.parent, default_name=path.stem)
 
 
