@@ -62,7 +62,7 @@ class ContactResult:
     timings: dict = field(default_factory=dict)
 
 
-def _touch_offset(indenter: Indenter, position: tuple[float, float], points: np.ndarray) -> np.ndarray:
+def touch_offset(indenter: Indenter, position: tuple[float, float], points: np.ndarray) -> np.ndarray:
     """Where the indenter's frame sits when it first touches the undeformed body."""
     offset = np.array([position[0], position[1], 0.0])
     gap = indenter.vertical_gap(points - offset)[0].min()
@@ -72,7 +72,7 @@ def _touch_offset(indenter: Indenter, position: tuple[float, float], points: np.
     return offset
 
 
-def _load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list[np.ndarray]:
+def load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list[np.ndarray]:
     path = [np.array([0.0, 0.0, -load.depth * k / normal_steps]) for k in range(1, normal_steps + 1)]
     if any(load.tangential):
         path += [np.array([load.tangential[0] * k / tangential_steps, load.tangential[1] * k / tangential_steps,
@@ -80,7 +80,7 @@ def _load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list
     return path
 
 
-def _contact_candidates(body: BodyModel) -> tuple[np.ndarray, np.ndarray]:
+def contact_candidates(body: BodyModel) -> tuple[np.ndarray, np.ndarray]:
     """Outer nodes with a free displacement component, and their unknowns (-1 where held)."""
     outer = body.space.boundary_nodes["outer"]
     outer = outer[(body.node_dofs[outer] >= 0).any(axis=1)]
@@ -235,10 +235,10 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     t_assembly = time.perf_counter() - t0
     solver = solver or SPDSolver()
     factorizations0 = solver.factorizations
-    candidates, cand_dofs = _contact_candidates(body)
+    candidates, cand_dofs = contact_candidates(body)
     x = body.space.nodes[candidates]
     epsilon = penalty * stiffness.diagonal()[: body.n_free].mean()
-    touch = _touch_offset(load.indenter, load.position, x)
+    touch = touch_offset(load.indenter, load.position, x)
     stick = load.friction == "stick"
     if normal_steps is None:  # sticking nodes that touch late hold where they touched
         normal_steps = 2 if stick and any(load.tangential) else 1
@@ -255,7 +255,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     previous_frame = touch.copy()
     active = np.zeros(len(candidates), dtype=bool)
     iterations = 0
-    for travel in _load_path(load, normal_steps, tangential_steps):
+    for travel in load_path(load, normal_steps, tangential_steps):
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
         active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
@@ -324,10 +324,10 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
     """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
     t0 = time.perf_counter()
     solver = SPDSolver()
-    candidates, cand_dofs = _contact_candidates(body)
+    candidates, cand_dofs = contact_candidates(body)
     x = body.space.nodes[candidates]
     epsilon = penalty * body.stiffness.diagonal()[: body.n_free].mean()
-    touch = _touch_offset(load.indenter, load.position, x)
+    touch = touch_offset(load.indenter, load.position, x)
     anchors: dict[int, np.ndarray] = {}  # sticking nodes (candidate index) -> anchor in the indenter's frame
     unknowns = np.zeros(body.size)
     iterations = 0
@@ -370,7 +370,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
         for i in np.flatnonzero(in_contact & (gap < 0)):
             anchors.setdefault(int(i), p[i] - gap[i] * normal[i] - frame)
 
-    path = _load_path(load, load_steps, tangential_steps)
+    path = load_path(load, load_steps, tangential_steps)
     newton = _RegularizedNewton(solver)
     previous = unknowns
     for step, travel in enumerate(path):

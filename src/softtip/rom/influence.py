@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from softtip.mechanics.contact import ActiveSetIteration, LoadCase, _contact_candidates, _load_path, _touch_offset
+from softtip.mechanics.contact import ActiveSetIteration, LoadCase, contact_candidates, load_path, touch_offset
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
 
@@ -38,7 +38,7 @@ class SurfaceInfluence:
     @classmethod
     def build(cls, body: BodyModel, lowest_z: float, block: int = 240, progress=None) -> "SurfaceInfluence":
         """Influence of unit forces on the body's outer nodes at or above ``lowest_z`` (m)."""
-        candidates, dofs = _contact_candidates(body)
+        candidates, dofs = contact_candidates(body)
         keep = (body.space.nodes[candidates, 2] >= lowest_z) & (dofs >= 0).all(axis=1)
         nodes, dofs = candidates[keep], dofs[keep]
         columns = dofs.ravel()
@@ -72,7 +72,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
                   tangential_steps: int = 4, max_iterations: int = 50) -> ContactSolution:
     """Exact small-strain contact on the influence matrices, along the FE solver's load path."""
     x = influence.nodes
-    touch = _touch_offset(load.indenter, load.position, x)
+    touch = touch_offset(load.indenter, load.position, x)
     stick = load.friction == "stick"
     if normal_steps is None:
         normal_steps = 2 if stick and any(load.tangential) else 1
@@ -81,7 +81,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
     anchors: dict[int, np.ndarray] = {}  # node -> displacement target offset, moving with the indenter
     active = np.zeros(len(x), dtype=bool)
     previous_frame = touch.copy()
-    for travel in _load_path(load, normal_steps, tangential_steps):
+    for travel in load_path(load, normal_steps, tangential_steps):
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
         active |= gap - u[:, 2] < 0  # the linearised gap g + n.u, n = -z
