@@ -74,7 +74,11 @@ class Readout:
 
         Without noise the change is the exact field difference (no quantisation).
         """
-        loaded = self.field(magnet_positions, magnet_rotvecs)
+        return self.read_field(self.field(magnet_positions, magnet_rotvecs), noise, rng)
+
+    def read_field(self, loaded: np.ndarray, noise: bool = True,
+                   rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """What the sensors report for absolute fields ``loaded`` (N, S, 3) in T; see :meth:`readings`."""
         if not noise:
             return (loaded - self.rest_field) * 1e6, self.sensor.to_counts(loaded, noise=False)
         rng = rng or np.random.default_rng()
@@ -120,10 +124,11 @@ class FingertipTwin(Readout):
         rotvecs = np.array([p.rotvec for p in contact.magnet_poses])
         arms = np.array([m.top_center for m in self.design.magnets]) - rest
         features = translations + np.cross(rotvecs, arms)
-        start = time.perf_counter()
         positions = rest + translations
-        change_uT, counts = self.readings(positions[None], rotvecs[None], noise=noise, rng=rng)
-        field_change = self.field(positions[None], rotvecs[None])[0] - self.rest_field
+        start = time.perf_counter()
+        loaded = self.field(positions[None], rotvecs[None])
+        change_uT, counts = self.read_field(loaded, noise=noise, rng=rng)
+        field_change = loaded[0] - self.rest_field
         timings = dict(self.timings)
         timings.update(contact.timings)
         timings["magnetics_sensor_s"] = time.perf_counter() - start

@@ -107,8 +107,9 @@ def penalty_blocks(body: BodyModel, dofs: np.ndarray, blocks: np.ndarray) -> sp.
     return sp.csr_matrix((blocks.ravel()[keep], (rows[keep], cols[keep])), shape=(body.size, body.size))
 
 
-class _StickAnchors:
-    """Where each sticking node holds on to the indenter, in the indenter's frame."""
+class StickAnchors:
+    """Where each sticking node holds on to the indenter, in the indenter's frame
+    (stored as the node's position, or displacement, minus the frame's when it was held)."""
 
     def __init__(self):
         self.points: dict[int, np.ndarray] = {}
@@ -248,7 +249,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
                         else np.einsum("ni,nj->nij", normal, normal))
     system = _ActiveSetSystem(body, stiffness, cand_dofs, blocks, solver)
     blocks = system.blocks  # held components carry no penalty
-    anchors = _StickAnchors()
+    anchors = StickAnchors()
     unknowns = np.zeros(body.size)
     u_candidates = np.zeros_like(x)
     nodal_force = np.zeros_like(x)
@@ -357,7 +358,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
         return energy, gradient, matrix, force, gap, normal, held | touching
 
     def total_energy(q: np.ndarray, frame: np.ndarray) -> float:
-        elastic = body.hyperelastic(q, with_tangent=False)[0]
+        elastic = body.hyperelastic_energy(q)
         return elastic + contact_terms(q, frame, False)[0] if np.isfinite(elastic) else np.inf
 
     def update_anchors(q: np.ndarray, frame: np.ndarray) -> None:

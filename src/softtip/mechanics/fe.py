@@ -43,13 +43,13 @@ def linear_elastic_matrices(grads: np.ndarray, weights: np.ndarray, lam: float, 
 
 
 def neo_hookean_element(grads: np.ndarray, weights: np.ndarray, lam: float, mu: float,
-                        element_displacements: np.ndarray, with_tangent: bool = True):
+                        element_displacements: np.ndarray, with_tangent: bool = True, with_forces: bool = True):
     """Energy, internal forces and tangents of a compressible neo-Hookean solid.
 
     W = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2, which reduces to linear
     elasticity with the same Lamé parameters at small strain.
     ``element_displacements`` is (ne, k, 3). Returns (energy per element (ne,),
-    forces (ne, 3k), tangents (ne, 3k, 3k) or None). Elements inverted by a
+    forces (ne, 3k) or None, tangents (ne, 3k, 3k) or None). Elements inverted by a
     trial displacement get infinite energy so a line search backs off.
     """
     ne, nq, k, _ = grads.shape
@@ -62,6 +62,8 @@ def neo_hookean_element(grads: np.ndarray, weights: np.ndarray, lam: float, mu: 
     density = 0.5 * mu * (np.einsum("eqij,eqij->eq", F, F) - 3) - mu * log_j + 0.5 * lam * log_j**2
     energy = np.einsum("eq,eq->e", density, weights)
     energy[bad.any(axis=1)] = np.inf
+    if not with_forces:
+        return energy, None, None
     P = mu * (F - F_inv_t) + (lam * log_j)[..., None, None] * F_inv_t
     weighted = grads * weights[:, :, None, None]
     forces = np.einsum("eqiJ,eqaJ->eai", P, weighted, optimize=True).reshape(ne, 3 * k)
@@ -242,6 +244,13 @@ class BodyModel:
     def magnet_poses(self, unknowns: np.ndarray) -> list[MagnetPose]:
         rigid = unknowns[self.n_free:].reshape(-1, 6)
         return [MagnetPose(translation=r[:3].copy(), rotvec=r[3:].copy()) for r in rigid]
+
+    def hyperelastic_energy(self, unknowns: np.ndarray) -> float:
+        """Neo-Hookean strain energy at ``unknowns`` (inf if an element inverts)."""
+        u = self.nodal_displacements(unknowns)
+        energy = neo_hookean_element(self.space.grads, self.space.weights, self.lam, self.mu,
+                                     u[self.space.cell_nodes], with_tangent=False, with_forces=False)[0]
+        return float(energy.sum())
 
     def hyperelastic(self, unknowns: np.ndarray, with_tangent: bool = True):
         """Neo-Hookean energy, reduced gradient and (optionally) reduced tangent at ``unknowns``."""

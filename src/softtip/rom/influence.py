@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from softtip.mechanics.contact import ActiveSetIteration, LoadCase, contact_candidates, load_path, touch_offset
+from softtip.mechanics.contact import ActiveSetIteration, LoadCase, StickAnchors, contact_candidates, load_path, touch_offset
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
 
@@ -78,7 +78,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
         normal_steps = 2 if stick and any(load.tangential) else 1
     forces = np.zeros_like(x)  # force of the indenter on each node
     u = np.zeros_like(x)
-    anchors: dict[int, np.ndarray] = {}  # node -> displacement target offset, moving with the indenter
+    anchors = StickAnchors()  # on displacements: x is fixed, so targets move with the indenter alike
     active = np.zeros(len(x), dtype=bool)
     previous_frame = touch.copy()
     for travel in load_path(load, normal_steps, tangential_steps):
@@ -92,9 +92,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             index = np.flatnonzero(active)
             if stick:
                 # held nodes follow the indenter tangentially from where they were held; the gap closes
-                for i in index:
-                    anchors.setdefault(int(i), u[i] - previous_frame)
-                target = np.array([anchors[int(i)] + frame for i in index]).reshape(-1, 3)
+                target = anchors.targets(index, u[index], previous_frame) + (frame - previous_frame)
                 target[:, 2] = gap[index]  # closing the gap: u_z = g
                 rows = (3 * index[:, None] + np.arange(3)).ravel()
                 values = target.ravel()
@@ -113,9 +111,8 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             active = iteration.active
         u, forces = new_u, f
         if stick:
-            anchors = {i: anchors[i] for i in map(int, np.flatnonzero(active)) if i in anchors}
-            for i in map(int, np.flatnonzero(active)):
-                anchors.setdefault(i, u[i] - frame)
+            anchors.keep_only(np.flatnonzero(active))
+            anchors.targets(np.flatnonzero(active), u[active], frame)
         previous_frame = frame
     rigid = (influence.magnets @ forces.ravel()).reshape(-1, 6)
     return ContactSolution(magnet_rigid=rigid, force=-forces.sum(axis=0), contact_nodes=np.flatnonzero(active))
