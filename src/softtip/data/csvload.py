@@ -1,0 +1,283 @@
+"""Real recordings from CSV files, mapped onto the softtip dataset format.
+
+A mapping names, for each CSV column used, the softtip column it becomes: a channel
+(``s0_bx_uT``...), a label or a condition (declared with its unit). Magnetic columns are
+converted to µT from the unit they were recorded in; time is converted to seconds and
+counted from the first sample of each trial. Errors name the file, the CSV column and the
+line (the header is line 1). The mapping is a dict, or a TOML file::
+
+    trial_column = "run"
+    time_column = "t"
+    time_unit = "ms"
+    units = "mT"              # or a [units] table: CSV column -> unit, per magnetic column
+
+    [columns]
+    Bx = "s0_bx_uT"
+    By = "s0_by_uT"
+    Bz = "s0_bz_uT"
+    Fz = "fz_N"
+    angle = "board_angle_deg"
+
+    [labels]
+    fz_N = "N"
+
+    [conditions]
+    board_angle_deg = "deg"
+
+Every top-level key of the file is also a keyword of :func:`read_csv_recording`; a setting
+given both ways is refused.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.csv as pacsv
+
+from softtip.data.dataset import (
+    DIMENSIONLESS,
+    TIME,
+    TRIAL,
+    Dataset,
+    DatasetError,
+    DatasetMetadata,
+    column_to_numpy,
+    is_channel,
+    subtract_trial_baseline,
+    trial_runs,
+)
+from softtip.tomlfile import read_toml
+
+MAGNETIC_UNITS_IN_UT = {"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}  # 1 G = 1e-4 T
+TIME_UNITS_IN_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
+_DEFAULTS: dict[str, Any] = {"trial_column": None, "time_column": None, "time_unit": "s", "rate_hz": None,
+                             "units": "uT", "labels": {}, "conditions": {}, "baseline_samples": 0,
+                             "delimiter": ","}
+_FIRST_DATA_LINE = 2  # line 1 is the header
+
+
+def _check_option(source: str, key: str, value: Any) -> Any:
+    """One layout setting, type-checked; ``source`` says where it came from."""
+    def fail(expected: str) -> DatasetError:
+        return DatasetError(f"{source}: {key} = {value!r}: expected {expected}")
+
+    if key in ("trial_column", "time_column"):
+        if not isinstance(value, str) or not value:
+            raise fail("a CSV column name")
+    elif key == "time_unit":
+        if value not in TIME_UNITS_IN_S:
+            raise fail(f"one of {', '.join(TIME_UNITS_IN_S)}")
+    elif key == "rate_hz":
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < float("inf"):
+            raise fail("a positive sampling rate in Hz")
+        value = float(value)
+    elif key == "units":
+        for unit in [value] if isinstance(value, str) else (value.values() if isinstance(value, Mapping) else [None]):
+            if unit not in MAGNETIC_UNITS_IN_UT:
+                raise fail(f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")
+    elif key in ("labels", "conditions"):
+        if not isinstance(value, Mapping):
+            raise fail("a table of name = unit")
+    elif key == "baseline_samples":
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
+            raise fail("a number of samples >= 0")
+    elif key == "delimiter":
+        if not isinstance(value, str) or len(value) != 1:
+            raise fail("one character")
+    return value
+
+
+def _read_mapping_file(path: Path) -> tuple[dict[str, str], dict[str, Any]]:
+    document = read_toml(path, "CSV mapping", DatasetError)
+    for key in document:
+        if key != "columns" and key not in _DEFAULTS:
+            raise DatasetError(f"{path}: unknown key {key!r} (expected columns, {', '.join(_DEFAULTS)})")
+    if "columns" not in document:
+        raise DatasetError(f"{path}: no [columns] table (CSV column = softtip column)")
+    options = {key: _check_option(str(path), key, value) for key, value in document.items() if key != "columns"}
+    return document["columns"], options
+
+
+def _check_columns(source: str, columns: Any, labels: Mapping[str, str], conditions: Mapping[str, str]) -> dict:
+    if not isinstance(columns, Mapping) or not columns:
+        raise DatasetError(f"{source}: columns: expected a non-empty table of CSV column = softtip column")
+    targets: dict[str, str] = {}
+    for csv_name, name in columns.items():
+        if not isinstance(name, str):
+            raise DatasetError(f"{source}: columns: {csv_name!r} = {name!r}: expected a softtip column name")
+        if name in (TRIAL, TIME):
+            raise DatasetError(f"{source}: columns: {csv_name!r} = {name!r}: give it as "
+                               f"{'trial_column' if name == TRIAL else 'time_column'} instead")
+        if not (is_channel(name) or name in labels or name in conditions):
+            raise DatasetError(f"{source}: columns: {csv_name!r} = {name!r} is neither a channel (s<k>_b<x|y|z>_uT) "
+                               "nor declared in labels or conditions (with its unit)")
+        if name in targets:
+            raise DatasetError(f"{source}: columns: both {targets[name]!r} and {csv_name!r} map to {name}")
+        targets[name] = csv_name
+    for name in (*labels, *conditions):
+        if name not in targets:
+            raise DatasetError(f"{source}: {name} is declared but no CSV column maps to it")
+    return dict(columns)
+
+
+def _magnetic_units(source: str, units: str | Mapping[str, str], magnetic: list[str]) -> dict[str, str]:
+    if isinstance(units, str):
+        return dict.fromkeys(magnetic, units)
+    for csv_name in units:
+        if csv_name not in magnetic:
+            raise DatasetError(f"{source}: units: {csv_name!r} is not a CSV column mapped to a channel")
+    for csv_name in magnetic:
+        if csv_name not in units:
+            raise DatasetError(f"{source}: units: no unit for magnetic column {csv_name!r}")
+    return dict(units)
+
+
+def _numbers(path: Path, csv_name: str, column: pa.ChunkedArray) -> np.ndarray:
+    """A CSV column read as text, parsed as float64, with the first bad cell named on failure."""
+    text = pc.utf8_trim_whitespace(column)
+    try:
+        return pc.cast(text, pa.float64()).to_numpy(zero_copy_only=False)
+    except pa.ArrowInvalid:
+        for line, cell in enumerate(text.to_pylist(), start=_FIRST_DATA_LINE):
+            try:
+                float(cell)
+            except (TypeError, ValueError):
+                shown = "empty" if not cell else f"{cell!r} is not a number"
+                raise DatasetError(f"{path}: column {csv_name!r}, line {line}: {shown}") from None
+        raise DatasetError(f"{path}: column {csv_name!r}: not all values are numbers") from None
+
+
+def _is_text(column: pa.ChunkedArray) -> bool:
+    return pa.types.is_string(column.type) or pa.types.is_large_string(column.type)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Every setting of one reading, resolved and checked."""
+
+    source: str  # where the mapping came from, for messages
+    columns: dict[str, str]  # CSV column -> softtip column
+    magnetic_units: dict[str, str]  # CSV column -> unit, for the columns mapped to channels
+    options: dict[str, Any]
+
+    @property
+    def numeric(self) -> list[str]:
+        """The CSV columns read as text and parsed as numbers here (for one-line messages naming the cell)."""
+        own = (self.options["trial_column"], self.options["time_column"])
+        return [*self.magnetic_units, *(name for name in own if name is not None)]
+
+
+def _layout(mapping: Any, given: dict[str, Any]) -> _Layout:
+    options = {key: _check_option("read_csv_recording", key, value) for key, value in given.items()
+               if value is not None}
+    if isinstance(mapping, (str, os.PathLike)):
+        source = str(mapping)
+        columns, from_file = _read_mapping_file(Path(mapping))
+        for key, value in from_file.items():
+            if key in options:
+                raise DatasetError(f"{source}: {key} is also given as an argument")
+            options[key] = value
+    elif isinstance(mapping, Mapping):
+        source, columns = "mapping", mapping
+    else:
+        raise DatasetError(f"mapping: expected a dict or the path of a TOML file, got {type(mapping).__name__}")
+    options = {**_DEFAULTS, **options}
+    if options["time_column"] is not None and options["rate_hz"] is not None:
+        raise DatasetError(f"{source}: give either time_column or rate_hz, not both")
+    if options["time_column"] is None and options["rate_hz"] is None:
+        options["time_column"] = TIME
+    columns = _check_columns(source, columns, options["labels"], options["conditions"])
+    magnetic = [csv_name for csv_name, name in columns.items() if is_channel(name)]
+    return _Layout(source, columns, _magnetic_units(source, options["units"], magnetic), options)
+
+
+def _read_table(path: Path, layout: _Layout) -> pa.Table:
+    if not path.is_file():
+        raise DatasetError(f"recording {path} does not exist")
+    try:
+        table = pacsv.read_csv(
+            path, parse_options=pacsv.ParseOptions(delimiter=layout.options["delimiter"]),
+            convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(layout.numeric, pa.string())))
+    except (pa.ArrowException, OSError) as problem:
+        raise DatasetError(f"{path}: cannot be read as CSV ({str(problem).strip().splitlines()[0]})") from None
+    for csv_name in [*layout.columns, *layout.numeric]:
+        if csv_name not in table.column_names:
+            raise DatasetError(f"{path}: no column {csv_name!r} (columns: {', '.join(table.column_names)})")
+        if table.column_names.count(csv_name) > 1:
+            raise DatasetError(f"{path}: column {csv_name!r} appears more than once")
+    return table
+
+
+def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str | os.PathLike, *,
+                       trial_column: str | None = None, time_column: str | None = None,
+                       time_unit: str | None = None, rate_hz: float | None = None,
+                       units: str | Mapping[str, str] | None = None, labels: Mapping[str, str] | None = None,
+                       conditions: Mapping[str, str] | None = None, baseline_samples: int | None = None,
+                       delimiter: str | None = None, metadata: DatasetMetadata | None = None) -> Dataset:
+    """A dataset from a CSV recording and a column mapping (a dict, or the path of a TOML file).
+
+    - ``trial_column``: the CSV column of integer trial ids; without it the file is one trial (id 0);
+    - ``time_column`` (default ``time_s``) in ``time_unit`` (s, ms, us), or, without a time column,
+      ``rate_hz``: samples evenly spaced at that rate; times count from each trial's first sample;
+    - ``units``: the unit of the magnetic columns as recorded (uT, mT, G, T), one for all or a
+      table per CSV column; values are stored in µT;
+    - ``labels`` / ``conditions``: name -> unit of every mapped column that is not a channel;
+    - ``baseline_samples``: when > 0, the mean of each trial's first that many samples is
+      subtracted from its magnetic columns (for recordings of absolute flux density);
+    - ``delimiter``: the CSV field separator.
+    """
+    path = Path(path)
+    layout = _layout(mapping, {"trial_column": trial_column, "time_column": time_column, "time_unit": time_unit,
+                               "rate_hz": rate_hz, "units": units, "labels": labels, "conditions": conditions,
+                               "baseline_samples": baseline_samples, "delimiter": delimiter})
+    options = layout.options
+    table = _read_table(path, layout)
+
+    if options["trial_column"] is None:
+        trial = np.zeros(table.num_rows, dtype=np.int64)
+    else:
+        ids = _numbers(path, options["trial_column"], table.column(options["trial_column"]))
+        if not np.all(np.isfinite(ids) & (ids == np.round(ids))):
+            raise DatasetError(f"{path}: trial column {options['trial_column']!r} holds values that are not integers")
+        trial = ids.astype(np.int64)
+    starts, lengths = trial_runs(trial)
+    first_row = np.repeat(starts, lengths)
+    if options["rate_hz"] is not None:
+        time = (np.arange(len(trial)) - first_row) / options["rate_hz"]
+    else:
+        time = _numbers(path, options["time_column"], table.column(options["time_column"]))
+        time = (time - time[first_row]) * TIME_UNITS_IN_S[options["time_unit"]]
+
+    data: dict[str, Any] = {TRIAL: trial, TIME: time}
+    units_of = {**options["labels"], **options["conditions"]}
+    for csv_name, name in layout.columns.items():
+        column = table.column(csv_name)
+        if csv_name in layout.magnetic_units:
+            values = _numbers(path, csv_name, column) * MAGNETIC_UNITS_IN_UT[layout.magnetic_units[csv_name]]
+            if options["baseline_samples"]:
+                try:
+                    values = subtract_trial_baseline(values, trial, options["baseline_samples"])
+                except DatasetError as problem:
+                    raise DatasetError(f"{path}: {problem}") from None
+            data[name] = values
+        elif _is_text(column) and units_of[name] != DIMENSIONLESS:
+            data[name] = _numbers(path, csv_name, column)  # a physical quantity read as text: name the bad cell
+        else:
+            try:
+                data[name] = column_to_numpy(repr(csv_name), column, row_word="line", first_row=_FIRST_DATA_LINE)
+            except DatasetError as problem:
+                raise DatasetError(f"{path}: {problem}") from None
+    if metadata is None:
+        metadata = DatasetMetadata(description=f"CSV recording {path.name}")
+    try:
+        return Dataset(data, options["labels"], options["conditions"], metadata)
+    except DatasetError as problem:
+        raise DatasetError(f"{path}: {problem}") from None
