@@ -1,0 +1,28 @@
+"""Calibration: models from sensor readings to what a robot needs, their metrics, their files.
+
+* :class:`PolynomialFit` — per-channel polynomial without cross terms, by pseudo-inverse
+  (the published "PFM");
+* :class:`LMNetwork` — tanh feedforward regression trained by Levenberg–Marquardt with
+  validation early stopping (the toolbox's ``feedforwardnet``/``trainlm``);
+* :class:`SoftmaxClassifier` — tanh network with softmax output trained by scaled
+  conjugate gradient (``patternnet``/``trainscg``).
+
+All three are scikit-learn estimators with an unchecked ``predict_one`` for real time.
+:mod:`~softtip.calibration.metrics` holds the papers' metrics; :func:`save_model` and
+:func:`load_model` store fitted models as ``.npz`` + JSON, never pickle.
+"""
+
+from softtip.calibration.classifier import SoftmaxClassifier
+from softtip.calibration.network import LMNetwork
+from softtip.calibration.persistence import ModelFileError, ModelMetadata, load_model, save_model
+from softtip.calibration.polynomial import PolynomialFit
+
+__all__ = [
+    "LMNetwork",
+    "ModelFileError",
+    "ModelMetadata",
+    "PolynomialFit",
+    "SoftmaxClassifier",
+    "load_model",
+    "save_model",
+]

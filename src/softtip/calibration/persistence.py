@@ -1,0 +1,342 @@
+"""Saved calibration models: one ``.npz`` file, no pickle.
+
+The archive (written by ``numpy.savez``, read with ``allow_pickle=False``) holds every
+array of the model under a path-like name (``model/weights/0``, ``model/input_min``, or
+``steps/<i>/...`` for a pipeline) and one text entry, ``metadata``, a JSON object::
+
+    format          "softtip-model"
+    schema_version  1
+    softtip_version the version that wrote the file
+    model           {"class", "params", "state"} for a model, or {"class": "Pipeline",
+                    "steps": [{"name", "class", "params", "state"}, ...]}; "state" holds
+                    the JSON-able fitted values (sizes, stop reason, ...)
+    input_channels, input_units, target_names, target_units   one entry per input / output
+    baseline        how readings were zeroed before calibration ("initial-value": the
+                    reading before contact subtracted)
+    scaling         the scaling each step applies to inputs and outputs
+    extra           free JSON object for the caller
+    sha256          hex digest of the metadata without this field (canonical JSON: sorted
+                    keys, no spaces) followed, for each array in sorted name order, by
+                    name NUL dtype NUL shape NUL and the C-order bytes
+
+Saved: :class:`LMNetwork`, :class:`SoftmaxClassifier`, :class:`PolynomialFit`, and a
+scikit-learn ``Pipeline`` of ``StandardScaler``/``MinMaxScaler`` steps ending in one of them.
+Parameters that are not JSON (a numpy Generator as ``random_state``) are saved as null:
+they only shape training, not the fitted model. Every refusal raises
+:class:`ModelFileError` with one line naming the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import zipfile
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import MinMaxScaler, StandardScaler
+
+from softtip import __version__
+from softtip.calibration import checks
+from softtip.calibration.classifier import SoftmaxClassifier
+from softtip.calibration.network import LMNetwork
+from softtip.calibration.polynomial import PolynomialFit
+
+FORMAT = "softtip-model"
+SCHEMA_VERSION = 1
+MODELS = {cls.__name__: cls for cls in (LMNetwork, SoftmaxClassifier, PolynomialFit)}
+SCALERS = {
+    "StandardScaler": (StandardScaler, ("mean_", "var_", "scale_")),
+    "MinMaxScaler": (MinMaxScaler, ("min_", "scale_", "data_min_", "data_max_", "data_range_")),
+}
+ZIP_MAGIC = b"PK\x03\x04"
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be written or trusted."""
+
+
+@dataclass(frozen=True)
+class ModelMetadata:
+    """What a saved model says about itself, besides its arrays."""
+
+    model_class: str
+    params: dict
+    input_channels: tuple[str, ...]
+    input_units: tuple[str, ...]
+    target_names: tuple[str, ...]
+    target_units: tuple[str, ...]
+    baseline: str
+    scaling: dict
+    softtip_version: str
+    schema_version: int = SCHEMA_VERSION
+    extra: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------
+# Steps: model or scaler <-> (params, state, arrays)
+# --------------------------------------------------------------------------
+
+
+def _json_params(estimator) -> dict:
+    params = estimator.get_params(deep=False)
+    if not isinstance(params.get("random_state"), (int, type(None))):
+        params["random_state"] = None  # a Generator: it only shaped training
+    try:
+        json.dumps(params, allow_nan=False)
+    except (TypeError, ValueError):
+        raise ModelFileError(f"{type(estimator).__name__}: parameters must be JSON values to be saved, "
+                             f"got {params!r}") from None
+    return params
+
+
+def _tuples(value):
+    """JSON lists back to the tuples estimators take as parameters."""
+    if isinstance(value, list):
+        return tuple(_tuples(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _tuples(v) for k, v in value.items()}
+    return value
+
+
+def _export_step(step) -> tuple[dict, dict[str, np.ndarray]]:
+    name = type(step).__name__
+    if name in MODELS and isinstance(step, MODELS[name]):
+        arrays, state = step._export()
+    elif name in SCALERS and isinstance(step, SCALERS[name][0]):
+        if not hasattr(step, "n_features_in_"):
+            raise ModelFileError(f"{name} is not fitted")
+        arrays = {a: np.asarray(getattr(step, a), dtype=np.float64) for a in SCALERS[name][1]
+                  if getattr(step, a, None) is not None}
+        state = {"n_features_in": int(step.n_features_in_)}
+        seen = np.asarray(step.n_samples_seen_)
+        if seen.ndim:
+            arrays["n_samples_seen"] = seen.astype(np.int64)
+        else:
+            state["n_samples_seen"] = int(seen)
+    else:
+        raise ModelFileError(f"cannot save a {name}: expected one of {', '.join(MODELS)} "
+                             f"(alone or after {' / '.join(SCALERS)} in a Pipeline)")
+    return {"class": name, "params": _json_params(step), "state": state}, arrays
+
+
+def _restore_step(description: dict, arrays: dict[str, np.ndarray]):
+    name = description.get("class")
+    params, state = description.get("params"), description.get("state")
+    if not isinstance(params, dict) or not isinstance(state, dict):
+        raise ValueError(f"{name}: params and state must be JSON objects")
+    params = _tuples(params)
+    if name in MODELS:
+        try:
+            return MODELS[name]._restore(params, arrays, state)
+        except TypeError as problem:  # unknown parameter names
+            raise ValueError(f"{name}: {problem}") from None
+    if name in SCALERS:
+        cls, names = SCALERS[name]
+        try:
+            scaler = cls(**params)
+        except TypeError as problem:
+            raise ValueError(f"{name}: {problem}") from None
+        n_features = checks.stored_int(state, "n_features_in", 1)
+        for attribute in names:
+            setattr(scaler, attribute, checks.stored_array(arrays, attribute, (n_features,))
+                    if attribute in arrays else None)
+        scaler.n_features_in_ = n_features
+        scaler.n_samples_seen_ = (checks.stored_array(arrays, "n_samples_seen", (n_features,), kinds="i")
+                                  if "n_samples_seen" in arrays else checks.stored_int(state, "n_samples_seen", 1))
+        return scaler
+    raise ModelFileError(f"unknown model class {name!r}")
+
+
+def _scaling(step) -> dict:
+    if isinstance(step, LMNetwork):
+        return {"input": "mapminmax to [-1, 1] (arrays input_min, input_max)",
+                "output": "mapminmax from [-1, 1] (arrays target_min, target_max)"}
+    if isinstance(step, SoftmaxClassifier):
+        return {"input": "mapminmax to [-1, 1] (arrays input_min, input_max)", "output": "softmax over classes"}
+    if isinstance(step, PolynomialFit):
+        return {"input": "none", "output": "none"}
+    return {"input": f"{type(step).__name__} (scikit-learn)", "output": "none"}
+
+
+# --------------------------------------------------------------------------
+# Checksum and file I/O
+# --------------------------------------------------------------------------
+
+
+def _canonical(metadata: dict) -> bytes:
+    return json.dumps(metadata, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+
+
+def _digest(metadata: dict, arrays: dict[str, np.ndarray]) -> str:
+    digest = hashlib.sha256(_canonical({k: v for k, v in metadata.items() if k != "sha256"}))
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}\0{array.dtype.str}\0{array.shape}\0".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+def _write(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> None:
+    """Write atomically: a crash leaves either the old file or the new one, never half of it."""
+    metadata = metadata | {"sha256": _digest(metadata, arrays)}
+    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(descriptor, "wb") as handle:
+            np.savez(handle, metadata=np.array(_canonical(metadata).decode()), **arrays)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def _names(value, count: int, what: str, *, broadcast: bool) -> tuple[str, ...]:
+    if broadcast and isinstance(value, str):
+        value = [value] * count
+    if isinstance(value, str) or not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):
+        expected = f"{'a string or ' if broadcast else ''}a sequence of {count} strings"
+        raise ModelFileError(f"{what} must be {expected}, got {value!r}")
+    if len(value) != count:
+        raise ModelFileError(f"{what} has {len(value)} entries, the model has {count}")
+    return tuple(value)
+
+
+def _output_count(model) -> int:
+    return 1 if isinstance(model, SoftmaxClassifier) else int(model.n_outputs_)
+
+
+def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str], input_units: str | Sequence[str],
+               target_names: Sequence[str], target_units: str | Sequence[str], baseline: str = "initial-value",
+               extra: dict | None = None) -> Path:
+    """Save a fitted model (or scaler Pipeline ending in one) to ``path``, exactly as named
+    (use the ``.npz`` suffix). Units may be one string for every channel/output. For a
+    classifier ``target_names`` is one name (the predicted label), e.g. ``["contact_state"]``.
+    """
+    path = Path(path)
+    steps = list(model.named_steps.items()) if isinstance(model, Pipeline) else [(None, model)]
+    final = steps[-1][1]
+    if isinstance(model, Pipeline) and not all(type(s).__name__ in SCALERS for _, s in steps[:-1]):
+        raise ModelFileError(f"cannot save this Pipeline: steps before the model must be {' / '.join(SCALERS)}")
+    if type(final).__name__ not in MODELS:
+        raise ModelFileError(f"cannot save a {type(final).__name__}: expected one of {', '.join(MODELS)}")
+    if not hasattr(final, "n_features_in_"):
+        raise ModelFileError(f"the {type(final).__name__} is not fitted")
+    exported = [_export_step(step) for _, step in steps]
+    n_inputs = int(steps[0][1].n_features_in_)
+    n_outputs = _output_count(final)
+    if not isinstance(baseline, str) or not baseline:
+        raise ModelFileError(f"baseline must be a non-empty string, got {baseline!r}")
+    if extra is not None and not isinstance(extra, dict):
+        raise ModelFileError(f"extra must be a dict of JSON values or None, got {type(extra).__name__}")
+    if isinstance(model, Pipeline):
+        named = [d | {"name": name} for (name, _), (d, _) in zip(steps, exported, strict=True)]
+        description = {"class": "Pipeline", "steps": named}
+        arrays = {f"steps/{i}/{k}": v for i, (_, a) in enumerate(exported) for k, v in a.items()}
+        scaling = {name: _scaling(step) for name, step in steps}
+    else:
+        description = exported[0][0]
+        arrays = {f"model/{k}": v for k, v in exported[0][1].items()}
+        scaling = _scaling(final)
+    metadata = {
+        "format": FORMAT,
+        "schema_version": SCHEMA_VERSION,
+        "softtip_version": __version__,
+        "model": description,
+        "input_channels": list(_names(input_channels, n_inputs, "input_channels", broadcast=False)),
+        "input_units": list(_names(input_units, n_inputs, "input_units", broadcast=True)),
+        "target_names": list(_names(target_names, n_outputs, "target_names", broadcast=False)),
+        "target_units": list(_names(target_units, n_outputs, "target_units", broadcast=True)),
+        "baseline": baseline,
+        "scaling": scaling,
+        "extra": extra or {},
+    }
+    try:
+        _canonical(metadata)
+    except (TypeError, ValueError) as problem:
+        raise ModelFileError(f"extra must hold JSON values only ({problem})") from None
+    _write(path, metadata, {k: np.asarray(v) for k, v in arrays.items()})
+    return path
+
+
+def _read(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    if not path.is_file():
+        raise ModelFileError(f"model file {path} does not exist")
+    with path.open("rb") as handle:
+        if handle.read(len(ZIP_MAGIC)) != ZIP_MAGIC:
+            raise ModelFileError(f"{path} is not a softtip model file (not an npz archive)")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as problem:
+        raise ModelFileError(f"{path} is truncated or unreadable ({type(problem).__name__}: {problem})") from None
+    text = arrays.pop("metadata", None)
+    if text is None or text.dtype.kind != "U" or text.ndim != 0:
+        raise ModelFileError(f"{path} is not a softtip model file (no metadata entry)")
+    try:
+        metadata = json.loads(str(text))
+    except json.JSONDecodeError:
+        metadata = None
+    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT:
+        raise ModelFileError(f"{path} is not a softtip model file (format is not {FORMAT!r})")
+    return metadata, arrays
+
+
+def load_model(path: str | os.PathLike):
+    """The fitted estimator saved in ``path`` and its :class:`ModelMetadata`."""
+    path = Path(path)
+    metadata, arrays = _read(path)
+    if metadata.get("schema_version") != SCHEMA_VERSION:
+        raise ModelFileError(f"{path}: unsupported schema version {metadata.get('schema_version')!r} "
+                             f"(this softtip reads version {SCHEMA_VERSION})")
+    if metadata.get("sha256") != _digest(metadata, arrays):
+        raise ModelFileError(f"{path}: checksum mismatch: the file was altered or damaged after it was written")
+    description = metadata.get("model")
+    if not isinstance(description, dict):
+        raise ModelFileError(f"{path}: metadata has no model description")
+    try:
+        if description.get("class") == "Pipeline":
+            steps = description.get("steps")
+            if not isinstance(steps, list) or not steps or not all(isinstance(s, dict) for s in steps):
+                raise ValueError("a Pipeline needs a non-empty list of steps")
+            restored = [(str(s.get("name")), _restore_step(s, _sub(arrays, f"steps/{i}/")))
+                        for i, s in enumerate(steps)]
+            kinds = [type(s).__name__ for _, s in restored]
+            if kinds[-1] not in MODELS or any(kind not in SCALERS for kind in kinds[:-1]):
+                raise ValueError("a Pipeline must be scalers followed by one model")
+            widths = {int(s.n_features_in_) for _, s in restored}
+            if len(widths) != 1:
+                raise ValueError(f"the pipeline steps expect different numbers of inputs {sorted(widths)}")
+            model, final = Pipeline(restored), restored[-1][1]
+            params = {"steps": [{key: s.get(key) for key in ("name", "class", "params")} for s in steps]}
+        else:
+            final = model = _restore_step(description, _sub(arrays, "model/"))
+            params = description["params"]
+        n_inputs, n_outputs = int(final.n_features_in_), _output_count(final)
+        result = ModelMetadata(
+            model_class=description["class"],
+            params=params,
+            input_channels=_names(metadata.get("input_channels"), n_inputs, "input_channels", broadcast=False),
+            input_units=_names(metadata.get("input_units"), n_inputs, "input_units", broadcast=False),
+            target_names=_names(metadata.get("target_names"), n_outputs, "target_names", broadcast=False),
+            target_units=_names(metadata.get("target_units"), n_outputs, "target_units", broadcast=False),
+            baseline=str(metadata.get("baseline")),
+            scaling=metadata.get("scaling") or {},
+            softtip_version=str(metadata.get("softtip_version")),
+            schema_version=SCHEMA_VERSION,
+            extra=metadata.get("extra") or {},
+        )
+    except ModelFileError as problem:
+        raise ModelFileError(f"{path}: {problem}") from None
+    except ValueError as problem:
+        raise ModelFileError(f"{path}: inconsistent model: {problem}") from None
+    return model, result
+
+
+def _sub(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
+    return {name.removeprefix(prefix): array for name, array in arrays.items() if name.startswith(prefix)}
