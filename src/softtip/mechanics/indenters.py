@@ -101,14 +101,73 @@ class Sphere:
         return _downward(points, np.where(inside | extend, lower - points[:, 2], np.inf))
 
 
-Indenter = Board | Plate | Sphere
+@dataclass(frozen=True)
+class TiltedPlate:
+    """A rigid flat plate tilted by ``tilt`` (rad) about a horizontal axis: its face rises along the
+    horizontal direction at ``angle`` (rad) about the vertical axis; passes through the origin.
+    A grasped object whose face is not square to the fingertip."""
+
+    tilt: float = 0.0
+    angle: float = 0.0
+
+    def __post_init__(self):
+        if not abs(self.tilt) < math.radians(60):
+            raise ValueError(f"plate tilt = {math.degrees(self.tilt):.1f} deg: expected less than 60 deg")
+
+    def _rise(self, points: np.ndarray) -> np.ndarray:
+        uphill = np.array([math.cos(self.angle), math.sin(self.angle), 0.0])
+        return math.tan(self.tilt) * (points @ uphill)
+
+    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        uphill = np.array([math.cos(self.angle), math.sin(self.angle), 0.0])
+        normal = -math.cos(self.tilt) * np.array([0.0, 0.0, 1.0]) + math.sin(self.tilt) * uphill
+        distance = (self._rise(points) - points[:, 2]) * math.cos(self.tilt)
+        return distance, np.tile(normal, (len(points), 1))
+
+    def vertical_gap(self, points: np.ndarray, extend: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        return _downward(points, self._rise(points) - points[:, 2])
 
 
-def make_indenter(kind: str, thickness: float = 1.6e-3, angle_deg: float = 0.0, radius: float = 5e-3) -> Indenter:
+@dataclass(frozen=True)
+class CornerPlate:
+    """The corner of a large rigid flat plate: it covers the quadrant u >= 0, v >= 0 of axes turned
+    by ``angle`` (rad) about the vertical, corner at the origin, face at z = 0 - a board held
+    face-on whose corner lies on the fingertip."""
+
+    angle: float = 0.0
+
+    def _inside(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return points[:, 0] * c + points[:, 1] * s, -points[:, 0] * s + points[:, 1] * c
+
+    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u, v = self._inside(points)
+        outside = np.hypot(np.maximum(-u, 0), np.maximum(-v, 0))
+        beside = outside > 0
+        distance = np.where(beside, np.hypot(outside, np.maximum(points[:, 2], 0)), -points[:, 2])
+        normal = np.tile(_DOWN, (len(points), 1))
+        return distance, normal
+
+    def vertical_gap(self, points: np.ndarray, extend: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        u, v = self._inside(points)
+        covered = (u >= 0) & (v >= 0)
+        return _downward(points, np.where(covered | extend, -points[:, 2], np.inf))
+
+
+Indenter = Board | Plate | Sphere | TiltedPlate | CornerPlate
+INDENTERS = ("board", "plate", "sphere", "tilted-plate", "corner")
+
+
+def make_indenter(kind: str, thickness: float = 1.6e-3, angle_deg: float = 0.0, radius: float = 5e-3,
+                  tilt_deg: float = 0.0) -> Indenter:
     if kind == "board":
         return Board(thickness=thickness, angle=math.radians(angle_deg))
     if kind == "plate":
         return Plate()
     if kind == "sphere":
         return Sphere(radius=radius)
-    raise ValueError(f"indenter = {kind!r}: expected one of board, plate, sphere")
+    if kind == "tilted-plate":
+        return TiltedPlate(tilt=math.radians(tilt_deg), angle=math.radians(angle_deg))
+    if kind == "corner":
+        return CornerPlate(angle=math.radians(angle_deg))
+    raise ValueError(f"indenter = {kind!r}: expected one of {', '.join(INDENTERS)}")

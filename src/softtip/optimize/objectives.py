@@ -51,6 +51,11 @@ class Objective:
     unit: str = ""
 
 
+class Infeasible(StudyError):
+    """Raised by a score when a design violates a constraint only its results can reveal
+    (a saturated sensor, say): the design is reported infeasible, not failed."""
+
+
 ObjectiveFactory = Callable[[SettingsReader, Design], Objective]
 _REGISTRY: dict[str, ObjectiveFactory] = {}
 _imported_plugins = False

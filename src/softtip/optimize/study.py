@@ -22,6 +22,7 @@ from softtip.design.model import Design, DesignError
 from softtip.optimize.bayes import BayesianSearch
 from softtip.optimize.cache import FEResultCache
 from softtip.optimize.config import StudyConfig, numeric_parameters
+from softtip.optimize.objectives import Infeasible
 from softtip.optimize.executors import Executor, FEJob
 from softtip.optimize.runs import FEResult, Simulation
 from softtip.optimize.space import grid_candidates, normalised_points
@@ -159,6 +160,9 @@ class _Evaluator:
     def _score(self, record: DesignRecord, design: Design, results: list[FEResult]) -> DesignRecord:
         try:
             value = float(self.objective.score(design, results))
+        except Infeasible as error:
+            record.status, record.reason = INFEASIBLE, str(error)
+            return record
         except StudyError as error:
             record.status, record.reason = FAILED, str(error)
             return record

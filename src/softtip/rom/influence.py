@@ -61,6 +61,9 @@ class SurfaceInfluence:
                    magnet_centers=body.magnet_centers.copy())
 
 
+_BULGE_MARGIN = 1e-3  # m
+
+
 @dataclass
 class ContactSolution:
     magnet_rigid: np.ndarray  # (M, 6): translation (m) and rotation vector (rad) of each magnet
@@ -71,17 +74,26 @@ class ContactSolution:
 def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int | None = None,
                   tangential_steps: int = 4, max_iterations: int = 50) -> ContactSolution:
     """Exact small-strain contact on the influence matrices, along the FE solver's load path."""
-    x = influence.nodes
-    touch = touch_offset(load.indenter, load.position, x)
+    touch = touch_offset(load.indenter, load.position, influence.nodes)
     stick = load.friction == "stick"
     if normal_steps is None:
         normal_steps = 2 if stick and any(load.tangential) else 1
+    path = load_path(load, normal_steps, tangential_steps)
+    # only nodes the indenter can reach along its path take part: every other node stays out of contact
+    # unless the surface bulges up by more than the margin, far beyond what these loads do
+    reach = np.zeros(len(influence.nodes), dtype=bool)
+    for travel in path:
+        reach |= load.indenter.vertical_gap(influence.nodes - (touch + travel))[0] < load.depth + _BULGE_MARGIN
+    local = np.flatnonzero(reach)
+    x = influence.nodes[local]
+    local_rows = (3 * local[:, None] + np.arange(3)).ravel()
+    compliance = influence.compliance[np.ix_(local_rows, local_rows)]
     forces = np.zeros_like(x)  # force of the indenter on each node
     u = np.zeros_like(x)
     anchors = StickAnchors()  # on displacements: x is fixed, so targets move with the indenter alike
     active = np.zeros(len(x), dtype=bool)
     previous_frame = touch.copy()
-    for travel in load_path(load, normal_steps, tangential_steps):
+    for travel in path:
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
         active |= gap - u[:, 2] < 0  # the linearised gap g + n.u, n = -z
@@ -101,9 +113,10 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
                 values = gap[index]
             f = np.zeros(3 * len(x))
             if len(rows):
-                block = influence.compliance[np.ix_(rows, rows)]
-                f[rows] = scipy.linalg.solve(block, values, assume_a="pos")
-            new_u = (influence.compliance[:, rows] @ f[rows]).reshape(-1, 3) if len(rows) else np.zeros_like(x)
+                f[rows] = scipy.linalg.solve(compliance[np.ix_(rows, rows)], values, assume_a="pos")
+                new_u = (compliance[:, rows] @ f[rows]).reshape(-1, 3)
+            else:
+                new_u = np.zeros_like(x)
             f = f.reshape(-1, 3)
             pressure = -f[:, 2]  # the indenter pushes down on the body
             if iteration.update(pressure, gap - new_u[:, 2], 1e-6 * max(load.depth, 1e-6)):
@@ -114,5 +127,5 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             anchors.keep_only(np.flatnonzero(active))
             anchors.targets(np.flatnonzero(active), u[active], frame)
         previous_frame = frame
-    rigid = (influence.magnets @ forces.ravel()).reshape(-1, 6)
-    return ContactSolution(magnet_rigid=rigid, force=-forces.sum(axis=0), contact_nodes=np.flatnonzero(active))
+    rigid = (influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6)
+    return ContactSolution(magnet_rigid=rigid, force=-forces.sum(axis=0), contact_nodes=local[active])
