@@ -335,3 +335,7 @@ app.command()(user_errors(optimize))
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())
+
+from softtip.cli.lab import register as register_lab  # noqa: E402
+
+register_lab(app, user_errors)

@@ -69,6 +69,7 @@ class ContactSolution:
     magnet_rigid: np.ndarray  # (M, 6): translation (m) and rotation vector (rad) of each magnet
     force: np.ndarray  # (3,) N, the fingertip's reaction on the indenter
     contact_nodes: np.ndarray  # indices into SurfaceInfluence.nodes
+    path: list[tuple[np.ndarray, np.ndarray, np.ndarray]]  # (travel (3,), magnet_rigid, force) after every step
 
 
 def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int | None = None,
@@ -93,6 +94,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
     anchors = StickAnchors()  # on displacements: x is fixed, so targets move with the indenter alike
     active = np.zeros(len(x), dtype=bool)
     previous_frame = touch.copy()
+    states = []
     for travel in path:
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
@@ -127,5 +129,7 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             anchors.keep_only(np.flatnonzero(active))
             anchors.targets(np.flatnonzero(active), u[active], frame)
         previous_frame = frame
-    rigid = (influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6)
-    return ContactSolution(magnet_rigid=rigid, force=-forces.sum(axis=0), contact_nodes=local[active])
+        states.append((travel, (influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6),
+                       -forces.sum(axis=0)))
+    _, rigid, force = states[-1]
+    return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=local[active], path=states)

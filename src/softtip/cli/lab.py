@@ -1,0 +1,207 @@
+"""``softtip lab run``, ``softtip reproduce``, ``softtip calibrate``, ``softtip evaluate``.
+
+Registered on the main app at the end of :mod:`softtip.cli.main` (see :mod:`softtip.cli.optimize`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.table import Table
+
+lab_app = typer.Typer(help="The virtual lab: the published experiments on the twin, as datasets.",
+                      no_args_is_help=True)
+
+STUDY_NAMES = ("pushing", "force3", "hysteresis", "grasp-two", "grasp-positions", "contact-states", "inverter")
+MODEL_KINDS = ("polynomial", "network", "classifier")
+
+
+def _status(message: str, quiet: bool):
+    from softtip.cli.main import console
+
+    return contextlib.nullcontext() if quiet else console.status(message)
+
+
+def lab_run(
+    protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(STUDY_NAMES)}."),
+    output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
+    seed: int = typer.Option(None, "--seed", help="Override the protocol's seed."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
+    from softtip.cli.main import console
+    from softtip.lab import load_protocol, run_protocol
+
+    loaded = load_protocol(protocol)
+    if seed is not None:
+        loaded.seed = seed
+    with _status(f"running {loaded.name} on {loaded.design.name}", json_output):
+        dataset, timings = run_protocol(loaded)
+    path = dataset.write(output or Path(f"{loaded.name}.parquet"))
+    summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
+               "trials": len(dataset.trials), "samples": int(len(dataset.groups)), "channels": list(dataset.channels),
+               "labels": dict(dataset.labels), "timings_s": {k: round(v, 2) for k, v in timings.items()}}
+    if json_output:
+        print(json.dumps(summary, indent=2))
+    else:
+        console.print(f"{summary['trials']} trials, {summary['samples']} samples -> {path}")
+
+
+def reproduce(
+    study: str = typer.Argument(..., help=f"One of {', '.join(STUDY_NAMES)}, or all."),
+    output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML report(s)."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the experiments and the models."),
+    quick: bool = typer.Option(False, "--quick", help="Two trials per condition: a smoke run, not the study."),
+    json_output: bool = typer.Option(False, "--json", help="Print the results as JSON."),
+) -> None:
+    """Run a published study end to end (experiments on the twin -> models -> metrics) and write a
+    self-contained HTML report with tables and figures beside the published figures."""
+    from softtip.cli.main import console, fail
+    from softtip.report.html import write_report
+    from softtip.studies.published import run_published_study
+
+    names = STUDY_NAMES if study == "all" else (study,)
+    if study != "all" and study not in STUDY_NAMES:
+        fail(f"study = {study!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    everything = {}
+    for name in names:
+        start = time.perf_counter()
+        with _status(f"reproducing {name}", json_output):
+            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick)
+        seconds = time.perf_counter() - start
+        report = write_report(output / f"{name}.html", f"softtip reproduce {name}", [
+            {"heading": "Twin beside the publication", "notes": notes},
+            {"heading": "Results (validation trials)", "results": results},
+            {"heading": "Figures", "figures": figures},
+            {"heading": "Protocol", "text": json.dumps(protocol.to_dict())}])
+        everything[name] = {"results": results, "report": str(report), "seconds": round(seconds, 1)}
+        if not json_output:
+            console.print(f"{name}: {report} ({seconds:.0f} s)")
+    if json_output:
+        print(json.dumps(everything[study] if study != "all" else everything, indent=2))
+
+
+def calibrate(
+    dataset: Path = typer.Argument(..., help="Dataset (.parquet) from softtip lab run or softtip convert."),
+    target: list[str] = typer.Option(..., "--target", "-t", help="Label column(s) to estimate."),
+    model: str = typer.Option("network", "--model", help=f"One of {', '.join(MODEL_KINDS)}."),
+    hidden: str = typer.Option("10", "--hidden", help="Hidden layer sizes, e.g. 20 or 10,10,10,10."),
+    min_force: float = typer.Option(None, "--min-label", help="Use only samples whose first target is above this."),
+    output: Path = typer.Option(Path("model.npz"), "--output", "-o", help="Saved model (.npz)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the training."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Fit a model on the calibration trials of a dataset, score it on its validation trials, save it."""
+    from softtip.calibration import save_model
+    from softtip.cli.main import console, fail
+    from softtip.data import Dataset
+
+    if model not in MODEL_KINDS:
+        fail(f"--model = {model!r}: expected one of {', '.join(MODEL_KINDS)}")
+    data = Dataset.read(dataset)
+    unknown = [t for t in target if t not in data.labels]
+    if unknown:
+        fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
+    try:
+        sizes = tuple(int(v) for v in hidden.split(","))
+    except ValueError:
+        fail(f"--hidden = {hidden!r}: expected sizes separated by commas, e.g. 10,10")
+    estimator = _make_model(model, sizes, seed)
+    X, y = data.X(), _targets(data, target, model)
+    keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
+    role = data.column("role") if "role" in data.conditions else np.full(len(X), "calibration")
+    train = keep & (role == "calibration")
+    test = keep & (role != "calibration")
+    if not train.any():
+        fail(f"{dataset}: no calibration samples (role = calibration) to fit on")
+    start = time.perf_counter()
+    if model == "polynomial":
+        estimator.fit(X[train], y[train])
+    else:
+        estimator.fit(X[train], y[train], groups=data.groups[train])
+    seconds = time.perf_counter() - start
+    report = _score(estimator, model, X[test], y[test], target) if test.any() else {}
+    save_model(output, estimator, input_channels=list(data.channels), input_units=["uT"] * len(data.channels),
+               target_names=list(target) if model != "classifier" else [target[0]],
+               target_units=[data.labels[t] for t in target][: 1 if model == "classifier" else None],
+               extra={"dataset": str(dataset), "validation": report})
+    summary = {"model": str(output), "kind": model, "hidden": list(sizes), "targets": list(target),
+               "fit_s": round(seconds, 2), "calibration_samples": int(train.sum()),
+               "validation_samples": int(test.sum()), "validation": report}
+    if json_output:
+        print(json.dumps(summary, indent=2))
+    else:
+        console.print(json.dumps(summary, indent=2))
+
+
+def evaluate(
+    model_file: Path = typer.Argument(..., help="Saved model (.npz)."),
+    dataset: Path = typer.Argument(..., help="Dataset (.parquet)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Score a saved model on every sample of a dataset (its validation report, by condition)."""
+    from softtip.calibration import load_model
+    from softtip.cli.main import console, fail
+    from softtip.data import Dataset
+
+    estimator, meta = load_model(model_file)
+    data = Dataset.read(dataset)
+    missing = [c for c in meta.input_channels if c not in data.channels]
+    if missing:
+        fail(f"{dataset}: lacks the model's input channel {missing[0]!r}")
+    kind = "classifier" if hasattr(estimator, "predict_proba") else "regression"
+    targets = list(meta.target_names)
+    absent = [t for t in targets if t not in data.labels]
+    if absent:
+        fail(f"{dataset}: lacks the model's target {absent[0]!r}")
+    X = data.X(list(meta.input_channels))
+    y = _targets(data, targets, kind)
+    report = _score(estimator, kind, X, y, targets)
+    if json_output:
+        print(json.dumps(report, indent=2))
+    else:
+        console.print(json.dumps(report, indent=2))
+
+
+def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
+    from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier
+
+    if kind == "polynomial":
+        return PolynomialFit()
+    if kind == "network":
+        return LMNetwork(sizes, random_state=seed)
+    return SoftmaxClassifier(sizes, random_state=seed)
+
+
+def _targets(data, target: list[str], kind: str) -> np.ndarray:
+    if kind == "classifier":
+        return data.column(target[0])
+    columns = [np.asarray(data.column(t), dtype=float) for t in target]
+    return columns[0] if len(columns) == 1 else np.column_stack(columns)
+
+
+def _score(estimator, kind: str, X: np.ndarray, y: np.ndarray, target: list[str]) -> dict:
+    from softtip.calibration import metrics
+
+    if kind == "classifier":
+        predicted = estimator.predict(X)
+        return {"accuracy": float(np.mean(predicted == y)),
+                "mean_probability_of_true_class": metrics.mean_probability_of_true_class(
+                    estimator.predict_proba(X), y, estimator.classes_)}
+    estimate = estimator.predict(X).reshape(len(X), -1)
+    truth = y.reshape(len(y), -1)
+    return {name: {"mean_abs_error": float(metrics.mean_abs_error(truth[:, k], estimate[:, k])),
+                   "rmse": float(metrics.rmse(truth[:, k], estimate[:, k])),
+                   "r2": float(metrics.r2(truth[:, k], estimate[:, k]))} for k, name in enumerate(target)}
+
+
+def register(app: typer.Typer, user_errors) -> None:
+    lab_app.command("run")(user_errors(lab_run))
+    app.add_typer(lab_app, name="lab")
+    for command in (reproduce, calibrate, evaluate):
+        app.command()(user_errors(command))

@@ -1,0 +1,110 @@
+"""What makes a virtual experiment look like a real one, with the source of every number.
+
+On by default; each effect can be switched off (set to 0) in a protocol's ``[realism]`` table.
+
+==========================  ==========  ===========================================================
+effect                      default     source / reasoning
+==========================  ==========  ===========================================================
+sensor noise                on          MLX90393 datasheet noise at the design's GAIN/OSR/DIG_FILT
+                                        (:func:`softtip.sensors.mlx90393.noise_rms_uT`), quantised
+                                        to the register's LSB, clipped at full scale
+magnet placement            0.10 mm     per magnet and axis, per fabricated unit: cast or printed
+                                        pockets hold a magnet to about +-0.1 mm
+magnetisation               2 %         per magnet: NdFeB grades specify Br within about +-2-3 %
+sensor placement            0.10 mm     per chip and axis: reflow and pick-and-place tolerance
+contact position scatter    0.20 mm     per trial and axis: a hand-set or fixture-set contact
+angle scatter               0.5 deg     per trial: a rotary stage set by hand
+speed scatter               2 %         per trial: the robot's speed is exact, its start is not
+baseline drift              0.02 K/rt s temperature random walk of the magnets during a trial;
+                                        the field follows Br's reversible coefficient, -0.12 %/K
+                                        for sintered NdFeB
+==========================  ==========  ===========================================================
+
+Nothing here is tuned to make a result look better: the numbers are the sources' and are the same
+for every experiment and design.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from softtip.design.model import MM, Design
+from softtip.magnetics import magnet_field_at_sensors
+from softtip.sensors import MLX90393, MLX90393Settings
+from softtip.settings import SettingsReader
+
+BR_TEMPERATURE_COEFFICIENT = -0.0012  # 1/K, sintered NdFeB, reversible
+
+
+@dataclass(frozen=True)
+class Realism:
+    noise: bool = True
+    magnet_position_sd_mm: float = 0.10
+    magnetisation_sd: float = 0.02
+    sensor_position_sd_mm: float = 0.10
+    position_sd_mm: float = 0.20
+    angle_sd_deg: float = 0.5
+    speed_sd: float = 0.02
+    drift_K_per_sqrt_s: float = 0.02
+
+    @classmethod
+    def read(cls, settings: SettingsReader) -> "Realism":
+        defaults = cls()
+        values = {}
+        for name, default in asdict(defaults).items():
+            if isinstance(default, bool):
+                value = settings.raw(name, default)
+                if not isinstance(value, bool):
+                    raise settings.fail(name, "expected true or false")
+                values[name] = value
+            else:
+                values[name] = settings.number(name, default, non_negative=True)
+        return cls(**values)
+
+    @classmethod
+    def off(cls) -> "Realism":
+        return cls(noise=False, magnet_position_sd_mm=0, magnetisation_sd=0, sensor_position_sd_mm=0,
+                   position_sd_mm=0, angle_sd_deg=0, speed_sd=0, drift_K_per_sqrt_s=0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class FabricatedUnit:
+    """One physical fingertip: the design's magnets and chips as they came out of fabrication."""
+
+    def __init__(self, design: Design, realism: Realism, rng: np.random.Generator):
+        self.design, self.realism = design, realism
+        magnets, sensors = len(design.magnets), len(design.sensor_positions)
+        self.magnet_offsets = rng.normal(0, realism.magnet_position_sd_mm * MM, (magnets, 3))
+        self.polarization = np.array([m.polarization for m in design.magnets]) * (
+            1 + rng.normal(0, realism.magnetisation_sd, magnets))
+        self.sensor_positions = design.sensor_positions + rng.normal(0, realism.sensor_position_sd_mm * MM,
+                                                                     (sensors, 3))
+        self.rest_positions = np.array([m.center for m in design.magnets]) + self.magnet_offsets
+        self.sensor = MLX90393(MLX90393Settings.from_dict(design.sensor_readout))
+
+    def field(self, magnet_rigid: np.ndarray) -> np.ndarray:
+        """Absolute flux density (N, S, 3) T for magnet rigid motions (N, M, 6) from rest."""
+        magnets = self.design.magnets
+        return magnet_field_at_sensors(self.sensor_positions, self.rest_positions + magnet_rigid[..., :3],
+                                       magnet_rigid[..., 3:], np.array([m.diameter / 2 for m in magnets]),
+                                       np.array([m.height for m in magnets]), self.polarization)
+
+    def record(self, magnet_rigid: np.ndarray, times: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """What the chips report over one trial, initial value subtracted: (N, S, 3) µT.
+
+        The first sample is taken before contact (the protocol starts every trial in the air), so
+        subtracting it is the papers' "reading before contact" - with its noise."""
+        field = self.field(magnet_rigid)
+        if self.realism.drift_K_per_sqrt_s > 0:
+            steps = rng.normal(0, self.realism.drift_K_per_sqrt_s, len(times)) * np.sqrt(
+                np.diff(times, prepend=times[0]))
+            field = field * (1 + BR_TEMPERATURE_COEFFICIENT * np.cumsum(steps))[:, None, None]
+        if self.realism.noise:
+            read = self.sensor.counts_to_uT(self.sensor.to_counts(field, rng=rng))
+        else:
+            read = field * 1e6
+        return read - read[:1]

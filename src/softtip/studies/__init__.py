@@ -1,0 +1,1 @@
+"""End-to-end studies: experiments on the twin, models, metrics and reports."""
