@@ -135,7 +135,44 @@ def test_designs_lists_the_shipped_designs():
                                          "rectangular"]
 
 
-@pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["bench"], ["bench", "twin"]])
+@pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["demo", "insertion"], ["bench"],
+                                     ["bench", "twin"], ["bench", "live"], ["lab", "run"], ["reproduce"],
+                                     ["calibrate"], ["evaluate"], ["live"], ["convert"]])
 def test_every_command_has_help(command):
     result = run(*command, "--help")
     assert result.exit_code == 0 and "Usage" in result.output
+
+
+def _synthetic_dataset(path):
+    """Trials of a sensor whose readings are an exact cubic map of a force (calibration and validation)."""
+    from softtip.data import DatasetMetadata, TrialWriter, channel_columns
+
+    rng = np.random.default_rng(0)
+    writer = TrialWriter(1, labels={"fz_N": "N"}, conditions={"role": "1"}, metadata=DatasetMetadata(seed=0))
+    for trial in range(12):
+        force = np.linspace(0, rng.uniform(2, 4), 40)
+        field = np.stack([np.column_stack([3 * force, -2 * force + 0.1 * force**2, 50 * force + force**3])], axis=1)
+        writer.add({"time_s": np.arange(40) / 20, **channel_columns(field), "fz_N": force},
+                   {"role": "calibration" if trial < 8 else "validation"})
+    writer.write(path)
+    return path
+
+
+def test_calibrate_then_evaluate_a_saved_model(tmp_path):
+    dataset = _synthetic_dataset(tmp_path / "push.parquet")
+    model = tmp_path / "force.npz"
+    fitted = json.loads(run("calibrate", str(dataset), "--target", "fz_N", "--model", "polynomial",
+                            "--output", str(model), "--json").output)
+    # the readings are a per-axis cubic of the force: the polynomial's inverse map is close to exact
+    assert fitted["validation"]["fz_N"]["r2"] > 0.999 and model.is_file()
+    scored = json.loads(run("evaluate", str(model), str(dataset), "--json").output)
+    assert scored["fz_N"]["mean_abs_error"] < 0.02
+    model.write_bytes(model.read_bytes()[:-200])
+    refused = run("evaluate", str(model), str(dataset))
+    assert refused.exit_code == 2 and len(refused.output.strip().splitlines()) == 1
+
+
+def test_calibrate_names_a_missing_target(tmp_path):
+    dataset = _synthetic_dataset(tmp_path / "push.parquet")
+    result = run("calibrate", str(dataset), "--target", "angle_deg")
+    assert result.exit_code == 2 and "angle_deg" in result.output

@@ -287,45 +287,168 @@ def bench_rom(
         print(json.dumps(report, indent=2))
 
 
-@app.command()
+demo_app = typer.Typer(help="Demonstrations on the built-in simulated sensor.")
+app.add_typer(demo_app, name="demo")
+
+
+@demo_app.callback(invoke_without_command=True)
 @user_errors
 def demo(
-    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Mesh size (mm)."),
+    context: typer.Context,
+    seed: int = typer.Option(1, "--seed", help="Seed of the experiments, the fabricated unit and the training."),
+    duration: float = typer.Option(20.0, "--duration", help="Seconds of live streaming."),
+    record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The main job on the built-in simulated sensor: designs A–D under a 1 mm board push at 0° and 45°."""
-    from softtip.design.model import MM, load_design
-    from softtip.mechanics.contact import LoadCase
-    from softtip.mechanics.indenters import Board
-    from softtip.twin import FingertipTwin
-
-    rows = []
-    with console.status("simulating designs A–D") if not json_output else contextlib.nullcontext():
-        for letter in "ABCD":
-            twin = FingertipTwin(load_design(f"cylindrical-{letter}"), mesh_size=mesh_size * MM)
-            for angle in (0.0, 45.0):
-                result = twin.simulate(LoadCase(Board(1.6e-3, np.radians(angle)), 1e-3, friction="stick"),
-                                       noise=True, rng=np.random.default_rng(0))
-                dz = result.feature_displacements[:, 2] * 1e3
-                rows.append({"design": f"cylindrical-{letter}", "angle_deg": angle,
-                             "feature_dz_mm": [round(float(v), 4) for v in dz],
-                             "max_feature_dz_mm": round(float(np.abs(dz).max()), 4),
-                             "force_z_N": round(float(result.force[2]), 4),
-                             "dB_uT": [round(float(v), 2) for v in result.reading_change_uT[0]],
-                             "solve_s": round(result.timings["contact_solve_s"], 3)})
-    if json_output:
-        print(json.dumps(rows, indent=2))
+    """The main job on the built-in simulated sensor: the twin runs the 3-axis force calibration, a
+    network is fitted to it, and an emulated fingertip streams the twin's pushes through the live
+    pipeline, whose estimates are scored against the twin's true force."""
+    if context.invoked_subcommand is not None:
         return
-    table = Table(title="1 mm board push (stick friction); feature point = centre of each magnet's top face")
-    for column in ("design", "angle", "feature dz per magnet (mm)", "Fz (N)", "ΔB x, y, z (µT)"):
+    from softtip.studies.live_demo import run_main_demo
+
+    say = (lambda message: None) if json_output else (lambda message: console.print(f"[bold]{message}[/]"))
+    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record, say=say)
+    if json_output:
+        print(json.dumps(report, indent=2, default=float))
+        return
+    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator")
+    for column in ("axis", "offline MAE (N)", "offline R²", "live MAE (N)", "live peak |F| (N)"):
         table.add_column(column, justify="right")
-    for r in rows:
-        table.add_row(r["design"].removeprefix("cylindrical-"), f"{r['angle_deg']:g}°", _fmt(r["feature_dz_mm"], 3),
-                      f"{r['force_z_N']:.3f}", _fmt(r["dB_uT"], 0))
+    for axis, offline in report["calibration"]["validation"].items():
+        live = report["live"].get(axis, {})
+        table.add_row(axis, f"{offline['mean_abs_error_N']:.3f}", f"{offline['r2']:.4f}",
+                      f"{live.get('mean_abs_error_N', float('nan')):.3f}", f"{live.get('peak_true_N', float('nan')):.2f}")
     console.print(table)
-    best = max(rows, key=lambda r: r["max_feature_dz_mm"])
-    console.print(f"largest feature displacement: {best['design']} at {best['angle_deg']:g}° "
-                  f"({best['max_feature_dz_mm']:.3f} mm)")
+    pipeline = report["pipeline"]
+    console.print(f"{report['estimated_frames']} frames estimated live; model saved at {report['model']}; "
+                  f"lost frames: {pipeline.get('lost_in_transit', 0)}")
+
+
+@demo_app.command("insertion")
+@user_errors
+def demo_insertion(
+    case: str = typer.Option("good", "--case", help="good, left-clip or right-clip."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the training data and the sensors' noise."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON (outcome, state_detected, "
+                                                           "force_at_detection_N, every decision)."),
+) -> None:
+    """Feedback-controlled insertion of the inverter lid on the simulated arm: stop and retract when the
+    fingertips see a clip on part B's rim (state 2 or 3), done when the target pose is reached."""
+    from softtip.lab.insertion import CASES
+    from softtip.studies.insertion import run_insertion
+
+    if case not in CASES:
+        fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
+    with console.status(f"insertion, case {case}") if not json_output else contextlib.nullcontext():
+        outcome = run_insertion(case, seed, say=(lambda m: None) if json_output else console.print)
+    if json_output:
+        print(json.dumps(outcome, indent=2))
+        return
+    for decision in outcome["decisions"]:
+        if decision["action"] != "approach" or decision["cycle"] % 25 == 0:
+            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] * 1e3:+.3f} mm  "
+                          f"state {decision['state']}  force {decision['force_N']:.3f} N  -> {decision['action']}")
+    estimated = outcome["force_at_detection_N"]
+    console.print(f"[bold]{outcome['outcome']}[/]: state {outcome['state_detected']} at an estimated "
+                  f"{'-' if estimated is None else f'{estimated:.3f}'} N "
+                  f"(true {outcome['true_force_at_decision_N']:.3f} N)")
+
+
+@app.command()
+@user_errors
+def live(
+    port: str = typer.Option(None, "--port", help="Serial port of a fingertip board (e.g. /dev/ttyACM0)."),
+    model: list[Path] = typer.Option([], "--model", help="Saved softtip model(s) to run on every frame "
+                                                         "(with --emulate, default: the twin's force model)."),
+    emulate: bool = typer.Option(False, "--emulate", help="An emulated fingertip (pty, firmware protocol) "
+                                                         "replaying the twin instead of a port."),
+    chips: int = typer.Option(None, "--chips", help="Chips on the board (default: as it reports)."),
+    rate: int = typer.Option(50, "--rate", help="Frames per second."),
+    record: Path = typer.Option(None, "--record", help="Record to this MCAP file (ROS 2 message types)."),
+    foxglove: int = typer.Option(None, "--foxglove", help="Serve a Foxglove WebSocket live view on this port."),
+    ros2: bool = typer.Option(False, "--ros2", help="Also publish the topics as a ROS 2 node (needs rclpy)."),
+    duration: float = typer.Option(None, "--duration", help="Seconds to run (default: until Ctrl-C)."),
+    baseline_frames: int = typer.Option(50, "--baseline-frames", help="Frames averaged into the baseline."),
+    drift_tau: float = typer.Option(None, "--drift-tau", help="Track slow baseline drift with this time "
+                                                              "constant (s) while nothing touches."),
+    json_output: bool = typer.Option(False, "--json", help="Print the session's summary as JSON."),
+) -> None:
+    """Stream a fingertip (or the emulated one) through baseline -> models -> dashboard, recording,
+    Foxglove, ROS 2. Retake the baseline with kill -USR1 PID."""
+    from softtip.realtime.pipeline import run_live
+    from softtip.realtime.sinks import live_sinks
+
+    if emulate == (port is not None):
+        fail("give either --port PORT or --emulate")
+    source = None
+    settings = None
+    if emulate:
+        from softtip.lab import load_protocol
+        from softtip.lab.scenario import pushing_scenario
+        from softtip.sensors import MLX90393Settings
+
+        protocol = load_protocol("force3")
+        with console.status("computing the twin's scenario") if not json_output else contextlib.nullcontext():
+            source = pushing_scenario(protocol, protocol.seed)
+        settings = MLX90393Settings.from_dict(protocol.design.sensor_readout)
+        chips = chips or source.field_uT.shape[1]
+        if not model:  # the emulated fingertip comes with its calibration: the main demo's force model
+            from softtip.studies.live_demo import calibrate_force_model
+
+            with console.status("calibrating the twin") if not json_output else contextlib.nullcontext():
+                model = [calibrate_force_model(protocol.seed, say=lambda message: None, reuse=True)[0]]
+    summary = run_live("emulator" if emulate else port, model,
+                       live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
+                       duration, rate_hz=rate, chips=chips, settings=settings, baseline_frames=baseline_frames,
+                       drift_time_constant_s=drift_tau, emulator_source=source)
+    if json_output:
+        print(json.dumps(summary, indent=2, default=float))
+
+
+@app.command()
+@user_errors
+def convert(
+    recording: Path = typer.Argument(..., help="MCAP recording from softtip live."),
+    output: Path = typer.Argument(..., help="Dataset to write (.parquet)."),
+    gap: float = typer.Option(1.0, "--gap", help="A gap longer than this (s) starts a new trial."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Turn a live recording into the calibration tools' trial dataset (changes in µT, labels)."""
+    from softtip.realtime.convert import convert as convert_recording
+
+    result = convert_recording(recording, output, gap_s=gap)
+    dataset = result.dataset
+    summary = {"dataset": str(output), "trials": len(dataset.trials), "samples": int(len(dataset.groups)),
+               "channels": list(dataset.channels), "labels": list(dataset.labels)}
+    if json_output:
+        print(json.dumps(summary, indent=2))
+    else:
+        console.print(summary)
+
+
+@bench_app.command("live")
+@user_errors
+def bench_live(
+    duration: float = typer.Option(20.0, "--duration", help="Seconds of streaming (the full soak: 600)."),
+    rate: int = typer.Option(500, "--rate", help="Frames per second."),
+    chips: int = typer.Option(4, "--chips", help="Chips per frame."),
+    faults: bool = typer.Option(False, "--faults", help="Inject corrupt and dropped bytes, stalls, chip errors."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Soak: emulator -> driver -> baseline -> a 12-20-4 network -> MCAP recorder; every frame counted,
+    latency from arrival to estimate, CPU of the pipeline's process (emulator in another process)."""
+    from softtip.hardware import FaultPlan
+    from softtip.realtime.bench import soak
+
+    plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
+                     seed=1) if faults else None
+    with console.status(f"soaking for {duration:g} s") if not json_output else contextlib.nullcontext():
+        report = soak(duration, rate, chips, plan)
+    if json_output:
+        print(json.dumps(report, indent=2, default=float))
+    else:
+        console.print(report)
 
 
 from softtip.cli.optimize import optimize  # noqa: E402 - its own module; uses the helpers above

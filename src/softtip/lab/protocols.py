@@ -48,7 +48,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
                "shear_depth_mm": 2.0, "shear_mm": 2.0, "speed_mm_s": 0.5},
     "hysteresis": {**GEN1, "rate_hz": 50.0, "speeds_mm_s": [0.25, 0.5, 1.0], "trials": 10, "depth_mm": 3.0,
                    "rest_s": 1.0},
-    "grasp-two": {**GEN1, "reach_mm": 3.5, "trained_angles_deg": [0.0, 10.0, 20.0, 30.0],
+    "grasp-two": {**GEN1, "trained_angles_deg": [0.0, 10.0, 20.0, 30.0],
                   "untrained_angles_deg": [5.0, 15.0, 25.0], "calibration_trials": 7, "validation_trials": 3,
                   "untrained_trials": 3, "grasp_displacement_mm": 4.0, "grasp_speed_mm_s": 5.0, "hold_s": 1.0},
     "grasp-positions": {**GEN2, "rate_hz": 20.0, "positions_mm": [-9.0, -6.0, -3.0, 0.0, 3.0, 6.0, 9.0],

@@ -261,13 +261,13 @@ def contact_states(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, li
         "orientation). Samples with a collision force above 0.05 N are classified."]
 
 
-def inverter(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def inverter_models(dataset: Dataset, seed: int):
+    """The published pair of networks (12 inputs, 4 hidden layers of 10 tanh neurons): the contact
+    state (4 classes) from the calibration windows - state 1 at 0.3-0.5 N, states 2 and 3 at
+    0.6-0.8 N, state 0 in the air - and the normal force from every calibration sample."""
     X = dataset.X()
-    force, state = dataset.column("normal_force_N"), dataset.column("state")
-    nominal, sets, roles = dataset.column("state_nominal"), dataset.column("set"), dataset.column("role")
-    calibration = (sets == "trained") & (roles == CALIBRATION)
-    # the published calibration windows: state 1 at 0.3-0.5 N, states 2 and 3 at 0.6-0.8 N
+    force, state, nominal = dataset.column("normal_force_N"), dataset.column("state"), dataset.column("state_nominal")
+    calibration = (dataset.column("set") == "trained") & (dataset.column("role") == CALIBRATION)
     window = ((nominal == 0) | ((nominal == 1) & (force >= 0.3) & (force <= 0.5))
               | ((nominal >= 2) & (force >= 0.6) & (force <= 0.8)))
     train = calibration & window
@@ -275,6 +275,15 @@ def inverter(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, li
                       dataset.groups[train])
     regressor = _fit(LMNetwork((10, 10, 10, 10), random_state=seed), X[calibration], force[calibration],
                      dataset.groups[calibration])
+    return classifier, regressor
+
+
+def inverter(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol)
+    X = dataset.X()
+    force = dataset.column("normal_force_N")
+    nominal, sets, roles = dataset.column("state_nominal"), dataset.column("set"), dataset.column("role")
+    classifier, regressor = inverter_models(dataset, seed)
     results = {"timings_s": timings}
     for name in ("trained", "untrained-tilt", "untrained-offset"):
         mask = (sets == name) & (roles == VALIDATION)

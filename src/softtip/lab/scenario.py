@@ -1,0 +1,87 @@
+"""Scripted scenarios for the emulated fingertip: what its chips read over time, from the twin.
+
+A scenario is computed once (exact contact mechanics along each motion, the exact field of the
+fabricated unit's magnets) and then replayed as a picklable ``source(t_s) -> (chips, 3)`` µT -
+absolute field, no noise: the emulator adds the sensor's noise and quantisation like a chip.
+It loops, and keeps the true force so live estimates can be scored against it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from softtip.design.model import MM
+from softtip.lab.engine import interpolate_path, path_table
+from softtip.lab.experiments import material_prony
+from softtip.lab.protocols import Protocol, fingertip_for
+from softtip.lab.realism import FabricatedUnit
+from softtip.mechanics.contact import LoadCase
+from softtip.mechanics.indenters import Board
+from softtip.mechanics.viscoelastic import qlv_response
+
+
+@dataclass(frozen=True)
+class TwinScenario:
+    times_s: np.ndarray  # (N,)
+    field_uT: np.ndarray  # (N, chips, 3) absolute
+    force_N: np.ndarray  # (N, 3): fx, fy (on the fingertip), fz (compressive)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times_s[-1])
+
+    def _index(self, t_s: float) -> tuple[int, float]:
+        t = t_s % self.duration_s
+        k = min(int(np.searchsorted(self.times_s, t, side="right")) - 1, len(self.times_s) - 2)
+        return k, (t - self.times_s[k]) / (self.times_s[k + 1] - self.times_s[k])
+
+    def __call__(self, t_s: float) -> np.ndarray:
+        k, w = self._index(t_s)
+        return (1 - w) * self.field_uT[k] + w * self.field_uT[k + 1]
+
+    def force(self, t_s: np.ndarray) -> np.ndarray:
+        """True force (N, 3) at device times ``t_s``."""
+        t = np.asarray(t_s, float) % self.duration_s
+        return np.column_stack([np.interp(t, self.times_s, self.force_N[:, k]) for k in range(3)])
+
+
+def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = None, rate_hz: float = 200.0,
+                     rest_s: float = 2.0) -> TwinScenario:
+    """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
+    each followed by a release and a rest, on one fabricated unit of the protocol's design, at the
+    protocol's speed unless ``speed_mm_s`` is given; the force is what a reference sensor reads
+    (the material's relaxation included)."""
+    p = protocol.parameters
+    fingertip = fingertip_for(protocol.design, p)
+    rng = np.random.default_rng(seed)
+    unit = FabricatedUnit(protocol.design, protocol.realism, rng)  # its exact field: the emulator adds the noise
+    speed = (p["speed_mm_s"] if speed_mm_s is None else speed_mm_s) * MM
+    segments_t, segments_rigid, segments_force = [], [], []
+    clock = 0.0
+    for depth_mm, shear_mm in ((p["normal_depth_mm"], (0.0, 0.0)), (p["shear_depth_mm"], (p["shear_mm"], 0.0)),
+                               (p["shear_depth_mm"], (0.0, p["shear_mm"]))):
+        depth, shear = depth_mm * MM, np.array(shear_mm) * MM
+        load = LoadCase(Board(thickness=p["board_thickness_mm"] * MM, angle=0.0), depth, tangential=tuple(shear),
+                        friction="stick")
+        table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
+        reach = float(np.linalg.norm(shear))
+        # air, down, shear, back along the same path, air
+        going = depth / speed + reach / speed
+        times = np.arange(0.0, rest_s + 2 * going, 1 / rate_hz)
+        along = np.clip(np.minimum(times - rest_s, rest_s + 2 * going - times), 0, going) * speed
+        depth_now = np.minimum(along, depth)
+        progress = np.clip(along - depth, 0, reach)
+        direction = shear / max(reach, 1e-12)
+        rigid, force = interpolate_path(table, depth_now, progress[:, None] * direction[None])
+        segments_t.append(clock + times)
+        segments_rigid.append(rigid)
+        segments_force.append(np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]]))
+        clock += times[-1] + 1 / rate_hz
+    rigid, times = np.concatenate(segments_rigid), np.concatenate(segments_t)
+    v = protocol.viscoelastic
+    prony = material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM, v["speed_mm_s"] * MM, v["rest_s"])
+    force = qlv_response(times, np.concatenate(segments_force), prony)
+    force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
+    return TwinScenario(times_s=times, field_uT=unit.field(rigid) * 1e6, force_N=force)

@@ -1,0 +1,125 @@
+"""The baseline subtracted from the live readings: initial values, retaken on command, with
+optional slow drift tracking.
+
+Readings are changes of flux density from a baseline taken before contact. :class:`Baseline`
+
+* takes the mean of ``frames`` readings in which every chip is sound (per chip and axis):
+  at start, and again whenever :meth:`Baseline.take` is called (for instance after a grasp,
+  before the insertion moves). Until a new baseline is complete the previous one stays in
+  use, so the estimates never stop.
+* optionally tracks slow drift (``drift_time_constant_s``): the Hall offsets and the
+  magnets' remanence move with temperature by a few µT over minutes. A first-order
+  exponential filter ``b <- b + a (x - b)``, ``a = 1 - exp(-dt / tau)``, pulls the baseline
+  toward the reading, but only while the fingertip is free: every channel's change
+  ``|x - b|`` is below ``drift_threshold_uT`` and the caller says the estimated contact
+  state is a free one. A contact (a larger change, or a contact state) freezes the filter,
+  so it is never absorbed into the baseline. A ramp of slope r is followed with the lag
+  ``r dt (1 - a) / a`` (about ``r tau``).
+* changes the baseline in use in steps: the filter's value replaces it once they differ by
+  more than ``step_uT`` on some channel (default 0.01 µT, a fifteenth of the finest LSB).
+  Every baseline in use gets a new :attr:`Baseline.version`, so a recorder can store each
+  one and the recorded changes can be reproduced exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+
+def drift_step(filtered: np.ndarray, reading: np.ndarray, alpha: float,
+               threshold_uT: float) -> tuple[np.ndarray, bool]:
+    """One step of the gated exponential filter: ``filtered + alpha (reading - filtered)``
+    if every channel's change is below ``threshold_uT``, else ``filtered`` unchanged; also
+    returns whether it moved."""
+    change = reading - filtered
+    if not np.abs(change).max() < threshold_uT:
+        return filtered, False
+    return filtered + alpha * change, True
+
+
+def _positive(name: str, value: object, *, integer: bool = False) -> float:
+    kinds = numbers.Integral if integer else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, kinds) or not value > 0 or not math.isfinite(value):
+        raise ValueError(f"{name} = {value!r}: expected a positive {'integer' if integer else 'number'}")
+    return value
+
+
+class Baseline:
+    """The baseline in use, in µT, shape (chips, 3); see the module notes.
+
+    ``update`` is called for every frame from the acquisition thread; ``take`` may be
+    called from any thread.
+    """
+
+    def __init__(self, frames: int = 50, *, drift_time_constant_s: float | None = None,
+                 drift_threshold_uT: float = 20.0, step_uT: float = 0.01) -> None:
+        self.frames = int(_positive("baseline frames", frames, integer=True))
+        self.drift_time_constant_s = (None if drift_time_constant_s is None
+                                      else float(_positive("drift_time_constant_s", drift_time_constant_s)))
+        self.drift_threshold_uT = float(_positive("drift_threshold_uT", drift_threshold_uT))
+        self.step_uT = float(_positive("step_uT", step_uT))
+        self.version = 0
+        self._value: np.ndarray | None = None
+        self._filtered: np.ndarray | None = None
+        # take() only writes these two, update() only reads them: no lock on the frame path.
+        self._requests = 1  # the baseline at start
+        self._requested_frames = self.frames
+        self._served = 0
+        self._target = 0
+        self._sum: np.ndarray | None = None
+        self._count = 0
+
+    @property
+    def value_uT(self) -> np.ndarray | None:
+        """The baseline in use (read-only), or None before the first one is complete."""
+        return self._value
+
+    @property
+    def ready(self) -> bool:
+        return self._value is not None
+
+    @property
+    def collecting(self) -> bool:
+        """Whether a baseline is being taken (the previous one, if any, is still in use)."""
+        return self._target > 0 or self._requests != self._served
+
+    def take(self, frames: int | None = None) -> None:
+        """Take a new baseline from the next ``frames`` sound frames (default: as configured)."""
+        self._requested_frames = self.frames if frames is None else int(_positive("frames", frames, integer=True))
+        self._requests += 1
+
+    def update(self, field_uT: np.ndarray, sound: bool, dt_s: float, free: bool = True) -> bool:
+        """Account for one frame (``sound``: every chip read without fault; ``dt_s``: time
+        since the previous frame; ``free``: the contact state allows drift tracking).
+        Returns whether the baseline in use changed."""
+        if self._requests != self._served:
+            self._served = self._requests
+            self._target = self._requested_frames
+            self._sum = np.zeros_like(field_uT, dtype=np.float64)
+            self._count = 0
+        if self._target:
+            if sound:
+                self._sum += field_uT
+                self._count += 1
+            if self._count < self._target:
+                return False
+            self._target = 0
+            self._filtered = self._sum / self._count
+            return self._use(self._filtered)
+        if self.drift_time_constant_s is None or self._value is None or not sound or not free or dt_s <= 0:
+            return False
+        alpha = -math.expm1(-dt_s / self.drift_time_constant_s)
+        self._filtered, moved = drift_step(self._filtered, field_uT, alpha, self.drift_threshold_uT)
+        if moved and np.abs(self._filtered - self._value).max() > self.step_uT:
+            return self._use(self._filtered)
+        return False
+
+    def _use(self, value: np.ndarray) -> bool:
+        in_use = value.copy()
+        in_use.setflags(write=False)
+        self._value = in_use
+        self.version += 1
+        return True

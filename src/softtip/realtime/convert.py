@@ -1,0 +1,217 @@
+"""MCAP recordings to the Parquet trial dataset (:mod:`softtip.data.dataset`).
+
+A frame is a header stamp at which every chip's ``{prefix}/chip{k}/field`` message is
+present. Its channels are the change from the baseline in µT: the recorded
+``{prefix}/chip{k}/baseline`` in use at that stamp (frames before the first baseline use
+the first one: it was taken from them), or, in recordings without baselines, the mean of
+the first ``baseline_frames`` frames of each trial (initial-value subtraction). Frames in
+which a chip reported a fault (NaN) are left out. A new trial starts wherever the time
+between frames exceeds ``gap_s`` or goes backwards (a restarted device); ``gap_s=None``
+keeps one trial per recording (unless time goes backwards).
+
+Labels, when their topics are present: ``Fx, Fy, Fz`` (N) and ``Tx, Ty, Tz`` (N m) from
+``{prefix}/wrench`` (the components that hold a value somewhere), each estimate of
+``{prefix}/estimates`` under its own name and unit (unless a wrench label has it already),
+and ``contact_state`` from ``{prefix}/contact_state``. Stamped labels are matched to frames
+by header stamp, the others by log time; a frame without a label value gets NaN (or an
+empty state). A recording cut short by a killed process converts up to its last chunk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from softtip.data.dataset import (
+    DIMENSIONLESS,
+    TIME,
+    TRIAL,
+    Dataset,
+    DatasetMetadata,
+    channel_columns,
+    subtract_trial_baseline,
+)
+from softtip.realtime.mcap_record import (
+    FLOAT64_MULTI_ARRAY,
+    MAGNETIC_FIELD,
+    MAGNETIC_FIELD_FLOATS,
+    METADATA_NAME,
+    STRING,
+    UT_PER_T,
+    WRENCH_FLOATS,
+    WRENCH_LABELS,
+    WRENCH_STAMPED,
+    Recording,
+    RecordingError,
+    TopicMessages,
+    decode_float64_array,
+    decode_stamped,
+    decode_string,
+    read_recording,
+)
+
+CONTACT_STATE = "contact_state"
+_FIELD_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/field")
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """The dataset written and what was left out on the way."""
+
+    dataset: Dataset
+    frames: int
+    incomplete_frames: int  # stamps at which some chip's message is missing
+    fault_frames: int  # frames with a faulty chip (NaN)
+    truncated: bool  # the recording ended before its footer
+
+
+def _topic(recording: Recording, name: str, schema: str) -> TopicMessages | None:
+    topic = recording.topics.get(name)
+    if topic is None or not topic.data:
+        return None
+    if topic.schema_name != schema or topic.message_encoding != "cdr":
+        raise RecordingError(f"{recording.path}: topic {name} holds {topic.schema_name or 'schemaless'} "
+                             f"{topic.message_encoding} messages, expected {schema} in cdr")
+    return topic
+
+
+def _field_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str]]:
+    found: dict[str, dict[int, str]] = {}
+    for name, topic in recording.topics.items():
+        match = _FIELD_TOPIC.fullmatch(name)
+        if match and topic.schema_name == MAGNETIC_FIELD and topic.data:
+            found.setdefault(match["prefix"], {})[int(match["chip"])] = name
+    if prefix is None:
+        if len(found) != 1:
+            raise RecordingError(f"{recording.path}: " + (
+                "no <prefix>/chip<k>/field topics of sensor_msgs/msg/MagneticField messages" if not found else
+                f"fingertips under several prefixes ({', '.join(sorted(found))}): pass prefix"))
+        prefix = next(iter(found))
+    chips = found.get(prefix, {})
+    if not chips:
+        raise RecordingError(f"{recording.path}: no {prefix}/chip<k>/field topics")
+    if sorted(chips) != list(range(len(chips))):
+        raise RecordingError(f"{recording.path}: chips {sorted(chips)} recorded; expected chips 0..{len(chips) - 1}")
+    return prefix, [chips[k] for k in range(len(chips))]
+
+
+def _frames(recording: Recording, topics: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(stamps in ns, log times of chip 0, fields (n, chips, 3) in µT, stamps left out as incomplete)."""
+    decoded = []
+    for name in topics:
+        topic = recording.topics[name]
+        stamps, _, values = decode_stamped(topic.data, MAGNETIC_FIELD_FLOATS)
+        decoded.append((stamps, np.asarray(topic.log_times, dtype=np.int64), values[:, :3]))
+    every = np.unique(np.concatenate([stamps for stamps, _, _ in decoded]))
+    common = every
+    for stamps, _, _ in decoded:
+        common = np.intersect1d(common, stamps)
+    rows = [_matched(stamps, common) for stamps, _, _ in decoded]
+    fields = np.stack([values[r] for (_, _, values), r in zip(decoded, rows, strict=True)], axis=1) * UT_PER_T
+    return common, decoded[0][1][rows[0]], fields, len(every) - len(common)
+
+
+def _held(stamps: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Index of the last of ``stamps`` (sorted) at or before each of ``at``; the first before any."""
+    return np.maximum(np.searchsorted(stamps, at, side="right") - 1, 0)
+
+
+def _matched(stamps: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Index into ``stamps`` of each of ``at``, -1 where absent."""
+    order = np.argsort(stamps, kind="stable")
+    position = np.minimum(np.searchsorted(stamps[order], at), len(stamps) - 1)
+    found = stamps[order][position] == at
+    return np.where(found, order[position], -1)
+
+
+def _trials(stamps: np.ndarray, gap_s: float | None) -> np.ndarray:
+    step = np.diff(stamps)
+    breaks = step <= 0
+    if gap_s is not None:
+        breaks |= step > gap_s * 1e9
+    return np.concatenate([[0], np.cumsum(breaks)]).astype(np.int64)
+
+
+def _labels(recording: Recording, prefix: str, stamps: np.ndarray,
+            log_times: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    wrench = _topic(recording, f"{prefix}/wrench", WRENCH_STAMPED)
+    if wrench is not None:
+        wrench_stamps, _, values = decode_stamped(wrench.data, WRENCH_FLOATS)
+        rows = _matched(wrench_stamps, stamps)
+        matched = np.where(rows[:, None] >= 0, values[rows], np.nan)
+        for component, (name, unit) in enumerate(zip(WRENCH_LABELS, ("N",) * 3 + ("N m",) * 3, strict=True)):
+            if np.isfinite(matched[:, component]).any():
+                columns[name], units[name] = matched[:, component], unit
+    estimates = _topic(recording, f"{prefix}/estimates", FLOAT64_MULTI_ARRAY)
+    if estimates is not None:
+        decoded = [decode_float64_array(message) for message in estimates.data]
+        names = decoded[0][0][0].split(",") if decoded[0][0] else []
+        declared_units = json.loads(estimates.metadata.get("units", "null")) or [DIMENSIONLESS] * len(names)
+        if len(declared_units) != len(names) or any(len(values) != len(names) for _, values in decoded):
+            raise RecordingError(f"{recording.path}: {prefix}/estimates messages do not match their names {names}")
+        values = np.array([values for _, values in decoded]).reshape(len(decoded), len(names))
+        rows = _matched(np.asarray(estimates.log_times, dtype=np.int64), log_times)
+        for i, (name, unit) in enumerate(zip(names, declared_units, strict=True)):
+            if name not in columns:
+                columns[name] = np.where(rows >= 0, values[rows, i], np.nan)
+                units[name] = unit
+    states = _topic(recording, f"{prefix}/contact_state", STRING)
+    if states is not None:
+        texts = np.array([decode_string(message) for message in states.data] + [""])
+        rows = _matched(np.asarray(states.log_times, dtype=np.int64), log_times)
+        columns[CONTACT_STATE], units[CONTACT_STATE] = texts[rows], DIMENSIONLESS  # -1: the empty entry
+    return columns, units
+
+
+def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None = None, *,
+            gap_s: float | None = 1.0, baseline_frames: int = 50, prefix: str | None = None,
+            description: str | None = None) -> Conversion:
+    """Convert an MCAP recording to a dataset (module notes); written to ``parquet_path`` if given."""
+    if gap_s is not None and (isinstance(gap_s, bool) or not isinstance(gap_s, (int, float)) or not gap_s > 0):
+        raise ValueError(f"gap_s = {gap_s!r}: expected a positive number of seconds or None")
+    recording = read_recording(mcap_path)
+    prefix, field_topics = _field_topics(recording, prefix)
+    stamps, log_times, fields, incomplete = _frames(recording, field_topics)
+    chips = len(field_topics)
+
+    baselines = [_topic(recording, f"{prefix}/chip{k}/baseline", MAGNETIC_FIELD) for k in range(chips)]
+    recorded_baseline = all(topic is not None for topic in baselines)
+    if recorded_baseline:
+        for k, topic in enumerate(baselines):
+            baseline_stamps, _, values = decode_stamped(topic.data, MAGNETIC_FIELD_FLOATS)
+            order = np.argsort(baseline_stamps, kind="stable")
+            fields[:, k] -= values[order][_held(baseline_stamps[order], stamps), :3] * UT_PER_T
+
+    sound = np.isfinite(fields).all(axis=(1, 2))
+    labels, units = _labels(recording, prefix, stamps, log_times)
+    stamps, fields = stamps[sound], fields[sound]
+    labels = {name: values[sound] for name, values in labels.items()}
+    if not len(stamps):
+        raise RecordingError(f"{recording.path}: no frame in which every chip was read")
+    trial = _trials(stamps, gap_s)
+    if not recorded_baseline:
+        fields = subtract_trial_baseline(fields, trial, baseline_frames)
+    starts = np.flatnonzero(np.r_[True, trial[1:] != trial[:-1]])
+    first_stamp = np.repeat(stamps[starts], np.diff(np.r_[starts, len(stamps)]))
+    columns = {TRIAL: trial, TIME: (stamps - first_stamp) * 1e-9, **channel_columns(fields), **labels}
+
+    recorded = recording.metadata.get(METADATA_NAME, {})
+    extra = json.loads(recorded.get("extra", "{}"))
+    metadata = DatasetMetadata(
+        description=description if description is not None else f"converted from {Path(mcap_path).name}",
+        sensor_settings=extra.get("sensor_settings"),
+        protocol={"source": "mcap recording", "file": Path(mcap_path).name, "truncated": recording.truncated,
+                  "gap_s": gap_s, "baseline": "recorded" if recorded_baseline else
+                  f"initial value: mean of the first {baseline_frames} frames of each trial",
+                  "rate_hz": extra.get("rate_hz"), "models": extra.get("models"), "device": extra.get("device")})
+    dataset = Dataset(columns, units, {}, metadata)
+    if parquet_path is not None:
+        dataset.write(parquet_path)
+    return Conversion(dataset, len(stamps), incomplete, int(np.count_nonzero(~sound)), recording.truncated)

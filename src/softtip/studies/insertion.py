@@ -1,0 +1,60 @@
+"""The insertion demo: models trained on the inverter protocol, then the feedback loop on the
+simulated arm for one case (S1 §3)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+
+from softtip.calibration import load_model, save_model
+from softtip.design.model import MM
+from softtip.lab import Protocol, load_protocol, run_protocol
+from softtip.lab.insertion import InsertionWorld, SimulatedArm
+from softtip.mechanics.mesh import cache_dir
+from softtip.realtime.control import InsertionController
+from softtip.studies.published import inverter_models
+
+INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A first touches part B
+TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much
+
+
+def trained_models(protocol: Protocol, say=print):
+    """The inverter's state and force networks, trained once per protocol (and its seed) and kept
+    as softtip model files in the cache."""
+    key = hashlib.sha256(json.dumps(protocol.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+    folder = cache_dir() / "models"
+    paths = folder / f"inverter-state-{key}.npz", folder / f"inverter-force-{key}.npz"
+    if all(p.is_file() for p in paths):
+        return protocol, load_model(paths[0])[0], load_model(paths[1])[0]
+    say("training the contact-state and force networks on the inverter protocol")
+    dataset, _ = run_protocol(protocol)
+    classifier, regressor = inverter_models(dataset, protocol.seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    channels = list(dataset.channels)
+    save_model(paths[0], classifier, input_channels=channels, input_units=["uT"] * len(channels),
+               target_names=["state"], target_units=["1"])
+    save_model(paths[1], regressor, input_channels=channels, input_units=["uT"] * len(channels),
+               target_names=["normal_force_N"], target_units=["N"])
+    return protocol, classifier, regressor
+
+
+def run_insertion(case: str, seed: int = 1, protocol: Protocol | None = None, say=print) -> dict:
+    """One insertion; ``protocol`` defaults to the shipped inverter protocol with ``seed``."""
+    if protocol is None:
+        protocol = load_protocol("inverter")
+        protocol.seed = seed
+    protocol, classifier, regressor = trained_models(protocol, say)
+    world = InsertionWorld(protocol, case, np.random.default_rng(seed + 100))
+    arm = SimulatedArm(INITIAL_HEIGHT)
+    world.take_baseline(INITIAL_HEIGHT)  # grasped, in the air: the initial value
+    controller = InsertionController(robot=arm, read=world.reader(arm), state_model=classifier,
+                                     force_model=regressor, initial_pose=np.array([INITIAL_HEIGHT]),
+                                     target_pose=np.array([-TARGET_DEPTH]))
+    outcome = controller.run()
+    outcome["case"] = case
+    outcome["true_force_at_decision_N"] = round(world.force, 4)
+    outcome["final_pose_mm"] = round(float(arm.current_pose()[0]) / MM, 4)
+    outcome["decisions"] = [vars(d) for d in controller.log]
+    return outcome
