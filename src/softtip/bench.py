@@ -125,7 +125,7 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int = 4000, holdout: 
     say("held-out FE error: sensor axes {} % FS; magnet displacements max {:.2f} % of range; force {} % FS".format(
         ", ".join(f"{e:.2f}" for e in np.ravel(holdout_report["sensor_error_percent_fs"])),
         float(np.max(holdout_report["magnet_displacement_error_percent_range"])),
-        ", ".join(f"{e:.2f}" for e in holdout_report["force_error_percent_fs"])))
+        ", ".join("-" if e is None else f"{e:.2f}" for e in holdout_report["force_error_percent_fs"])))
     say(f"batch readings: {per_second:,.0f} per second; FE {fe_seconds:.2f} s per load; "
         f"speed-up {report['speedup_vs_fe']:,.0f}x")
     return report

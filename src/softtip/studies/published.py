@@ -93,6 +93,12 @@ def pushing(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, lis
     best = min(results, key=lambda d: results[d]["network"]["mean_abs_error_deg"])
     notes = [f"Lowest network error: {best}. Published: the network beat the polynomial on every design, "
              "and the optimised design (largest magnet displacement, D) was claimed to give the lowest error.",
+             "Why the twin's errors are large at 0 and 90 deg (and at 15/75): four magnets at 90 deg spacing over "
+             "one sensor on the axis make a board at angle a and at a + 90 deg the same load, and a board through "
+             "the axis at 0 or 45 deg gives Bx = By = 0 by mirror symmetry. Only Bx and By separate a from "
+             "90 - a, and they are a few µT against the board-position scatter; only fabrication tolerances "
+             "separate 0 from 90. The estimation-quality objective (examples/estimation-grid.toml) finds the "
+             "same: the orientation bound is worst for magnets closest to the axis (design D's P2 = 4.5).",
              "Samples from 1 mm depth on are used (before that the board barely touches and the angle is "
              "not observable above the sensor's noise)."]
     return results, figures, notes
