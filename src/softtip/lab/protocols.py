@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from softtip.data import Dataset
 from softtip.design.model import MM, Design, load_design
@@ -177,8 +178,10 @@ def run_protocol(protocol: Protocol, progress=None) -> tuple[Dataset, dict]:
     bench = experiments.Bench(fingertip=fingertip, prony=prony, realism=protocol.realism,
                               rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters["rate_hz"])
     say(f"{protocol.name}: trials")
-    dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
-                                             "prony": {"g": list(prony.g), "tau_s": list(prony.tau)},
-                                             "realism": protocol.realism.to_dict()}, protocol.seed)
+    # the trials' dense solves are small: a second BLAS thread only fights for a shared core
+    with threadpool_limits(limits=1):
+        dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
+                                                 "prony": {"g": list(prony.g), "tau_s": list(prony.tau)},
+                                                 "realism": protocol.realism.to_dict()}, protocol.seed)
     timings["trials_s"] = time.perf_counter() - start
     return dataset, timings
