@@ -12,6 +12,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from softtip.mechanics import viscoelastic
+
 
 def _pair(y: ArrayLike, yhat: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     y, yhat = np.asarray(y, dtype=np.float64), np.asarray(yhat, dtype=np.float64)
@@ -144,43 +146,12 @@ def _series(force: ArrayLike, signal: ArrayLike, name: str) -> tuple[np.ndarray,
     return force, signal
 
 
-def _value_at_crossing(force: np.ndarray, signal: np.ndarray, level: float) -> float:
-    """``signal`` interpolated linearly at the first pair of samples whose force brackets ``level``."""
-    offset = force - level
-    brackets = np.flatnonzero(offset[:-1] * offset[1:] <= 0)
-    if not len(brackets):
-        return float("nan")
-    i = brackets[0]
-    if offset[i] == offset[i + 1]:
-        return float(signal[i])
-    fraction = offset[i] / (offset[i] - offset[i + 1])
-    return float(signal[i] + fraction * (signal[i + 1] - signal[i]))
-
-
 def hysteresis_percent(force: ArrayLike, z: ArrayLike) -> float:
-    """Hysteresis (%) of one load–unload cycle: |Z_up − Z_down| / (Z_max − Z_min) · 100.
-
-    The cycle is split at its maximum force (the first sample holding it): loading is the
-    samples up to it, unloading the samples from it on. Z_up and Z_down are the z-axis MFD
-    interpolated linearly on each branch at the force midway between the cycle's minimum
-    and maximum force, at the first crossing of that force met walking each branch away
-    from its start (the start of the cycle; the peak). Z_max − Z_min is the range of z
-    over the whole cycle.
-    """
-    force, z = _series(force, z, "z")
-    if z.ndim != 1:
-        raise ValueError(f"z must be 1-D (the z-axis reading), got shape {z.shape}")
-    peak = int(np.argmax(force))
-    middle = 0.5 * (force.min() + force.max())
-    z_up = _value_at_crossing(force[:peak + 1], z[:peak + 1], middle)
-    z_down = _value_at_crossing(force[peak:], z[peak:], middle)
-    if np.isnan(z_up) or np.isnan(z_down):
-        branch = "loading" if np.isnan(z_up) else "unloading"
-        raise ValueError(f"the {branch} branch never reaches the mid force {middle:g} N: not a load-unload cycle")
-    span = z.max() - z.min()
-    if span <= 0:
-        raise ValueError("z is constant over the cycle: hysteresis undefined")
-    return float(100.0 * abs(z_up - z_down) / span)
+    """Hysteresis (%) of one load–unload cycle (S1 §2): |Z_up − Z_down| / (Z_max − Z_min) · 100,
+    with Z_up, Z_down the z-axis MFD on the loading and unloading branches at the force midway
+    between the cycle's minimum and maximum; see
+    :func:`softtip.mechanics.viscoelastic.hysteresis_percent`, which computes it."""
+    return viscoelastic.hysteresis_percent(z, force)
 
 
 def sensitivity(force: ArrayLike, mfd: ArrayLike):

@@ -116,7 +116,7 @@ def qlv_response(times: np.ndarray, elastic: np.ndarray, prony: PronySeries) -> 
     return response
 
 
-def _mean_crossing(force: np.ndarray, sensor_z: np.ndarray, level: float) -> float:
+def _mean_crossing(force: np.ndarray, sensor_z: np.ndarray, level: float, branch: str) -> float:
     """The sensor output where a branch's force crosses ``level``: linear
     interpolation between the two samples either side of each crossing, averaged
     over all crossings (a noisy branch may cross the level several times)."""
@@ -126,7 +126,7 @@ def _mean_crossing(force: np.ndarray, sensor_z: np.ndarray, level: float) -> flo
         fraction = above[i] / (above[i] - above[i + 1])
         hits.append(sensor_z[i] + fraction * (sensor_z[i + 1] - sensor_z[i]))
     if not hits:
-        raise ValueError("force: a branch of the cycle never reaches the mid force")
+        raise ValueError(f"force: the {branch} branch never reaches the mid force {level:g} N: not a load/unload cycle")
     return float(np.mean(hits))
 
 
@@ -150,8 +150,8 @@ def hysteresis_percent(sensor_z: np.ndarray, force: np.ndarray) -> float:
         raise ValueError("sensor_z and force: expected a cycle along which both vary")
     peak = int(np.argmax(force))
     mid = (force.min() + force.max()) / 2
-    z_up = _mean_crossing(force[: peak + 1], sensor_z[: peak + 1], mid)
-    z_down = _mean_crossing(force[peak:], sensor_z[peak:], mid)
+    z_up = _mean_crossing(force[: peak + 1], sensor_z[: peak + 1], mid, "loading")
+    z_down = _mean_crossing(force[peak:], sensor_z[peak:], mid, "unloading")
     return float(abs(z_up - z_down) / z_range * 100)
 
 
