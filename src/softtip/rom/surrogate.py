@@ -94,11 +94,15 @@ _WORKER: dict = {}
 
 
 def _solve_samples(rows: np.ndarray) -> np.ndarray:
+    from threadpoolctl import threadpool_limits
+
     influence, family = _WORKER["influence"], _WORKER["family"]
     out = np.empty((len(rows), influence.magnets.shape[0] + 3))
-    for k, p in enumerate(rows):
-        solution = solve_contact(influence, family.load(p))
-        out[k] = np.concatenate([solution.magnet_rigid.ravel(), solution.force])
+    # one BLAS thread per worker: the workers fill the cores, more threads only contend
+    with threadpool_limits(limits=1):
+        for k, p in enumerate(rows):
+            solution = solve_contact(influence, family.load(p))
+            out[k] = np.concatenate([solution.magnet_rigid.ravel(), solution.force])
     return out
 
 
