@@ -16,6 +16,7 @@ import contextlib
 import logging
 import os
 import queue
+import select
 import threading
 import time
 from collections.abc import Callable
@@ -96,6 +97,25 @@ class DeviceTimeout(TimeoutError):
 
 class DeviceDisconnected(ConnectionError):
     """The serial link is down (the driver is reconnecting or closed)."""
+
+
+def _read_available(port: serial.SerialBase) -> bytes:
+    """What has arrived, waiting up to the port's timeout for the first byte.
+
+    A POSIX port is read with one select and one read per wake-up (pyserial's read costs an
+    ioctl, a select and a read per call, and splits a frame that is still arriving); other
+    ports (pyserial URLs) go through pyserial."""
+    fileno = getattr(port, "fileno", None)
+    if os.name != "posix" or fileno is None or not isinstance(port, serial.Serial):
+        return port.read(max(1, port.in_waiting))
+    fd = fileno()
+    ready, _, _ = select.select([fd], [], [], port.timeout)
+    if not ready:
+        return b""
+    data = os.read(fd, 4096)
+    if not data:  # readable but empty: the device went away
+        raise serial.SerialException("device reports readiness to read but returned no data")
+    return data
 
 
 def open_serial(port: str, baudrate: int, read_timeout_s: float = _READ_TIMEOUT_S) -> serial.SerialBase:
@@ -505,7 +525,7 @@ class FingertipDriver:
                 self._try_reconnect()
                 continue
             try:
-                data = port.read(max(1, port.in_waiting))
+                data = _read_available(port)
             except (serial.SerialException, OSError) as error:
                 self._disconnected(port, error)
                 continue
@@ -564,9 +584,9 @@ class FingertipDriver:
         self._dropped += lost
         model = self._model
         chip_ok = (frame.status & CHIP_FAULTS) == 0
-        field = model.counts_to_uT(frame.raw)
+        field, saturated = model.decode(frame.raw)
         field[~chip_ok] = np.nan
-        saturated = model.saturated(frame.raw) & chip_ok[:, None]
+        saturated &= chip_ok[:, None]
         temperature = None if frame.temperature_raw is None else temperature_C(frame.temperature_raw)
         sample = Sample(
             seq=frame.seq,

@@ -156,6 +156,21 @@ class Frame:
             object.__setattr__(self, "temperature_raw", temperature)
         object.__setattr__(self, "boot", bool(self.boot))
 
+    @classmethod
+    def decoded(cls, seq: int, device_time_us: int, status: np.ndarray, raw: np.ndarray,
+                temperature_raw: np.ndarray | None, boot: bool) -> Frame:
+        """A frame from the decoder, whose fields have their types and ranges by construction (a
+        CRC-checked payload of the right length): built without re-checking them, since the
+        decoder does this for every frame in real time."""
+        frame = object.__new__(cls)
+        for array in (status, raw, temperature_raw):
+            if array is not None:
+                array.setflags(write=False)
+        for name, value in (("seq", seq), ("device_time_us", device_time_us), ("status", status), ("raw", raw),
+                            ("temperature_raw", temperature_raw), ("boot", boot)):
+            object.__setattr__(frame, name, value)
+        return frame
+
     @property
     def chips(self) -> int:
         return self.raw.shape[0]
@@ -405,14 +420,10 @@ def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
         if not 1 <= chips <= MAX_CHIPS or len(payload) != DATA_HEADER_SIZE + chips * block.itemsize:
             return None
         blocks = np.frombuffer(payload, dtype=block, offset=DATA_HEADER_SIZE)
-        return Frame(
-            seq=seq,
-            device_time_us=device_time_us,
-            status=blocks["status"],
-            raw=np.stack([blocks["x"], blocks["y"], blocks["z"]], axis=1),
-            temperature_raw=blocks["t"] if with_temperature else None,
-            boot=bool(flags & DataFlag.BOOT),
-        )
+        raw = np.empty((chips, 3), dtype=np.uint16)
+        raw[:, 0], raw[:, 1], raw[:, 2] = blocks["x"], blocks["y"], blocks["z"]
+        return Frame.decoded(seq, device_time_us, blocks["status"].copy(), raw,
+                             blocks["t"].copy() if with_temperature else None, bool(flags & DataFlag.BOOT))
     if frame_type == FrameType.IDENTITY:
         if payload[1] > MAX_CHIPS or not _is_printable_ascii(payload[2:]):
             return None

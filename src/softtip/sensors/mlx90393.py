@@ -342,8 +342,12 @@ class MLX90393:
 
     def saturated(self, counts: ArrayLike) -> np.ndarray:
         """Boolean mask, shape of counts, of words at the saturation limit of their axis."""
+        return self.decode(counts)[1]
+
+    def decode(self, counts: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Both at once, for a host reading every frame: (field in uT, saturated mask)."""
         signed = self._signed_counts(counts)
-        return (signed <= self._lowest) | (signed >= self._highest)
+        return signed * self._lsb_uT, (signed <= self._lowest) | (signed >= self._highest)
 
     def _signed_counts(self, counts: ArrayLike) -> np.ndarray:
         words = np.asarray(counts)
