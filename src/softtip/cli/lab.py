@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import typer
-from rich.table import Table
 
 lab_app = typer.Typer(help="The virtual lab: the published experiments on the twin, as datasets.",
                       no_args_is_help=True)

@@ -24,7 +24,7 @@ from softtip.optimize.cache import FEResultCache
 from softtip.optimize.config import StudyConfig, numeric_parameters
 from softtip.optimize.objectives import Infeasible
 from softtip.optimize.executors import Executor, FEJob
-from softtip.optimize.runs import FEResult, Simulation
+from softtip.optimize.runs import FEResult
 from softtip.optimize.space import grid_candidates, normalised_points
 from softtip.optimize.settings import StudyError
 

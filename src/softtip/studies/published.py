@@ -64,7 +64,7 @@ def _scatter_plot(ax, truth, estimate, title, unit):
 
 # ---------------------------------------------------------------------------------------------- studies
 
-def pushing(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def pushing(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     """Designs A-D, polynomial vs network, board angle from one sensor's three readings."""
     results, figures = {}, []
     figure, axes = plt.subplots(2, 4, figsize=(14, 6.5))
@@ -104,7 +104,7 @@ def pushing(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, lis
     return results, figures, notes
 
 
-def force3(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def force3(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     X = dataset.X()
     y = np.column_stack([dataset.column(k) for k in ("fx_N", "fy_N", "fz_N")])
@@ -136,7 +136,7 @@ def force3(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list
         "the spec gives no error figures to compare with."]
 
 
-def hysteresis(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def hysteresis(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     speeds = dataset.column("speed_mm_s")
     results = {"timings_s": timings, "per_speed": {}}
@@ -166,10 +166,10 @@ def hysteresis(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, 
         "construction (up to noise and trial scatter); the other speeds are predictions of the model."]
 
 
-def grasp_two(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def grasp_two(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     X, y = dataset.X(), dataset.column("angle_deg")
-    gripped = dataset.column("grip_force_N") > 0.5 * dataset.column("grip_force_N").max() * 0.2
+    gripped = dataset.column("grip_force_N") > 0.1 * dataset.column("grip_force_N").max()
     trained = dataset.column("trained")
     train = _rows(dataset, gripped & trained, CALIBRATION)
     results = {"timings_s": timings}
@@ -190,7 +190,7 @@ def grasp_two(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, l
         "untrained 5/15/25 deg. Samples with a grip force above 10 % of the peak are used."]
 
 
-def grasp_positions(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def grasp_positions(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     X = dataset.X()
     y = np.column_stack([dataset.column("angle_deg"), dataset.column("grip_force_N")])
@@ -234,7 +234,7 @@ def _classifier_report(dataset, model, mask, classes) -> dict:
             "confusion": metrics.confusion(y, predicted, classes).tolist(), "labels": [str(c) for c in classes]}
 
 
-def contact_states(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def contact_states(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     X = dataset.X()
     touching = dataset.column("normal_force_N") > 0.05
@@ -284,7 +284,7 @@ def inverter_models(dataset: Dataset, seed: int):
     return classifier, regressor
 
 
-def inverter(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, list[str]]:
+def inverter(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     dataset, timings = run_protocol(protocol)
     X = dataset.X()
     force = dataset.column("normal_force_N")
@@ -320,15 +320,16 @@ def inverter(protocol: Protocol, seed: int, quick: bool) -> tuple[dict, list, li
         "with 4 hidden layers of 10 tanh neurons (state, normal force)."]
 
 
-STUDIES: dict[str, tuple[str | tuple[str, ...], Callable]] = {
+STUDIES: dict[str, tuple[str, Callable]] = {
     "pushing": ("pushing", pushing), "force3": ("force3", force3), "hysteresis": ("hysteresis", hysteresis),
     "grasp-two": ("grasp-two", grasp_two), "grasp-positions": ("grasp-positions", grasp_positions),
     "contact-states": ("contact-states", contact_states), "inverter": ("inverter", inverter),
 }
 
 
-def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_path=None, say=None):
-    """Run study ``name``; ``quick`` cuts every trial count to a minimum (a smoke run)."""
+def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_path=None):
+    """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
+    count to a minimum (a smoke run)."""
     protocol_name, function = STUDIES[name]
     protocol = load_protocol(protocol_path or protocol_name)
     protocol.seed = seed
@@ -336,5 +337,5 @@ def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_
         for key in ("calibration_trials", "validation_trials", "trials", "untrained_trials"):
             if key in protocol.parameters:
                 protocol.parameters[key] = min(protocol.parameters[key], 2 if key != "untrained_trials" else 1)
-    results, figures, notes = function(protocol, seed, quick)
+    results, figures, notes = function(protocol, seed)
     return _round(results), figures, notes, protocol
