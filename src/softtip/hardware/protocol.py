@@ -419,11 +419,13 @@ def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
         block = _BLOCK_DTYPES[with_temperature]
         if not 1 <= chips <= MAX_CHIPS or len(payload) != DATA_HEADER_SIZE + chips * block.itemsize:
             return None
-        blocks = np.frombuffer(payload, dtype=block, offset=DATA_HEADER_SIZE)
-        raw = np.empty((chips, 3), dtype=np.uint16)
-        raw[:, 0], raw[:, 1], raw[:, 2] = blocks["x"], blocks["y"], blocks["z"]
-        return Frame.decoded(seq, device_time_us, blocks["status"].copy(), raw,
-                             blocks["t"].copy() if with_temperature else None, bool(flags & DataFlag.BOOT))
+        # strided views straight into the payload (status, then x y z [t] words per chip), copied once
+        stride = block.itemsize
+        status = np.ndarray((chips,), np.uint8, payload, DATA_HEADER_SIZE, (stride,)).copy()
+        raw = np.ndarray((chips, 3), "<u2", payload, DATA_HEADER_SIZE + 1, (stride, 2)).astype(np.uint16)
+        temperature = (np.ndarray((chips,), "<u2", payload, DATA_HEADER_SIZE + 7, (stride,)).astype(np.uint16)
+                       if with_temperature else None)
+        return Frame.decoded(seq, device_time_us, status, raw, temperature, bool(flags & DataFlag.BOOT))
     if frame_type == FrameType.IDENTITY:
         if payload[1] > MAX_CHIPS or not _is_printable_ascii(payload[2:]):
             return None
