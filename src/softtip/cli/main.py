@@ -363,6 +363,8 @@ def live(
                                                          "(with --emulate, default: the twin's force model)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated fingertip (pty, firmware protocol) "
                                                          "replaying the twin instead of a port."),
+    scenario: str = typer.Option("push", "--scenario", help="With --emulate: push (one fingertip: pushes and "
+                                                           "shears) or insertion (two fingertips, the inverter lid)."),
     chips: int = typer.Option(None, "--chips", help="Chips on the board (default: as it reports)."),
     rate: int = typer.Option(50, "--rate", help="Frames per second."),
     record: Path = typer.Option(None, "--record", help="Record to this MCAP file (ROS 2 message types)."),
@@ -383,21 +385,28 @@ def live(
         fail("give either --port PORT or --emulate")
     source = None
     settings = None
+    if scenario not in ("push", "insertion"):
+        fail(f"--scenario = {scenario!r}: expected push or insertion")
     if emulate:
         from softtip.lab import load_protocol
-        from softtip.lab.scenario import pushing_scenario
+        from softtip.lab.scenario import insertion_scenario, pushing_scenario
         from softtip.sensors import MLX90393Settings
 
-        protocol = load_protocol("force3")
+        protocol = load_protocol("force3" if scenario == "push" else "inverter")
         with console.status("computing the twin's scenario") if not json_output else contextlib.nullcontext():
-            source = pushing_scenario(protocol, protocol.seed)
+            source = (pushing_scenario if scenario == "push" else insertion_scenario)(protocol, protocol.seed)
         settings = MLX90393Settings.from_dict(protocol.design.sensor_readout)
         chips = chips or source.field_uT.shape[1]
-        if not model:  # the emulated fingertip comes with its calibration: the main demo's force model
-            from softtip.studies.live_demo import calibrate_force_model
-
+        if not model:  # the emulated fingertip comes with its calibration, trained on the twin once
             with console.status("calibrating the twin") if not json_output else contextlib.nullcontext():
-                model = [calibrate_force_model(protocol.seed, say=lambda message: None, reuse=True)[0]]
+                if scenario == "push":
+                    from softtip.studies.live_demo import calibrate_force_model
+
+                    model = [calibrate_force_model(protocol.seed, say=lambda message: None, reuse=True)[0]]
+                else:
+                    from softtip.studies.insertion import trained_model_files
+
+                    model = list(trained_model_files(protocol, say=lambda message: None))
     summary = run_live("emulator" if emulate else port, model,
                        live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
                        duration, rate_hz=rate, chips=chips, settings=settings, baseline_frames=baseline_frames,

@@ -81,7 +81,7 @@ class ChipStatus(IntFlag):
     SED = 0x10  # single-error detection in the chip's memory (informational)
 
 
-CHIP_FAULTS = ChipStatus.BUS_ERROR | ChipStatus.CHIP_ERROR | ChipStatus.RESET | ChipStatus.COUNT_MISMATCH
+CHIP_FAULTS = int(ChipStatus.BUS_ERROR | ChipStatus.CHIP_ERROR | ChipStatus.RESET | ChipStatus.COUNT_MISMATCH)
 
 _DATA_HEADER = struct.Struct("<HIBB")
 _CRC = struct.Struct("<H")
@@ -398,24 +398,30 @@ _DATA_LENGTHS = frozenset(
 
 def _length_allowed(frame_type: int, length: int) -> bool:
     """Whether a header's type and payload length can belong to a valid frame."""
-    if frame_type == FrameType.DATA:
+    if frame_type == _DATA:
         return length in _DATA_LENGTHS
-    if frame_type == FrameType.IDENTITY:
+    if frame_type == _IDENTITY:
         return 2 <= length <= 2 + MAX_NAME_LENGTH
-    if frame_type == FrameType.ACK:
+    if frame_type == _ACK:
         return length == 2
-    if frame_type == FrameType.ERROR:
+    if frame_type == _ERROR:
         return length == 4
     if FIRST_COMMAND <= frame_type <= LAST_COMMAND:
         return 1 <= length <= MAX_COMMAND_PAYLOAD
     return False
 
 
+# plain ints of the enums the decoder compares for every frame: enum operators cost microseconds
+_DATA, _IDENTITY, _ACK, _ERROR = (int(FrameType.DATA), int(FrameType.IDENTITY), int(FrameType.ACK),
+                                  int(FrameType.ERROR))
+_TEMPERATURE_FLAG, _BOOT_FLAG = int(DataFlag.TEMPERATURE), int(DataFlag.BOOT)
+
+
 def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
     """The message of a CRC-checked payload, or None when its content is inconsistent."""
-    if frame_type == FrameType.DATA:
+    if frame_type == _DATA:
         seq, device_time_us, chips, flags = _DATA_HEADER.unpack_from(payload)
-        with_temperature = bool(flags & DataFlag.TEMPERATURE)
+        with_temperature = bool(flags & _TEMPERATURE_FLAG)
         block = _BLOCK_DTYPES[with_temperature]
         if not 1 <= chips <= MAX_CHIPS or len(payload) != DATA_HEADER_SIZE + chips * block.itemsize:
             return None
@@ -425,7 +431,7 @@ def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
         raw = np.ndarray((chips, 3), "<u2", payload, DATA_HEADER_SIZE + 1, (stride, 2)).astype(np.uint16)
         temperature = (np.ndarray((chips,), "<u2", payload, DATA_HEADER_SIZE + 7, (stride,)).astype(np.uint16)
                        if with_temperature else None)
-        return Frame.decoded(seq, device_time_us, status, raw, temperature, bool(flags & DataFlag.BOOT))
+        return Frame.decoded(seq, device_time_us, status, raw, temperature, bool(flags & _BOOT_FLAG))
     if frame_type == FrameType.IDENTITY:
         if payload[1] > MAX_CHIPS or not _is_printable_ascii(payload[2:]):
             return None

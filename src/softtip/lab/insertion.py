@@ -60,7 +60,8 @@ class InsertionWorld:
         self.noise = protocol.realism.noise
         self.baseline = np.zeros(12)
 
-    def _absolute(self, pose: float) -> np.ndarray:
+    def absolute_uT(self, pose: float) -> np.ndarray:
+        """What the four chips read (µT, absolute) with part A at height ``pose`` (m)."""
         travel = np.array([max(0.0, -pose)])
         out = self.part.collide(self.points, self.normal, -self.normal, travel, self.seat)
         readings = []
@@ -73,7 +74,7 @@ class InsertionWorld:
 
     def take_baseline(self, pose: float, samples: int = 10) -> None:
         """The initial value, averaged over a few readings in the air after grasping."""
-        self.baseline = np.mean([self._absolute(pose) for _ in range(samples)], axis=0)
+        self.baseline = np.mean([self.absolute_uT(pose) for _ in range(samples)], axis=0)
 
     def reader(self, arm: SimulatedArm):
-        return lambda: self._absolute(float(arm.current_pose()[0])) - self.baseline
+        return lambda: self.absolute_uT(float(arm.current_pose()[0])) - self.baseline

@@ -85,3 +85,30 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     force = qlv_response(times, np.concatenate(segments_force), prony)
     force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
     return TwinScenario(times_s=times, field_uT=unit.field(rigid) * 1e6, force_N=force)
+
+
+def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, speed_mm_s: float = 2.0,
+                       rest_s: float = 1.0) -> TwinScenario:
+    """The inverter lid lowered into its body and lifted again, once per case - seated, left clip on
+    the rim, right clip on the rim - read by the two fingertips' four chips (the inverter protocol's
+    world). ``force_N`` holds the contact force on part B along its normal in the z column."""
+    from dataclasses import replace
+
+    from softtip.lab.insertion import CASES, InsertionWorld
+
+    quiet = replace(protocol, realism=replace(protocol.realism, noise=False))
+    speed, top, bottom = speed_mm_s * MM, 2.0 * MM, -0.6 * MM
+    travel = (top - bottom) / speed
+    times = np.arange(0.0, rest_s + 2 * travel, 1 / rate_hz)
+    pose = top - np.clip(np.minimum(times - rest_s, rest_s + 2 * travel - times), 0, travel) * speed
+    segments_t, fields, forces = [], [], []
+    clock = 0.0
+    for case in CASES:
+        world = InsertionWorld(quiet, case, np.random.default_rng(seed))
+        for height in pose:
+            fields.append(world.absolute_uT(float(height)).reshape(-1, 3))
+            forces.append([0.0, 0.0, world.force])
+        segments_t.append(clock + times)
+        clock += times[-1] + 1 / rate_hz
+    return TwinScenario(times_s=np.concatenate(segments_t), field_uT=np.array(fields), force_N=np.array(forces))
+

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -20,14 +21,14 @@ INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A firs
 TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much
 
 
-def trained_models(protocol: Protocol, say=print):
-    """The inverter's state and force networks, trained once per protocol (and its seed) and kept
-    as softtip model files in the cache."""
+def trained_model_files(protocol: Protocol, say=print) -> tuple[Path, Path]:
+    """The inverter's state and force networks as softtip model files, trained once per protocol
+    (and its seed) and kept in the cache."""
     key = hashlib.sha256(json.dumps(protocol.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
     folder = cache_dir() / "models"
     paths = folder / f"inverter-state-{key}.npz", folder / f"inverter-force-{key}.npz"
     if all(p.is_file() for p in paths):
-        return protocol, load_model(paths[0])[0], load_model(paths[1])[0]
+        return paths
     say("training the contact-state and force networks on the inverter protocol")
     dataset, _ = run_protocol(protocol)
     classifier, regressor = inverter_models(dataset, protocol.seed)
@@ -37,7 +38,13 @@ def trained_models(protocol: Protocol, say=print):
                target_names=["state"], target_units=["1"])
     save_model(paths[1], regressor, input_channels=channels, input_units=["uT"] * len(channels),
                target_names=["normal_force_N"], target_units=["N"])
-    return protocol, classifier, regressor
+    return paths
+
+
+def trained_models(protocol: Protocol, say=print):
+    """The inverter's state and force networks (see :func:`trained_model_files`)."""
+    state, force = trained_model_files(protocol, say)
+    return protocol, load_model(state)[0], load_model(force)[0]
 
 
 def run_insertion(case: str, seed: int = 1, protocol: Protocol | None = None, say=print) -> dict:
