@@ -58,3 +58,24 @@ def test_one_false_reading_does_not_stop_the_arm_but_two_do():
     result = controller.run()
     assert result["outcome"] == "retracted" and result["cycles"] == 4
     assert arm.current_pose()[0] == pytest.approx(1e-3)
+
+
+def test_the_emulated_insertion_replays_the_three_cases_with_both_fingertips(protocol):
+    from softtip.lab.scenario import insertion_scenario
+
+    scenario = insertion_scenario(protocol, seed=1)
+    assert scenario.field_uT.shape[1:] == (4, 3)
+    thirds = np.array_split(np.arange(len(scenario.times_s)), 3)
+    rest = scenario.field_uT[0]
+    for rows in thirds:
+        force = scenario.force_N[rows, 2]
+        # in the air at the start and the end of each case, pressed in the middle
+        assert force[0] == 0 and force[-1] == 0 and force.max() > 0.3
+        change = np.abs(scenario.field_uT[rows] - rest).max()
+        assert change > 1.0  # µT: the chips see the part's push
+    # the left and right clips are mirror images through the part's x = 0 plane, and so are each pad's
+    # two chips (at x = -6 and +6 mm): chip 0 in one case reads chip 1 of the other with Bx reversed
+    # (up to the fabrication tolerances of the units)
+    left, right = (scenario.field_uT[rows[len(rows) // 2]] - rest for rows in thirds[1:])
+    mirror = np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(left[[0, 2]], right[[1, 3]] * mirror, rtol=0.25, atol=0.05 * np.abs(left).max())
