@@ -92,6 +92,27 @@ class SettingsReader:
             raise self.fail(key, "expected [x, y] in mm")
         return float(value[0]), float(value[1])
 
+    def like(self, key: str, default: Any) -> Any:
+        """A value of the default's kind: true/false, an integer >= 0, a number >= 0, a list of
+        numbers, or a list of [x, y] pairs."""
+        if isinstance(default, bool):
+            value = self._get(key, default)
+            if not isinstance(value, bool):
+                raise self.fail(key, "expected true or false")
+            return value
+        if isinstance(default, int):
+            return self.integer(key, default)
+        if isinstance(default, float):
+            return self.number(key, default, non_negative=True)
+        if isinstance(default, list) and default and isinstance(default[0], list):
+            value = self._get(key, default)
+            if not (isinstance(value, list) and value and all(
+                    isinstance(v, list) and len(v) == 2
+                    and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v) for v in value)):
+                raise self.fail(key, "expected a list of [x, y] pairs in mm")
+            return [[float(x) for x in v] for v in value]
+        return self.numbers(key, default)
+
     def raw(self, key: str, default: Any) -> Any:
         """A value whose type the caller checks itself (``default=None``: required)."""
         return self._get(key, default)

@@ -46,7 +46,9 @@ class PolynomialFit(RegressorMixin, BaseEstimator):
         tags.target_tags.multi_output = True
         return tags
 
-    def fit(self, X, y):
+    def fit(self, X, y, groups=None):
+        """Least squares by pseudo-inverse. ``groups`` (the trial of each sample) is accepted so that
+        every softtip model is fitted the same way; a closed-form fit holds nothing out."""
         degree = checks.integer("degree", self.degree, 1)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         targets = y.reshape(len(y), -1).astype(np.float64)

@@ -5,7 +5,6 @@ Registered on the main app at the end of :mod:`softtip.cli.main` (see :mod:`soft
 
 from __future__ import annotations
 
-import contextlib
 import json
 import time
 from pathlib import Path
@@ -20,12 +19,6 @@ STUDY_NAMES = ("pushing", "force3", "hysteresis", "grasp-two", "grasp-positions"
 MODEL_KINDS = ("polynomial", "network", "classifier")
 
 
-def _status(message: str, quiet: bool):
-    from softtip.cli.main import console
-
-    return contextlib.nullcontext() if quiet else console.status(message)
-
-
 def lab_run(
     protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(STUDY_NAMES)}."),
     output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
@@ -33,13 +26,13 @@ def lab_run(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
-    from softtip.cli.main import console
+    from softtip.cli.main import console, status
     from softtip.lab import load_protocol, run_protocol
 
     loaded = load_protocol(protocol)
     if seed is not None:
         loaded.seed = seed
-    with _status(f"running {loaded.name} on {loaded.design.name}", json_output):
+    with status(f"running {loaded.name} on {loaded.design.name}", json_output):
         dataset, timings = run_protocol(loaded)
     path = dataset.write(output or Path(f"{loaded.name}.parquet"))
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
@@ -60,7 +53,7 @@ def reproduce(
 ) -> None:
     """Run a published study end to end (experiments on the twin -> models -> metrics) and write a
     self-contained HTML report with tables and figures beside the published figures."""
-    from softtip.cli.main import console, fail
+    from softtip.cli.main import console, fail, status
     from softtip.report.html import write_report
     from softtip.studies.published import run_published_study
 
@@ -70,7 +63,7 @@ def reproduce(
     everything = {}
     for name in names:
         start = time.perf_counter()
-        with _status(f"reproducing {name}", json_output):
+        with status(f"reproducing {name}", json_output):
             results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick)
         seconds = time.perf_counter() - start
         report = write_report(output / f"{name}.html", f"softtip reproduce {name}", [
@@ -119,10 +112,7 @@ def calibrate(
     if not train.any():
         fail(f"{dataset}: no calibration samples (role = calibration) to fit on")
     start = time.perf_counter()
-    if model == "polynomial":
-        estimator.fit(X[train], y[train])
-    else:
-        estimator.fit(X[train], y[train], groups=data.groups[train])
+    estimator.fit(X[train], y[train], groups=data.groups[train])
     seconds = time.perf_counter() - start
     report = _score(estimator, model, X[test], y[test], target) if test.any() else {}
     save_model(output, estimator, input_channels=list(data.channels), input_units=["uT"] * len(data.channels),

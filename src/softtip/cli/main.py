@@ -45,6 +45,11 @@ class Switch(str, Enum):
     off = "off"
 
 
+def status(message: str, quiet: bool):
+    """A spinner with ``message`` on the terminal, nothing when the output is JSON."""
+    return contextlib.nullcontext() if quiet else console.status(message)
+
+
 def fail(message: str) -> None:
     """A user mistake: one line, no traceback, exit code 2."""
     errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
@@ -340,7 +345,7 @@ def demo_insertion(
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
-    with console.status(f"insertion, case {case}") if not json_output else contextlib.nullcontext():
+    with status(f"insertion, case {case}", json_output):
         outcome = run_insertion(case, seed, say=(lambda m: None) if json_output else console.print)
     if json_output:
         print(json.dumps(outcome, indent=2))
@@ -393,12 +398,12 @@ def live(
         from softtip.sensors import MLX90393Settings
 
         protocol = load_protocol("force3" if scenario == "push" else "inverter")
-        with console.status("computing the twin's scenario") if not json_output else contextlib.nullcontext():
+        with status("computing the twin's scenario", json_output):
             source = (pushing_scenario if scenario == "push" else insertion_scenario)(protocol, protocol.seed)
         settings = MLX90393Settings.from_dict(protocol.design.sensor_readout)
         chips = chips or source.field_uT.shape[1]
         if not model:  # the emulated fingertip comes with its calibration, trained on the twin once
-            with console.status("calibrating the twin") if not json_output else contextlib.nullcontext():
+            with status("calibrating the twin", json_output):
                 if scenario == "push":
                     from softtip.studies.live_demo import calibrate_force_model
 
@@ -452,7 +457,7 @@ def bench_live(
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None
-    with console.status(f"soaking for {duration:g} s") if not json_output else contextlib.nullcontext():
+    with status(f"soaking for {duration:g} s", json_output):
         report = soak(duration, rate, chips, plan)
     if json_output:
         print(json.dumps(report, indent=2, default=float))

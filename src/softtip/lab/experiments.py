@@ -341,6 +341,23 @@ def contact_states(bench: Bench, p: dict, seed: int) -> Dataset:
     return writer.to_dataset()
 
 
+def inverter_contacts(p: dict) -> dict[int, tuple[np.ndarray | None, float]]:
+    """For each insertion state, where part A touches part B (points in the part's frame, m; None in
+    the air) and the compliance (m/N) it meets: the clips flex as the lid seats through its centre,
+    a clip on the rim meets hard plastic."""
+    clip_x, depth = p["clip_spacing_mm"] / 2 * MM, p["part_depth_mm"] * MM
+    seat, rim = p["seat_compliance_mm_per_N"] * MM, p["rim_compliance_mm_per_N"] * MM
+    return {0: (None, 0.0), 1: (np.array([[0.0, -depth, 0.0]]), seat),
+            2: (np.array([[-clip_x, -depth, 0.0]]), rim), 3: (np.array([[clip_x, -depth, 0.0]]), rim)}
+
+
+def world_up(tilt_y_deg: float, tilt_x_deg: float) -> np.ndarray:
+    """World up seen from a part that hangs from a flange tilted about y and x, its -y pointing down."""
+    ty, tx = math.radians(tilt_y_deg), math.radians(tilt_x_deg)
+    up = np.array([math.sin(tx), math.cos(ty) * math.cos(tx), math.sin(ty) * math.cos(tx)])
+    return up / np.linalg.norm(up)
+
+
 def inverter(bench: Bench, p: dict, seed: int) -> Dataset:
     """S1 §2 insertion of an inverter lid (part A, held by its top edge) into its body (part B):
     state 0 in the air, 1 inserted (the lid seats through its centre), 2 left clip on part B's rim,
@@ -352,16 +369,11 @@ def inverter(bench: Bench, p: dict, seed: int) -> Dataset:
     grip = p["grip_depth_mm"] * MM
     offsets = sorted({0.0, *p["untrained_offsets_mm"]})
     parts = {o: HeldPart.grasp(bench.fingertip, grip, p["part_thickness_mm"] * MM, (o * MM, 0.0)) for o in offsets}
-    clip_x, depth = p["clip_spacing_mm"] / 2 * MM, p["part_depth_mm"] * MM
-    points = {0: None, 1: np.array([[0.0, -depth, 0.0]]), 2: np.array([[-clip_x, -depth, 0.0]]),
-              3: np.array([[clip_x, -depth, 0.0]])}
+    contacts = inverter_contacts(p)
 
     def normal_for(tilt_y: float, tilt_x: float) -> np.ndarray:
-        # world up seen from the part: the part hangs from the flange, its -y pointing down
-        ty, tx = math.radians(tilt_y + bench.scatter(bench.realism.angle_sd_deg)), math.radians(
-            tilt_x + bench.scatter(bench.realism.angle_sd_deg))
-        up = np.array([math.sin(tx), math.cos(ty) * math.cos(tx), math.sin(ty) * math.cos(tx)])
-        return up / np.linalg.norm(up)
+        sd = bench.realism.angle_sd_deg
+        return world_up(tilt_y + bench.scatter(sd), tilt_x + bench.scatter(sd))
 
     plan = []
     for state in (0, 1, 2, 3):
@@ -387,8 +399,5 @@ def inverter(bench: Bench, p: dict, seed: int) -> Dataset:
         # before part A touches part B the lid is in the air, whatever the trial's outcome
         return {"state": np.where(contact > 0, state, 0).astype(np.int64), "normal_force_N": contact}
 
-    # the clips flex as the lid seats; a clip on the rim meets hard plastic
-    seat = {0: 0.0, 1: p["seat_compliance_mm_per_N"] * MM, 2: p["rim_compliance_mm_per_N"] * MM,
-            3: p["rim_compliance_mm_per_N"] * MM}
-    _collision_trials(bench, parts, rows, lambda state: (points[state], seat[state]), p, writer, labels)
+    _collision_trials(bench, parts, rows, lambda state: contacts[state], p, writer, labels)
     return writer.to_dataset()

@@ -10,12 +10,11 @@ part B's rim (``left-clip``) or the right clip (``right-clip``).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from softtip.design.model import MM
 from softtip.lab.engine import HeldPart
+from softtip.lab.experiments import inverter_contacts, world_up
 from softtip.lab.protocols import Protocol, fingertip_for
 from softtip.lab.realism import FabricatedUnit
 
@@ -48,12 +47,8 @@ class InsertionWorld:
         self.state = CASES[case]
         fingertip = fingertip_for(protocol.design, p)
         self.part = HeldPart.grasp(fingertip, p["grip_depth_mm"] * MM, p["part_thickness_mm"] * MM)
-        clip, depth = p["clip_spacing_mm"] / 2 * MM, p["part_depth_mm"] * MM
-        self.points = {1: np.array([[0.0, -depth, 0.0]]), 2: np.array([[-clip, -depth, 0.0]]),
-                       3: np.array([[clip, -depth, 0.0]])}[self.state]
-        self.seat = (p["seat_compliance_mm_per_N"] if self.state == 1 else p["rim_compliance_mm_per_N"]) * MM
-        tilt = math.radians(p["tilt_y_deg"])
-        self.normal = np.array([0.0, math.cos(tilt), math.sin(tilt)])
+        self.points, self.seat = inverter_contacts(p)[self.state]
+        self.normal = world_up(p["tilt_y_deg"], 0.0)
         self.units = (FabricatedUnit(protocol.design, protocol.realism, rng),
                       FabricatedUnit(protocol.design, protocol.realism, rng))
         self.rng = rng

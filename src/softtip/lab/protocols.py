@@ -96,26 +96,6 @@ def shipped_protocol_path(name: str) -> Path:
     return Path(str(resources.files("softtip.lab") / "protocols" / f"{name}.toml"))
 
 
-def _read_value(reader: SettingsReader, key: str, default: Any) -> Any:
-    if isinstance(default, bool):
-        value = reader.raw(key, default)
-        if not isinstance(value, bool):
-            raise reader.fail(key, "expected true or false")
-        return value
-    if isinstance(default, int):
-        return reader.integer(key, default)
-    if isinstance(default, float):
-        return reader.number(key, default, non_negative=True)
-    if isinstance(default, list) and default and isinstance(default[0], list):
-        value = reader.raw(key, default)
-        if not (isinstance(value, list) and value and all(
-                isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                             for x in v) for v in value)):
-            raise reader.fail(key, "expected a list of [x, y] pairs in mm")
-        return [[float(x) for x in v] for v in value]
-    return reader.numbers(key, default)
-
-
 def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Protocol:
     top = SettingsReader(source, table, "")
     name = top.choice("protocol", sorted(RUNNERS))
@@ -129,7 +109,7 @@ def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Pr
     parameters = {}
     reader = SettingsReader(source, top.raw("parameters", {}), "parameters")
     for key, default in DEFAULTS[name].items():
-        parameters[key] = _read_value(reader, key, copy.deepcopy(default))
+        parameters[key] = reader.like(key, copy.deepcopy(default))
     reader.finish()
     if parameters["rate_hz"] <= 0:
         raise ConfigError(f"{source}: parameters.rate_hz = {parameters['rate_hz']}: expected a positive rate")

@@ -51,17 +51,7 @@ class Realism:
 
     @classmethod
     def read(cls, settings: SettingsReader) -> "Realism":
-        defaults = cls()
-        values = {}
-        for name, default in asdict(defaults).items():
-            if isinstance(default, bool):
-                value = settings.raw(name, default)
-                if not isinstance(value, bool):
-                    raise settings.fail(name, "expected true or false")
-                values[name] = value
-            else:
-                values[name] = settings.number(name, default, non_negative=True)
-        return cls(**values)
+        return cls(**{name: settings.like(name, default) for name, default in asdict(cls()).items()})
 
     @classmethod
     def off(cls) -> "Realism":

@@ -33,12 +33,6 @@ def _rows(dataset: Dataset, mask_rows: np.ndarray, role: str | None) -> np.ndarr
     return keep
 
 
-def _fit(model, X, y, groups):
-    if isinstance(model, (LMNetwork, SoftmaxClassifier)):
-        return model.fit(X, y, groups=groups)
-    return model.fit(X, y)
-
-
 def _round(value, digits=3):
     if isinstance(value, dict):
         return {str(k): _round(v, digits) for k, v in value.items()}
@@ -79,7 +73,7 @@ def pushing(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         results[name] = {}
         for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
                                                ("network", LMNetwork((10,), random_state=seed)))):
-            _fit(model, X[train], y[train], dataset.groups[train])
+            model.fit(X[train], y[train], groups=dataset.groups[train])
             estimate = model.predict(X[test])
             results[name][method] = {
                 "mean_abs_error_deg": metrics.mean_abs_error(y[test], estimate),
@@ -115,7 +109,7 @@ def force3(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     figure, axes = plt.subplots(2, 3, figsize=(12, 7))
     for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
                                            ("network", LMNetwork((10,), random_state=seed)))):
-        _fit(model, X[train], y[train], dataset.groups[train])
+        model.fit(X[train], y[train], groups=dataset.groups[train])
         estimate = model.predict(X[test])
         results[method] = {axis: {"mean_abs_error_N": metrics.mean_abs_error(y[test, k], estimate[:, k]),
                                   "rmse_percent_fs": metrics.rmse_percent_fs(y[test, k], estimate[:, k], full_scale[k]),
@@ -174,7 +168,7 @@ def grasp_two(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     train = _rows(dataset, gripped & trained, CALIBRATION)
     results = {"timings_s": timings}
     figure, ax = plt.subplots(figsize=(6, 4.5))
-    model = _fit(LMNetwork((20,), random_state=seed), X[train], y[train], dataset.groups[train])
+    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     for name, mask in (("trained", gripped & trained & (dataset.column("role") == VALIDATION)),
                        ("untrained", gripped & ~trained)):
         estimate = model.predict(X[mask])
@@ -197,7 +191,7 @@ def grasp_positions(protocol: Protocol, seed: int) -> tuple[dict, list, list[str
     gripped = y[:, 1] > 0.1 * y[:, 1].max()
     sets = dataset.column("set")
     train = _rows(dataset, gripped & (sets == "trained"), CALIBRATION)
-    model = _fit(LMNetwork((20,), random_state=seed), X[train], y[train], dataset.groups[train])
+    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     results = {"timings_s": timings}
     figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
     for name in ("trained", "untrained-position", "untrained-position-orientation", "thickness"):
@@ -241,8 +235,8 @@ def contact_states(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]
     sets, roles = dataset.column("set"), dataset.column("role")
     classes = np.array(["point-a", "point-b", "edge"])
     train = touching & (sets == "trained") & (roles == CALIBRATION)
-    model = _fit(SoftmaxClassifier((10,), random_state=seed), X[train], dataset.column("state")[train],
-                 dataset.groups[train])
+    model = SoftmaxClassifier((10,), random_state=seed).fit(X[train], dataset.column("state")[train],
+                                                            groups=dataset.groups[train])
     results = {"timings_s": timings}
     for name in ("trained", "untrained-angles", "untrained-approach"):
         mask = touching & (sets == name) & (roles == VALIDATION)
@@ -277,10 +271,10 @@ def inverter_models(dataset: Dataset, seed: int):
     window = ((nominal == 0) | ((nominal == 1) & (force >= 0.3) & (force <= 0.5))
               | ((nominal >= 2) & (force >= 0.6) & (force <= 0.8)))
     train = calibration & window
-    classifier = _fit(SoftmaxClassifier((10, 10, 10, 10), random_state=seed), X[train], state[train],
-                      dataset.groups[train])
-    regressor = _fit(LMNetwork((10, 10, 10, 10), random_state=seed), X[calibration], force[calibration],
-                     dataset.groups[calibration])
+    classifier = SoftmaxClassifier((10, 10, 10, 10), random_state=seed).fit(X[train], state[train],
+                                                                            groups=dataset.groups[train])
+    regressor = LMNetwork((10, 10, 10, 10), random_state=seed).fit(X[calibration], force[calibration],
+                                                                   groups=dataset.groups[calibration])
     return classifier, regressor
 
 
