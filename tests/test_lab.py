@@ -95,6 +95,7 @@ def test_every_shipped_protocol_loads_with_every_default():
     ({"parameters": {"speed": 1.0}}, "unknown key"),
     ({"protocol": "juggling"}, "protocol"),
     ({"realism": {"noise": 1}}, "realism.noise"),
+    ({"realism": {"position_sd": 0.1}}, "unknown key"),
     ({"design": "cylindrical-Z"}, "design"),
 ])
 def test_protocol_mistakes_are_one_line_errors(change, message):

@@ -113,7 +113,9 @@ def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Pr
     reader.finish()
     if parameters["rate_hz"] <= 0:
         raise ConfigError(f"{source}: parameters.rate_hz = {parameters['rate_hz']}: expected a positive rate")
-    realism = Realism.read(SettingsReader(source, top.raw("realism", {}), "realism"))
+    realism_reader = SettingsReader(source, top.raw("realism", {}), "realism")
+    realism = Realism.read(realism_reader)
+    realism_reader.finish()
     visco_reader = SettingsReader(source, top.raw("viscoelastic", {}), "viscoelastic")
     viscoelastic = {k: visco_reader.number(k, v, non_negative=True) for k, v in VISCOELASTIC.items()}
     visco_reader.finish()
