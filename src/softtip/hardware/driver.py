@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import serial
@@ -137,8 +138,7 @@ def open_serial(port: str, baudrate: int, read_timeout_s: float = _READ_TIMEOUT_
 # --------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, eq=False)
-class Sample:
+class Sample(NamedTuple):
     """One reading of every chip.
 
     seq: the frame's sequence number (uint16, wraps) or a running record count
@@ -159,6 +159,11 @@ class Sample:
     chip_ok: np.ndarray
     saturated: np.ndarray
     temperature_C: np.ndarray | None = None
+
+    # a tuple's equality would compare the arrays element-wise: identity, as for any object
+    __eq__ = object.__eq__
+    __ne__ = object.__ne__
+    __hash__ = object.__hash__
 
 
 @dataclass(frozen=True)
@@ -303,6 +308,7 @@ class FingertipDriver:
         # The model of the settings the device applies to the frames now arriving:
         # switched by the reader thread when the CONFIGURE reply arrives.
         self._model = MLX90393(self._settings)
+        self._all_ok: dict[int, np.ndarray] = {}  # chip count -> all-True chip_ok mask
         self._frames = 0
         self._dropped = 0
         self._reconnects = 0
@@ -582,11 +588,17 @@ class FingertipDriver:
     def _deliver(self, frame: Frame, host_time_s: float) -> None:
         lost, device_time_s = self._tracker.update(frame)
         self._dropped += lost
-        model = self._model
-        chip_ok = (frame.status & CHIP_FAULTS) == 0
-        field, saturated = model.decode(frame.raw)
-        field[~chip_ok] = np.nan
-        saturated &= chip_ok[:, None]
+        field, saturated = self._model.decode(frame.raw)
+        status = frame.status
+        if status.any() and (status & CHIP_FAULTS).any():
+            chip_ok = (status & CHIP_FAULTS) == 0
+            field[~chip_ok] = np.nan
+            saturated &= chip_ok[:, None]
+        else:  # the usual frame: one shared read-only mask, no masking
+            chip_ok = self._all_ok.get(len(status))
+            if chip_ok is None:
+                chip_ok = self._all_ok[len(status)] = np.ones(len(status), dtype=bool)
+                chip_ok.setflags(write=False)
         temperature = None if frame.temperature_raw is None else temperature_C(frame.temperature_raw)
         sample = Sample(
             seq=frame.seq,

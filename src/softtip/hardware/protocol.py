@@ -86,8 +86,8 @@ CHIP_FAULTS = int(ChipStatus.BUS_ERROR | ChipStatus.CHIP_ERROR | ChipStatus.RESE
 _DATA_HEADER = struct.Struct("<HIBB")
 _CRC = struct.Struct("<H")
 _BLOCK_DTYPES = {
-    False: np.dtype([("status", "u1"), ("x", "<u2"), ("y", "<u2"), ("z", "<u2")]),
-    True: np.dtype([("status", "u1"), ("x", "<u2"), ("y", "<u2"), ("z", "<u2"), ("t", "<u2")]),
+    False: np.dtype([("status", "u1"), ("xyz", "<u2", (3,))]),
+    True: np.dtype([("status", "u1"), ("xyz", "<u2", (3,)), ("t", "<u2")]),
 }
 _SETTINGS_ARGS = 9
 
@@ -163,12 +163,8 @@ class Frame:
         CRC-checked payload of the right length): built without re-checking them, since the
         decoder does this for every frame in real time."""
         frame = object.__new__(cls)
-        for array in (status, raw, temperature_raw):
-            if array is not None:
-                array.setflags(write=False)
-        for name, value in (("seq", seq), ("device_time_us", device_time_us), ("status", status), ("raw", raw),
-                            ("temperature_raw", temperature_raw), ("boot", boot)):
-            object.__setattr__(frame, name, value)
+        frame.__dict__.update(seq=seq, device_time_us=device_time_us, status=status, raw=raw,
+                              temperature_raw=temperature_raw, boot=boot)
         return frame
 
     @property
@@ -367,7 +363,7 @@ def encode_frame(message: Message) -> bytes:
             flags |= DataFlag.BOOT
         blocks = np.zeros(message.chips, dtype=_BLOCK_DTYPES[with_temperature])
         blocks["status"] = message.status
-        blocks["x"], blocks["y"], blocks["z"] = message.raw.T
+        blocks["xyz"] = message.raw
         if with_temperature:
             blocks["t"] = message.temperature_raw
         header = _DATA_HEADER.pack(message.seq, message.device_time_us, message.chips, int(flags))
@@ -425,13 +421,10 @@ def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
         block = _BLOCK_DTYPES[with_temperature]
         if not 1 <= chips <= MAX_CHIPS or len(payload) != DATA_HEADER_SIZE + chips * block.itemsize:
             return None
-        # strided views straight into the payload (status, then x y z [t] words per chip), copied once
-        stride = block.itemsize
-        status = np.ndarray((chips,), np.uint8, payload, DATA_HEADER_SIZE, (stride,)).copy()
-        raw = np.ndarray((chips, 3), "<u2", payload, DATA_HEADER_SIZE + 1, (stride, 2)).astype(np.uint16)
-        temperature = (np.ndarray((chips,), "<u2", payload, DATA_HEADER_SIZE + 7, (stride,)).astype(np.uint16)
-                       if with_temperature else None)
-        return Frame.decoded(seq, device_time_us, status, raw, temperature, bool(flags & _BOOT_FLAG))
+        # read-only views straight into the payload's bytes: no copy
+        blocks = np.frombuffer(payload, block, chips, DATA_HEADER_SIZE)
+        return Frame.decoded(seq, device_time_us, blocks["status"], blocks["xyz"],
+                             blocks["t"] if with_temperature else None, bool(flags & _BOOT_FLAG))
     if frame_type == FrameType.IDENTITY:
         if payload[1] > MAX_CHIPS or not _is_printable_ascii(payload[2:]):
             return None

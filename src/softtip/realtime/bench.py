@@ -5,8 +5,7 @@ every frame.
 The emulator runs in a child process, so the CPU time measured (``time.process_time`` of
 this process over the streaming time) is the pipeline's alone: the driver's reader
 thread (reading, decoding, conversion, then baseline and estimate) and the recorder's
-writer thread. It is also reported per thread (Linux) and, for the time spent in
-``Pipeline.process`` (baseline, estimate, hand-off to the sinks), separately.
+writer thread. It is also reported per thread (Linux).
 Latency is from the arrival of a frame's last bytes (the driver's host timestamp) to its
 estimate. The emulator's log of every generated frame and its fate (sent intact,
 corrupted, truncated, not sent) is compared frame by frame with the sequence numbers the
@@ -122,7 +121,7 @@ def soak(duration_s: float = 20.0, rate_hz: int = 500, chips: int = 4, faults: F
         baseline = Baseline(max(1, rate_hz // 2), drift_time_constant_s=drift_time_constant_s)
         session = LiveSession(EMULATOR, [estimator], [RecorderSink(path)], rate_hz=rate_hz, chips=chips,
                               baseline=baseline, callbacks=[deliveries], emulator_source=PressCycle(chips, seed=seed),
-                              emulator_faults=faults, emulator_seed=seed, measure_pipeline_cpu=True)
+                              emulator_faults=faults, emulator_seed=seed)
         say(f"soak: {chips} chips at {rate_hz} frames/s for {duration_s:g} s, recording to {path}")
         with session:
             threads_before = _thread_cpu_s()
@@ -165,7 +164,6 @@ def soak(duration_s: float = 20.0, rate_hz: int = 500, chips: int = 4, faults: F
         # The reader thread runs the driver (read, decode, convert) and then the pipeline.
         "cpu_percent_by_thread": {name: 100.0 * (cpu_s - threads_before.get(name, 0.0)) / streaming_s
                                   for name, cpu_s in threads_after.items() if cpu_s > threads_before.get(name, 0.0)},
-        "pipeline_cpu_percent": summary["pipeline_cpu_percent"],
         "streaming_s": streaming_s,
         "emulator": {"frames_per_s": len(log.seq) / streaming_s if streaming_s > 0 else math.nan,
                      "cpu_percent_of_one_core": 100.0 * log.cpu_s / streaming_s if streaming_s > 0 else math.nan,

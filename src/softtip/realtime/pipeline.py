@@ -207,8 +207,10 @@ class Estimator:
         output = self._predict_one(self.inputs(change_flat))
         if self.kind == "classifier":
             return str(output)
-        values = np.asarray(output, dtype=np.float64).reshape(-1)
-        if values.size != len(self.target_names):
+        # the real-time models already return a 1-D float64 array: no conversion for them
+        values = output if type(output) is np.ndarray and output.dtype == np.float64 and output.ndim == 1 else (
+            np.asarray(output, dtype=np.float64).reshape(-1))
+        if len(values) != len(self.target_names):
             raise ValueError(f"model {self.name}: {values.size} outputs for {len(self.target_names)} target names")
         return values
 
@@ -631,9 +633,7 @@ class LiveSession:
     ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
     :meth:`summary` reports frames, lost frames, latency and the CPU time of this process
     while streaming. ``chips`` defaults to what the device reports (the emulator: the
-    models' chips, or 4). ``measure_pipeline_cpu`` also sums the CPU time spent in
-    :meth:`Pipeline.process` (two clock readings per frame). Other arguments: see
-    :class:`Pipeline` and :class:`Baseline`.
+    models' chips, or 4). Other arguments: see :class:`Pipeline` and :class:`Baseline`.
     """
 
     def __init__(self, source_spec: str, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
@@ -641,8 +641,7 @@ class LiveSession:
                  baudrate: int = 1_000_000, baseline: Baseline | None = None, free_states: Sequence[str] = (),
                  callbacks: Sequence[Callable[[FrameResult], None]] = (),
                  emulator_source: Callable[[float], np.ndarray] | None = None,
-                 emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0,
-                 measure_pipeline_cpu: bool = False) -> None:
+                 emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0) -> None:
         if not isinstance(source_spec, str) or not source_spec.strip():
             raise ValueError(f"source = {source_spec!r}: expected a serial port or {EMULATOR!r}")
         self.source_spec = source_spec
@@ -661,8 +660,6 @@ class LiveSession:
                                           self.settings, emulator_faults, emulator_seed)
                           if self.emulated else None)
         self.emulator_log: EmulatorLog | None = None
-        self.pipeline_cpu_s = 0.0  # time in Pipeline.process, with measure_pipeline_cpu
-        self._measure = bool(measure_pipeline_cpu)
         self.driver: FingertipDriver | None = None
         self.pipeline: Pipeline | None = None
         self._cpu_s = self._wall_s = 0.0
@@ -693,12 +690,7 @@ class LiveSession:
         return self
 
     def _forward(self, sample: Sample) -> None:
-        if not self._measure:
-            self.pipeline.process(sample)
-            return
-        start = time.thread_time()
-        self.pipeline.process(sample)
-        self.pipeline_cpu_s += time.thread_time() - start
+        self.pipeline.process(sample)  # the pipeline exists once the device has said how many chips
 
     def _driver_counters(self) -> dict:
         stats = self.driver.stats
@@ -751,8 +743,6 @@ class LiveSession:
         summary = {"source": self.source_spec, "chips": None if self.pipeline is None else self.pipeline.chips,
                    "rate_hz": self.rate_hz, "streaming_s": self._wall_s, "cpu_percent": percent(self._cpu_s),
                    **counters}
-        if self._measure:
-            summary["pipeline_cpu_percent"] = percent(self.pipeline_cpu_s)
         return summary
 
 
