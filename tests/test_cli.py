@@ -120,6 +120,13 @@ def test_user_mistakes_give_one_line_and_exit_code_2(args, message):
     assert len(result.output.strip().splitlines()) == 1
 
 
+def test_a_bad_contact_layer_gives_one_line_before_any_work():
+    result = run("bench", "rom", "--contact-layer-mm", "0.05")
+    assert result.exit_code == 2
+    assert "--contact-layer-mm = 0.05" in result.output and "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
 def test_a_bad_design_file_gives_one_line(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text('kind = "cylindrical"\n[body]\ndiameter_mm = 25\nheight_mm = 9\n[cavity]\nradius_mm = 30\n'
@@ -136,7 +143,7 @@ def test_designs_lists_the_shipped_designs():
 
 
 @pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["demo", "insertion"], ["bench"],
-                                     ["bench", "twin"], ["bench", "live"], ["lab", "run"], ["reproduce"],
+                                     ["bench", "twin"], ["bench", "rom"], ["bench", "live"], ["lab", "run"], ["reproduce"],
                                      ["calibrate"], ["evaluate"], ["live"], ["convert"]])
 def test_every_command_has_help(command):
     result = run(*command, "--help")

@@ -171,3 +171,28 @@ def test_mesh_convergence_of_the_fingertip_board_push():
         coarse_error, default_error = abs(values[0] - values[2]), abs(values[1] - values[2])
         assert default_error < coarse_error  # refinement converges towards the reference
         assert default_error < 0.01 * abs(values[2])  # the default 1.0 mm mesh is within 1 %
+
+
+def test_a_contact_layer_refines_the_top_of_the_body_only(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path))
+    design = load_design("cylindrical-A")
+    plain = mesh_design(design, 2.5 * MM)
+    layered = mesh_design(design, 2.5 * MM, contact_layer=(1.5 * MM, 1.0 * MM))
+    assert layered.key != plain.key
+
+    def edges(mesh, low, high):
+        """Mean length of the tetrahedra's edges with both ends in low <= z <= high."""
+        ends = [(a, b) for a in range(4) for b in range(a + 1, 4)]
+        lengths = []
+        for a, b in ends:
+            p, q = mesh.points[mesh.tets[a]], mesh.points[mesh.tets[b]]
+            inside = (np.minimum(p[:, 2], q[:, 2]) >= low) & (np.maximum(p[:, 2], q[:, 2]) <= high)
+            lengths.append(np.linalg.norm(p - q, axis=1)[inside])
+        return np.concatenate(lengths).mean()
+
+    top = (design.height - 1.0 * MM, design.height)
+    bottom = (0.0, 2.0 * MM)
+    assert edges(layered, *top) < 1.2 * MM < edges(plain, *top)
+    assert edges(layered, *bottom) == pytest.approx(edges(plain, *bottom), rel=0.25)
+    with pytest.raises(ValueError, match="contact_layer"):
+        mesh_design(design, 2.5 * MM, contact_layer=(1.5 * MM, 0.0))

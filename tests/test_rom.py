@@ -53,13 +53,45 @@ def test_compliance_is_symmetric_positive_definite(coarse):
     assert np.linalg.eigvalsh(w[:300, :300]).min() > 0
 
 
+def test_a_board_shifted_along_itself_is_the_same_load(coarse):
+    # the physics behind the network's inputs: only the board's centre line matters
+    _, _, influence = coarse
+    angle, shift = 0.6, 2e-3
+    along = np.array([math.cos(angle), math.sin(angle)])
+    results = [solve_contact(influence, LoadCase(Board(1.6e-3, angle), 1.2e-3, tangential=(0.4e-3, 0.2e-3),
+                                                 position=tuple(np.array([0.5e-3, -0.3e-3]) + k * shift * along),
+                                                 friction="stick"))
+               for k in (0, 1)]
+    np.testing.assert_allclose(results[1].force, results[0].force, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(results[1].magnet_rigid, results[0].magnet_rigid, rtol=1e-9, atol=1e-15)
+
+
+def test_network_inputs_of_a_board_are_invariant_along_it_and_under_a_half_turn():
+    from softtip.rom.surrogate import _features
+
+    board, sphere = IndenterFamily("board"), IndenterFamily("sphere")
+    angle = 0.4
+    along = np.array([math.cos(angle), math.sin(angle)])
+    loads = np.array([[1e-3, 2e-3, angle, 1e-3, 2e-4, -1e-4]] * 3)
+    loads[1, :2] += 1.5e-3 * along  # the same board line
+    loads[2, 2] += math.pi  # the same board turned half a turn
+    features = _features(loads, board)
+    np.testing.assert_allclose(features[1], features[0], atol=1e-15)
+    np.testing.assert_allclose(features[2], features[0], atol=1e-15)
+    # hand-computed foot of the line from the axis: (p . a) a, a = (-sin, cos)
+    across = np.array([-math.sin(angle), math.cos(angle)])
+    np.testing.assert_allclose(features[0, :2], (loads[0, :2] @ across) * across)
+    # a sphere has no such line: its position is its own
+    np.testing.assert_allclose(_features(loads, sphere)[1, :2], loads[1, :2])
+
+
 @pytest.fixture(scope="module")
 def tiny_twin():
     design = load_design("cylindrical-A")
     # frictionless normal pushes keep the build to seconds; stick and shear are covered above
     ranges = LoadRanges(position_radius=2 * MM, depth=1.5 * MM, shear_fraction=0.0)
     return ReducedTwin.build(design, IndenterFamily("board", friction="none"), ranges, mesh_size=2.5 * MM,
-                             samples=200, holdout=3, hidden=(8,), workers=1)
+                             samples=200, holdout=3, exact_holdout=40, hidden=(8,), workers=1)
 
 
 def test_reduced_twin_reports_its_held_out_fe_error(tiny_twin):
@@ -68,6 +100,24 @@ def test_reduced_twin_reports_its_held_out_fe_error(tiny_twin):
     assert len(holdout["sensor_error_percent_fs"]) == 1  # one sensor
     assert np.array(holdout["magnet_displacement_error_percent_range"]).shape == (4, 3)
     assert holdout["fe_seconds_per_load"] > holdout["reduced_seconds_per_load_unbatched"]
+    exact = tiny_twin.report["exact_holdout"]
+    assert exact["loads"] == 40
+    # the largest error bounds the 99th percentile, on the same full scale
+    assert np.all(np.array(exact["sensor_error_p99_percent_fs"]) <= np.array(exact["sensor_error_percent_fs"]))
+
+
+def test_errors_are_percent_of_the_full_scale_over_the_load_ranges(tiny_twin):
+    params = tiny_twin.ranges.sample(np.random.default_rng(5), 20)
+    rigid, force = tiny_twin.predict(params)
+    scales = {"field_T": np.full((1, 3), 1e-3), "displacement_m": np.full((4, 3), 1e-4)}
+    # a reference 10 µm off in every magnet's x: 10 % of a 100 µm range, field errors of that shift
+    shifted = rigid.copy()
+    shifted[..., 0] += 10e-6
+    errors = tiny_twin._errors(params, shifted, force, scales)
+    np.testing.assert_allclose(np.array(errors["magnet_displacement_error_percent_range"])[:, 0], 10.0)
+    np.testing.assert_allclose(np.array(errors["magnet_displacement_error_percent_range"])[:, 1:], 0.0, atol=1e-9)
+    field_change = np.abs(tiny_twin._field(rigid) - tiny_twin._field(shifted)).max(axis=0)
+    np.testing.assert_allclose(errors["sensor_error_percent_fs"], field_change / 1e-3 * 100)
 
 
 def test_reduced_twin_round_trips_through_npz_and_json(tiny_twin, tmp_path):

@@ -276,9 +276,11 @@ def bench_twin(
 @user_errors
 def bench_rom(
     design: str = typer.Option("cylindrical-D", help="Design to reduce."),
-    samples: int = typer.Option(4000, help="Exact contact samples to fit the interpolator on."),
+    samples: int = typer.Option(5000, help="Exact contact samples to fit the interpolator on."),
     holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
     save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
+    contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
+                                           help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""
@@ -286,7 +288,9 @@ def bench_rom(
 
     if samples < 50 or holdout < 2:
         fail(f"--samples = {samples}, --holdout = {holdout}: expected at least 50 samples and 2 held-out loads")
-    report = run(design, samples, holdout, save=str(save) if save else None,
+    if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
+        fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
+    report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,
                  log=None if json_output else console.print)
     if json_output:
         print(json.dumps(report, indent=2))

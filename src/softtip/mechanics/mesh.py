@@ -45,24 +45,33 @@ def cache_dir() -> Path:
     return Path(root)
 
 
-def mesh_key(design: Design, size: float, curvature_points: int) -> str:
+def mesh_key(design: Design, size: float, curvature_points: int,
+             contact_layer: tuple[float, float] | None = None) -> str:
     import gmsh
 
-    payload = json.dumps({"geometry": design.geometry_key, "size": size, "curvature_points": curvature_points,
-                          "format": MESH_FORMAT, "gmsh": gmsh.__version__}, sort_keys=True)
+    recipe = {"geometry": design.geometry_key, "size": size, "curvature_points": curvature_points,
+              "format": MESH_FORMAT, "gmsh": gmsh.__version__}
+    if contact_layer is not None:  # absent otherwise: the keys of existing meshes do not change
+        recipe["contact_layer"] = list(contact_layer)
+    payload = json.dumps(recipe, sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()[:20]
 
 
 def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 10,
-                use_cache: bool = True) -> TetMesh:
+                use_cache: bool = True, contact_layer: tuple[float, float] | None = None) -> TetMesh:
     """Mesh the design's body; ``size`` is the largest element edge (m).
 
     Element size near the magnets follows their curvature (``curvature_points``
     elements around a circle) so the small holes are resolved at any ``size``.
+    ``contact_layer = (depth, layer_size)``: elements of at most ``layer_size`` in the top
+    ``depth`` of the body (m), where indenters press; a thin indenter (a 1.6 mm board) is
+    only resolved by a surface mesh finer than itself.
     """
     if size <= 0:
         raise ValueError(f"mesh size = {size}: expected a positive length in metres")
-    key = mesh_key(design, size, curvature_points)
+    if contact_layer is not None and not (len(contact_layer) == 2 and all(v > 0 for v in contact_layer)):
+        raise ValueError(f"contact_layer = {contact_layer!r}: expected (depth, element size) in metres, both > 0")
+    key = mesh_key(design, size, curvature_points, contact_layer)
     path = cache_dir() / "meshes" / f"{key}.npz"
     if use_cache and path.exists():
         try:
@@ -70,7 +79,7 @@ def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 
         except (OSError, ValueError, KeyError):
             path.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
     with _GMSH_LOCK:
-        mesh = _build(design, size, curvature_points, key)
+        mesh = _build(design, size, curvature_points, key, contact_layer)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
@@ -88,7 +97,8 @@ def _load(path: Path, key: str) -> TetMesh:
                        boundaries={name: data[f"boundary_{name}"] for name in names}, key=key)
 
 
-def _build(design: Design, size: float, curvature_points: int, key: str) -> TetMesh:
+def _build(design: Design, size: float, curvature_points: int, key: str,
+           contact_layer: tuple[float, float] | None) -> TetMesh:
     import gmsh
 
     gmsh.initialize(interruptible=False)
@@ -113,6 +123,16 @@ def _build(design: Design, size: float, curvature_points: int, key: str) -> TetM
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size / 20)
         gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", curvature_points)
+        if contact_layer is not None:
+            depth, layer_size = contact_layer
+            field = gmsh.model.mesh.field
+            box = field.add("Box")
+            reach = 1.0  # m: the whole body sideways
+            for name, value in (("VIn", layer_size), ("VOut", size), ("XMin", -reach), ("XMax", reach),
+                                ("YMin", -reach), ("YMax", reach), ("ZMin", design.height - depth),
+                                ("ZMax", design.height + 1.0), ("Thickness", depth)):
+                field.setNumber(box, name, value)
+            field.setAsBackgroundMesh(box)
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)
         gmsh.option.setNumber("Mesh.Optimize", 1)
         gmsh.option.setNumber("Mesh.ElementOrder", 1)
