@@ -118,8 +118,9 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int = 5000, holdout: 
     _, t_batch = _timed(rom.readings, params, noise=True, rng=np.random.default_rng(8))
     per_second = batch / t_batch
     fe_seconds = fe_report["fe_seconds_per_load"]
-    report = {"design": design_name, "contact_layer_mm": contact_layer_mm, "build_s": rom.report["timings_s"]["build_s"],
-              "build_and_holdout_s": t_build, "timings_s": rom.report["timings_s"], "full_scale": rom.report["full_scale"],
+    report = {"design": design_name, "contact_layer_mm": contact_layer_mm,
+              "build_s": rom.report["timings_s"]["build_s"], "build_and_holdout_s": t_build,
+              "timings_s": rom.report["timings_s"], "full_scale": rom.report["full_scale"],
               "holdout": fe_report, "exact_holdout": exact_report, "readings_per_s": per_second,
               "fe_seconds_per_load": fe_seconds, "speedup_vs_fe": per_second * fe_seconds}
     if save:

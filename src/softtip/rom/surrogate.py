@@ -185,8 +185,9 @@ class ReducedTwin:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         meta = {"schema": SCHEMA, "softtip": __version__, "design": self.design.spec, "design_name": self.design.name,
                 "family": vars(self.family), "ranges": {k: v for k, v in vars(self.ranges).items()},
-                "mesh_size_m": self.mesh_size, "contact_layer_size_m": self.contact_layer_size, "layers": len(self.network["weights"]), "parameters": PARAMETERS,
-                "weights_sha256": digest, "report": self.report}
+                "mesh_size_m": self.mesh_size, "contact_layer_size_m": self.contact_layer_size,
+                "layers": len(self.network["weights"]), "parameters": PARAMETERS, "weights_sha256": digest,
+                "report": self.report}
         path.with_suffix(".json").write_text(json.dumps(meta, indent=2))
         return path
 
@@ -265,7 +266,8 @@ class ReducedTwin:
         # many held-out loads solved exactly on the influence matrices (which reproduce the FE
         # solution, as the FE held-out loads check) give the error's distribution, not a few values
         exact = ranges.sample(np.random.default_rng(seed + 2), exact_holdout)
-        reference = _solve_in_parallel(influence, family, exact, workers, lambda d, t: say("held-out exact solves", d, t))
+        reference = _solve_in_parallel(influence, family, exact, workers,
+                                       lambda d, t: say("held-out exact solves", d, t))
         twin.report["exact_holdout"] = twin._errors(exact, reference[:, :-3].reshape(exact_holdout, -1, 6),
                                                     reference[:, -3:], scales)
         twin.report["holdout"] = twin._fe_errors(body, ranges.sample(np.random.default_rng(seed + 1), holdout),
