@@ -113,7 +113,7 @@ def test_errors_are_percent_of_the_full_scale_over_the_load_ranges(tiny_twin):
     # a reference 10 µm off in every magnet's x: 10 % of a 100 µm range, field errors of that shift
     shifted = rigid.copy()
     shifted[..., 0] += 10e-6
-    errors = tiny_twin._errors(params, shifted, force, scales)
+    errors = tiny_twin._errors((rigid, force), shifted, force, scales)
     np.testing.assert_allclose(np.array(errors["magnet_displacement_error_percent_range"])[:, 0], 10.0)
     np.testing.assert_allclose(np.array(errors["magnet_displacement_error_percent_range"])[:, 1:], 0.0, atol=1e-9)
     field_change = np.abs(tiny_twin._field(rigid) - tiny_twin._field(shifted)).max(axis=0)

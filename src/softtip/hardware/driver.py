@@ -590,11 +590,12 @@ class FingertipDriver:
         self._dropped += lost
         field, saturated = self._model.decode(frame.raw)
         status = frame.status
-        if status.any() and (status & CHIP_FAULTS).any():
-            chip_ok = (status & CHIP_FAULTS) == 0
+        # the usual frame has clear status bytes: one test, then a shared read-only mask
+        chip_ok = (status & CHIP_FAULTS) == 0 if status.any() else None
+        if chip_ok is not None and not chip_ok.all():
             field[~chip_ok] = np.nan
             saturated &= chip_ok[:, None]
-        else:  # the usual frame: one shared read-only mask, no masking
+        else:
             chip_ok = self._all_ok.get(len(status))
             if chip_ok is None:
                 chip_ok = self._all_ok[len(status)] = np.ones(len(status), dtype=bool)

@@ -47,6 +47,13 @@ class TwinScenario:
         return np.column_stack([np.interp(t, self.times_s, self.force_N[:, k]) for k in range(3)])
 
 
+def _out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times of a rest, a motion of ``travel_s`` seconds and its way back, and the time
+    travelled along the motion at each (0 at rest, ``travel_s`` at the far end)."""
+    times = np.arange(0.0, rest_s + 2 * travel_s, 1 / rate_hz)
+    return times, np.clip(np.minimum(times - rest_s, rest_s + 2 * travel_s - times), 0, travel_s)
+
+
 def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = None, rate_hz: float = 200.0,
                      rest_s: float = 2.0) -> TwinScenario:
     """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
@@ -68,9 +75,8 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
         table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
         reach = float(np.linalg.norm(shear))
         # air, down, shear, back along the same path, air
-        going = depth / speed + reach / speed
-        times = np.arange(0.0, rest_s + 2 * going, 1 / rate_hz)
-        along = np.clip(np.minimum(times - rest_s, rest_s + 2 * going - times), 0, going) * speed
+        times, travelled_s = _out_and_back(rate_hz, rest_s, (depth + reach) / speed)
+        along = travelled_s * speed
         depth_now = np.minimum(along, depth)
         progress = np.clip(along - depth, 0, reach)
         direction = shear / max(reach, 1e-12)
@@ -98,9 +104,8 @@ def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, sp
 
     quiet = replace(protocol, realism=replace(protocol.realism, noise=False))
     speed, top, bottom = speed_mm_s * MM, 2.0 * MM, -0.6 * MM
-    travel = (top - bottom) / speed
-    times = np.arange(0.0, rest_s + 2 * travel, 1 / rate_hz)
-    pose = top - np.clip(np.minimum(times - rest_s, rest_s + 2 * travel - times), 0, travel) * speed
+    times, travelled_s = _out_and_back(rate_hz, rest_s, (top - bottom) / speed)
+    pose = top - travelled_s * speed
     segments_t, fields, forces = [], [], []
     clock = 0.0
     for case in CASES:

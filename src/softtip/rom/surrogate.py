@@ -268,7 +268,7 @@ class ReducedTwin:
         exact = ranges.sample(np.random.default_rng(seed + 2), exact_holdout)
         reference = _solve_in_parallel(influence, family, exact, workers,
                                        lambda d, t: say("held-out exact solves", d, t))
-        twin.report["exact_holdout"] = twin._errors(exact, reference[:, :-3].reshape(exact_holdout, -1, 6),
+        twin.report["exact_holdout"] = twin._errors(twin.predict(exact), reference[:, :-3].reshape(exact_holdout, -1, 6),
                                                     reference[:, -3:], scales)
         twin.report["holdout"] = twin._fe_errors(body, ranges.sample(np.random.default_rng(seed + 1), holdout),
                                                  scales, lambda d, t: say("held-out FE solves", d, t))
@@ -287,9 +287,9 @@ class ReducedTwin:
             fe_force.append(result.force)
             progress(k + 1, len(params))
         start = time.perf_counter()
-        self.predict(params)
+        predicted = self.predict(params)
         rom_seconds = (time.perf_counter() - start) / len(params)
-        return self._errors(params, np.array(fe_rigid), np.array(fe_force), scales) | {
+        return self._errors(predicted, np.array(fe_rigid), np.array(fe_force), scales) | {
             "fe_seconds_per_load": float(np.mean(fe_seconds)), "reduced_seconds_per_load_unbatched": rom_seconds}
 
     def _field(self, rigid: np.ndarray) -> np.ndarray:
@@ -302,11 +302,13 @@ class ReducedTwin:
         return {"field_T": np.abs(self._field(sample_rigid)).max(axis=0),
                 "displacement_m": np.ptp(sample_rigid[..., :3], axis=0)}
 
-    def _errors(self, params: np.ndarray, rigid: np.ndarray, force: np.ndarray, scales: dict) -> dict:
-        """The network's errors at ``params`` against reference poses (N, M, 6) and forces (N, 3):
-        the largest and the 99th percentile, in % of the full scales over the load ranges, and the
-        largest in % of the largest change among these loads (stricter for a few loads)."""
-        rom_rigid, rom_force = self.predict(params)
+    def _errors(self, predicted: tuple[np.ndarray, np.ndarray], rigid: np.ndarray, force: np.ndarray,
+                scales: dict) -> dict:
+        """Errors of the network's ``predicted`` (poses, forces) against reference poses (N, M, 6)
+        and forces (N, 3): the largest and the 99th percentile, in % of the full scales over the
+        load ranges, and the largest in % of the largest change among these loads (stricter for a
+        few loads)."""
+        rom_rigid, rom_force = predicted
         field = self._field(rigid)
         field_error = np.abs(self._field(rom_rigid) - field)
         disp_error = np.abs(rom_rigid[..., :3] - rigid[..., :3])
@@ -316,7 +318,7 @@ class ReducedTwin:
 
         force_scale = np.abs(force).max(axis=0)
         return {
-            "loads": len(params),
+            "loads": len(rigid),
             "sensor_error_percent_fs": percent(field_error.max(axis=0), scales["field_T"]),
             "sensor_error_p99_percent_fs": percent(np.percentile(field_error, 99, axis=0), scales["field_T"]),
             "magnet_displacement_error_percent_range": percent(disp_error.max(axis=0), scales["displacement_m"]),
