@@ -506,11 +506,12 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
                                rtol=1e-9, atol=1e-9)
 
 
-def test_five_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
-    report = soak(5.0, rate_hz=500, chips=CHIPS, record_path=tmp_path / "soak.mcap")
+def test_twenty_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
+    # the CI version of `softtip bench live --duration 600`
+    report = soak(20.0, rate_hz=500, chips=CHIPS, record_path=tmp_path / "soak.mcap")
     frames = report["frames"]
     assert frames["lost"] == 0 and frames["every_intact_frame_delivered_in_order"]
-    assert frames["delivered"] > 1500 and report["recording"]["complete"]
+    assert frames["delivered"] > 9000 and report["recording"]["complete"]
     assert report["sink_errors"] == 0
 
 
