@@ -33,6 +33,8 @@ def coarse():
         LoadCase(Board(1.6e-3, 0.0), 1e-3, friction="none"),
         LoadCase(Board(1.6e-3, 0.6), 1.5e-3, position=(1e-3, -2e-3), friction="stick"),
         LoadCase(Board(1.6e-3, 0.3), 2e-3, tangential=(1e-3, -0.5e-3), friction="stick"),
+        # without friction, nodes the board travels off are released
+        LoadCase(Board(1.6e-3, 1.1), 1.5e-3, tangential=(0.6e-3, 0.4e-3), friction="none"),
         LoadCase(Sphere(5e-3), 1e-3, position=(2e-3, 0.0), friction="none"),
     ],
 )

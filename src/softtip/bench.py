@@ -102,14 +102,16 @@ def _bench_readings(twin: FingertipTwin, poses: int, say) -> dict:
             "speedup_vs_magpylib": ours / theirs}
 
 
-def bench_rom(design_name: str = "cylindrical-D", samples: int = 5000, holdout: int = 12, batch: int = 200_000,
+def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, holdout: int = 12, batch: int = 200_000,
               save: str | None = None, contact_layer_mm: float | None = None,
               log: Callable[[str], None] | None = None) -> dict:
     """Build a reduced-order twin (timed), report its held-out errors and its batch speed,
-    against the FE seconds per load measured on the held-out solves of the same run."""
-    from softtip.rom.surrogate import ReducedTwin
+    against the FE seconds per load measured on the held-out solves of the same run; ``samples``
+    defaults to the twin's own."""
+    from softtip.rom.surrogate import SAMPLES, ReducedTwin
 
     say = log or (lambda message: None)
+    samples = SAMPLES if samples is None else samples
     rom, t_build = _timed(ReducedTwin.build, load_design(design_name), samples=samples, holdout=holdout,
                           contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM)
     fe_report, exact_report = rom.report["holdout"], rom.report["exact_holdout"]

@@ -30,11 +30,11 @@ import numpy as np
 import scipy.linalg
 
 from softtip.design.model import Design
-from softtip.mechanics.contact import LoadCase
+from softtip.mechanics.contact import ContactSolution, LoadCase
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Plate
 from softtip.mechanics.mesh import mesh_design
-from softtip.rom.influence import ContactSolution, SurfaceInfluence, solve_contact
+from softtip.rom.influence import SurfaceInfluence, solve_contact
 from softtip.twin import Readout
 
 

@@ -62,6 +62,16 @@ class ContactResult:
     timings: dict = field(default_factory=dict)
 
 
+@dataclass
+class ContactSolution:
+    """A contact solve on a reduced view of the body (its surface compliance)."""
+
+    magnet_rigid: np.ndarray  # (M, 6): translation (m) and rotation vector (rad) of each magnet
+    force: np.ndarray  # (3,) N, the fingertip's reaction on the indenter
+    contact_nodes: np.ndarray  # nodes in contact, as the solver numbers them
+    path: list[tuple[np.ndarray, np.ndarray, np.ndarray]]  # (travel (3,), magnet_rigid, force) after every step
+
+
 def touch_offset(indenter: Indenter, position: tuple[float, float], points: np.ndarray) -> np.ndarray:
     """Where the indenter's frame sits when it first touches the undeformed body."""
     offset = np.array([position[0], position[1], 0.0])
@@ -262,6 +272,8 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
         active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
         if stick:  # nodes held by the indenter travel with it, even past the edge of its footprint
             gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
+        else:  # without friction, nodes the indenter has moved off are free
+            active &= np.isfinite(gap)
         iteration = ActiveSetIteration(active)
         for _ in range(max_iterations):
             iterations += 1

@@ -125,21 +125,25 @@ class P2Space:
         grads = np.stack([basis.basis[a][0].grad for a in range(10)])  # (10, 3, ne, nq)
         self.grads = np.ascontiguousarray(grads.transpose(2, 3, 0, 1))  # (ne, nq, 10, 3)
         self.weights = np.asarray(basis.dx)  # (ne, nq)
-        n_vertices = mesh.points.shape[0]
         edges = np.sort(skmesh.edges, axis=0)
-        edge_keys = edges[0].astype(np.int64) * n_vertices + edges[1]
-        order = np.argsort(edge_keys)
-        self.boundary_nodes = {}
-        for name, tris in mesh.boundaries.items():
-            pairs = np.sort(np.hstack([tris[[0, 1]], tris[[1, 2]], tris[[0, 2]]]), axis=0)
-            keys = pairs[0].astype(np.int64) * n_vertices + pairs[1]
-            edge_index = order[np.searchsorted(edge_keys, keys, sorter=order)]
-            self.boundary_nodes[name] = np.unique(np.concatenate([tris.ravel(), n_vertices + edge_index]))
+        self._edge_keys = edges[0].astype(np.int64) * mesh.points.shape[0] + edges[1]
+        self._edge_order = np.argsort(self._edge_keys)
         self.mesh = mesh
+        self.boundary_nodes = {name: np.unique(self.boundary_facets(name)) for name in mesh.boundaries}
 
     @property
     def node_count(self) -> int:
         return self.nodes.shape[0]
+
+    def boundary_facets(self, name: str) -> np.ndarray:
+        """(k, 6) nodes of the quadratic triangles of boundary ``name``: corners 0, 1, 2, then the
+        midpoints of edges 01, 12, 20."""
+        tris = self.mesh.boundaries[name]
+        n_vertices = self.mesh.points.shape[0]
+        pairs = np.sort(np.hstack([tris[[0, 1]], tris[[1, 2]], tris[[2, 0]]]), axis=0)
+        keys = pairs[0].astype(np.int64) * n_vertices + pairs[1]
+        edge_index = self._edge_order[np.searchsorted(self._edge_keys, keys, sorter=self._edge_order)]
+        return np.column_stack([tris.T, (n_vertices + edge_index).reshape(3, -1).T])
 
     def cell_dofs(self) -> np.ndarray:
         """(ne, 30) global dofs, 3 * node + component."""
@@ -244,6 +248,26 @@ class BodyModel:
     def magnet_poses(self, unknowns: np.ndarray) -> list[MagnetPose]:
         rigid = unknowns[self.n_free:].reshape(-1, 6)
         return [MagnetPose(translation=r[:3].copy(), rotvec=r[3:].copy()) for r in rigid]
+
+    def unit_load_responses(self, solver, columns: np.ndarray, block: int = 240,
+                            progress=None) -> tuple[np.ndarray, np.ndarray]:
+        """Responses to a unit force on each of the unknowns ``columns``, by back-substitution in
+        blocks with ``solver`` (an :class:`~softtip.mechanics.linsolve.SPDSolver` holding the
+        factorised stiffness): at the same unknowns (len, len) - a compliance - and at the magnets'
+        rigid coordinates (6M, len)."""
+        rigid = np.arange(self.n_free, self.size)
+        at_columns = np.empty((len(columns), len(columns)))
+        at_magnets = np.empty((len(rigid), len(columns)))
+        for start in range(0, len(columns), block):
+            chunk = columns[start:start + block]
+            unit = np.zeros((self.size, len(chunk)))
+            unit[chunk, np.arange(len(chunk))] = 1.0
+            solved = solver.solve(unit)
+            at_columns[:, start:start + len(chunk)] = solved[columns]
+            at_magnets[:, start:start + len(chunk)] = solved[rigid]
+            if progress is not None:
+                progress(min(start + block, len(columns)), len(columns))
+        return 0.5 * (at_columns + at_columns.T), at_magnets  # symmetric up to round-off
 
     def hyperelastic_energy(self, unknowns: np.ndarray) -> float:
         """Neo-Hookean strain energy at ``unknowns`` (inf if an element inverts)."""

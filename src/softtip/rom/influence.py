@@ -11,9 +11,12 @@ two matrices over the surface nodes where contact can happen:
 Both come from one factorisation of K and 3m back-substitutions, done in
 blocks. A contact problem then only involves the nodes under the indenter: a
 primal-dual active-set iteration on dense blocks of W enforces the contact
-conditions exactly (Lagrange multipliers, no penalty) in milliseconds, with
-the same load path and friction semantics as the finite-element solver
-(:func:`softtip.mechanics.contact.solve_linear_contact`).
+conditions exactly (Lagrange multipliers, no penalty) in milliseconds.
+:func:`solve_contact` holds nodes, with the same load path and friction
+semantics as the finite-element solver
+(:func:`softtip.mechanics.contact.solve_linear_contact`);
+:meth:`SurfaceInfluence.compliance_of` serves contact on footprint cells
+(:func:`softtip.mechanics.footprint.solve_footprint_contact`).
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from softtip.mechanics.contact import ActiveSetIteration, LoadCase, StickAnchors, contact_candidates, load_path, touch_offset
+from softtip.mechanics.contact import (ActiveSetIteration, ContactSolution, LoadCase, StickAnchors, contact_candidates,
+                                      load_path, touch_offset)
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
 
@@ -31,45 +35,34 @@ from softtip.mechanics.linsolve import SPDSolver
 @dataclass
 class SurfaceInfluence:
     nodes: np.ndarray  # (m, 3) m, surface nodes where contact may happen
+    node_ids: np.ndarray  # (m,) their numbers in the body
     compliance: np.ndarray  # (3m, 3m) m/N, node-major (x, y, z of node 0, then node 1, ...)
     magnets: np.ndarray  # (6M, 3m): (t, theta) of each magnet per unit nodal force
     magnet_centers: np.ndarray  # (M, 3) m
 
     @classmethod
-    def build(cls, body: BodyModel, lowest_z: float, block: int = 240, progress=None) -> "SurfaceInfluence":
+    def build(cls, body: BodyModel, lowest_z: float, progress=None) -> "SurfaceInfluence":
         """Influence of unit forces on the body's outer nodes at or above ``lowest_z`` (m)."""
         candidates, dofs = contact_candidates(body)
         keep = (body.space.nodes[candidates, 2] >= lowest_z) & (dofs >= 0).all(axis=1)
-        nodes, dofs = candidates[keep], dofs[keep]
-        columns = dofs.ravel()
         solver = SPDSolver()
         solver.factorize(body.stiffness)
-        rigid = np.arange(body.n_free, body.size)
-        compliance = np.empty((len(columns), len(columns)))
-        magnets = np.empty((len(rigid), len(columns)))
-        for start in range(0, len(columns), block):
-            chunk = columns[start:start + block]
-            unit = np.zeros((body.size, len(chunk)))
-            unit[chunk, np.arange(len(chunk))] = 1.0
-            solved = solver.solve(unit)
-            compliance[:, start:start + len(chunk)] = solved[columns]
-            magnets[:, start:start + len(chunk)] = solved[rigid]
-            if progress is not None:
-                progress(min(start + block, len(columns)), len(columns))
-        compliance = 0.5 * (compliance + compliance.T)  # symmetric up to round-off
-        return cls(nodes=body.space.nodes[nodes], compliance=compliance, magnets=magnets,
-                   magnet_centers=body.magnet_centers.copy())
+        compliance, magnets = body.unit_load_responses(solver, dofs[keep].ravel(), progress=progress)
+        return cls(nodes=body.space.nodes[candidates[keep]], node_ids=candidates[keep], compliance=compliance,
+                   magnets=magnets, magnet_centers=body.magnet_centers.copy())
+
+    def compliance_of(self, node_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compliance (3n, 3n) and magnet response (6M, 3n) of body nodes ``node_ids`` (all among
+        :attr:`node_ids`): the view :func:`softtip.mechanics.footprint.solve_footprint_contact` needs."""
+        order = np.argsort(self.node_ids)
+        local = order[np.minimum(np.searchsorted(self.node_ids, node_ids, sorter=order), len(order) - 1)]
+        if not np.array_equal(self.node_ids[local], node_ids):
+            raise ValueError("node_ids: expected nodes of the influence matrices' surface")
+        rows = (3 * local[:, None] + np.arange(3)).ravel()
+        return self.compliance[np.ix_(rows, rows)], self.magnets[:, rows]
 
 
 _BULGE_MARGIN = 1e-3  # m
-
-
-@dataclass
-class ContactSolution:
-    magnet_rigid: np.ndarray  # (M, 6): translation (m) and rotation vector (rad) of each magnet
-    force: np.ndarray  # (3,) N, the fingertip's reaction on the indenter
-    contact_nodes: np.ndarray  # indices into SurfaceInfluence.nodes
-    path: list[tuple[np.ndarray, np.ndarray, np.ndarray]]  # (travel (3,), magnet_rigid, force) after every step
 
 
 def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int | None = None,
@@ -101,6 +94,8 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
         active |= gap - u[:, 2] < 0  # the linearised gap g + n.u, n = -z
         if stick:
             gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
+        else:  # without friction, nodes the indenter has moved off are free
+            active &= np.isfinite(gap)
         iteration = ActiveSetIteration(active)
         for _ in range(max_iterations):
             index = np.flatnonzero(active)

@@ -1,0 +1,240 @@
+"""Contact enforced on cells of the indenter's footprint: smooth in where the indenter is.
+
+Nodal contact (:mod:`softtip.mechanics.contact`) holds surface *nodes* to the
+indenter. An indenter narrower than a few elements - a 1.6 mm board on a
+1.5 mm mesh - then covers one or two rows of nodes, and the response steps as
+rows enter and leave its footprint as it moves across them (Bz by up to
+3.7 % of full scale at a 2.8 mm push).
+
+Here the rigid indenter is the mortar side: the contact pressure is constant
+on each cell of a grid fixed to the indenter, and each cell holds the body's
+displacement *averaged over the cell* (the quadratic surface interpolation,
+integrated at points every ``_POINT_SPACING``). The constraints move
+continuously with the indenter, so does the response. Cells are about as
+large as the surface's node spacing, so the constraints never outnumber the
+nodes they act on (the discrete inf-sup condition).
+
+A board's footprint is a strip: its cells tile the board's thickness exactly
+and lie along the board from the foot of its centre line, so a board shifted
+along itself meets the same cells. Other indenters get a square grid on the
+part of it over which they have a lower surface.
+
+Friction semantics follow the nodal solvers, with one difference that makes
+them physical: with ``"stick"`` the material under a cell holds on to it, so
+the cells stay attached to the material they first touched, and tangential
+travel brings no new material under the indenter (the nodal solvers let nodes
+the moved footprint covers in the *undeformed* configuration join).
+
+The contact problem needs only the compliance of the nodes under the cells,
+from any source: influence matrices (:mod:`softtip.rom.influence`) or
+back-substitutions with a factorised stiffness (:func:`stiffness_compliance`),
+which is the finite-element solve of the same problem.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from softtip.mechanics.contact import ActiveSetIteration, ContactSolution, LoadCase, load_path, touch_offset
+from softtip.mechanics.fe import BodyModel
+from softtip.mechanics.indenters import Board, Indenter
+from softtip.mechanics.linsolve import SPDSolver
+
+_POINT_SPACING = 0.2e-3  # m, integration points in each cell
+CELL_SIZE = 1.0e-3  # m, about the surface node spacing of a 1.5 mm quadratic mesh
+
+# (nodes (n,) -> (compliance (3n, 3n) m/N, magnet response (6M, 3n))): the body seen from its surface
+Compliance = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+class SurfacePatch:
+    """The upward-facing outer surface of a body above ``lowest_z``, as quadratic triangles whose
+    nodes are all free; one-to-one with its plan view, where points are located."""
+
+    def __init__(self, body: BodyModel, lowest_z: float):
+        from scipy.spatial import cKDTree
+
+        facets = body.space.boundary_facets("outer")
+        nodes = body.space.nodes
+        corners = nodes[facets[:, :3]]
+        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        keep = ((normal[:, 2] > 1e-3 * np.linalg.norm(normal, axis=1))
+                & (nodes[facets, 2] >= lowest_z).all(axis=1)
+                & (body.node_dofs[facets] >= 0).all(axis=(1, 2)))
+        self.facets = facets[keep]  # (k, 6) node ids
+        self.corners = nodes[self.facets[:, :3]]  # (k, 3, 3) m
+        self.radius = float(np.hypot(self.corners[..., 0], self.corners[..., 1]).max())
+        self._tree = cKDTree(self.corners.mean(axis=1)[:, :2])
+        # a point lies in one of the facets whose centroids are nearest; 12 covers any graded mesh
+        self._candidates = min(12, len(self.facets))
+
+    def locate(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Facet under each plan-view point (-1 where none) and the point's barycentric coordinates."""
+        _, near = self._tree.query(xy, k=self._candidates)
+        facet = np.full(len(xy), -1)
+        bary = np.zeros((len(xy), 3))
+        for j in range(self._candidates):
+            f = near[:, j]
+            a, b, c = (self.corners[f, k, :2] for k in range(3))
+            e1, e2, r = b - a, c - a, xy - a
+            det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
+            l1 = (r[:, 0] * e2[:, 1] - e2[:, 0] * r[:, 1]) / det
+            l2 = (e1[:, 0] * r[:, 1] - r[:, 0] * e1[:, 1]) / det
+            inside = (facet < 0) & (np.minimum(np.minimum(1 - l1 - l2, l1), l2) >= -1e-9)
+            facet[inside] = f[inside]
+            bary[inside] = np.column_stack([1 - l1 - l2, l1, l2])[inside]
+        return facet, bary
+
+
+def quadratic_triangle_shapes(bary: np.ndarray) -> np.ndarray:
+    """(n, 6) quadratic Lagrange shape values: corners 0, 1, 2, then edges 01, 12, 20."""
+    l0, l1, l2 = bary.T
+    return np.column_stack([l0 * (2 * l0 - 1), l1 * (2 * l1 - 1), l2 * (2 * l2 - 1),
+                            4 * l0 * l1, 4 * l1 * l2, 4 * l2 * l0])
+
+
+@dataclass
+class FootprintCells:
+    nodes: np.ndarray  # (n,) body nodes under the cells
+    average: np.ndarray  # (c, n): a cell's mean of each node's shape function
+    points: np.ndarray  # (p, 3) m, integration points on the undeformed surface
+    cell_of_point: np.ndarray  # (p,)
+    area: np.ndarray  # (c,) m^2
+
+    def gaps(self, indenter: Indenter, frame: np.ndarray, extend: bool = False) -> np.ndarray:
+        """Each cell's mean vertical gap to the indenter at ``frame`` (inf where a point has none;
+        with ``extend``, the indenter's lower surface continued beyond its edge)."""
+        gap = indenter.vertical_gap(self.points - frame, extend=extend)[0]
+        return np.bincount(self.cell_of_point, weights=gap) / np.bincount(self.cell_of_point)
+
+
+def _grid(indenter: Indenter, frame: np.ndarray, reach: float, cell: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Plan-view integration points of the footprint cells at ``frame``, the cell of each, and the
+    area each point stands for."""
+    if isinstance(indenter, Board):
+        along = np.array([math.cos(indenter.angle), math.sin(indenter.angle)])
+        across = np.array([-along[1], along[0]])
+        origin = (frame[:2] @ across) * across  # the foot of the centre line
+        half = (reach, indenter.thickness / 2)
+        counts = (math.ceil(2 * reach / cell), max(1, round(indenter.thickness / cell)))
+    else:
+        along, across, origin = np.array([1.0, 0.0]), np.array([0.0, 1.0]), frame[:2]
+        half = (reach, reach)
+        counts = (math.ceil(2 * reach / cell),) * 2
+    per_cell = [max(2, math.ceil(2 * h / n / _POINT_SPACING)) for h, n in zip(half, counts)]
+    u = ((np.arange(counts[0] * per_cell[0]) + 0.5) / (counts[0] * per_cell[0]) * 2 - 1) * half[0]
+    v = ((np.arange(counts[1] * per_cell[1]) + 0.5) / (counts[1] * per_cell[1]) * 2 - 1) * half[1]
+    cell_u = np.arange(len(u)) // per_cell[0]
+    cell_v = np.arange(len(v)) // per_cell[1]
+    xy = origin + u[:, None, None] * along + v[None, :, None] * across
+    cells = cell_u[:, None] * counts[1] + cell_v[None, :]
+    return xy.reshape(-1, 2), cells.ravel(), (u[1] - u[0]) * (v[1] - v[0])
+
+
+def footprint_cells(patch: SurfacePatch, indenter: Indenter, frame: np.ndarray, reach: float,
+                    cell: float = CELL_SIZE) -> FootprintCells:
+    """Cells of the indenter's footprint at ``frame`` over ``patch``, out to ``reach`` (m) from the
+    indenter's axis (a board's centre line); cells with no point over the patch are left out."""
+    xy, cell_of_point, point_area = _grid(indenter, frame, reach, cell)
+    facet, bary = patch.locate(xy)
+    keep = facet >= 0
+    z = np.einsum("pk,pk->p", bary[keep], patch.corners[facet[keep], :, 2])
+    points = np.column_stack([xy[keep], z])
+    if not isinstance(indenter, Board):  # only where the indenter has a lower surface
+        under = np.isfinite(indenter.vertical_gap(points - np.array([*frame[:2], 0.0]))[0])
+        points, keep = points[under], np.flatnonzero(keep)[under]
+    facet, bary, cell_of_point = facet[keep], bary[keep], cell_of_point[keep]
+    _, cell_of_point = np.unique(cell_of_point, return_inverse=True)
+    count = np.bincount(cell_of_point)  # the points are evenly spaced: means are plain averages
+    nodes, node_of = np.unique(patch.facets[facet], return_inverse=True)
+    average = np.zeros((len(count), len(nodes)))
+    np.add.at(average, (np.repeat(cell_of_point, 6), node_of.ravel()), quadratic_triangle_shapes(bary).ravel())
+    return FootprintCells(nodes=nodes, average=average / count[:, None], points=points,
+                          cell_of_point=cell_of_point, area=count * point_area)
+
+
+def stiffness_compliance(body: BodyModel, solver: SPDSolver | None = None) -> Compliance:
+    """Compliance of surface nodes by back-substitution with the factorised stiffness: with it,
+    :func:`solve_footprint_contact` is a finite-element solve."""
+    if solver is None:
+        solver = SPDSolver()
+        solver.factorize(body.stiffness)
+
+    def compliance(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        columns = body.node_dofs[nodes].ravel()
+        return body.unit_load_responses(solver, columns)
+
+    return compliance
+
+
+def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: LoadCase,
+                            normal_steps: int | None = None, tangential_steps: int = 4, cell: float = CELL_SIZE,
+                            max_iterations: int = 50) -> ContactSolution:
+    """Small-strain contact with tractions constant on footprint cells (Lagrange multipliers, exact),
+    along the nodal solvers' load path; ``contact_nodes`` are the body nodes under cells in contact."""
+    stick = load.friction == "stick"
+    if normal_steps is None:
+        normal_steps = 2 if stick and any(load.tangential) else 1
+    path = load_path(load, normal_steps, tangential_steps)
+    reach = patch.radius + float(np.hypot(*load.tangential))
+    start = np.array([*load.position, 0.0])
+    touch = touch_offset(load.indenter, load.position, footprint_cells(patch, load.indenter, start, reach, cell).points)
+    if stick:  # cells stay with the material they hold
+        steps = [footprint_cells(patch, load.indenter, touch, reach, cell)] * len(path)
+    else:  # cells travel with the indenter; normal steps share one plan view
+        steps = []
+        for travel in path:
+            same = steps and np.array_equal(travel[:2], path[len(steps) - 1][:2])
+            steps.append(steps[-1] if same else footprint_cells(patch, load.indenter, touch + travel, reach, cell))
+    nodes = np.unique(np.concatenate([c.nodes for c in steps]))
+    body_compliance, magnet_response = compliance(nodes)
+    components = 3 if stick else 1  # of each cell's multiplier: the last is the normal one
+    u = np.zeros(3 * len(nodes))  # surface displacements after the last step
+    previous_frame = touch.copy()
+    states = []
+    for k, travel in enumerate(path):
+        frame = touch + travel
+        cells = steps[k]
+        if k == 0 or cells is not steps[k - 1]:
+            spread = np.zeros((len(cells.area), len(nodes)))
+            spread[:, np.searchsorted(nodes, cells.nodes)] = cells.average
+            spread = np.kron(spread, np.eye(3))  # every cell's mean displacement (x, y, z)
+            operator = spread if stick else spread[2::3]  # the components the constraints hold
+            schur = operator @ body_compliance @ operator.T
+            active = np.zeros(len(cells.area), dtype=bool)
+        cell_u = (spread @ u).reshape(-1, 3)
+        gap = cells.gaps(load.indenter, frame)
+        active |= gap - cell_u[:, 2] < 0
+        if stick:  # held cells travel with the indenter, even past the edge of its footprint
+            gap = np.where(active, cells.gaps(load.indenter, frame, extend=True), gap)
+        else:  # without friction, cells the indenter has moved off are free
+            active &= np.isfinite(gap)
+        iteration = ActiveSetIteration(active)
+        for _ in range(max_iterations):
+            index = np.flatnonzero(active)
+            if stick:  # held cells follow the indenter tangentially from where they were
+                target = np.column_stack([cell_u[index, :2] + (frame - previous_frame)[:2], gap[index]])
+                rows = (3 * index[:, None] + np.arange(3)).ravel()
+                values = target.ravel()
+            else:
+                rows, values = index, gap[index]
+            multipliers = np.zeros(operator.shape[0])
+            if len(rows):
+                multipliers[rows] = np.linalg.solve(schur[np.ix_(rows, rows)], values)
+            new_cell_u = (schur @ multipliers).reshape(-1, components)[:, -1]
+            pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
+            if iteration.update(pressure, gap - new_cell_u, 1e-6 * max(load.depth, 1e-6)):
+                break
+            active = iteration.active
+        force_on_nodes = operator.T @ multipliers
+        u = body_compliance @ force_on_nodes
+        previous_frame = frame
+        states.append((travel, (magnet_response @ force_on_nodes).reshape(-1, 6),
+                       -force_on_nodes.reshape(-1, 3).sum(axis=0)))
+    _, rigid, force = states[-1]
+    touched = cells.nodes[(cells.average[active] != 0).any(axis=0)]
+    return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)

@@ -1,0 +1,113 @@
+"""Contact on cells of the indenter's footprint: the cell operator, the two routes to the same
+solve, and the smoothness it exists for."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from softtip.design.model import MM, load_design
+from softtip.mechanics.contact import LoadCase, solve_linear_contact
+from softtip.mechanics.fe import BodyModel
+from softtip.mechanics.footprint import (SurfacePatch, footprint_cells, quadratic_triangle_shapes,
+                                         solve_footprint_contact, stiffness_compliance)
+from softtip.mechanics.indenters import Board, Sphere
+from softtip.mechanics.mesh import mesh_design
+from softtip.rom.influence import SurfaceInfluence, solve_contact
+
+LOWEST_Z = 5 * MM
+
+
+@pytest.fixture(scope="module")
+def coarse():
+    design = load_design("cylindrical-A")
+    body = BodyModel.for_design(design, mesh_design(design, 2.5 * MM))
+    return body, SurfaceInfluence.build(body, LOWEST_Z), SurfacePatch(body, LOWEST_Z)
+
+
+def test_quadratic_shapes_at_corners_and_midpoints():
+    # hand-computed: each shape is 1 at its own node and 0 at the other five
+    nodes = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0, 0.5]])
+    np.testing.assert_allclose(quadratic_triangle_shapes(nodes), np.eye(6), atol=1e-15)
+
+
+def test_cell_averages_reproduce_quadratic_fields_and_sum_to_one(coarse):
+    body, _, patch = coarse
+    board = Board(1.6e-3, 0.7)
+    cells = footprint_cells(patch, board, np.array([1e-3, -2e-3, 9e-3]), patch.radius)
+    np.testing.assert_allclose(cells.average.sum(axis=1), 1.0, atol=1e-12)
+
+    def field(x):  # quadratic in plan view: the surface interpolation holds it exactly on flat facets
+        return 3.0 + 2e2 * x[:, 0] - 5e2 * x[:, 1] + 4e4 * x[:, 0] * x[:, 1] + 7e4 * x[:, 1] ** 2
+
+    direct = np.bincount(cells.cell_of_point, weights=field(cells.points)) / np.bincount(cells.cell_of_point)
+    np.testing.assert_allclose(cells.average @ field(body.space.nodes[cells.nodes]), direct, rtol=1e-10)
+    # a board's cells tile its thickness: every point lies within it, in the cells' plan-view area
+    across = np.array([-math.sin(board.angle), math.cos(board.angle)])
+    assert np.abs((cells.points[:, :2] - [1e-3, -2e-3]) @ across).max() < board.thickness / 2
+
+
+@pytest.mark.parametrize(
+    "load",
+    [
+        LoadCase(Board(1.6e-3, 0.3), 2e-3, tangential=(1e-3, -0.5e-3), position=(1e-3, 0.0), friction="stick"),
+        LoadCase(Board(1.6e-3, 1.1), 1.5e-3, tangential=(0.6e-3, 0.4e-3), friction="none"),
+        LoadCase(Sphere(5e-3), 1e-3, position=(2e-3, 0.0), friction="none"),
+    ],
+)
+def test_influence_matrices_and_the_factorised_stiffness_give_the_same_solve(coarse, load):
+    body, influence, patch = coarse
+    fe = solve_footprint_contact(patch, stiffness_compliance(body), load)
+    reduced = solve_footprint_contact(patch, influence.compliance_of, load)
+    np.testing.assert_allclose(reduced.force, fe.force, rtol=1e-8, atol=1e-9)
+    scale = np.abs(fe.magnet_rigid).max()
+    np.testing.assert_allclose(reduced.magnet_rigid, fe.magnet_rigid, rtol=1e-8, atol=1e-8 * scale)
+    assert fe.force[2] > 0
+
+
+def test_a_wide_board_pushes_as_hard_as_with_nodal_contact(coarse):
+    # two discretisations of one problem: they converge to each other once the footprint spans
+    # several elements
+    body, _, patch = coarse
+    load = LoadCase(Board(8e-3, 0.2), 1e-3, friction="none")
+    nodal = solve_linear_contact(body, load)
+    cells = solve_footprint_contact(patch, stiffness_compliance(body), load)
+    assert cells.force[2] == pytest.approx(nodal.force[2], rel=0.05)
+
+
+def test_a_board_shifted_along_itself_or_turned_half_a_turn_is_the_same_load(coarse):
+    _, influence, patch = coarse
+    angle = 0.6
+    along = np.array([math.cos(angle), math.sin(angle)])
+    start = np.array([0.5e-3, -0.3e-3])
+    loads = [LoadCase(Board(1.6e-3, a), 1.2e-3, tangential=(0.4e-3, 0.2e-3), position=tuple(p), friction="stick")
+             for a, p in ((angle, start), (angle, start + 2e-3 * along), (angle + math.pi, start))]
+    results = [solve_footprint_contact(patch, influence.compliance_of, load) for load in loads]
+    for other in results[1:]:
+        np.testing.assert_allclose(other.force, results[0].force, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(other.magnet_rigid, results[0].magnet_rigid, rtol=1e-9, atol=1e-15)
+
+
+def test_the_response_is_smooth_across_a_narrow_board_where_nodal_contact_steps(coarse):
+    _, influence, patch = coarse
+    angle = 0.4
+    across = np.array([-math.sin(angle), math.cos(angle)])
+    offsets = np.linspace(-1.25e-3, 1.25e-3, 26)  # one element across, in 0.1 mm steps
+    loads = [LoadCase(Board(1.6e-3, angle), 2e-3, position=tuple(s * across), friction="stick") for s in offsets]
+
+    def roughness(solve) -> float:
+        fz = np.array([solve(load).force[2] for load in loads])
+        return np.abs(fz - np.polyval(np.polyfit(offsets, fz, 3), offsets)).max() / fz.mean()
+
+    cells = roughness(lambda load: solve_footprint_contact(patch, influence.compliance_of, load))
+    nodes = roughness(lambda load: solve_contact(influence, load))
+    assert cells < 0.01
+    assert nodes > 5 * cells
+
+
+def test_nodes_off_the_influence_surface_are_refused(coarse):
+    _, influence, _ = coarse
+    with pytest.raises(ValueError, match="node_ids"):
+        influence.compliance_of(np.array([0, 10**9]))
