@@ -55,6 +55,7 @@ def test_cell_averages_reproduce_quadratic_fields_and_sum_to_one(coarse):
         LoadCase(Board(1.6e-3, 0.3), 2e-3, tangential=(1e-3, -0.5e-3), position=(1e-3, 0.0), friction="stick"),
         LoadCase(Board(1.6e-3, 1.1), 1.5e-3, tangential=(0.6e-3, 0.4e-3), friction="none"),
         LoadCase(Sphere(5e-3), 1e-3, position=(2e-3, 0.0), friction="none"),
+        LoadCase(Board(1.6e-3, 0.8), 1.5e-3, tangential=(1.2e-3, 0.3e-3), position=(0.0, 2e-3), friction="coulomb"),
     ],
 )
 def test_influence_matrices_and_the_factorised_stiffness_give_the_same_solve(coarse, load):
@@ -111,3 +112,51 @@ def test_nodes_off_the_influence_surface_are_refused(coarse):
     _, influence, _ = coarse
     with pytest.raises(ValueError, match="node_ids"):
         influence.compliance_of(np.array([0, 10**9]))
+
+
+def _drag(friction: str, mu: float = 0.5) -> LoadCase:
+    """A shallow push dragged far along the board."""
+    angle = 0.3
+    return LoadCase(Board(1.6e-3, angle), 0.2e-3, tangential=(1.5e-3 * math.cos(angle), 1.5e-3 * math.sin(angle)),
+                    friction=friction, mu=mu)
+
+
+def test_coulomb_friction_slides_at_mu_times_the_normal_force_where_stick_holds_more(coarse):
+    _, influence, patch = coarse
+    stuck = solve_footprint_contact(patch, influence.compliance_of, _drag("stick"))
+    sliding = solve_footprint_contact(patch, influence.compliance_of, _drag("coulomb", mu=0.5))
+    assert np.hypot(*stuck.force[:2]) > 2 * stuck.force[2]  # no board holds the skin like that
+    shear = np.hypot(*sliding.force[:2])
+    assert shear == pytest.approx(0.5 * sliding.force[2], rel=1e-3)  # Amontons, in gross sliding
+    travel = np.array(_drag("coulomb").tangential)
+    assert sliding.force[:2] @ travel / (shear * np.linalg.norm(travel)) < -0.95  # against the travel
+
+
+def test_coulomb_friction_never_exceeds_its_cone_and_holds_like_stick_when_ample(coarse):
+    _, influence, patch = coarse
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        angle, depth = rng.uniform(0, math.pi), rng.uniform(0.3e-3, 2e-3)
+        load = LoadCase(Board(1.6e-3, angle), depth, tangential=tuple(rng.uniform(-1.5e-3, 1.5e-3, 2)),
+                        position=tuple(rng.uniform(-3e-3, 3e-3, 2)), friction="coulomb", mu=0.4)
+        force = solve_footprint_contact(patch, influence.compliance_of, load).force
+        assert np.hypot(*force[:2]) <= 0.4 * force[2] * (1 + 1e-3)
+    # a deep push with a short travel needs little friction: as mu grows, Coulomb's law tends to stick
+    def push(friction: str, mu: float = 0.7) -> np.ndarray:
+        load = LoadCase(Board(1.6e-3, 0.5), 2e-3, tangential=(0.2e-3, 0.1e-3), friction=friction, mu=mu)
+        return solve_footprint_contact(patch, influence.compliance_of, load).force
+
+    stick = push("stick")
+    gaps = [np.abs(push("coulomb", mu) - stick).max() / stick[2] for mu in (0.2, 0.7, 2.0)]
+    assert gaps[0] > gaps[1] > gaps[2] and gaps[2] < 0.02
+
+
+def test_solvers_that_hold_nodes_refuse_coulomb_friction(coarse):
+    body, influence, _ = coarse
+    load = LoadCase(Board(), 1e-3, friction="coulomb")
+    for solve in (lambda: solve_contact(influence, load), lambda: solve_linear_contact(body, load)):
+        with pytest.raises(ValueError, match="footprint cells"):
+            solve()
+    for mu in (-0.1, 5.0):
+        with pytest.raises(ValueError, match=f"mu = {mu}"):
+            LoadCase(Board(), 1e-3, friction="coulomb", mu=mu)

@@ -103,16 +103,17 @@ def _bench_readings(twin: FingertipTwin, poses: int, say) -> dict:
 
 
 def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, holdout: int = 12, batch: int = 200_000,
-              save: str | None = None, contact_layer_mm: float | None = None,
+              save: str | None = None, contact_layer_mm: float | None = None, friction: str = "stick",
               log: Callable[[str], None] | None = None) -> dict:
     """Build a reduced-order twin (timed), report its held-out errors and its batch speed,
     against the FE seconds per load measured on the held-out solves of the same run; ``samples``
     defaults to the twin's own."""
-    from softtip.rom.surrogate import SAMPLES, ReducedTwin
+    from softtip.rom.surrogate import SAMPLES, IndenterFamily, ReducedTwin
 
     say = log or (lambda message: None)
     samples = SAMPLES if samples is None else samples
-    rom, t_build = _timed(ReducedTwin.build, load_design(design_name), samples=samples, holdout=holdout,
+    rom, t_build = _timed(ReducedTwin.build, load_design(design_name), IndenterFamily(friction=friction),
+                          samples=samples, holdout=holdout,
                           contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM)
     fe_report, exact_report = rom.report["holdout"], rom.report["exact_holdout"]
     params = rom.ranges.sample(np.random.default_rng(7), batch)
@@ -120,7 +121,7 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
     _, t_batch = _timed(rom.readings, params, noise=True, rng=np.random.default_rng(8))
     per_second = batch / t_batch
     fe_seconds = fe_report["fe_seconds_per_load"]
-    report = {"design": design_name, "contact_layer_mm": contact_layer_mm,
+    report = {"design": design_name, "contact_layer_mm": contact_layer_mm, "friction": friction,
               "build_s": rom.report["timings_s"]["build_s"], "build_and_holdout_s": t_build,
               "timings_s": rom.report["timings_s"], "full_scale": rom.report["full_scale"],
               "holdout": fe_report, "exact_holdout": exact_report, "readings_per_s": per_second,

@@ -35,6 +35,12 @@ class Friction(str, Enum):
     stick = "stick"
 
 
+class RomFriction(str, Enum):  # contact on footprint cells adds Coulomb's law
+    none = "none"
+    stick = "stick"
+    coulomb = "coulomb"
+
+
 class Model(str, Enum):
     linear = "linear"
     neo_hookean = "neo-hookean"
@@ -281,6 +287,7 @@ def bench_rom(
     save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
     contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
                                            help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
+    friction: RomFriction = typer.Option(RomFriction.stick, help="Friction of the board: coulomb has mu = 0.7."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""
@@ -291,7 +298,7 @@ def bench_rom(
     if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
         fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
     report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,
-                 log=None if json_output else console.print)
+                 friction=friction.value, log=None if json_output else console.print)
     if json_output:
         print(json.dumps(report, indent=2))
 

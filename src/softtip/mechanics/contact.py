@@ -32,7 +32,8 @@ from softtip.mechanics.fe import BodyModel, MagnetPose
 from softtip.mechanics.indenters import Indenter
 from softtip.mechanics.linsolve import NotPositiveDefinite, SPDSolver
 
-FRICTION_MODES = ("none", "stick")
+FRICTION_MODES = ("none", "stick")  # of the solvers that hold nodes
+FOOTPRINT_FRICTION_MODES = (*FRICTION_MODES, "coulomb")  # contact on footprint cells adds Coulomb's law
 
 
 @dataclass(frozen=True)
@@ -42,12 +43,22 @@ class LoadCase:
     tangential: tuple[float, float] = (0.0, 0.0)  # m, travel along x and y after the normal push
     position: tuple[float, float] = (0.0, 0.0)  # m, (x, y) of the indenter's axis on the fingertip
     friction: str = "none"
+    mu: float = 0.7  # Coulomb's coefficient, with friction = "coulomb" (soft body on a board, S1)
 
     def __post_init__(self):
         if not self.depth >= 0:
             raise ValueError(f"depth = {self.depth}: expected a non-negative length in metres")
-        if self.friction not in FRICTION_MODES:
-            raise ValueError(f"friction = {self.friction!r}: expected one of {', '.join(FRICTION_MODES)}")
+        if self.friction not in FOOTPRINT_FRICTION_MODES:
+            raise ValueError(f"friction = {self.friction!r}: expected one of {', '.join(FOOTPRINT_FRICTION_MODES)}")
+        if not 0 <= self.mu <= 2:  # where the semi-smooth Newton is checked; friction="stick" never slips
+            raise ValueError(f"mu = {self.mu}: expected a friction coefficient from 0 to 2")
+
+
+def require_nodal_friction(load: LoadCase) -> None:
+    """Refuse friction the solvers that hold nodes do not model."""
+    if load.friction not in FRICTION_MODES:
+        raise ValueError(f"friction = {load.friction!r}: contact on nodes models {' or '.join(FRICTION_MODES)}; "
+                         "Coulomb friction needs contact on footprint cells (softtip.mechanics.footprint)")
 
 
 @dataclass
@@ -241,6 +252,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
                          tangential_steps: int = 4, max_iterations: int = 30,
                          solver: SPDSolver | None = None) -> ContactResult:
     """Small-strain contact; gaps are linearised about the undeformed body."""
+    require_nodal_friction(load)
     t0 = time.perf_counter()
     stiffness = body.stiffness
     t_assembly = time.perf_counter() - t0
@@ -335,6 +347,7 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
                                penalty: float = 1e3, tolerance: float = 1e-7, max_newton: int = 40,
                                progress=None, monitor=None) -> ContactResult:
     """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
+    require_nodal_friction(load)
     t0 = time.perf_counter()
     solver = SPDSolver()
     candidates, cand_dofs = contact_candidates(body)

@@ -23,7 +23,8 @@ Friction semantics follow the nodal solvers, with one difference that makes
 them physical: with ``"stick"`` the material under a cell holds on to it, so
 the cells stay attached to the material they first touched, and tangential
 travel brings no new material under the indenter (the nodal solvers let nodes
-the moved footprint covers in the *undeformed* configuration join).
+the moved footprint covers in the *undeformed* configuration join). Cells also
+model Coulomb's law (``"coulomb"``), which the nodal solvers do not.
 
 The contact problem needs only the compliance of the nodes under the cells,
 from any source: influence matrices (:mod:`softtip.rom.influence`) or
@@ -175,15 +176,19 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
                             normal_steps: int | None = None, tangential_steps: int = 4, cell: float = CELL_SIZE,
                             max_iterations: int = 50) -> ContactSolution:
     """Small-strain contact with tractions constant on footprint cells (Lagrange multipliers, exact),
-    along the nodal solvers' load path; ``contact_nodes`` are the body nodes under cells in contact."""
-    stick = load.friction == "stick"
+    along the nodal solvers' load path; ``contact_nodes`` are the body nodes under cells in contact.
+
+    Friction: ``"none"``, ``"stick"``, or ``"coulomb"`` with ``load.mu``: a cell in contact sticks
+    while its tangential traction is below mu times its pressure and otherwise slips, with that
+    traction, against its slip (incremental over the load steps; semi-smooth Newton)."""
+    holds = load.friction in ("stick", "coulomb")  # cells hold on to the material they touch
     if normal_steps is None:
-        normal_steps = 2 if stick and any(load.tangential) else 1
+        normal_steps = 2 if holds and any(load.tangential) else 1
     path = load_path(load, normal_steps, tangential_steps)
     reach = patch.radius + float(np.hypot(*load.tangential))
     start = np.array([*load.position, 0.0])
     touch = touch_offset(load.indenter, load.position, footprint_cells(patch, load.indenter, start, reach, cell).points)
-    if stick:  # cells stay with the material they hold
+    if holds:  # cells stay with the material they hold
         steps = [footprint_cells(patch, load.indenter, touch, reach, cell)] * len(path)
     else:  # cells travel with the indenter; normal steps share one plan view
         steps = []
@@ -192,7 +197,6 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             steps.append(steps[-1] if same else footprint_cells(patch, load.indenter, touch + travel, reach, cell))
     nodes = np.unique(np.concatenate([c.nodes for c in steps]))
     body_compliance, magnet_response = compliance(nodes)
-    components = 3 if stick else 1  # of each cell's multiplier: the last is the normal one
     u = np.zeros(3 * len(nodes))  # surface displacements after the last step
     previous_frame = touch.copy()
     states = []
@@ -203,33 +207,26 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             spread = np.zeros((len(cells.area), len(nodes)))
             spread[:, np.searchsorted(nodes, cells.nodes)] = cells.average
             spread = np.kron(spread, np.eye(3))  # every cell's mean displacement (x, y, z)
-            operator = spread if stick else spread[2::3]  # the components the constraints hold
+            operator = spread if holds else spread[2::3]  # the components the constraints hold
             schur = operator @ body_compliance @ operator.T
             active = np.zeros(len(cells.area), dtype=bool)
+            multipliers = np.zeros(operator.shape[0])
         cell_u = (spread @ u).reshape(-1, 3)
         gap = cells.gaps(load.indenter, frame)
         active |= gap - cell_u[:, 2] < 0
-        if stick:  # held cells travel with the indenter, even past the edge of its footprint
+        if holds:  # held cells travel with the indenter, even past the edge of its footprint
             gap = np.where(active, cells.gaps(load.indenter, frame, extend=True), gap)
         else:  # without friction, cells the indenter has moved off are free
             active &= np.isfinite(gap)
-        iteration = ActiveSetIteration(active)
-        for _ in range(max_iterations):
-            index = np.flatnonzero(active)
-            if stick:  # held cells follow the indenter tangentially from where they were
-                target = np.column_stack([cell_u[index, :2] + (frame - previous_frame)[:2], gap[index]])
-                rows = (3 * index[:, None] + np.arange(3)).ravel()
-                values = target.ravel()
-            else:
-                rows, values = index, gap[index]
-            multipliers = np.zeros(operator.shape[0])
-            if len(rows):
-                multipliers[rows] = np.linalg.solve(schur[np.ix_(rows, rows)], values)
-            new_cell_u = (schur @ multipliers).reshape(-1, components)[:, -1]
-            pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
-            if iteration.update(pressure, gap - new_cell_u, 1e-6 * max(load.depth, 1e-6)):
-                break
-            active = iteration.active
+        # held cells follow the indenter tangentially from where they were
+        target = cell_u[:, :2] + (frame - previous_frame)[:2]
+        tolerance = 1e-6 * max(load.depth, 1e-6)
+        if load.friction == "coulomb":
+            multipliers, active = _coulomb_step(schur, gap, target, load.mu, active, multipliers, tolerance,
+                                                max_iterations)
+        else:
+            multipliers, active = _frictionless_or_sticking_step(schur, gap, target, holds, active, tolerance,
+                                                                 max_iterations)
         force_on_nodes = operator.T @ multipliers
         u = body_compliance @ force_on_nodes
         previous_frame = frame
@@ -238,3 +235,81 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     _, rigid, force = states[-1]
     touched = cells.nodes[(cells.average[active] != 0).any(axis=0)]
     return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)
+
+
+def _frictionless_or_sticking_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, stick: bool,
+                                   active: np.ndarray, tolerance: float,
+                                   max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """Multipliers (force of the indenter on each cell: all three components if ``stick``, else
+    the normal one) and the contact set of one load step, by primal-dual active sets."""
+    components = 3 if stick else 1
+    iteration = ActiveSetIteration(active)
+    for _ in range(max_iterations):
+        index = np.flatnonzero(active)
+        if stick:
+            rows = (3 * index[:, None] + np.arange(3)).ravel()
+            values = np.column_stack([target[index], gap[index]]).ravel()
+        else:
+            rows, values = index, gap[index]
+        multipliers = np.zeros(len(schur))
+        if len(rows):
+            multipliers[rows] = np.linalg.solve(schur[np.ix_(rows, rows)], values)
+        normal_u = (schur @ multipliers).reshape(-1, components)[:, -1]
+        pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
+        if iteration.update(pressure, gap - normal_u, tolerance):
+            break
+        active = iteration.active
+    return multipliers, active
+
+
+def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: float, active: np.ndarray,
+                  multipliers: np.ndarray, tolerance: float, max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """One load step with Coulomb friction: semi-smooth Newton on the contact conditions and on
+    Alart and Curnier's friction condition  max(b, |z|) t - b z = 0,  z = t - c s,  b = mu p
+    (t tangential traction on the body, s its slip relative to the indenter, p pressure), with
+    the damped tangent of Hueber, Stadler and Wohlmuth; contact sets by primal-dual active sets.
+    Starts from the last step's multipliers."""
+    cells = len(gap)
+    augment = 1.0 / np.mean(np.diag(schur))  # c: makes traction and slip commensurate
+    rows = schur.reshape(cells, 3, -1)
+    for _ in range(max_iterations):
+        traction = multipliers.reshape(-1, 3)
+        moved = (schur @ multipliers).reshape(-1, 3)
+        pressure = -traction[:, 2]
+        slip = moved[:, :2] - target
+        z = traction[:, :2] - augment * slip
+        bound = mu * np.maximum(pressure, 0.0)
+        size = np.linalg.norm(z, axis=1)
+        slipping = active & (size > bound)
+        # residuals and their generalised Jacobian, three rows per cell
+        residual = np.concatenate([slip, (moved[:, 2] - gap)[:, None]], axis=1)
+        jacobian = rows.copy()
+        k = np.flatnonzero(slipping)
+        if len(k):
+            n = np.arange(len(k))
+            dz = -augment * rows[k, :2]  # d z / d multipliers
+            dz[n, 0, 3 * k] += 1.0
+            dz[n, 1, 3 * k + 1] += 1.0
+            tangential = traction[k, :2]
+            damped = bound[k, None] * tangential / np.maximum(
+                np.maximum(bound[k], np.linalg.norm(tangential, axis=1)), 1e-300)[:, None]
+            direction = z[k] / size[k, None]
+            jac = (damped[:, :, None] * np.einsum("ki,kij->kj", direction, dz)[:, None, :]
+                   - bound[k, None, None] * dz)
+            jac[n, 0, 3 * k] += size[k]
+            jac[n, 1, 3 * k + 1] += size[k]
+            jac[n[:, None], np.arange(2), (3 * k + 2)[:, None]] += mu * z[k]  # b = mu p = -mu (normal multiplier)
+            jacobian[k, :2] = jac
+            residual[k, :2] = size[k, None] * tangential - bound[k, None] * z[k]
+        free = np.flatnonzero(~active)  # out of contact: no traction
+        jacobian[free] = 0.0
+        jacobian[free[:, None], np.arange(3), 3 * free[:, None] + np.arange(3)] = 1.0
+        residual[free] = traction[free]
+        step = np.linalg.solve(jacobian.reshape(3 * cells, -1), -residual.ravel())
+        multipliers = multipliers + step
+        iteration = ActiveSetIteration(active)
+        settled = iteration.update(-multipliers[2::3], gap - (schur @ multipliers)[2::3], tolerance)
+        if settled and np.abs(step).max() <= 1e-9 * max(np.abs(multipliers).max(), 1e-12):
+            return multipliers, active
+        active = iteration.active
+    raise ArithmeticError(f"Coulomb friction (mu = {mu}) did not converge in {max_iterations} iterations")

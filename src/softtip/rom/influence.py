@@ -27,7 +27,7 @@ import numpy as np
 import scipy.linalg
 
 from softtip.mechanics.contact import (ActiveSetIteration, ContactSolution, LoadCase, StickAnchors, contact_candidates,
-                                      load_path, touch_offset)
+                                      load_path, require_nodal_friction, touch_offset)
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
 
@@ -68,6 +68,7 @@ _BULGE_MARGIN = 1e-3  # m
 def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int | None = None,
                   tangential_steps: int = 4, max_iterations: int = 50) -> ContactSolution:
     """Exact small-strain contact on the influence matrices, along the FE solver's load path."""
+    require_nodal_friction(load)
     touch = touch_offset(load.indenter, load.position, influence.nodes)
     stick = load.friction == "stick"
     if normal_steps is None:
