@@ -178,6 +178,33 @@ class ActiveSetIteration:
         return False
 
 
+def exact_contact_step(compliance: np.ndarray, gap: np.ndarray, target: np.ndarray, stick: bool,
+                       active: np.ndarray, tolerance: float, max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """One load step of contact enforced exactly (Lagrange multipliers) on the dense ``compliance``
+    of the points it holds (surface nodes or footprint cells): with ``stick`` three components per
+    point (x, y, z), the tangential ones held at ``target`` (n, 2); else only the normal one
+    (``compliance`` of those alone). The gap closes: u_z = ``gap``. Returns the multipliers (the
+    indenter's force on each point, per component) and the contact set, by primal-dual active sets."""
+    components = 3 if stick else 1
+    iteration = ActiveSetIteration(active)
+    for _ in range(max_iterations):
+        index = np.flatnonzero(active)
+        if stick:
+            rows = (3 * index[:, None] + np.arange(3)).ravel()
+            values = np.column_stack([target[index], gap[index]]).ravel()
+        else:
+            rows, values = index, gap[index]
+        multipliers = np.zeros(len(compliance))
+        if len(rows):
+            multipliers[rows] = np.linalg.solve(compliance[np.ix_(rows, rows)], values)
+        normal_u = (compliance @ multipliers).reshape(-1, components)[:, -1]
+        pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
+        if iteration.update(pressure, gap - normal_u, tolerance):
+            break
+        active = iteration.active
+    return multipliers, active
+
+
 class _ActiveSetSystem:
     """Solves (K + sum of penalty blocks of the active nodes) u = f for changing active sets.
 

@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.mechanics.contact import ActiveSetIteration, ContactSolution, LoadCase, load_path, touch_offset
+from softtip.mechanics.contact import (ActiveSetIteration, ContactSolution, LoadCase, exact_contact_step, load_path,
+                                      touch_offset)
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Board, Indenter
 from softtip.mechanics.linsolve import SPDSolver
@@ -102,20 +103,19 @@ def quadratic_triangle_shapes(bary: np.ndarray) -> np.ndarray:
 class FootprintCells:
     nodes: np.ndarray  # (n,) body nodes under the cells
     average: np.ndarray  # (c, n): a cell's mean of each node's shape function
-    points: np.ndarray  # (p, 3) m, integration points on the undeformed surface
+    points: np.ndarray  # (p, 3) m, integration points on the undeformed surface, evenly spaced
     cell_of_point: np.ndarray  # (p,)
-    area: np.ndarray  # (c,) m^2
+    points_per_cell: np.ndarray  # (c,)
 
     def gaps(self, indenter: Indenter, frame: np.ndarray, extend: bool = False) -> np.ndarray:
         """Each cell's mean vertical gap to the indenter at ``frame`` (inf where a point has none;
         with ``extend``, the indenter's lower surface continued beyond its edge)."""
         gap = indenter.vertical_gap(self.points - frame, extend=extend)[0]
-        return np.bincount(self.cell_of_point, weights=gap) / np.bincount(self.cell_of_point)
+        return np.bincount(self.cell_of_point, weights=gap) / self.points_per_cell
 
 
-def _grid(indenter: Indenter, frame: np.ndarray, reach: float, cell: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Plan-view integration points of the footprint cells at ``frame``, the cell of each, and the
-    area each point stands for."""
+def _grid(indenter: Indenter, frame: np.ndarray, reach: float, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """Plan-view integration points of the footprint cells at ``frame`` and the cell of each."""
     if isinstance(indenter, Board):
         along = np.array([math.cos(indenter.angle), math.sin(indenter.angle)])
         across = np.array([-along[1], along[0]])
@@ -133,14 +133,14 @@ def _grid(indenter: Indenter, frame: np.ndarray, reach: float, cell: float) -> t
     cell_v = np.arange(len(v)) // per_cell[1]
     xy = origin + u[:, None, None] * along + v[None, :, None] * across
     cells = cell_u[:, None] * counts[1] + cell_v[None, :]
-    return xy.reshape(-1, 2), cells.ravel(), (u[1] - u[0]) * (v[1] - v[0])
+    return xy.reshape(-1, 2), cells.ravel()
 
 
 def footprint_cells(patch: SurfacePatch, indenter: Indenter, frame: np.ndarray, reach: float,
                     cell: float = CELL_SIZE) -> FootprintCells:
     """Cells of the indenter's footprint at ``frame`` over ``patch``, out to ``reach`` (m) from the
     indenter's axis (a board's centre line); cells with no point over the patch are left out."""
-    xy, cell_of_point, point_area = _grid(indenter, frame, reach, cell)
+    xy, cell_of_point = _grid(indenter, frame, reach, cell)
     facet, bary = patch.locate(xy)
     keep = facet >= 0
     z = np.einsum("pk,pk->p", bary[keep], patch.corners[facet[keep], :, 2])
@@ -155,15 +155,14 @@ def footprint_cells(patch: SurfacePatch, indenter: Indenter, frame: np.ndarray, 
     average = np.zeros((len(count), len(nodes)))
     np.add.at(average, (np.repeat(cell_of_point, 6), node_of.ravel()), quadratic_triangle_shapes(bary).ravel())
     return FootprintCells(nodes=nodes, average=average / count[:, None], points=points,
-                          cell_of_point=cell_of_point, area=count * point_area)
+                          cell_of_point=cell_of_point, points_per_cell=count)
 
 
-def stiffness_compliance(body: BodyModel, solver: SPDSolver | None = None) -> Compliance:
+def stiffness_compliance(body: BodyModel) -> Compliance:
     """Compliance of surface nodes by back-substitution with the factorised stiffness: with it,
     :func:`solve_footprint_contact` is a finite-element solve."""
-    if solver is None:
-        solver = SPDSolver()
-        solver.factorize(body.stiffness)
+    solver = SPDSolver()
+    solver.factorize(body.stiffness)
 
     def compliance(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         columns = body.node_dofs[nodes].ravel()
@@ -186,15 +185,15 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
         normal_steps = 2 if holds and any(load.tangential) else 1
     path = load_path(load, normal_steps, tangential_steps)
     reach = patch.radius + float(np.hypot(*load.tangential))
-    start = np.array([*load.position, 0.0])
-    touch = touch_offset(load.indenter, load.position, footprint_cells(patch, load.indenter, start, reach, cell).points)
-    if holds:  # cells stay with the material they hold
-        steps = [footprint_cells(patch, load.indenter, touch, reach, cell)] * len(path)
-    else:  # cells travel with the indenter; normal steps share one plan view
-        steps = []
-        for travel in path:
-            same = steps and np.array_equal(travel[:2], path[len(steps) - 1][:2])
-            steps.append(steps[-1] if same else footprint_cells(patch, load.indenter, touch + travel, reach, cell))
+    # cells depend on the plan view of the frame only: those where the indenter starts find the touch
+    cells = footprint_cells(patch, load.indenter, np.array([*load.position, 0.0]), reach, cell)
+    touch = touch_offset(load.indenter, load.position, cells.points)
+    steps, plan = [], np.zeros(2)  # the cells of every load step; the sideways travel they are at
+    for travel in path:
+        # held cells stay with the material they hold; others travel with the indenter
+        if not holds and not np.array_equal(travel[:2], plan):
+            cells, plan = footprint_cells(patch, load.indenter, touch + travel, reach, cell), travel[:2]
+        steps.append(cells)
     nodes = np.unique(np.concatenate([c.nodes for c in steps]))
     body_compliance, magnet_response = compliance(nodes)
     u = np.zeros(3 * len(nodes))  # surface displacements after the last step
@@ -204,12 +203,12 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
         frame = touch + travel
         cells = steps[k]
         if k == 0 or cells is not steps[k - 1]:
-            spread = np.zeros((len(cells.area), len(nodes)))
+            spread = np.zeros((len(cells.average), len(nodes)))
             spread[:, np.searchsorted(nodes, cells.nodes)] = cells.average
             spread = np.kron(spread, np.eye(3))  # every cell's mean displacement (x, y, z)
             operator = spread if holds else spread[2::3]  # the components the constraints hold
             schur = operator @ body_compliance @ operator.T
-            active = np.zeros(len(cells.area), dtype=bool)
+            active = np.zeros(len(cells.average), dtype=bool)
             multipliers = np.zeros(operator.shape[0])
         cell_u = (spread @ u).reshape(-1, 3)
         gap = cells.gaps(load.indenter, frame)
@@ -225,8 +224,7 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             multipliers, active = _coulomb_step(schur, gap, target, load.mu, active, multipliers, tolerance,
                                                 max_iterations)
         else:
-            multipliers, active = _frictionless_or_sticking_step(schur, gap, target, holds, active, tolerance,
-                                                                 max_iterations)
+            multipliers, active = exact_contact_step(schur, gap, target, holds, active, tolerance, max_iterations)
         force_on_nodes = operator.T @ multipliers
         u = body_compliance @ force_on_nodes
         previous_frame = frame
@@ -235,31 +233,6 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     _, rigid, force = states[-1]
     touched = cells.nodes[(cells.average[active] != 0).any(axis=0)]
     return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)
-
-
-def _frictionless_or_sticking_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, stick: bool,
-                                   active: np.ndarray, tolerance: float,
-                                   max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
-    """Multipliers (force of the indenter on each cell: all three components if ``stick``, else
-    the normal one) and the contact set of one load step, by primal-dual active sets."""
-    components = 3 if stick else 1
-    iteration = ActiveSetIteration(active)
-    for _ in range(max_iterations):
-        index = np.flatnonzero(active)
-        if stick:
-            rows = (3 * index[:, None] + np.arange(3)).ravel()
-            values = np.column_stack([target[index], gap[index]]).ravel()
-        else:
-            rows, values = index, gap[index]
-        multipliers = np.zeros(len(schur))
-        if len(rows):
-            multipliers[rows] = np.linalg.solve(schur[np.ix_(rows, rows)], values)
-        normal_u = (schur @ multipliers).reshape(-1, components)[:, -1]
-        pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
-        if iteration.update(pressure, gap - normal_u, tolerance):
-            break
-        active = iteration.active
-    return multipliers, active
 
 
 def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: float, active: np.ndarray,
@@ -272,6 +245,7 @@ def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: fl
     cells = len(gap)
     augment = 1.0 / np.mean(np.diag(schur))  # c: makes traction and slip commensurate
     rows = schur.reshape(cells, 3, -1)
+    iteration = ActiveSetIteration(active)
     for _ in range(max_iterations):
         traction = multipliers.reshape(-1, 3)
         moved = (schur @ multipliers).reshape(-1, 3)
@@ -307,7 +281,6 @@ def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: fl
         residual[free] = traction[free]
         step = np.linalg.solve(jacobian.reshape(3 * cells, -1), -residual.ravel())
         multipliers = multipliers + step
-        iteration = ActiveSetIteration(active)
         settled = iteration.update(-multipliers[2::3], gap - (schur @ multipliers)[2::3], tolerance)
         if settled and np.abs(step).max() <= 1e-9 * max(np.abs(multipliers).max(), 1e-12):
             return multipliers, active

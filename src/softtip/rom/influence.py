@@ -24,10 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
-from softtip.mechanics.contact import (ActiveSetIteration, ContactSolution, LoadCase, StickAnchors, contact_candidates,
-                                      load_path, require_nodal_friction, touch_offset)
+from softtip.mechanics.contact import (ContactSolution, LoadCase, contact_candidates, exact_contact_step, load_path,
+                                      require_nodal_friction, touch_offset)
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
 
@@ -83,9 +82,8 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
     x = influence.nodes[local]
     local_rows = (3 * local[:, None] + np.arange(3)).ravel()
     compliance = influence.compliance[np.ix_(local_rows, local_rows)]
-    forces = np.zeros_like(x)  # force of the indenter on each node
+    held = compliance if stick else compliance[2::3, 2::3]  # the components the constraints hold
     u = np.zeros_like(x)
-    anchors = StickAnchors()  # on displacements: x is fixed, so targets move with the indenter alike
     active = np.zeros(len(x), dtype=bool)
     previous_frame = touch.copy()
     states = []
@@ -97,33 +95,17 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
         else:  # without friction, nodes the indenter has moved off are free
             active &= np.isfinite(gap)
-        iteration = ActiveSetIteration(active)
-        for _ in range(max_iterations):
-            index = np.flatnonzero(active)
-            if stick:
-                # held nodes follow the indenter tangentially from where they were held; the gap closes
-                target = anchors.targets(index, u[index], previous_frame) + (frame - previous_frame)
-                target[:, 2] = gap[index]  # closing the gap: u_z = g
-                rows = (3 * index[:, None] + np.arange(3)).ravel()
-                values = target.ravel()
-            else:
-                rows = 3 * index + 2
-                values = gap[index]
-            f = np.zeros(3 * len(x))
-            if len(rows):
-                f[rows] = scipy.linalg.solve(compliance[np.ix_(rows, rows)], values, assume_a="pos")
-                new_u = (compliance[:, rows] @ f[rows]).reshape(-1, 3)
-            else:
-                new_u = np.zeros_like(x)
-            f = f.reshape(-1, 3)
-            pressure = -f[:, 2]  # the indenter pushes down on the body
-            if iteration.update(pressure, gap - new_u[:, 2], 1e-6 * max(load.depth, 1e-6)):
-                break
-            active = iteration.active
-        u, forces = new_u, f
+        # held nodes follow the indenter tangentially from where they were (the constraints hold
+        # exactly, so that is where they were held)
+        target = u[:, :2] + (frame - previous_frame)[:2]
+        multipliers, active = exact_contact_step(held, gap, target, stick, active, 1e-6 * max(load.depth, 1e-6),
+                                                 max_iterations)
+        forces = np.zeros_like(x)  # force of the indenter on each node
         if stick:
-            anchors.keep_only(np.flatnonzero(active))
-            anchors.targets(np.flatnonzero(active), u[active], frame)
+            forces[:] = multipliers.reshape(-1, 3)
+        else:
+            forces[:, 2] = multipliers
+        u = (compliance @ forces.ravel()).reshape(-1, 3)
         previous_frame = frame
         states.append((travel, (influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6),
                        -forces.sum(axis=0)))
