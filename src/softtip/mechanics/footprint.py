@@ -115,17 +115,21 @@ class FootprintCells:
 
 
 def _grid(indenter: Indenter, frame: np.ndarray, reach: float, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """Plan-view integration points of the footprint cells at ``frame`` and the cell of each."""
+    """Plan-view integration points of the footprint cells at ``frame`` and the cell of each. Cells
+    have the size ``cell`` and sit at fixed places relative to the indenter, whatever ``reach``: a
+    longer reach only adds cells at the far ends, so the response is continuous in the tangential
+    travel that sets it."""
+    cells_out = math.ceil(reach / cell)  # on each side of the indenter's axis
     if isinstance(indenter, Board):
         along = np.array([math.cos(indenter.angle), math.sin(indenter.angle)])
         across = np.array([-along[1], along[0]])
         origin = (frame[:2] @ across) * across  # the foot of the centre line
-        half = (reach, indenter.thickness / 2)
-        counts = (math.ceil(2 * reach / cell), max(1, round(indenter.thickness / cell)))
+        half = (cells_out * cell, indenter.thickness / 2)
+        counts = (2 * cells_out, max(1, round(indenter.thickness / cell)))
     else:
         along, across, origin = np.array([1.0, 0.0]), np.array([0.0, 1.0]), frame[:2]
-        half = (reach, reach)
-        counts = (math.ceil(2 * reach / cell),) * 2
+        half = (cells_out * cell,) * 2
+        counts = (2 * cells_out,) * 2
     per_cell = [max(2, math.ceil(2 * h / n / _POINT_SPACING)) for h, n in zip(half, counts)]
     u = ((np.arange(counts[0] * per_cell[0]) + 0.5) / (counts[0] * per_cell[0]) * 2 - 1) * half[0]
     v = ((np.arange(counts[1] * per_cell[1]) + 0.5) / (counts[1] * per_cell[1]) * 2 - 1) * half[1]
@@ -177,7 +181,8 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     """Small-strain contact with tractions constant on footprint cells (Lagrange multipliers, exact),
     along the nodal solvers' load path; ``contact_nodes`` are the body nodes under cells in contact.
 
-    Friction: ``"none"``, ``"stick"``, or ``"coulomb"`` with ``load.mu``: a cell in contact sticks
+    Friction: ``"none"``, ``"stick"`` (the path followed exactly between its steps, from one change
+    of the contact set to the next), or ``"coulomb"`` with ``load.mu``: a cell in contact sticks
     while its tangential traction is below mu times its pressure and otherwise slips, with that
     traction, against its slip (incremental over the load steps; semi-smooth Newton)."""
     holds = load.friction in ("stick", "coulomb")  # cells hold on to the material they touch
@@ -212,19 +217,26 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             multipliers = np.zeros(operator.shape[0])
         cell_u = (spread @ u).reshape(-1, 3)
         gap = cells.gaps(load.indenter, frame)
-        active |= gap - cell_u[:, 2] < 0
-        if holds:  # held cells travel with the indenter, even past the edge of its footprint
-            gap = np.where(active, cells.gaps(load.indenter, frame, extend=True), gap)
-        else:  # without friction, cells the indenter has moved off are free
-            active &= np.isfinite(gap)
-        # held cells follow the indenter tangentially from where they were
-        target = cell_u[:, :2] + (frame - previous_frame)[:2]
         tolerance = 1e-6 * max(load.depth, 1e-6)
-        if load.friction == "coulomb":
-            multipliers, active = _coulomb_step(schur, gap, target, load.mu, active, multipliers, tolerance,
-                                                max_iterations)
+        if load.friction == "stick":
+            start = (cells.gaps(load.indenter, previous_frame), cells.gaps(load.indenter, previous_frame, extend=True))
+            end = (gap, cells.gaps(load.indenter, frame, extend=True))
+            multipliers, active = _stick_segment(schur, multipliers, active, start, end,
+                                                 (frame - previous_frame)[:2], tolerance)
         else:
-            multipliers, active = exact_contact_step(schur, gap, target, holds, active, tolerance, max_iterations)
+            active |= gap - cell_u[:, 2] < 0
+            if holds:  # held cells travel with the indenter, even past the edge of its footprint
+                gap = np.where(active, cells.gaps(load.indenter, frame, extend=True), gap)
+            else:  # without friction, cells the indenter has moved off are free
+                active &= np.isfinite(gap)
+            # held cells follow the indenter tangentially from where they were
+            target = cell_u[:, :2] + (frame - previous_frame)[:2]
+            if load.friction == "coulomb":
+                multipliers, active = _coulomb_step(schur, gap, target, load.mu, active, multipliers, tolerance,
+                                                    max_iterations)
+            else:
+                multipliers, active = exact_contact_step(schur, gap, target, holds, active, tolerance,
+                                                         max_iterations)
         force_on_nodes = operator.T @ multipliers
         u = body_compliance @ force_on_nodes
         previous_frame = frame
@@ -233,6 +245,65 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     _, rigid, force = states[-1]
     touched = cells.nodes[(cells.average[active] != 0).any(axis=0)]
     return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)
+
+
+def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarray,
+                   start: tuple[np.ndarray, np.ndarray], end: tuple[np.ndarray, np.ndarray], shift: np.ndarray,
+                   tolerance: float, max_events: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One segment of the load path with sticking cells, followed exactly: with a fixed contact set
+    the response is linear along the segment, so the path is solved from one change of the contact
+    set to the next (a cell touches: its gap closes; a cell lets go: its pressure vanishes). A cell
+    holds on where it touched, wherever that falls in the segment, so the end state is continuous in
+    the load, where a stepped path joins cells only at its steps.
+
+    ``start``, ``end``: each cell's mean gap at the segment's ends, to the indenter's surface (inf
+    where it has none) and to that surface extended (for the cells in contact); the indenter's gaps
+    are taken linear along the segment (exact for flat faces), over which it moves ``shift``
+    tangentially. Cells that change at one point of the path change together, whatever their
+    order. A cell that touches with no pressure may be unable to be held (it would pull) or left free
+    (it would penetrate): friction needs pressure, so it stays in contact without holding on until
+    the segment ends, and holds on from there."""
+    cells = len(active)
+    max_events = max_events or 20 * cells + 50
+    reachable = np.isfinite(start[0]) & np.isfinite(end[0])
+    free_start, free_end = np.where(reachable, start[0], 0.0), np.where(reachable, end[0], 0.0)
+    held = active.copy()
+    flips = np.zeros(cells, dtype=int)  # changes of each cell at the present point of the path
+    moved = schur @ multipliers
+    done = 0.0  # fraction of the segment travelled
+    for _ in range(max_events):
+        left = 1.0 - done
+        rows = np.flatnonzero(np.repeat(held, 3) | (np.arange(3 * cells) % 3 == 2) & np.repeat(active, 3))
+        target = np.column_stack([moved.reshape(-1, 3)[:, :2] + left * shift, end[1]]).ravel()[rows]
+        final = np.zeros_like(multipliers)
+        if len(rows):
+            final[rows] = np.linalg.solve(schur[np.ix_(rows, rows)], target)
+        change = final - multipliers
+        moved_change = schur @ change
+        # where, as a fraction of what is left, a cell's pressure or a free cell's gap reaches zero
+        pressure, pressure_change = -multipliers[2::3], -change[2::3]
+        gap_now = free_start + done * (free_end - free_start) - moved[2::3]
+        gap_end = free_end - moved[2::3] - moved_change[2::3]
+        lets_go = active & (pressure + pressure_change < 0)
+        touches = ~active & reachable & (gap_end < -tolerance)
+        when = np.full(cells, np.inf)
+        when[lets_go] = np.clip(pressure[lets_go], 0, None) / -pressure_change[lets_go]
+        when[touches] = np.clip(gap_now[touches], 0, None) / (gap_now[touches] - gap_end[touches])
+        when[(flips >= 4) & (when <= 1e-12)] = np.inf  # a cell that cannot settle waits for the path to move on
+        first = when.min()
+        if not np.isfinite(first):
+            return final, active
+        changing = np.flatnonzero(when <= first + 1e-12)
+        if first > 1e-12:
+            flips[:] = 0
+        multipliers = multipliers + first * change
+        moved = moved + first * moved_change
+        done += first * left
+        flips[changing] += 1
+        active, held = active.copy(), held.copy()
+        active[changing] = ~active[changing]
+        held[changing] = active[changing] & (flips[changing] < 2)
+    raise ArithmeticError(f"sticking contact changed more than {max_events} times in one load step")
 
 
 def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: float, active: np.ndarray,
