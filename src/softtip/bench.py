@@ -124,7 +124,9 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
     report = {"design": design_name, "contact_layer_mm": contact_layer_mm, "friction": friction,
               "build_s": rom.report["timings_s"]["build_s"], "build_and_holdout_s": t_build,
               "timings_s": rom.report["timings_s"], "full_scale": rom.report["full_scale"],
-              "holdout": fe_report, "exact_holdout": exact_report, "readings_per_s": per_second,
+              "domain": rom.report["domain"], "held_share": rom.report["held_share"],
+              "holdout": fe_report, "exact_holdout": exact_report,
+              "exact_sliding_loads": rom.report.get("exact_sliding_loads"), "readings_per_s": per_second,
               "fe_seconds_per_load": fe_seconds, "speedup_vs_fe": per_second * fe_seconds}
     if save:
         report["saved"] = str(rom.save(save))
@@ -133,8 +135,12 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
         return ", ".join(f"{e:.2f}" for e in np.ravel(values))
 
     say(f"reduced twin of {design_name}: built in {report['build_s']:.0f} s ({samples} exact contact samples)")
+    say(f"  domain: {report['domain']} ({report['held_share']:.0%} of the loads drawn)")
+    sliding = report["exact_sliding_loads"]
     for name, errors in ((f"{fe_report['loads']} held-out FE solves", fe_report),
-                         (f"{exact_report['loads']} held-out exact solves", exact_report)):
+                         (f"{exact_report['loads']} held-out exact solves", exact_report),
+                         *([(f"{sliding['loads']} loads outside the domain (the board slides)", sliding)]
+                           if sliding else [])):
         say(f"{name}: sensor axes max {axes(errors['sensor_error_percent_fs'])} % FS "
             f"(p99 {axes(errors['sensor_error_p99_percent_fs'])}); magnet displacements max "
             f"{np.max(errors['magnet_displacement_error_percent_range']):.2f} % of range "

@@ -9,11 +9,12 @@ Built automatically for one design and one indenter family, in three stages:
    of the indenter's footprint (:mod:`softtip.mechanics.footprint`): with
    contact on nodes, a board narrower than two elements makes the response
    step as rows of nodes enter its footprint, steps no interpolator follows;
-3. a smooth interpolator fitted to it: a small tanh network (scikit-learn's
+3. a smooth interpolator fitted to it: small tanh networks (scikit-learn's
    MLPRegressor) from the scaled load parameters to the magnets' rigid poses
-   and the force. The network is the right interpolator here because the
-   response is smooth but not separable in six dimensions, and it evaluates
-   as a few small matrix products (fast in batch).
+   and the force, two from independent initialisations, averaged. Networks
+   are the right interpolator here because the response is smooth but not
+   separable in six dimensions, and they evaluate as a few small matrix
+   products (fast in batch).
 
 It reports its own error on held-out *finite-element* solves (not on stage-2
 samples), in % of full scale of every sensor axis and of the range of every
@@ -21,7 +22,14 @@ magnet displacement. It is stored as npz (weights) + JSON (everything else)
 and reloaded without rebuilding; nothing is pickled.
 
 Load parameters (SI): contact position x, y (m), indenter angle about the
-vertical axis (rad), normal depth (m), tangential travel tx, ty (m).
+vertical axis (rad), normal depth (m), tangential travel tx, ty (m). With
+sticking friction the twin covers the loads the board holds without sliding
+at the spec's friction coefficient (|Ft| <= 0.7 Fz): a shallow push dragged
+far would hold the skin with up to five times its normal force, which no
+real board does, and the response there grows steeply from zero depth, a
+corner no smooth interpolator follows. Samples and held-out loads are drawn
+from the load ranges and those that would slide are set aside; the report
+gives the error on them too.
 """
 
 from __future__ import annotations
@@ -49,12 +57,19 @@ from softtip.mechanics.viscoelastic import PronySeries, qlv_response
 from softtip.rom.influence import SurfaceInfluence
 from softtip.twin import Readout
 
-SCHEMA = "softtip.reduced-twin/3"  # 2: a board enters by the foot of its centre line; 3: footprint contact
+# 2: a board enters by the foot of its centre line; 3: footprint contact; 4: an ensemble of networks
+SCHEMA = "softtip.reduced-twin/4"
 PARAMETERS = ("x_m", "y_m", "angle_rad", "depth_m", "tx_m", "ty_m")
 # with contact on footprint cells the samples are smooth, and more of them lower the error's tail:
 # over 500 held-out loads, the largest sensor error was 2.9 % of full scale from 5,000 samples and
 # 1.5-2.1 % from 8,000 (five fits)
 SAMPLES = 8000
+# networks from independent initialisations, averaged: their errors' tails fall on different loads,
+# and two fit side by side on two cores in the time of one (500 held-out loads, four seeds: largest
+# sensor error 1.65-2.01 % of full scale for one network, 1.39-1.89 % for pairs of them)
+ENSEMBLE = 2
+_SCALING = ("x_mean", "x_scale", "y_mean", "y_scale")
+_BLOCK_ROWS = 8192
 
 
 @dataclass(frozen=True)
@@ -86,9 +101,18 @@ class IndenterFamily:
     thickness: float = 1.6 * MM
     radius: float = 5 * MM
     # "stick" is the easier map to interpolate: Coulomb's onset of sliding puts a kink in the
-    # response (500 held-out loads: largest errors 2.3 % of full scale, 2.8 % of displacement range)
+    # response (500 held-out loads: largest errors 2.3 % of full scale, 2.8 % of displacement range).
+    # A sticking twin covers the loads the board holds without sliding at mu (see slides)
     friction: str = "stick"
-    mu: float = 0.7  # with friction = "coulomb"
+    mu: float = 0.7  # the spec's soft body / board coefficient
+
+    def slides(self, force: np.ndarray) -> np.ndarray:
+        """Which loads, by their forces (N, 3), need more friction than ``mu`` to hold: with
+        ``stick`` these lie outside the twin's domain (the board would slide over the skin)."""
+        force = np.atleast_2d(force)
+        if self.friction != "stick":
+            return np.zeros(len(force), dtype=bool)
+        return np.hypot(force[:, 0], force[:, 1]) > self.mu * force[:, 2]
 
     def load(self, p: np.ndarray) -> LoadCase:
         indenter = make_indenter(self.kind, thickness=self.thickness, angle_deg=math.degrees(p[2]),
@@ -135,7 +159,7 @@ class ReducedTwin:
     family: IndenterFamily
     ranges: LoadRanges
     mesh_size: float
-    network: dict  # weights, biases, input/output scaling (arrays)
+    networks: list[dict]  # each: weights, biases, input/output scaling (arrays); their outputs are averaged
     report: dict = field(default_factory=dict)  # build timings and held-out errors
     contact_layer_size: float | None = None  # element size (m) in the layer indenters reach, if refined
 
@@ -144,11 +168,8 @@ class ReducedTwin:
     def predict(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 6) load parameters -> magnet rigid poses (N, M, 6) [t (m), rotvec (rad)] and force (N, 3) N."""
         params = np.atleast_2d(np.asarray(params, dtype=float))
-        net = self.network
-        hidden = (_features(params, self.family) - net["x_mean"]) / net["x_scale"]
-        for k in range(len(net["weights"]) - 1):
-            hidden = np.tanh(hidden @ net["weights"][k] + net["biases"][k])
-        out = (hidden @ net["weights"][-1] + net["biases"][-1]) * net["y_scale"] + net["y_mean"]
+        features = _features(params, self.family)
+        out = sum(_evaluate(net, features) for net in self.networks) / len(self.networks)
         # no contact, no response: the network is exact at zero depth only up to its error
         out *= (params[:, 3] > 0)[:, None]
         return out[:, :-3].reshape(len(params), -1, 6), out[:, -3:]
@@ -173,7 +194,8 @@ class ReducedTwin:
                prony: PronySeries | None = None, noise: bool = True, rng: np.random.Generator | None = None) -> dict:
         """Time series of a motion at ``rate_hz``: times, depth, tangential travel, readings (µT), raw
         counts and force. With ``prony`` the force is quasi-linear viscoelastic: the magnets follow the
-        imposed motion while the force relaxes (normal force clipped at zero: contact does not pull)."""
+        imposed motion while the force relaxes (normal force clipped at zero: contact does not pull).
+        ``slides`` marks the samples where the board would slide: outside the twin's domain."""
         times, depth, tangential = motion.sample(rate_hz)
         params = np.column_stack([np.full_like(times, position[0]), np.full_like(times, position[1]),
                                   np.full_like(times, angle), depth, tangential])
@@ -182,23 +204,26 @@ class ReducedTwin:
         if prony is not None:
             force[:, 2] = np.maximum(force[:, 2], 0.0)
         return {"times_s": times, "depth_m": depth, "tangential_m": tangential, "readings_uT": change,
-                "counts": counts, "force_N": force, "elastic_force_N": elastic}
+                "counts": counts, "force_N": force, "elastic_force_N": elastic,
+                "slides": self.family.slides(elastic) & (depth > 0)}
 
     # ------------------------------------------------------------------ storage
 
     def save(self, path: str | Path) -> Path:
         """Write ``path`` (.npz, the weights) and ``path`` with .json (everything else)."""
         path = Path(path).with_suffix(".npz")
-        arrays = {f"weight_{k}": w for k, w in enumerate(self.network["weights"])}
-        arrays |= {f"bias_{k}": b for k, b in enumerate(self.network["biases"])}
-        arrays |= {k: self.network[k] for k in ("x_mean", "x_scale", "y_mean", "y_scale")}
+        arrays = {}
+        for j, net in enumerate(self.networks):
+            arrays |= {f"network_{j}_weight_{k}": w for k, w in enumerate(net["weights"])}
+            arrays |= {f"network_{j}_bias_{k}": b for k, b in enumerate(net["biases"])}
+            arrays |= {f"network_{j}_{k}": net[k] for k in _SCALING}
         np.savez(path, **arrays)
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         meta = {"schema": SCHEMA, "softtip": __version__, "design": self.design.spec, "design_name": self.design.name,
                 "family": vars(self.family), "ranges": {k: v for k, v in vars(self.ranges).items()},
                 "mesh_size_m": self.mesh_size, "contact_layer_size_m": self.contact_layer_size,
-                "layers": len(self.network["weights"]), "parameters": PARAMETERS, "weights_sha256": digest,
-                "report": self.report}
+                "networks": len(self.networks), "layers": len(self.networks[0]["weights"]), "parameters": PARAMETERS,
+                "weights_sha256": digest, "report": self.report}
         path.with_suffix(".json").write_text(json.dumps(meta, indent=2))
         return path
 
@@ -221,14 +246,14 @@ class ReducedTwin:
             raise ValueError(f"reduced twin {path}: weights do not match their JSON (truncated or modified)")
         with np.load(path, allow_pickle=False) as data:
             layers = int(meta["layers"])
-            network = {"weights": [data[f"weight_{k}"] for k in range(layers)],
-                       "biases": [data[f"bias_{k}"] for k in range(layers)],
-                       **{k: data[k] for k in ("x_mean", "x_scale", "y_mean", "y_scale")}}
+            networks = [{"weights": [data[f"network_{j}_weight_{k}"] for k in range(layers)],
+                         "biases": [data[f"network_{j}_bias_{k}"] for k in range(layers)],
+                         **{k: data[f"network_{j}_{k}"] for k in _SCALING}} for j in range(int(meta["networks"]))]
         ranges = meta["ranges"]
         ranges["angle"] = tuple(ranges["angle"])
         return cls(design=design_from_dict(meta["design"], source=meta["design_name"]),
                    family=IndenterFamily(**meta["family"]), ranges=LoadRanges(**ranges),
-                   mesh_size=float(meta["mesh_size_m"]), network=network, report=meta["report"],
+                   mesh_size=float(meta["mesh_size_m"]), networks=networks, report=meta["report"],
                    contact_layer_size=meta.get("contact_layer_size_m"))
 
     # ------------------------------------------------------------------ building
@@ -236,7 +261,7 @@ class ReducedTwin:
     @classmethod
     def build(cls, design: Design, family: IndenterFamily = IndenterFamily(), ranges: LoadRanges = LoadRanges(),
               mesh_size: float = 1.5 * MM, samples: int = SAMPLES, holdout: int = 12, exact_holdout: int = 500,
-              hidden: tuple[int, ...] = (128, 128), seed: int = 0, workers: int = 2,
+              hidden: tuple[int, ...] = (128, 128), ensemble: int = ENSEMBLE, seed: int = 0, workers: int = 2,
               contact_layer_size: float | None = None, progress=None) -> "ReducedTwin":
         """Influence matrices, ``samples`` exact contact solves on them, the fitted network, and its
         errors on ``holdout`` FE solves and on ``exact_holdout`` exact solves on the influence
@@ -258,37 +283,53 @@ class ReducedTwin:
         timings["influence_s"] = time.perf_counter() - start
 
         start = time.perf_counter()
-        rng = np.random.default_rng(seed)
-        params = ranges.sample(rng, samples)
-        targets = _solve_in_parallel(influence, patch, family, params, workers,
-                                     lambda d, t: say("contact samples", d, t))
+        params, targets, _, held_share = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed),
+                                                     samples, workers, lambda d, t: say("contact samples", d, t))
         timings["samples_s"] = time.perf_counter() - start
 
         start = time.perf_counter()
-        network = _fit_network(_features(params, family), targets, hidden, seed)
+        networks = _fit_networks(_features(params, family), targets, hidden, seed, ensemble, workers)
         timings["fit_s"] = time.perf_counter() - start
-        twin = cls(design=design, family=family, ranges=ranges, mesh_size=mesh_size, network=network,
+        twin = cls(design=design, family=family, ranges=ranges, mesh_size=mesh_size, networks=networks,
                    contact_layer_size=contact_layer_size)
 
         start = time.perf_counter()
-        twin.report = {"samples": samples, "hidden": list(hidden), "seed": seed, "timings_s": timings,
+        twin.report = {"samples": samples, "hidden": list(hidden), "networks": ensemble, "seed": seed,
+                       "timings_s": timings,
                        "surface_nodes": len(influence.nodes), "contact": "footprint cells",
-                       "contact_cell_m": CELL_SIZE}
+                       "contact_cell_m": CELL_SIZE, "domain": twin.domain,
+                       "held_share": held_share}
         scales = twin._full_scales(targets[:, :-3].reshape(samples, -1, 6))
         twin.report["full_scale"] = {"sensor_uT": (scales["field_T"] * 1e6).tolist(),
                                      "magnet_displacement_um": (scales["displacement_m"] * 1e6).tolist()}
         # many held-out loads solved exactly on the influence matrices (which reproduce the FE
         # solution, as the FE held-out loads check) give the error's distribution, not a few values
-        exact = ranges.sample(np.random.default_rng(seed + 2), exact_holdout)
-        reference = _solve_in_parallel(influence, patch, family, exact, workers,
-                                       lambda d, t: say("held-out exact solves", d, t))
-        twin.report["exact_holdout"] = twin._errors(twin.predict(exact), reference[:, :-3].reshape(exact_holdout, -1, 6),
-                                                    reference[:, -3:], scales)
-        twin.report["holdout"] = twin._fe_errors(body, patch, ranges.sample(np.random.default_rng(seed + 1), holdout),
-                                                 scales, lambda d, t: say("held-out FE solves", d, t))
+        exact, reference, sliding, _ = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed + 2),
+                                                exact_holdout, workers, lambda d, t: say("held-out exact solves", d, t))
+        twin.report["exact_holdout"] = twin._exact_errors(exact, reference, scales)
+        if len(sliding[0]):  # how far off the twin is where the board would slide: outside its domain
+            twin.report["exact_sliding_loads"] = twin._exact_errors(*sliding, scales)
+        fe_loads = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed + 1), holdout, workers,
+                               lambda d, t: None)[0]
+        twin.report["holdout"] = twin._fe_errors(body, patch, fe_loads, scales,
+                                                 lambda d, t: say("held-out FE solves", d, t))
         timings["holdout_s"] = time.perf_counter() - start
         timings["build_s"] = sum(v for k, v in timings.items() if k != "holdout_s")
         return twin
+
+    @property
+    def domain(self) -> str:
+        """The loads the twin was built on and answers for."""
+        ranges = self.ranges
+        covered = (f"contact within {ranges.position_radius / MM:g} mm of the axis, "
+                   f"depth up to {ranges.depth / MM:g} mm, tangential travel up to {ranges.tangential / MM:g} mm")
+        if self.family.friction == "stick":
+            covered += f", where the board holds without sliding (|Ft| <= {self.family.mu:g} Fz)"
+        return covered
+
+    def _exact_errors(self, params: np.ndarray, reference: np.ndarray, scales: dict) -> dict:
+        return self._errors(self.predict(params), reference[:, :-3].reshape(len(params), -1, 6), reference[:, -3:],
+                            scales)
 
     def _fe_errors(self, body, patch: SurfacePatch, params: np.ndarray, scales: dict, progress) -> dict:
         """Errors against full finite-element solves at loads the network never saw: the same
@@ -348,6 +389,28 @@ class ReducedTwin:
         }
 
 
+def _held_loads(influence: SurfaceInfluence, patch: SurfacePatch, family: IndenterFamily, ranges: LoadRanges,
+                rng: np.random.Generator, count: int, workers: int, progress) -> tuple:
+    """``count`` loads drawn from ``ranges`` that the family holds without sliding and their exact
+    solutions (magnet poses, force); the loads drawn on the way that slide, with their solutions;
+    and the share of drawn loads that hold."""
+    batches, outs = [], []
+    held = drawn = 0
+    while held < count:
+        share = held / drawn if drawn else 1.0  # draw what is missing at the share held so far, and a little more
+        batch = ranges.sample(rng, math.ceil((count - held) / max(share, 0.2) * 1.05) + 8)
+        out = _solve_in_parallel(influence, patch, family, batch, workers,
+                                 lambda d, t, done=held: progress(min(done + d, count), count))
+        batches.append(batch)
+        outs.append(out)
+        drawn += len(batch)
+        held += int((~family.slides(out[:, -3:])).sum())
+    params, solutions = np.vstack(batches), np.vstack(outs)
+    holds = ~family.slides(solutions[:, -3:])
+    first = np.flatnonzero(holds)[:count]
+    return params[first], solutions[first], (params[~holds], solutions[~holds]), float(holds.mean())
+
+
 def _solve_in_parallel(influence: SurfaceInfluence, patch: SurfacePatch, family: IndenterFamily, params: np.ndarray,
                        workers: int, progress) -> np.ndarray:
     _WORKER.update(influence=influence, patch=patch, family=family)
@@ -366,6 +429,33 @@ def _solve_in_parallel(influence: SurfaceInfluence, patch: SurfacePatch, family:
                 progress(sum(len(r) for r in results), len(params))
     _WORKER.clear()
     return np.vstack(results)
+
+
+def _fit_networks(features: np.ndarray, targets: np.ndarray, hidden: tuple[int, ...], seed: int, count: int,
+                  workers: int) -> list[dict]:
+    """``count`` networks from independent initialisations, fitted side by side on the cores."""
+    seeds = [int(s) for s in np.random.SeedSequence(seed).generate_state(count)]
+    if workers <= 1 or count == 1 or os.name != "posix":
+        return [_fit_network(features, targets, hidden, s) for s in seeds]
+    import multiprocessing
+
+    with ProcessPoolExecutor(min(workers, count), mp_context=multiprocessing.get_context("fork")) as pool:
+        return list(pool.map(_fit_network, *zip(*[(features, targets, hidden, s) for s in seeds])))
+
+
+def _evaluate(net: dict, features: np.ndarray) -> np.ndarray:
+    """A network's outputs. The layers run in single precision on blocks of rows that stay in cache:
+    three times faster in batch, and their rounding (a few 1e-6 of each output's spread) is three
+    orders of magnitude below the network's own error."""
+    weights = [w.astype(np.float32) for w in net["weights"]]
+    biases = [b.astype(np.float32) for b in net["biases"]]
+    out = np.empty((len(features), len(net["y_mean"])))
+    for start in range(0, len(features), _BLOCK_ROWS):
+        hidden = ((features[start:start + _BLOCK_ROWS] - net["x_mean"]) / net["x_scale"]).astype(np.float32)
+        for w, b in zip(weights[:-1], biases[:-1]):
+            hidden = np.tanh(hidden @ w + b)
+        out[start:start + _BLOCK_ROWS] = (hidden @ weights[-1] + biases[-1]) * net["y_scale"] + net["y_mean"]
+    return out
 
 
 def _fit_network(features: np.ndarray, targets: np.ndarray, hidden: tuple[int, ...], seed: int) -> dict:
