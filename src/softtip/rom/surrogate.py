@@ -61,8 +61,8 @@ from softtip.twin import Readout
 SCHEMA = "softtip.reduced-twin/4"
 PARAMETERS = ("x_m", "y_m", "angle_rad", "depth_m", "tx_m", "ty_m")
 # with contact on footprint cells the samples are smooth, and more of them lower the error's tail:
-# over 500 held-out loads, the largest sensor error was 2.9 % of full scale from 5,000 samples and
-# 1.5-2.1 % from 8,000 (five fits)
+# over 500 held-out loads (one network, sliding loads included), the largest sensor error was
+# 2.9 % of full scale from 5,000 samples and 1.5-2.1 % from 8,000 (five fits); 12,000 gained nothing
 SAMPLES = 8000
 # networks from independent initialisations, averaged: their errors' tails fall on different loads,
 # and two fit side by side on two cores in the time of one (500 held-out loads, four seeds: largest
