@@ -287,7 +287,8 @@ def bench_rom(
     save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
     contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
                                            help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
-    friction: RomFriction = typer.Option(RomFriction.stick, help="Friction of the board: stick covers the loads it holds at mu = 0.7, coulomb slides at mu = 0.7."),
+    friction: RomFriction = typer.Option(
+        RomFriction.stick, help="Board friction: stick (the loads it holds at mu = 0.7) or coulomb (mu = 0.7)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""

@@ -203,6 +203,9 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     body_compliance, magnet_response = compliance(nodes)
     u = np.zeros(3 * len(nodes))  # surface displacements after the last step
     previous_frame = touch.copy()
+    tolerance = 1e-6 * max(load.depth, 1e-6)
+    if load.friction == "stick":  # the cells never change: a step starts at the gaps the last ended at
+        previous_gap = cells.gaps(load.indenter, touch)
     states = []
     for k, travel in enumerate(path):
         frame = touch + travel
@@ -215,15 +218,14 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             schur = operator @ body_compliance @ operator.T
             active = np.zeros(len(cells.average), dtype=bool)
             multipliers = np.zeros(operator.shape[0])
-        cell_u = (spread @ u).reshape(-1, 3)
         gap = cells.gaps(load.indenter, frame)
-        tolerance = 1e-6 * max(load.depth, 1e-6)
         if load.friction == "stick":
-            start = (cells.gaps(load.indenter, previous_frame), cells.gaps(load.indenter, previous_frame, extend=True))
-            end = (gap, cells.gaps(load.indenter, frame, extend=True))
-            multipliers, active = _stick_segment(schur, multipliers, active, start, end,
+            multipliers, active = _stick_segment(schur, multipliers, active, previous_gap,
+                                                 (gap, cells.gaps(load.indenter, frame, extend=True)),
                                                  (frame - previous_frame)[:2], tolerance)
+            previous_gap = gap
         else:
+            cell_u = (spread @ u).reshape(-1, 3)
             active |= gap - cell_u[:, 2] < 0
             if holds:  # held cells travel with the indenter, even past the edge of its footprint
                 gap = np.where(active, cells.gaps(load.indenter, frame, extend=True), gap)
@@ -247,33 +249,34 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
     return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)
 
 
-def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarray,
-                   start: tuple[np.ndarray, np.ndarray], end: tuple[np.ndarray, np.ndarray], shift: np.ndarray,
-                   tolerance: float, max_events: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarray, start: np.ndarray,
+                   end: tuple[np.ndarray, np.ndarray], shift: np.ndarray, tolerance: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """One segment of the load path with sticking cells, followed exactly: with a fixed contact set
     the response is linear along the segment, so the path is solved from one change of the contact
     set to the next (a cell touches: its gap closes; a cell lets go: its pressure vanishes). A cell
     holds on where it touched, wherever that falls in the segment, so the end state is continuous in
     the load, where a stepped path joins cells only at its steps.
 
-    ``start``, ``end``: each cell's mean gap at the segment's ends, to the indenter's surface (inf
-    where it has none) and to that surface extended (for the cells in contact); the indenter's gaps
-    are taken linear along the segment (exact for flat faces), over which it moves ``shift``
-    tangentially. Cells that change at one point of the path change together, whatever their
-    order. A cell that touches with no pressure may be unable to be held (it would pull) or left free
-    (it would penetrate): friction needs pressure, so it stays in contact without holding on until
-    the segment ends, and holds on from there."""
+    ``start``: each cell's mean gap to the indenter's surface (inf where it has none) where the
+    segment starts; ``end``: the same where it ends, and to that surface extended (for the cells in
+    contact). The gaps are taken linear along the segment (exact for flat faces), over which the
+    indenter moves ``shift`` tangentially. Cells that change at one point of the path change
+    together, whatever their order. A cell that touches with no pressure may be unable to be held
+    (it would pull) or left free (it would penetrate): friction needs pressure, so it stays in
+    contact without holding on until the segment ends, and holds on from there."""
     cells = len(active)
-    max_events = max_events or 20 * cells + 50
-    reachable = np.isfinite(start[0]) & np.isfinite(end[0])
-    free_start, free_end = np.where(reachable, start[0], 0.0), np.where(reachable, end[0], 0.0)
-    held = active.copy()
+    max_events = 20 * cells + 50
+    reachable = np.isfinite(start) & np.isfinite(end[0])
+    free_start, free_end = np.where(reachable, start, 0.0), np.where(reachable, end[0], 0.0)
+    active = active.copy()
+    held = active.copy()  # cells also held tangentially: those in contact, but for touches with no pressure
     flips = np.zeros(cells, dtype=int)  # changes of each cell at the present point of the path
     moved = schur @ multipliers
     done = 0.0  # fraction of the segment travelled
     for _ in range(max_events):
         left = 1.0 - done
-        rows = np.flatnonzero(np.repeat(held, 3) | (np.arange(3 * cells) % 3 == 2) & np.repeat(active, 3))
+        rows = np.flatnonzero(np.column_stack([held, held, active]))  # the components held, cell-major
         target = np.column_stack([moved.reshape(-1, 3)[:, :2] + left * shift, end[1]]).ravel()[rows]
         final = np.zeros_like(multipliers)
         if len(rows):
@@ -300,7 +303,6 @@ def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarra
         moved = moved + first * moved_change
         done += first * left
         flips[changing] += 1
-        active, held = active.copy(), held.copy()
         active[changing] = ~active[changing]
         held[changing] = active[changing] & (flips[changing] < 2)
     raise ArithmeticError(f"sticking contact changed more than {max_events} times in one load step")
