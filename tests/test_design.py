@@ -119,11 +119,11 @@ def test_unknown_or_conflicting_keys_are_refused(change, message):
 
 
 def test_bad_sensor_settings_are_refused_when_the_twin_is_built():
-    from softtip.twin import FingertipTwin
+    from softtip.twin import Twin
 
     design = design_from_dict(with_value(spec("cylindrical-A"), "sensor.gain_sel", 9))
     with pytest.raises(DesignError, match="gain_sel"):
-        FingertipTwin(design, mesh_size=3 * MM)
+        Twin.finite_element(design, mesh_size=3 * MM)
 
 
 def test_with_params_revalidates_and_rejects_unknown_parameters():

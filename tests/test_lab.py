@@ -12,18 +12,20 @@ import pytest
 from softtip.data import Dataset
 from softtip.design.model import MM, load_design
 from softtip.lab import load_protocol, protocol_from_dict, run_protocol
-from softtip.lab.engine import Fingertip, HeldPart, _contact_forces, interpolate_path, path_table
+from softtip.lab.engine import HeldPart, _contact_forces, interpolate_path, path_table
 from softtip.lab.protocols import DEFAULTS, RUNNERS
 from softtip.lab.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
+from softtip.mechanics.poses import MagnetPoses
 from softtip.sensors.mlx90393 import MLX90393Settings, noise_rms_uT
 from softtip.settings import ConfigError
+from softtip.twin.influence import InfluenceEngine
 
 
 @pytest.fixture(scope="module")
-def coarse_rectangular() -> Fingertip:
-    return Fingertip.build(load_design("rectangular"), 3.0 * MM, 2.0 * MM, curvature_points=3)
+def coarse_rectangular() -> InfluenceEngine:
+    return InfluenceEngine.build(load_design("rectangular"), 3.0 * MM, 2.0 * MM, curvature_points=3)
 
 
 def test_contact_forces_of_two_points_by_hand():
@@ -65,8 +67,8 @@ def test_path_interpolation_is_exact_at_the_solved_states(coarse_rectangular):
     table = path_table(solution)
     depth = np.array([0.0, 0.5, 1.0, 1.0, 1.0]) * MM
     tangential = np.array([[0, 0], [0, 0], [0, 0], [0.25, 0], [0.5, 0]]) * MM
-    rigid, force = interpolate_path(table, depth, tangential)
-    np.testing.assert_allclose(rigid, table[1], atol=1e-15)
+    poses, force = interpolate_path(table, depth, tangential)
+    np.testing.assert_allclose(poses.rigid, table[1], atol=1e-15)
     np.testing.assert_allclose(force, table[2], atol=1e-12)
 
 
@@ -75,7 +77,7 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
     rng = np.random.default_rng(3)
     exact = FabricatedUnit(design, Realism.off(), rng)
     np.testing.assert_array_equal(exact.sensor_positions, design.sensor_positions)
-    still = np.zeros((4000, 4, 6))
+    still = MagnetPoses.at_rest(4, (4000,))
     times = np.arange(4000) / 20.0
     noisy = FabricatedUnit(design, Realism(drift_K_per_sqrt_s=0.0), rng).record(still, times, rng)
     expected = noise_rms_uT(MLX90393Settings.from_dict(design.sensor_readout))

@@ -26,7 +26,7 @@ from softtip.optimize.settings import StudyError
 from softtip.optimize.space import Constraint, grid_candidates
 from softtip.optimize.report import plot_objective, write_outputs
 from softtip.optimize.study import DesignRecord, StudyResult, run_study
-from softtip.twin import FingertipTwin
+from softtip.twin import Twin
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FAST = {"friction": "none", "mesh_size_mm": 3.0}
@@ -55,15 +55,15 @@ def small_study(p1: list[float], p2: list[float] | None = None, **extra) -> dict
 
 @pytest.fixture
 def count_fe_runs(monkeypatch):
-    """Counts FingertipTwin.simulate calls in this process (the in-process executor runs here)."""
+    """Counts Twin.simulate calls in this process (the in-process executor runs here)."""
     calls = []
-    original = FingertipTwin.simulate
+    original = Twin.simulate
 
     def counting(self, *args, **kwargs):
         calls.append(self.design.spec["cavity"]["radius_mm"])
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(FingertipTwin, "simulate", counting)
+    monkeypatch.setattr(Twin, "simulate", counting)
     return calls
 
 
@@ -293,14 +293,14 @@ def test_more_than_two_parameters_are_mapped_over_the_first_two_at_the_best_desi
 
 
 def test_a_design_whose_fe_run_fails_is_recorded_and_not_cached(tmp_path, monkeypatch):
-    original = FingertipTwin.simulate
+    original = Twin.simulate
 
     def fragile(self, *args, **kwargs):
         if self.design.spec["cavity"]["radius_mm"] == 9.0:
             raise RuntimeError("solver\ndiverged")
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(FingertipTwin, "simulate", fragile)
+    monkeypatch.setattr(Twin, "simulate", fragile)
     cache = FEResultCache(tmp_path / "fe")
     result = run_study(study_from_dict(small_study([8.0, 9.0])), InProcessExecutor(), cache)
     failed = result.records[1]

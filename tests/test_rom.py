@@ -18,7 +18,8 @@ from softtip.mechanics.motion import Motion
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.rom.influence import SurfaceInfluence, solve_contact
 from softtip.mechanics.footprint import SurfacePatch, solve_footprint_contact
-from softtip.rom.surrogate import IndenterFamily, LoadRanges, ReducedTwin, _fit_networks, _held_loads
+from softtip.twin import Twin
+from softtip.twin.reduced import IndenterFamily, LoadRanges, ReducedTwin, _fit_networks, _held_loads
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +44,7 @@ def test_influence_matrix_contact_equals_the_finite_element_solution(coarse, loa
     _, body, influence = coarse
     fe = solve_linear_contact(body, load)
     exact = solve_contact(influence, load)
-    fe_rigid = np.array([np.r_[p.translation, p.rotvec] for p in fe.magnet_poses])
+    fe_rigid = fe.magnet_poses.rigid
     # the FE solver enforces contact by a stiff penalty (1e-4 relative), the influence solve exactly
     np.testing.assert_allclose(exact.force, fe.force, atol=1e-3 * np.abs(fe.force).max())
     np.testing.assert_allclose(exact.magnet_rigid[:, :3], fe_rigid[:, :3], atol=1e-3 * np.abs(fe_rigid[:, :3]).max())
@@ -70,7 +71,7 @@ def test_a_board_shifted_along_itself_is_the_same_load(coarse):
 
 
 def test_network_inputs_of_a_board_are_invariant_along_it_and_under_a_half_turn():
-    from softtip.rom.surrogate import _features
+    from softtip.twin.reduced import _features
 
     board, sphere = IndenterFamily("board"), IndenterFamily("sphere")
     angle = 0.4
@@ -192,8 +193,8 @@ def test_no_contact_no_response(tiny_twin):
 
 def test_series_of_a_load_unload_cycle_at_any_rate(tiny_twin):
     motion = Motion().push(1.5e-3, 1e-3).hold(1.0).release(1e-3)
-    slow = tiny_twin.series(motion, 20.0, noise=False)
-    fast = tiny_twin.series(motion, 200.0, noise=False)
+    slow = Twin(tiny_twin).series(motion, 20.0, noise=False)
+    fast = Twin(tiny_twin).series(motion, 200.0, noise=False)
     assert len(slow["times_s"]) == math.floor(motion.duration * 20) + 1
     peak = np.argmax(slow["depth_m"])
     assert slow["depth_m"][peak] == pytest.approx(1.5e-3)
@@ -201,7 +202,7 @@ def test_series_of_a_load_unload_cycle_at_any_rate(tiny_twin):
     # single-precision rounding of the networks, which depends on the batch: ~1e-5 µT, far below
     # the sensor's least significant bit)
     np.testing.assert_allclose(slow["readings_uT"][peak], fast["readings_uT"][np.argmax(fast["depth_m"])], atol=1e-3)
-    relaxed = tiny_twin.series(motion, 20.0, prony=PronySeries(g=(0.3,), tau=(1.0,)), noise=False)
+    relaxed = Twin(tiny_twin).series(motion, 20.0, prony=PronySeries(g=(0.3,), tau=(1.0,)), noise=False)
     elastic = relaxed["elastic_force_N"][:, 2]
     force = relaxed["force_N"][:, 2]
     assert force.max() < elastic.max()  # relaxation during loading

@@ -12,7 +12,8 @@ from softtip.mechanics.contact import LoadCase, penalty_blocks
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.linsolve import SPDSolver
 from softtip.mechanics.mesh import mesh_design
-from softtip.twin import FingertipTwin
+from softtip.mechanics.poses import MagnetPoses
+from softtip.twin import Readout, Twin
 
 
 def _timed(function, *args, **kwargs):
@@ -37,12 +38,12 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
 
         load = LoadCase(Board(1.6e-3, 0.0), 1e-3, friction="stick")
         start = time.perf_counter()
-        twin = FingertipTwin(design, mesh_size=size)
+        twin = Twin.finite_element(design, mesh_size=size)
         result = twin.simulate(load, noise=True, rng=np.random.default_rng(0))
         t_push = time.perf_counter() - start
-        body = twin.body
+        body = twin.engine.body
         # baseline: one linear solve with the converged contact area prescribed
-        nodes = result.contact.contact_nodes
+        nodes = result.solution.contact_nodes
         epsilon = 1e4 * body.stiffness.diagonal()[: body.n_free].mean()
         fixed_area = body.stiffness + penalty_blocks(body, body.node_dofs[nodes],
                                                       epsilon * np.broadcast_to(np.eye(3), (len(nodes), 3, 3)))
@@ -55,44 +56,44 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
         report["board_push_1mm"] = {
             "total_s_mesh_cached": t_push, "unknowns": int(body.size), "contact_nodes": int(len(nodes)),
             "contact_solve_s": t_contact, "fixed_area_linear_solve_s": t_linear,
-            "contact_over_linear": t_contact / t_linear, "factorizations": result.contact.factorizations,
+            "contact_over_linear": t_contact / t_linear, "factorizations": result.solution.factorizations,
             "feature_dz_mm": [float(v) for v in result.feature_displacements[:, 2] * 1e3],
             "force_N": [float(v) for v in result.force], "timings_s": result.timings}
         say(f"1 mm board push (stick), mesh cached: {t_push:.2f} s total; contact solve {t_contact:.2f} s = "
             f"{t_contact / t_linear:.2f} x one fixed-area linear solve ({t_linear:.2f} s); "
-            f"{result.contact.factorizations} factorisation(s)")
+            f"{result.solution.factorizations} factorisation(s)")
 
         if include_neo_hookean:
             deep = LoadCase(Board(1.6e-3, 0.0), 3e-3, friction="stick")
             neo, t_neo = _timed(twin.simulate, deep, model="neo-hookean", noise=False)
-            report["neo_hookean_push_3mm"] = {"total_s": t_neo, "newton_iterations": neo.contact.iterations,
-                                              "factorizations": neo.contact.factorizations,
+            report["neo_hookean_push_3mm"] = {"total_s": t_neo, "newton_iterations": neo.solution.iterations,
+                                              "factorizations": neo.solution.factorizations,
                                               "force_N": [float(v) for v in neo.force],
                                               "feature_dz_mm": [float(v) for v in neo.feature_displacements[:, 2] * 1e3]}
-            say(f"neo-Hookean 3 mm board push: {t_neo:.1f} s, {neo.contact.iterations} Newton iterations")
+            say(f"neo-Hookean 3 mm board push: {t_neo:.1f} s, {neo.solution.iterations} Newton iterations")
 
-        report["magnetics_sensor"] = _bench_readings(twin, poses, say)
+        report["magnetics_sensor"] = _bench_readings(twin.readout, poses, say)
     return report
 
 
-def _bench_readings(twin: FingertipTwin, poses: int, say) -> dict:
+def _bench_readings(readout: Readout, poses: int, say) -> dict:
     """Readings per second through the exact field and the sensor model, against magpylib."""
     import magpylib
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(1)
-    rest = np.array([m.center for m in twin.design.magnets])
-    positions = rest + rng.uniform(-0.5e-3, 0.5e-3, (poses, len(rest), 3))
-    rotvecs = rng.uniform(-0.1, 0.1, (poses, len(rest), 3))
-    twin.readings(positions[:100], rotvecs[:100])  # warm-up
-    _, t_ours = _timed(twin.readings, positions, rotvecs, noise=True, rng=rng)
-    sensors = twin.design.sensor_positions
+    rest = readout.rest_positions
+    moved = MagnetPoses(rng.uniform(-0.5e-3, 0.5e-3, (poses, len(rest), 3)), rng.uniform(-0.1, 0.1, (poses, len(rest), 3)))
+    positions, rotvecs = rest + moved.translation, moved.rotvec
+    readout.readings(MagnetPoses(moved.translation[:100], moved.rotvec[:100]))  # warm-up
+    _, t_ours = _timed(readout.readings, moved, noise=True, rng=rng)
+    sensors = readout.design.sensor_positions
     readings = poses * len(sensors)
     # baseline: magpylib's vectorised path API on a sub-batch, field only (no sensor model)
     sub = min(poses, 20_000)
     magnets = [magpylib.magnet.Cylinder(polarization=(0, 0, m.polarization), dimension=(m.diameter, m.height),
                                         position=positions[:sub, i], orientation=Rotation.from_rotvec(rotvecs[:sub, i]))
-               for i, m in enumerate(twin.design.magnets)]
+               for i, m in enumerate(readout.design.magnets)]
     _, t_magpy = _timed(magpylib.getB, magnets, sensors, sumup=True)
     ours = readings / t_ours
     theirs = sub * len(sensors) / t_magpy
@@ -108,7 +109,7 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
     """Build a reduced-order twin (timed), report its held-out errors and its batch speed,
     against the FE seconds per load measured on the held-out solves of the same run; ``samples``
     defaults to the twin's own."""
-    from softtip.rom.surrogate import SAMPLES, IndenterFamily, ReducedTwin
+    from softtip.twin.reduced import SAMPLES, IndenterFamily, ReducedTwin
 
     say = log or (lambda message: None)
     samples = SAMPLES if samples is None else samples
@@ -117,8 +118,9 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
                           contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM)
     fe_report, exact_report = rom.report["holdout"], rom.report["exact_holdout"]
     params = rom.ranges.sample(np.random.default_rng(7), batch)
-    rom.readings(params[:100])  # warm-up
-    _, t_batch = _timed(rom.readings, params, noise=True, rng=np.random.default_rng(8))
+    twin = Twin(rom)
+    twin.readings(params[:100])  # warm-up
+    _, t_batch = _timed(twin.readings, params, noise=True, rng=np.random.default_rng(8))
     per_second = batch / t_batch
     fe_seconds = fe_report["fe_seconds_per_load"]
     report = {"design": design_name, "contact_layer_mm": contact_layer_mm, "friction": friction,

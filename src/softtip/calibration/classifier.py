@@ -18,13 +18,13 @@ from sklearn.base import ClassifierMixin
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import column_or_1d, validate_data
 
+from softtip._core.network import forward_one
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
     EarlyStopping,
     backprop_gradient,
     cross_entropy,
     forward,
-    forward_one,
     initial_layers,
     pack,
     single_threaded_blas,

@@ -15,10 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from softtip._core.network import fold_scaling
+
 # tanh is steep (not saturated) for net inputs in [-2, 2]: the Nguyen–Widrow spread targets it
 TANH_ACTIVE_HALF_WIDTH = 2.0
-# rows per chunk of a batch prediction: the chunk's activations stay in cache
-PREDICT_CHUNK = 4096
 
 
 # --------------------------------------------------------------------------
@@ -244,44 +244,12 @@ def divide(n_samples: int, fractions: Sequence[float], rng: np.random.Generator,
 def runtime_layers(layers: Sequence[np.ndarray], input_low: np.ndarray, input_high: np.ndarray,
                    output_gain: np.ndarray | None = None,
                    output_offset: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(W, b) pairs, C-contiguous, with the input scaling folded into the first layer and
-    the output map ``y = output_gain · y_scaled + output_offset`` into the last.
-
-    With ``s = g x − (g·low + 1)`` (mapminmax): ``W s + b = (W g) x + (b − W (g·low + 1))``.
-    """
+    """(W, b) pairs for the run-time network (:mod:`softtip._core.network`), with the input
+    scaling (mapminmax: ``s = g x - (g low + 1)``) folded into the first layer and the output map
+    ``y = output_gain * y_scaled + output_offset`` into the last."""
     gain = minmax_gain(input_low, input_high)
-    pairs = [(np.ascontiguousarray(w[:, :-1]), w[:, -1].copy()) for w in layers]
-    first_w, first_b = pairs[0]
-    pairs[0] = (np.ascontiguousarray(first_w * gain), first_b - first_w @ (gain * input_low + 1.0))
-    if output_gain is not None:
-        last_w, last_b = pairs[-1]
-        pairs[-1] = (np.ascontiguousarray(last_w * output_gain[:, None]), last_b * output_gain + output_offset)
-    return pairs
-
-
-def forward_one(pairs: Sequence[tuple[np.ndarray, np.ndarray]], sample: np.ndarray) -> np.ndarray:
-    """Outputs of the run-time network for one sample (1-D): the real-time path."""
-    activation = sample
-    for weights, bias in pairs[:-1]:
-        activation = np.tanh(weights @ activation + bias)
-    weights, bias = pairs[-1]
-    return weights @ activation + bias
-
-
-def predict_batch(pairs: Sequence[tuple[np.ndarray, np.ndarray]], inputs: np.ndarray,
-                  chunk: int = PREDICT_CHUNK) -> np.ndarray:
-    """Outputs of the run-time network for many samples, in cache-sized chunks."""
-    n_samples = len(inputs)
-    outputs = np.empty((n_samples, pairs[-1][0].shape[0]))
-    for start in range(0, n_samples, chunk):
-        activation = inputs[start:start + chunk]
-        for weights, bias in pairs[:-1]:
-            activation = activation @ weights.T
-            activation += bias
-            np.tanh(activation, out=activation)
-        last_w, last_b = pairs[-1]
-        np.add(activation @ last_w.T, last_b, out=outputs[start:start + chunk])
-    return outputs
+    pairs = [(w[:, :-1], w[:, -1]) for w in layers]
+    return fold_scaling(pairs, gain, -(gain * input_low + 1.0), output_gain, output_offset)
 
 
 # --------------------------------------------------------------------------

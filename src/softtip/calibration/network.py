@@ -31,20 +31,18 @@ import scipy.linalg
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
+from softtip._core.network import PREDICT_CHUNK, forward_one, predict_batch
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
-    PREDICT_CHUNK,
     EarlyStopping,
     backprop_gradient,
     divide,
     forward,
-    forward_one,
     gauss_newton_matrix,
     initial_layers,
     layer_shapes,
     minmax_gain,
     pack,
-    predict_batch,
     runtime_layers,
     single_threaded_blas,
     to_unit_range,

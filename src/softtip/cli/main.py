@@ -132,7 +132,7 @@ def simulate(
     from softtip.design.model import MM, load_design
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import make_indenter
-    from softtip.twin import FingertipTwin
+    from softtip.twin import Twin
 
     for name, value in (("depth", depth), ("thickness", thickness), ("radius", radius), ("mesh-size", mesh_size)):
         if not np.isfinite(value) or value < 0 or (value == 0 and name != "depth"):
@@ -141,7 +141,8 @@ def simulate(
         fail(f"--plot {plot}: expected a file name ending in .png")
     if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
         fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
-    twin = FingertipTwin(load_design(design), mesh_size=mesh_size * MM, ambient_field=np.array(ambient) * 1e-6)
+    twin = Twin.finite_element(load_design(design), mesh_size=mesh_size * MM, model=model.value,
+                               ambient_field=np.array(ambient) * 1e-6)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
                     depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
@@ -155,7 +156,7 @@ def simulate(
         task = bar.add_task("Newton load steps", total=None)
         progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
     try:
-        result = twin.simulate(load, model=model.value, noise=noise is Switch.on, rng=np.random.default_rng(seed))
+        result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed), progress=progress)
     finally:
         if progress is not None:
             bar.stop()
@@ -163,13 +164,14 @@ def simulate(
     if plot is not None:
         from softtip.report.section import plot_section
 
-        report["plot"] = str(plot_section(result, plot))
+        report["plot"] = str(plot_section(result, twin.engine.mesh, plot))
     if deformed_mesh is not None:
-        vertices = len(twin.mesh.points)  # quadratic nodes: vertices first, then edge midpoints
-        np.savez_compressed(deformed_mesh, points_m=twin.mesh.points, tetrahedra=twin.mesh.tets.T,
-                            displacements_m=result.contact.displacements[:vertices],
-                            quadratic_nodes_m=twin.body.space.nodes, quadratic_displacements_m=result.contact.displacements,
-                            contact_nodes=result.contact.contact_nodes)
+        mesh, contact = twin.engine.mesh, result.solution
+        vertices = len(mesh.points)  # quadratic nodes: vertices first, then edge midpoints
+        np.savez_compressed(deformed_mesh, points_m=mesh.points, tetrahedra=mesh.tets.T,
+                            displacements_m=contact.displacements[:vertices],
+                            quadratic_nodes_m=twin.engine.body.space.nodes,
+                            quadratic_displacements_m=contact.displacements, contact_nodes=contact.contact_nodes)
         report["deformed_mesh"] = str(deformed_mesh)
     if json_output:
         print(json.dumps(report, indent=2))
@@ -183,7 +185,7 @@ def _mm(vector) -> list[float]:
 
 def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
     design = result.design
-    saturated = twin.sensor.saturated(result.reading_counts)
+    saturated = twin.readout.sensor.saturated(result.reading_counts)
     load = result.load
     return {
         "softtip": __version__,
@@ -195,7 +197,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
                  "friction": load.friction},
         "magnets": [
             {"index": i, "position_mm": _mm(result.magnet_positions[i]),
-             "rotvec": [round(float(v), 9) for v in result.magnet_rotvecs[i]],
+             "rotvec": [round(float(v), 9) for v in result.poses.rotvec[i]],
              "feature_displacement_mm": _mm(result.feature_displacements[i]),
              "dimension_mm": _mm([m.diameter, m.height]),
              "polarization_T": [0.0, 0.0, m.polarization]}
@@ -207,12 +209,12 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
              "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
             for j in range(len(design.sensor_positions))],
         "noise": noise,
-        "sensor_model": sensor_summary(twin.sensor),
+        "sensor_model": sensor_summary(twin.readout.sensor),
         "force_N": [round(float(f), 6) for f in result.force],
-        "contact": {"nodes": int(len(result.contact.contact_nodes)), "iterations": result.contact.iterations,
-                    "factorizations": result.contact.factorizations},
-        "mesh": {"size_mm": mesh_size, "tetrahedra": int(twin.mesh.tets.shape[1]),
-                 "unknowns": int(twin.body.size)},
+        "contact": {"nodes": int(len(result.solution.contact_nodes)), "iterations": result.solution.iterations,
+                    "factorizations": result.solution.factorizations},
+        "mesh": {"size_mm": mesh_size, "tetrahedra": int(twin.engine.mesh.tets.shape[1]),
+                 "unknowns": int(twin.engine.body.size)},
         "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
     }
 

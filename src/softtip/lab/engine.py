@@ -5,7 +5,7 @@ Every experiment of the virtual lab reduces to two kinds of response:
 
 * a **press** - an indenter (board edge, plate, tilted plate, board corner) pushed into one
   fingertip along a load path, solved exactly on the influence matrices
-  (:func:`softtip.rom.influence.solve_contact`), recorded after every load step so time series
+  (:class:`softtip.twin.influence.InfluenceEngine`), recorded after every load step so time series
   are interpolated between exact states;
 * a **held part** - a thin part grasped face-on between two fingertips (both pads pressed by the
   grip, sticking), which then collides with its environment. The part is rigid; the fingertips'
@@ -24,51 +24,25 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 import scipy.linalg
 
-from softtip.design.model import Design
 from softtip.mechanics.contact import ContactSolution, LoadCase
-from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Plate
-from softtip.mechanics.mesh import mesh_design
-from softtip.rom.influence import SurfaceInfluence, solve_contact
-from softtip.twin import Readout
+from softtip.mechanics.poses import MagnetPoses
+from softtip.twin.influence import InfluenceEngine
 
 
-@dataclass
-class Fingertip:
-    """One fingertip design's contact mechanics for the lab (nominal geometry)."""
-
-    design: Design
-    influence: SurfaceInfluence
-
-    @classmethod
-    def build(cls, design: Design, mesh_size: float, reach: float, curvature_points: int = 10,
-              progress=None) -> "Fingertip":
-        """Influence matrices of the surface within ``reach`` (m) of the top, on a ``mesh_size`` mesh."""
-        body = BodyModel.for_design(design, mesh_design(design, mesh_size, curvature_points=curvature_points))
-        influence = SurfaceInfluence.build(body, design.height - reach, progress=progress)
-        return cls(design=design, influence=influence)
-
-    @cached_property
-    def readout(self) -> Readout:
-        return Readout(self.design)
-
-    def press(self, load: LoadCase, normal_steps: int | None = None, tangential_steps: int = 4) -> ContactSolution:
-        return solve_contact(self.influence, load, normal_steps=normal_steps, tangential_steps=tangential_steps)
-
-    def gripped(self, depth: float) -> tuple[np.ndarray, np.ndarray, tuple]:
-        """The pad pressed ``depth`` (m) by a flat face, sticking: its contact nodes, their unknowns
-        and the factorised compliance of those unknowns (computed once per depth)."""
-        cache = self.__dict__.setdefault("_gripped", {})
-        if depth not in cache:
-            nodes = solve_contact(self.influence, LoadCase(Plate(), depth, friction="stick")).contact_nodes
-            rows = (3 * nodes[:, None] + np.arange(3)).ravel()
-            cache[depth] = nodes, rows, scipy.linalg.cho_factor(self.influence.compliance[np.ix_(rows, rows)])
-        return cache[depth]
+def gripped(engine: InfluenceEngine, depth: float) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """The pad pressed ``depth`` (m) by a flat face, sticking: its contact nodes, their unknowns
+    and the factorised compliance of those unknowns (computed once per engine and depth)."""
+    cache = engine.__dict__.setdefault("_gripped", {})
+    if depth not in cache:
+        nodes = engine.press(LoadCase(Plate(), depth, friction="stick")).contact_nodes
+        rows = (3 * nodes[:, None] + np.arange(3)).ravel()
+        cache[depth] = nodes, rows, scipy.linalg.cho_factor(engine.influence.compliance[np.ix_(rows, rows)])
+    return cache[depth]
 
 
 def path_table(solution: ContactSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -81,8 +55,8 @@ def path_table(solution: ContactSolution) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def interpolate_path(table: tuple[np.ndarray, np.ndarray, np.ndarray], depth: np.ndarray,
-                     tangential: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Magnet rigid motion (N, M, 6) and force (N, 3) at N points of a normal-then-tangential path,
+                     tangential: np.ndarray) -> tuple[MagnetPoses, np.ndarray]:
+    """Magnet poses (N, M, 3) and force (N, 3) at N points of a normal-then-tangential path,
     piecewise linear between the exact states along the path's arc length."""
     travel, rigid, force = table
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(travel, axis=0), axis=1))])
@@ -95,7 +69,7 @@ def interpolate_path(table: tuple[np.ndarray, np.ndarray, np.ndarray], depth: np
     flat = rigid.reshape(len(rigid), -1)
     out_rigid = np.column_stack([np.interp(query, arc, flat[:, k]) for k in range(flat.shape[1])])
     out_force = np.column_stack([np.interp(query, arc, force[:, k]) for k in range(3)])
-    return out_rigid.reshape(len(query), *rigid.shape[1:]), out_force
+    return MagnetPoses.from_rigid(out_rigid.reshape(len(query), *rigid.shape[1:])), out_force
 
 
 # ---------------------------------------------------------------------------------------------------- held part
@@ -120,10 +94,10 @@ class Pad:
     force: np.ndarray  # (3, 6) force of the part on the pad (pad frame) per unit q
 
 
-def grasp_pad(fingertip: Fingertip, grip_depth: float, rotation: np.ndarray, origin: np.ndarray) -> Pad:
+def grasp_pad(fingertip: InfluenceEngine, grip_depth: float, rotation: np.ndarray, origin: np.ndarray) -> Pad:
     """A pad pressed ``grip_depth`` (m) by a flat face (sticking), then linearised about that state."""
     influence = fingertip.influence
-    nodes, rows, factor = fingertip.gripped(grip_depth)
+    nodes, rows, factor = gripped(fingertip, grip_depth)
     in_part = (influence.nodes[nodes] - origin) @ rotation.T
     # displacement of node i (pad frame) = R^T (t + w x y_i) = R^T [I, -skew(y_i)] q
     local = np.concatenate([np.broadcast_to(np.eye(3), (len(nodes), 3, 3)), -_skew(in_part)], axis=2)
@@ -146,7 +120,7 @@ class HeldPart:
         self.stiffness = self.pads[0].stiffness + self.pads[1].stiffness
 
     @classmethod
-    def grasp(cls, fingertip: Fingertip, grip_depth: float, part_thickness: float,
+    def grasp(cls, fingertip: InfluenceEngine, grip_depth: float, part_thickness: float,
               offset: tuple[float, float] = (0.0, 0.0)) -> "HeldPart":
         """The part's frame: origin on its mid-plane over the point ``offset`` (m) of pad 0's top face,
         x and y along pad 0's, z out of pad 0 through the part."""
@@ -161,7 +135,7 @@ class HeldPart:
         """The part driven by the arm along ``approach`` (unit, part frame) by ``travel`` (N,) m past
         the first touch of any of ``points`` (P, 3) with a plane of unit ``normal`` (pointing at the
         part) that gives ``seat_compliance`` (m/N) at each point. Returns the part's motion q (N, 6),
-        contact forces (N, P) N and each pad's magnet motion (N, M, 6) and force (N, 3)."""
+        contact forces (N, P) N and each pad's magnet poses (N, M, 3) and force (N, 3)."""
         gaps = (points - points[np.argmin(points @ normal)]) @ normal  # >= 0: distance to the plane at touch
         coupling = np.concatenate([np.broadcast_to(normal, points.shape), np.cross(points, normal)], axis=1).T
         compliance = scipy.linalg.solve(self.stiffness, coupling, assume_a="pos")  # q per unit contact force
@@ -171,7 +145,7 @@ class HeldPart:
         q = forces @ compliance.T
         out = {"q": q, "contact_forces": forces}
         for k, pad in enumerate(self.pads):
-            out[f"magnets_{k}"] = (q @ pad.magnets.T).reshape(len(q), -1, 6)
+            out[f"magnets_{k}"] = MagnetPoses.from_rigid((q @ pad.magnets.T).reshape(len(q), -1, 6))
             out[f"force_{k}"] = q @ pad.force.T
         return out
 

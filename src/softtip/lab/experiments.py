@@ -19,11 +19,14 @@ import numpy as np
 
 from softtip.data import Dataset, DatasetMetadata, TrialWriter, channel_columns
 from softtip.design.model import MM, Design
-from softtip.lab.engine import Fingertip, HeldPart, interpolate_path, path_table
+from softtip.lab.engine import HeldPart, interpolate_path, path_table
 from softtip.lab.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board, CornerPlate, TiltedPlate
+from softtip.mechanics.poses import MagnetPoses
 from softtip.mechanics.viscoelastic import PronySeries, prony_for_hysteresis, qlv_response
+from softtip.twin import Readout
+from softtip.twin.influence import InfluenceEngine
 
 CALIBRATION, VALIDATION = "calibration", "validation"
 
@@ -33,7 +36,7 @@ class Bench:
     """What every protocol needs: the fingertip's mechanics, its material's viscoelasticity,
     the realism settings and a seeded random stream."""
 
-    fingertip: Fingertip
+    fingertip: InfluenceEngine
     prony: PronySeries
     realism: Realism
     rng: np.random.Generator
@@ -53,7 +56,7 @@ class Bench:
         return np.arange(0.0, duration + 1e-9, 1.0 / self.rate_hz)
 
 
-def material_prony(fingertip: Fingertip, hysteresis_percent: float, depth: float, speed: float,
+def material_prony(fingertip: InfluenceEngine, hysteresis_percent: float, depth: float, speed: float,
                    rest: float) -> PronySeries:
     """The material's relaxation, set once per design so that a centred board load/unload cycle
     (``depth`` at ``speed`` with ``rest`` s at the bottom) shows ``hysteresis_percent`` between
@@ -63,9 +66,8 @@ def material_prony(fingertip: Fingertip, hysteresis_percent: float, depth: float
     times = np.linspace(0, 2 * depth / speed + rest, 400)
     profile = np.minimum(times * speed, depth)
     profile = np.where(times > depth / speed + rest, depth - (times - depth / speed - rest) * speed, profile)
-    rigid, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-    readout = fingertip.readout
-    z = (readout.field(readout.rest_positions + rigid[..., :3], rigid[..., 3:]) - readout.rest_field)[:, 0, 2]
+    poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
+    z = Readout(fingertip.design).field_change(poses)[:, 0, 2]
     return prony_for_hysteresis(hysteresis_percent, times, z, force[:, 2])
 
 
@@ -115,8 +117,8 @@ def pushing(bench: Bench, p: dict, seed: int) -> Dataset:
                          position=position, friction="stick"), normal_steps=6))
             times = bench.times(p["pre_contact_s"] + depth / trial_speed)
             profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
-            rigid, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-            readings = unit.record(rigid, times, bench.rng)
+            poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
+            readings = unit.record(poses, times, bench.rng)
             writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),
                         "depth_mm": profile / MM, **_force_labels(force, times, bench.prony)},
                        {"board_angle_deg": float(angle), "role": role})
@@ -148,8 +150,8 @@ def force3(bench: Bench, p: dict, seed: int) -> Dataset:
             profile = _push_profile(times, start, depth, trial_speed)
             progress = np.clip((times - start - depth / trial_speed) * trial_speed, 0, np.linalg.norm(shear))
             direction = shear / max(np.linalg.norm(shear), 1e-12)
-            rigid, force = interpolate_path(table, profile, progress[:, None] * direction[None])
-            readings = unit.record(rigid, times, bench.rng)
+            poses, force = interpolate_path(table, profile, progress[:, None] * direction[None])
+            readings = unit.record(poses, times, bench.rng)
             writer.add({"time_s": times, **channel_columns(readings), **_force_labels(force, times, bench.prony)},
                        {"motion": name, "role": role})
     return writer.to_dataset()
@@ -172,8 +174,8 @@ def hysteresis(bench: Bench, p: dict, seed: int) -> Dataset:
             start = p["pre_contact_s"]
             times = bench.times(start + 2 * depth / speed + p["rest_s"] + p["pre_contact_s"])
             profile = _push_profile(times, start, depth, speed, p["rest_s"], speed)
-            rigid, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-            readings = unit.record(rigid, times, bench.rng)
+            poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
+            readings = unit.record(poses, times, bench.rng)
             labels = _force_labels(force, times, bench.prony)
             writer.add({"time_s": times, **channel_columns(readings), "depth_mm": profile / MM, "fz_N": labels["fz_N"]},
                        {"speed_mm_s": float(speed_mm_s), "role": CALIBRATION})
@@ -203,8 +205,8 @@ def grasp_two(bench: Bench, p: dict, seed: int) -> Dataset:
             load = LoadCase(TiltedPlate(tilt=math.radians(true_angle), angle=math.radians(mirror)), depth,
                             position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)), friction="stick")
             table = path_table(bench.fingertip.press(load, normal_steps=4))
-            rigid, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-            readings.append(units[pad].record(rigid, times, bench.rng))
+            poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
+            readings.append(units[pad].record(poses, times, bench.rng))
             normal.append(force)
         grip = _force_labels(normal[0], times, bench.prony)["fz_N"]
         writer.add({"time_s": times, **channel_columns(np.concatenate(readings, axis=1)),
@@ -248,9 +250,9 @@ def grasp_positions(bench: Bench, p: dict, seed: int) -> Dataset:
         profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
         # a flat face on a flat pad keeps its contact patch: the response grows in proportion to depth
         scale = (profile / depth)[:, None, None]
-        rigid = scale * solution.magnet_rigid[None]
+        poses = MagnetPoses.from_rigid(scale * solution.magnet_rigid[None])
         force = scale[:, 0] * solution.force[None]
-        readings = unit.record(rigid, times, bench.rng)
+        readings = unit.record(poses, times, bench.rng)
         writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),
                     "grip_force_N": _force_labels(force, times, bench.prony)["fz_N"]},
                    {"board_angle_deg": float(angle), "position_x_mm": float(x), "position_y_mm": float(y),
@@ -279,13 +281,13 @@ def _collision_trials(bench: Bench, parts: dict, plan: list, points_for: Callabl
         shift = np.append(bench.scatter(bench.realism.position_sd_mm * MM, 2), 0.0)
         points, seat = points_for(state)
         if points is None:
-            rigid = [np.zeros((len(times), len(bench.design.magnets), 6))] * 2
+            poses = [MagnetPoses.at_rest(len(bench.design.magnets), (len(times),))] * 2
             contact = np.zeros(len(times))
         else:
             out = part.collide(points - shift, normal, approach, travel, seat)
-            rigid = [out["magnets_0"], out["magnets_1"]]
+            poses = [out["magnets_0"], out["magnets_1"]]
             contact = out["contact_forces"].sum(axis=1)
-        readings = np.concatenate([units[k].record(rigid[k], times, bench.rng) for k in range(2)], axis=1)
+        readings = np.concatenate([units[k].record(poses[k], times, bench.rng) for k in range(2)], axis=1)
         writer.add({"time_s": times, **channel_columns(readings), **labels_for(state, contact, times)}, conditions)
 
 

@@ -33,9 +33,9 @@ from threadpoolctl import threadpool_limits
 from softtip.data import Dataset
 from softtip.design.model import MM, Design, load_design
 from softtip.lab import experiments
-from softtip.lab.engine import Fingertip
 from softtip.lab.realism import Realism
 from softtip.settings import ConfigError, SettingsReader
+from softtip.twin.influence import InfluenceEngine
 from softtip.tomlfile import read_toml
 
 GEN1 = {"rate_hz": 20.0, "mesh_size_mm": 1.5, "curvature_points": 10, "reach_mm": 4.5, "pre_contact_s": 0.5,
@@ -133,14 +133,14 @@ def load_protocol(path: str | Path) -> Protocol:
     return protocol_from_dict(table, str(path), path.parent)
 
 
-_FINGERTIPS: dict[tuple, Fingertip] = {}
+_FINGERTIPS: dict[tuple, InfluenceEngine] = {}
 
 
-def fingertip_for(design: Design, parameters: dict, progress=None) -> Fingertip:
+def fingertip_for(design: Design, parameters: dict, progress=None) -> InfluenceEngine:
     """The design's lab mechanics, built once per process for each design and mesh."""
     key = (repr(design.spec), parameters["mesh_size_mm"], parameters["curvature_points"], parameters["reach_mm"])
     if key not in _FINGERTIPS:
-        _FINGERTIPS[key] = Fingertip.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
+        _FINGERTIPS[key] = InfluenceEngine.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
                                            curvature_points=parameters["curvature_points"], progress=progress)
     return _FINGERTIPS[key]
 

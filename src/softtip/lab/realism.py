@@ -31,9 +31,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from softtip.design.model import MM, Design
-from softtip.magnetics import magnet_field_at_sensors
-from softtip.sensors import MLX90393, MLX90393Settings
+from softtip.mechanics.poses import MagnetPoses
 from softtip.settings import SettingsReader
+from softtip.twin import Readout
 
 BR_TEMPERATURE_COEFFICIENT = -0.0012  # 1/K, sintered NdFeB, reversible
 
@@ -62,33 +62,25 @@ class Realism:
         return asdict(self)
 
 
-class FabricatedUnit:
+class FabricatedUnit(Readout):
     """One physical fingertip: the design's magnets and chips as they came out of fabrication."""
 
     def __init__(self, design: Design, realism: Realism, rng: np.random.Generator):
-        self.design, self.realism = design, realism
+        self.realism = realism
         magnets, sensors = len(design.magnets), len(design.sensor_positions)
         self.magnet_offsets = rng.normal(0, realism.magnet_position_sd_mm * MM, (magnets, 3))
-        self.polarization = np.array([m.polarization for m in design.magnets]) * (
+        polarizations = np.array([m.polarization for m in design.magnets]) * (
             1 + rng.normal(0, realism.magnetisation_sd, magnets))
-        self.sensor_positions = design.sensor_positions + rng.normal(0, realism.sensor_position_sd_mm * MM,
-                                                                     (sensors, 3))
-        self.rest_positions = np.array([m.center for m in design.magnets]) + self.magnet_offsets
-        self.sensor = MLX90393(MLX90393Settings.from_dict(design.sensor_readout))
+        sensor_positions = design.sensor_positions + rng.normal(0, realism.sensor_position_sd_mm * MM, (sensors, 3))
+        super().__init__(design, magnet_centers=np.array([m.center for m in design.magnets]) + self.magnet_offsets,
+                         polarizations=polarizations, sensor_positions=sensor_positions)
 
-    def field(self, magnet_rigid: np.ndarray) -> np.ndarray:
-        """Absolute flux density (N, S, 3) T for magnet rigid motions (N, M, 6) from rest."""
-        magnets = self.design.magnets
-        return magnet_field_at_sensors(self.sensor_positions, self.rest_positions + magnet_rigid[..., :3],
-                                       magnet_rigid[..., 3:], np.array([m.diameter / 2 for m in magnets]),
-                                       np.array([m.height for m in magnets]), self.polarization)
-
-    def record(self, magnet_rigid: np.ndarray, times: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def record(self, poses: MagnetPoses, times: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """What the chips report over one trial, initial value subtracted: (N, S, 3) µT.
 
         The first sample is taken before contact (the protocol starts every trial in the air), so
         subtracting it is the papers' "reading before contact" - with its noise."""
-        field = self.field(magnet_rigid)
+        field = self.field(poses)
         if self.realism.drift_K_per_sqrt_s > 0:
             steps = rng.normal(0, self.realism.drift_K_per_sqrt_s, len(times)) * np.sqrt(
                 np.diff(times, prepend=times[0]))

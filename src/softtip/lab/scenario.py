@@ -19,6 +19,7 @@ from softtip.lab.protocols import Protocol, fingertip_for
 from softtip.lab.realism import FabricatedUnit
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
+from softtip.mechanics.poses import MagnetPoses
 from softtip.mechanics.viscoelastic import qlv_response
 
 
@@ -80,17 +81,17 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
         depth_now = np.minimum(along, depth)
         progress = np.clip(along - depth, 0, reach)
         direction = shear / max(reach, 1e-12)
-        rigid, force = interpolate_path(table, depth_now, progress[:, None] * direction[None])
+        poses, force = interpolate_path(table, depth_now, progress[:, None] * direction[None])
         segments_t.append(clock + times)
-        segments_rigid.append(rigid)
+        segments_rigid.append(poses.rigid)
         segments_force.append(np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]]))
         clock += times[-1] + 1 / rate_hz
-    rigid, times = np.concatenate(segments_rigid), np.concatenate(segments_t)
+    poses, times = MagnetPoses.from_rigid(np.concatenate(segments_rigid)), np.concatenate(segments_t)
     v = protocol.viscoelastic
     prony = material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM, v["speed_mm_s"] * MM, v["rest_s"])
     force = qlv_response(times, np.concatenate(segments_force), prony)
     force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
-    return TwinScenario(times_s=times, field_uT=unit.field(rigid) * 1e6, force_N=force)
+    return TwinScenario(times_s=times, field_uT=unit.field(poses) * 1e6, force_N=force)
 
 
 def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, speed_mm_s: float = 2.0,

@@ -28,9 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from softtip.mechanics.fe import BodyModel, MagnetPose
+from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Indenter
 from softtip.mechanics.linsolve import NotPositiveDefinite, SPDSolver
+from softtip.mechanics.poses import MagnetPoses
 
 FRICTION_MODES = ("none", "stick")  # of the solvers that hold nodes
 FOOTPRINT_FRICTION_MODES = (*FRICTION_MODES, "coulomb")  # contact on footprint cells adds Coulomb's law
@@ -64,7 +65,7 @@ def require_nodal_friction(load: LoadCase) -> None:
 @dataclass
 class ContactResult:
     unknowns: np.ndarray
-    magnet_poses: list[MagnetPose]
+    magnet_poses: MagnetPoses  # (M, 3)
     force: np.ndarray  # (3,) N, force of the body on the indenter (its reaction); Fz > 0 when pushing down
     contact_nodes: np.ndarray  # indices of nodes in contact at the end
     displacements: np.ndarray  # (n_nodes, 3) m

@@ -14,7 +14,6 @@ the base face is bonded and each magnet's hole surface moves as a rigid body
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -22,6 +21,7 @@ import scipy.sparse as sp
 
 from softtip.design.model import Design, Material
 from softtip.mechanics.mesh import TetMesh
+from softtip.mechanics.poses import MagnetPoses
 
 # --------------------------------------------------------------------------- kernels
 
@@ -153,12 +153,6 @@ class P2Space:
 # --------------------------------------------------------------------------- constrained body
 
 
-@dataclass(frozen=True)
-class MagnetPose:
-    translation: np.ndarray  # (3,) m
-    rotvec: np.ndarray  # (3,) rad
-
-
 class BodyModel:
     """The elastomer body: P2 space, material, supports and rigid magnets.
 
@@ -245,9 +239,8 @@ class BodyModel:
     def nodal_displacements(self, unknowns: np.ndarray) -> np.ndarray:
         return (self.transform @ unknowns).reshape(-1, 3)
 
-    def magnet_poses(self, unknowns: np.ndarray) -> list[MagnetPose]:
-        rigid = unknowns[self.n_free:].reshape(-1, 6)
-        return [MagnetPose(translation=r[:3].copy(), rotvec=r[3:].copy()) for r in rigid]
+    def magnet_poses(self, unknowns: np.ndarray) -> MagnetPoses:
+        return MagnetPoses.from_rigid(unknowns[self.n_free:].reshape(-1, 6).copy())
 
     def unit_load_responses(self, solver, columns: np.ndarray, block: int = 240,
                             progress=None) -> tuple[np.ndarray, np.ndarray]:

@@ -27,7 +27,7 @@ from softtip.mechanics.indenters import make_indenter
 from softtip.optimize.settings import SettingsReader, StudyError
 
 if TYPE_CHECKING:
-    from softtip.twin import FingertipTwin, TwinResult
+    from softtip.twin import Twin, TwinResult
 
 INDENTERS = ("board", "plate", "sphere")
 MODELS = ("linear", "neo-hookean")
@@ -129,24 +129,24 @@ def run_design(design_spec: dict[str, Any], simulations: list[dict[str, Any]]) -
     from threadpoolctl import threadpool_limits
 
     from softtip.design.model import design_from_dict
-    from softtip.twin import FingertipTwin  # loads MKL, so the limit below reaches it
+    from softtip.twin import Twin  # loads MKL, so the limit below reaches it
 
     seconds: list[float] = []
     # one BLAS/PARDISO thread per worker: the workers themselves fill the cores
     with threadpool_limits(limits=1), _quiet("skfem"):
         try:
             design = design_from_dict(design_spec, source=design_spec.get("name", "design"))
-            twins: dict[float, FingertipTwin] = {}
+            twins: dict[float, Twin] = {}
             results = []
             for data in simulations:
                 start = time.perf_counter()
                 simulation = Simulation.from_dict(data)
                 size = simulation.mesh_size_mm
                 if size not in twins:  # one mesh and stiffness per size, shared by the design's load cases
-                    twins[size] = FingertipTwin(design, mesh_size=size * MM)
+                    twins[size] = Twin.finite_element(design, mesh_size=size * MM)
                 twin = twins[size]
                 results.append(fe_result(twin, twin.simulate(simulation.load_case(), model=simulation.model,
-                                                               noise=False)).to_dict())
+                                                             noise=False)).to_dict())
                 seconds.append(time.perf_counter() - start)
         except Exception as error:  # noqa: BLE001 - reported per design, see the docstring
             message = " ".join(str(error).split()) or "no message"
@@ -167,8 +167,9 @@ def _quiet(logger_name: str) -> Iterator[None]:
         logger.setLevel(level)
 
 
-def fe_result(twin: FingertipTwin, result: TwinResult) -> FEResult:
+def fe_result(twin: Twin, result: TwinResult) -> FEResult:
     return FEResult(feature_displacements_m=result.feature_displacements, magnet_positions_m=result.magnet_positions,
-                    magnet_rotvecs_rad=result.magnet_rotvecs, force_N=result.force, field_rest_T=twin.rest_field,
-                    field_change_T=result.field_change, contact_nodes=len(result.contact.contact_nodes),
-                    tetrahedra=int(twin.mesh.tets.shape[1]), unknowns=int(twin.body.size))
+                    magnet_rotvecs_rad=result.poses.rotvec, force_N=result.force,
+                    field_rest_T=twin.readout.rest_field, field_change_T=result.field_change,
+                    contact_nodes=len(result.solution.contact_nodes), tetrahedra=int(twin.engine.mesh.tets.shape[1]),
+                    unknowns=int(twin.engine.body.size))

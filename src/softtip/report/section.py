@@ -29,15 +29,16 @@ def section_polygons(points: np.ndarray, tets: np.ndarray, origin: np.ndarray, n
     return polygons
 
 
-def plot_section(result, path: str | Path) -> Path:
-    """Draw the deformed section of ``result`` (a twin result) across the indenter, coloured by |u|."""
+def plot_section(result, mesh, path: str | Path) -> Path:
+    """Draw the deformed section of ``result`` (a finite-element twin result on ``mesh``) across the
+    indenter, coloured by |u|."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    twin_mesh = result.contact
+    contact = result.solution
     design = result.design
     indenter = result.load.indenter
     angle = indenter.angle if isinstance(indenter, Board) else 0.0
@@ -45,10 +46,10 @@ def plot_section(result, path: str | Path) -> Path:
     across = np.array([-math.sin(angle), math.cos(angle), 0.0])
     along = np.array([math.cos(angle), math.sin(angle), 0.0])
     origin = np.array([*result.load.position, 0.0])
-    mesh_points = result.mesh.points
-    vertex_u = twin_mesh.displacements[: len(mesh_points)]  # P2 vertex nodes come first
+    mesh_points = mesh.points
+    vertex_u = contact.displacements[: len(mesh_points)]  # P2 vertex nodes come first
     polygons, colours = [], []
-    for corners in section_polygons(mesh_points, result.mesh.tets, origin, along):
+    for corners in section_polygons(mesh_points, mesh.tets, origin, along):
         xyz = []
         mags = []
         for a, b, s in corners:
@@ -66,7 +67,7 @@ def plot_section(result, path: str | Path) -> Path:
     collection = PolyCollection(polygons, array=np.array(colours), cmap="viridis", edgecolors="face", linewidths=0.2)
     ax.add_collection(collection)
     fig.colorbar(collection, ax=ax, label="|u| (mm)")
-    for m, position, rotvec in zip(design.magnets, result.magnet_positions, result.magnet_rotvecs):
+    for m, position, rotvec in zip(design.magnets, result.magnet_positions, result.poses.rotvec):
         offset = (position - origin) @ along
         if abs(offset) > m.diameter:  # only magnets the section cuts
             continue

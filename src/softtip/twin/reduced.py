@@ -2,7 +2,7 @@
 
 Built automatically for one design and one indenter family, in three stages:
 
-1. influence matrices of the contact surface (:mod:`softtip.rom.influence`),
+1. influence matrices of the contact surface (:mod:`softtip.twin.influence`),
    from one factorisation of the finite-element stiffness;
 2. a design of experiments over the load parameters, each solved exactly on
    those matrices (milliseconds each, on every core), with contact on cells
@@ -48,14 +48,15 @@ from pathlib import Path
 import numpy as np
 
 from softtip import __version__
+from softtip._core.network import fold_scaling, predict_batch
 from softtip.design.model import MM, Design, design_from_dict
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
 from softtip.mechanics.indenters import make_indenter
-from softtip.mechanics.motion import Motion
-from softtip.mechanics.viscoelastic import PronySeries, qlv_response
+from softtip.mechanics.poses import MagnetPoses
 from softtip.rom.influence import SurfaceInfluence
-from softtip.twin import Readout
+from softtip.twin.engines import Response
+from softtip.twin.readout import Readout
 
 # 2: a board enters by the foot of its centre line; 3: footprint contact; 4: an ensemble of networks
 SCHEMA = "softtip.reduced-twin/4"
@@ -69,7 +70,6 @@ SAMPLES = 8000
 # sensor error 1.65-2.01 % of full scale for one network, 1.39-1.89 % for pairs of them)
 ENSEMBLE = 2
 _SCALING = ("x_mean", "x_scale", "y_mean", "y_scale")
-_BLOCK_ROWS = 8192
 
 
 @dataclass(frozen=True)
@@ -113,6 +113,21 @@ class IndenterFamily:
         if self.friction != "stick":
             return np.zeros(len(force), dtype=bool)
         return np.hypot(force[:, 0], force[:, 1]) > self.mu * force[:, 2]
+
+    def parameters(self, load: LoadCase) -> np.ndarray:
+        """The load parameters (6,) of a load case of this family (the inverse of :meth:`load`)."""
+        indenter = load.indenter
+        kind = type(indenter).__name__.lower()
+        if kind != self.kind:
+            raise ValueError(f"indenter = {kind}: this reduced twin was built for a {self.kind}")
+        if load.friction != self.friction:
+            raise ValueError(f"friction = {load.friction!r}: this reduced twin was built with {self.friction!r}")
+        if kind == "board" and not math.isclose(indenter.thickness, self.thickness):
+            raise ValueError(f"board thickness = {indenter.thickness} m: this reduced twin was built for "
+                             f"{self.thickness} m")
+        if kind == "sphere" and not math.isclose(indenter.radius, self.radius):
+            raise ValueError(f"sphere radius = {indenter.radius} m: this reduced twin was built for {self.radius} m")
+        return np.array([*load.position, getattr(indenter, "angle", 0.0), load.depth, *load.tangential])
 
     def load(self, p: np.ndarray) -> LoadCase:
         indenter = make_indenter(self.kind, thickness=self.thickness, angle_deg=math.degrees(p[2]),
@@ -169,49 +184,32 @@ class ReducedTwin:
         """(N, 6) load parameters -> magnet rigid poses (N, M, 6) [t (m), rotvec (rad)] and force (N, 3) N."""
         params = np.atleast_2d(np.asarray(params, dtype=float))
         features = _features(params, self.family)
-        out = sum(_evaluate(net, features) for net in self._single_precision) / len(self.networks)
+        out = sum(predict_batch(layers, features) for layers in self._single_precision) / len(self.networks)
         # no contact, no response: the network is exact at zero depth only up to its error
         out *= (params[:, 3] > 0)[:, None]
         return out[:, :-3].reshape(len(params), -1, 6), out[:, -3:]
 
-    def magnet_poses(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Positions (N, M, 3), rotation vectors (N, M, 3) and force (N, 3)."""
+    def respond_parameters(self, params: np.ndarray) -> Response:
+        """Magnet poses (N, M, 3) and force (N, 3) for (N, 6) load parameters: the batch path."""
         rigid, force = self.predict(params)
-        centers = np.array([m.center for m in self.design.magnets])
-        return centers + rigid[..., :3], rigid[..., 3:], force
+        return Response(poses=MagnetPoses.from_rigid(rigid), force=force, model="reduced")
+
+    def respond(self, loads) -> Response:
+        """The engine interface: load cases of this twin's indenter family."""
+        return self.respond_parameters(np.array([self.family.parameters(load) for load in loads]))
 
     @cached_property
-    def _single_precision(self) -> list[dict]:
-        """The networks with their layers in single precision, cast once for every batch to come."""
-        return [net | {key: [a.astype(np.float32) for a in net[key]] for key in ("weights", "biases")}
+    def _single_precision(self) -> list[list]:
+        """The networks as run-time layers in single precision, cast once for every batch to come:
+        three times faster in batch, and their rounding (a few 1e-6 of each output's spread) is three
+        orders of magnitude below the networks' own error."""
+        return [[(w.astype(np.float32), b.astype(np.float32)) for w, b in _runtime_layers(net)]
                 for net in self.networks]
 
     @cached_property
-    def readout(self) -> Readout:
+    def _readout(self) -> Readout:
+        """The nominal readout, for the errors in % of the sensors' full scale."""
         return Readout(self.design)
-
-    def readings(self, params: np.ndarray, noise: bool = True, rng: np.random.Generator | None = None):
-        """Sensor readings (change from rest, µT) (N, S, 3), raw counts (N, S, 3) and force (N, 3)."""
-        positions, rotvecs, force = self.magnet_poses(params)
-        change, counts = self.readout.readings(positions, rotvecs, noise=noise, rng=rng)
-        return change, counts, force
-
-    def series(self, motion: Motion, rate_hz: float, position: tuple[float, float] = (0.0, 0.0), angle: float = 0.0,
-               prony: PronySeries | None = None, noise: bool = True, rng: np.random.Generator | None = None) -> dict:
-        """Time series of a motion at ``rate_hz``: times, depth, tangential travel, readings (µT), raw
-        counts and force. With ``prony`` the force is quasi-linear viscoelastic: the magnets follow the
-        imposed motion while the force relaxes (normal force clipped at zero: contact does not pull).
-        ``slides`` marks the samples where the board would slide: outside the twin's domain."""
-        times, depth, tangential = motion.sample(rate_hz)
-        params = np.column_stack([np.full_like(times, position[0]), np.full_like(times, position[1]),
-                                  np.full_like(times, angle), depth, tangential])
-        change, counts, elastic = self.readings(params, noise=noise, rng=rng)
-        force = elastic if prony is None else qlv_response(times, elastic, prony)
-        if prony is not None:
-            force[:, 2] = np.maximum(force[:, 2], 0.0)
-        return {"times_s": times, "depth_m": depth, "tangential_m": tangential, "readings_uT": change,
-                "counts": counts, "force_N": force, "elastic_force_N": elastic,
-                "slides": self.family.slides(elastic) & (depth > 0)}
 
     # ------------------------------------------------------------------ storage
 
@@ -355,8 +353,7 @@ class ReducedTwin:
             "fe_seconds_per_load": float(np.mean(fe_seconds)), "reduced_seconds_per_load_unbatched": rom_seconds}
 
     def _field(self, rigid: np.ndarray) -> np.ndarray:
-        readout = self.readout
-        return readout.field(readout.rest_positions + rigid[..., :3], rigid[..., 3:]) - readout.rest_field
+        return self._readout.field_change(MagnetPoses.from_rigid(rigid))
 
     def _full_scales(self, sample_rigid: np.ndarray) -> dict:
         """Full scales over the load ranges, from exact samples that span them: the largest
@@ -449,18 +446,11 @@ def _fit_networks(features: np.ndarray, targets: np.ndarray, hidden: tuple[int, 
         return list(pool.map(_fit_network, *zip(*[(features, targets, hidden, s) for s in seeds])))
 
 
-def _evaluate(net: dict, features: np.ndarray) -> np.ndarray:
-    """A network's outputs, its layers in the precision of its weights: in single precision, on
-    blocks of rows that stay in cache, three times faster in batch, and their rounding (a few 1e-6
-    of each output's spread) is three orders of magnitude below the network's own error."""
-    weights, biases = net["weights"], net["biases"]
-    out = np.empty((len(features), len(net["y_mean"])))
-    for start in range(0, len(features), _BLOCK_ROWS):
-        hidden = ((features[start:start + _BLOCK_ROWS] - net["x_mean"]) / net["x_scale"]).astype(weights[0].dtype)
-        for w, b in zip(weights[:-1], biases[:-1]):
-            hidden = np.tanh(hidden @ w + b)
-        out[start:start + _BLOCK_ROWS] = (hidden @ weights[-1] + biases[-1]) * net["y_scale"] + net["y_mean"]
-    return out
+def _runtime_layers(net: dict) -> list:
+    """A fitted network (scikit-learn's layout: weights (inputs, outputs), standardised inputs
+    and outputs) as run-time layers of the raw features and targets."""
+    return fold_scaling([(w.T, b) for w, b in zip(net["weights"], net["biases"])], 1 / net["x_scale"],
+                        -net["x_mean"] / net["x_scale"], net["y_scale"], net["y_mean"])
 
 
 def _fit_network(features: np.ndarray, targets: np.ndarray, hidden: tuple[int, ...], seed: int) -> dict:

@@ -1,0 +1,1 @@
+"""softtip's private core: what every stage shares and no stage owns."""
