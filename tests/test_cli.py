@@ -183,3 +183,23 @@ def test_calibrate_names_a_missing_target(tmp_path):
     dataset = _synthetic_dataset(tmp_path / "push.parquet")
     result = run("calibrate", str(dataset), "--target", "angle_deg")
     assert result.exit_code == 2 and "angle_deg" in result.output
+
+
+EVERY_COMMAND = {"designs", "simulate", "live", "convert", "optimize", "reproduce", "calibrate", "evaluate", "lab",
+                 "demo", "bench"}
+
+
+def test_python_dash_m_softtip_lists_every_command_in_a_fresh_interpreter():
+    import os
+    import subprocess
+    import sys
+
+    # a fresh process: no test module has imported any command module first
+    listed = subprocess.run([sys.executable, "-m", "softtip", "--help"], capture_output=True, text=True,
+                            env={**os.environ, "COLUMNS": "200"}, check=True).stdout
+    names = {line.split()[1] for line in listed.splitlines() if line.startswith("│ ") and len(line.split()) > 2}
+    assert EVERY_COMMAND <= names, EVERY_COMMAND - names
+    bench = subprocess.run([sys.executable, "-m", "softtip", "bench", "--help"], capture_output=True, text=True,
+                           env={**os.environ, "COLUMNS": "200"}, check=True).stdout
+    for name in ("twin", "rom", "live", "magnetics", "calibration"):
+        assert f"│ {name} " in bench

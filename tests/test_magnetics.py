@@ -19,7 +19,6 @@ from softtip.magnetics import (
     axial_cylinder_field,
     magnet_axes,
     magnet_field_at_sensors,
-    measure_throughput,
 )
 
 MU0 = 4e-7 * np.pi
@@ -370,14 +369,6 @@ def test_invalid_inputs_are_rejected(
 def test_ambient_must_be_a_3_vector() -> None:
     with pytest.raises(ValueError):
         magnet_field_at_sensors(np.zeros((1, 3)), np.ones((1, 1, 3)), np.zeros((1, 1, 3)), 1e-3, 1e-3, 1.0, [0.0, 0.0])
-
-
-def test_measure_throughput_reports_consistent_numbers() -> None:
-    result = measure_throughput(2000, n_magnets=4, n_sensors=2, repeats=1)
-
-    assert result["n_poses"] == 2000 and result["n_magnets"] == 4 and result["n_sensors"] == 2
-    assert result["readings_per_second"] == pytest.approx(2000 * 2 / result["seconds"])
-    assert result["cylinder_evaluations_per_second"] == pytest.approx(4 * result["readings_per_second"])
 
 
 def test_empty_batches_and_no_magnets_give_empty_or_ambient_fields() -> None:

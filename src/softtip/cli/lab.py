@@ -1,6 +1,5 @@
 """``softtip lab run``, ``softtip reproduce``, ``softtip calibrate``, ``softtip evaluate``.
 
-Registered on the main app at the end of :mod:`softtip.cli.main` (see :mod:`softtip.cli.optimize`).
 """
 
 from __future__ import annotations
@@ -12,21 +11,20 @@ from pathlib import Path
 import numpy as np
 import typer
 
-lab_app = typer.Typer(help="The virtual lab: the published experiments on the twin, as datasets.",
-                      no_args_is_help=True)
+from softtip.cli.common import console, fail, status
+from softtip.studies.registry import STUDIES
 
-STUDY_NAMES = ("pushing", "force3", "hysteresis", "grasp-two", "grasp-positions", "contact-states", "inverter")
+STUDY_NAMES = tuple(STUDIES)
 MODEL_KINDS = ("polynomial", "network", "classifier")
 
 
 def lab_run(
-    protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(STUDY_NAMES)}."),
+    protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(s.protocol for s in STUDIES.values())}."),
     output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
     seed: int = typer.Option(None, "--seed", help="Override the protocol's seed."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
-    from softtip.cli.main import console, status
     from softtip.lab import load_protocol, run_protocol
 
     loaded = load_protocol(protocol)
@@ -53,7 +51,6 @@ def reproduce(
 ) -> None:
     """Run a published study end to end (experiments on the twin -> models -> metrics) and write a
     self-contained HTML report with tables and figures beside the published figures."""
-    from softtip.cli.main import console, fail, status
     from softtip.report.html import write_report
     from softtip.studies.published import run_published_study
 
@@ -90,7 +87,6 @@ def calibrate(
 ) -> None:
     """Fit a model on the calibration trials of a dataset, score it on its validation trials, save it."""
     from softtip.calibration import save_model
-    from softtip.cli.main import console, fail
     from softtip.data import Dataset
 
     if model not in MODEL_KINDS:
@@ -135,7 +131,6 @@ def evaluate(
 ) -> None:
     """Score a saved model on every sample of a dataset (its validation report, by condition)."""
     from softtip.calibration import load_model
-    from softtip.cli.main import console, fail
     from softtip.data import Dataset
 
     estimator, meta = load_model(model_file)
@@ -187,10 +182,3 @@ def _score(estimator, kind: str, X: np.ndarray, y: np.ndarray, target: list[str]
     return {name: {"mean_abs_error": float(metrics.mean_abs_error(truth[:, k], estimate[:, k])),
                    "rmse": float(metrics.rmse(truth[:, k], estimate[:, k])),
                    "r2": float(metrics.r2(truth[:, k], estimate[:, k]))} for k, name in enumerate(target)}
-
-
-def register(app: typer.Typer, user_errors) -> None:
-    lab_app.command("run")(user_errors(lab_run))
-    app.add_typer(lab_app, name="lab")
-    for command in (reproduce, calibrate, evaluate):
-        app.command()(user_errors(command))

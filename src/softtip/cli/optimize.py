@@ -1,8 +1,4 @@
 """``softtip optimize``: run a design study (grid sweep or Bayesian search) from a TOML file.
-
-Registered on the main app at the end of :mod:`softtip.cli.main`; the helpers
-it shares with the other commands (``fail``, the consoles) are imported when it
-runs, so the two modules never import each other half-initialised.
 """
 
 from __future__ import annotations
@@ -12,6 +8,8 @@ from pathlib import Path
 
 import typer
 from rich.table import Table
+
+from softtip.cli.common import console, errors
 
 
 def optimize(
@@ -26,7 +24,6 @@ def optimize(
 ) -> None:
     """Sweep or search design parameters on the physics twin; FE results are cached, so a killed
     study resumes where it stopped."""
-    from softtip.cli.main import console, errors
     from softtip.optimize.config import load_study
     from softtip.optimize.executors import make_executor
     from softtip.optimize.report import write_outputs

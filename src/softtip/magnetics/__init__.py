@@ -8,7 +8,6 @@ from softtip.magnetics.cylinder import axial_cylinder_field, axial_cylinder_fiel
 from softtip.magnetics.field import (
     magnet_axes,
     magnet_field_at_sensors,
-    measure_throughput,
 )
 
 __all__ = [
@@ -16,5 +15,4 @@ __all__ = [
     "axial_cylinder_field_rz",
     "magnet_axes",
     "magnet_field_at_sensors",
-    "measure_throughput",
 ]

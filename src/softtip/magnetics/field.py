@@ -14,7 +14,6 @@ which is the rotated field without building or applying a 3x3 matrix.
 
 from __future__ import annotations
 
-import time
 from typing import NamedTuple
 
 import numpy as np
@@ -193,37 +192,3 @@ def magnet_field_at_sensors(
     if ambient is not None:
         field += ambient
     return field
-
-
-def measure_throughput(
-    n_poses: int, n_magnets: int = 4, n_sensors: int = 1, repeats: int = 3, seed: int = 0
-) -> dict[str, float | int]:
-    """Time `magnet_field_at_sensors` on a fingertip-like random batch.
-
-    Magnets (Ø4 x 2 mm, J = 1.2 T, alternating up/down) sit on a circle of
-    radius 2.5 mm, 4 mm above the sensors (spread 4 mm apart along x), each
-    displaced by up to 1 mm per axis and tilted by up to 0.3 rad. Returns the best of ``repeats`` runs;
-    one reading is one sensor's three axes for one pose set.
-    """
-    rng = np.random.default_rng(seed)
-    angles = 2.0 * np.pi * np.arange(n_magnets) / n_magnets
-    rest = np.stack([2.5e-3 * np.cos(angles), 2.5e-3 * np.sin(angles), np.full(n_magnets, 4e-3)], axis=1)
-    positions = rest + rng.uniform(-1e-3, 1e-3, (n_poses, n_magnets, 3))
-    rotvecs = rng.uniform(-0.3, 0.3, (n_poses, n_magnets, 3)) / np.sqrt(3.0)
-    sensors = np.zeros((n_sensors, 3))
-    sensors[:, 0] = 4e-3 * (np.arange(n_sensors) - 0.5 * (n_sensors - 1))
-    polarization = 1.2 * (-1.0) ** np.arange(n_magnets)
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        magnet_field_at_sensors(sensors, positions, rotvecs, 2e-3, 2e-3, polarization)
-        best = min(best, time.perf_counter() - start)
-    readings = n_poses * n_sensors
-    return {
-        "n_poses": n_poses,
-        "n_magnets": n_magnets,
-        "n_sensors": n_sensors,
-        "seconds": best,
-        "readings_per_second": readings / best,
-        "cylinder_evaluations_per_second": readings * n_magnets / best,
-    }

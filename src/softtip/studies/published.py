@@ -8,8 +8,6 @@ sample); untrained conditions are left out of calibration entirely.
 
 from __future__ import annotations
 
-from typing import Callable
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -22,6 +20,7 @@ from softtip.data import Dataset  # noqa: E402
 from softtip.lab import Protocol, load_protocol, run_protocol  # noqa: E402
 from softtip.lab.experiments import CALIBRATION, VALIDATION  # noqa: E402
 from softtip.design.model import load_design  # noqa: E402
+from softtip.studies.registry import STUDIES  # noqa: E402
 
 PUBLISHED_TIMING_MS = {"network": 82.0, "polynomial": 108.0}
 
@@ -314,22 +313,15 @@ def inverter(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         "with 4 hidden layers of 10 tanh neurons (state, normal force)."]
 
 
-STUDIES: dict[str, tuple[str, Callable]] = {
-    "pushing": ("pushing", pushing), "force3": ("force3", force3), "hysteresis": ("hysteresis", hysteresis),
-    "grasp-two": ("grasp-two", grasp_two), "grasp-positions": ("grasp-positions", grasp_positions),
-    "contact-states": ("contact-states", contact_states), "inverter": ("inverter", inverter),
-}
-
-
 def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_path=None):
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
     count to a minimum (a smoke run)."""
-    protocol_name, function = STUDIES[name]
-    protocol = load_protocol(protocol_path or protocol_name)
+    study = STUDIES[name]
+    protocol = load_protocol(protocol_path or study.protocol)
     protocol.seed = seed
     if quick:
         for key in ("calibration_trials", "validation_trials", "trials", "untrained_trials"):
             if key in protocol.parameters:
                 protocol.parameters[key] = min(protocol.parameters[key], 2 if key != "untrained_trials" else 1)
-    results, figures, notes = function(protocol, seed)
+    results, figures, notes = globals()[study.analysis](protocol, seed)
     return _round(results), figures, notes, protocol

@@ -6,17 +6,13 @@ throughput of ``LMNetwork.predict``, and Levenberg–Marquardt training time on 
 samples. Baselines: scikit-learn's ``MLPRegressor.predict`` on one sample and in batch, and
 ``PolynomialFit`` (the published third-order polynomial), plus the published per-estimate
 times (82 ms network, 108 ms polynomial). Batch figures run with BLAS on one thread for
-every model alike. Usage: ``python benchmarks/calibration_speed.py [--json] [--calls 20000]
-[--batch 1000000] [--train 20000]``.
+every model alike.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform
-import time
 import warnings
 
 import numpy as np
@@ -24,6 +20,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.neural_network import MLPRegressor
 
+from softtip.bench.timing import best_of, latency, timed
 from softtip.calibration import LMNetwork, PolynomialFit
 from softtip.calibration.feedforward import single_threaded_blas
 
@@ -53,42 +50,20 @@ def calibration_data(n_samples: int, rng: np.random.Generator) -> tuple[np.ndarr
     return readings + rng.normal(0, NOISE_UT, readings.shape), np.column_stack([angle, force])
 
 
-def latency(function, sample: np.ndarray, calls: int) -> dict:
-    for _ in range(min(calls, 1000)):  # warm caches and allocators
-        function(sample)
-    times = np.empty(calls)
-    clock = time.perf_counter_ns
-    for i in range(calls):
-        start = clock()
-        function(sample)
-        times[i] = clock() - start
-    return {"median_us": float(np.median(times) / 1e3), "p99_us": float(np.percentile(times, 99) / 1e3)}
-
-
 def throughput(predict, inputs: np.ndarray, repeats: int = 3) -> float:
-    best = np.inf
+    """Samples per second of ``predict`` on a batch, BLAS on one thread."""
     with single_threaded_blas():
-        for _ in range(repeats):
-            start = time.perf_counter()
-            predict(inputs)
-            best = min(best, time.perf_counter() - start)
-    return len(inputs) / best
+        return len(inputs) / best_of(lambda: predict(inputs), repeats)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--json", action="store_true", help="print the results as JSON")
-    parser.add_argument("--calls", type=int, default=20_000, help="single-sample calls timed")
-    parser.add_argument("--batch", type=int, default=1_000_000, help="samples in the batch")
-    parser.add_argument("--train", type=int, default=20_000, help="training samples")
-    args = parser.parse_args()
+def bench_calibration(calls: int = 20_000, batch_samples: int = 1_000_000, train: int = 20_000) -> dict:
+    """Single-sample latency, batch throughput and training time of a 6-20-2 network beside
+    scikit-learn's MLPRegressor, the published polynomial and the published per-estimate times."""
     rng = np.random.default_rng(0)
-    x, y = calibration_data(args.train, rng)
+    x, y = calibration_data(train, rng)
     x_test, y_test = calibration_data(5_000, rng)
 
-    start = time.perf_counter()
-    network = LMNetwork((20,), random_state=0).fit(x, y)
-    training_s = time.perf_counter() - start
+    network, training_s = timed(LMNetwork((20,), random_state=0).fit, x, y)
     epochs = len(network.history_["train"]) - 1
     polynomial = PolynomialFit().fit(x, y)
     with warnings.catch_warnings():  # its speed, not its accuracy, is the baseline here
@@ -97,12 +72,12 @@ def main() -> None:
 
     sample = x_test[0].copy()
     one = {
-        "lm_network_predict_one": latency(network.predict_one, sample, args.calls),
-        "polynomial_predict_one": latency(polynomial.predict_one, sample, args.calls),
-        "mlp_regressor_predict": latency(lambda s: mlp.predict(s[None, :]), sample, args.calls // 4),
-        "lm_network_predict": latency(lambda s: network.predict(s[None, :]), sample, args.calls // 4),
+        "lm_network_predict_one": latency(network.predict_one, sample, calls),
+        "polynomial_predict_one": latency(polynomial.predict_one, sample, calls),
+        "mlp_regressor_predict": latency(lambda s: mlp.predict(s[None, :]), sample, calls // 4),
+        "lm_network_predict": latency(lambda s: network.predict(s[None, :]), sample, calls // 4),
     }
-    batch = calibration_data(args.batch, rng)[0]
+    batch = calibration_data(batch_samples, rng)[0]
     per_second = {
         "lm_network": throughput(network.predict, batch),
         "mlp_regressor": throughput(mlp.predict, batch),
@@ -116,7 +91,7 @@ def main() -> None:
         "single_sample_latency": one,
         "batch_samples_per_s": per_second,
         "training": {
-            "samples": args.train, "seconds": training_s, "epochs": epochs, "stop_reason": network.stop_reason_,
+            "samples": train, "seconds": training_s, "epochs": epochs, "stop_reason": network.stop_reason_,
             "ms_per_epoch": 1e3 * training_s / max(epochs, 1),
             "held_out_r2": [float(v) for v in r2_score(y_test, network.predict(x_test), multioutput="raw_values")],
             "polynomial_held_out_r2": [float(v) for v in
@@ -131,22 +106,4 @@ def main() -> None:
             "batch_network_over_mlp": per_second["lm_network"] / per_second["mlp_regressor"],
         },
     }
-    if args.json:
-        print(json.dumps(report, indent=2))
-        return
-    print(f"{report['network']}; {report['machine']['cpus']} CPUs")
-    for name, figures in one.items():
-        print(f"  {name:28s} median {figures['median_us']:8.2f} us   p99 {figures['p99_us']:8.2f} us")
-    for name, rate in per_second.items():
-        print(f"  batch {name:22s} {rate / 1e6:8.2f} M samples/s")
-    training = report["training"]
-    print(f"  LM training on {training['samples']} samples: {training['seconds']:.2f} s, {training['epochs']} epochs "
-          f"({training['ms_per_epoch']:.1f} ms each), stop: {training['stop_reason']}, held-out R2 "
-          f"{', '.join(f'{v:.5f}' for v in training['held_out_r2'])} (polynomial "
-          f"{', '.join(f'{v:.5f}' for v in training['polynomial_held_out_r2'])})")
-    for name, ratio in report["ratios"].items():
-        print(f"  {name:50s} {ratio:12.1f}x")
-
-
-if __name__ == "__main__":
-    main()
+    return report

@@ -7,6 +7,7 @@ from typing import Callable
 
 import numpy as np
 
+from softtip.bench.timing import timed
 from softtip.design.model import MM, load_design
 from softtip.mechanics.contact import LoadCase, penalty_blocks
 from softtip.mechanics.indenters import Board
@@ -14,12 +15,6 @@ from softtip.mechanics.linsolve import SPDSolver
 from softtip.mechanics.mesh import mesh_design
 from softtip.mechanics.poses import MagnetPoses
 from softtip.twin import Readout, Twin
-
-
-def _timed(function, *args, **kwargs):
-    start = time.perf_counter()
-    value = function(*args, **kwargs)
-    return value, time.perf_counter() - start
 
 
 def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, poses: int = 200_000,
@@ -31,7 +26,7 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
     size = mesh_size_mm * MM
     report: dict = {"design": design_name, "mesh_size_mm": mesh_size_mm}
     with threadpool_limits(2):
-        mesh, t_cold = _timed(mesh_design, design, size, use_cache=False)
+        mesh, t_cold = timed(mesh_design, design, size, use_cache=False)
         mesh_design(design, size)  # make sure the cache holds it
         report["mesh"] = {"cold_s": t_cold, "tetrahedra": int(mesh.tets.shape[1])}
         say(f"mesh (cold, no cache): {t_cold:.2f} s, {mesh.tets.shape[1]} tetrahedra")
@@ -65,7 +60,7 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
 
         if include_neo_hookean:
             deep = LoadCase(Board(1.6e-3, 0.0), 3e-3, friction="stick")
-            neo, t_neo = _timed(twin.simulate, deep, model="neo-hookean", noise=False)
+            neo, t_neo = timed(twin.simulate, deep, model="neo-hookean", noise=False)
             report["neo_hookean_push_3mm"] = {"total_s": t_neo, "newton_iterations": neo.solution.iterations,
                                               "factorizations": neo.solution.factorizations,
                                               "force_N": [float(v) for v in neo.force],
@@ -86,7 +81,7 @@ def _bench_readings(readout: Readout, poses: int, say) -> dict:
     moved = MagnetPoses(rng.uniform(-0.5e-3, 0.5e-3, (poses, len(rest), 3)), rng.uniform(-0.1, 0.1, (poses, len(rest), 3)))
     positions, rotvecs = rest + moved.translation, moved.rotvec
     readout.readings(MagnetPoses(moved.translation[:100], moved.rotvec[:100]))  # warm-up
-    _, t_ours = _timed(readout.readings, moved, noise=True, rng=rng)
+    _, t_ours = timed(readout.readings, moved, noise=True, rng=rng)
     sensors = readout.design.sensor_positions
     readings = poses * len(sensors)
     # baseline: magpylib's vectorised path API on a sub-batch, field only (no sensor model)
@@ -94,7 +89,7 @@ def _bench_readings(readout: Readout, poses: int, say) -> dict:
     magnets = [magpylib.magnet.Cylinder(polarization=(0, 0, m.polarization), dimension=(m.diameter, m.height),
                                         position=positions[:sub, i], orientation=Rotation.from_rotvec(rotvecs[:sub, i]))
                for i, m in enumerate(readout.design.magnets)]
-    _, t_magpy = _timed(magpylib.getB, magnets, sensors, sumup=True)
+    _, t_magpy = timed(magpylib.getB, magnets, sensors, sumup=True)
     ours = readings / t_ours
     theirs = sub * len(sensors) / t_magpy
     say(f"magnetics + sensor: {ours:,.0f} readings/s ({poses} poses x {len(sensors)} sensor(s), "
@@ -113,14 +108,14 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
 
     say = log or (lambda message: None)
     samples = SAMPLES if samples is None else samples
-    rom, t_build = _timed(ReducedTwin.build, load_design(design_name), IndenterFamily(friction=friction),
+    rom, t_build = timed(ReducedTwin.build, load_design(design_name), IndenterFamily(friction=friction),
                           samples=samples, holdout=holdout,
                           contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM)
     fe_report, exact_report = rom.report["holdout"], rom.report["exact_holdout"]
     params = rom.ranges.sample(np.random.default_rng(7), batch)
     twin = Twin(rom)
     twin.readings(params[:100])  # warm-up
-    _, t_batch = _timed(twin.readings, params, noise=True, rng=np.random.default_rng(8))
+    _, t_batch = timed(twin.readings, params, noise=True, rng=np.random.default_rng(8))
     per_second = batch / t_batch
     fe_seconds = fe_report["fe_seconds_per_load"]
     report = {"design": design_name, "contact_layer_mm": contact_layer_mm, "friction": friction,

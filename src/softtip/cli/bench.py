@@ -1,0 +1,133 @@
+"""``softtip bench``: speeds on this machine, each beside a baseline measured in the same run."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+
+import typer
+
+from softtip.cli.common import console, fail, status
+
+
+class RomFriction(str, Enum):  # contact on footprint cells adds Coulomb's law
+    none = "none"
+    stick = "stick"
+    coulomb = "coulomb"
+
+
+
+def bench_twin(
+    design: str = typer.Option("cylindrical-D", help="Design to benchmark."),
+    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Mesh size (mm)."),
+    poses: int = typer.Option(200_000, help="Batch size of magnet poses for the magnetics + sensor stage."),
+    skip_neo_hookean: bool = typer.Option(False, "--skip-neo-hookean", help="Leave out the 3 mm neo-Hookean push."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Time the twin: mesh, 1 mm board push with contact (vs one fixed-area linear solve),
+    neo-Hookean 3 mm push, and magnetics + sensor readings per second (vs magpylib)."""
+    from softtip.bench.twin import bench_twin as run
+
+    report = run(design, mesh_size, poses, include_neo_hookean=not skip_neo_hookean,
+                 log=None if json_output else console.print)
+    if json_output:
+        print(json.dumps(report, indent=2))
+
+
+def bench_rom(
+    design: str = typer.Option("cylindrical-D", help="Design to reduce."),
+    samples: int = typer.Option(None, help="Exact contact samples to fit the interpolator on (default: 8000)."),
+    holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
+    save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
+    contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
+                                           help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
+    friction: RomFriction = typer.Option(
+        RomFriction.stick, help="Board friction: stick (the loads it holds at mu = 0.7) or coulomb (mu = 0.7)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""
+    from softtip.bench.twin import bench_rom as run
+
+    if (samples is not None and samples < 50) or holdout < 2:
+        fail(f"--samples = {samples}, --holdout = {holdout}: expected at least 50 samples and 2 held-out loads")
+    if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
+        fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
+    report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,
+                 friction=friction.value, log=None if json_output else console.print)
+    if json_output:
+        print(json.dumps(report, indent=2))
+
+
+def bench_live(
+    duration: float = typer.Option(20.0, "--duration", help="Seconds of streaming (the full soak: 600)."),
+    rate: int = typer.Option(500, "--rate", help="Frames per second."),
+    chips: int = typer.Option(4, "--chips", help="Chips per frame."),
+    faults: bool = typer.Option(False, "--faults", help="Inject corrupt and dropped bytes, stalls, chip errors."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Soak: emulator -> driver -> baseline -> a 12-20-4 network -> MCAP recorder; every frame counted,
+    latency from arrival to estimate, CPU of the pipeline's process (emulator in another process)."""
+    from softtip.hardware import FaultPlan
+    from softtip.realtime.bench import soak
+
+    plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
+                     seed=1) if faults else None
+    with status(f"soaking for {duration:g} s", json_output):
+        report = soak(duration, rate, chips, plan)
+    if json_output:
+        print(json.dumps(report, indent=2, default=float))
+    else:
+        console.print(report)
+
+
+
+def bench_magnetics(
+    poses: list[int] = typer.Option([100_000, 1_000_000], "--poses", help="Pose sets per batch (repeatable)."),
+    sensors: list[int] = typer.Option([1, 2], "--sensors", help="Sensors (repeatable)."),
+    magnets: int = typer.Option(4, "--magnets", help="Magnets per pose set."),
+    repeats: int = typer.Option(3, "--repeats", help="Runs per batch; the fastest counts."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Readings per second of the exact field kernel, beside magpylib's on the same poses."""
+    from softtip.bench.magnetics import bench_magnetics as run
+
+    if min(poses) < 1 or min(sensors) < 1 or magnets < 1 or repeats < 1:
+        fail("--poses, --sensors, --magnets and --repeats: expected positive integers")
+    results = [run(n, magnets, s, repeats) for n in poses for s in sensors]
+    if json_output:
+        print(json.dumps(results, indent=2))
+        return
+    for r in results:
+        console.print(f"{r['n_poses']:>9,} poses x {r['n_sensors']} sensor(s), {r['n_magnets']} magnets: "
+                      f"{r['readings_per_second']:,.0f} readings/s; magpylib {r['magpylib_readings_per_second']:,.0f}; "
+                      f"ratio {r['speedup_vs_magpylib']:.1f}x")
+
+
+def bench_calibration(
+    calls: int = typer.Option(20_000, "--calls", help="Single-sample calls timed."),
+    batch: int = typer.Option(1_000_000, "--batch", help="Samples in the batch."),
+    train: int = typer.Option(20_000, "--train", help="Training samples."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """One-sample estimate, batch throughput and Levenberg-Marquardt training time of a 6-20-2
+    network, beside scikit-learn's MLPRegressor, the published polynomial and the published times."""
+    from softtip.bench.calibration import bench_calibration as run
+
+    if min(calls, batch, train) < 100:
+        fail("--calls, --batch and --train: expected at least 100")
+    with status("timing the calibration models", json_output):
+        report = run(calls, batch, train)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print(f"{report['network']}; {report['machine']['cpus']} CPUs")
+    for name, figures in report["single_sample_latency"].items():
+        console.print(f"  {name:28s} median {figures['median_us']:8.2f} µs   p99 {figures['p99_us']:8.2f} µs")
+    for name, rate in report["batch_samples_per_s"].items():
+        console.print(f"  batch {name:22s} {rate / 1e6:8.2f} M samples/s")
+    training = report["training"]
+    console.print(f"  LM training on {training['samples']} samples: {training['seconds']:.2f} s, "
+                  f"{training['epochs']} epochs, stop: {training['stop_reason']}")
+    for name, ratio in report["ratios"].items():
+        console.print(f"  {name:50s} {ratio:12.1f}x")

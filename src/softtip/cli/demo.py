@@ -1,0 +1,72 @@
+"""``softtip demo``: the main job and the insertion demonstration on the simulated sensor."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from softtip.cli.common import console, fail, status
+
+
+def demo(
+    context: typer.Context,
+    seed: int = typer.Option(1, "--seed", help="Seed of the experiments, the fabricated unit and the training."),
+    duration: float = typer.Option(20.0, "--duration", help="Seconds of live streaming."),
+    record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The main job on the built-in simulated sensor: the twin runs the 3-axis force calibration, a
+    network is fitted to it, and an emulated fingertip streams the twin's pushes through the live
+    pipeline, whose estimates are scored against the twin's true force."""
+    if context.invoked_subcommand is not None:
+        return
+    from softtip.studies.live_demo import run_main_demo
+
+    say = (lambda message: None) if json_output else (lambda message: console.print(f"[bold]{message}[/]"))
+    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record, say=say)
+    if json_output:
+        print(json.dumps(report, indent=2, default=float))
+        return
+    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator")
+    for column in ("axis", "offline MAE (N)", "offline R²", "live MAE (N)", "live peak |F| (N)"):
+        table.add_column(column, justify="right")
+    for axis, offline in report["calibration"]["validation"].items():
+        live = report["live"].get(axis, {})
+        table.add_row(axis, f"{offline['mean_abs_error_N']:.3f}", f"{offline['r2']:.4f}",
+                      f"{live.get('mean_abs_error_N', float('nan')):.3f}", f"{live.get('peak_true_N', float('nan')):.2f}")
+    console.print(table)
+    pipeline = report["pipeline"]
+    console.print(f"{report['estimated_frames']} frames estimated live; model saved at {report['model']}; "
+                  f"lost frames: {pipeline.get('lost_in_transit', 0)}")
+
+
+def demo_insertion(
+    case: str = typer.Option("good", "--case", help="good, left-clip or right-clip."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the training data and the sensors' noise."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON (outcome, state_detected, "
+                                                           "force_at_detection_N, every decision)."),
+) -> None:
+    """Feedback-controlled insertion of the inverter lid on the simulated arm: stop and retract when the
+    fingertips see a clip on part B's rim (state 2 or 3), done when the target pose is reached."""
+    from softtip.lab.insertion import CASES
+    from softtip.studies.insertion import run_insertion
+
+    if case not in CASES:
+        fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
+    with status(f"insertion, case {case}", json_output):
+        outcome = run_insertion(case, seed, say=(lambda m: None) if json_output else console.print)
+    if json_output:
+        print(json.dumps(outcome, indent=2))
+        return
+    for decision in outcome["decisions"]:
+        if decision["action"] != "approach" or decision["cycle"] % 25 == 0:
+            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] * 1e3:+.3f} mm  "
+                          f"state {decision['state']}  force {decision['force_N']:.3f} N  -> {decision['action']}")
+    estimated = outcome["force_at_detection_N"]
+    console.print(f"[bold]{outcome['outcome']}[/]: state {outcome['state_detected']} at an estimated "
+                  f"{'-' if estimated is None else f'{estimated:.3f}'} N "
+                  f"(true {outcome['true_force_at_decision_N']:.3f} N)")
+

@@ -1,0 +1,209 @@
+"""``softtip designs`` and ``softtip simulate``: the shipped designs, one load case on the twin."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from softtip import __version__
+from softtip.cli.common import console, errors, fail
+
+
+class IndenterKind(str, Enum):
+    board = "board"
+    plate = "plate"
+    sphere = "sphere"
+
+
+class Friction(str, Enum):
+    none = "none"
+    stick = "stick"
+
+
+class Model(str, Enum):
+    linear = "linear"
+    neo_hookean = "neo-hookean"
+
+
+class Switch(str, Enum):
+    on = "on"
+    off = "off"
+
+
+
+def designs(json_output: bool = typer.Option(False, "--json", help="Print JSON.")) -> None:
+    """List the shipped fingertip designs."""
+    from softtip.design.model import load_design, shipped_designs
+
+    rows = [{"name": name, "kind": (d := load_design(name)).kind, "description": d.spec.get("description", ""),
+             "magnets": len(d.magnets), "sensors": len(d.sensor_positions)} for name in shipped_designs()]
+    if json_output:
+        print(json.dumps(rows, indent=2))
+        return
+    table = Table(title="shipped designs")
+    for column in ("name", "kind", "magnets", "sensors", "description"):
+        table.add_column(column)
+    for row in rows:
+        table.add_row(*(str(row[c]) for c in ("name", "kind", "magnets", "sensors", "description")))
+    console.print(table)
+
+
+def simulate(
+    design: str = typer.Option("cylindrical-A", help="Shipped design name or path to a design TOML file."),
+    indenter: IndenterKind = typer.Option(IndenterKind.board, help="Rigid indenter."),
+    depth: float = typer.Option(1.0, help="Normal travel after first touch (mm)."),
+    angle: float = typer.Option(0.0, help="Board angle about the vertical axis (degrees)."),
+    thickness: float = typer.Option(1.6, help="Board thickness (mm)."),
+    radius: float = typer.Option(5.0, help="Sphere radius (mm)."),
+    shear_x: float = typer.Option(0.0, "--shear-x", help="Tangential travel along x after the push (mm)."),
+    shear_y: float = typer.Option(0.0, "--shear-y", help="Tangential travel along y after the push (mm)."),
+    x: float = typer.Option(0.0, help="Contact position x on the fingertip (mm)."),
+    y: float = typer.Option(0.0, help="Contact position y on the fingertip (mm)."),
+    friction: Friction = typer.Option(Friction.stick, help="Contact friction: none, or stick (no slip)."),
+    model: Model = typer.Option(Model.linear, help="Linear elasticity (fast) or neo-Hookean (large deformation)."),
+    mesh_size: float = typer.Option(1.0, "--mesh-size", help="Largest element edge (mm)."),
+    noise: Switch = typer.Option(Switch.on, help="Sensor noise and quantisation (off: the exact field)."),
+    ambient: tuple[float, float, float] = typer.Option((0.0, 0.0, 0.0), help="Uniform ambient field x y z (µT)."),
+    seed: int = typer.Option(0, help="Seed of the sensor noise."),
+    plot: Path = typer.Option(None, help="Save a section of the deformed body to this PNG file."),
+    deformed_mesh: Path = typer.Option(None, "--deformed-mesh",
+                                       help="Save the mesh and its nodal displacements to this .npz file."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
+    from softtip.design.model import MM, load_design
+    from softtip.mechanics.contact import LoadCase
+    from softtip.mechanics.indenters import make_indenter
+    from softtip.twin import Twin
+
+    for name, value in (("depth", depth), ("thickness", thickness), ("radius", radius), ("mesh-size", mesh_size)):
+        if not np.isfinite(value) or value < 0 or (value == 0 and name != "depth"):
+            fail(f"--{name} = {value}: expected a positive length in mm")
+    if plot is not None and plot.suffix.lower() != ".png":
+        fail(f"--plot {plot}: expected a file name ending in .png")
+    if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
+        fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
+    twin = Twin.finite_element(load_design(design), mesh_size=mesh_size * MM, model=model.value,
+                               ambient_field=np.array(ambient) * 1e-6)
+    load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
+                                           radius=radius * MM),
+                    depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
+                    friction=friction.value)
+    progress = None
+    if model is Model.neo_hookean and not json_output:
+        from rich.progress import Progress
+
+        bar = Progress(console=errors, transient=True)
+        bar.start()
+        task = bar.add_task("Newton load steps", total=None)
+        progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
+    try:
+        result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed), progress=progress)
+    finally:
+        if progress is not None:
+            bar.stop()
+    report = result_json(result, twin, angle, thickness, radius, mesh_size, noise is Switch.on)
+    if plot is not None:
+        from softtip.report.section import plot_section
+
+        report["plot"] = str(plot_section(result, twin.engine.mesh, plot))
+    if deformed_mesh is not None:
+        mesh, contact = twin.engine.mesh, result.solution
+        vertices = len(mesh.points)  # quadratic nodes: vertices first, then edge midpoints
+        np.savez_compressed(deformed_mesh, points_m=mesh.points, tetrahedra=mesh.tets.T,
+                            displacements_m=contact.displacements[:vertices],
+                            quadratic_nodes_m=twin.engine.body.space.nodes,
+                            quadratic_displacements_m=contact.displacements, contact_nodes=contact.contact_nodes)
+        report["deformed_mesh"] = str(deformed_mesh)
+    if json_output:
+        print(json.dumps(report, indent=2))
+    else:
+        print_result(report)
+
+
+def _mm(vector) -> list[float]:
+    return [round(float(v) * 1e3, 6) for v in vector]
+
+
+def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
+    design = result.design
+    saturated = twin.readout.sensor.saturated(result.reading_counts)
+    load = result.load
+    return {
+        "softtip": __version__,
+        "design": design.name,
+        "model": result.model,
+        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth * 1e3,
+                 "angle_deg": angle, "thickness_mm": thickness, "radius_mm": radius,
+                 "tangential_mm": _mm(load.tangential), "position_mm": _mm(load.position),
+                 "friction": load.friction},
+        "magnets": [
+            {"index": i, "position_mm": _mm(result.magnet_positions[i]),
+             "rotvec": [round(float(v), 9) for v in result.poses.rotvec[i]],
+             "feature_displacement_mm": _mm(result.feature_displacements[i]),
+             "dimension_mm": _mm([m.diameter, m.height]),
+             "polarization_T": [0.0, 0.0, m.polarization]}
+            for i, m in enumerate(design.magnets)],
+        "sensors": [
+            {"index": j, "position_mm": _mm(design.sensor_positions[j]),
+             "dB_uT": [round(float(v), 4) for v in result.reading_change_uT[j]],
+             "dB_exact_uT": [round(float(v) * 1e6, 4) for v in result.field_change[j]],
+             "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
+            for j in range(len(design.sensor_positions))],
+        "noise": noise,
+        "sensor_model": sensor_summary(twin.readout.sensor),
+        "force_N": [round(float(f), 6) for f in result.force],
+        "contact": {"nodes": int(len(result.solution.contact_nodes)), "iterations": result.solution.iterations,
+                    "factorizations": result.solution.factorizations},
+        "mesh": {"size_mm": mesh_size, "tetrahedra": int(twin.engine.mesh.tets.shape[1]),
+                 "unknowns": int(twin.engine.body.size)},
+        "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
+    }
+
+
+def sensor_summary(sensor) -> dict:
+    from softtip.sensors import conversion_time_s, lsb_uT, max_output_rate_hz, noise_rms_uT
+
+    settings = sensor.settings
+    return {"chip": "MLX90393", "settings": settings.to_dict(),
+            "lsb_uT": [float(v) for v in lsb_uT(settings)], "noise_rms_uT": [float(v) for v in noise_rms_uT(settings)],
+            "conversion_time_ms": conversion_time_s(settings) * 1e3, "max_rate_hz": max_output_rate_hz(settings)}
+
+
+def print_result(report: dict) -> None:
+    load = report["load"]
+    console.print(f"[bold]{report['design']}[/] — {load['indenter']} {load['depth_mm']:.3g} mm, "
+                  f"angle {load['angle_deg']:g}°, friction {load['friction']}, {report['model']} model")
+    magnets = Table(title="magnets after loading")
+    for column in ("#", "position (mm)", "feature displacement (mm)", "rotation vector (mrad)"):
+        magnets.add_column(column, justify="right")
+    for m in report["magnets"]:
+        magnets.add_row(str(m["index"]), _fmt(m["position_mm"], 3), _fmt(m["feature_displacement_mm"], 4),
+                        _fmt([v * 1e3 for v in m["rotvec"]], 2))
+    console.print(magnets)
+    sensors = Table(title="Hall sensors (change from the unloaded state)")
+    for column in ("#", "position (mm)", "ΔB reading (µT)", "ΔB exact (µT)", "saturated"):
+        sensors.add_column(column, justify="right")
+    for s in report["sensors"]:
+        sensors.add_row(str(s["index"]), _fmt(s["position_mm"], 2), _fmt(s["dB_uT"], 1), _fmt(s["dB_exact_uT"], 2),
+                        "yes" if s["saturated"] else "no")
+    console.print(sensors)
+    force = report["force_N"]
+    console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
+    console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
+    chip = report["sensor_model"]
+    console.print(f"MLX90393: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
+                  f"{chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
+    for key, label in (("plot", "section plot"), ("deformed_mesh", "deformed mesh")):
+        if key in report:
+            console.print(f"{label}: {report[key]}")
+
+
+def _fmt(values, digits: int) -> str:
+    return "  ".join(f"{v:+.{digits}f}" for v in values)
+
