@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from softtip.design.model import MM, Design, DesignError
+from softtip._core.units import MM
+from softtip.design.model import Design, DesignError
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.contact import ContactResult, LoadCase, solve_hyperelastic_contact, solve_linear_contact
 from softtip.mechanics.fe import BodyModel

@@ -116,8 +116,11 @@ def _value_at(table: Any, path: tuple) -> Any:
 
 
 def _plain(value: Any) -> Any:
-    """numpy scalars and arrays as the Python values they hold: settings are often built from numpy."""
     return value.tolist() if isinstance(value, (np.generic, np.ndarray)) else value
+
+
+# ``Annotated`` metadata: numpy scalars and arrays as the Python values they hold (settings are often built from numpy)
+from_numpy = BeforeValidator(_plain)
 
 
 def expect(text: str) -> WrapValidator:
@@ -136,8 +139,8 @@ def expect(text: str) -> WrapValidator:
 
 
 # building blocks, without a message of their own
-Real = Annotated[float, BeforeValidator(_plain), Strict(), Field(allow_inf_nan=False)]
-Whole = Annotated[int, BeforeValidator(_plain), Strict()]
+Real = Annotated[float, from_numpy, Strict(), Field(allow_inf_nan=False)]
+Whole = Annotated[int, from_numpy, Strict()]
 
 
 def number(expected: str = "a number", *, gt: float | None = None, ge: float | None = None,
@@ -153,7 +156,7 @@ def integer(minimum: int = 0, maximum: int | None = None, expected: str | None =
     return Annotated[Whole, expect("an integer"), Field(ge=minimum, le=maximum), expect(expected)]
 
 
-def choice(*options: Any) -> Any:
+def choice(*options: Any, expected: str | None = None) -> Any:
     """One of ``options``, of the same type (12.0 and true are not the option 12)."""
     kinds = {type(option) for option in options}
 
@@ -163,15 +166,16 @@ def choice(*options: Any) -> Any:
             raise ValueError("not an option")
         return value
 
-    return Annotated[Literal[options], BeforeValidator(same_kind), expect(f"one of {', '.join(map(str, options))}")]
+    return Annotated[Literal[options], BeforeValidator(same_kind),
+                     expect(expected or f"one of {', '.join(map(str, options))}")]
 
 
 Number = number()
 PositiveNumber = number("a positive number", gt=0)
 NonNegativeNumber = number("a number >= 0", ge=0)
-Flag = Annotated[bool, BeforeValidator(_plain), Strict(), expect("true or false")]
+Flag = Annotated[bool, from_numpy, Strict(), expect("true or false")]
 Text = Annotated[str, Strict(), Field(min_length=1), expect("a non-empty string")]
-Numbers = Annotated[list[Real], BeforeValidator(_plain), Field(min_length=1), expect("a non-empty list of numbers")]
+Numbers = Annotated[list[Real], from_numpy, Field(min_length=1), expect("a non-empty list of numbers")]
 
 
 # ---------------------------------------------------------------------------------------------- schemas

@@ -26,14 +26,13 @@ def lab_run(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
-    from softtip.cli.main import console, status
+    from softtip.cli.main import console, progress_for
     from softtip.lab import load_protocol, run_protocol
 
     loaded = load_protocol(protocol)
     if seed is not None:
         loaded.seed = seed
-    with status(f"running {loaded.name} on {loaded.design.name}", json_output):
-        dataset, timings = run_protocol(loaded)
+    dataset, timings = run_protocol(loaded, progress_for(json_output))
     path = dataset.write(output or Path(f"{loaded.name}.parquet"))
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
                "trials": len(dataset.trials), "samples": int(len(dataset.groups)), "channels": list(dataset.channels),
@@ -53,7 +52,7 @@ def reproduce(
 ) -> None:
     """Run a published study end to end (experiments on the twin -> models -> metrics) and write a
     self-contained HTML report with tables and figures beside the published figures."""
-    from softtip.cli.main import console, fail, status
+    from softtip.cli.main import console, fail, progress_for
     from softtip.report.html import write_report
     from softtip.studies.published import run_published_study
 
@@ -61,10 +60,11 @@ def reproduce(
     if study != "all" and study not in STUDY_NAMES:
         fail(f"study = {study!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
     everything = {}
+    progress = progress_for(json_output)
     for name in names:
         start = time.perf_counter()
-        with status(f"reproducing {name}", json_output):
-            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick)
+        with progress.task(f"reproducing {name}"):
+            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick, progress=progress)
         seconds = time.perf_counter() - start
         report = write_report(output / f"{name}.html", f"softtip reproduce {name}", [
             {"heading": "Twin beside the publication", "notes": notes},

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 from enum import Enum
@@ -14,6 +13,9 @@ from rich.console import Console
 from rich.table import Table
 
 from softtip import __version__
+from softtip._core.files import atomic_write
+from softtip._core.progress import SILENT, Progress, RichProgress
+from softtip._core.units import MM, UT_PER_T
 
 app = typer.Typer(help="softtip: soft magnetic tactile fingertips, from design to real-time estimates.",
                   no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
@@ -51,9 +53,9 @@ class Switch(str, Enum):
     off = "off"
 
 
-def status(message: str, quiet: bool):
-    """A spinner with ``message`` on the terminal, nothing when the output is JSON."""
-    return contextlib.nullcontext() if quiet else console.status(message)
+def progress_for(json_output: bool) -> Progress:
+    """Progress bars on stderr, none when the output is JSON."""
+    return SILENT if json_output else RichProgress(errors)
 
 
 def fail(message: str) -> None:
@@ -66,13 +68,11 @@ def user_errors(function):
     """Turn the library's validation errors into one-line messages."""
     import functools
 
-    from softtip.design.model import DesignError
-
     @functools.wraps(function)
     def wrapper(*args, **kwargs):
         try:
             return function(*args, **kwargs)
-        except (DesignError, ValueError) as error:
+        except ValueError as error:  # every config and argument error is one
             fail(str(error))
 
     return wrapper
@@ -129,7 +129,7 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
-    from softtip.design.model import MM, load_design
+    from softtip.design.model import load_design
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import make_indenter
     from softtip.twin import FingertipTwin
@@ -141,7 +141,7 @@ def simulate(
         fail(f"--plot {plot}: expected a file name ending in .png")
     if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
         fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
-    twin = FingertipTwin(load_design(design), mesh_size=mesh_size * MM, ambient_field=np.array(ambient) * 1e-6)
+    twin = FingertipTwin(load_design(design), mesh_size=mesh_size * MM, ambient_field=np.array(ambient) / UT_PER_T)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
                     depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
@@ -166,10 +166,11 @@ def simulate(
         report["plot"] = str(plot_section(result, plot))
     if deformed_mesh is not None:
         vertices = len(twin.mesh.points)  # quadratic nodes: vertices first, then edge midpoints
-        np.savez_compressed(deformed_mesh, points_m=twin.mesh.points, tetrahedra=twin.mesh.tets.T,
-                            displacements_m=result.contact.displacements[:vertices],
-                            quadratic_nodes_m=twin.body.space.nodes, quadratic_displacements_m=result.contact.displacements,
-                            contact_nodes=result.contact.contact_nodes)
+        arrays = {"points_m": twin.mesh.points, "tetrahedra": twin.mesh.tets.T,
+                  "displacements_m": result.contact.displacements[:vertices], "quadratic_nodes_m": twin.body.space.nodes,
+                  "quadratic_displacements_m": result.contact.displacements,
+                  "contact_nodes": result.contact.contact_nodes}
+        atomic_write(deformed_mesh, lambda handle: np.savez_compressed(handle, **arrays))
         report["deformed_mesh"] = str(deformed_mesh)
     if json_output:
         print(json.dumps(report, indent=2))
@@ -178,7 +179,7 @@ def simulate(
 
 
 def _mm(vector) -> list[float]:
-    return [round(float(v) * 1e3, 6) for v in vector]
+    return [round(float(v) / MM, 6) for v in vector]
 
 
 def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
@@ -189,7 +190,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
         "softtip": __version__,
         "design": design.name,
         "model": result.model,
-        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth * 1e3,
+        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth / MM,
                  "angle_deg": angle, "thickness_mm": thickness, "radius_mm": radius,
                  "tangential_mm": _mm(load.tangential), "position_mm": _mm(load.position),
                  "friction": load.friction},
@@ -203,7 +204,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
         "sensors": [
             {"index": j, "position_mm": _mm(design.sensor_positions[j]),
              "dB_uT": [round(float(v), 4) for v in result.reading_change_uT[j]],
-             "dB_exact_uT": [round(float(v) * 1e6, 4) for v in result.field_change[j]],
+             "dB_exact_uT": [round(float(v) * UT_PER_T, 4) for v in result.field_change[j]],
              "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
             for j in range(len(design.sensor_positions))],
         "noise": noise,
@@ -324,8 +325,8 @@ def demo(
         return
     from softtip.studies.live_demo import run_main_demo
 
-    say = (lambda message: None) if json_output else (lambda message: console.print(f"[bold]{message}[/]"))
-    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record, say=say)
+    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
+                           progress=progress_for(json_output))
     if json_output:
         print(json.dumps(report, indent=2, default=float))
         return
@@ -357,14 +358,15 @@ def demo_insertion(
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
-    with status(f"insertion, case {case}", json_output):
-        outcome = run_insertion(case, seed, say=(lambda m: None) if json_output else console.print)
+    progress = progress_for(json_output)
+    with progress.task(f"insertion, case {case}"):
+        outcome = run_insertion(case, seed, progress=progress)
     if json_output:
         print(json.dumps(outcome, indent=2))
         return
     for decision in outcome["decisions"]:
         if decision["action"] != "approach" or decision["cycle"] % 25 == 0:
-            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] * 1e3:+.3f} mm  "
+            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] / MM:+.3f} mm  "
                           f"state {decision['state']}  force {decision['force_N']:.3f} N  -> {decision['action']}")
     estimated = outcome["force_at_detection_N"]
     console.print(f"[bold]{outcome['outcome']}[/]: state {outcome['state_detected']} at an estimated "
@@ -410,20 +412,21 @@ def live(
         from softtip.sensors import MLX90393Settings
 
         protocol = load_protocol("force3" if scenario == "push" else "inverter")
-        with status("computing the twin's scenario", json_output):
+        progress = progress_for(json_output)
+        with progress.task("computing the twin's scenario"):
             source = (pushing_scenario if scenario == "push" else insertion_scenario)(protocol, protocol.seed)
         settings = MLX90393Settings.from_dict(protocol.design.sensor_readout)
         chips = chips or source.field_uT.shape[1]
         if not model:  # the emulated fingertip comes with its calibration, trained on the twin once
-            with status("calibrating the twin", json_output):
+            with progress.task("calibrating the twin"):
                 if scenario == "push":
                     from softtip.studies.live_demo import calibrate_force_model
 
-                    model = [calibrate_force_model(protocol.seed, say=lambda message: None, reuse=True)[0]]
+                    model = [calibrate_force_model(protocol.seed, progress, reuse=True)[0]]
                 else:
                     from softtip.studies.insertion import trained_model_files
 
-                    model = list(trained_model_files(protocol, say=lambda message: None))
+                    model = list(trained_model_files(protocol, progress))
     summary = run_live("emulator" if emulate else port, model,
                        live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
                        duration, rate_hz=rate, chips=chips, settings=settings, baseline_frames=baseline_frames,
@@ -469,7 +472,7 @@ def bench_live(
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None
-    with status(f"soaking for {duration:g} s", json_output):
+    with progress_for(json_output).task(f"soaking for {duration:g} s"):
         report = soak(duration, rate, chips, plan)
     if json_output:
         print(json.dumps(report, indent=2, default=float))

@@ -26,7 +26,7 @@ def optimize(
 ) -> None:
     """Sweep or search design parameters on the physics twin; FE results are cached, so a killed
     study resumes where it stopped."""
-    from softtip.cli.main import console, errors
+    from softtip.cli.main import console, progress_for
     from softtip.optimize.config import load_study
     from softtip.optimize.executors import make_executor
     from softtip.optimize.report import write_outputs
@@ -35,10 +35,7 @@ def optimize(
     study = load_study(config)
     directory = output if output is not None else study.output
     with make_executor(scheduler, workers) as executor:
-        if json_output:
-            result = run_study(study, executor)
-        else:
-            result = _run_with_progress(study, executor, errors)
+        result = run_study(study, executor, progress=progress_for(json_output))
     files = write_outputs(result, directory)
     if json_output:
         report = result.to_json()
@@ -49,28 +46,7 @@ def optimize(
         print_study(result, files, console)
 
 
-def _run_with_progress(study, executor, errors):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from softtip.optimize.study import run_study
-
-    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-               TextColumn("{task.fields[last]}"))
-    with Progress(*columns, console=errors, transient=True) as bar:
-        task = bar.add_task(f"{study.name} ({study.method})", total=None, last="")
-
-        def update(record, done: int, total: int) -> None:
-            value = f"{record.objective:.4g}" if record.objective is not None else record.status
-            bar.update(task, completed=done, total=total, last=f"last: {_params(record.params)} -> {value}")
-
-        return run_study(study, executor, progress=update)
-
-
 MAX_REASONS = 10  # why designs are infeasible or failed: the first few, the rest are in the CSV
-
-
-def _params(params: dict) -> str:
-    return ", ".join(f"{v:g}" for v in params.values())
 
 
 def print_study(result, files: dict[str, str], console) -> None:
@@ -95,7 +71,7 @@ def print_study(result, files: dict[str, str], console) -> None:
     console.print(table)
     problems = [r for r in rows if r.reason]
     for r in problems[:MAX_REASONS]:
-        console.print(f"[dim]{r.status}: {_params(r.params)}: {r.reason}[/]", highlight=False)
+        console.print(f"[dim]{r.status}: {r.values}: {r.reason}[/]", highlight=False)
     if len(problems) > MAX_REASONS:
         console.print(f"[dim]... and {len(problems) - MAX_REASONS} more (see results.csv)[/]")
     counts = result.counts()

@@ -48,7 +48,8 @@ from pathlib import Path
 import numpy as np
 
 from softtip import __version__
-from softtip.design.model import MM, Design, design_from_dict
+from softtip._core.units import MM
+from softtip.design.model import Design, design_from_dict
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
 from softtip.mechanics.indenters import make_indenter
