@@ -167,7 +167,8 @@ def simulate(
     if deformed_mesh is not None:
         vertices = len(twin.mesh.points)  # quadratic nodes: vertices first, then edge midpoints
         arrays = {"points_m": twin.mesh.points, "tetrahedra": twin.mesh.tets.T,
-                  "displacements_m": result.contact.displacements[:vertices], "quadratic_nodes_m": twin.body.space.nodes,
+                  "displacements_m": result.contact.displacements[:vertices],
+                  "quadratic_nodes_m": twin.body.space.nodes,
                   "quadratic_displacements_m": result.contact.displacements,
                   "contact_nodes": result.contact.contact_nodes}
         atomic_write(deformed_mesh, lambda handle: np.savez_compressed(handle, **arrays))

@@ -63,8 +63,8 @@ _FIRST_DATA_LINE = 2  # line 1 is the header
 
 ColumnName = Annotated[str, Strict(), Field(min_length=1), expect("a CSV column name")]
 _MagneticUnit = Literal[tuple(MAGNETIC_UNITS_IN_UT)]
-MagneticUnits = Annotated[_MagneticUnit | dict[str, _MagneticUnit],
-                          expect(f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")]
+MagneticUnits = Annotated[_MagneticUnit | dict[str, _MagneticUnit], expect(
+    f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")]
 UnitTable = Annotated[dict[str, Any], expect("a table of name = unit")]  # names and units: checked by the dataset
 Delimiter = Annotated[str, Strict(), Field(min_length=1, max_length=1), expect("one character")]
 SamplingRate = number("a positive sampling rate in Hz", gt=0)

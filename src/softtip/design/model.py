@@ -179,12 +179,13 @@ def _below_the_top(magnets: _Magnets, body_height: float) -> tuple[float, float]
     """z of the magnets' top and bottom faces (mm)."""
     top, bottom = body_height - magnets.depth_mm, body_height - magnets.depth_mm - magnets.height_mm
     if bottom <= 0:
-        raise Refusal(("magnets", "depth_mm"), f"the magnets reach the base (depth + height must be < {body_height} mm)")
+        raise Refusal(("magnets", "depth_mm"),
+                      f"the magnets reach the base (depth + height must be < {body_height} mm)")
     return top, bottom
 
 
 def _check_fillet_edge(key: str, outer: float, top: float, half_side: float, height: float, fillet: float,
-                   depth: float) -> None:
+                       depth: float) -> None:
     """The magnet's outer top edge must stay inside the rounded edge of the body."""
     if fillet > 0 and outer > half_side - fillet and top > height - fillet:
         if math.hypot(outer - (half_side - fillet), top - (height - fillet)) >= fillet:
@@ -194,7 +195,7 @@ def _check_fillet_edge(key: str, outer: float, top: float, half_side: float, hei
 
 def _cut_into_cavity(bottom: float, cavity_height: float) -> Refusal:
     return Refusal(("magnets", "depth_mm"), f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm "
-                  f"must be above the cavity top at {cavity_height} mm)")
+                   f"must be above the cavity top at {cavity_height} mm)")
 
 
 @schema
