@@ -105,8 +105,8 @@ def test_impossible_designs_are_refused_with_one_line_naming_the_parameter(name,
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        (lambda s: s.update(colour="red"), "unknown key 'colour'"),
-        (lambda s: s["magnets"].update(grade="N52"), "unknown key magnets.grade"),
+        (lambda s: s.update(colour="red"), "colour: unknown key"),
+        (lambda s: s["magnets"].update(grade="N52"), "magnets.grade: unknown key"),
         (lambda s: s.update(kind="spherical"), "kind = 'spherical'"),
         (lambda s: s["magnets"].update(surface_field_T=0.3), "not both"),
     ],

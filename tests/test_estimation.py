@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from softtip.design.model import MM, load_design
+from softtip._core.units import MM
+from softtip.design.model import load_design
 from softtip.mechanics.indenters import CornerPlate, TiltedPlate
 from softtip.optimize.estimation import (Steps, _simulations, cramer_rao, estimation_bounds,
                                          reading_covariance_uT2)

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from softtip.design.model import MM, load_design
+from softtip._core.units import MM
+from softtip.design.model import load_design
 from softtip.mechanics.contact import LoadCase, solve_linear_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.footprint import (SurfacePatch, footprint_cells, quadratic_triangle_shapes,

@@ -22,7 +22,7 @@ def protocol():
 @pytest.mark.parametrize("case, outcome, state", [("good", "completed", None), ("left-clip", "retracted", 2),
                                                   ("right-clip", "retracted", 3)])
 def test_insertion_cases(protocol, case, outcome, state):
-    result = run_insertion(case, protocol=protocol, say=lambda message: None)
+    result = run_insertion(case, protocol=protocol)
     assert result["outcome"] == outcome
     if state is not None:
         assert result["state_detected"] == state

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from softtip.data import Dataset
-from softtip.design.model import MM, load_design
+from softtip._core.units import MM
+from softtip.design.model import load_design
 from softtip.lab import load_protocol, protocol_from_dict, run_protocol
 from softtip.lab.engine import HeldPart, _contact_forces, interpolate_path, path_table
 from softtip.lab.protocols import DEFAULTS, RUNNERS
@@ -19,7 +20,7 @@ from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.poses import MagnetPoses
 from softtip.sensors.mlx90393 import MLX90393Settings, noise_rms_uT
-from softtip.settings import ConfigError
+from softtip._core.config import ConfigError
 from softtip.twin.influence import InfluenceEngine
 
 

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from softtip.design.model import MM, Material, load_design
+from softtip._core.units import MM
+from softtip.design.model import Material, load_design
 from softtip.mechanics.contact import LoadCase, solve_hyperelastic_contact, solve_linear_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Board, Plate, Sphere

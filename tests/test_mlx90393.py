@@ -246,7 +246,7 @@ def test_settings_refuse_out_of_range_values(field, value, message):
 
 @pytest.mark.parametrize(("osr", "dig_filt"), [(0, 0), (0, 1), (1, 0)])
 def test_settings_refuse_forbidden_osr_dig_filt(osr, dig_filt):
-    expected = f"sensor.osr = {osr} with sensor.dig_filt = {dig_filt}: not permitted"
+    expected = f"sensor.dig_filt = {dig_filt}: not permitted with sensor.osr = {osr}"
     with pytest.raises(ValueError, match=expected):
         MLX90393Settings(osr=osr, dig_filt=dig_filt)
 
@@ -257,7 +257,7 @@ def test_settings_accept_permitted_osr_dig_filt(osr, dig_filt):
 
 
 def test_from_dict_refuses_unknown_key():
-    with pytest.raises(ValueError, match=r"^sensor\.gain: unknown key; expected one of gain_sel, "):
+    with pytest.raises(ValueError, match=r"^sensor\.gain: unknown key \(expected one of dig_filt, gain_sel, "):
         MLX90393Settings.from_dict({"gain": 3})
 
 

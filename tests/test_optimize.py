@@ -20,9 +20,10 @@ from softtip.optimize.cache import FEResultCache, cache_key
 from softtip.optimize.config import load_study, study_from_dict
 from softtip.optimize import executors
 from softtip.optimize.executors import DaskExecutor, InProcessExecutor, LocalPoolExecutor, make_executor
-from softtip.optimize.objectives import Objective, objective, objective_names
-from softtip.optimize.runs import FEResult, Simulation, read_simulation
-from softtip.optimize.settings import StudyError
+from softtip._core.config import PositiveNumber, schema
+from softtip.optimize.errors import StudyError
+from softtip.optimize.objectives import Objective, ObjectiveSettings, objective, objective_names
+from softtip.optimize.runs import FEResult, Simulation
 from softtip.optimize.space import Constraint, grid_candidates
 from softtip.optimize.report import plot_objective, write_outputs
 from softtip.optimize.study import DesignRecord, StudyResult, run_study
@@ -312,12 +313,15 @@ def test_a_design_whose_fe_run_fails_is_recorded_and_not_cached(tmp_path, monkey
 # --------------------------------------------------------------------------- objectives are pluggable
 
 
-@objective("test_vertical_force")
+@schema
+class ScaledForce(ObjectiveSettings):
+    scale: PositiveNumber = 1.0
+
+
+@objective("test_vertical_force", ScaledForce)
 def vertical_force(settings, design) -> Objective:
-    simulation = read_simulation(settings)
-    scale = settings.number("scale", 1.0, positive=True)
-    return Objective(name="test_vertical_force", simulations=(simulation,), goal="min", unit="N",
-                     score=lambda design, results: scale * float(results[0].force_N[2]))
+    return Objective(name="test_vertical_force", simulations=(Simulation.of(settings),), goal="min", unit="N",
+                     score=lambda design, results: settings.scale * float(results[0].force_N[2]))
 
 
 def test_objectives_register_from_other_modules(tmp_path, monkeypatch):
@@ -332,11 +336,12 @@ def test_objectives_register_from_other_modules(tmp_path, monkeypatch):
 
     # a module named by the study registers its objectives when the study is read
     (tmp_path / "lab_objectives.py").write_text(textwrap.dedent("""
-        from softtip.optimize.objectives import Objective, objective, read_simulation
+        from softtip.optimize.objectives import Objective, objective
+        from softtip.optimize.runs import Simulation
 
         @objective("lab_rotation")
         def lab_rotation(settings, design):
-            return Objective(name="lab_rotation", simulations=(read_simulation(settings),), unit="rad",
+            return Objective(name="lab_rotation", simulations=(Simulation.of(settings),), unit="rad",
                              score=lambda design, results: float(abs(results[0].magnet_rotvecs_rad).max()))
     """))
     monkeypatch.syspath_prepend(str(tmp_path))

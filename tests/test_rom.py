@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from softtip.design.model import MM, load_design
+from softtip._core.units import MM
+from softtip.design.model import load_design
 from softtip.mechanics.contact import LoadCase, solve_linear_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Board, Sphere

@@ -1,1 +1,9 @@
-"""softtip's private core: what every stage shares and no stage owns."""
+"""What every stage of softtip shares, each concept in one module.
+
+- :mod:`~softtip._core.config`: the TOML reader and declarative schemas with one-line errors;
+- :mod:`~softtip._core.files`: replacing a file atomically;
+- :mod:`~softtip._core.progress`: reporting the progress of long jobs;
+- :mod:`~softtip._core.units`: unit constants (SI internally);
+- :mod:`~softtip._core.channels`: the names of the sensor channels;
+- :mod:`~softtip._core.network`: the run-time of the tanh networks (calibration models, reduced twin).
+"""

@@ -7,8 +7,9 @@ from typing import Callable
 
 import numpy as np
 
+from softtip._core.units import MM
 from softtip.bench.timing import timed
-from softtip.design.model import MM, load_design
+from softtip.design.model import load_design
 from softtip.mechanics.contact import LoadCase, penalty_blocks
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.linsolve import SPDSolver
@@ -52,7 +53,7 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
             "total_s_mesh_cached": t_push, "unknowns": int(body.size), "contact_nodes": int(len(nodes)),
             "contact_solve_s": t_contact, "fixed_area_linear_solve_s": t_linear,
             "contact_over_linear": t_contact / t_linear, "factorizations": result.solution.factorizations,
-            "feature_dz_mm": [float(v) for v in result.feature_displacements[:, 2] * 1e3],
+            "feature_dz_mm": [float(v) for v in result.feature_displacements[:, 2] / MM],
             "force_N": [float(v) for v in result.force], "timings_s": result.timings}
         say(f"1 mm board push (stick), mesh cached: {t_push:.2f} s total; contact solve {t_contact:.2f} s = "
             f"{t_contact / t_linear:.2f} x one fixed-area linear solve ({t_linear:.2f} s); "
@@ -64,7 +65,7 @@ def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, po
             report["neo_hookean_push_3mm"] = {"total_s": t_neo, "newton_iterations": neo.solution.iterations,
                                               "factorizations": neo.solution.factorizations,
                                               "force_N": [float(v) for v in neo.force],
-                                              "feature_dz_mm": [float(v) for v in neo.feature_displacements[:, 2] * 1e3]}
+                                              "feature_dz_mm": [float(v) for v in neo.feature_displacements[:, 2] / MM]}
             say(f"neo-Hookean 3 mm board push: {t_neo:.1f} s, {neo.solution.iterations} Newton iterations")
 
         report["magnetics_sensor"] = _bench_readings(twin.readout, poses, say)

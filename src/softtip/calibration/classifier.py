@@ -18,6 +18,7 @@ from sklearn.base import ClassifierMixin
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import column_or_1d, validate_data
 
+from softtip._core.config import PositiveNumber, schema
 from softtip._core.network import forward_one
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
@@ -32,7 +33,7 @@ from softtip.calibration.feedforward import (
     to_unit_range,
     unpack,
 )
-from softtip.calibration.network import TanhNetworkBase, TrainingResult
+from softtip.calibration.network import TanhNetworkBase, TanhNetworkSettings, TrainingResult
 
 
 def cross_entropy_and_gradient(layers: list[np.ndarray], inputs: np.ndarray,
@@ -129,6 +130,12 @@ def scaled_conjugate_gradient(layers: list[np.ndarray], train: tuple[np.ndarray,
                           stop_reason, stopping.best_epoch)
 
 
+@schema
+class SCGSettings(TanhNetworkSettings):
+    sigma: PositiveNumber
+    lambda_init: PositiveNumber
+
+
 class SoftmaxClassifier(ClassifierMixin, TanhNetworkBase):
     """Classifier network (tanh hidden layers, softmax output) trained by scaled conjugate
     gradient with validation early stopping; see the module notes.
@@ -139,6 +146,8 @@ class SoftmaxClassifier(ClassifierMixin, TanhNetworkBase):
     ``validation``/``test`` mean cross-entropy, ``lambda``, ``gradient``), ``stop_reason_``
     (``goal``, ``max_epochs``, ``min_grad`` or ``validation``) and ``best_epoch_``.
     """
+
+    _SETTINGS = SCGSettings
 
     def __init__(self, hidden_layer_sizes=(10,), *, max_epochs=1000, max_fail=6, sigma=5e-5, lambda_init=5e-7,
                  min_grad=1e-6, goal=0.0, division=(0.70, 0.15, 0.15), random_state=None):
@@ -158,9 +167,8 @@ class SoftmaxClassifier(ClassifierMixin, TanhNetworkBase):
         ``groups``: one label per sample (e.g. the trial); the division then keeps groups whole.
         ``validation_data``: (X_val, y_val) to validate on instead of a share of X.
         """
-        settings = self._check_network_params()
-        sigma = checks.real("sigma", self.sigma, above=0.0)
-        lambda_init = checks.real("lambda_init", self.lambda_init, above=0.0)
+        settings = self._settings()
+        rng = np.random.default_rng(settings.random_state)
         X, y = validate_data(self, X, y, dtype=np.float64)
         check_classification_targets(y)
         self.classes_, labels = np.unique(y, return_inverse=True)
@@ -173,14 +181,14 @@ class SoftmaxClassifier(ClassifierMixin, TanhNetworkBase):
         if validation_data is not None:
             val_inputs, val_labels = self._validation_pair(validation_data, X.shape[1])
             validation = (val_inputs, self._one_hot(column_or_1d(val_labels), "validation_data y"))
-        parts = self._divide(X, one_hot, groups, validation, settings["division"], settings["rng"])
+        parts = self._divide(X, one_hot, groups, validation, settings.division, rng)
         scaled = [(to_unit_range(inputs, self.input_min_, self.input_max_), targets) for inputs, targets in parts]
-        sizes = [X.shape[1], *settings["sizes"], len(self.classes_)]
+        sizes = [X.shape[1], *settings.hidden_layer_sizes, len(self.classes_)]
         with single_threaded_blas():
             result = scaled_conjugate_gradient(
-                initial_layers(sizes, settings["rng"]), *scaled, max_epochs=settings["max_epochs"],
-                max_fail=settings["max_fail"], sigma=sigma, lambda_init=lambda_init, min_grad=settings["min_grad"],
-                goal=settings["goal"])
+                initial_layers(sizes, rng), *scaled, max_epochs=settings.max_epochs, max_fail=settings.max_fail,
+                sigma=settings.sigma, lambda_init=settings.lambda_init, min_grad=settings.min_grad,
+                goal=settings.goal)
         self.weights_ = [np.array(w) for w in result.layers]
         self.history_ = result.history
         self.stop_reason_ = result.stop_reason

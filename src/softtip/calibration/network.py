@@ -24,13 +24,29 @@ Errors in ``history_`` are mean squared errors of the scaled targets.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import scipy.linalg
+from pydantic import AfterValidator, BeforeValidator, Field
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
+from softtip._core.config import (
+    NonNegativeNumber,
+    Number,
+    PositiveNumber,
+    Real,
+    Refusal,
+    Whole,
+    expect,
+    integer,
+    number,
+    parse,
+    schema,
+)
 from softtip._core.network import PREDICT_CHUNK, forward_one, predict_batch
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
@@ -123,19 +139,57 @@ def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.nd
                           stop_reason, stopping.best_epoch)
 
 
+def _one_or_more(sizes):
+    return (sizes,) if isinstance(sizes, numbers.Integral) and not isinstance(sizes, bool) else sizes
+
+
+def _fractions(fractions: tuple[float, float, float]) -> tuple[float, float, float]:
+    if min(fractions) < 0 or fractions[0] <= 0 or abs(sum(fractions) - 1.0) > 1e-9:
+        raise ValueError("not a division")
+    return fractions
+
+
+LayerSizes = Annotated[tuple[integer(1), ...], BeforeValidator(_one_or_more), Field(min_length=1),
+                       expect("one or more positive integers")]
+Division = Annotated[tuple[Real, Real, Real], AfterValidator(_fractions),
+                     expect("(train, validation, test) fractions >= 0 summing to 1 with train > 0")]
+Fraction = number("a number between 0 and 1", gt=0, lt=1)
+Growth = number("a number > 1", gt=1)
+RandomState = Annotated[None | Whole | np.random.Generator, expect("None, an int or a numpy Generator")]
+
+
+@schema
+class TanhNetworkSettings:
+    """The hyper-parameters the tanh networks share, checked at fit time (scikit-learn stores them as given)."""
+
+    hidden_layer_sizes: LayerSizes
+    max_epochs: integer(0)
+    max_fail: integer(1)
+    min_grad: NonNegativeNumber
+    goal: NonNegativeNumber
+    division: Division
+    random_state: RandomState
+
+
+@schema
+class LMSettings(TanhNetworkSettings):
+    mu: PositiveNumber
+    mu_dec: Fraction
+    mu_inc: Growth
+    mu_max: Number
+
+    def __post_init__(self):
+        if not self.mu_max > self.mu:
+            raise Refusal("mu_max", f"expected a number > mu = {self.mu}")
+
+
 class TanhNetworkBase(BaseEstimator):
     """What the tanh networks share: hyper-parameter checks, data division, run-time weights."""
 
-    def _check_network_params(self) -> dict:
-        return {
-            "sizes": checks.layer_sizes(self.hidden_layer_sizes),
-            "max_epochs": checks.integer("max_epochs", self.max_epochs, 0),
-            "max_fail": checks.integer("max_fail", self.max_fail, 1),
-            "min_grad": checks.real("min_grad", self.min_grad, at_least=0.0),
-            "goal": checks.real("goal", self.goal, at_least=0.0),
-            "division": checks.division(self.division),
-            "rng": checks.generator(self.random_state),
-        }
+    _SETTINGS: type[TanhNetworkSettings]  # the schema of the estimator's hyper-parameters
+
+    def _settings(self) -> TanhNetworkSettings:
+        return parse(self._SETTINGS, self.get_params(), type(self).__name__)
 
     def _validation_pair(self, validation_data, n_features: int) -> tuple[np.ndarray, object]:
         """Checked inputs and the raw targets of ``validation_data``."""
@@ -176,7 +230,7 @@ class TanhNetworkBase(BaseEstimator):
     def _restore_network(self, arrays: dict[str, np.ndarray], state: dict, n_outputs: int) -> None:
         """Set the fitted attributes shared by the networks from saved arrays, checking shapes."""
         n_inputs = checks.stored_int(state, "n_features_in", 1)
-        shapes = layer_shapes([n_inputs, *checks.layer_sizes(self.hidden_layer_sizes), n_outputs])
+        shapes = layer_shapes([n_inputs, *self._settings().hidden_layer_sizes, n_outputs])
         self.weights_ = [checks.stored_array(arrays, f"weights/{i}", shape) for i, shape in enumerate(shapes)]
         if f"weights/{len(shapes)}" in arrays:
             raise ValueError(f"more weight arrays than the {len(shapes)} layers of hidden_layer_sizes")
@@ -219,6 +273,8 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
     and ``best_epoch_``.
     """
 
+    _SETTINGS = LMSettings
+
     def __init__(self, hidden_layer_sizes=(10,), *, max_epochs=1000, max_fail=6, mu=1e-3, mu_dec=0.1,
                  mu_inc=10.0, mu_max=1e10, min_grad=1e-7, goal=0.0, division=(0.70, 0.15, 0.15),
                  random_state=None):
@@ -245,13 +301,8 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
         ``groups``: one label per sample (e.g. the trial); the division then keeps groups whole.
         ``validation_data``: (X_val, y_val) to validate on instead of a share of X.
         """
-        settings = self._check_network_params()
-        mu = checks.real("mu", self.mu, above=0.0)
-        mu_dec = checks.real("mu_dec", self.mu_dec, above=0.0)
-        mu_inc = checks.real("mu_inc", self.mu_inc, above=1.0)
-        mu_max = checks.real("mu_max", self.mu_max, above=mu)
-        if mu_dec >= 1.0:
-            raise ValueError(f"mu_dec must be below 1, got {self.mu_dec!r}")
+        settings = self._settings()
+        rng = np.random.default_rng(settings.random_state)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         targets = y.reshape(len(y), -1).astype(np.float64)
         self.input_min_, self.input_max_ = X.min(axis=0), X.max(axis=0)
@@ -266,15 +317,15 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
                 raise ValueError(f"validation_data y has {val_targets.shape[1]} outputs, "
                                  f"the training data {self.n_outputs_}")
             validation = (val_inputs, val_targets)
-        parts = self._divide(X, targets, groups, validation, settings["division"], settings["rng"])
+        parts = self._divide(X, targets, groups, validation, settings.division, rng)
         scaled = [(to_unit_range(inputs, self.input_min_, self.input_max_),
                    to_unit_range(outputs, self.target_min_, self.target_max_)) for inputs, outputs in parts]
-        sizes = [X.shape[1], *settings["sizes"], self.n_outputs_]
+        sizes = [X.shape[1], *settings.hidden_layer_sizes, self.n_outputs_]
         with single_threaded_blas():
             result = levenberg_marquardt(
-                initial_layers(sizes, settings["rng"]), *scaled, max_epochs=settings["max_epochs"],
-                max_fail=settings["max_fail"], mu=mu, mu_dec=mu_dec, mu_inc=mu_inc, mu_max=mu_max,
-                min_grad=settings["min_grad"], goal=settings["goal"])
+                initial_layers(sizes, rng), *scaled, max_epochs=settings.max_epochs, max_fail=settings.max_fail,
+                mu=settings.mu, mu_dec=settings.mu_dec, mu_inc=settings.mu_inc, mu_max=settings.mu_max,
+                min_grad=settings.min_grad, goal=settings.goal)
         self.weights_ = [np.array(w) for w in result.layers]
         self.history_ = result.history
         self.stop_reason_ = result.stop_reason

@@ -31,7 +31,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -43,6 +42,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 
 from softtip import __version__
+from softtip._core.files import atomic_write
 from softtip.calibration import checks
 from softtip.calibration.classifier import SoftmaxClassifier
 from softtip.calibration.network import LMNetwork
@@ -186,14 +186,7 @@ def _digest(metadata: dict, arrays: dict[str, np.ndarray]) -> str:
 def _write(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> None:
     """Write atomically: a crash leaves either the old file or the new one, never half of it."""
     metadata = metadata | {"sha256": _digest(metadata, arrays)}
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(descriptor, "wb") as handle:
-            np.savez(handle, metadata=np.array(_canonical(metadata).decode()), **arrays)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    atomic_write(path, lambda handle: np.savez(handle, metadata=np.array(_canonical(metadata).decode()), **arrays))
 
 
 def _names(value, count: int, what: str, *, broadcast: bool) -> tuple[str, ...]:

@@ -14,6 +14,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from softtip._core.config import integer, parse, schema
 from softtip.calibration import checks
 
 
@@ -31,6 +32,11 @@ def polynomial_features(inputs: np.ndarray, degree: int) -> np.ndarray:
     return np.column_stack([_powers(inputs, degree).reshape(len(inputs), -1), np.ones(len(inputs))])
 
 
+@schema
+class PolynomialSettings:
+    degree: integer(1)
+
+
 class PolynomialFit(RegressorMixin, BaseEstimator):
     """Per-channel polynomial of ``degree`` without cross terms, least squares by pseudo-inverse.
 
@@ -46,10 +52,14 @@ class PolynomialFit(RegressorMixin, BaseEstimator):
         tags.target_tags.multi_output = True
         return tags
 
+    def _degree(self) -> int:
+        """The degree, checked (scikit-learn stores it as given)."""
+        return parse(PolynomialSettings, self.get_params(), type(self).__name__).degree
+
     def fit(self, X, y, groups=None):
         """Least squares by pseudo-inverse. ``groups`` (the trial of each sample) is accepted so that
         every softtip model is fitted the same way; a closed-form fit holds nothing out."""
-        degree = checks.integer("degree", self.degree, 1)
+        degree = self._degree()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         targets = y.reshape(len(y), -1).astype(np.float64)
         design = polynomial_features(X, degree)
@@ -79,7 +89,7 @@ class PolynomialFit(RegressorMixin, BaseEstimator):
     def _restore(cls, params: dict, arrays: dict[str, np.ndarray], state: dict) -> PolynomialFit:
         """A fitted polynomial from :meth:`_export` output; ValueError if the parts do not fit together."""
         fit = cls(**params)
-        degree = checks.integer("degree", fit.degree, 1)
+        degree = fit._degree()
         fit.n_features_in_ = checks.stored_int(state, "n_features_in", 1)
         fit.n_outputs_ = checks.stored_int(state, "n_outputs", 1)
         fit.coef_ = checks.stored_array(arrays, "coef", (fit.n_features_in_ * degree + 1, fit.n_outputs_))

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from softtip.cli.common import console, fail, status
+from softtip.cli.common import console, fail, progress_for
 
 
 class RomFriction(str, Enum):  # contact on footprint cells adds Coulomb's law
@@ -73,7 +73,7 @@ def bench_live(
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None
-    with status(f"soaking for {duration:g} s", json_output):
+    with progress_for(json_output).task(f"soaking for {duration:g} s"):
         report = soak(duration, rate, chips, plan)
     if json_output:
         print(json.dumps(report, indent=2, default=float))
@@ -116,7 +116,7 @@ def bench_calibration(
 
     if min(calls, batch, train) < 100:
         fail("--calls, --batch and --train: expected at least 100")
-    with status("timing the calibration models", json_output):
+    with progress_for(json_output).task("timing the calibration models"):
         report = run(calls, batch, train)
     if json_output:
         print(json.dumps(report, indent=2))

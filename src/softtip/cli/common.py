@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
-import contextlib
 import functools
 
 import typer
 from rich.console import Console
 
+from softtip._core.progress import SILENT, Progress, RichProgress
+
 console = Console()
 errors = Console(stderr=True)
 
 
-def status(message: str, quiet: bool):
-    """A spinner with ``message`` on the terminal, nothing when the output is JSON."""
-    return contextlib.nullcontext() if quiet else console.status(message)
+def progress_for(json_output: bool) -> Progress:
+    """Progress bars on stderr, none when the output is JSON."""
+    return SILENT if json_output else RichProgress(errors)
 
 
 def fail(message: str) -> None:
@@ -25,13 +26,11 @@ def fail(message: str) -> None:
 
 def user_errors(function):
     """Turn the library's validation errors into one-line messages."""
-    from softtip.design.model import DesignError
-
     @functools.wraps(function)
     def wrapper(*args, **kwargs):
         try:
             return function(*args, **kwargs)
-        except (DesignError, ValueError) as error:
+        except ValueError as error:  # every config and argument error is one
             fail(str(error))
 
     return wrapper

@@ -8,7 +8,8 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from softtip.cli.common import console, fail, status
+from softtip._core.units import MM
+from softtip.cli.common import console, fail, progress_for
 
 
 def demo(
@@ -25,8 +26,8 @@ def demo(
         return
     from softtip.studies.live_demo import run_main_demo
 
-    say = (lambda message: None) if json_output else (lambda message: console.print(f"[bold]{message}[/]"))
-    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record, say=say)
+    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
+                           progress=progress_for(json_output))
     if json_output:
         print(json.dumps(report, indent=2, default=float))
         return
@@ -56,14 +57,15 @@ def demo_insertion(
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
-    with status(f"insertion, case {case}", json_output):
-        outcome = run_insertion(case, seed, say=(lambda m: None) if json_output else console.print)
+    progress = progress_for(json_output)
+    with progress.task(f"insertion, case {case}"):
+        outcome = run_insertion(case, seed, progress=progress)
     if json_output:
         print(json.dumps(outcome, indent=2))
         return
     for decision in outcome["decisions"]:
         if decision["action"] != "approach" or decision["cycle"] % 25 == 0:
-            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] * 1e3:+.3f} mm  "
+            console.print(f"t = {decision['time_s']:6.2f} s  height {decision['pose'][0] / MM:+.3f} mm  "
                           f"state {decision['state']}  force {decision['force_N']:.3f} N  -> {decision['action']}")
     estimated = outcome["force_at_detection_N"]
     console.print(f"[bold]{outcome['outcome']}[/]: state {outcome['state_detected']} at an estimated "

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from softtip.cli.common import console, fail, status
+from softtip.cli.common import console, fail, progress_for
 from softtip.studies.registry import STUDIES
 
 STUDY_NAMES = tuple(STUDIES)
@@ -30,8 +30,7 @@ def lab_run(
     loaded = load_protocol(protocol)
     if seed is not None:
         loaded.seed = seed
-    with status(f"running {loaded.name} on {loaded.design.name}", json_output):
-        dataset, timings = run_protocol(loaded)
+    dataset, timings = run_protocol(loaded, progress_for(json_output))
     path = dataset.write(output or Path(f"{loaded.name}.parquet"))
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
                "trials": len(dataset.trials), "samples": int(len(dataset.groups)), "channels": list(dataset.channels),
@@ -58,10 +57,11 @@ def reproduce(
     if study != "all" and study not in STUDY_NAMES:
         fail(f"study = {study!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
     everything = {}
+    progress = progress_for(json_output)
     for name in names:
         start = time.perf_counter()
-        with status(f"reproducing {name}", json_output):
-            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick)
+        with progress.task(f"reproducing {name}"):
+            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick, progress=progress)
         seconds = time.perf_counter() - start
         report = write_report(output / f"{name}.html", f"softtip reproduce {name}", [
             {"heading": "Twin beside the publication", "notes": notes},

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from softtip.cli.common import console, fail, status
+from softtip.cli.common import console, fail, progress_for
 
 
 def live(
@@ -46,20 +46,21 @@ def live(
         from softtip.sensors import MLX90393Settings
 
         protocol = load_protocol("force3" if scenario == "push" else "inverter")
-        with status("computing the twin's scenario", json_output):
+        progress = progress_for(json_output)
+        with progress.task("computing the twin's scenario"):
             source = (pushing_scenario if scenario == "push" else insertion_scenario)(protocol, protocol.seed)
         settings = MLX90393Settings.from_dict(protocol.design.sensor_readout)
         chips = chips or source.field_uT.shape[1]
         if not model:  # the emulated fingertip comes with its calibration, trained on the twin once
-            with status("calibrating the twin", json_output):
+            with progress.task("calibrating the twin"):
                 if scenario == "push":
                     from softtip.studies.live_demo import calibrate_force_model
 
-                    model = [calibrate_force_model(protocol.seed, say=lambda message: None, reuse=True)[0]]
+                    model = [calibrate_force_model(protocol.seed, progress, reuse=True)[0]]
                 else:
                     from softtip.studies.insertion import trained_model_files
 
-                    model = list(trained_model_files(protocol, say=lambda message: None))
+                    model = list(trained_model_files(protocol, progress))
     summary = run_live("emulator" if emulate else port, model,
                        live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
                        duration, rate_hz=rate, chips=chips, settings=settings, baseline_frames=baseline_frames,

@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from softtip.cli.common import console, errors
+from softtip.cli.common import console, progress_for
 
 
 def optimize(
@@ -32,10 +32,7 @@ def optimize(
     study = load_study(config)
     directory = output if output is not None else study.output
     with make_executor(scheduler, workers) as executor:
-        if json_output:
-            result = run_study(study, executor)
-        else:
-            result = _run_with_progress(study, executor, errors)
+        result = run_study(study, executor, progress=progress_for(json_output))
     files = write_outputs(result, directory)
     if json_output:
         report = result.to_json()
@@ -46,28 +43,7 @@ def optimize(
         print_study(result, files, console)
 
 
-def _run_with_progress(study, executor, errors):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from softtip.optimize.study import run_study
-
-    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-               TextColumn("{task.fields[last]}"))
-    with Progress(*columns, console=errors, transient=True) as bar:
-        task = bar.add_task(f"{study.name} ({study.method})", total=None, last="")
-
-        def update(record, done: int, total: int) -> None:
-            value = f"{record.objective:.4g}" if record.objective is not None else record.status
-            bar.update(task, completed=done, total=total, last=f"last: {_params(record.params)} -> {value}")
-
-        return run_study(study, executor, progress=update)
-
-
 MAX_REASONS = 10  # why designs are infeasible or failed: the first few, the rest are in the CSV
-
-
-def _params(params: dict) -> str:
-    return ", ".join(f"{v:g}" for v in params.values())
 
 
 def print_study(result, files: dict[str, str], console) -> None:
@@ -92,7 +68,7 @@ def print_study(result, files: dict[str, str], console) -> None:
     console.print(table)
     problems = [r for r in rows if r.reason]
     for r in problems[:MAX_REASONS]:
-        console.print(f"[dim]{r.status}: {_params(r.params)}: {r.reason}[/]", highlight=False)
+        console.print(f"[dim]{r.status}: {r.values}: {r.reason}[/]", highlight=False)
     if len(problems) > MAX_REASONS:
         console.print(f"[dim]... and {len(problems) - MAX_REASONS} more (see results.csv)[/]")
     counts = result.counts()

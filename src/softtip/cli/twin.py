@@ -11,6 +11,8 @@ import typer
 from rich.table import Table
 
 from softtip import __version__
+from softtip._core.files import atomic_write
+from softtip._core.units import MM, UT_PER_T
 from softtip.cli.common import console, errors, fail
 
 
@@ -76,7 +78,7 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
-    from softtip.design.model import MM, load_design
+    from softtip.design.model import load_design
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import make_indenter
     from softtip.twin import Twin
@@ -89,7 +91,7 @@ def simulate(
     if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
         fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
     twin = Twin.finite_element(load_design(design), mesh_size=mesh_size * MM, model=model.value,
-                               ambient_field=np.array(ambient) * 1e-6)
+                               ambient_field=np.array(ambient) / UT_PER_T)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
                     depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
@@ -115,10 +117,10 @@ def simulate(
     if deformed_mesh is not None:
         mesh, contact = twin.engine.mesh, result.solution
         vertices = len(mesh.points)  # quadratic nodes: vertices first, then edge midpoints
-        np.savez_compressed(deformed_mesh, points_m=mesh.points, tetrahedra=mesh.tets.T,
-                            displacements_m=contact.displacements[:vertices],
-                            quadratic_nodes_m=twin.engine.body.space.nodes,
-                            quadratic_displacements_m=contact.displacements, contact_nodes=contact.contact_nodes)
+        arrays = {"points_m": mesh.points, "tetrahedra": mesh.tets.T, "displacements_m": contact.displacements[:vertices],
+                  "quadratic_nodes_m": twin.engine.body.space.nodes,
+                  "quadratic_displacements_m": contact.displacements, "contact_nodes": contact.contact_nodes}
+        atomic_write(deformed_mesh, lambda handle: np.savez_compressed(handle, **arrays))
         report["deformed_mesh"] = str(deformed_mesh)
     if json_output:
         print(json.dumps(report, indent=2))
@@ -127,7 +129,7 @@ def simulate(
 
 
 def _mm(vector) -> list[float]:
-    return [round(float(v) * 1e3, 6) for v in vector]
+    return [round(float(v) / MM, 6) for v in vector]
 
 
 def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
@@ -138,7 +140,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
         "softtip": __version__,
         "design": design.name,
         "model": result.model,
-        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth * 1e3,
+        "load": {"indenter": type(load.indenter).__name__.lower(), "depth_mm": load.depth / MM,
                  "angle_deg": angle, "thickness_mm": thickness, "radius_mm": radius,
                  "tangential_mm": _mm(load.tangential), "position_mm": _mm(load.position),
                  "friction": load.friction},
@@ -152,7 +154,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
         "sensors": [
             {"index": j, "position_mm": _mm(design.sensor_positions[j]),
              "dB_uT": [round(float(v), 4) for v in result.reading_change_uT[j]],
-             "dB_exact_uT": [round(float(v) * 1e6, 4) for v in result.field_change[j]],
+             "dB_exact_uT": [round(float(v) * UT_PER_T, 4) for v in result.field_change[j]],
              "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
             for j in range(len(design.sensor_positions))],
         "noise": noise,

@@ -1,7 +1,9 @@
 """Recorded and simulated trials: the dataset format, a CSV loader and trial-wise splits.
 
 - :mod:`softtip.data.dataset`: :class:`Dataset` (one Parquet file, metadata as JSON),
-  :class:`TrialWriter` (trial by trial), :func:`concat`;
+  :class:`TrialWriter` (trial by trial), :func:`concat`, and the channel names
+  (:func:`channel_name`, :func:`channel_names`, :func:`channel_columns`, from
+  :mod:`softtip._core.channels`);
 - :mod:`softtip.data.csvload`: :func:`read_csv_recording` (a column mapping and unit
   conversion for real recordings);
 - :mod:`softtip.data.splits`: calibration / validation splits that keep every trial on one
@@ -9,6 +11,7 @@
   :func:`leave_condition_out`), and :func:`split_by_sample`, which warns.
 """
 
+from softtip._core.channels import channel_columns, channel_name, channel_names
 from softtip.data.csvload import MAGNETIC_UNITS_IN_UT, TIME_UNITS_IN_S, read_csv_recording
 from softtip.data.dataset import (
     FORMAT,
@@ -17,9 +20,6 @@ from softtip.data.dataset import (
     DatasetError,
     DatasetMetadata,
     TrialWriter,
-    channel_columns,
-    channel_name,
-    channel_names,
     concat,
     subtract_trial_baseline,
 )

@@ -30,17 +30,20 @@ given both ways is refused.
 
 from __future__ import annotations
 
-import numbers
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
+from pydantic import Field, Strict
+
+from softtip._core.channels import is_channel
+from softtip._core.config import choice, expect, integer, number, parse, read_toml, schema
 
 from softtip.data.dataset import (
     DIMENSIONLESS,
@@ -50,60 +53,43 @@ from softtip.data.dataset import (
     DatasetError,
     DatasetMetadata,
     column_to_numpy,
-    is_channel,
     subtract_trial_baseline,
     trial_runs,
 )
-from softtip.tomlfile import read_toml
 
 MAGNETIC_UNITS_IN_UT = {"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}  # 1 G = 1e-4 T
 TIME_UNITS_IN_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
-_DEFAULTS: dict[str, Any] = {"trial_column": None, "time_column": None, "time_unit": "s", "rate_hz": None,
-                             "units": "uT", "labels": {}, "conditions": {}, "baseline_samples": 0,
-                             "delimiter": ","}
 _FIRST_DATA_LINE = 2  # line 1 is the header
 
-
-def _check_option(source: str, key: str, value: Any) -> Any:
-    """One layout setting, type-checked; ``source`` says where it came from."""
-    def fail(expected: str) -> DatasetError:
-        return DatasetError(f"{source}: {key} = {value!r}: expected {expected}")
-
-    if key in ("trial_column", "time_column"):
-        if not isinstance(value, str) or not value:
-            raise fail("a CSV column name")
-    elif key == "time_unit":
-        if value not in TIME_UNITS_IN_S:
-            raise fail(f"one of {', '.join(TIME_UNITS_IN_S)}")
-    elif key == "rate_hz":
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < float("inf"):
-            raise fail("a positive sampling rate in Hz")
-        value = float(value)
-    elif key == "units":
-        for unit in [value] if isinstance(value, str) else (value.values() if isinstance(value, Mapping) else [None]):
-            if unit not in MAGNETIC_UNITS_IN_UT:
-                raise fail(f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")
-    elif key in ("labels", "conditions"):
-        if not isinstance(value, Mapping):
-            raise fail("a table of name = unit")
-    elif key == "baseline_samples":
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
-            raise fail("a number of samples >= 0")
-    elif key == "delimiter":
-        if not isinstance(value, str) or len(value) != 1:
-            raise fail("one character")
-    return value
+ColumnName = Annotated[str, Strict(), Field(min_length=1), expect("a CSV column name")]
+_MagneticUnit = Literal[tuple(MAGNETIC_UNITS_IN_UT)]
+MagneticUnits = Annotated[_MagneticUnit | dict[str, _MagneticUnit], expect(
+    f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")]
+UnitTable = Annotated[dict[str, Any], expect("a table of name = unit")]  # names and units: checked by the dataset
+Delimiter = Annotated[str, Strict(), Field(min_length=1, max_length=1), expect("one character")]
+SamplingRate = number("a positive sampling rate in Hz", gt=0)
+SampleCount = integer(0, expected="a number of samples >= 0")
 
 
-def _read_mapping_file(path: Path) -> tuple[dict[str, str], dict[str, Any]]:
-    document = read_toml(path, "CSV mapping", DatasetError)
-    for key in document:
-        if key != "columns" and key not in _DEFAULTS:
-            raise DatasetError(f"{path}: unknown key {key!r} (expected columns, {', '.join(_DEFAULTS)})")
-    if "columns" not in document:
-        raise DatasetError(f"{path}: no [columns] table (CSV column = softtip column)")
-    options = {key: _check_option(str(path), key, value) for key, value in document.items() if key != "columns"}
-    return document["columns"], options
+@schema
+class CsvLayout:
+    """Every setting of a reading but the column mapping (see :func:`read_csv_recording`)."""
+
+    trial_column: ColumnName | None = None
+    time_column: ColumnName | None = None
+    time_unit: choice(*TIME_UNITS_IN_S) = "s"
+    rate_hz: SamplingRate | None = None
+    units: MagneticUnits = "uT"
+    labels: UnitTable = field(default_factory=dict)
+    conditions: UnitTable = field(default_factory=dict)
+    baseline_samples: SampleCount = 0
+    delimiter: Delimiter = ","
+
+
+@schema
+class _MappingFile(CsvLayout):
+    _: KW_ONLY
+    columns: Annotated[dict[str, Any], expect("a table of CSV column = softtip column")]
 
 
 def _check_columns(source: str, columns: Any, labels: Mapping[str, str], conditions: Mapping[str, str]) -> dict:
@@ -166,37 +152,40 @@ class _Layout:
     source: str  # where the mapping came from, for messages
     columns: dict[str, str]  # CSV column -> softtip column
     magnetic_units: dict[str, str]  # CSV column -> unit, for the columns mapped to channels
-    options: dict[str, Any]
+    options: CsvLayout
 
     @property
     def numeric(self) -> list[str]:
         """The CSV columns read as text and parsed as numbers here (for one-line messages naming the cell)."""
-        own = (self.options["trial_column"], self.options["time_column"])
+        own = (self.options.trial_column, self.options.time_column)
         return [*self.magnetic_units, *(name for name in own if name is not None)]
 
 
-def _layout(mapping: Any, given: dict[str, Any]) -> _Layout:
-    options = {key: _check_option("read_csv_recording", key, value) for key, value in given.items()
-               if value is not None}
+def _layout(mapping: Any, arguments: dict[str, Any]) -> _Layout:
+    """The layout from the mapping (a dict of columns, or a file with the columns and settings) and the
+    settings given as arguments (those not None)."""
+    arguments = {key: value for key, value in arguments.items() if value is not None}
+    parse(CsvLayout, arguments, "read_csv_recording", error=DatasetError)
     if isinstance(mapping, (str, os.PathLike)):
         source = str(mapping)
-        columns, from_file = _read_mapping_file(Path(mapping))
-        for key, value in from_file.items():
-            if key in options:
+        document = read_toml(mapping, "CSV mapping", DatasetError)
+        columns = parse(_MappingFile, document, source, error=DatasetError).columns
+        settings = {key: value for key, value in document.items() if key != "columns"}
+        for key in arguments:
+            if key in settings:
                 raise DatasetError(f"{source}: {key} is also given as an argument")
-            options[key] = value
     elif isinstance(mapping, Mapping):
-        source, columns = "mapping", mapping
+        source, columns, settings = "mapping", mapping, {}
     else:
         raise DatasetError(f"mapping: expected a dict or the path of a TOML file, got {type(mapping).__name__}")
-    options = {**_DEFAULTS, **options}
-    if options["time_column"] is not None and options["rate_hz"] is not None:
+    options = parse(CsvLayout, settings | arguments, source, error=DatasetError)
+    if options.time_column is not None and options.rate_hz is not None:
         raise DatasetError(f"{source}: give either time_column or rate_hz, not both")
-    if options["time_column"] is None and options["rate_hz"] is None:
-        options["time_column"] = TIME
-    columns = _check_columns(source, columns, options["labels"], options["conditions"])
+    if options.time_column is None and options.rate_hz is None:
+        options = replace(options, time_column=TIME)
+    columns = _check_columns(source, columns, options.labels, options.conditions)
     magnetic = [csv_name for csv_name, name in columns.items() if is_channel(name)]
-    return _Layout(source, columns, _magnetic_units(source, options["units"], magnetic), options)
+    return _Layout(source, columns, _magnetic_units(source, options.units, magnetic), options)
 
 
 def _read_table(path: Path, layout: _Layout) -> pa.Table:
@@ -204,7 +193,7 @@ def _read_table(path: Path, layout: _Layout) -> pa.Table:
         raise DatasetError(f"recording {path} does not exist")
     try:
         table = pacsv.read_csv(
-            path, parse_options=pacsv.ParseOptions(delimiter=layout.options["delimiter"]),
+            path, parse_options=pacsv.ParseOptions(delimiter=layout.options.delimiter),
             convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(layout.numeric, pa.string())))
     except (pa.ArrowException, OSError) as problem:
         raise DatasetError(f"{path}: cannot be read as CSV ({str(problem).strip().splitlines()[0]})") from None
@@ -241,30 +230,30 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     options = layout.options
     table = _read_table(path, layout)
 
-    if options["trial_column"] is None:
+    if options.trial_column is None:
         trial = np.zeros(table.num_rows, dtype=np.int64)
     else:
-        ids = _numbers(path, options["trial_column"], table.column(options["trial_column"]))
+        ids = _numbers(path, options.trial_column, table.column(options.trial_column))
         if not np.all(np.isfinite(ids) & (ids == np.round(ids))):
-            raise DatasetError(f"{path}: trial column {options['trial_column']!r} holds values that are not integers")
+            raise DatasetError(f"{path}: trial column {options.trial_column!r} holds values that are not integers")
         trial = ids.astype(np.int64)
     starts, lengths = trial_runs(trial)
     first_row = np.repeat(starts, lengths)
-    if options["rate_hz"] is not None:
-        time = (np.arange(len(trial)) - first_row) / options["rate_hz"]
+    if options.rate_hz is not None:
+        time = (np.arange(len(trial)) - first_row) / options.rate_hz
     else:
-        time = _numbers(path, options["time_column"], table.column(options["time_column"]))
-        time = (time - time[first_row]) * TIME_UNITS_IN_S[options["time_unit"]]
+        time = _numbers(path, options.time_column, table.column(options.time_column))
+        time = (time - time[first_row]) * TIME_UNITS_IN_S[options.time_unit]
 
     data: dict[str, Any] = {TRIAL: trial, TIME: time}
-    units_of = {**options["labels"], **options["conditions"]}
+    units_of = {**options.labels, **options.conditions}
     for csv_name, name in layout.columns.items():
         column = table.column(csv_name)
         if csv_name in layout.magnetic_units:
             values = _numbers(path, csv_name, column) * MAGNETIC_UNITS_IN_UT[layout.magnetic_units[csv_name]]
-            if options["baseline_samples"]:
+            if options.baseline_samples:
                 try:
-                    values = subtract_trial_baseline(values, trial, options["baseline_samples"])
+                    values = subtract_trial_baseline(values, trial, options.baseline_samples)
                 except DatasetError as problem:
                     raise DatasetError(f"{path}: {problem}") from None
             data[name] = values
@@ -278,6 +267,6 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     if metadata is None:
         metadata = DatasetMetadata(description=f"CSV recording {path.name}")
     try:
-        return Dataset(data, options["labels"], options["conditions"], metadata)
+        return Dataset(data, options.labels, options.conditions, metadata)
     except DatasetError as problem:
         raise DatasetError(f"{path}: {problem}") from None

@@ -36,59 +36,26 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from softtip import __version__
+from softtip._core.channels import CHANNEL_UNIT, channel_names, channel_order, is_channel
+# realtime/ imports these three from here until it is switched over to softtip._core.channels
+from softtip._core.channels import AXES, CHANNEL_PATTERN, channel_columns  # noqa: F401
+from softtip._core.config import ConfigError
+from softtip._core.files import atomic_write
 
 FORMAT = "softtip-dataset"
 SCHEMA_VERSION = 1
 METADATA_KEY = b"softtip"
 TRIAL = "trial"
 TIME = "time_s"
-CHANNEL_UNIT = "uT"
 DIMENSIONLESS = "1"  # the unit of counts, ratios and categories
-AXES = ("x", "y", "z")
-CHANNEL_PATTERN = re.compile(r"s(0|[1-9][0-9]*)_b([xyz])_uT")
 _NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DOCUMENT_KEYS = ("format", "schema_version", "description", "channels", "labels", "conditions", "design",
                   "sensor_settings", "protocol", "seed", "softtip_version", "created_utc")
 
 
-class DatasetError(ValueError):
-    """A dataset, dataset file or recording that does not hold valid softtip trials."""
-
-
-# --------------------------------------------------------------------------
-# Channel names
-# --------------------------------------------------------------------------
-
-
-def channel_name(sensor: int, axis: str) -> str:
-    """The column of one axis (``"x"``, ``"y"`` or ``"z"``) of sensor ``sensor``."""
-    if axis not in AXES or not isinstance(sensor, numbers.Integral) or sensor < 0:
-        raise DatasetError(f"channel: expected a sensor index >= 0 and an axis in x, y, z, got {sensor!r}, {axis!r}")
-    return f"s{int(sensor)}_b{axis}_uT"
-
-
-def channel_names(n_sensors: int) -> tuple[str, ...]:
-    """Every channel of ``n_sensors`` 3-axis sensors, in storage order."""
-    if not isinstance(n_sensors, numbers.Integral) or n_sensors < 1:
-        raise DatasetError(f"n_sensors: expected an integer >= 1, got {n_sensors!r}")
-    return tuple(channel_name(k, axis) for k in range(n_sensors) for axis in AXES)
-
-
-def is_channel(name: str) -> bool:
-    return CHANNEL_PATTERN.fullmatch(name) is not None
-
-
-def _channel_order(name: str) -> tuple[int, int]:
-    match = CHANNEL_PATTERN.fullmatch(name)
-    return int(match[1]), AXES.index(match[2])
-
-
-def channel_columns(field_uT: Any) -> dict[str, np.ndarray]:
-    """Named channel columns from readings of shape (n_samples, n_sensors, 3) in µT."""
-    values = np.asarray(field_uT, dtype=np.float64)
-    if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
-        raise DatasetError(f"field_uT: expected shape (n_samples, n_sensors, 3), got {values.shape}")
-    return {channel_name(k, axis): values[:, k, a] for k in range(values.shape[1]) for a, axis in enumerate(AXES)}
+class DatasetError(ConfigError):
+    """A dataset, dataset file or recording (or the mapping that reads it) that does not hold valid
+    softtip trials."""
 
 
 # --------------------------------------------------------------------------
@@ -303,7 +270,7 @@ class Dataset:
         for required in (TRIAL, TIME):
             if required not in given:
                 raise DatasetError(f"missing column {required}")
-        channels = sorted((name for name in given if isinstance(name, str) and is_channel(name)), key=_channel_order)
+        channels = sorted((name for name in given if isinstance(name, str) and is_channel(name)), key=channel_order)
         if not channels:
             raise DatasetError("no channel columns (expected names like s0_bx_uT)")
         for name in given:
@@ -465,10 +432,7 @@ class Dataset:
         table = pa.Table.from_arrays(
             [pa.array(values) for values in self.columns.values()], names=list(self.columns),
             metadata={METADATA_KEY: json.dumps(self._document(), allow_nan=False).encode()})
-        partial = path.with_name(f".{path.name}.partial")
-        pq.write_table(table, partial)
-        os.replace(partial, path)
-        return path
+        return atomic_write(path, lambda handle: pq.write_table(table, handle))
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> Dataset:
@@ -643,7 +607,7 @@ class TrialWriter:
         """Adds one trial and returns its id (the next free one unless given).
 
         ``samples`` maps ``time_s``, every channel and every label to equal-length arrays
-        (:func:`channel_columns` names an (n, sensors, 3) array); ``conditions`` maps every
+        (:func:`softtip.data.channel_columns` names an (n, sensors, 3) array); ``conditions`` maps every
         condition to one value.
         """
         if trial is None:

@@ -10,18 +10,33 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from pydantic import AfterValidator, Field, model_validator
 
-from softtip.tomlfile import read_toml
+from softtip._core.config import (
+    ConfigError,
+    NonNegativeNumber,
+    Number,
+    PositiveNumber,
+    Real,
+    Refusal,
+    Text,
+    expect,
+    integer,
+    number,
+    parse,
+    read_toml,
+    refused,
+    schema,
+)
+from softtip._core.units import MM
 
-MM = 1e-3
 
-
-class DesignError(ValueError):
+class DesignError(ConfigError):
     """A design file or parameter that cannot describe a buildable fingertip."""
 
 
@@ -86,62 +101,236 @@ class Design:
         return design_from_dict(spec, source=self.name)
 
 
-# ---------------------------------------------------------------- parsing helpers
+# ---------------------------------------------------------------- the tables of a design file
 
 
-_TOP_KEYS = {"kind", "name", "description", "body", "cavity", "magnets", "sensor"}
-_SECTION_KEYS = {
-    "cylindrical": {
-        "body": {"diameter_mm", "height_mm", "fillet_mm", "youngs_modulus_Pa", "poisson_ratio", "density_kg_m3"},
-        "cavity": {"radius_mm", "height_mm"},
-        "magnets": {"count", "circle_radius_mm", "diameter_mm", "height_mm", "depth_mm", "polarization_T",
-                    "surface_field_T", "first_angle_deg"},
-    },
-    "rectangular": {
-        "body": {"width_mm", "length_mm", "height_mm", "fillet_mm", "youngs_modulus_Pa", "poisson_ratio",
-                 "density_kg_m3"},
-        "cavity": {"width_mm", "length_mm", "height_mm"},
-        "magnets": {"pitch_x_mm", "pitch_y_mm", "diameter_mm", "height_mm", "depth_mm", "polarization_T",
-                    "surface_field_T"},
-    },
-}
+def _not_zero(value: float) -> float:
+    if value == 0:
+        raise ValueError("zero polarisation")
+    return value
 
 
-class _Reader:
-    """Pulls typed values out of a TOML table, naming the dotted key in every error."""
+PoissonRatio = number("0 < nu < 0.5 (a compressible elastic solid)", gt=0, lt=0.5)
+_REMANENCE = "0 < |J| <= 1.6 T (NdFeB remanence)"
+Polarization = Annotated[number(_REMANENCE, ge=-1.6, le=1.6), AfterValidator(_not_zero), expect(_REMANENCE)]
+MagnetCount = integer(1, expected="a positive integer")
+Points = Annotated[list[tuple[Real, Real, Real]], Field(min_length=1), expect("a list of [x, y, z] in mm")]
 
-    def __init__(self, source: str, table: dict, section: str, allowed: set[str]):
+
+@schema
+class _BodyMaterial:
+    _: KW_ONLY
+    fillet_mm: NonNegativeNumber = 0.0
+    youngs_modulus_Pa: PositiveNumber = 0.59e6
+    poisson_ratio: PoissonRatio = 0.48
+    density_kg_m3: PositiveNumber = 1120.0
+
+    @property
+    def material(self) -> Material:
+        return Material(self.youngs_modulus_Pa, self.poisson_ratio, self.density_kg_m3)
+
+
+@schema
+class _Magnets:
+    _: KW_ONLY
+    diameter_mm: PositiveNumber
+    height_mm: PositiveNumber
+    depth_mm: PositiveNumber
+    polarization_T: Polarization | None = None
+    surface_field_T: PositiveNumber | None = None
+
+    def __post_init__(self):
+        if self.polarization_T is not None and self.surface_field_T is not None:
+            raise Refusal("surface_field_T", "give magnets.polarization_T or magnets.surface_field_T, not both")
+
+    @property
+    def polarization(self) -> float:
+        """J in T, given or from the surface field."""
+        if self.surface_field_T is not None:
+            return float(polarization_from_surface_field(self.surface_field_T, self.diameter_mm * MM,
+                                                         self.height_mm * MM))
+        return 1.2 if self.polarization_T is None else self.polarization_T
+
+
+@schema
+class _Sensor:
+    """Where the sensors sit; the other keys are their register settings, which the sensor model
+    checks when the twin is built."""
+
+    positions_mm: Points | None = None
+    readout: dict[str, Any] = field(default_factory=dict)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _split(cls, table: Any) -> Any:
         if not isinstance(table, dict):
-            raise DesignError(f"{source}: [{section}] must be a table")
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise DesignError(f"{source}: unknown key {section}.{unknown[0]} (expected one of {', '.join(sorted(allowed))})")
-        self.source, self.table, self.section = source, table, section
-
-    def where(self, key: str) -> str:
-        return f"{self.source}: {self.section}.{key}"
-
-    def number(self, key: str, default: float | None = None, positive: bool = True) -> float:
-        if key not in self.table:
-            if default is None:
-                raise DesignError(f"{self.where(key)} is missing")
-            return default
-        value = self.table[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise DesignError(f"{self.where(key)} = {value!r}: expected a number")
-        if positive and value <= 0:
-            raise DesignError(f"{self.where(key)} = {value}: expected a positive number")
-        return float(value)
-
-    def fail(self, key: str, message: str) -> DesignError:
-        return DesignError(f"{self.where(key)} = {self.table.get(key)}: {message}")
+            return table
+        return {**({"positions_mm": table["positions_mm"]} if "positions_mm" in table else {}),
+                "readout": {k: v for k, v in table.items() if k != "positions_mm"}}
 
 
-def _material(body: _Reader) -> Material:
-    nu = body.number("poisson_ratio", 0.48)
-    if not 0 < nu < 0.5:
-        raise body.fail("poisson_ratio", "expected 0 < nu < 0.5 (a compressible elastic solid)")
-    return Material(body.number("youngs_modulus_Pa", 0.59e6), nu, body.number("density_kg_m3", 1120.0))
+def _check_sensors_inside(positions: list, inside, problem: str) -> None:
+    for index, point in enumerate(positions):
+        if not inside(*point):
+            raise Refusal(("sensor", "positions_mm", index), problem)
+
+
+def _below_the_top(magnets: _Magnets, body_height: float) -> tuple[float, float]:
+    """z of the magnets' top and bottom faces (mm)."""
+    top, bottom = body_height - magnets.depth_mm, body_height - magnets.depth_mm - magnets.height_mm
+    if bottom <= 0:
+        raise Refusal(("magnets", "depth_mm"),
+                      f"the magnets reach the base (depth + height must be < {body_height} mm)")
+    return top, bottom
+
+
+def _check_fillet_edge(key: str, outer: float, top: float, half_side: float, height: float, fillet: float,
+                       depth: float) -> None:
+    """The magnet's outer top edge must stay inside the rounded edge of the body."""
+    if fillet > 0 and outer > half_side - fillet and top > height - fillet:
+        if math.hypot(outer - (half_side - fillet), top - (height - fillet)) >= fillet:
+            raise Refusal(("magnets", key), f"with magnets.depth_mm = {depth}, the magnets cross the filleted top "
+                          f"edge of the body (move them inwards or deeper)")
+
+
+def _cut_into_cavity(bottom: float, cavity_height: float) -> Refusal:
+    return Refusal(("magnets", "depth_mm"), f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm "
+                   f"must be above the cavity top at {cavity_height} mm)")
+
+
+@schema
+class CylindricalBody(_BodyMaterial):
+    diameter_mm: PositiveNumber
+    height_mm: PositiveNumber
+
+    def __post_init__(self):
+        radius = self.diameter_mm / 2
+        if self.fillet_mm >= min(radius, self.height_mm):
+            raise Refusal("fillet_mm", f"expected 0 <= fillet < min(body radius {radius}, body height "
+                          f"{self.height_mm}) mm")
+
+
+@schema
+class CylindricalCavity:
+    radius_mm: PositiveNumber
+    height_mm: PositiveNumber
+
+
+@schema
+class CylindricalMagnets(_Magnets):
+    circle_radius_mm: PositiveNumber
+    count: MagnetCount = 4
+    first_angle_deg: Number = 0.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        spacing = 2 * self.circle_radius_mm * math.sin(math.pi / self.count)
+        if self.count > 1 and spacing <= self.diameter_mm:
+            raise Refusal("circle_radius_mm", f"the {self.count} magnets overlap (centre spacing {spacing:.3g} mm "
+                          f"<= diameter {self.diameter_mm} mm)")
+
+
+@schema
+class CylindricalSpec:
+    kind: Literal["cylindrical"]
+    body: CylindricalBody
+    cavity: CylindricalCavity
+    magnets: CylindricalMagnets
+    sensor: _Sensor = _Sensor()
+    name: Text | None = None
+    description: str = ""
+
+    def __post_init__(self):
+        body, cavity, magnets = self.body, self.cavity, self.magnets
+        radius, height = body.diameter_mm / 2, body.height_mm
+        if cavity.radius_mm >= radius:
+            raise Refusal(("cavity", "radius_mm"), f"the cavity must be narrower than the body (radius < {radius} mm)")
+        if cavity.height_mm >= height:
+            raise Refusal(("cavity", "height_mm"), f"the cavity must be lower than the body (height < {height} mm)")
+        top, bottom = _below_the_top(magnets, height)
+        outer = magnets.circle_radius_mm + magnets.diameter_mm / 2
+        if outer >= radius:
+            raise Refusal(("magnets", "circle_radius_mm"), f"the magnets cross the side surface (circle radius + "
+                          f"magnet radius must be < {radius} mm)")
+        _check_fillet_edge("circle_radius_mm", outer, top, radius, height, body.fillet_mm, magnets.depth_mm)
+        if bottom <= cavity.height_mm and magnets.circle_radius_mm - magnets.diameter_mm / 2 < cavity.radius_mm:
+            raise _cut_into_cavity(bottom, cavity.height_mm)
+        _check_sensors_inside(self.sensor_positions_mm,
+                              lambda x, y, z: math.hypot(x, y) < cavity.radius_mm and 0 <= z < cavity.height_mm,
+                              f"the sensor must sit inside the cavity (r < {cavity.radius_mm} mm, "
+                              f"0 <= z < {cavity.height_mm} mm)")
+
+    @property
+    def sensor_positions_mm(self) -> list:
+        return self.sensor.positions_mm or [(0.0, 0.0, 0.8)]
+
+
+@schema
+class RectangularBody(_BodyMaterial):
+    width_mm: PositiveNumber
+    length_mm: PositiveNumber
+    height_mm: PositiveNumber
+
+    def __post_init__(self):
+        if self.fillet_mm >= min(self.width_mm / 2, self.length_mm / 2, self.height_mm):
+            raise Refusal("fillet_mm", "expected 0 <= fillet < min(half width, half length, height)")
+
+
+@schema
+class RectangularCavity:
+    width_mm: PositiveNumber
+    length_mm: PositiveNumber
+    height_mm: PositiveNumber
+
+
+@schema
+class RectangularMagnets(_Magnets):
+    pitch_x_mm: PositiveNumber
+    pitch_y_mm: PositiveNumber
+
+    def __post_init__(self):
+        super().__post_init__()
+        if min(self.pitch_x_mm, self.pitch_y_mm) <= self.diameter_mm:
+            key = "pitch_x_mm" if self.pitch_x_mm <= self.pitch_y_mm else "pitch_y_mm"
+            raise Refusal(key, f"neighbouring magnets overlap (pitch must exceed the diameter {self.diameter_mm} mm)")
+
+
+@schema
+class RectangularSpec:
+    kind: Literal["rectangular"]
+    body: RectangularBody
+    cavity: RectangularCavity
+    magnets: RectangularMagnets
+    sensor: _Sensor = _Sensor()
+    name: Text | None = None
+    description: str = ""
+
+    def __post_init__(self):
+        body, cavity, magnets = self.body, self.cavity, self.magnets
+        for key in ("width_mm", "length_mm", "height_mm"):
+            if getattr(cavity, key) >= getattr(body, key):
+                raise Refusal(("cavity", key), f"the cavity must be smaller than the body (< {getattr(body, key)} mm)")
+        top, bottom = _below_the_top(magnets, body.height_mm)
+        radius = magnets.diameter_mm / 2
+        for key, half_pitch, half_side in (("pitch_x_mm", magnets.pitch_x_mm / 2, body.width_mm / 2),
+                                           ("pitch_y_mm", magnets.pitch_y_mm / 2, body.length_mm / 2)):
+            outer = half_pitch + radius
+            if outer >= half_side:
+                raise Refusal(("magnets", key), f"the magnets cross the side surface (half pitch + magnet radius "
+                              f"must be < {half_side} mm)")
+            _check_fillet_edge(key, outer, top, half_side, body.height_mm, body.fillet_mm, magnets.depth_mm)
+        over_cavity = (magnets.pitch_x_mm / 2 - radius < cavity.width_mm / 2
+                       and magnets.pitch_y_mm / 2 - radius < cavity.length_mm / 2)
+        if over_cavity and bottom <= cavity.height_mm:
+            raise _cut_into_cavity(bottom, cavity.height_mm)
+        _check_sensors_inside(self.sensor_positions_mm,
+                              lambda x, y, z: abs(x) < cavity.width_mm / 2 and abs(y) < cavity.length_mm / 2
+                              and 0 <= z < cavity.height_mm, "the sensor must sit inside the cavity")
+
+    @property
+    def sensor_positions_mm(self) -> list:
+        half = self.magnets.pitch_x_mm / 2
+        return self.sensor.positions_mm or [(-half, 0.0, 0.8), (half, 0.0, 0.8)]
 
 
 def polarization_from_surface_field(surface_field: float, diameter: float, height: float) -> float:
@@ -155,171 +344,49 @@ def polarization_from_surface_field(surface_field: float, diameter: float, heigh
     return 2 * surface_field * math.hypot(radius, height) / height
 
 
-def _polarization(mag: _Reader, diameter: float, height: float) -> float:
-    if "polarization_T" in mag.table and "surface_field_T" in mag.table:
-        raise DesignError(f"{mag.source}: give magnets.polarization_T or magnets.surface_field_T, not both")
-    if "surface_field_T" in mag.table:
-        return float(polarization_from_surface_field(mag.number("surface_field_T"), diameter, height))
-    pol = mag.number("polarization_T", 1.2, positive=False)
-    if pol == 0 or abs(pol) > 1.6:
-        raise mag.fail("polarization_T", "expected 0 < |J| <= 1.6 T (NdFeB remanence)")
-    return pol
-
-
-def _sensors(source: str, table: dict, default_positions: list, check_inside) -> tuple[np.ndarray, dict]:
-    if not isinstance(table, dict):
-        raise DesignError(f"{source}: [sensor] must be a table")
-    positions = table.get("positions_mm", default_positions)
-    array = np.asarray(positions, dtype=float) if _is_point_list(positions) else None
-    if array is None:
-        raise DesignError(f"{source}: sensor.positions_mm = {positions!r}: expected a list of [x, y, z] in mm")
-    for index, point in enumerate(array):
-        problem = check_inside(point)
-        if problem:
-            raise DesignError(f"{source}: sensor.positions_mm[{index}] = {point.tolist()}: {problem}")
-    return array * MM, {k: v for k, v in table.items() if k != "positions_mm"}
-
-
-def _is_point_list(value: Any) -> bool:
-    return (isinstance(value, list) and len(value) > 0
-            and all(isinstance(p, list) and len(p) == 3 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
-                                                               for c in p) for p in value))
-
-
 # ---------------------------------------------------------------- the two families
 
 
-def _cylindrical(spec: dict, source: str) -> Design:
-    keys = _SECTION_KEYS["cylindrical"]
-    body = _Reader(source, spec.get("body", {}), "body", keys["body"])
-    cav = _Reader(source, spec.get("cavity", {}), "cavity", keys["cavity"])
-    mag = _Reader(source, spec.get("magnets", {}), "magnets", keys["magnets"])
-
-    radius = body.number("diameter_mm") / 2
-    height = body.number("height_mm")
-    fillet = body.number("fillet_mm", 0.0, positive=False)
-    if fillet < 0 or fillet >= min(radius, height):
-        raise body.fail("fillet_mm", f"expected 0 <= fillet < min(body radius {radius}, body height {height}) mm")
-    cavity_radius = cav.number("radius_mm")
-    cavity_height = cav.number("height_mm")
-    if cavity_radius >= radius:
-        raise cav.fail("radius_mm", f"the cavity must be narrower than the body (radius < {radius} mm)")
-    if cavity_height >= height:
-        raise cav.fail("height_mm", f"the cavity must be lower than the body (height < {height} mm)")
-
-    count = mag.table.get("count", 4)
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise mag.fail("count", "expected a positive integer")
-    circle = mag.number("circle_radius_mm")
-    m_diameter, m_height = mag.number("diameter_mm"), mag.number("height_mm")
-    depth = mag.number("depth_mm")
-    m_radius = m_diameter / 2
-    if count > 1 and 2 * circle * math.sin(math.pi / count) <= m_diameter:
-        raise mag.fail("circle_radius_mm", f"the {count} magnets overlap (centre spacing "
-                       f"{2 * circle * math.sin(math.pi / count):.3g} mm <= diameter {m_diameter} mm)")
-    top, bottom = height - depth, height - depth - m_height
-    outer = circle + m_radius
-    if bottom <= 0:
-        raise mag.fail("depth_mm", f"the magnets reach the base (depth + height must be < {height} mm)")
-    if outer >= radius:
-        raise mag.fail("circle_radius_mm", f"the magnets cross the side surface (circle radius + magnet radius "
-                       f"must be < {radius} mm)")
-    if fillet > 0 and outer > radius - fillet and top > height - fillet:
-        # the magnet's outer top edge must stay inside the rounded edge of the body
-        if math.hypot(outer - (radius - fillet), top - (height - fillet)) >= fillet:
-            raise mag.fail("circle_radius_mm", f"with magnets.depth_mm = {depth}, the magnets cross the filleted top "
-                           f"edge of the body (move them inwards or deeper)")
-    if bottom <= cavity_height and circle - m_radius < cavity_radius:
-        raise mag.fail("depth_mm", f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm must be "
-                       f"above the cavity top at {cavity_height} mm)")
-
-    def inside_cavity(point: np.ndarray) -> str:
-        if math.hypot(point[0], point[1]) >= cavity_radius or not 0 <= point[2] < cavity_height:
-            return f"the sensor must sit inside the cavity (r < {cavity_radius} mm, 0 <= z < {cavity_height} mm)"
-        return ""
-
-    sensor_positions, settings = _sensors(source, spec.get("sensor", {}), [[0.0, 0.0, 0.8]], inside_cavity)
-    first = math.radians(mag.number("first_angle_deg", 0.0, positive=False))
-    polarization = _polarization(mag, m_diameter * MM, m_height * MM)
-    center_z = (top + bottom) / 2
-    magnets = tuple(
-        Magnet(center=(circle * MM * math.cos(first + 2 * math.pi * i / count),
-                       circle * MM * math.sin(first + 2 * math.pi * i / count), center_z * MM),
-               diameter=m_diameter * MM, height=m_height * MM, polarization=polarization)
-        for i in range(count))
-    return Design(name=spec.get("name", source), kind="cylindrical", spec=spec, material=_material(body),
-                  height=height * MM, magnets=magnets, sensor_positions=sensor_positions, sensor_readout=settings)
-
-
-def _rectangular(spec: dict, source: str) -> Design:
-    keys = _SECTION_KEYS["rectangular"]
-    body = _Reader(source, spec.get("body", {}), "body", keys["body"])
-    cav = _Reader(source, spec.get("cavity", {}), "cavity", keys["cavity"])
-    mag = _Reader(source, spec.get("magnets", {}), "magnets", keys["magnets"])
-
-    width, length, height = body.number("width_mm"), body.number("length_mm"), body.number("height_mm")
-    fillet = body.number("fillet_mm", 0.0, positive=False)
-    if fillet < 0 or fillet >= min(width / 2, length / 2, height):
-        raise body.fail("fillet_mm", "expected 0 <= fillet < min(half width, half length, height)")
-    c_width, c_length, c_height = cav.number("width_mm"), cav.number("length_mm"), cav.number("height_mm")
-    for key, inner, outer in (("width_mm", c_width, width), ("length_mm", c_length, length),
-                              ("height_mm", c_height, height)):
-        if inner >= outer:
-            raise cav.fail(key, f"the cavity must be smaller than the body (< {outer} mm)")
-
-    pitch_x, pitch_y = mag.number("pitch_x_mm"), mag.number("pitch_y_mm")
-    m_diameter, m_height, depth = mag.number("diameter_mm"), mag.number("height_mm"), mag.number("depth_mm")
-    m_radius = m_diameter / 2
-    if min(pitch_x, pitch_y) <= m_diameter:
-        key = "pitch_x_mm" if pitch_x <= pitch_y else "pitch_y_mm"
-        raise mag.fail(key, f"neighbouring magnets overlap (pitch must exceed the diameter {m_diameter} mm)")
-    top, bottom = height - depth, height - depth - m_height
-    if bottom <= 0:
-        raise mag.fail("depth_mm", f"the magnets reach the base (depth + height must be < {height} mm)")
-    for key, half_pitch, half_side in (("pitch_x_mm", pitch_x / 2, width / 2), ("pitch_y_mm", pitch_y / 2, length / 2)):
-        outer = half_pitch + m_radius
-        if outer >= half_side:
-            raise mag.fail(key, f"the magnets cross the side surface (half pitch + magnet radius must be < {half_side} mm)")
-        if fillet > 0 and outer > half_side - fillet and top > height - fillet:
-            if math.hypot(outer - (half_side - fillet), top - (height - fillet)) >= fillet:
-                raise mag.fail(key, f"with magnets.depth_mm = {depth}, the magnets cross the filleted top edge "
-                               f"of the body (move them inwards or deeper)")
-    over_cavity = (pitch_x / 2 - m_radius < c_width / 2) and (pitch_y / 2 - m_radius < c_length / 2)
-    if over_cavity and bottom <= c_height:
-        raise mag.fail("depth_mm", f"the magnets cut into the cavity (magnet bottom at z = {bottom:.3g} mm must be "
-                       f"above the cavity top at {c_height} mm)")
-
-    def inside_cavity(point: np.ndarray) -> str:
-        if abs(point[0]) >= c_width / 2 or abs(point[1]) >= c_length / 2 or not 0 <= point[2] < c_height:
-            return "the sensor must sit inside the cavity"
-        return ""
-
-    sensor_positions, settings = _sensors(source, spec.get("sensor", {}),
-                                          [[-pitch_x / 2, 0.0, 0.8], [pitch_x / 2, 0.0, 0.8]], inside_cavity)
-    polarization = _polarization(mag, m_diameter * MM, m_height * MM)
+def _design(spec: CylindricalSpec | RectangularSpec, raw: dict, source: str, magnets_xy: list) -> Design:
+    """The design whose magnets' centres are at ``magnets_xy`` (m)."""
+    magnets = spec.magnets
+    top, bottom = _below_the_top(magnets, spec.body.height_mm)
     center_z = (top + bottom) / 2 * MM
-    magnets = tuple(
-        Magnet(center=(sx * pitch_x / 2 * MM, sy * pitch_y / 2 * MM, center_z), diameter=m_diameter * MM,
-               height=m_height * MM, polarization=polarization)
-        for sy in (-1, 1) for sx in (-1, 1))
-    return Design(name=spec.get("name", source), kind="rectangular", spec=spec, material=_material(body),
-                  height=height * MM, magnets=magnets, sensor_positions=sensor_positions, sensor_readout=settings)
+    polarization = magnets.polarization
+    return Design(
+        name=spec.name or source, kind=spec.kind, spec=raw, material=spec.body.material,
+        height=spec.body.height_mm * MM,
+        magnets=tuple(Magnet(center=(x, y, center_z), diameter=magnets.diameter_mm * MM,
+                             height=magnets.height_mm * MM, polarization=polarization) for x, y in magnets_xy),
+        sensor_positions=np.asarray(spec.sensor_positions_mm, dtype=float) * MM, sensor_readout=spec.sensor.readout)
 
 
-_BUILDERS = {"cylindrical": _cylindrical, "rectangular": _rectangular}
+def _cylindrical(spec: CylindricalSpec, raw: dict, source: str) -> Design:
+    magnets = spec.magnets
+    circle, first = magnets.circle_radius_mm * MM, math.radians(magnets.first_angle_deg)
+    angles = [first + 2 * math.pi * i / magnets.count for i in range(magnets.count)]
+    return _design(spec, raw, source, [(circle * math.cos(a), circle * math.sin(a)) for a in angles])
+
+
+def _rectangular(spec: RectangularSpec, raw: dict, source: str) -> Design:
+    pitch_x, pitch_y = spec.magnets.pitch_x_mm, spec.magnets.pitch_y_mm
+    return _design(spec, raw, source, [(sx * pitch_x / 2 * MM, sy * pitch_y / 2 * MM)
+                                       for sy in (-1, 1) for sx in (-1, 1)])
+
+
+_KINDS = {"cylindrical": (CylindricalSpec, _cylindrical), "rectangular": (RectangularSpec, _rectangular)}
 
 
 def design_from_dict(spec: dict, source: str = "design") -> Design:
     """Validate a TOML-level description and build the design."""
     if not isinstance(spec, dict):
         raise DesignError(f"{source}: expected a table of design parameters")
-    unknown = sorted(set(spec) - _TOP_KEYS)
-    if unknown:
-        raise DesignError(f"{source}: unknown key {unknown[0]!r} (expected one of {', '.join(sorted(_TOP_KEYS))})")
     kind = spec.get("kind")
-    if kind not in _BUILDERS:
-        raise DesignError(f"{source}: kind = {kind!r}: expected one of {', '.join(sorted(_BUILDERS))}")
-    return _BUILDERS[kind](copy.deepcopy(spec), source)
+    if kind not in _KINDS:
+        raise refused(f"expected one of {', '.join(sorted(_KINDS))}", source, "kind", value=kind, error=DesignError)
+    schema_of_kind, build = _KINDS[kind]
+    raw = copy.deepcopy(spec)
+    return build(parse(schema_of_kind, raw, source, error=DesignError), raw, source)
 
 
 SHIPPED_DIR = Path(__file__).with_name("shipped")

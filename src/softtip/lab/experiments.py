@@ -18,7 +18,8 @@ from typing import Callable
 import numpy as np
 
 from softtip.data import Dataset, DatasetMetadata, TrialWriter, channel_columns
-from softtip.design.model import MM, Design
+from softtip._core.units import MM
+from softtip.design.model import Design
 from softtip.lab.engine import HeldPart, interpolate_path, path_table
 from softtip.lab.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase

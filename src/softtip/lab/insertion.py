@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from softtip.design.model import MM
+from softtip._core.units import MM, UT_PER_T
 from softtip.lab.engine import HeldPart
 from softtip.lab.experiments import inverter_contacts, world_up
 from softtip.lab.protocols import Protocol, fingertip_for
@@ -63,7 +63,7 @@ class InsertionWorld:
         for k, unit in enumerate(self.units):
             field = unit.field(out[f"magnets_{k}"])
             readings.append(unit.sensor.counts_to_uT(unit.sensor.to_counts(field, rng=self.rng))
-                            if self.noise else field * 1e6)
+                            if self.noise else field * UT_PER_T)
         self.force = float(out["contact_forces"].sum())
         return np.concatenate(readings, axis=1).ravel()
 

@@ -21,22 +21,40 @@ parameters (every key and its default is in :data:`DEFAULTS`; the shipped files 
 from __future__ import annotations
 
 import copy
+import dataclasses
+import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable
+from typing import Annotated, Any, Callable
 
 import numpy as np
+from pydantic import Field
 from threadpoolctl import threadpool_limits
 
+from softtip._core.config import (
+    Flag,
+    NonNegativeNumber,
+    Numbers,
+    PositiveNumber,
+    Real,
+    Text,
+    choice,
+    expect,
+    integer,
+    parse,
+    read_toml,
+    refused,
+    schema,
+)
+from softtip._core.progress import SILENT, Progress
+from softtip._core.units import MM
 from softtip.data import Dataset
-from softtip.design.model import MM, Design, load_design
+from softtip.design.model import Design, load_design
 from softtip.lab import experiments
 from softtip.lab.realism import Realism
-from softtip.settings import ConfigError, SettingsReader
 from softtip.twin.influence import InfluenceEngine
-from softtip.tomlfile import read_toml
 
 GEN1 = {"rate_hz": 20.0, "mesh_size_mm": 1.5, "curvature_points": 10, "reach_mm": 4.5, "pre_contact_s": 0.5,
         "board_thickness_mm": 1.6}
@@ -75,7 +93,16 @@ RUNNERS: dict[str, Callable] = {
     "grasp-two": experiments.grasp_two, "grasp-positions": experiments.grasp_positions,
     "contact-states": experiments.contact_states, "inverter": experiments.inverter,
 }
-VISCOELASTIC = {"hysteresis_percent": 7.3, "depth_mm": 3.0, "speed_mm_s": 0.25, "rest_s": 1.0}
+
+
+@schema(section="viscoelastic")
+class Viscoelastic:
+    """The material's relaxation: this hysteresis on one centred board cycle (S1 §1: 7.3 %)."""
+
+    hysteresis_percent: NonNegativeNumber = 7.3
+    depth_mm: NonNegativeNumber = 3.0
+    speed_mm_s: NonNegativeNumber = 0.25
+    rest_s: NonNegativeNumber = 1.0
 
 
 @dataclass
@@ -85,7 +112,7 @@ class Protocol:
     seed: int
     parameters: dict[str, Any]
     realism: Realism = field(default_factory=Realism)
-    viscoelastic: dict[str, float] = field(default_factory=lambda: dict(VISCOELASTIC))
+    viscoelastic: dict[str, float] = field(default_factory=lambda: asdict(Viscoelastic()))
 
     def to_dict(self) -> dict:
         return {"protocol": self.name, "design": self.design.name, "seed": self.seed, "parameters": self.parameters,
@@ -96,32 +123,49 @@ def shipped_protocol_path(name: str) -> Path:
     return Path(str(resources.files("softtip.lab") / "protocols" / f"{name}.toml"))
 
 
+@schema
+class _ProtocolFile:
+    protocol: choice(*sorted(RUNNERS))
+    design: Text  # a shipped design or a design TOML file
+    seed: integer() = 0
+    parameters: dict[str, Any] = field(default_factory=dict)  # checked against the protocol's own
+    realism: Realism = Realism()
+    viscoelastic: Viscoelastic = Viscoelastic()
+
+
+PointsMM = Annotated[list[Annotated[list[Real], Field(min_length=2, max_length=2)]], Field(min_length=1),
+                     expect("a list of [x, y] pairs in mm")]
+
+
+def _parameter_type(key: str, default: Any) -> Any:
+    """What a protocol parameter may be, from its default: true/false, an integer >= 0, a number >= 0
+    (the rate > 0), a list of numbers or a list of [x, y] pairs."""
+    if isinstance(default, bool):
+        return Flag
+    if isinstance(default, int):
+        return integer()
+    if isinstance(default, float):
+        return PositiveNumber if key == "rate_hz" else NonNegativeNumber
+    return PointsMM if isinstance(default[0], list) else Numbers
+
+
+@functools.cache
+def parameters_schema(name: str) -> type:
+    """The schema of the ``[parameters]`` table of protocol ``name``: every key of :data:`DEFAULTS`."""
+    fields = [(key, _parameter_type(key, default), field(default_factory=functools.partial(copy.deepcopy, default)))
+              for key, default in DEFAULTS[name].items()]
+    return schema(dataclasses.make_dataclass("ProtocolParameters", fields, frozen=True))
+
+
 def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Protocol:
-    top = SettingsReader(source, table, "")
-    name = top.choice("protocol", sorted(RUNNERS))
-    design_name = top.string("design")
+    top = parse(_ProtocolFile, table, source)
     try:
-        design = load_design(design_name if base is None or not (base / design_name).is_file()
-                             else base / design_name)
+        design = load_design(top.design if base is None or not (base / top.design).is_file() else base / top.design)
     except ValueError as error:
-        raise ConfigError(f"{source}: design = {design_name!r}: {error}") from None
-    seed = top.integer("seed", 0)
-    parameters = {}
-    reader = SettingsReader(source, top.raw("parameters", {}), "parameters")
-    for key, default in DEFAULTS[name].items():
-        parameters[key] = reader.like(key, copy.deepcopy(default))
-    reader.finish()
-    if parameters["rate_hz"] <= 0:
-        raise ConfigError(f"{source}: parameters.rate_hz = {parameters['rate_hz']}: expected a positive rate")
-    realism_reader = SettingsReader(source, top.raw("realism", {}), "realism")
-    realism = Realism.read(realism_reader)
-    realism_reader.finish()
-    visco_reader = SettingsReader(source, top.raw("viscoelastic", {}), "viscoelastic")
-    viscoelastic = {k: visco_reader.number(k, v, non_negative=True) for k, v in VISCOELASTIC.items()}
-    visco_reader.finish()
-    top.finish()
-    return Protocol(name=name, design=design, seed=seed, parameters=parameters, realism=realism,
-                    viscoelastic=viscoelastic)
+        raise refused(str(error), source, "design", value=top.design) from None
+    parameters = parse(parameters_schema(top.protocol), top.parameters, source, "parameters")
+    return Protocol(name=top.protocol, design=design, seed=top.seed, parameters=asdict(parameters),
+                    realism=top.realism, viscoelastic=asdict(top.viscoelastic))
 
 
 def load_protocol(path: str | Path) -> Protocol:
@@ -129,41 +173,39 @@ def load_protocol(path: str | Path) -> Protocol:
     path = Path(path)
     if not path.suffix and str(path) in RUNNERS:
         path = shipped_protocol_path(str(path))
-    table = read_toml(path, "protocol", ConfigError)
-    return protocol_from_dict(table, str(path), path.parent)
+    return protocol_from_dict(read_toml(path, "protocol"), str(path), path.parent)
 
 
 _FINGERTIPS: dict[tuple, InfluenceEngine] = {}
 
 
-def fingertip_for(design: Design, parameters: dict, progress=None) -> InfluenceEngine:
+def fingertip_for(design: Design, parameters: dict, progress: Progress = SILENT) -> InfluenceEngine:
     """The design's lab mechanics, built once per process for each design and mesh."""
     key = (repr(design.spec), parameters["mesh_size_mm"], parameters["curvature_points"], parameters["reach_mm"])
     if key not in _FINGERTIPS:
-        _FINGERTIPS[key] = InfluenceEngine.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
-                                           curvature_points=parameters["curvature_points"], progress=progress)
+        with progress.task(f"influence matrices of {design.name}"):
+            _FINGERTIPS[key] = InfluenceEngine.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
+                                                     curvature_points=parameters["curvature_points"])
     return _FINGERTIPS[key]
 
 
-def run_protocol(protocol: Protocol, progress=None) -> tuple[Dataset, dict]:
-    """Run one experiment; returns its dataset and timings (s)."""
-    say = progress or (lambda message: None)
+def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Dataset, dict]:
+    """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage."""
     timings = {}
     start = time.perf_counter()
-    say(f"{protocol.name}: influence matrices of {protocol.design.name}")
-    fingertip = fingertip_for(protocol.design, protocol.parameters)
+    fingertip = fingertip_for(protocol.design, protocol.parameters, progress)
     timings["mechanics_s"] = time.perf_counter() - start
     start = time.perf_counter()
-    v = protocol.viscoelastic
-    prony = experiments.material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM,
-                                       v["speed_mm_s"] * MM, v["rest_s"])
-    bench = experiments.Bench(fingertip=fingertip, prony=prony, realism=protocol.realism,
-                              rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters["rate_hz"])
-    say(f"{protocol.name}: trials")
-    # the trials' dense solves are small: a second BLAS thread only fights for a shared core
-    with threadpool_limits(limits=1):
-        dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
-                                                 "prony": {"g": list(prony.g), "tau_s": list(prony.tau)},
-                                                 "realism": protocol.realism.to_dict()}, protocol.seed)
+    with progress.task(f"{protocol.name}: trials on {protocol.design.name}"):
+        v = protocol.viscoelastic
+        prony = experiments.material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM,
+                                           v["speed_mm_s"] * MM, v["rest_s"])
+        bench = experiments.Bench(fingertip=fingertip, prony=prony, realism=protocol.realism,
+                                  rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters["rate_hz"])
+        # the trials' dense solves are small: a second BLAS thread only fights for a shared core
+        with threadpool_limits(limits=1):
+            dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
+                                                     "prony": {"g": list(prony.g), "tau_s": list(prony.tau)},
+                                                     "realism": protocol.realism.to_dict()}, protocol.seed)
     timings["trials_s"] = time.perf_counter() - start
     return dataset, timings

@@ -26,32 +26,31 @@ for every experiment and design.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 
-from softtip.design.model import MM, Design
+from softtip._core.config import Flag, NonNegativeNumber, schema
+from softtip._core.units import MM
+from softtip.design.model import Design
 from softtip.mechanics.poses import MagnetPoses
-from softtip.settings import SettingsReader
 from softtip.twin import Readout
 
 BR_TEMPERATURE_COEFFICIENT = -0.0012  # 1/K, sintered NdFeB, reversible
 
 
-@dataclass(frozen=True)
+@schema(section="realism")
 class Realism:
-    noise: bool = True
-    magnet_position_sd_mm: float = 0.10
-    magnetisation_sd: float = 0.02
-    sensor_position_sd_mm: float = 0.10
-    position_sd_mm: float = 0.20
-    angle_sd_deg: float = 0.5
-    speed_sd: float = 0.02
-    drift_K_per_sqrt_s: float = 0.02
+    """The ``[realism]`` table of a protocol."""
 
-    @classmethod
-    def read(cls, settings: SettingsReader) -> "Realism":
-        return cls(**{name: settings.like(name, default) for name, default in asdict(cls()).items()})
+    noise: Flag = True
+    magnet_position_sd_mm: NonNegativeNumber = 0.10
+    magnetisation_sd: NonNegativeNumber = 0.02
+    sensor_position_sd_mm: NonNegativeNumber = 0.10
+    position_sd_mm: NonNegativeNumber = 0.20
+    angle_sd_deg: NonNegativeNumber = 0.5
+    speed_sd: NonNegativeNumber = 0.02
+    drift_K_per_sqrt_s: NonNegativeNumber = 0.02
 
     @classmethod
     def off(cls) -> "Realism":

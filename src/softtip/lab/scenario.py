@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.design.model import MM
+from softtip._core.units import MM, UT_PER_T
 from softtip.lab.engine import interpolate_path, path_table
 from softtip.lab.experiments import material_prony
 from softtip.lab.protocols import Protocol, fingertip_for
@@ -91,7 +91,7 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     prony = material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM, v["speed_mm_s"] * MM, v["rest_s"])
     force = qlv_response(times, np.concatenate(segments_force), prony)
     force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
-    return TwinScenario(times_s=times, field_uT=unit.field(poses) * 1e6, force_N=force)
+    return TwinScenario(times_s=times, field_uT=unit.field(poses) * UT_PER_T, force_N=force)
 
 
 def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, speed_mm_s: float = 2.0,

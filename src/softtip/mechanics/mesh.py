@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip.design.model import MM, Design
+from softtip._core.units import MM
+from softtip.design.model import Design
 
 MESH_FORMAT = 1  # bump when the meshing recipe changes, so cached meshes are rebuilt
 _GMSH_LOCK = threading.Lock()  # gmsh keeps global state

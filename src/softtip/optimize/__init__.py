@@ -19,11 +19,12 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "StudyError": "settings", "SettingsReader": "settings",
+    "StudyError": "errors",
     "StudyConfig": "config", "SearchSettings": "config", "load_study": "config", "study_from_dict": "config",
     "ParameterRange": "space", "Constraint": "space", "grid_candidates": "space",
-    "Objective": "objectives", "objective": "objectives", "objective_names": "objectives",
-    "Simulation": "runs", "FEResult": "runs", "read_simulation": "runs", "run_design": "runs",
+    "Objective": "objectives", "ObjectiveSettings": "objectives", "objective": "objectives",
+    "objective_names": "objectives",
+    "Simulation": "runs", "FEResult": "runs", "run_design": "runs",
     "FEResultCache": "cache", "cache_key": "cache",
     "InProcessExecutor": "executors", "LocalPoolExecutor": "executors", "DaskExecutor": "executors",
     "make_executor": "executors",

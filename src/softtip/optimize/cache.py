@@ -6,9 +6,9 @@ physics), the simulation (load case, friction, model, mesh size), the mesh
 recipe's version and this cache's format version. Bump :data:`CACHE_FORMAT`
 whenever the solver changes what it computes, so stale results are not reused.
 
-Entries are written atomically (a temporary file in the same directory, then
-a rename), so a sweep killed at any moment leaves only complete entries, and
-a re-run computes only what is missing. An entry that cannot be read is
+Entries are written atomically (:func:`~softtip._core.files.atomic_write`),
+so a sweep killed at any moment leaves only complete entries, and a re-run
+computes only what is missing. An entry that cannot be read is
 removed and recomputed, never trusted. Nothing is pickled.
 """
 
@@ -16,11 +16,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import uuid
 from pathlib import Path
 from typing import Any
 
+from softtip._core.files import atomic_write
 from softtip.mechanics.mesh import MESH_FORMAT, cache_dir
 from softtip.optimize.runs import FEResult, Simulation
 
@@ -76,10 +75,4 @@ class FEResultCache:
         entry = {"key": key, "cache_format": CACHE_FORMAT, "design": design_spec,
                  "simulation": simulation.to_dict(), "seconds": seconds, "result": result.to_dict()}
         self.root.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{key}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-        try:
-            tmp.write_text(json.dumps(entry))
-            tmp.replace(path)
-        finally:
-            tmp.unlink(missing_ok=True)
-        return path
+        return atomic_write(path, json.dumps(entry))

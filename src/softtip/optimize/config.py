@@ -29,28 +29,74 @@ results.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
+from softtip._core.config import (
+    NonNegativeNumber,
+    Number,
+    PositiveNumber,
+    Refusal,
+    Text,
+    choice,
+    expect,
+    integer,
+    parse,
+    read_toml,
+    refused,
+    schema,
+    where,
+)
 from softtip.design.model import Design, DesignError, load_design
+from softtip.optimize.errors import StudyError
 from softtip.optimize.objectives import Objective, build_objective
-from softtip.optimize.settings import SettingsReader, StudyError
 from softtip.optimize.space import Constraint, ParameterRange, whole_steps
-from softtip.tomlfile import read_toml
 
 METHODS = ("grid", "bayes")
 MAX_CANDIDATES = 1_000_000  # the candidate list is held in memory
 
 
-@dataclass(frozen=True)
+@schema
 class SearchSettings:
-    budget: int = 25  # at most this many designs evaluated (cache hits included)
-    seed: int = 0
-    initial: int | None = None  # size of the space-filling start; default 2 * parameters + 1
-    batch: int = 1  # designs proposed per step (use the workers' count on a cluster)
-    ei_tolerance: float = 1e-3  # stop when the best expected improvement is below this many sd ...
-    patience: int = 3  # ... for this many steps in a row
+    budget: integer(1) = 25  # at most this many designs evaluated (cache hits included)
+    seed: integer() = 0
+    initial: integer(1) | None = None  # size of the space-filling start; default 2 * parameters + 1
+    batch: integer(1) = 1  # designs proposed per step (use the workers' count on a cluster)
+    ei_tolerance: NonNegativeNumber = 1e-3  # stop when the best expected improvement is below this many sd ...
+    patience: integer(1) = 3  # ... for this many steps in a row
+
+
+@schema
+class _Range:
+    """One entry of ``[parameters]``; ``step`` defaults to the whole range (one step)."""
+
+    min: Number
+    max: Number
+    step: PositiveNumber | None = None
+
+    def __post_init__(self):
+        if self.max < self.min:
+            raise Refusal("max", f"expected max >= min = {self.min}")
+        if self.step is None:
+            object.__setattr__(self, "step", self.max - self.min if self.max > self.min else 1.0)
+        elif not whole_steps(self.min, self.max, self.step):
+            raise Refusal("step", f"expected (max - min) = {self.max - self.min:g} to be a whole number of steps")
+
+
+Constraints = Annotated[list[Text], expect('a list of strings such as "magnets.circle_radius_mm < cavity.radius_mm"')]
+
+
+@schema
+class _StudyFile:
+    design: Text  # a shipped design, or a path relative to the study file
+    parameters: dict[str, _Range]
+    name: Text | None = None
+    method: choice(*METHODS) = "grid"
+    output: Text | None = None
+    constraints: Constraints = field(default_factory=list)
+    objective: dict[str, Any] = field(default_factory=dict)  # checked by the objective's own schema
+    search: SearchSettings = SearchSettings()
 
 
 @dataclass(frozen=True)
@@ -83,33 +129,27 @@ def load_study(path: str | Path) -> StudyConfig:
 def study_from_dict(data: dict[str, Any], source: str = "study", base_dir: Path = Path("."),
                     default_name: str = "study") -> StudyConfig:
     """Validate a study table; ``base_dir`` resolves a design given as a relative path."""
-    top = SettingsReader(source, data, "")
-    name = top.string("name", default_name)
-    design = _design(top, base_dir)
-    method = top.choice("method", METHODS, "grid")
-    output = Path(top.string("output", f"optimize-{name}"))
-    parameters = _parameters(top, design)
-    constraints = _constraints(top, design)
-    objective_table = top.raw("objective", {})
-    objective = build_objective(objective_table, design, source)
-    search = _search(SettingsReader(source, top.raw("search", {}), "search"))
-    top.finish()
+    study = parse(_StudyFile, data, source, error=StudyError)
+    name = study.name or default_name
+    design = _design(study.design, source, base_dir)
+    parameters = _parameters(study.parameters, data, design, source)
+    constraints = _constraints(study.constraints, design, source)
+    objective = build_objective(study.objective, design, source)
     config = StudyConfig(name=name, source=source, design=design, parameters=parameters,
-                         constraints=constraints, objective=objective, objective_settings=dict(objective_table),
-                         method=method, search=search, output=output)
+                         constraints=constraints, objective=objective, objective_settings=dict(study.objective),
+                         method=study.method, search=study.search, output=Path(study.output or f"optimize-{name}"))
     if config.candidate_count > MAX_CANDIDATES:
-        raise StudyError(f"{source}: parameters: the grid has {config.candidate_count:,} designs "
+        raise StudyError(f"{where(source, 'parameters')}: the grid has {config.candidate_count:,} designs "
                          f"(at most {MAX_CANDIDATES:,}; use larger steps)")
     return config
 
 
-def _design(top: SettingsReader, base_dir: Path) -> Design:
-    reference = top.string("design")
+def _design(reference: str, source: str, base_dir: Path) -> Design:
     path = Path(reference)
     try:
         return load_design(path if path.is_absolute() or not path.suffix else base_dir / path)
     except DesignError as error:
-        raise top.fail("design", str(error)) from None
+        raise refused(str(error), source, "design", value=reference, error=StudyError) from None
 
 
 def numeric_parameters(design: Design) -> dict[str, float]:
@@ -118,58 +158,33 @@ def numeric_parameters(design: Design) -> dict[str, float]:
             for key, value in table.items() if isinstance(value, (int, float)) and not isinstance(value, bool)}
 
 
-def _parameters(top: SettingsReader, design: Design) -> tuple[ParameterRange, ...]:
-    table = top.raw("parameters", None)
-    if not isinstance(table, dict) or not table:
-        raise top.fail("parameters", 'expected a table such as "cavity.radius_mm" = { min = 8, max = 10, step = 0.1 }')
+def _parameters(ranges: dict[str, _Range], data: dict[str, Any], design: Design,
+                source: str) -> tuple[ParameterRange, ...]:
+    if not ranges:
+        raise refused('expected a table such as "cavity.radius_mm" = { min = 8, max = 10, step = 0.1 }', source,
+                      "parameters", value=ranges, error=StudyError)
     known = numeric_parameters(design)
-    ranges = []
-    for name, bounds in table.items():
-        where = f'parameters."{name}"'
+    swept = []
+    for name, span in ranges.items():
         if name not in known:
-            raise StudyError(f"{top.source}: {where}: not a numeric parameter of {design.name} "
+            raise StudyError(f"{where(source, 'parameters', name)}: not a numeric parameter of {design.name} "
                              f"(expected one of {', '.join(sorted(known))})")
-        reader = SettingsReader(top.source, bounds, where)
-        minimum, maximum = reader.number("min"), reader.number("max")
-        if maximum < minimum:
-            raise reader.fail("max", f"expected max >= min = {minimum}")
-        step = reader.number("step", maximum - minimum if maximum > minimum else 1.0, positive=True)
-        reader.finish()
-        if not whole_steps(minimum, maximum, step):
-            raise reader.fail("step", f"expected (max - min) = {maximum - minimum:g} to be a whole number of steps")
-        integer = isinstance(known[name], int)
-        if integer and not all(float(v).is_integer() for v in (minimum, maximum, step)):
-            raise reader.fail("step", f"{name} is an integer: expected whole-number min, max and step")
-        ranges.append(ParameterRange(name, minimum, maximum, step, integer))
-    return tuple(ranges)
+        integer_valued = isinstance(known[name], int)
+        if integer_valued and not all(float(v).is_integer() for v in (span.min, span.max, span.step)):
+            raise Refusal("step", f"{name} is an integer: expected whole-number min, max and step").locate(
+                data["parameters"][name], source, "parameters", name, error=StudyError)
+        swept.append(ParameterRange(name, span.min, span.max, span.step, integer_valued))
+    return tuple(swept)
 
 
-def _constraints(top: SettingsReader, design: Design) -> tuple[Constraint, ...]:
-    texts = top.raw("constraints", [])
-    if not isinstance(texts, list) or not all(isinstance(t, str) for t in texts):
-        raise top.fail("constraints",
-                       "expected a list of strings such as \"magnets.circle_radius_mm < cavity.radius_mm\"")
+def _constraints(texts: list[str], design: Design, source: str) -> tuple[Constraint, ...]:
     known = numeric_parameters(design)
     constraints = []
     for index, text in enumerate(texts):
-        where = f"{top.source}: constraints[{index}]"
-        constraint = Constraint.parse(text, where)
+        place = where(source, "constraints", index)
+        constraint = Constraint.parse(text, place)
         unknown = sorted(constraint.names - set(known))
         if unknown:
-            raise StudyError(f"{where} = {text!r}: {unknown[0]!r} is not a numeric parameter of {design.name}")
+            raise StudyError(f"{place} = {text!r}: {unknown[0]!r} is not a numeric parameter of {design.name}")
         constraints.append(constraint)
     return tuple(constraints)
-
-
-def _search(reader: SettingsReader) -> SearchSettings:
-    defaults = SearchSettings()
-    settings = SearchSettings(
-        budget=reader.integer("budget", defaults.budget, minimum=1),
-        seed=reader.integer("seed", defaults.seed),
-        initial=None if reader.optional("initial") is None else reader.integer("initial", minimum=1),
-        batch=reader.integer("batch", defaults.batch, minimum=1),
-        ei_tolerance=reader.number("ei_tolerance", defaults.ei_tolerance, non_negative=True),
-        patience=reader.integer("patience", defaults.patience, minimum=1),
-    )
-    reader.finish()
-    return settings

@@ -36,10 +36,11 @@ from typing import Sequence
 
 import numpy as np
 
-from softtip.design.model import MM, Design
-from softtip.optimize.objectives import Infeasible, Objective, objective
-from softtip.optimize.runs import FEResult, Simulation, read_simulation
-from softtip.optimize.settings import SettingsReader
+from softtip._core.config import NonNegativeNumber, Number, PositiveNumber, Refusal, schema
+from softtip._core.units import MM, UT_PER_T
+from softtip.design.model import Design
+from softtip.optimize.objectives import Infeasible, Objective, ObjectiveSettings, objective
+from softtip.optimize.runs import FEResult, Simulation
 from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT, lsb_uT, noise_rms_uT
 
 # the pushing test: a board across the top, pushed at the centre; 22.5 deg lies between the
@@ -94,7 +95,7 @@ class EstimationBounds:
 def estimation_bounds(design: Design, results: Sequence[FEResult], steps: Steps) -> EstimationBounds:
     """Both bounds from the results of :func:`_simulations`, in that order."""
     base, angle_up, angle_down, deeper, shallower, shear_x, shear_y, deepest = results
-    readings = [r.field_change_T.ravel() * 1e6 for r in results]  # µT, sensor-major
+    readings = [r.field_change_T.ravel() * UT_PER_T for r in results]  # µT, sensor-major
     settings = MLX90393Settings.from_dict(design.sensor_readout)
     variance = reading_covariance_uT2(settings, len(base.field_change_T))
     d_angle = (readings[1] - readings[2]) / np.radians(2 * steps.angle_deg)
@@ -107,25 +108,34 @@ def estimation_bounds(design: Design, results: Sequence[FEResult], steps: Steps)
                                       (shear_y.force_N - base.force_N) / (steps.tangential_mm * MM)])
     covariance = cramer_rao(np.column_stack([d_depth, d_tx, d_ty]), variance)
     force_cov = force_jacobian @ covariance @ force_jacobian.T if np.isfinite(covariance).all() else covariance
-    peak = np.abs((deepest.field_rest_T + deepest.field_change_T) * 1e6)
+    peak = np.abs((deepest.field_rest_T + deepest.field_change_T) * UT_PER_T)
     margin = float(((full_scale_uT(settings) - peak) / full_scale_uT(settings)).min())
     return EstimationBounds(orientation_deg=float(np.degrees(np.sqrt(orientation[0, 0]))),
                             force_mN=np.sqrt(np.abs(np.diag(force_cov))) * 1e3, saturation_margin=margin)
 
 
-def _read_steps(settings: SettingsReader) -> Steps:
-    defaults = Steps()
-    return Steps(angle_deg=settings.number("angle_step_deg", defaults.angle_deg, positive=True),
-                 depth_mm=settings.number("depth_step_mm", defaults.depth_mm, positive=True),
-                 tangential_mm=settings.number("tangential_step_mm", defaults.tangential_mm, positive=True),
-                 max_depth_mm=settings.number("max_depth_mm", defaults.max_depth_mm, positive=True))
+@schema
+class BoundSettings(ObjectiveSettings):
+    """The ``[objective]`` table of the bounds: the operating point (the load-case keys, by default
+    :data:`OPERATING_POINT`) and the finite-difference steps around it."""
+
+    angle_deg: Number = OPERATING_POINT.angle_deg
+    depth_mm: NonNegativeNumber = OPERATING_POINT.depth_mm
+    angle_step_deg: PositiveNumber = Steps.angle_deg
+    depth_step_mm: PositiveNumber = Steps.depth_mm
+    tangential_step_mm: PositiveNumber = Steps.tangential_mm
+    max_depth_mm: PositiveNumber = Steps.max_depth_mm
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.depth_step_mm < self.depth_mm:
+            raise Refusal("depth_step_mm", f"expected less than depth_mm = {self.depth_mm}")
 
 
-def _bound_objective(name: str, unit: str, pick, settings: SettingsReader) -> Objective:
-    base = read_simulation(settings, OPERATING_POINT)
-    steps = _read_steps(settings)
-    if not steps.depth_mm < base.depth_mm:
-        raise settings.fail("depth_step_mm", f"expected less than depth_mm = {base.depth_mm}")
+def _bound_objective(name: str, unit: str, pick, settings: BoundSettings) -> Objective:
+    base = Simulation.of(settings)
+    steps = Steps(angle_deg=settings.angle_step_deg, depth_mm=settings.depth_step_mm,
+                  tangential_mm=settings.tangential_step_mm, max_depth_mm=settings.max_depth_mm)
 
     def score(design: Design, results: Sequence[FEResult]) -> float:
         bounds = estimation_bounds(design, results, steps)
@@ -137,13 +147,13 @@ def _bound_objective(name: str, unit: str, pick, settings: SettingsReader) -> Ob
     return Objective(name=name, simulations=_simulations(base, steps), score=score, goal="min", unit=unit)
 
 
-@objective("orientation_bound")
-def orientation_bound(settings: SettingsReader, design: Design) -> Objective:
+@objective("orientation_bound", BoundSettings)
+def orientation_bound(settings: BoundSettings, design: Design) -> Objective:
     """Cramér-Rao bound (deg, 1 sigma) of the board angle from one push's readings, depth unknown."""
     return _bound_objective("orientation_bound", "deg", lambda b: b.orientation_deg, settings)
 
 
-@objective("force_bound")
-def force_bound(settings: SettingsReader, design: Design) -> Objective:
+@objective("force_bound", BoundSettings)
+def force_bound(settings: BoundSettings, design: Design) -> Objective:
     """Cramér-Rao bound (mN, 1 sigma, worst axis) of the 3-axis force from the readings."""
     return _bound_objective("force_bound", "mN", lambda b: float(b.force_mN.max()), settings)

@@ -20,7 +20,7 @@ from multiprocessing import get_context
 from typing import Any, Iterator, Protocol, Sequence
 
 from softtip.optimize.runs import run_design
-from softtip.optimize.settings import StudyError
+from softtip.optimize.errors import StudyError
 
 
 TASKS_PER_WORKER_PROCESS = 10  # a fresh worker process costs ~2 s of imports; 10 designs take ~30 s

@@ -1,21 +1,27 @@
 """Design objectives: a registry of named, configurable scores of FE results.
 
-An objective is made by a factory registered under a name::
+An objective is made by a factory registered under a name, with the schema of its settings::
 
-    from softtip.optimize.objectives import Objective, objective, read_simulation
+    from softtip._core.config import PositiveNumber, schema
+    from softtip.optimize.objectives import Objective, ObjectiveSettings, objective
+    from softtip.optimize.runs import Simulation
 
-    @objective("peak_force")
+    @schema
+    class PeakForce(ObjectiveSettings):    # the load-case keys, name, goal, module - and its own
+        scale: PositiveNumber = 1.0
+
+    @objective("peak_force", PeakForce)
     def peak_force(settings, design):
-        simulation = read_simulation(settings)          # the load-case keys of [objective]
-        return Objective(name="peak_force", simulations=(simulation,), goal="min", unit="N",
-                         score=lambda design, results: float(results[0].force_N[2]))
+        return Objective(name="peak_force", simulations=(Simulation.of(settings),), goal="min", unit="N",
+                         score=lambda design, results: settings.scale * float(results[0].force_N[2]))
 
-The factory reads its settings from the study's ``[objective]`` table through a
-:class:`~softtip.optimize.settings.SettingsReader` (unknown keys are refused
-after it returns), may check them against the study's base design, and
-returns the FE runs it needs per design (``simulations``) and a ``score`` of
-their results. Workers only run the simulations; scores are computed by the
-client, from fresh or cached results alike.
+The study's ``[objective]`` table is validated against the schema (one-line
+errors, unknown keys refused); the factory gets the settings and the study's
+base design, may refuse a key that does not suit the design by raising
+:class:`~softtip._core.config.Refusal`, and returns the FE runs it needs per
+design (``simulations``) and a ``score`` of their results. Workers only run
+the simulations; scores are computed by the client, from fresh or cached
+results alike.
 
 Objectives in other modules are found in two ways: modules listed in
 :data:`PLUGIN_MODULES` are imported when an objective is first looked up (so
@@ -28,13 +34,15 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Annotated, Any, Callable, Literal, Sequence
 
 import numpy as np
 
-from softtip.design.model import MM, Design
-from softtip.optimize.runs import FEResult, Simulation, read_simulation
-from softtip.optimize.settings import SettingsReader, StudyError
+from softtip._core.config import Refusal, Text, Whole, choice, expect, parse, refused, schema
+from softtip._core.units import MM
+from softtip.design.model import Design
+from softtip.optimize.errors import StudyError
+from softtip.optimize.runs import FEResult, Simulation
 
 GOALS = ("max", "min")
 PLUGIN_MODULES = ("softtip.optimize.estimation",)
@@ -56,18 +64,35 @@ class Infeasible(StudyError):
     (a saturated sensor, say): the design is reported infeasible, not failed."""
 
 
-ObjectiveFactory = Callable[[SettingsReader, Design], Objective]
-_REGISTRY: dict[str, ObjectiveFactory] = {}
+@schema
+class _Choice:
+    """Which objective, from which module (imported before the objective is looked up)."""
+
+    name: Text = "feature_displacement"
+    module: Text | None = None
+
+
+@schema
+class ObjectiveSettings(Simulation, _Choice):
+    """The keys every ``[objective]`` table may hold: which objective (from which module), its goal
+    (default: the objective's own), and the load case of a :class:`~softtip.optimize.runs.Simulation`."""
+
+    goal: choice(*GOALS) | None = None
+
+
+ObjectiveFactory = Callable[[Any, Design], Objective]
+_REGISTRY: dict[str, tuple[ObjectiveFactory, type]] = {}
 _imported_plugins = False
 
 
-def objective(name: str) -> Callable[[ObjectiveFactory], ObjectiveFactory]:
-    """Register ``factory(settings, base_design) -> Objective`` under ``name``."""
+def objective(name: str, settings: type = ObjectiveSettings) -> Callable[[ObjectiveFactory], ObjectiveFactory]:
+    """Register ``factory(settings, base_design) -> Objective`` under ``name``; ``settings`` is the
+    schema of its ``[objective]`` table (:class:`ObjectiveSettings` or a schema extending it)."""
 
     def register(factory: ObjectiveFactory) -> ObjectiveFactory:
-        if name in _REGISTRY and _REGISTRY[name] is not factory:
-            raise ValueError(f"objective {name!r} is already registered by {_REGISTRY[name].__module__}")
-        _REGISTRY[name] = factory
+        if name in _REGISTRY and _REGISTRY[name][0] is not factory:
+            raise ValueError(f"objective {name!r} is already registered by {_REGISTRY[name][0].__module__}")
+        _REGISTRY[name] = factory, settings
         return factory
 
     return register
@@ -91,33 +116,44 @@ def objective_names() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def build_objective(table: Any, base_design: Design, source: str) -> Objective:
+def build_objective(table: dict[str, Any], base_design: Design, source: str) -> Objective:
     """The objective described by a study's ``[objective]`` table."""
-    settings = SettingsReader(source, table, "objective")
-    if settings.has("module"):
-        module = settings.string("module")
+    chosen = parse(_Choice, {k: table[k] for k in ("name", "module") if k in table}, source, "objective",
+                   error=StudyError)
+    if chosen.module is not None:
         try:
-            importlib.import_module(module)
+            importlib.import_module(chosen.module)
         except ImportError as error:
-            raise settings.fail("module", f"cannot import it ({error})") from None
+            raise refused(f"cannot import it ({error})", source, "objective", "module", value=chosen.module,
+                          error=StudyError) from None
     names = objective_names()
-    name = settings.string("name", "feature_displacement")
-    if name not in _REGISTRY:
-        raise settings.fail("name", f"expected one of {', '.join(names)}")
-    made = _REGISTRY[name](settings, base_design)
-    goal = settings.choice("goal", GOALS, made.goal)
-    settings.finish()
-    return dataclasses.replace(made, goal=goal)
+    if chosen.name not in _REGISTRY:
+        raise refused(f"expected one of {', '.join(names)}", source, "objective", "name", value=chosen.name,
+                      error=StudyError)
+    factory, settings_schema = _REGISTRY[chosen.name]
+    settings = parse(settings_schema, table, source, "objective", error=StudyError)
+    try:
+        made = factory(settings, base_design)
+    except Refusal as refusal:
+        raise refusal.locate(table, source, "objective", error=StudyError) from None
+    return dataclasses.replace(made, goal=settings.goal or made.goal)
 
 
 # --------------------------------------------------------------------------- built-in objectives
 
 COMPONENTS = ("x", "y", "z", "magnitude")
 MAGNET_STATISTICS = ("max", "mean")
+Magnet = Annotated[Literal[MAGNET_STATISTICS] | Whole, expect("max, mean or a magnet index")]
 
 
-@objective("feature_displacement")
-def feature_displacement(settings: SettingsReader, design: Design) -> Objective:
+@schema
+class FeatureDisplacementSettings(ObjectiveSettings):
+    component: choice(*COMPONENTS) = "z"
+    magnet: Magnet = "max"
+
+
+@objective("feature_displacement", FeatureDisplacementSettings)
+def feature_displacement(settings: FeatureDisplacementSettings, design: Design) -> Objective:
     """Displacement (mm) of the feature point - the centre of a magnet's top face - under a load case.
 
     The published objective: the vertical (``component = "z"``) displacement under a
@@ -125,13 +161,11 @@ def feature_displacement(settings: SettingsReader, design: Design) -> Objective:
     the one under the board), maximised. ``magnet`` may also be ``"mean"`` or an
     index; values are magnitudes, so "more displacement" is always larger.
     """
-    simulation = read_simulation(settings)
-    component = settings.choice("component", COMPONENTS, "z")
-    magnet = settings.raw("magnet", "max")
+    simulation = Simulation.of(settings)
+    component, magnet = settings.component, settings.magnet
     count = len(design.magnets)
-    if magnet not in MAGNET_STATISTICS and not (isinstance(magnet, int) and not isinstance(magnet, bool)
-                                                and 0 <= magnet < count):
-        raise settings.fail("magnet", f"expected max, mean or a magnet index 0..{count - 1}")
+    if magnet not in MAGNET_STATISTICS and not 0 <= magnet < count:
+        raise Refusal("magnet", f"expected max, mean or a magnet index 0..{count - 1}")
 
     def score(design: Design, results: Sequence[FEResult]) -> float:
         displacement = results[0].feature_displacements_m

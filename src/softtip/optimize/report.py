@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from softtip._core.files import atomic_write
 from softtip.optimize.study import OK, StudyResult
 
 
@@ -17,30 +18,23 @@ def write_outputs(result: StudyResult, directory: Path) -> dict[str, str]:
     directory.mkdir(parents=True, exist_ok=True)
     paths = {"csv": directory / "results.csv", "json": directory / "results.json",
              "plot": directory / "objective.png"}
-    _write_csv(result, paths["csv"])
-    _atomic_write(paths["json"], json.dumps(result.to_json(), indent=2))
+    atomic_write(paths["csv"], _csv_text(result))
+    atomic_write(paths["json"], json.dumps(result.to_json(), indent=2))
     plot_objective(result, paths["plot"])
     return {key: str(path) for key, path in paths.items()}
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
-
-
-def _write_csv(result: StudyResult, path: Path) -> None:
+def _csv_text(result: StudyResult) -> str:
     names = [p.name for p in result.config.parameters]
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with tmp.open("w", newline="") as stream:
-        writer = csv.writer(stream)
-        writer.writerow(["evaluation", "index", *names, "status", f"objective_{result.config.objective.unit}",
-                         "cached", "fe_seconds", "reason"])
-        for r in result.table:
-            writer.writerow([r.evaluation or "", r.index, *(r.params[n] for n in names), r.status,
-                             "" if r.objective is None else repr(r.objective), r.cached,
-                             "" if r.fe_seconds is None else f"{r.fe_seconds:.3f}", r.reason])
-    tmp.replace(path)
+    stream = io.StringIO(newline="")
+    writer = csv.writer(stream)
+    writer.writerow(["evaluation", "index", *names, "status", f"objective_{result.config.objective.unit}",
+                     "cached", "fe_seconds", "reason"])
+    for r in result.table:
+        writer.writerow([r.evaluation or "", r.index, *(r.params[n] for n in names), r.status,
+                         "" if r.objective is None else repr(r.objective), r.cached,
+                         "" if r.fe_seconds is None else f"{r.fe_seconds:.3f}", r.reason])
+    return stream.getvalue()
 
 
 def plot_objective(result: StudyResult, path: Path) -> Path:
@@ -98,7 +92,7 @@ def plot_objective(result: StudyResult, path: Path) -> Path:
         axes.set_ylabel(py.name)
     axes.set_title(title, fontsize=10)
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    atomic_write(path, lambda handle: figure.savefig(handle, format=path.suffix[1:] or "png", dpi=120))
     plt.close(figure)
     return path
 

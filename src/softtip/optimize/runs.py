@@ -16,15 +16,15 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Iterator
+from dataclasses import asdict, dataclass, fields
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Iterator
 
 import numpy as np
 
-from softtip.design.model import MM
+from softtip._core.config import NonNegativeNumber, Number, PositiveNumber, Real, choice, expect, schema
+from softtip._core.units import MM
 from softtip.mechanics.contact import FRICTION_MODES, LoadCase
 from softtip.mechanics.indenters import make_indenter
-from softtip.optimize.settings import SettingsReader, StudyError
 
 if TYPE_CHECKING:
     from softtip.twin import Twin, TwinResult
@@ -35,21 +35,36 @@ MODELS = ("linear", "neo-hookean")
 # 0.6 mm mesh, at a third of the cost of the twin's 1.0 mm default - the right mesh for sweeps.
 SWEEP_MESH_SIZE_MM = 1.5
 
+PointMM = Annotated[tuple[Real, Real], expect("[x, y] in mm")]
+Indenter = choice(*INDENTERS)
+Friction = choice(*FRICTION_MODES)
+SolidModel = choice(*MODELS)
 
-@dataclass(frozen=True)
+
+@schema
 class Simulation:
-    """A load case on the twin with the solver settings that determine its result (lengths in mm)."""
+    """A load case on the twin with the solver settings that determine its result (lengths in mm).
 
-    indenter: str = "board"
-    thickness_mm: float = 1.6
-    angle_deg: float = 0.0
-    radius_mm: float = 5.0
-    depth_mm: float = 1.0
-    position_mm: tuple[float, float] = (0.0, 0.0)
-    tangential_mm: tuple[float, float] = (0.0, 0.0)
-    friction: str = "stick"
-    model: str = "linear"
-    mesh_size_mm: float = SWEEP_MESH_SIZE_MM
+    Its keys are also the load-case keys of a study's ``[objective]`` table."""
+
+    indenter: Indenter = "board"
+    thickness_mm: PositiveNumber = 1.6
+    angle_deg: Number = 0.0
+    radius_mm: PositiveNumber = 5.0
+    depth_mm: NonNegativeNumber = 1.0
+    position_mm: PointMM = (0.0, 0.0)
+    tangential_mm: PointMM = (0.0, 0.0)
+    friction: Friction = "stick"
+    model: SolidModel = "linear"
+    mesh_size_mm: PositiveNumber = SWEEP_MESH_SIZE_MM
+
+    def __post_init__(self):
+        self.load_case()  # refuses what the contact mechanics would
+
+    @classmethod
+    def of(cls, settings: "Simulation") -> "Simulation":
+        """The simulation part of settings that extend it (an objective's)."""
+        return cls(**{f.name: getattr(settings, f.name) for f in fields(cls)})
 
     def load_case(self) -> LoadCase:
         indenter = make_indenter(self.indenter, thickness=self.thickness_mm * MM, angle_deg=self.angle_deg,
@@ -65,29 +80,7 @@ class Simulation:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Simulation":
-        return cls(**{**data, "position_mm": tuple(data["position_mm"]),
-                      "tangential_mm": tuple(data["tangential_mm"])})
-
-
-def read_simulation(settings: SettingsReader, defaults: Simulation = Simulation()) -> Simulation:
-    """The simulation described by the load-case keys of an objective's settings table."""
-    simulation = Simulation(
-        indenter=settings.choice("indenter", INDENTERS, defaults.indenter),
-        thickness_mm=settings.number("thickness_mm", defaults.thickness_mm, positive=True),
-        angle_deg=settings.number("angle_deg", defaults.angle_deg),
-        radius_mm=settings.number("radius_mm", defaults.radius_mm, positive=True),
-        depth_mm=settings.number("depth_mm", defaults.depth_mm, non_negative=True),
-        position_mm=settings.pair("position_mm", defaults.position_mm),
-        tangential_mm=settings.pair("tangential_mm", defaults.tangential_mm),
-        friction=settings.choice("friction", FRICTION_MODES, defaults.friction),
-        model=settings.choice("model", MODELS, defaults.model),
-        mesh_size_mm=settings.number("mesh_size_mm", defaults.mesh_size_mm, positive=True),
-    )
-    try:
-        simulation.load_case()
-    except ValueError as error:
-        raise StudyError(f"{settings.source}: [{settings.section}] {error}") from None
-    return simulation
+        return cls(**data)
 
 
 @dataclass(frozen=True, eq=False)  # arrays: compare fields with numpy, not ==

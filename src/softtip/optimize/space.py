@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from softtip.optimize.settings import StudyError
+from softtip.optimize.errors import StudyError
 
 _DIGITS = 10  # grid values are rounded so 8.0 + 3 * 0.1 is 8.3, the number a user would write
 

@@ -18,15 +18,16 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from softtip import __version__
+from softtip._core.progress import SILENT, Progress, Task
 from softtip.design.model import Design, DesignError
 from softtip.optimize.bayes import BayesianSearch
 from softtip.optimize.cache import FEResultCache
 from softtip.optimize.config import StudyConfig, numeric_parameters
-from softtip.optimize.objectives import Infeasible
+from softtip.optimize.errors import StudyError
 from softtip.optimize.executors import Executor, FEJob
+from softtip.optimize.objectives import Infeasible
 from softtip.optimize.runs import FEResult
 from softtip.optimize.space import grid_candidates, normalised_points
-from softtip.optimize.settings import StudyError
 
 OK, INFEASIBLE, FAILED = "ok", "infeasible", "failed"
 
@@ -43,6 +44,11 @@ class DesignRecord:
     evaluation: int | None = None  # 1-based order in which the search asked for it
     cached: bool = False  # every FE result came from the cache
     fe_seconds: float | None = None  # wall time of the FE runs computed now
+
+    @property
+    def values(self) -> str:
+        """The parameter values as a user writes them: ``8.3, 4.5``."""
+        return ", ".join(f"{v:g}" for v in self.params.values())
 
     def to_json(self) -> dict[str, Any]:
         return {"evaluation": self.evaluation, "index": self.index, "params": self.params,
@@ -98,9 +104,6 @@ class StudyResult:
             "evaluations": self.counts(), "executor": self.executor, "wall_seconds": round(self.wall_seconds, 2),
             "table": [r.to_json() for r in self.table],
         }
-
-
-Progress = Callable[[DesignRecord, int, int], None]  # (record just finished, finished so far, expected total)
 
 
 def check_feasibility(config: StudyConfig, params: dict[str, float]) -> tuple[Design | None, str]:
@@ -174,7 +177,9 @@ class _Evaluator:
 
 
 def run_study(config: StudyConfig, executor: Executor, cache: FEResultCache | None = None,
-              progress: Progress | None = None) -> StudyResult:
+              progress: Progress = SILENT) -> StudyResult:
+    """Evaluate the study; ``progress`` gets one task, advanced per design evaluated, its note the
+    design's parameters and objective."""
     start = time.perf_counter()
     cache = FEResultCache() if cache is None else cache
     records = [DesignRecord(index=i, params=params) for i, params in enumerate(grid_candidates(config.parameters))]
@@ -186,41 +191,44 @@ def run_study(config: StudyConfig, executor: Executor, cache: FEResultCache | No
         else:
             designs[record.index] = design
     evaluator = _Evaluator(config, executor, cache)
-    asked = finished = 0
+    asked = 0
 
-    def evaluate(indices: list[int], total: int) -> Iterator[DesignRecord]:
-        nonlocal asked, finished
+    def evaluate(indices: list[int], task: Task) -> Iterator[DesignRecord]:
+        nonlocal asked
         for index in indices:
             asked += 1
             records[index].evaluation = asked
         for record in evaluator.evaluate([(records[i], designs[i]) for i in indices]):
-            finished += 1
-            if progress is not None:
-                progress(record, finished, total)
+            value = f"{record.objective:.4g}" if record.objective is not None else record.status
+            task.advance(note=f"last: {record.values} -> {value}")
             yield record
 
     feasible = sorted(designs)
+    description = f"{config.name} ({config.method})"
     if not feasible:
         stop = "no feasible candidate"
     elif config.method == "grid":
-        for _ in evaluate(feasible, len(feasible)):
-            pass
+        with progress.task(description, total=len(feasible)) as task:
+            for _ in evaluate(feasible, task):
+                pass
         stop = "grid complete"
     else:
-        stop = _bayes(config, records, feasible, evaluate)
+        stop = _bayes(config, records, feasible, evaluate, progress, description)
     return StudyResult(config=config, records=records, fe_runs=evaluator.fe_runs, cache_hits=evaluator.cache_hits,
                        wall_seconds=time.perf_counter() - start, executor=executor.description, stop_reason=stop)
 
 
 def _bayes(config: StudyConfig, records: list[DesignRecord], feasible: list[int],
-           evaluate: Callable[[list[int], int], Iterator[DesignRecord]]) -> str:
+           evaluate: Callable[[list[int], Task], Iterator[DesignRecord]], progress: Progress,
+           description: str) -> str:
     settings = config.search
     points = normalised_points(config.parameters, [records[i].params for i in feasible])
     search = BayesianSearch(points, budget=settings.budget, seed=settings.seed, initial=settings.initial,
                             batch=settings.batch, ei_tolerance=settings.ei_tolerance, patience=settings.patience)
     sign = 1.0 if config.objective.goal == "max" else -1.0  # the search maximises
     position = {index: k for k, index in enumerate(feasible)}
-    while picks := search.ask():
-        for record in evaluate([feasible[k] for k in picks], search.budget):
-            search.tell(position[record.index], None if record.status != OK else sign * record.objective)
+    with progress.task(description, total=search.budget) as task:
+        while picks := search.ask():
+            for record in evaluate([feasible[k] for k in picks], task):
+                search.tell(position[record.index], None if record.status != OK else sign * record.objective)
     return search.stop_reason

@@ -9,6 +9,8 @@ import json
 from pathlib import Path
 from typing import Any, Iterable
 
+from softtip._core.files import atomic_write
+
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 72em; color: #222; }
 h1 { font-size: 1.5em; } h2 { font-size: 1.15em; margin-top: 1.6em; border-bottom: 1px solid #ccc; }
@@ -74,5 +76,4 @@ def write_report(path: str | Path, title: str, sections: list[dict]) -> Path:
     parts.append("</body></html>")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(parts))
-    return path
+    return atomic_write(path, "\n".join(parts))

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.files import atomic_write
+from softtip._core.units import MM
 from softtip.mechanics.indenters import Board, Sphere
 
 
@@ -61,8 +63,8 @@ def plot_section(result, mesh, path: str | Path) -> Path:
         h = (xyz - origin) @ across
         centre = np.array([h.mean(), xyz[:, 2].mean()])
         order = np.argsort(np.arctan2(xyz[:, 2] - centre[1], h - centre[0]))
-        polygons.append(np.column_stack([h[order], xyz[order, 2]]) * 1e3)
-        colours.append(np.mean(mags) * 1e3)
+        polygons.append(np.column_stack([h[order], xyz[order, 2]]) / MM)
+        colours.append(np.mean(mags) / MM)
     fig, ax = plt.subplots(figsize=(8, 4.2))
     collection = PolyCollection(polygons, array=np.array(colours), cmap="viridis", edgecolors="face", linewidths=0.2)
     ax.add_collection(collection)
@@ -76,26 +78,26 @@ def plot_section(result, mesh, path: str | Path) -> Path:
         corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [m.diameter / 2, m.height / 2]
         c, s = math.cos(tilt), math.sin(tilt)
         rotated = corners @ np.array([[c, s], [-s, c]])
-        ax.fill(*((rotated + [h0, position[2]]) * 1e3).T, color="firebrick", alpha=0.85, zorder=3)
+        ax.fill(*((rotated + [h0, position[2]]) / MM).T, color="firebrick", alpha=0.85, zorder=3)
     frame_z = design.height - result.load.depth
     if isinstance(indenter, Board):
         t = indenter.thickness / 2
-        ax.fill(np.array([-t, t, t, -t]) * 1e3, np.array([frame_z, frame_z, frame_z + 3e-3, frame_z + 3e-3]) * 1e3,
+        ax.fill(np.array([-t, t, t, -t]) / MM, np.array([frame_z, frame_z, frame_z + 3 * MM, frame_z + 3 * MM]) / MM,
                 color="0.6", zorder=4)
     elif isinstance(indenter, Sphere):
-        ax.add_patch(plt.Circle((0, (frame_z + indenter.radius) * 1e3), indenter.radius * 1e3, color="0.6", zorder=4))
+        ax.add_patch(plt.Circle((0, (frame_z + indenter.radius) / MM), indenter.radius / MM, color="0.6", zorder=4))
     else:
-        ax.axhspan(frame_z * 1e3, frame_z * 1e3 + 1.5, color="0.6", zorder=4)
+        ax.axhspan(frame_z / MM, frame_z / MM + 1.5, color="0.6", zorder=4)
     for position in design.sensor_positions:
-        ax.plot((position - origin) @ across * 1e3, position[2] * 1e3, "ks", ms=6, zorder=5)
+        ax.plot((position - origin) @ across / MM, position[2] / MM, "ks", ms=6, zorder=5)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("across the indenter (mm)")
     ax.set_ylabel("z (mm)")
-    ax.set_title(f"{design.name}: {type(indenter).__name__.lower()} {result.load.depth * 1e3:.2f} mm, "
+    ax.set_title(f"{design.name}: {type(indenter).__name__.lower()} {result.load.depth / MM:.2f} mm, "
                  f"{result.model}; Fz = {result.force[2]:.3f} N")
     path = Path(path)
     fig.tight_layout()
-    fig.savefig(path, dpi=150)
+    atomic_write(path, lambda handle: fig.savefig(handle, format=path.suffix[1:] or "png", dpi=150))
     plt.close(fig)
     return path

@@ -16,11 +16,13 @@ not modelled: TCMP_EN = 0 throughout.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from softtip._core.config import Flag, Refusal, choice, expect, from_numpy, integer, parse, schema
+from softtip._core.units import UT_PER_T
 
 # --------------------------------------------------------------------------
 # Datasheet facts
@@ -127,17 +129,12 @@ _XYZ = np.arange(3)
 # --------------------------------------------------------------------------
 
 
-def _is_integer(value: Any) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+Resolution = integer(0, 3)
+Resolutions = Annotated[tuple[Resolution, Resolution, Resolution], from_numpy, expect("3 integers, each 0..3")]
+Hallconf = choice(0xC, 0x0, expected="0xC (12) or 0x0 (0)")
 
 
-def _check_range(name: str, value: Any, highest: int) -> int:
-    if not _is_integer(value) or not 0 <= value <= highest:
-        raise ValueError(f"sensor.{name} = {value!r}: expected an integer 0..{highest}")
-    return int(value)
-
-
-@dataclass(frozen=True)
+@schema(section="sensor")
 class MLX90393Settings:
     """Register settings of one MLX90393 (TCMP_EN = 0).
 
@@ -152,42 +149,23 @@ class MLX90393Settings:
     permitted filter.
     """
 
-    gain_sel: int = 7
-    res_xyz: tuple[int, int, int] = (0, 0, 0)
-    osr: int = 0
-    dig_filt: int = 2
-    osr2: int = 0
-    hallconf: int = HALLCONF_DEFAULT
-    temperature: bool = False
+    gain_sel: integer(0, 7) = 7
+    res_xyz: Resolutions = (0, 0, 0)
+    osr: integer(0, 3) = 0
+    dig_filt: integer(0, 7) = 2
+    osr2: integer(0, 3) = 0
+    hallconf: Hallconf = HALLCONF_DEFAULT
+    temperature: Flag = False
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "gain_sel", _check_range("gain_sel", self.gain_sel, 7))
-        object.__setattr__(self, "res_xyz", _checked_resolutions(self.res_xyz))
-        object.__setattr__(self, "osr", _check_range("osr", self.osr, 3))
-        object.__setattr__(self, "dig_filt", _check_range("dig_filt", self.dig_filt, 7))
-        object.__setattr__(self, "osr2", _check_range("osr2", self.osr2, 3))
-        if not _is_integer(self.hallconf) or int(self.hallconf) not in SENSITIVITY_UT:
-            raise ValueError(f"sensor.hallconf = {self.hallconf!r}: expected 0xC (12) or 0x0 (0)")
-        object.__setattr__(self, "hallconf", int(self.hallconf))
-        if not isinstance(self.temperature, (bool, np.bool_)):
-            raise ValueError(f"sensor.temperature = {self.temperature!r}: expected true or false")
-        object.__setattr__(self, "temperature", bool(self.temperature))
         if (self.osr, self.dig_filt) in FORBIDDEN_OSR_DIG_FILT:
-            raise ValueError(
-                f"sensor.osr = {self.osr} with sensor.dig_filt = {self.dig_filt}: not permitted "
-                "by the datasheet; use dig_filt >= 2 with osr 0 and dig_filt >= 1 with osr 1"
-            )
+            raise Refusal("dig_filt", f"not permitted with sensor.osr = {self.osr} by the datasheet; "
+                          "use dig_filt >= 2 with osr 0 and dig_filt >= 1 with osr 1")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> MLX90393Settings:
         """Settings from a mapping such as a parsed [sensor] table; unknown keys are refused."""
-        if not isinstance(d, Mapping):
-            raise ValueError(f"sensor = {d!r}: expected a table of settings")
-        known = cls.__dataclass_fields__.keys()
-        for key in d:
-            if key not in known:
-                raise ValueError(f"sensor.{key}: unknown key; expected one of {', '.join(known)}")
-        return cls(**d)
+        return parse(cls, d, "", "sensor")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (lists, ints, bool) that from_dict turns back into equal settings."""
@@ -200,16 +178,6 @@ class MLX90393Settings:
             "hallconf": self.hallconf,
             "temperature": self.temperature,
         }
-
-
-def _checked_resolutions(value: Any) -> tuple[int, int, int]:
-    if (
-        not isinstance(value, (tuple, list, np.ndarray))
-        or len(value) != 3
-        or not all(_is_integer(res) and 0 <= res <= 3 for res in value)
-    ):
-        raise ValueError(f"sensor.res_xyz = {value!r}: expected 3 integers, each 0..3")
-    return tuple(int(res) for res in value)
 
 
 # --------------------------------------------------------------------------
@@ -246,7 +214,7 @@ def conversion_time_s(settings: MLX90393Settings, axes: int = 3) -> float:
     phase (T_CONV_END) and the temperature conversion when settings.temperature.
     Excludes the bus traffic of the SM and RM commands.
     """
-    if not _is_integer(axes) or not 1 <= axes <= 3:
+    if isinstance(axes, (bool, np.bool_)) or not isinstance(axes, (int, np.integer)) or not 1 <= axes <= 3:
         raise ValueError(f"axes = {axes!r}: expected an integer 1..3")
     axis_time = AXIS_FIXED_TIME_S + AXIS_SAMPLE_TIME_S * averaging_count(settings)
     temperature_time = 0.0
@@ -288,7 +256,7 @@ class MLX90393:
         self._settings = MLX90393Settings() if settings is None else settings
         lsb = lsb_uT(self._settings)
         self._lsb_uT = lsb
-        self._counts_per_tesla = 1e6 / lsb
+        self._counts_per_tesla = UT_PER_T / lsb
         self._noise_counts = noise_rms_uT(self._settings) / lsb
         self._lowest = _per_axis(self._settings, OUTPUT_LOWEST_COUNTS).astype(np.float64)
         self._highest = _per_axis(self._settings, OUTPUT_HIGHEST_COUNTS).astype(np.float64)

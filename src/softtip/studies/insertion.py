@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
+from softtip._core.units import MM
 from softtip.calibration import load_model, save_model
-from softtip.design.model import MM
 from softtip.lab import Protocol, load_protocol, run_protocol
 from softtip.lab.insertion import InsertionWorld, SimulatedArm
 from softtip.mechanics.mesh import cache_dir
@@ -21,7 +22,7 @@ INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A firs
 TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much
 
 
-def trained_model_files(protocol: Protocol, say=print) -> tuple[Path, Path]:
+def trained_model_files(protocol: Protocol, progress: Progress = SILENT) -> tuple[Path, Path]:
     """The inverter's state and force networks as softtip model files, trained once per protocol
     (and its seed) and kept in the cache."""
     key = hashlib.sha256(json.dumps(protocol.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
@@ -29,9 +30,9 @@ def trained_model_files(protocol: Protocol, say=print) -> tuple[Path, Path]:
     paths = folder / f"inverter-state-{key}.npz", folder / f"inverter-force-{key}.npz"
     if all(p.is_file() for p in paths):
         return paths
-    say("training the contact-state and force networks on the inverter protocol")
-    dataset, _ = run_protocol(protocol)
-    classifier, regressor = inverter_models(dataset, protocol.seed)
+    dataset, _ = run_protocol(protocol, progress)
+    with progress.task("training the contact-state and force networks on the inverter protocol"):
+        classifier, regressor = inverter_models(dataset, protocol.seed)
     folder.mkdir(parents=True, exist_ok=True)
     channels = list(dataset.channels)
     save_model(paths[0], classifier, input_channels=channels, input_units=["uT"] * len(channels),
@@ -41,18 +42,18 @@ def trained_model_files(protocol: Protocol, say=print) -> tuple[Path, Path]:
     return paths
 
 
-def trained_models(protocol: Protocol, say=print):
+def trained_models(protocol: Protocol, progress: Progress = SILENT):
     """The inverter's state and force networks (see :func:`trained_model_files`)."""
-    state, force = trained_model_files(protocol, say)
+    state, force = trained_model_files(protocol, progress)
     return protocol, load_model(state)[0], load_model(force)[0]
 
 
-def run_insertion(case: str, seed: int = 1, protocol: Protocol | None = None, say=print) -> dict:
+def run_insertion(case: str, seed: int = 1, protocol: Protocol | None = None, progress: Progress = SILENT) -> dict:
     """One insertion; ``protocol`` defaults to the shipped inverter protocol with ``seed``."""
     if protocol is None:
         protocol = load_protocol("inverter")
         protocol.seed = seed
-    protocol, classifier, regressor = trained_models(protocol, say)
+    protocol, classifier, regressor = trained_models(protocol, progress)
     world = InsertionWorld(protocol, case, np.random.default_rng(seed + 100))
     arm = SimulatedArm(INITIAL_HEIGHT)
     world.take_baseline(INITIAL_HEIGHT)  # grasped, in the air: the initial value

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
 from softtip.calibration import LMNetwork, metrics, save_model
 from softtip.lab import load_protocol, run_protocol
 from softtip.lab.experiments import CALIBRATION, VALIDATION
@@ -27,7 +28,7 @@ FORCES = ("fx_N", "fy_N", "fz_N")
 DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
 
 
-def calibrate_force_model(seed: int, say=print, reuse: bool = False) -> tuple[Path, dict, object]:
+def calibrate_force_model(seed: int, progress: Progress = SILENT, reuse: bool = False) -> tuple[Path, dict, object]:
     """Run the force calibration on the twin and fit the network (``reuse``: take the model saved by an
     earlier run with this seed, if there is one)."""
     protocol = load_protocol("force3")
@@ -35,15 +36,14 @@ def calibrate_force_model(seed: int, say=print, reuse: bool = False) -> tuple[Pa
     path = cache_dir() / "models" / f"demo-force-{seed}.npz"
     if reuse and path.is_file():
         return path, {}, protocol
-    say(f"twin: running the 3-axis force calibration on {protocol.design.name}")
-    dataset, timings = run_protocol(protocol)
+    dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     y = np.column_stack([dataset.column(k) for k in FORCES])
     contact = np.abs(y).max(axis=1) > 0.05
     role = dataset.column("role")
     train, test = contact & (role == CALIBRATION), contact & (role == VALIDATION)
-    say(f"calibration: fitting a 3-10-3 network on {int(train.sum())} samples of {len(dataset.trials)} trials")
-    model = LMNetwork((10,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    with progress.task(f"calibration: a 3-10-3 network on {int(train.sum())} samples of {len(dataset.trials)} trials"):
+        model = LMNetwork((10,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     estimate = model.predict(X[test])
     validation = {k: {"mean_abs_error_N": float(metrics.mean_abs_error(y[test, i], estimate[:, i])),
                       "r2": float(metrics.r2(y[test, i], estimate[:, i]))} for i, k in enumerate(FORCES)}
@@ -54,10 +54,10 @@ def calibrate_force_model(seed: int, say=print, reuse: bool = False) -> tuple[Pa
 
 
 def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, dashboard: bool = True,
-                  record: str | None = None, say=print) -> dict:
-    model_path, calibration, protocol = calibrate_force_model(seed, say)
-    scenario = pushing_scenario(protocol, seed, speed_mm_s=DEMO_SPEED_MM_S)
-    say(f"live: emulated fingertip replaying the twin ({scenario.duration_s:.0f} s loop) for {duration_s:g} s")
+                  record: str | None = None, progress: Progress = SILENT) -> dict:
+    model_path, calibration, protocol = calibrate_force_model(seed, progress)
+    with progress.task(f"live: the twin's pushes for {duration_s:g} s of emulated streaming"):
+        scenario = pushing_scenario(protocol, seed, speed_mm_s=DEMO_SPEED_MM_S)
     frames = []
 
     def collect(frame) -> None:

@@ -14,6 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from softtip._core.progress import SILENT, Progress  # noqa: E402
 from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier  # noqa: E402
 from softtip.calibration import metrics  # noqa: E402
 from softtip.data import Dataset  # noqa: E402
@@ -57,13 +58,13 @@ def _scatter_plot(ax, truth, estimate, title, unit):
 
 # ---------------------------------------------------------------------------------------------- studies
 
-def pushing(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
+def pushing(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
     """Designs A-D, polynomial vs network, board angle from one sensor's three readings."""
     results, figures = {}, []
     figure, axes = plt.subplots(2, 4, figsize=(14, 6.5))
     for column, name in enumerate(("cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D")):
         protocol.design = load_design(name)
-        dataset, timings = run_protocol(protocol)
+        dataset, timings = run_protocol(protocol, progress)
         # orientation is only defined once the board presses: samples 1 mm deep or more
         pressed = dataset.column("depth_mm") >= 1.0
         train = _rows(dataset, pressed, CALIBRATION)
@@ -97,8 +98,8 @@ def pushing(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
     return results, figures, notes
 
 
-def force3(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def force3(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     y = np.column_stack([dataset.column(k) for k in ("fx_N", "fy_N", "fz_N")])
     contact = np.abs(y).max(axis=1) > 0.05
@@ -129,8 +130,8 @@ def force3(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         "the spec gives no error figures to compare with."]
 
 
-def hysteresis(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     speeds = dataset.column("speed_mm_s")
     results = {"timings_s": timings, "per_speed": {}}
     figure, ax = plt.subplots(figsize=(6, 4.5))
@@ -159,8 +160,8 @@ def hysteresis(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         "construction (up to noise and trial scatter); the other speeds are predictions of the model."]
 
 
-def grasp_two(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     X, y = dataset.X(), dataset.column("angle_deg")
     gripped = dataset.column("grip_force_N") > 0.1 * dataset.column("grip_force_N").max()
     trained = dataset.column("trained")
@@ -183,8 +184,8 @@ def grasp_two(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         "untrained 5/15/25 deg. Samples with a grip force above 10 % of the peak are used."]
 
 
-def grasp_positions(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     y = np.column_stack([dataset.column("angle_deg"), dataset.column("grip_force_N")])
     gripped = y[:, 1] > 0.1 * y[:, 1].max()
@@ -227,8 +228,8 @@ def _classifier_report(dataset, model, mask, classes) -> dict:
             "confusion": metrics.confusion(y, predicted, classes).tolist(), "labels": [str(c) for c in classes]}
 
 
-def contact_states(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def contact_states(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     touching = dataset.column("normal_force_N") > 0.05
     sets, roles = dataset.column("set"), dataset.column("role")
@@ -277,8 +278,8 @@ def inverter_models(dataset: Dataset, seed: int):
     return classifier, regressor
 
 
-def inverter(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
-    dataset, timings = run_protocol(protocol)
+def inverter(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, list, list[str]]:
+    dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     force = dataset.column("normal_force_N")
     nominal, sets, roles = dataset.column("state_nominal"), dataset.column("set"), dataset.column("role")
@@ -313,7 +314,8 @@ def inverter(protocol: Protocol, seed: int) -> tuple[dict, list, list[str]]:
         "with 4 hidden layers of 10 tanh neurons (state, normal force)."]
 
 
-def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_path=None):
+def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_path=None,
+                        progress: Progress = SILENT):
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
     count to a minimum (a smoke run)."""
     study = STUDIES[name]
@@ -323,5 +325,5 @@ def run_published_study(name: str, seed: int = 1, quick: bool = False, protocol_
         for key in ("calibration_trials", "validation_trials", "trials", "untrained_trials"):
             if key in protocol.parameters:
                 protocol.parameters[key] = min(protocol.parameters[key], 2 if key != "untrained_trials" else 1)
-    results, figures, notes = globals()[study.analysis](protocol, seed)
+    results, figures, notes = globals()[study.analysis](protocol, seed, progress)
     return _round(results), figures, notes, protocol

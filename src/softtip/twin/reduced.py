@@ -49,7 +49,8 @@ import numpy as np
 
 from softtip import __version__
 from softtip._core.network import fold_scaling, predict_batch
-from softtip.design.model import MM, Design, design_from_dict
+from softtip._core.units import MM
+from softtip.design.model import Design, design_from_dict
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
 from softtip.mechanics.indenters import make_indenter

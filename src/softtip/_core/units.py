@@ -1,0 +1,5 @@
+"""Unit constants. softtip computes in SI; a value in another unit is converted where it enters or
+leaves: ``depth_mm * MM`` is metres, ``depth_m / MM`` millimetres, ``field_T * UT_PER_T`` microtesla."""
+
+MM = 1e-3  # metres per millimetre
+UT_PER_T = 1e6  # microtesla per tesla
