@@ -150,7 +150,7 @@ def _parameter_type(key: str, default: Any) -> Any:
 
 
 @functools.cache
-def parameters_schema(name: str) -> type:
+def _parameters_schema(name: str) -> type:
     """The schema of the ``[parameters]`` table of protocol ``name``: every key of :data:`DEFAULTS`."""
     fields = [(key, _parameter_type(key, default), field(default_factory=functools.partial(copy.deepcopy, default)))
               for key, default in DEFAULTS[name].items()]
@@ -163,7 +163,7 @@ def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Pr
         design = load_design(top.design if base is None or not (base / top.design).is_file() else base / top.design)
     except ValueError as error:
         raise refused(str(error), source, "design", value=top.design) from None
-    parameters = parse(parameters_schema(top.protocol), top.parameters, source, "parameters")
+    parameters = parse(_parameters_schema(top.protocol), top.parameters, source, "parameters")
     return Protocol(name=top.protocol, design=design, seed=top.seed, parameters=asdict(parameters),
                     realism=top.realism, viscoelastic=asdict(top.viscoelastic))
 
