@@ -16,6 +16,7 @@ import struct
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +24,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from rich.console import Console
 
 from softtip.data import Dataset, channel_names
-from softtip.hardware import FaultPlan, FrameFate, Sample
+from softtip.hardware import FaultPlan, FrameFate, PressCycle, Sample
 from softtip.realtime import (
     AcquisitionClock,
     Baseline,
@@ -34,7 +35,6 @@ from softtip.realtime import (
     LiveSession,
     McapRecorder,
     Pipeline,
-    PressCycle,
     RecorderSink,
     RecordingError,
     ROS2Sink,
@@ -46,13 +46,7 @@ from softtip.realtime import (
     run_live,
     soak,
 )
-from softtip.realtime.mcap_record import (
-    MAGNETIC_FIELD_FLOATS,
-    decode_stamped,
-    encode_stamped,
-    schema_text,
-    stamped_layout,
-)
+from softtip.realtime.recording.format import schema_text
 
 CHIPS = 4
 CHANNELS = channel_names(CHIPS)
@@ -333,16 +327,58 @@ def test_recording_reads_back_as_ros2_messages_with_an_independent_decoder(tmp_p
     assert [ros.data for _, _, ros in decoded["/fingertip/contact_state"]] == [f.state for f in frames[3:]]
 
 
-def test_magnetic_field_cdr_bytes_match_a_hand_packed_message():
+def test_recorded_messages_are_the_bytes_of_hand_packed_cdr(tmp_path):
+    # Little-endian plain CDR: encapsulation 00 01 00 00, each primitive aligned to its size
+    # counted from the end of that header, strings as uint32 length (with the NUL) + bytes + NUL.
     stamp_ns = 1_234_567_890_123_456_789
-    field_T = np.array([1e-4, -2e-4, 3.5e-3])
+    field_uT = np.array([[0.0, 0.0, 0.0], [100.0, -200.0, 3500.0]])
     covariance = np.arange(9) * 1e-12
-    (message,) = encode_stamped(np.array([stamp_ns]), "fingertip_chip3", np.r_[field_T, covariance][None])
-    frame_id = b"fingertip_chip3\x00"  # 16 bytes: the body is at 12 + 16 = 28, the doubles at 32
-    expected = (b"\x00\x01\x00\x00" + struct.pack("<iII", 1_234_567_890, 123_456_789, len(frame_id)) + frame_id
-                + b"\x00" * 4 + struct.pack("<12d", *field_T, *covariance))
-    assert message == expected
-    assert stamped_layout("ab", 6).itemsize == 4 + 16 + 48  # 12 + 3 = 15 -> 16, then 6 doubles
+    path = tmp_path / "one.mcap"
+    recorder = McapRecorder(path, 2, target_names=["grip_force", "Fz"], target_units=["N", "N"],
+                            classes=["free", "pressed"], covariance_T2=covariance)
+    recorder.write_frames([frame(7, stamp_ns, field_uT, None, 0, np.array([0.25, -1.5]), "pressed")])
+    recorder.close()
+    topics = read_recording(path).topics
+    frame_id = b"fingertip_chip1\x00"  # 16 bytes: the body is at 12 + 16 = 28, the doubles at 32
+    assert topics["/fingertip/chip1/field"].data == [
+        b"\x00\x01\x00\x00" + struct.pack("<iII", 1_234_567_890, 123_456_789, len(frame_id)) + frame_id
+        + b"\x00" * 4 + struct.pack("<12d", 1e-4, -2e-4, 3.5e-3, *covariance)]
+    label = b"grip_force,Fz\x00"  # 14 bytes from 8: size at 24 (aligned), stride, data_offset, count, data at 40
+    assert topics["/fingertip/estimates"].data == [
+        b"\x00\x01\x00\x00" + struct.pack("<II", 1, len(label)) + label + b"\x00" * 2
+        + struct.pack("<IIII", 2, 2, 0, 2) + struct.pack("<2d", 0.25, -1.5)]
+    assert topics["/fingertip/contact_state"].data == [b"\x00\x01\x00\x00" + struct.pack("<I", 8) + b"pressed\x00"]
+    assert topics["/fingertip/chip1/field"].sequences == [7] and topics["/fingertip/chip1/field"].log_times == [stamp_ns]
+
+
+OLD_RECORDING = Path(__file__).parent / "data" / "recording-0.1.0.mcap"
+
+
+def test_a_recording_written_by_softtip_0_1_0_reads_and_converts():
+    # Written by the 0.1.0 recorder (its own CDR encoder): 2 chips, 12 frames 2 ms apart, chip 1
+    # faulty in frame 6, baselines taken at frames 3 and 8, estimates Fz, grip_force, Tx (N m).
+    def field_uT(i):
+        return np.array([[1000.0 * (k + 1) - 250.0 * a + 3.5 * i for a in range(3)] for k in range(2)])
+
+    recording = read_recording(OLD_RECORDING)
+    assert not recording.truncated and recording.metadata["softtip"]["softtip_version"] == "0.1.0"
+    _, second = recording.topics["/fingertip/chip1/baseline"].decoded()
+    vector = second.magnetic_field
+    assert [vector.x, vector.y, vector.z] == list((field_uT(7)[1] - 1.25) / 1e6)
+    dataset = convert(OLD_RECORDING).dataset
+    kept = [i for i in range(12) if i != 6]
+    baselines = {i: field_uT(0) + 0.5 if i < 8 else field_uT(7) - 1.25 for i in kept}  # frames 0-2: the first
+    expected = np.array([field_uT(i) - baselines[i] for i in kept]).reshape(len(kept), -1)
+    np.testing.assert_allclose(dataset.X(), expected, rtol=0, atol=1e-9)
+    assert dataset.labels == {"Fz": "N", "Tx": "N m", "grip_force": "N", "contact_state": "1"}
+    estimated = np.array(kept) >= 3
+    np.testing.assert_array_equal(dataset.column("Fz")[estimated], [0.1 * i for i in kept if i >= 3])
+    np.testing.assert_array_equal(dataset.column("grip_force")[estimated], [-0.2 * i for i in kept if i >= 3])
+    np.testing.assert_array_equal(dataset.column("Tx")[estimated], [0.01 * i for i in kept if i >= 3])
+    assert np.isnan(dataset.column("Fz")[~estimated]).all()
+    assert list(dataset.column("contact_state")) == ["", "", ""] + [
+        "pressed" if i % 2 else "free" for i in kept if i >= 3]
+    np.testing.assert_allclose(dataset.column("time_s"), np.array(kept) * 2e-3, rtol=0, atol=1e-12)
 
 
 def test_schemas_list_every_dependency_once():
@@ -394,9 +430,9 @@ def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_flush(tmp_path)
     assert recording.truncated
     messages = recording.topics["/fingertip/chip1/field"]
     assert len(messages.data) >= flushed
-    _, _, values = decode_stamped(messages.data, MAGNETIC_FIELD_FLOATS)
+    values = [(m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z) for m in messages.decoded()]
     i = np.arange(len(values))
-    np.testing.assert_allclose(values[:, :3], np.column_stack([1000.0 + i, 2.0 * i, np.full(i.size, -3.0)]) * 1e-6,
+    np.testing.assert_allclose(values, np.column_stack([1000.0 + i, 2.0 * i, np.full(i.size, -3.0)]) * 1e-6,
                                rtol=1e-15)
     # The mcap library's own stream reader reads the same messages, then meets the torn tail
     # (most often the end of the file between records; a record cut short fails otherwise).
