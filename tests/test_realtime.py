@@ -15,6 +15,7 @@ import signal
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -51,6 +52,8 @@ from softtip.realtime.recording.format import schema_text
 CHIPS = 4
 CHANNELS = channel_names(CHIPS)
 RNG_SEED = 7
+# How long a test waits for what it waits for: reaching it means a hang, never the expected way out.
+HANG_GUARD_S = 60.0
 
 
 class LinearModel:
@@ -230,18 +233,19 @@ def test_acquisition_stamps_recover_the_device_clock_on_the_host_clock():
     true_offset = 12.5  # host clock minus device clock, s
     delays = rng.exponential(5e-4, device.size)
     delays[::50] = 0.0  # now and then a frame arrives without delay
-    clock = AcquisitionClock(leak=1e-4)
+    wall_minus_perf_ns = 1_700_000_000 * 10**9  # the host's wall clock read 1.7e9 s at perf_counter 0
+    clock = AcquisitionClock(leak=1e-4, wall_minus_perf_ns=wall_minus_perf_ns)
     stamps = np.array([clock.stamp_ns(h, d) for h, d in zip(device + true_offset + delays, device, strict=True)])
     acquired = device + true_offset
-    wall_minus_perf_s = (time.time_ns() - time.perf_counter_ns()) * 1e-9
-    error_s = stamps * 1e-9 - wall_minus_perf_s - acquired
-    # The estimate is late by min_j [delay_j + leak (d_k - d_j)]: at most the leak over the
-    # 100 ms since the last undelayed frame. 50 us allow for reading two clocks twice.
-    assert error_s.min() > -5e-5 and error_s.max() < 1e-4 * 0.1 + 5e-5
+    error_s = (stamps - wall_minus_perf_ns) * 1e-9 - acquired
+    # The estimate is late by min_j [delay_j + leak (d_k - d_j)] >= 0: at most the leak over
+    # the 100 ms since the last undelayed frame. 2 ns: rounding to whole ns and of the sums.
+    assert error_s.min() > -2e-9 and error_s.max() < 1e-4 * 0.1 + 2e-9
+    assert error_s.max() > 0.9 * 1e-4 * 0.1  # the leak's lag is there, just before each undelayed frame
     assert np.all(np.diff(stamps) > 0)
     # The device restarts: its clock goes back, a new minimum starts from that frame.
-    restart = clock.stamp_ns(true_offset + 100.0 + 0.0, 0.0)
-    assert abs(restart * 1e-9 - wall_minus_perf_s - (true_offset + 100.0)) < 5e-5
+    restart = clock.stamp_ns(true_offset + 100.0, 0.0)
+    assert abs((restart - wall_minus_perf_ns) * 1e-9 - (true_offset + 100.0)) < 2e-9
 
 
 def test_saved_calibration_model_runs_in_the_pipeline(tmp_path):
@@ -411,11 +415,12 @@ while True:
 """
 
 
+@pytest.mark.realtime
 def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_flush(tmp_path):
     path = tmp_path / "killed.mcap"
     child = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(path)], stdout=subprocess.PIPE, text=True)
     try:
-        flushed, deadline = 0, time.monotonic() + 60
+        flushed, deadline = 0, time.monotonic() + HANG_GUARD_S
         while flushed < 600 and time.monotonic() < deadline:
             line = child.stdout.readline()
             assert line, "the recording process ended early"
@@ -494,17 +499,31 @@ def test_convert_without_recorded_baselines_subtracts_each_trials_initial_value(
 # --------------------------------------------------------------------------
 
 
+class FrameCollector:
+    """A pipeline callback keeping every frame; ``enough`` is set once ``count`` have arrived."""
+
+    def __init__(self, count):
+        self.frames, self.count = [], count
+        self.enough = threading.Event()
+
+    def __call__(self, frame):
+        self.frames.append(frame)
+        if len(self.frames) >= self.count:
+            self.enough.set()
+
+
+@pytest.mark.realtime
 def test_emulated_stream_with_faults_delivers_every_intact_frame_and_counts_the_rest():
     forces, _, _ = three_estimators()
-    frames = []
+    collector = FrameCollector(300)
     faults = FaultPlan(corrupt_every=17, drop_byte_every=23, chip_error_every=13, seed=2)
     session = LiveSession("emulator", [forces], rate_hz=250, chips=CHIPS, baseline=Baseline(20),
-                          callbacks=[frames.append], emulator_faults=faults, emulator_source=PressCycle(CHIPS))
+                          callbacks=[collector], emulator_faults=faults, emulator_source=PressCycle(CHIPS))
     with session:
-        session.wait(1.5)
-    log, summary = session.emulator_log, session.summary()
+        session.wait(HANG_GUARD_S, collector.enough)
+    log, summary, frames = session.emulator_log, session.summary(), collector.frames
     sent = log.fate == log.FATES.index(FrameFate.SENT)
-    assert len(frames) > 200
+    assert collector.enough.is_set() and len(frames) >= 300
     np.testing.assert_array_equal([f.seq for f in frames], log.seq[sent])
     # A frame is known lost when a later one arrives: count those before the last intact frame.
     damaged = np.count_nonzero(~sent[:np.flatnonzero(sent)[-1]])
@@ -523,6 +542,7 @@ def test_emulated_stream_with_faults_delivers_every_intact_frame_and_counts_the_
             assert f.baseline_uT is None or not f.chip_ok.all()
 
 
+@pytest.mark.realtime
 def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the_converted_data(tmp_path):
     from softtip.calibration import PolynomialFit, save_model
 
@@ -532,9 +552,10 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
     model_path = save_model(tmp_path / "force.npz", model, input_channels=channel_names(2), input_units="uT",
                             target_names=["Fz", "Fx"], target_units="N")
     recording = tmp_path / "live.mcap"
-    summary = run_live("emulator", [model_path], [RecorderSink(recording)], duration_s=1.0, rate_hz=100, chips=2,
-                       baseline_frames=10)
-    assert summary["frames"] > 50 and summary["lost_in_transit"] == 0 and summary["sink_errors"] == 0
+    collector = FrameCollector(100)
+    summary = run_live("emulator", [model_path], [RecorderSink(recording)], duration_s=HANG_GUARD_S, rate_hz=100,
+                       chips=2, baseline_frames=10, callbacks=[collector], stop=collector.enough)
+    assert summary["frames"] >= 100 and summary["lost_in_transit"] == 0 and summary["sink_errors"] == 0
     dataset = convert(recording).dataset
     estimated = np.isfinite(dataset.y(["Fz", "Fx"])).all(axis=1)
     assert np.count_nonzero(estimated) == summary["frames"] - 10
@@ -542,13 +563,18 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
                                rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.realtime
 def test_twenty_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
-    # the CI version of `softtip bench live --duration 600`
+    # The CI version of `softtip bench live --duration 600`. How many frames the emulator gets
+    # out in 20 s depends on the machine's load (it restarts its schedule when late, as the
+    # firmware does, and a frame it cannot write within 50 ms is damaged or not sent): every
+    # frame sent intact must arrive in order and be recorded, every damaged one be counted.
     report = soak(20.0, rate_hz=500, chips=CHIPS, record_path=tmp_path / "soak.mcap")
     frames = report["frames"]
     assert frames["lost"] == 0 and frames["every_intact_frame_delivered_in_order"]
-    assert frames["delivered"] > 9000 and report["recording"]["complete"]
-    assert report["sink_errors"] == 0
+    assert frames["every_damaged_frame_counted"]
+    assert frames["delivered"] == frames["sent_intact"] > 0 and report["recording"]["complete"]
+    assert report["streaming_s"] >= 20.0 and report["sink_errors"] == 0
 
 
 # --------------------------------------------------------------------------

@@ -18,11 +18,15 @@ class AcquisitionClock:
     ``t = d (1 + leak) + min_j [h_j - d_j (1 + leak)]``. A device clock that goes back
     (the device restarted) starts a new minimum. Without a device clock the arrival time
     is used. Stamps are strictly increasing (by 1 ns at least).
+
+    Arrival times are on the ``time.perf_counter`` clock; ``wall_minus_perf_ns`` turns them
+    into wall-clock time (None: read both clocks now).
     """
 
-    def __init__(self, leak: float = CLOCK_LEAK) -> None:
+    def __init__(self, leak: float = CLOCK_LEAK, wall_minus_perf_ns: int | None = None) -> None:
         self._factor = 1.0 + leak
-        self._wall_minus_perf_ns = time.time_ns() - time.perf_counter_ns()
+        self._wall_minus_perf_ns = (time.time_ns() - time.perf_counter_ns() if wall_minus_perf_ns is None
+                                    else int(wall_minus_perf_ns))
         self._offset = math.inf
         self._last_device: float | None = None
         self._last_ns = -1
