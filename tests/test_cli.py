@@ -83,7 +83,10 @@ def test_deformed_mesh_is_saved_as_data_only_npz(tmp_path):
 def test_sensor_model_facts_are_reported(board_push):
     chip = board_push["sensor_model"]
     assert chip["lsb_uT"] == pytest.approx([0.150, 0.150, 0.242])  # GAIN_SEL 7, RES 0 (datasheet table 17)
-    assert 1 / chip["max_rate_hz"] == pytest.approx(chip["conversion_time_ms"] * 1e-3)
+    # Datasheet Table 8 at OSR 0, DIG_FILT 2: T_STBY + T_ACTIVE + 3 (67 + 64 (2 + 2^2)) + T_CONV_END
+    # = 264 + 432 + 3 x 451 + 120 = 2169 us, one reading after another: 461.0 Hz.
+    assert chip["conversion_time_ms"] == pytest.approx(2.169, rel=1e-9)
+    assert chip["max_rate_hz"] == pytest.approx(1e6 / 2169, rel=1e-9)
 
 
 def test_ambient_field_cancels_in_the_change_but_shifts_the_raw_counts():

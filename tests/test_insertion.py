@@ -8,7 +8,7 @@ import pytest
 
 from softtip.lab import load_protocol
 from softtip.lab.insertion import SimulatedArm
-from softtip.realtime.control import InsertionController
+from softtip.control.insertion import InsertionController
 from softtip.studies.insertion import INITIAL_HEIGHT, run_insertion
 
 

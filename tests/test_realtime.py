@@ -15,7 +15,9 @@ import signal
 import struct
 import subprocess
 import sys
+import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +25,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from rich.console import Console
 
 from softtip.data import Dataset, channel_names
-from softtip.hardware import FaultPlan, FrameFate, Sample
+from softtip.hardware import FaultPlan, FrameFate, PressCycle, Sample
 from softtip.realtime import (
     AcquisitionClock,
     Baseline,
@@ -34,7 +36,6 @@ from softtip.realtime import (
     LiveSession,
     McapRecorder,
     Pipeline,
-    PressCycle,
     RecorderSink,
     RecordingError,
     ROS2Sink,
@@ -46,17 +47,13 @@ from softtip.realtime import (
     run_live,
     soak,
 )
-from softtip.realtime.mcap_record import (
-    MAGNETIC_FIELD_FLOATS,
-    decode_stamped,
-    encode_stamped,
-    schema_text,
-    stamped_layout,
-)
+from softtip.realtime.recording.format import schema_text
 
 CHIPS = 4
 CHANNELS = channel_names(CHIPS)
 RNG_SEED = 7
+# How long a test waits for what it waits for: reaching it means a hang, never the expected way out.
+HANG_GUARD_S = 60.0
 
 
 class LinearModel:
@@ -236,18 +233,19 @@ def test_acquisition_stamps_recover_the_device_clock_on_the_host_clock():
     true_offset = 12.5  # host clock minus device clock, s
     delays = rng.exponential(5e-4, device.size)
     delays[::50] = 0.0  # now and then a frame arrives without delay
-    clock = AcquisitionClock(leak=1e-4)
+    wall_minus_perf_ns = 1_700_000_000 * 10**9  # the host's wall clock read 1.7e9 s at perf_counter 0
+    clock = AcquisitionClock(leak=1e-4, wall_minus_perf_ns=wall_minus_perf_ns)
     stamps = np.array([clock.stamp_ns(h, d) for h, d in zip(device + true_offset + delays, device, strict=True)])
     acquired = device + true_offset
-    wall_minus_perf_s = (time.time_ns() - time.perf_counter_ns()) * 1e-9
-    error_s = stamps * 1e-9 - wall_minus_perf_s - acquired
-    # The estimate is late by min_j [delay_j + leak (d_k - d_j)]: at most the leak over the
-    # 100 ms since the last undelayed frame. 50 us allow for reading two clocks twice.
-    assert error_s.min() > -5e-5 and error_s.max() < 1e-4 * 0.1 + 5e-5
+    error_s = (stamps - wall_minus_perf_ns) * 1e-9 - acquired
+    # The estimate is late by min_j [delay_j + leak (d_k - d_j)] >= 0: at most the leak over
+    # the 100 ms since the last undelayed frame. 2 ns: rounding to whole ns and of the sums.
+    assert error_s.min() > -2e-9 and error_s.max() < 1e-4 * 0.1 + 2e-9
+    assert error_s.max() > 0.9 * 1e-4 * 0.1  # the leak's lag is there, just before each undelayed frame
     assert np.all(np.diff(stamps) > 0)
     # The device restarts: its clock goes back, a new minimum starts from that frame.
-    restart = clock.stamp_ns(true_offset + 100.0 + 0.0, 0.0)
-    assert abs(restart * 1e-9 - wall_minus_perf_s - (true_offset + 100.0)) < 5e-5
+    restart = clock.stamp_ns(true_offset + 100.0, 0.0)
+    assert abs((restart - wall_minus_perf_ns) * 1e-9 - (true_offset + 100.0)) < 2e-9
 
 
 def test_saved_calibration_model_runs_in_the_pipeline(tmp_path):
@@ -333,16 +331,58 @@ def test_recording_reads_back_as_ros2_messages_with_an_independent_decoder(tmp_p
     assert [ros.data for _, _, ros in decoded["/fingertip/contact_state"]] == [f.state for f in frames[3:]]
 
 
-def test_magnetic_field_cdr_bytes_match_a_hand_packed_message():
+def test_recorded_messages_are_the_bytes_of_hand_packed_cdr(tmp_path):
+    # Little-endian plain CDR: encapsulation 00 01 00 00, each primitive aligned to its size
+    # counted from the end of that header, strings as uint32 length (with the NUL) + bytes + NUL.
     stamp_ns = 1_234_567_890_123_456_789
-    field_T = np.array([1e-4, -2e-4, 3.5e-3])
+    field_uT = np.array([[0.0, 0.0, 0.0], [100.0, -200.0, 3500.0]])
     covariance = np.arange(9) * 1e-12
-    (message,) = encode_stamped(np.array([stamp_ns]), "fingertip_chip3", np.r_[field_T, covariance][None])
-    frame_id = b"fingertip_chip3\x00"  # 16 bytes: the body is at 12 + 16 = 28, the doubles at 32
-    expected = (b"\x00\x01\x00\x00" + struct.pack("<iII", 1_234_567_890, 123_456_789, len(frame_id)) + frame_id
-                + b"\x00" * 4 + struct.pack("<12d", *field_T, *covariance))
-    assert message == expected
-    assert stamped_layout("ab", 6).itemsize == 4 + 16 + 48  # 12 + 3 = 15 -> 16, then 6 doubles
+    path = tmp_path / "one.mcap"
+    recorder = McapRecorder(path, 2, target_names=["grip_force", "Fz"], target_units=["N", "N"],
+                            classes=["free", "pressed"], covariance_T2=covariance)
+    recorder.write_frames([frame(7, stamp_ns, field_uT, None, 0, np.array([0.25, -1.5]), "pressed")])
+    recorder.close()
+    topics = read_recording(path).topics
+    frame_id = b"fingertip_chip1\x00"  # 16 bytes: the body is at 12 + 16 = 28, the doubles at 32
+    assert topics["/fingertip/chip1/field"].data == [
+        b"\x00\x01\x00\x00" + struct.pack("<iII", 1_234_567_890, 123_456_789, len(frame_id)) + frame_id
+        + b"\x00" * 4 + struct.pack("<12d", 1e-4, -2e-4, 3.5e-3, *covariance)]
+    label = b"grip_force,Fz\x00"  # 14 bytes from 8: size at 24 (aligned), stride, data_offset, count, data at 40
+    assert topics["/fingertip/estimates"].data == [
+        b"\x00\x01\x00\x00" + struct.pack("<II", 1, len(label)) + label + b"\x00" * 2
+        + struct.pack("<IIII", 2, 2, 0, 2) + struct.pack("<2d", 0.25, -1.5)]
+    assert topics["/fingertip/contact_state"].data == [b"\x00\x01\x00\x00" + struct.pack("<I", 8) + b"pressed\x00"]
+    assert topics["/fingertip/chip1/field"].sequences == [7] and topics["/fingertip/chip1/field"].log_times == [stamp_ns]
+
+
+OLD_RECORDING = Path(__file__).parent / "data" / "recording-0.1.0.mcap"
+
+
+def test_a_recording_written_by_softtip_0_1_0_reads_and_converts():
+    # Written by the 0.1.0 recorder (its own CDR encoder): 2 chips, 12 frames 2 ms apart, chip 1
+    # faulty in frame 6, baselines taken at frames 3 and 8, estimates Fz, grip_force, Tx (N m).
+    def field_uT(i):
+        return np.array([[1000.0 * (k + 1) - 250.0 * a + 3.5 * i for a in range(3)] for k in range(2)])
+
+    recording = read_recording(OLD_RECORDING)
+    assert not recording.truncated and recording.metadata["softtip"]["softtip_version"] == "0.1.0"
+    _, second = recording.topics["/fingertip/chip1/baseline"].decoded()
+    vector = second.magnetic_field
+    assert [vector.x, vector.y, vector.z] == list((field_uT(7)[1] - 1.25) / 1e6)
+    dataset = convert(OLD_RECORDING).dataset
+    kept = [i for i in range(12) if i != 6]
+    baselines = {i: field_uT(0) + 0.5 if i < 8 else field_uT(7) - 1.25 for i in kept}  # frames 0-2: the first
+    expected = np.array([field_uT(i) - baselines[i] for i in kept]).reshape(len(kept), -1)
+    np.testing.assert_allclose(dataset.X(), expected, rtol=0, atol=1e-9)
+    assert dataset.labels == {"Fz": "N", "Tx": "N m", "grip_force": "N", "contact_state": "1"}
+    estimated = np.array(kept) >= 3
+    np.testing.assert_array_equal(dataset.column("Fz")[estimated], [0.1 * i for i in kept if i >= 3])
+    np.testing.assert_array_equal(dataset.column("grip_force")[estimated], [-0.2 * i for i in kept if i >= 3])
+    np.testing.assert_array_equal(dataset.column("Tx")[estimated], [0.01 * i for i in kept if i >= 3])
+    assert np.isnan(dataset.column("Fz")[~estimated]).all()
+    assert list(dataset.column("contact_state")) == ["", "", ""] + [
+        "pressed" if i % 2 else "free" for i in kept if i >= 3]
+    np.testing.assert_allclose(dataset.column("time_s"), np.array(kept) * 2e-3, rtol=0, atol=1e-12)
 
 
 def test_schemas_list_every_dependency_once():
@@ -375,11 +415,12 @@ while True:
 """
 
 
+@pytest.mark.realtime
 def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_flush(tmp_path):
     path = tmp_path / "killed.mcap"
     child = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(path)], stdout=subprocess.PIPE, text=True)
     try:
-        flushed, deadline = 0, time.monotonic() + 60
+        flushed, deadline = 0, time.monotonic() + HANG_GUARD_S
         while flushed < 600 and time.monotonic() < deadline:
             line = child.stdout.readline()
             assert line, "the recording process ended early"
@@ -394,9 +435,9 @@ def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_flush(tmp_path)
     assert recording.truncated
     messages = recording.topics["/fingertip/chip1/field"]
     assert len(messages.data) >= flushed
-    _, _, values = decode_stamped(messages.data, MAGNETIC_FIELD_FLOATS)
+    values = [(m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z) for m in messages.decoded()]
     i = np.arange(len(values))
-    np.testing.assert_allclose(values[:, :3], np.column_stack([1000.0 + i, 2.0 * i, np.full(i.size, -3.0)]) * 1e-6,
+    np.testing.assert_allclose(values, np.column_stack([1000.0 + i, 2.0 * i, np.full(i.size, -3.0)]) * 1e-6,
                                rtol=1e-15)
     # The mcap library's own stream reader reads the same messages, then meets the torn tail
     # (most often the end of the file between records; a record cut short fails otherwise).
@@ -458,17 +499,31 @@ def test_convert_without_recorded_baselines_subtracts_each_trials_initial_value(
 # --------------------------------------------------------------------------
 
 
+class FrameCollector:
+    """A pipeline callback keeping every frame; ``enough`` is set once ``count`` have arrived."""
+
+    def __init__(self, count):
+        self.frames, self.count = [], count
+        self.enough = threading.Event()
+
+    def __call__(self, frame):
+        self.frames.append(frame)
+        if len(self.frames) >= self.count:
+            self.enough.set()
+
+
+@pytest.mark.realtime
 def test_emulated_stream_with_faults_delivers_every_intact_frame_and_counts_the_rest():
     forces, _, _ = three_estimators()
-    frames = []
+    collector = FrameCollector(300)
     faults = FaultPlan(corrupt_every=17, drop_byte_every=23, chip_error_every=13, seed=2)
     session = LiveSession("emulator", [forces], rate_hz=250, chips=CHIPS, baseline=Baseline(20),
-                          callbacks=[frames.append], emulator_faults=faults, emulator_source=PressCycle(CHIPS))
+                          callbacks=[collector], emulator_faults=faults, emulator_source=PressCycle(CHIPS))
     with session:
-        session.wait(1.5)
-    log, summary = session.emulator_log, session.summary()
+        session.wait(HANG_GUARD_S, collector.enough)
+    log, summary, frames = session.emulator_log, session.summary(), collector.frames
     sent = log.fate == log.FATES.index(FrameFate.SENT)
-    assert len(frames) > 200
+    assert collector.enough.is_set() and len(frames) >= 300
     np.testing.assert_array_equal([f.seq for f in frames], log.seq[sent])
     # A frame is known lost when a later one arrives: count those before the last intact frame.
     damaged = np.count_nonzero(~sent[:np.flatnonzero(sent)[-1]])
@@ -487,6 +542,7 @@ def test_emulated_stream_with_faults_delivers_every_intact_frame_and_counts_the_
             assert f.baseline_uT is None or not f.chip_ok.all()
 
 
+@pytest.mark.realtime
 def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the_converted_data(tmp_path):
     from softtip.calibration import PolynomialFit, save_model
 
@@ -496,9 +552,10 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
     model_path = save_model(tmp_path / "force.npz", model, input_channels=channel_names(2), input_units="uT",
                             target_names=["Fz", "Fx"], target_units="N")
     recording = tmp_path / "live.mcap"
-    summary = run_live("emulator", [model_path], [RecorderSink(recording)], duration_s=1.0, rate_hz=100, chips=2,
-                       baseline_frames=10)
-    assert summary["frames"] > 50 and summary["lost_in_transit"] == 0 and summary["sink_errors"] == 0
+    collector = FrameCollector(100)
+    summary = run_live("emulator", [model_path], [RecorderSink(recording)], duration_s=HANG_GUARD_S, rate_hz=100,
+                       chips=2, baseline_frames=10, callbacks=[collector], stop=collector.enough)
+    assert summary["frames"] >= 100 and summary["lost_in_transit"] == 0 and summary["sink_errors"] == 0
     dataset = convert(recording).dataset
     estimated = np.isfinite(dataset.y(["Fz", "Fx"])).all(axis=1)
     assert np.count_nonzero(estimated) == summary["frames"] - 10
@@ -506,13 +563,18 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
                                rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.realtime
 def test_twenty_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
-    # the CI version of `softtip bench live --duration 600`
+    # The CI version of `softtip bench live --duration 600`. How many frames the emulator gets
+    # out in 20 s depends on the machine's load (it restarts its schedule when late, as the
+    # firmware does, and a frame it cannot write within 50 ms is damaged or not sent): every
+    # frame sent intact must arrive in order and be recorded, every damaged one be counted.
     report = soak(20.0, rate_hz=500, chips=CHIPS, record_path=tmp_path / "soak.mcap")
     frames = report["frames"]
     assert frames["lost"] == 0 and frames["every_intact_frame_delivered_in_order"]
-    assert frames["delivered"] > 9000 and report["recording"]["complete"]
-    assert report["sink_errors"] == 0
+    assert frames["every_damaged_frame_counted"]
+    assert frames["delivered"] == frames["sent_intact"] > 0 and report["recording"]["complete"]
+    assert report["streaming_s"] >= 20.0 and report["sink_errors"] == 0
 
 
 # --------------------------------------------------------------------------

@@ -31,8 +31,8 @@ def live(
 ) -> None:
     """Stream a fingertip (or the emulated one) through baseline -> models -> dashboard, recording,
     Foxglove, ROS 2. Retake the baseline with kill -USR1 PID."""
-    from softtip.realtime.pipeline import run_live
-    from softtip.realtime.sinks import live_sinks
+    from softtip.realtime.session import run_live
+    from softtip.realtime.sinks.factory import live_sinks
 
     if emulate == (port is not None):
         fail("give either --port PORT or --emulate")
@@ -76,7 +76,7 @@ def convert(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Turn a live recording into the calibration tools' trial dataset (changes in µT, labels)."""
-    from softtip.realtime.convert import convert as convert_recording
+    from softtip.realtime.recording.convert import convert as convert_recording
 
     result = convert_recording(recording, output, gap_s=gap)
     dataset = result.dataset

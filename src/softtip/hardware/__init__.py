@@ -1,4 +1,5 @@
-"""Hardware layer: the fingertip serial protocol, the host driver, a ReSkin reader and a pty emulator."""
+"""Hardware layer: the fingertip serial protocol, the host driver, a ReSkin reader and a pty emulator
+(in this process or a child process)."""
 
 from softtip.hardware.driver import (
     DeviceDisconnected,
@@ -14,6 +15,7 @@ from softtip.hardware.driver import (
     temperature_to_raw,
 )
 from softtip.hardware.emulator import Emulator, FaultPlan, FrameFate, LoggedFrame
+from softtip.hardware.emulator_process import EmulatorLog, EmulatorProcess, PressCycle
 from softtip.hardware.protocol import (
     Ack,
     ChipStatus,
@@ -42,6 +44,8 @@ __all__ = [
     "DeviceTimeout",
     "DriverStats",
     "Emulator",
+    "EmulatorLog",
+    "EmulatorProcess",
     "ErrorCode",
     "ErrorReply",
     "FaultPlan",
@@ -53,6 +57,7 @@ __all__ = [
     "Identity",
     "LoggedFrame",
     "PortError",
+    "PressCycle",
     "ReSkinDecoder",
     "ReSkinReader",
     "Sample",

@@ -1,45 +1,43 @@
 """Real-time estimation: the live pipeline, its sinks, MCAP recording and conversion.
 
-- :mod:`~softtip.realtime.pipeline`: :class:`Pipeline` (source -> baseline -> estimators
-  -> sinks, in the acquisition thread), :class:`Estimator` (any model with ``predict``,
-  ``predict_one`` used when present), :class:`LiveSession` and :func:`run_live` (a
-  fingertip or an emulated one, its driver and a pipeline), :class:`EmulatorProcess`;
+- :mod:`~softtip.realtime.frames`: :class:`FrameResult` (one frame after the pipeline) and
+  :class:`StreamInfo` (what sinks learn about the stream);
+- :mod:`~softtip.realtime.estimator`: :class:`Estimator` (any model with ``predict``,
+  ``predict_one`` used when present);
+- :mod:`~softtip.realtime.clock`: :class:`AcquisitionClock`, acquisition times on the host's
+  wall clock from the device clock;
 - :mod:`~softtip.realtime.baseline`: initial-value subtraction at start and on command,
   optional gated drift tracking;
+- :mod:`~softtip.realtime.pipeline`: :class:`Pipeline` (source -> baseline -> estimators
+  -> sinks, in the acquisition thread);
+- :mod:`~softtip.realtime.session`: :class:`LiveSession` and :func:`run_live` (a fingertip or
+  an emulated one in a child process, its driver and a pipeline);
 - :mod:`~softtip.realtime.sinks`: :class:`RecorderSink` (MCAP), :class:`DashboardSink`
-  (terminal), :class:`FoxgloveSink` (Foxglove WebSocket live view), :func:`live_sinks`;
-- :mod:`~softtip.realtime.mcap_record`: ROS 2 message types in CDR, written chunk by chunk
-  so that a killed process leaves a readable file, and :func:`read_recording`;
-- :mod:`~softtip.realtime.convert`: MCAP recordings to the Parquet trial dataset;
-- :mod:`~softtip.realtime.ros2`: :class:`ROS2Sink`, a ROS 2 node on the same topics (needs
-  rclpy);
+  (terminal), :class:`FoxgloveSink` (Foxglove WebSocket live view), :class:`ROS2Sink` (a ROS 2
+  node, needs rclpy), :func:`live_sinks`;
+- :mod:`~softtip.realtime.recording`: ROS 2 message types in MCAP, written chunk by chunk so
+  that a killed process leaves a readable file, :func:`read_recording`, and :func:`convert`
+  to the Parquet trial dataset;
 - :mod:`~softtip.realtime.bench`: :func:`soak`, the endurance and speed benchmark.
 """
 
 from softtip.realtime.baseline import Baseline, drift_step
 from softtip.realtime.bench import soak
-from softtip.realtime.convert import Conversion, convert
-from softtip.realtime.mcap_record import (
-    McapRecorder,
-    Recording,
-    RecordingError,
-    read_recording,
-)
-from softtip.realtime.pipeline import (
-    EMULATOR,
-    AcquisitionClock,
-    EmulatorProcess,
-    Estimator,
-    FrameResult,
-    LiveSession,
-    Pipeline,
-    PressCycle,
+from softtip.realtime.clock import AcquisitionClock
+from softtip.realtime.estimator import Estimator
+from softtip.realtime.frames import FrameResult, StreamInfo
+from softtip.realtime.pipeline import Pipeline
+from softtip.realtime.recording import Conversion, McapRecorder, Recording, RecordingError, convert, read_recording
+from softtip.realtime.session import EMULATOR, LiveSession, run_live
+from softtip.realtime.sinks import (
+    DashboardSink,
+    FoxgloveSink,
+    RecorderSink,
+    ROS2Sink,
     Sink,
-    StreamInfo,
-    run_live,
+    live_sinks,
+    ros2_available,
 )
-from softtip.realtime.ros2 import ROS2Sink, ros2_available
-from softtip.realtime.sinks import DashboardSink, FoxgloveSink, RecorderSink, live_sinks
 
 __all__ = [
     "EMULATOR",
@@ -47,14 +45,12 @@ __all__ = [
     "Baseline",
     "Conversion",
     "DashboardSink",
-    "EmulatorProcess",
     "Estimator",
     "FoxgloveSink",
     "FrameResult",
     "LiveSession",
     "McapRecorder",
     "Pipeline",
-    "PressCycle",
     "ROS2Sink",
     "RecorderSink",
     "Recording",

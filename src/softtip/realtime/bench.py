@@ -27,16 +27,12 @@ import numpy as np
 from mcap.reader import make_reader
 
 from softtip.data.dataset import channel_names
-from softtip.hardware import FaultPlan, FrameFate
+from softtip.hardware import FaultPlan, FrameFate, PressCycle
 from softtip.realtime.baseline import Baseline
-from softtip.realtime.pipeline import (
-    EMULATOR,
-    Estimator,
-    FrameResult,
-    LiveSession,
-    PressCycle,
-)
-from softtip.realtime.sinks import RecorderSink
+from softtip.realtime.estimator import Estimator
+from softtip.realtime.frames import FrameResult
+from softtip.realtime.session import EMULATOR, LiveSession
+from softtip.realtime.sinks.recorder import RecorderSink
 
 SOAK_TARGETS = ("Fx", "Fy", "Fz", "grip_force")
 LATENCY_TARGET_P99_MS = 2.0

@@ -15,7 +15,7 @@ from softtip.calibration import load_model, save_model
 from softtip.lab import Protocol, load_protocol, run_protocol
 from softtip.lab.insertion import InsertionWorld, SimulatedArm
 from softtip.mechanics.mesh import cache_dir
-from softtip.realtime.control import InsertionController
+from softtip.control.insertion import InsertionController
 from softtip.studies.published import inverter_models
 
 INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A first touches part B

@@ -20,8 +20,8 @@ from softtip.lab import load_protocol, run_protocol
 from softtip.lab.experiments import CALIBRATION, VALIDATION
 from softtip.lab.scenario import pushing_scenario
 from softtip.mechanics.mesh import cache_dir
-from softtip.realtime.pipeline import run_live
-from softtip.realtime.sinks import live_sinks
+from softtip.realtime.session import run_live
+from softtip.realtime.sinks.factory import live_sinks
 from softtip.sensors import MLX90393Settings
 
 FORCES = ("fx_N", "fy_N", "fz_N")

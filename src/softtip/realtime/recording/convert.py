@@ -36,24 +36,19 @@ from softtip.data.dataset import (
     channel_columns,
     subtract_trial_baseline,
 )
-from softtip.realtime.mcap_record import (
+from softtip.realtime.recording.format import (
     FLOAT64_MULTI_ARRAY,
     MAGNETIC_FIELD,
-    MAGNETIC_FIELD_FLOATS,
+    MESSAGE_ENCODING,
     METADATA_NAME,
     STRING,
     UT_PER_T,
-    WRENCH_FLOATS,
     WRENCH_LABELS,
     WRENCH_STAMPED,
-    Recording,
+    WRENCH_UNITS,
     RecordingError,
-    TopicMessages,
-    decode_float64_array,
-    decode_stamped,
-    decode_string,
-    read_recording,
 )
+from softtip.realtime.recording.reader import Recording, TopicMessages, read_recording
 
 CONTACT_STATE = "contact_state"
 _FIELD_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/field")
@@ -74,10 +69,25 @@ def _topic(recording: Recording, name: str, schema: str) -> TopicMessages | None
     topic = recording.topics.get(name)
     if topic is None or not topic.data:
         return None
-    if topic.schema_name != schema or topic.message_encoding != "cdr":
+    if topic.schema_name != schema or topic.message_encoding != MESSAGE_ENCODING:
         raise RecordingError(f"{recording.path}: topic {name} holds {topic.schema_name or 'schemaless'} "
-                             f"{topic.message_encoding} messages, expected {schema} in cdr")
+                             f"{topic.message_encoding} messages, expected {schema} in {MESSAGE_ENCODING}")
     return topic
+
+
+def _stamp_ns(header) -> int:
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+def _vectors(vectors) -> np.ndarray:
+    return np.array([(v.x, v.y, v.z) for v in vectors], dtype=np.float64).reshape(-1, 3)
+
+
+def _magnetic_fields(topic: TopicMessages) -> tuple[np.ndarray, np.ndarray]:
+    """(header stamps in ns, fields (n, 3) in T) of a topic of MagneticField messages."""
+    messages = topic.decoded()
+    stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
+    return stamps, _vectors(m.magnetic_field for m in messages)
 
 
 def _field_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str]]:
@@ -105,8 +115,8 @@ def _frames(recording: Recording, topics: list[str]) -> tuple[np.ndarray, np.nda
     decoded = []
     for name in topics:
         topic = recording.topics[name]
-        stamps, _, values = decode_stamped(topic.data, MAGNETIC_FIELD_FLOATS)
-        decoded.append((stamps, np.asarray(topic.log_times, dtype=np.int64), values[:, :3]))
+        stamps, values = _magnetic_fields(topic)
+        decoded.append((stamps, np.asarray(topic.log_times, dtype=np.int64), values))
     every = np.unique(np.concatenate([stamps for stamps, _, _ in decoded]))
     common = every
     for stamps, _, _ in decoded:
@@ -143,20 +153,22 @@ def _labels(recording: Recording, prefix: str, stamps: np.ndarray,
     units: dict[str, str] = {}
     wrench = _topic(recording, f"{prefix}/wrench", WRENCH_STAMPED)
     if wrench is not None:
-        wrench_stamps, _, values = decode_stamped(wrench.data, WRENCH_FLOATS)
+        messages = wrench.decoded()
+        wrench_stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
+        values = np.hstack([_vectors(m.wrench.force for m in messages), _vectors(m.wrench.torque for m in messages)])
         rows = _matched(wrench_stamps, stamps)
         matched = np.where(rows[:, None] >= 0, values[rows], np.nan)
-        for component, (name, unit) in enumerate(zip(WRENCH_LABELS, ("N",) * 3 + ("N m",) * 3, strict=True)):
+        for component, (name, unit) in enumerate(zip(WRENCH_LABELS, WRENCH_UNITS, strict=True)):
             if np.isfinite(matched[:, component]).any():
                 columns[name], units[name] = matched[:, component], unit
     estimates = _topic(recording, f"{prefix}/estimates", FLOAT64_MULTI_ARRAY)
     if estimates is not None:
-        decoded = [decode_float64_array(message) for message in estimates.data]
-        names = decoded[0][0][0].split(",") if decoded[0][0] else []
+        decoded = estimates.decoded()
+        names = decoded[0].layout.dim[0].label.split(",") if decoded[0].layout.dim else []
         declared_units = json.loads(estimates.metadata.get("units", "null")) or [DIMENSIONLESS] * len(names)
-        if len(declared_units) != len(names) or any(len(values) != len(names) for _, values in decoded):
+        if len(declared_units) != len(names) or any(len(m.data) != len(names) for m in decoded):
             raise RecordingError(f"{recording.path}: {prefix}/estimates messages do not match their names {names}")
-        values = np.array([values for _, values in decoded]).reshape(len(decoded), len(names))
+        values = np.array([m.data for m in decoded], dtype=np.float64).reshape(len(decoded), len(names))
         rows = _matched(np.asarray(estimates.log_times, dtype=np.int64), log_times)
         for i, (name, unit) in enumerate(zip(names, declared_units, strict=True)):
             if name not in columns:
@@ -164,7 +176,7 @@ def _labels(recording: Recording, prefix: str, stamps: np.ndarray,
                 units[name] = unit
     states = _topic(recording, f"{prefix}/contact_state", STRING)
     if states is not None:
-        texts = np.array([decode_string(message) for message in states.data] + [""])
+        texts = np.array([m.data for m in states.decoded()] + [""])
         rows = _matched(np.asarray(states.log_times, dtype=np.int64), log_times)
         columns[CONTACT_STATE], units[CONTACT_STATE] = texts[rows], DIMENSIONLESS  # -1: the empty entry
     return columns, units
@@ -185,9 +197,9 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
     recorded_baseline = all(topic is not None for topic in baselines)
     if recorded_baseline:
         for k, topic in enumerate(baselines):
-            baseline_stamps, _, values = decode_stamped(topic.data, MAGNETIC_FIELD_FLOATS)
+            baseline_stamps, values = _magnetic_fields(topic)
             order = np.argsort(baseline_stamps, kind="stable")
-            fields[:, k] -= values[order][_held(baseline_stamps[order], stamps), :3] * UT_PER_T
+            fields[:, k] -= values[order][_held(baseline_stamps[order], stamps)] * UT_PER_T
 
     sound = np.isfinite(fields).all(axis=(1, 2))
     labels, units = _labels(recording, prefix, stamps, log_times)

@@ -5,7 +5,7 @@ Needs ``rclpy`` and the standard message packages (``sensor_msgs``, ``geometry_m
 the ROS 2 setup script before starting Python. Without them this module still imports;
 :func:`ros2_available` says False and :class:`ROS2Sink` refuses with one line.
 
-Topics and types are those of :mod:`softtip.realtime.mcap_record` (MagneticField per chip
+Topics and types are those of :mod:`softtip.realtime.recording.format` (MagneticField per chip
 and per baseline, WrenchStamped, Float64MultiArray of the estimates, String contact state),
 so a node subscribed to the live topics also reads ``ros2 bag play`` of a recording. The
 node offers the service ``~/take_baseline`` (std_srvs/srv/Trigger): the insertion task's
@@ -22,13 +22,16 @@ import threading
 
 import numpy as np
 
-from softtip.realtime.mcap_record import (
+from softtip.realtime.frames import FrameResult, StreamInfo
+from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
-    WRENCH_FLOATS,
+    UT_PER_T,
+    frame_id,
     magnetic_covariance_T2,
     wrench_mapping,
+    wrench_values,
 )
-from softtip.realtime.pipeline import FrameResult, Sink, StreamInfo
+from softtip.realtime.sinks.base import Sink
 from softtip.sensors.mlx90393 import lsb_uT, noise_rms_uT
 
 
@@ -78,7 +81,6 @@ class ROS2Sink(Sink):
         settings = stream.settings
         self._covariance = magnetic_covariance_T2(None if settings is None else noise_rms_uT(settings),
                                                   None if settings is None else lsb_uT(settings)).tolist()
-        self._frame_prefix = self.prefix.strip("/").replace("/", "_")
         node = self._node = rclpy.create_node(self.node_name)
         depth, prefix = self.qos_depth, self.prefix
         self._field_publishers = [node.create_publisher(msg_sensor.MagneticField, f"{prefix}/chip{k}/field", depth)
@@ -121,8 +123,8 @@ class ROS2Sink(Sink):
 
     def _magnetic_field(self, frame: FrameResult, chip: int, field_uT: np.ndarray):
         msg_sensor, msg_geometry = self._ros["sensor_msgs.msg"], self._ros["geometry_msgs.msg"]
-        x, y, z = (float(v) * 1e-6 for v in field_uT)
-        return msg_sensor.MagneticField(header=self._header(frame, f"{self._frame_prefix}_chip{chip}"),
+        x, y, z = (float(v) / UT_PER_T for v in field_uT)
+        return msg_sensor.MagneticField(header=self._header(frame, frame_id(self.prefix, chip)),
                                         magnetic_field=msg_geometry.Vector3(x=x, y=y, z=z),
                                         magnetic_field_covariance=self._covariance)
 
@@ -136,10 +138,8 @@ class ROS2Sink(Sink):
             publisher.publish(self._magnetic_field(frame, k, frame.field_uT[k]))
         if frame.estimates is not None:
             if self._wrench_publisher is not None:
-                wrench = np.full(WRENCH_FLOATS, np.nan)
-                for target, component, factor in self._wrench:
-                    wrench[component] = frame.estimates[target] * factor
-                message = msg_geometry.WrenchStamped(header=self._header(frame, self._frame_prefix))
+                wrench = wrench_values(frame.estimates, self._wrench)
+                message = msg_geometry.WrenchStamped(header=self._header(frame, frame_id(self.prefix)))
                 (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z,
                  message.wrench.torque.x, message.wrench.torque.y, message.wrench.torque.z) = map(float, wrench)
                 self._wrench_publisher.publish(message)

@@ -1,0 +1,68 @@
+"""What the live pipeline hands on: one frame's result, and what sinks learn about the stream."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from softtip.data.dataset import AXES, CHANNEL_PATTERN
+from softtip.sensors.mlx90393 import MLX90393Settings
+
+
+class FrameResult(NamedTuple):
+    """One frame after the pipeline.
+
+    stamp_ns: acquisition time, ns since the Unix epoch; host_time_s: the driver's arrival
+    stamp (perf_counter clock); device_time_s: the device clock, or None.
+    field_uT: (chips, 3) reading, NaN for a faulty chip; chip_ok (chips,), saturated (chips, 3).
+    baseline_uT: the baseline in use (read-only, replaced when it changes) or None before
+    the first one; baseline_version counts the baselines used so far.
+    change_uT: field minus baseline, or None. estimates: the regression targets in
+    :attr:`StreamInfo.target_names` order, state: the contact state; both None when the
+    frame was not estimated. latency_s: arrival to estimate ready.
+    """
+
+    seq: int
+    stamp_ns: int
+    host_time_s: float
+    device_time_s: float | None
+    field_uT: np.ndarray
+    chip_ok: np.ndarray
+    saturated: np.ndarray
+    baseline_uT: np.ndarray | None
+    baseline_version: int
+    change_uT: np.ndarray | None
+    estimates: np.ndarray | None
+    state: str | None
+    latency_s: float
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What sinks are told when the pipeline opens.
+
+    counters(latency_window=None) returns the live counters (frames, lost frames, latency
+    percentiles over the last latency_window frames...) as a dict; take_baseline() asks
+    for a new baseline (a sink may offer it as a command).
+    """
+
+    chips: int
+    target_names: tuple[str, ...]
+    target_units: tuple[str, ...]
+    classes: tuple[str, ...] | None
+    settings: MLX90393Settings | None
+    rate_hz: float | None
+    metadata: dict = field(default_factory=dict)
+    counters: Callable[..., dict] = lambda latency_window=None: {}
+    take_baseline: Callable[[], None] = lambda: None
+
+
+def channel_index(name: str) -> int:
+    """Position of channel ``s{k}_b{axis}_uT`` in a frame's flattened (chips, 3) reading."""
+    match = CHANNEL_PATTERN.fullmatch(name) if isinstance(name, str) else None
+    if match is None:
+        raise ValueError(f"input channel {name!r}: expected a channel name like s0_bx_uT")
+    return 3 * int(match[1]) + AXES.index(match[2])

@@ -1,0 +1,151 @@
+"""The recording format: ROS 2 message types, topics, units, and the stream's mapping onto them.
+
+A recording is an MCAP file with the ``ros2`` profile: every channel has a ``ros2msg``
+schema (the message definition with its dependencies, as ``ros2 bag`` writes it) and
+``cdr`` messages (ROS 2's wire format). Only standard message packages are used, so
+``ros2 bag play`` needs nothing installed and Foxglove decodes the file from its embedded
+schemas.
+
+Topics (``prefix`` is ``/fingertip`` by default):
+
+==============================  ===========================  =======================================
+``{prefix}/chip{k}/field``      sensor_msgs/msg/MagneticField  the reading of chip k, in tesla (NaN
+                                                               when the chip reported a fault);
+                                                               covariance: the sensor model's noise
+                                                               plus quantisation, at start-up settings
+``{prefix}/chip{k}/baseline``   sensor_msgs/msg/MagneticField  the baseline subtracted from chip k,
+                                                               written whenever it changes
+``{prefix}/wrench``             geometry_msgs/msg/WrenchStamped  estimated force (N) and torque (N m);
+                                                               components no model estimates are NaN
+``{prefix}/estimates``          std_msgs/msg/Float64MultiArray  every regression estimate; the
+                                                               dimension label lists the names,
+                                                               channel metadata ``units`` the units
+``{prefix}/contact_state``      std_msgs/msg/String            the estimated contact state
+==============================  ===========================  =======================================
+
+All messages of one frame share one log time: the frame's acquisition time in ns since the
+Unix epoch, also the ``header.stamp`` of the stamped ones; the MCAP ``sequence`` is the
+frame's sequence number.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+
+import numpy as np
+
+PROFILE = "ros2"
+SCHEMA_ENCODING = "ros2msg"
+MESSAGE_ENCODING = "cdr"
+METADATA_NAME = "softtip"
+RECORDING_FORMAT = "softtip-recording"
+DEFAULT_PREFIX = "/fingertip"
+UT_PER_T = 1e6
+
+_SEPARATOR = "=" * 80
+
+# Message definitions as the ROS 2 packages state them (comments left out).
+DEFINITIONS = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z",
+    "geometry_msgs/Wrench": "geometry_msgs/Vector3 force\ngeometry_msgs/Vector3 torque",
+    "sensor_msgs/MagneticField": (
+        "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] magnetic_field_covariance"
+    ),
+    "geometry_msgs/WrenchStamped": "std_msgs/Header header\ngeometry_msgs/Wrench wrench",
+    "std_msgs/String": "string data",
+    "std_msgs/MultiArrayDimension": "string label\nuint32 size\nuint32 stride",
+    "std_msgs/MultiArrayLayout": "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset",
+    "std_msgs/Float64MultiArray": "std_msgs/MultiArrayLayout layout\nfloat64[] data",
+}
+MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
+WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
+STRING = "std_msgs/msg/String"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+
+WRENCH_FLOATS = 6  # force (3) + torque (3)
+
+# Estimated targets that fill a WrenchStamped, by name: (index in force+torque, SI unit).
+WRENCH_COMPONENTS = {
+    "fx": 0, "fy": 1, "fz": 2, "force_x": 0, "force_y": 1, "force_z": 2, "normal_force": 2, "fn": 2,
+    "tx": 3, "ty": 4, "tz": 5, "mx": 3, "my": 4, "mz": 5, "torque_x": 3, "torque_y": 4, "torque_z": 5,
+}
+WRENCH_LABELS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+WRENCH_UNITS = ("N", "N", "N", "N m", "N m", "N m")
+FORCE_UNITS_IN_N = {"N": 1.0, "mN": 1e-3}
+TORQUE_UNITS_IN_NM = {"N m": 1.0, "N*m": 1.0, "Nm": 1.0, "N.m": 1.0, "mN m": 1e-3, "N mm": 1e-3}
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be written or read as asked."""
+
+
+def _dependencies(name: str) -> list[str]:
+    """Every message type ``name`` uses, depth first, each once."""
+    found: list[str] = []
+
+    def visit(type_name: str) -> None:
+        for line in DEFINITIONS[type_name].splitlines():
+            field_type = re.sub(r"\[\d*\]$", "", line.split()[0])
+            if "/" in field_type and field_type not in found:
+                found.append(field_type)
+                visit(field_type)
+
+    visit(name)
+    return found
+
+
+def schema_text(schema_name: str) -> str:
+    """The ``ros2msg`` schema of ``pkg/msg/Name``: its definition, then each dependency's."""
+    name = schema_name.replace("/msg/", "/")
+    if name not in DEFINITIONS:
+        raise RecordingError(f"schema {schema_name!r}: no definition (known: {', '.join(sorted(DEFINITIONS))})")
+    parts = [DEFINITIONS[name]]
+    parts += [f"{_SEPARATOR}\nMSG: {dependency}\n{DEFINITIONS[dependency]}" for dependency in _dependencies(name)]
+    return "\n".join(parts) + "\n"
+
+
+def frame_id(prefix: str, chip: int | None = None) -> str:
+    """The header frame id under ``prefix``: ``fingertip_chip{k}`` for a chip, ``fingertip`` for the wrench."""
+    base = prefix.strip("/").replace("/", "_")
+    return base if chip is None else f"{base}_chip{chip}"
+
+
+def wrench_mapping(target_names: Sequence[str], target_units: Sequence[str]) -> list[tuple[int, int, float]]:
+    """(target index, wrench component 0..5, factor to N or N m) for every target that is a
+    force or torque component (Fx, force_x, normal_force, Tz, ...)."""
+    mapping = []
+    for index, (name, unit) in enumerate(zip(target_names, target_units, strict=True)):
+        component = WRENCH_COMPONENTS.get(name.lower())
+        if component is None:
+            continue
+        units = FORCE_UNITS_IN_N if component < 3 else TORQUE_UNITS_IN_NM
+        if unit not in units:
+            raise RecordingError(f"target {name}: unit {unit!r} is not a {'force' if component < 3 else 'torque'} "
+                                 f"unit ({', '.join(units)})")
+        mapping.append((index, component, units[unit]))
+    components = [component for _, component, _ in mapping]
+    if len(set(components)) != len(components):
+        raise RecordingError(f"targets {list(target_names)} name one wrench component twice")
+    return mapping
+
+
+def wrench_values(estimates: np.ndarray, mapping: Sequence[tuple[int, int, float]]) -> np.ndarray:
+    """Force and torque (..., 6) in N and N m from estimates (..., targets) by :func:`wrench_mapping`;
+    components no target estimates are NaN."""
+    estimates = np.asarray(estimates, dtype=np.float64)
+    wrench = np.full(estimates.shape[:-1] + (WRENCH_FLOATS,), np.nan)
+    for target, component, factor in mapping:
+        wrench[..., component] = estimates[..., target] * factor
+    return wrench
+
+
+def magnetic_covariance_T2(noise_rms_uT: np.ndarray | None, lsb_uT: np.ndarray | None) -> np.ndarray:
+    """Row-major 3x3 covariance in T^2: sensor noise plus uniform quantisation (LSB^2/12)
+    per axis; zeros (ROS: unknown) when the settings are not known."""
+    if noise_rms_uT is None or lsb_uT is None:
+        return np.zeros(9)
+    variance_uT2 = np.asarray(noise_rms_uT) ** 2 + np.asarray(lsb_uT) ** 2 / 12.0
+    return np.diag(variance_uT2 / UT_PER_T**2).ravel()

@@ -1,0 +1,189 @@
+"""Writing the live stream to an MCAP file in ROS 2 message types (:mod:`~softtip.realtime.recording.format`).
+
+Messages are serialised by ``mcap-ros2-support`` from the embedded message definitions. The
+file is written in chunks that are closed and flushed to the operating system every
+:meth:`McapRecorder.flush`, so a process that is killed leaves a file readable up to its
+last flush (:func:`~softtip.realtime.recording.reader.read_recording` reads such a file).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from mcap.records import Schema
+from mcap.writer import CompressionType
+from mcap_ros2.writer import Writer
+
+from softtip import __version__
+from softtip.realtime.recording.format import (
+    DEFAULT_PREFIX,
+    FLOAT64_MULTI_ARRAY,
+    MAGNETIC_FIELD,
+    MESSAGE_ENCODING,
+    METADATA_NAME,
+    RECORDING_FORMAT,
+    STRING,
+    UT_PER_T,
+    WRENCH_STAMPED,
+    RecordingError,
+    frame_id,
+    schema_text,
+    wrench_mapping,
+    wrench_values,
+)
+
+COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+
+
+class _Ros2Writer(Writer):
+    """mcap-ros2-support's writer with the two things the recorder needs that it does not offer:
+    channel metadata, and closing the chunk in progress on demand. Both go to the MCAP writer
+    it wraps (``_writer``), channels under the topic map it keeps (``_channel_ids``)."""
+
+    def register_channel(self, topic: str, schema: Schema, metadata: Mapping[str, str]) -> None:
+        self._channel_ids[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, schema.id, dict(metadata))
+
+    def flush(self) -> None:
+        self._writer.flush()
+
+
+def _vector(values: np.ndarray) -> dict:
+    x, y, z = values.tolist()
+    return {"x": x, "y": y, "z": z}
+
+
+def _header(stamp_ns: int, frame: str) -> dict:
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame}
+
+
+class McapRecorder:
+    """Writes frames of the live stream to an MCAP file (see the module notes).
+
+    ``chips``: sensors per frame; ``target_names``/``target_units``: the regression
+    estimates in order; ``classes``: the contact states (None without a classifier);
+    ``covariance_T2``: the MagneticField covariance (9 values); ``metadata``: JSON values
+    stored in the file's ``softtip`` metadata record. ``chunk_size`` bytes per chunk
+    before compression (``compression``: zstd, lz4 or none); :meth:`flush` closes the
+    chunk in progress and hands the bytes to the operating system (and, with ``fsync``,
+    to the disk).
+    """
+
+    def __init__(self, path: str | os.PathLike, chips: int, *, target_names: Sequence[str] = (),
+                 target_units: Sequence[str] = (), classes: Sequence[str] | None = None,
+                 covariance_T2: np.ndarray | None = None, metadata: Mapping | None = None,
+                 prefix: str = DEFAULT_PREFIX, chunk_size: int = 256 * 1024, compression: str = "zstd",
+                 fsync: bool = False) -> None:
+        if isinstance(chips, bool) or not isinstance(chips, int) or chips < 1:
+            raise RecordingError(f"chips = {chips!r}: expected an integer >= 1")
+        if len(target_names) != len(target_units):
+            raise RecordingError(f"target_units: expected {len(target_names)} units, got {len(target_units)}")
+        if compression not in COMPRESSIONS:
+            raise RecordingError(f"compression = {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
+        if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1024:
+            raise RecordingError(f"chunk_size = {chunk_size!r}: expected an integer >= 1024 bytes")
+        if not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", prefix):
+            raise RecordingError(f"prefix = {prefix!r}: expected a ROS topic namespace such as /fingertip")
+        path = Path(path)
+        if not path.parent.is_dir():
+            raise RecordingError(f"recording {path}: directory {path.parent} does not exist")
+        self.path = path
+        self.chips = chips
+        self.target_names = tuple(target_names)
+        self.target_units = tuple(target_units)
+        self.classes = None if classes is None else tuple(str(c) for c in classes)
+        self._wrench = wrench_mapping(self.target_names, self.target_units)
+        covariance = np.zeros(9) if covariance_T2 is None else np.asarray(covariance_T2, dtype=np.float64)
+        if covariance.shape != (9,):
+            raise RecordingError(f"covariance_T2: expected 9 values, got shape {covariance.shape}")
+        self._covariance = covariance.tolist()
+        self._fsync = bool(fsync)
+        self._frame_ids = [frame_id(prefix, k) for k in range(chips)]
+        self._wrench_frame_id = frame_id(prefix)
+        self._baseline_version: int | None = None
+        self.frames_written = 0
+
+        self._stream = open(path, "wb")
+        self._writer = _Ros2Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+        self._writer.add_metadata(METADATA_NAME, {
+            "format": RECORDING_FORMAT,
+            "chips": str(chips),
+            "target_names": json.dumps(self.target_names),
+            "target_units": json.dumps(self.target_units),
+            "classes": json.dumps(self.classes),
+            "extra": json.dumps(dict(metadata or {}), allow_nan=False),
+            "softtip_version": __version__,
+        })
+        schemas = {name: self._writer.register_msgdef(name, schema_text(name))
+                   for name in (MAGNETIC_FIELD, WRENCH_STAMPED, STRING, FLOAT64_MULTI_ARRAY)}
+
+        def channel(topic: str, schema: str, metadata: dict | None = None) -> tuple[str, Schema]:
+            self._writer.register_channel(topic, schemas[schema], metadata or {})
+            return topic, schemas[schema]
+
+        self._field_channels = [channel(f"{prefix}/chip{k}/field", MAGNETIC_FIELD) for k in range(chips)]
+        self._baseline_channels = [channel(f"{prefix}/chip{k}/baseline", MAGNETIC_FIELD) for k in range(chips)]
+        self._wrench_channel = channel(f"{prefix}/wrench", WRENCH_STAMPED) if self._wrench else None
+        self._estimates_channel = (channel(f"{prefix}/estimates", FLOAT64_MULTI_ARRAY,
+                                           {"names": json.dumps(self.target_names),
+                                            "units": json.dumps(self.target_units)})
+                                   if self.target_names else None)
+        self._estimates_label = ",".join(self.target_names)
+        self._state_channel = (channel(f"{prefix}/contact_state", STRING, {"classes": json.dumps(self.classes)})
+                               if self.classes is not None else None)
+
+    def _magnetic_field(self, stamp_ns: int, chip: int, field_T: np.ndarray, covariance: list[float]) -> dict:
+        return {"header": _header(stamp_ns, self._frame_ids[chip]), "magnetic_field": _vector(field_T),
+                "magnetic_field_covariance": covariance}
+
+    def write_frames(self, frames: Sequence) -> None:
+        """Adds frames (objects with seq, stamp_ns, field_uT, baseline_uT, baseline_version,
+        estimates, state)."""
+        if not frames:
+            return
+        fields_T = np.stack([f.field_uT for f in frames]) / UT_PER_T
+        if fields_T.shape[1:] != (self.chips, 3):
+            raise RecordingError(f"frames hold fields of shape {fields_T.shape[1:]}, the recording {(self.chips, 3)}")
+        write = self._writer.write_message
+        unknown = [0.0] * 9  # a baseline has no covariance of its own
+        for frame, field_T in zip(frames, fields_T, strict=True):
+            stamp, seq = frame.stamp_ns, frame.seq
+            if frame.baseline_uT is not None and frame.baseline_version != self._baseline_version:
+                self._baseline_version = frame.baseline_version
+                for k, (topic, schema) in enumerate(self._baseline_channels):
+                    write(topic, schema, self._magnetic_field(stamp, k, frame.baseline_uT[k] / UT_PER_T, unknown),
+                          stamp, stamp, seq)
+            for k, (topic, schema) in enumerate(self._field_channels):
+                write(topic, schema, self._magnetic_field(stamp, k, field_T[k], self._covariance), stamp, stamp, seq)
+            if frame.estimates is not None and self._estimates_channel is not None:
+                if self._wrench_channel is not None:
+                    wrench = wrench_values(frame.estimates, self._wrench)
+                    write(*self._wrench_channel, {"header": _header(stamp, self._wrench_frame_id),
+                                                  "wrench": {"force": _vector(wrench[:3]),
+                                                             "torque": _vector(wrench[3:])}}, stamp, stamp, seq)
+                count = len(frame.estimates)
+                write(*self._estimates_channel, {
+                    "layout": {"dim": [{"label": self._estimates_label, "size": count, "stride": count}],
+                               "data_offset": 0},
+                    "data": np.asarray(frame.estimates, dtype=np.float64).tolist()}, stamp, stamp, seq)
+            if self._state_channel is not None and frame.state is not None:
+                write(*self._state_channel, {"data": frame.state}, stamp, stamp, seq)
+        self.frames_written += len(frames)
+
+    def flush(self) -> None:
+        """Closes the chunk in progress and writes it out: a killed process keeps it."""
+        self._writer.flush()
+        if self._fsync:
+            os.fsync(self._stream.fileno())
+
+    def close(self) -> None:
+        """Writes the summary and footer and closes the file."""
+        if self._stream.closed:
+            return
+        self._writer.finish()
+        self._stream.close()

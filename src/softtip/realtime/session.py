@@ -1,0 +1,177 @@
+"""A fingertip (or an emulated one in a child process), its driver and a live pipeline, run together.
+
+:class:`LiveSession` runs a source, a driver and a :class:`~softtip.realtime.pipeline.Pipeline`
+together; :func:`run_live` is its one-call form for the command line.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Self
+
+import numpy as np
+
+from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PressCycle, Sample
+from softtip.realtime.baseline import Baseline
+from softtip.realtime.estimator import Estimator
+from softtip.realtime.frames import FrameResult
+from softtip.realtime.pipeline import Pipeline
+from softtip.realtime.sinks.base import Sink
+from softtip.sensors.mlx90393 import MLX90393Settings
+
+EMULATOR = "emulator"
+
+
+class LiveSession:
+    """A fingertip (``source_spec``: a serial device path or pyserial URL, or
+    ``"emulator"`` for an emulated one in a child process), its driver and a pipeline.
+
+    ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
+    :meth:`summary` reports frames, lost frames, latency and the CPU time of this process
+    while streaming. ``chips`` defaults to what the device reports (the emulator: the
+    models' chips, or 4). Other arguments: see :class:`Pipeline` and :class:`Baseline`.
+    """
+
+    def __init__(self, source_spec: str, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
+                 rate_hz: int = 50, chips: int | None = None, settings: MLX90393Settings | None = None,
+                 baudrate: int = 1_000_000, baseline: Baseline | None = None, free_states: Sequence[str] = (),
+                 callbacks: Sequence[Callable[[FrameResult], None]] = (),
+                 emulator_source: Callable[[float], np.ndarray] | None = None,
+                 emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0) -> None:
+        if not isinstance(source_spec, str) or not source_spec.strip():
+            raise ValueError(f"source = {source_spec!r}: expected a serial port or {EMULATOR!r}")
+        self.source_spec = source_spec
+        self.estimators = list(estimators)
+        self.sinks = list(sinks)
+        self.rate_hz = rate_hz
+        self.settings = MLX90393Settings() if settings is None else settings
+        self.baudrate = baudrate
+        self.baseline = baseline
+        self.free_states = free_states
+        self.callbacks = list(callbacks)
+        self.emulated = source_spec == EMULATOR
+        needed = max((e.chips_needed for e in self.estimators), default=1)
+        self.chips = chips if chips is not None else (max(needed, 4) if self.emulated else None)
+        self._emulator = (EmulatorProcess(emulator_source or PressCycle(self.chips), rate_hz, self.chips,
+                                          self.settings, emulator_faults, emulator_seed)
+                          if self.emulated else None)
+        self.emulator_log: EmulatorLog | None = None
+        self.driver: FingertipDriver | None = None
+        self.pipeline: Pipeline | None = None
+        self._cpu_s = self._wall_s = 0.0
+        self._started = False
+
+    def start(self) -> LiveSession:
+        try:
+            port = self._emulator.start().port if self._emulator is not None else self.source_spec
+            self.driver = FingertipDriver(port, self.baudrate, self.settings, self.rate_hz,
+                                          callback=self._forward, queue_size=0)
+            self.driver.open()
+            chips = self.driver.identity.chips if self.chips is None else self.chips
+            if chips != self.driver.identity.chips:
+                raise ValueError(f"chips = {chips}: the device at {self.source_spec!r} reports "
+                                 f"{self.driver.identity.chips}")
+            self.pipeline = Pipeline(chips, self.estimators, self.sinks, baseline=self.baseline,
+                                     free_states=self.free_states, callbacks=self.callbacks, settings=self.settings,
+                                     rate_hz=self.rate_hz, metadata={"source": self.source_spec,
+                                                                     "device": self.driver.identity.name},
+                                     source_counters=self._driver_counters)
+            self.pipeline.open()
+            self._cpu_s, self._wall_s = time.process_time(), time.perf_counter()
+            self.driver.start()
+            self._started = True
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _forward(self, sample: Sample) -> None:
+        self.pipeline.process(sample)  # the pipeline exists once the device has said how many chips
+
+    def _driver_counters(self) -> dict:
+        stats = self.driver.stats
+        return {"delivered": stats.frames, "lost_in_transit": stats.dropped, "crc_errors": stats.crc_errors,
+                "malformed": stats.malformed, "bytes_discarded": stats.bytes_discarded,
+                "reconnects": stats.reconnects}
+
+    def wait(self, duration_s: float | None = None, stop: threading.Event | None = None) -> None:
+        """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C)."""
+        stop = threading.Event() if stop is None else stop
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        try:
+            while not stop.is_set():
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    break
+                stop.wait(0.5 if remaining is None else min(remaining, 0.5))
+        except KeyboardInterrupt:
+            pass
+
+    def close(self) -> None:
+        """Stops the stream and closes the driver, the sinks and the emulator."""
+        if self._started:
+            self._cpu_s = time.process_time() - self._cpu_s
+            self._wall_s = time.perf_counter() - self._wall_s
+            self._started = False
+        try:
+            if self.driver is not None:
+                self.driver.close()
+        finally:
+            try:
+                if self.pipeline is not None:
+                    self.pipeline.close()
+            finally:
+                if self._emulator is not None:
+                    self.emulator_log = self._emulator.close()
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def summary(self) -> dict:
+        """Counters, latency percentiles and CPU use (% of one core) of the session so far."""
+        counters = self.pipeline.counters() if self.pipeline is not None else {}
+        def percent(cpu_s: float) -> float:
+            return 100.0 * cpu_s / self._wall_s if self._wall_s > 0 else math.nan
+
+        summary = {"source": self.source_spec, "chips": None if self.pipeline is None else self.pipeline.chips,
+                   "rate_hz": self.rate_hz, "streaming_s": self._wall_s, "cpu_percent": percent(self._cpu_s),
+                   **counters}
+        return summary
+
+
+def run_live(source_spec: str, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
+             duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
+             settings: MLX90393Settings | None = None, baudrate: int = 1_000_000, baseline_frames: int = 50,
+             drift_time_constant_s: float | None = None, drift_threshold_uT: float = 20.0,
+             free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),
+             stop: threading.Event | None = None, emulator_source: Callable[[float], np.ndarray] | None = None) -> dict:
+    """Stream from a fingertip (or ``"emulator"``) through the saved models in
+    ``model_paths`` to ``sinks`` for ``duration_s`` seconds (None: until Ctrl-C or
+    ``stop``), and return :meth:`LiveSession.summary`. In the main thread, SIGUSR1
+    takes a new baseline (``kill -USR1 <pid>``). ``emulator_source``: what the emulated
+    fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT)."""
+    estimators = [Estimator.from_file(path) for path in model_paths]
+    baseline = Baseline(baseline_frames, drift_time_constant_s=drift_time_constant_s,
+                        drift_threshold_uT=drift_threshold_uT)
+    session = LiveSession(source_spec, estimators, sinks, rate_hz=rate_hz, chips=chips, settings=settings,
+                          baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
+                          emulator_source=emulator_source)
+    in_main_thread = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGUSR1")
+    previous = None
+    with session:
+        if in_main_thread:
+            previous = signal.signal(signal.SIGUSR1, lambda *_: session.pipeline.take_baseline())
+        try:
+            session.wait(duration_s, stop)
+        finally:
+            if in_main_thread:
+                signal.signal(signal.SIGUSR1, previous)
+    return session.summary()

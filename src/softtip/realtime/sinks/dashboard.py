@@ -1,0 +1,103 @@
+"""A terminal dashboard of the live stream.
+
+:class:`DashboardSink` keeps the latest frame for a `rich` live display refreshed a few
+times per second (the change per chip and axis, the estimates, the contact state, the
+frame rate, lost frames, latency and baseline state).
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import time
+
+from rich.console import Console, Group
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from softtip.realtime.frames import FrameResult, StreamInfo
+from softtip.realtime.sinks.base import Sink, positive
+
+
+def _number(value: float, digits: int = 1) -> str:
+    return "—" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+class DashboardSink(Sink):
+    """A live terminal display (rich), refreshed ``refresh_hz`` times per second; rates and
+    latency percentiles are over the last ``window_s`` seconds."""
+
+    def __init__(self, console: Console | None = None, *, refresh_hz: float = 4.0, window_s: float = 5.0) -> None:
+        self.console = console
+        self.refresh_hz = positive("refresh_hz", refresh_hz)
+        self.window_s = positive("window_s", window_s)
+        self._stream: StreamInfo | None = None
+        self._latest: FrameResult | None = None
+        self._frames = 0
+        self._history: collections.deque[tuple[float, int]] = collections.deque()
+        self._live: Live | None = None
+
+    def open(self, stream: StreamInfo) -> None:
+        self._stream = stream
+        self._live = Live(get_renderable=self.render, console=self.console, refresh_per_second=self.refresh_hz)
+        self._live.start()
+
+    def write(self, frame: FrameResult) -> None:
+        self._latest = frame
+        self._frames += 1
+
+    def close(self) -> None:
+        if self._live is not None:
+            self._live.stop()
+            if not self._live.console.is_terminal:  # the last display ends without a newline there
+                self._live.console.line()
+            self._live = None
+
+    def _rate_hz(self) -> float:
+        now, frames = time.monotonic(), self._frames
+        self._history.append((now, frames))
+        while self._history[0][0] < now - self.window_s:
+            self._history.popleft()
+        then, earlier = self._history[0]
+        return (frames - earlier) / (now - then) if now > then else math.nan
+
+    def render(self) -> Group:
+        """The display for the latest frame and the current counters."""
+        stream, frame = self._stream, self._latest
+        rate = self._rate_hz()
+        nominal_hz = stream.rate_hz or (rate if math.isfinite(rate) else 1.0)
+        counters = stream.counters(latency_window=max(1, int(nominal_hz * self.window_s)))
+        chips = Table(title="Change of flux density (µT)", expand=False)
+        for column in ("chip", "ΔBx", "ΔBy", "ΔBz", ""):
+            chips.add_column(column, justify="right")
+        for k in range(stream.chips):
+            if frame is None or frame.change_uT is None:
+                values = ["—"] * 3
+            else:
+                values = [_number(v) for v in frame.change_uT[k]]
+            flags = "" if frame is None else (
+                "fault" if not frame.chip_ok[k] else ("saturated" if frame.saturated[k].any() else "ok"))
+            chips.add_row(str(k), *values, flags)
+        parts: list = [chips]
+        if stream.target_names:
+            estimates = Table(title="Estimates", expand=False)
+            for column in ("target", "value", "unit"):
+                estimates.add_column(column, justify="right")
+            for i, (name, unit) in enumerate(zip(stream.target_names, stream.target_units, strict=True)):
+                value = None if frame is None or frame.estimates is None else float(frame.estimates[i])
+                estimates.add_row(name, _number(value, 3), unit)
+            parts.append(estimates)
+        if stream.classes is not None:
+            state = "—" if frame is None or frame.state is None else frame.state
+            parts.append(Text(f"contact state: {state}", style="bold"))
+        latency = counters.get("latency_ms", {})
+        baseline = ("taking" if counters.get("baseline_collecting") else "in use") + \
+            f" (#{counters.get('baseline_version', 0)})"
+        parts.append(Text(
+            f"frames {counters.get('frames', 0)}  rate {_number(rate)} Hz  "
+            f"lost {counters.get('lost_in_transit', 0)}  CRC errors {counters.get('crc_errors', 0)}  "
+            f"chip faults {counters.get('with_chip_fault', 0)}  "
+            f"latency p50 {_number(latency.get('p50'), 2)} / p99 {_number(latency.get('p99'), 2)} ms  "
+            f"baseline {baseline}"))
+        return Group(*parts)

@@ -1,0 +1,231 @@
+"""A Foxglove live view of the stream.
+
+:class:`FoxgloveSink` serves the stream to Foxglove over its WebSocket protocol
+(``foxglove-websocket``), JSON-encoded with JSON schemas, on the recording's topics and
+with the same field layout (so one Foxglove layout serves live and recorded data), plus
+``{prefix}/field_change`` (the change per chip in µT, for live plots); at most
+``max_rate_hz`` frames per second, only on channels a client subscribed to.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import socket
+import threading
+import warnings
+
+from softtip.realtime.frames import FrameResult, StreamInfo
+from softtip.realtime.recording.format import (
+    DEFAULT_PREFIX,
+    FLOAT64_MULTI_ARRAY,
+    MAGNETIC_FIELD,
+    STRING,
+    UT_PER_T,
+    WRENCH_STAMPED,
+    frame_id,
+    wrench_mapping,
+    wrench_values,
+)
+from softtip.realtime.sinks.base import Sink, positive
+
+
+def _schema(properties: dict) -> dict:
+    return {"type": "object", "properties": properties}
+
+
+_NUMBER = {"type": ["number", "null"]}
+_VECTOR3 = _schema({"x": _NUMBER, "y": _NUMBER, "z": _NUMBER})
+_HEADER = _schema({"stamp": _schema({"sec": {"type": "integer"}, "nanosec": {"type": "integer"}}),
+                   "frame_id": {"type": "string"}})
+MAGNETIC_FIELD_SCHEMA = _schema({"header": _HEADER, "magnetic_field": _VECTOR3,
+                                 "magnetic_field_covariance": {"type": "array", "items": _NUMBER}})
+WRENCH_SCHEMA = _schema({"header": _HEADER, "wrench": _schema({"force": _VECTOR3, "torque": _VECTOR3})})
+ESTIMATES_SCHEMA = _schema({
+    "layout": _schema({"dim": {"type": "array", "items": _schema({"label": {"type": "string"},
+                                                                  "size": {"type": "integer"},
+                                                                  "stride": {"type": "integer"}})},
+                       "data_offset": {"type": "integer"}}),
+    "data": {"type": "array", "items": _NUMBER}})
+STATE_SCHEMA = _schema({"data": {"type": "string"}})
+FIELD_CHANGE_SCHEMA = _schema({"stamp": _schema({"sec": {"type": "integer"}, "nanosec": {"type": "integer"}}),
+                               "chips": {"type": "array", "items": _VECTOR3}})
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None  # JSON has no NaN
+
+
+def _vector(values) -> dict:
+    return {axis: _finite_or_none(v) for axis, v in zip("xyz", values, strict=True)}
+
+
+class FoxgloveSink(Sink):
+    """Serves the stream to Foxglove (``ws://host:port``, "Foxglove WebSocket" connection).
+
+    ``port`` 0 picks a free port (read :attr:`port` after opening). Frames are sent at most
+    ``max_rate_hz`` per second (None: every frame).
+    """
+
+    def __init__(self, port: int = 8765, host: str = "127.0.0.1", *, max_rate_hz: float | None = 50.0,
+                 prefix: str = DEFAULT_PREFIX, start_timeout_s: float = 10.0) -> None:
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+            raise ValueError(f"foxglove port = {port!r}: expected an integer 0..65535")
+        self.port = port
+        self.host = host
+        self._min_interval_ns = 0 if max_rate_hz is None else int(1e9 / positive("max_rate_hz", max_rate_hz))
+        self.prefix = prefix
+        self._start_timeout_s = start_timeout_s
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._failure: BaseException | None = None
+        self._latest: FrameResult | None = None
+        self._wake_pending = False
+        self._last_sent_ns = -(1 << 62)
+        self._subscribed: set[int] = set()
+        self._channels: dict[str, int] = {}
+        self._server = None
+        self._stopped: asyncio.Future | None = None
+        self.frames_sent = 0
+
+    def open(self, stream: StreamInfo) -> None:
+        self._stream = stream
+        self._wrench = wrench_mapping(stream.target_names, stream.target_units)
+        self._thread = threading.Thread(target=self._serve, name="foxglove-server", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(self._start_timeout_s):
+            raise RuntimeError(f"the Foxglove server on {self.host}:{self.port} did not start "
+                               f"within {self._start_timeout_s:g} s")
+        if self._failure is not None:
+            raise ValueError(f"foxglove port {self.port}: cannot serve on {self.host}: {self._failure}")
+
+    @property
+    def subscribed_topics(self) -> list[str]:
+        """The topics at least one client subscribed to."""
+        return [topic for topic, channel in self._channels.items() if channel in self._subscribed]
+
+    def write(self, frame: FrameResult) -> None:
+        if frame.stamp_ns - self._last_sent_ns < self._min_interval_ns:
+            return
+        self._last_sent_ns = frame.stamp_ns
+        self._latest = frame
+        if not self._wake_pending:  # the server thread sends the latest frame when it gets to it
+            self._wake_pending = True
+            self._loop.call_soon_threadsafe(self._send_latest)
+
+    def close(self) -> None:
+        if self._thread is None:
+            return
+        if self._loop is not None and self._stopped is not None:
+            self._loop.call_soon_threadsafe(self._stopped.set_result, None)
+        self._thread.join()
+        self._thread = None
+
+    # ---------------------------------------------------------- server thread
+
+    def _serve(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except Exception as error:
+            self._failure = error
+            self._ready.set()
+
+    async def _main(self) -> None:
+        with warnings.catch_warnings():
+            # foxglove-websocket 0.1 uses the legacy websockets server API.
+            warnings.simplefilter("ignore", DeprecationWarning)
+            from foxglove_websocket.server import FoxgloveServer, FoxgloveServerListener
+
+        sink = self
+
+        class Subscriptions(FoxgloveServerListener):
+            def on_subscribe(self, server, channel_id) -> None:
+                sink._subscribed.add(channel_id)
+
+            def on_unsubscribe(self, server, channel_id) -> None:
+                sink._subscribed.discard(channel_id)
+
+        self._loop = asyncio.get_running_loop()
+        self._stopped = self._loop.create_future()
+        if self.port:
+            # The server task swallows a failure to listen; find it out first, with one line.
+            with socket.socket(socket.AF_INET6 if ":" in self.host else socket.AF_INET) as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                probe.bind((self.host, self.port))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            server = FoxgloveServer(self.host, self.port, "softtip", supported_encodings=["json"],
+                                    logger=logging.getLogger(f"{__name__}.foxglove"))
+            server.start()
+            opened = await asyncio.wait_for(server.wait_opened(), self._start_timeout_s)
+        self._server = server
+        server.set_listener(Subscriptions())
+        self.port = opened.sockets[0].getsockname()[1]
+        for topic, name, schema in self._topics():
+            self._channels[topic] = await server.add_channel({
+                "topic": topic, "encoding": "json", "schemaName": name,
+                "schema": json.dumps(schema), "schemaEncoding": "jsonschema"})
+        self._ready.set()
+        try:
+            await self._stopped
+        finally:
+            server.close()
+            await server.wait_closed()
+
+    def _topics(self) -> list[tuple[str, str, dict]]:
+        stream, prefix = self._stream, self.prefix
+        topics = [(f"{prefix}/chip{k}/{kind}", MAGNETIC_FIELD, MAGNETIC_FIELD_SCHEMA)
+                  for k in range(stream.chips) for kind in ("field", "baseline")]
+        topics.append((f"{prefix}/field_change", "softtip/FieldChange", FIELD_CHANGE_SCHEMA))
+        if self._wrench:
+            topics.append((f"{prefix}/wrench", WRENCH_STAMPED, WRENCH_SCHEMA))
+        if stream.target_names:
+            topics.append((f"{prefix}/estimates", FLOAT64_MULTI_ARRAY, ESTIMATES_SCHEMA))
+        if stream.classes is not None:
+            topics.append((f"{prefix}/contact_state", STRING, STATE_SCHEMA))
+        return topics
+
+    def _send_latest(self) -> None:
+        self._wake_pending = False
+        frame = self._latest
+        if frame is None or not self._subscribed:
+            return
+        for topic, message in self.messages(frame).items():
+            channel = self._channels[topic]
+            if channel in self._subscribed:
+                asyncio.ensure_future(self._server.send_message(channel, frame.stamp_ns,
+                                                                json.dumps(message).encode()))
+        self.frames_sent += 1
+
+    def messages(self, frame: FrameResult) -> dict[str, dict]:
+        """The JSON messages of one frame, by topic (field values in T, as in the recording)."""
+        prefix, stream = self.prefix, self._stream
+        sec, nanosec = divmod(frame.stamp_ns, 1_000_000_000)
+        stamp = {"sec": sec, "nanosec": nanosec}
+        messages = {}
+        for k in range(stream.chips):
+            header = {"stamp": stamp, "frame_id": frame_id(prefix, k)}
+            messages[f"{prefix}/chip{k}/field"] = {"header": header,
+                                                   "magnetic_field": _vector(frame.field_uT[k] / UT_PER_T)}
+            if frame.baseline_uT is not None:
+                messages[f"{prefix}/chip{k}/baseline"] = {"header": header,
+                                                          "magnetic_field": _vector(frame.baseline_uT[k] / UT_PER_T)}
+        if frame.change_uT is not None:
+            messages[f"{prefix}/field_change"] = {"stamp": stamp, "chips": [_vector(c) for c in frame.change_uT]}
+        if frame.estimates is not None:
+            if self._wrench:
+                wrench = wrench_values(frame.estimates, self._wrench)
+                messages[f"{prefix}/wrench"] = {"header": {"stamp": stamp, "frame_id": frame_id(prefix)},
+                                                "wrench": {"force": _vector(wrench[:3]),
+                                                           "torque": _vector(wrench[3:])}}
+            n = len(frame.estimates)
+            messages[f"{prefix}/estimates"] = {
+                "layout": {"dim": [{"label": ",".join(stream.target_names), "size": n, "stride": n}],
+                           "data_offset": 0},
+                "data": [_finite_or_none(v) for v in frame.estimates]}
+        if frame.state is not None:
+            messages[f"{prefix}/contact_state"] = {"data": frame.state}
+        return messages
