@@ -26,6 +26,7 @@ from rich.console import Console
 
 from softtip.data import Dataset, channel_names
 from softtip.hardware import FaultPlan, FrameFate, PressCycle, Sample
+from softtip.bench.live import soak
 from softtip.realtime import (
     AcquisitionClock,
     Baseline,
@@ -45,7 +46,6 @@ from softtip.realtime import (
     read_recording,
     ros2_available,
     run_live,
-    soak,
 )
 from softtip.realtime.recording.format import schema_text
 

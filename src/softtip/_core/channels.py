@@ -47,3 +47,11 @@ def channel_columns(field_uT: Any) -> dict[str, np.ndarray]:
     if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
         raise ValueError(f"field_uT: expected shape (n_samples, n_sensors, 3), got {values.shape}")
     return {channel_name(k, axis): values[:, k, a] for k in range(values.shape[1]) for a, axis in enumerate(AXES)}
+
+
+def channel_index(name: str) -> int:
+    """Position of channel ``s{k}_b{axis}_uT`` in a flattened (sensors, 3) reading."""
+    match = CHANNEL_PATTERN.fullmatch(name) if isinstance(name, str) else None
+    if match is None:
+        raise ValueError(f"input channel {name!r}: expected a channel name like s0_bx_uT")
+    return 3 * int(match[1]) + AXES.index(match[2])

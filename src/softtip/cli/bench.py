@@ -69,7 +69,7 @@ def bench_live(
     """Soak: emulator -> driver -> baseline -> a 12-20-4 network -> MCAP recorder; every frame counted,
     latency from arrival to estimate, CPU of the pipeline's process (emulator in another process)."""
     from softtip.hardware import FaultPlan
-    from softtip.realtime.bench import soak
+    from softtip.bench.live import soak
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None

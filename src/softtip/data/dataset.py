@@ -37,8 +37,6 @@ import pyarrow.parquet as pq
 
 from softtip import __version__
 from softtip._core.channels import CHANNEL_UNIT, channel_names, channel_order, is_channel
-# realtime/ imports these three from here until it is switched over to softtip._core.channels
-from softtip._core.channels import AXES, CHANNEL_PATTERN, channel_columns  # noqa: F401
 from softtip._core.config import ConfigError
 from softtip._core.files import atomic_write
 

@@ -48,6 +48,7 @@ from enum import Enum
 
 import numpy as np
 
+from softtip._core.units import UT_PER_T
 from softtip.hardware.driver import temperature_to_raw
 from softtip.hardware.protocol import (
     BOOT_FRAMES,
@@ -409,7 +410,7 @@ class Emulator:
             raise ValueError(
                 f"source returned shape {field_uT.shape}: expected ({self._chips}, 3) in uT"
             )
-        raw = self._model.to_counts(field_uT * 1e-6, rng=self._noise_rng, noise=self._noise)
+        raw = self._model.to_counts(field_uT / UT_PER_T, rng=self._noise_rng, noise=self._noise)
         status = np.zeros(self._chips, dtype=np.uint8)
         every = self._faults.chip_error_every
         if FaultPlan.hits(every, index):

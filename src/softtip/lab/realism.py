@@ -31,7 +31,7 @@ from dataclasses import asdict
 import numpy as np
 
 from softtip._core.config import Flag, NonNegativeNumber, schema
-from softtip._core.units import MM
+from softtip._core.units import MM, UT_PER_T
 from softtip.design.model import Design
 from softtip.mechanics.poses import MagnetPoses
 from softtip.twin import Readout
@@ -87,5 +87,5 @@ class FabricatedUnit(Readout):
         if self.realism.noise:
             read = self.sensor.counts_to_uT(self.sensor.to_counts(field, rng=rng))
         else:
-            read = field * 1e6
+            read = field * UT_PER_T
         return read - read[:1]

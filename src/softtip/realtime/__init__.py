@@ -17,12 +17,12 @@
   node, needs rclpy), :func:`live_sinks`;
 - :mod:`~softtip.realtime.recording`: ROS 2 message types in MCAP, written chunk by chunk so
   that a killed process leaves a readable file, :func:`read_recording`, and :func:`convert`
-  to the Parquet trial dataset;
-- :mod:`~softtip.realtime.bench`: :func:`soak`, the endurance and speed benchmark.
+  to the Parquet trial dataset.
+
+The soak benchmark is :func:`softtip.bench.live.soak`.
 """
 
 from softtip.realtime.baseline import Baseline, drift_step
-from softtip.realtime.bench import soak
 from softtip.realtime.clock import AcquisitionClock
 from softtip.realtime.estimator import Estimator
 from softtip.realtime.frames import FrameResult, StreamInfo
@@ -63,5 +63,4 @@ __all__ = [
     "read_recording",
     "ros2_available",
     "run_live",
-    "soak",
 ]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from softtip.realtime.frames import channel_index
+from softtip._core.channels import channel_index
 
 INPUT_UNITS_PER_UT = {"uT": 1.0, "µT": 1.0, "mT": 1e-3, "T": 1e-6}
 

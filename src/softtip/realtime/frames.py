@@ -8,7 +8,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from softtip.data.dataset import AXES, CHANNEL_PATTERN
 from softtip.sensors.mlx90393 import MLX90393Settings
 
 
@@ -58,11 +57,3 @@ class StreamInfo:
     metadata: dict = field(default_factory=dict)
     counters: Callable[..., dict] = lambda latency_window=None: {}
     take_baseline: Callable[[], None] = lambda: None
-
-
-def channel_index(name: str) -> int:
-    """Position of channel ``s{k}_b{axis}_uT`` in a frame's flattened (chips, 3) reading."""
-    match = CHANNEL_PATTERN.fullmatch(name) if isinstance(name, str) else None
-    if match is None:
-        raise ValueError(f"input channel {name!r}: expected a channel name like s0_bx_uT")
-    return 3 * int(match[1]) + AXES.index(match[2])

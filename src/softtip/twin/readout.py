@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from softtip._core.units import UT_PER_T
 from softtip.design.model import Design, DesignError
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.poses import MagnetPoses
@@ -61,7 +62,7 @@ class Readout:
         With noise, both the baseline and the loaded reading go through the sensor model
         (quantisation, noise, clipping) like a real acquisition."""
         if not noise:
-            return (loaded - self.rest_field) * 1e6, self.sensor.to_counts(loaded, noise=False)
+            return (loaded - self.rest_field) * UT_PER_T, self.sensor.to_counts(loaded, noise=False)
         rng = rng or np.random.default_rng()
         counts = self.sensor.to_counts(loaded, rng=rng)
         baseline = self.sensor.read_uT(np.broadcast_to(self.rest_field, loaded.shape), rng=rng)

@@ -49,7 +49,7 @@ import numpy as np
 
 from softtip import __version__
 from softtip._core.network import fold_scaling, predict_batch
-from softtip._core.units import MM
+from softtip._core.units import MM, UT_PER_T
 from softtip.design.model import Design, design_from_dict
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
@@ -305,7 +305,7 @@ class ReducedTwin:
                        "contact_cell_m": CELL_SIZE, "domain": twin.domain,
                        "held_share": held_share}
         scales = twin._full_scales(targets[:, :-3].reshape(samples, -1, 6))
-        twin.report["full_scale"] = {"sensor_uT": (scales["field_T"] * 1e6).tolist(),
+        twin.report["full_scale"] = {"sensor_uT": (scales["field_T"] * UT_PER_T).tolist(),
                                      "magnet_displacement_um": (scales["displacement_m"] * 1e6).tolist()}
         # many held-out loads solved exactly on the influence matrices (which reproduce the FE
         # solution, as the FE held-out loads check) give the error's distribution, not a few values

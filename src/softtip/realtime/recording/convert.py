@@ -27,13 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.channels import channel_columns
+from softtip._core.units import UT_PER_T
 from softtip.data.dataset import (
     DIMENSIONLESS,
     TIME,
     TRIAL,
     Dataset,
     DatasetMetadata,
-    channel_columns,
     subtract_trial_baseline,
 )
 from softtip.realtime.recording.format import (
@@ -42,7 +43,6 @@ from softtip.realtime.recording.format import (
     MESSAGE_ENCODING,
     METADATA_NAME,
     STRING,
-    UT_PER_T,
     WRENCH_LABELS,
     WRENCH_STAMPED,
     WRENCH_UNITS,

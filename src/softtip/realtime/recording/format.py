@@ -35,13 +35,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from softtip._core.units import UT_PER_T
+
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
 METADATA_NAME = "softtip"
 RECORDING_FORMAT = "softtip-recording"
 DEFAULT_PREFIX = "/fingertip"
-UT_PER_T = 1e6
 
 _SEPARATOR = "=" * 80
 

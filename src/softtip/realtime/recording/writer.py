@@ -20,6 +20,7 @@ from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer
 
 from softtip import __version__
+from softtip._core.units import UT_PER_T
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
@@ -28,7 +29,6 @@ from softtip.realtime.recording.format import (
     METADATA_NAME,
     RECORDING_FORMAT,
     STRING,
-    UT_PER_T,
     WRENCH_STAMPED,
     RecordingError,
     frame_id,

@@ -17,13 +17,13 @@ import socket
 import threading
 import warnings
 
+from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
     MAGNETIC_FIELD,
     STRING,
-    UT_PER_T,
     WRENCH_STAMPED,
     frame_id,
     wrench_mapping,

@@ -22,10 +22,10 @@ import threading
 
 import numpy as np
 
+from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
-    UT_PER_T,
     frame_id,
     magnetic_covariance_T2,
     wrench_mapping,

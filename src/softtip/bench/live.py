@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
-from softtip.data.dataset import channel_names
+from softtip._core.channels import channel_names
 from softtip.hardware import FaultPlan, FrameFate, PressCycle
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.estimator import Estimator
