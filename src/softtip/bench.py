@@ -8,7 +8,8 @@ from typing import Callable
 import numpy as np
 
 from softtip.design.model import MM, load_design
-from softtip.mechanics.contact import LoadCase, penalty_blocks
+from softtip.mechanics.contact import LoadCase
+from softtip.mechanics.contact.nodal import penalty_blocks
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.linsolve import SPDSolver
 from softtip.mechanics.mesh import mesh_design

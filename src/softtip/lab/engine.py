@@ -5,8 +5,8 @@ Every experiment of the virtual lab reduces to two kinds of response:
 
 * a **press** - an indenter (board edge, plate, tilted plate, board corner) pushed into one
   fingertip along a load path, solved exactly on the influence matrices
-  (:func:`softtip.rom.influence.solve_contact`), recorded after every load step so time series
-  are interpolated between exact states;
+  (:func:`softtip.mechanics.contact.solve_influence_contact`), recorded after every load step so
+  time series are interpolated between exact states;
 * a **held part** - a thin part grasped face-on between two fingertips (both pads pressed by the
   grip, sticking), which then collides with its environment. The part is rigid; the fingertips'
   compliance holds it. Around the grasped state the pads act as a 6x6 stiffness on the part's
@@ -30,11 +30,10 @@ import numpy as np
 import scipy.linalg
 
 from softtip.design.model import Design
-from softtip.mechanics.contact import ContactSolution, LoadCase
+from softtip.mechanics.contact import LoadCase, ReducedContactResult, SurfaceInfluence, solve_influence_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Plate
 from softtip.mechanics.mesh import mesh_design
-from softtip.rom.influence import SurfaceInfluence, solve_contact
 from softtip.twin import Readout
 
 
@@ -57,21 +56,23 @@ class Fingertip:
     def readout(self) -> Readout:
         return Readout(self.design)
 
-    def press(self, load: LoadCase, normal_steps: int | None = None, tangential_steps: int = 4) -> ContactSolution:
-        return solve_contact(self.influence, load, normal_steps=normal_steps, tangential_steps=tangential_steps)
+    def press(self, load: LoadCase, normal_steps: int | None = None,
+              tangential_steps: int = 4) -> ReducedContactResult:
+        return solve_influence_contact(self.influence, load, normal_steps=normal_steps,
+                                       tangential_steps=tangential_steps)
 
     def gripped(self, depth: float) -> tuple[np.ndarray, np.ndarray, tuple]:
         """The pad pressed ``depth`` (m) by a flat face, sticking: its contact nodes, their unknowns
         and the factorised compliance of those unknowns (computed once per depth)."""
         cache = self.__dict__.setdefault("_gripped", {})
         if depth not in cache:
-            nodes = solve_contact(self.influence, LoadCase(Plate(), depth, friction="stick")).contact_nodes
+            nodes = solve_influence_contact(self.influence, LoadCase(Plate(), depth, friction="stick")).contact_nodes
             rows = (3 * nodes[:, None] + np.arange(3)).ravel()
             cache[depth] = nodes, rows, scipy.linalg.cho_factor(self.influence.compliance[np.ix_(rows, rows)])
         return cache[depth]
 
 
-def path_table(solution: ContactSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def path_table(solution: ReducedContactResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A press's path as arrays, starting from the unloaded state: travel (K, 3), magnet rigid
     motion (K, M, 6) and force (K, 3), K = steps + 1."""
     travel = np.array([np.zeros(3)] + [t for t, _, _ in solution.path])

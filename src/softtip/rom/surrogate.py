@@ -2,11 +2,11 @@
 
 Built automatically for one design and one indenter family, in three stages:
 
-1. influence matrices of the contact surface (:mod:`softtip.rom.influence`),
+1. influence matrices of the contact surface (:mod:`softtip.mechanics.contact.influence`),
    from one factorisation of the finite-element stiffness;
 2. a design of experiments over the load parameters, each solved exactly on
    those matrices (milliseconds each, on every core), with contact on cells
-   of the indenter's footprint (:mod:`softtip.mechanics.footprint`): with
+   of the indenter's footprint (:mod:`softtip.mechanics.contact.footprint`): with
    contact on nodes, a board narrower than two elements makes the response
    step as rows of nodes enter its footprint, steps no interpolator follows;
 3. a smooth interpolator fitted to it: small tanh networks (scikit-learn's
@@ -49,12 +49,11 @@ import numpy as np
 
 from softtip import __version__
 from softtip.design.model import MM, Design, design_from_dict
-from softtip.mechanics.contact import LoadCase
-from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
+from softtip.mechanics.contact import (CELL_SIZE, FootprintBody, LoadCase, SurfaceInfluence, SurfacePatch,
+                                      solve_footprint_contact, stiffness_compliance)
 from softtip.mechanics.indenters import make_indenter
 from softtip.mechanics.motion import Motion
 from softtip.mechanics.viscoelastic import PronySeries, qlv_response
-from softtip.rom.influence import SurfaceInfluence
 from softtip.twin import Readout
 
 # 2: a board enters by the foot of its centre line; 3: footprint contact; 4: an ensemble of networks
@@ -148,7 +147,7 @@ def _solve_samples(rows: np.ndarray) -> np.ndarray:
     # one BLAS thread per worker: the workers fill the cores, more threads only contend
     with threadpool_limits(limits=1):
         for k, p in enumerate(rows):
-            solution = solve_footprint_contact(patch, influence.compliance_of, family.load(p))
+            solution = solve_footprint_contact(FootprintBody(patch, influence.compliance_of), family.load(p))
             out[k] = np.concatenate([solution.magnet_rigid.ravel(), solution.force])
     return out
 
@@ -343,7 +342,7 @@ class ReducedTwin:
         fe_rigid, fe_force, fe_seconds = [], [], []
         for k, p in enumerate(params):
             start = time.perf_counter()
-            result = solve_footprint_contact(patch, stiffness_compliance(body), self.family.load(p))
+            result = solve_footprint_contact(FootprintBody(patch, stiffness_compliance(body)), self.family.load(p))
             fe_seconds.append(time.perf_counter() - start)
             fe_rigid.append(result.magnet_rigid)
             fe_force.append(result.force)
