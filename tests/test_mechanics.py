@@ -111,7 +111,7 @@ def test_uniaxial_compression_neo_hookean_matches_the_exact_large_strain_solutio
     lateral = brentq(lateral_stress, 1.0, 1.5)
     log_j = math.log(stretch * lateral**2)
     nominal = mu * (stretch - 1 / stretch) + lam * log_j / stretch  # first Piola-Kirchhoff, axial
-    result = solve_hyperelastic_contact(block_body, LoadCase(Plate(), depth, friction="none"), load_steps=4)
+    result = solve_hyperelastic_contact(block_body, LoadCase(Plate(), depth, friction="none"), normal_steps=4)
     assert -result.force[2] == pytest.approx(nominal * side**2, rel=1e-4)
     corner = np.argmin(np.linalg.norm(block_body.space.nodes - [side, side, height], axis=1))
     assert result.displacements[corner][0] == pytest.approx((lateral - 1) * side, rel=1e-4)
@@ -150,10 +150,14 @@ def test_neo_hookean_agrees_with_linear_at_small_depth():
     body = BodyModel.for_design(design, mesh_design(design, 2.0 * MM))
     load = LoadCase(Board(1.6e-3, 0.0), 0.05e-3, friction="none")
     linear = solve_linear_contact(body, load)
-    large = solve_hyperelastic_contact(body, load, load_steps=1)
-    assert large.force[2] == pytest.approx(linear.force[2], rel=0.03)
+    large = solve_hyperelastic_contact(body, load, normal_steps=1)
+    # the small-strain solution is the limit of the neo-Hookean one as the depth vanishes: they differ
+    # by the geometric nonlinearity, first order in depth. Measured at 0.05 mm: 0.33 % of the force and
+    # 0.046 % of the largest magnet translation (half that at 0.025 mm; the two solvers' penalties
+    # account for 0.001 %); the bounds allow 2.5 times that
+    assert large.force[2] == pytest.approx(linear.force[2], rel=0.008)
     for a, b in zip(linear.magnet_poses.translation, large.magnet_poses.translation):
-        assert np.linalg.norm(b - a) < 0.03 * np.linalg.norm(a)
+        assert np.linalg.norm(b - a) < 0.0012 * np.linalg.norm(a)
 
 
 @pytest.mark.slow

@@ -7,10 +7,12 @@ from typing import Callable
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.bench.timing import timed
 from softtip.design.model import load_design
-from softtip.mechanics.contact import LoadCase, penalty_blocks
+from softtip.mechanics.contact import LoadCase
+from softtip.mechanics.contact.nodal import penalty_blocks
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.linsolve import SPDSolver
 from softtip.mechanics.mesh import mesh_design
@@ -101,7 +103,7 @@ def _bench_readings(readout: Readout, poses: int, say) -> dict:
 
 def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, holdout: int = 12, batch: int = 200_000,
               save: str | None = None, contact_layer_mm: float | None = None, friction: str = "stick",
-              log: Callable[[str], None] | None = None) -> dict:
+              log: Callable[[str], None] | None = None, progress: Progress = SILENT) -> dict:
     """Build a reduced-order twin (timed), report its held-out errors and its batch speed,
     against the FE seconds per load measured on the held-out solves of the same run; ``samples``
     defaults to the twin's own."""
@@ -110,8 +112,9 @@ def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, ho
     say = log or (lambda message: None)
     samples = SAMPLES if samples is None else samples
     rom, t_build = timed(ReducedTwin.build, load_design(design_name), IndenterFamily(friction=friction),
-                          samples=samples, holdout=holdout,
-                          contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM)
+                         samples=samples, holdout=holdout,
+                         contact_layer_size=None if contact_layer_mm is None else contact_layer_mm * MM,
+                         progress=progress)
     fe_report, exact_report = rom.report["holdout"], rom.report["exact_holdout"]
     params = rom.ranges.sample(np.random.default_rng(7), batch)
     twin = Twin(rom)

@@ -54,7 +54,7 @@ def bench_rom(
     if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
         fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
     report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,
-                 friction=friction.value, log=None if json_output else console.print)
+                 friction=friction.value, log=None if json_output else console.print, progress=progress_for(json_output))
     if json_output:
         print(json.dumps(report, indent=2))
 

@@ -13,7 +13,7 @@ from rich.table import Table
 from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
-from softtip.cli.common import console, errors, fail
+from softtip.cli.common import console, fail, progress_for
 
 
 class IndenterKind(str, Enum):
@@ -96,19 +96,8 @@ def simulate(
                                            radius=radius * MM),
                     depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
                     friction=friction.value)
-    progress = None
-    if model is Model.neo_hookean and not json_output:
-        from rich.progress import Progress
-
-        bar = Progress(console=errors, transient=True)
-        bar.start()
-        task = bar.add_task("Newton load steps", total=None)
-        progress = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
-    try:
-        result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed), progress=progress)
-    finally:
-        if progress is not None:
-            bar.stop()
+    result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed),
+                           progress=progress_for(json_output))
     report = result_json(result, twin, angle, thickness, radius, mesh_size, noise is Switch.on)
     if plot is not None:
         from softtip.report.section import plot_section

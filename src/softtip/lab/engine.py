@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from softtip.mechanics.contact import ContactSolution, LoadCase
+from softtip.mechanics.contact import LoadCase, ReducedContactResult
 from softtip.mechanics.indenters import Plate
 from softtip.mechanics.poses import MagnetPoses
 from softtip.twin.influence import InfluenceEngine
@@ -45,11 +45,11 @@ def gripped(engine: InfluenceEngine, depth: float) -> tuple[np.ndarray, np.ndarr
     return cache[depth]
 
 
-def path_table(solution: ContactSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def path_table(solution: ReducedContactResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A press's path as arrays, starting from the unloaded state: travel (K, 3), magnet rigid
     motion (K, M, 6) and force (K, 3), K = steps + 1."""
     travel = np.array([np.zeros(3)] + [t for t, _, _ in solution.path])
-    rigid = np.array([np.zeros_like(solution.magnet_rigid)] + [r for _, r, _ in solution.path])
+    rigid = np.array([np.zeros_like(solution.magnet_poses.rigid)] + [p.rigid for _, p, _ in solution.path])
     force = np.array([np.zeros(3)] + [f for _, _, f in solution.path])
     return travel, rigid, force
 

@@ -251,7 +251,7 @@ def grasp_positions(bench: Bench, p: dict, seed: int) -> Dataset:
         profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
         # a flat face on a flat pad keeps its contact patch: the response grows in proportion to depth
         scale = (profile / depth)[:, None, None]
-        poses = MagnetPoses.from_rigid(scale * solution.magnet_rigid[None])
+        poses = MagnetPoses.from_rigid(scale * solution.magnet_poses.rigid[None])
         force = scale[:, 0] * solution.force[None]
         readings = unit.record(poses, times, bench.rng)
         writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),

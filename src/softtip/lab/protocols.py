@@ -183,9 +183,8 @@ def fingertip_for(design: Design, parameters: dict, progress: Progress = SILENT)
     """The design's lab mechanics, built once per process for each design and mesh."""
     key = (repr(design.spec), parameters["mesh_size_mm"], parameters["curvature_points"], parameters["reach_mm"])
     if key not in _FINGERTIPS:
-        with progress.task(f"influence matrices of {design.name}"):
-            _FINGERTIPS[key] = InfluenceEngine.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
-                                                     curvature_points=parameters["curvature_points"])
+        _FINGERTIPS[key] = InfluenceEngine.build(design, parameters["mesh_size_mm"] * MM, parameters["reach_mm"] * MM,
+                                                 curvature_points=parameters["curvature_points"], progress=progress)
     return _FINGERTIPS[key]
 
 

@@ -35,6 +35,11 @@ class MagnetPoses:
         zeros = np.zeros((*batch, magnets, 3))
         return cls(zeros, zeros.copy())
 
+    @classmethod
+    def stack(cls, poses: list[MagnetPoses]) -> MagnetPoses:
+        """One batch (N, M, 3) from N pose sets (M, 3)."""
+        return cls(np.array([p.translation for p in poses]), np.array([p.rotvec for p in poses]))
+
     @property
     def rigid(self) -> np.ndarray:
         """Stacked rigid coordinates (..., M, 6)."""

@@ -19,6 +19,7 @@ from typing import Any, Protocol, Sequence
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
 from softtip.design.model import MM, Design
 from softtip.mechanics.contact import LoadCase, solve_hyperelastic_contact, solve_linear_contact
 from softtip.mechanics.fe import BodyModel
@@ -71,7 +72,7 @@ class FiniteElementEngine:
             self.timings["body_model_s"] = time.perf_counter() - start
         return self._body
 
-    def respond(self, loads: Sequence[LoadCase], model: str | None = None, progress=None) -> Response:
+    def respond(self, loads: Sequence[LoadCase], model: str | None = None, progress: Progress = SILENT) -> Response:
         model = model or self.model
         if model not in MODELS:
             raise ValueError(f"model = {model!r}: expected one of {', '.join(MODELS)}")
@@ -82,7 +83,6 @@ class FiniteElementEngine:
         for solution in solutions:
             for key, seconds in solution.timings.items():
                 timings[key] = timings.get(key, 0.0) + seconds
-        return Response(poses=MagnetPoses(np.array([s.magnet_poses.translation for s in solutions]),
-                                          np.array([s.magnet_poses.rotvec for s in solutions])),
+        return Response(poses=MagnetPoses.stack([s.magnet_poses for s in solutions]),
                         force=np.array([s.force for s in solutions]), model=model, solutions=solutions,
                         timings=timings)

@@ -1,5 +1,5 @@
 """The influence-matrix engine: exact small-strain contact on a fingertip's surface influence
-matrices (:class:`softtip.rom.influence.SurfaceInfluence`), milliseconds per load.
+matrices (:class:`softtip.mechanics.contact.SurfaceInfluence`), milliseconds per load.
 
 The matrices come from one factorisation of the finite-element stiffness, so a press solved on
 them is the finite-element solution with contact on the surface's nodes, recorded after every
@@ -13,12 +13,12 @@ from typing import Sequence
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
 from softtip.design.model import Design
-from softtip.mechanics.contact import ContactSolution, LoadCase
+from softtip.mechanics.contact import LoadCase, ReducedContactResult, SurfaceInfluence, solve_influence_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.mesh import mesh_design
 from softtip.mechanics.poses import MagnetPoses
-from softtip.rom.influence import SurfaceInfluence, solve_contact
 from softtip.twin.engines import Response
 
 
@@ -31,18 +31,19 @@ class InfluenceEngine:
 
     @classmethod
     def build(cls, design: Design, mesh_size: float, reach: float, curvature_points: int = 10,
-              progress=None) -> InfluenceEngine:
+              progress: Progress = SILENT) -> InfluenceEngine:
         """Influence matrices of the surface within ``reach`` (m) of the top, on a ``mesh_size`` mesh."""
         body = BodyModel.for_design(design, mesh_design(design, mesh_size, curvature_points=curvature_points))
         influence = SurfaceInfluence.build(body, design.height - reach, progress=progress)
         return cls(design=design, influence=influence)
 
-    def press(self, load: LoadCase, normal_steps: int | None = None, tangential_steps: int = 4) -> ContactSolution:
+    def press(self, load: LoadCase, normal_steps: int | None = None, tangential_steps: int = 4) -> ReducedContactResult:
         """One load along its path, with the state after every load step."""
-        return solve_contact(self.influence, load, normal_steps=normal_steps, tangential_steps=tangential_steps)
+        return solve_influence_contact(self.influence, load, normal_steps=normal_steps,
+                                       tangential_steps=tangential_steps)
 
     def respond(self, loads: Sequence[LoadCase]) -> Response:
         solutions = [self.press(load) for load in loads]
-        return Response(poses=MagnetPoses.from_rigid(np.array([s.magnet_rigid for s in solutions])),
+        return Response(poses=MagnetPoses.stack([s.magnet_poses for s in solutions]),
                         force=np.array([s.force for s in solutions]), model="influence",
                         solutions=solutions)

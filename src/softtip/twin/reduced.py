@@ -2,11 +2,11 @@
 
 Built automatically for one design and one indenter family, in three stages:
 
-1. influence matrices of the contact surface (:mod:`softtip.twin.influence`),
+1. influence matrices of the contact surface (:mod:`softtip.mechanics.contact.influence`),
    from one factorisation of the finite-element stiffness;
 2. a design of experiments over the load parameters, each solved exactly on
    those matrices (milliseconds each, on every core), with contact on cells
-   of the indenter's footprint (:mod:`softtip.mechanics.footprint`): with
+   of the indenter's footprint (:mod:`softtip.mechanics.contact.footprint`): with
    contact on nodes, a board narrower than two elements makes the response
    step as rows of nodes enter its footprint, steps no interpolator follows;
 3. a smooth interpolator fitted to it: small tanh networks (scikit-learn's
@@ -49,13 +49,13 @@ import numpy as np
 
 from softtip import __version__
 from softtip._core.network import fold_scaling, predict_batch
+from softtip._core.progress import SILENT, Progress, Task
 from softtip._core.units import MM, UT_PER_T
 from softtip.design.model import Design, design_from_dict
-from softtip.mechanics.contact import LoadCase
-from softtip.mechanics.footprint import CELL_SIZE, SurfacePatch, solve_footprint_contact, stiffness_compliance
+from softtip.mechanics.contact import (CELL_SIZE, FootprintBody, LoadCase, SurfaceInfluence, SurfacePatch,
+                                      solve_footprint_contact, stiffness_compliance)
 from softtip.mechanics.indenters import make_indenter
 from softtip.mechanics.poses import MagnetPoses
-from softtip.rom.influence import SurfaceInfluence
 from softtip.twin.engines import Response
 from softtip.twin.readout import Readout
 
@@ -164,8 +164,8 @@ def _solve_samples(rows: np.ndarray) -> np.ndarray:
     # one BLAS thread per worker: the workers fill the cores, more threads only contend
     with threadpool_limits(limits=1):
         for k, p in enumerate(rows):
-            solution = solve_footprint_contact(patch, influence.compliance_of, family.load(p))
-            out[k] = np.concatenate([solution.magnet_rigid.ravel(), solution.force])
+            solution = solve_footprint_contact(FootprintBody(patch, influence.compliance_of), family.load(p))
+            out[k] = np.concatenate([solution.magnet_poses.rigid.ravel(), solution.force])
     return out
 
 
@@ -267,7 +267,7 @@ class ReducedTwin:
     def build(cls, design: Design, family: IndenterFamily = IndenterFamily(), ranges: LoadRanges = LoadRanges(),
               mesh_size: float = 1.5 * MM, samples: int = SAMPLES, holdout: int = 12, exact_holdout: int = 500,
               hidden: tuple[int, ...] = (128, 128), ensemble: int = ENSEMBLE, seed: int = 0, workers: int = 2,
-              contact_layer_size: float | None = None, progress=None) -> "ReducedTwin":
+              contact_layer_size: float | None = None, progress: Progress = SILENT) -> "ReducedTwin":
         """Influence matrices, ``samples`` exact contact solves on them, the fitted network, and its
         errors on ``holdout`` FE solves and on ``exact_holdout`` exact solves on the influence
         matrices. ``contact_layer_size``: element size (m) in the layer the load ranges reach
@@ -275,7 +275,6 @@ class ReducedTwin:
         from softtip.mechanics.fe import BodyModel
         from softtip.mechanics.mesh import mesh_design
 
-        say = progress or (lambda stage, done, total: None)
         timings = {}
         start = time.perf_counter()
         # contact can reach as low as the deepest push below the top surface, plus a margin
@@ -283,13 +282,14 @@ class ReducedTwin:
         layer = None if contact_layer_size is None else (reach, contact_layer_size)
         body = BodyModel.for_design(design, mesh_design(design, mesh_size, contact_layer=layer))
         lowest = design.height - reach
-        influence = SurfaceInfluence.build(body, lowest, progress=lambda d, t: say("influence matrices", d, t))
+        influence = SurfaceInfluence.build(body, lowest, progress=progress)
         patch = SurfacePatch(body, lowest)
         timings["influence_s"] = time.perf_counter() - start
 
         start = time.perf_counter()
-        params, targets, _, held_share = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed),
-                                                     samples, workers, lambda d, t: say("contact samples", d, t))
+        with progress.task("contact samples (loads solved)") as task:
+            params, targets, _, held_share = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed),
+                                                         samples, workers, task)
         timings["samples_s"] = time.perf_counter() - start
 
         start = time.perf_counter()
@@ -309,15 +309,16 @@ class ReducedTwin:
                                      "magnet_displacement_um": (scales["displacement_m"] * 1e6).tolist()}
         # many held-out loads solved exactly on the influence matrices (which reproduce the FE
         # solution, as the FE held-out loads check) give the error's distribution, not a few values
-        exact, reference, sliding, _ = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed + 2),
-                                                exact_holdout, workers, lambda d, t: say("held-out exact solves", d, t))
+        with progress.task("held-out exact solves (loads solved)") as task:
+            exact, reference, sliding, _ = _held_loads(influence, patch, family, ranges,
+                                                       np.random.default_rng(seed + 2), exact_holdout, workers, task)
         twin.report["exact_holdout"] = twin._exact_errors(exact, reference, scales)
         if len(sliding[0]):  # how far off the twin is where the board would slide: outside its domain
             twin.report["exact_sliding_loads"] = twin._exact_errors(*sliding, scales)
         fe_loads = _held_loads(influence, patch, family, ranges, np.random.default_rng(seed + 1), holdout, workers,
-                               lambda d, t: None)[0]
-        twin.report["holdout"] = twin._fe_errors(body, patch, fe_loads, scales,
-                                                 lambda d, t: say("held-out FE solves", d, t))
+                               Task())[0]
+        with progress.task("held-out FE solves", len(fe_loads)) as task:
+            twin.report["holdout"] = twin._fe_errors(body, patch, fe_loads, scales, task)
         timings["holdout_s"] = time.perf_counter() - start
         timings["build_s"] = sum(v for k, v in timings.items() if k != "holdout_s")
         return twin
@@ -336,17 +337,17 @@ class ReducedTwin:
         return self._errors(self.predict(params), reference[:, :-3].reshape(len(params), -1, 6), reference[:, -3:],
                             scales)
 
-    def _fe_errors(self, body, patch: SurfacePatch, params: np.ndarray, scales: dict, progress) -> dict:
+    def _fe_errors(self, body, patch: SurfacePatch, params: np.ndarray, scales: dict, task: Task) -> dict:
         """Errors against full finite-element solves at loads the network never saw: the same
         contact problem on the factorised stiffness, each load from scratch."""
         fe_rigid, fe_force, fe_seconds = [], [], []
         for k, p in enumerate(params):
             start = time.perf_counter()
-            result = solve_footprint_contact(patch, stiffness_compliance(body), self.family.load(p))
+            result = solve_footprint_contact(FootprintBody(patch, stiffness_compliance(body)), self.family.load(p))
             fe_seconds.append(time.perf_counter() - start)
-            fe_rigid.append(result.magnet_rigid)
+            fe_rigid.append(result.magnet_poses.rigid)
             fe_force.append(result.force)
-            progress(k + 1, len(params))
+            task.advance()
         start = time.perf_counter()
         predicted = self.predict(params)
         rom_seconds = (time.perf_counter() - start) / len(params)
@@ -394,7 +395,7 @@ class ReducedTwin:
 
 
 def _held_loads(influence: SurfaceInfluence, patch: SurfacePatch, family: IndenterFamily, ranges: LoadRanges,
-                rng: np.random.Generator, count: int, workers: int, progress) -> tuple:
+                rng: np.random.Generator, count: int, workers: int, task: Task) -> tuple:
     """``count`` loads drawn from ``ranges`` that the family holds without sliding and their exact
     solutions (magnet poses, force); the loads drawn on the way that slide, with their solutions;
     and the share of drawn loads that hold."""
@@ -403,8 +404,7 @@ def _held_loads(influence: SurfaceInfluence, patch: SurfacePatch, family: Indent
     while held < count:
         share = held / drawn if drawn else 1.0  # draw what is missing at the share held so far, and a little more
         batch = ranges.sample(rng, math.ceil((count - held) / max(share, 0.2) * 1.05) + 8)
-        out = _solve_in_parallel(influence, patch, family, batch, workers,
-                                 lambda d, t, done=held: progress(min(done + d, count), count))
+        out = _solve_in_parallel(influence, patch, family, batch, workers, task)
         batches.append(batch)
         outs.append(out)
         holding.append(~family.slides(out[:, -3:]))
@@ -416,21 +416,21 @@ def _held_loads(influence: SurfaceInfluence, patch: SurfacePatch, family: Indent
 
 
 def _solve_in_parallel(influence: SurfaceInfluence, patch: SurfacePatch, family: IndenterFamily, params: np.ndarray,
-                       workers: int, progress) -> np.ndarray:
+                       workers: int, task: Task) -> np.ndarray:
     _WORKER.update(influence=influence, patch=patch, family=family)
     chunks = np.array_split(params, max(1, len(params) // 100))
     results = []
     if workers <= 1 or os.name != "posix":
         for chunk in chunks:
             results.append(_solve_samples(chunk))
-            progress(sum(len(r) for r in results), len(params))
+            task.advance(len(chunk))
     else:
         import multiprocessing
 
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
             for out in pool.map(_solve_samples, chunks):
                 results.append(out)
-                progress(sum(len(r) for r in results), len(params))
+                task.advance(len(out))
     _WORKER.clear()
     return np.vstack(results)
 

@@ -12,11 +12,11 @@ Both come from one factorisation of K and 3m back-substitutions, done in
 blocks. A contact problem then only involves the nodes under the indenter: a
 primal-dual active-set iteration on dense blocks of W enforces the contact
 conditions exactly (Lagrange multipliers, no penalty) in milliseconds.
-:func:`solve_contact` holds nodes, with the same load path and friction
-semantics as the finite-element solver
-(:func:`softtip.mechanics.contact.solve_linear_contact`);
+:func:`solve_influence_contact` holds nodes, with the same load path and
+friction semantics as the finite-element solver
+(:func:`~softtip.mechanics.contact.nodal.solve_linear_contact`);
 :meth:`SurfaceInfluence.compliance_of` serves contact on footprint cells
-(:func:`softtip.mechanics.footprint.solve_footprint_contact`).
+(:func:`~softtip.mechanics.contact.footprint.solve_footprint_contact`).
 """
 
 from __future__ import annotations
@@ -25,10 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.mechanics.contact import (ContactSolution, LoadCase, contact_candidates, exact_contact_step, load_path,
-                                      require_nodal_friction, touch_offset)
+from softtip._core.progress import SILENT, Progress
+from softtip.mechanics.contact.active_set import ACTIVE_SET_MEASURE, exact_contact_step
+from softtip.mechanics.contact.load import LoadCase, load_path, require_nodal_friction, touch_offset
+from softtip.mechanics.contact.nodal import contact_candidates
+from softtip.mechanics.contact.result import ConvergenceLog, ReducedContactResult
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import SPDSolver
+from softtip.mechanics.poses import MagnetPoses
 
 
 @dataclass
@@ -40,7 +44,7 @@ class SurfaceInfluence:
     magnet_centers: np.ndarray  # (M, 3) m
 
     @classmethod
-    def build(cls, body: BodyModel, lowest_z: float, progress=None) -> "SurfaceInfluence":
+    def build(cls, body: BodyModel, lowest_z: float, progress: Progress = SILENT) -> "SurfaceInfluence":
         """Influence of unit forces on the body's outer nodes at or above ``lowest_z`` (m)."""
         candidates, dofs = contact_candidates(body)
         keep = (body.space.nodes[candidates, 2] >= lowest_z) & (dofs >= 0).all(axis=1)
@@ -52,7 +56,7 @@ class SurfaceInfluence:
 
     def compliance_of(self, node_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Compliance (3n, 3n) and magnet response (6M, 3n) of body nodes ``node_ids`` (all among
-        :attr:`node_ids`): the view :func:`softtip.mechanics.footprint.solve_footprint_contact` needs."""
+        :attr:`node_ids`): the view :func:`~softtip.mechanics.contact.footprint.solve_footprint_contact` needs."""
         order = np.argsort(self.node_ids)
         local = order[np.minimum(np.searchsorted(self.node_ids, node_ids, sorter=order), len(order) - 1)]
         if not np.array_equal(self.node_ids[local], node_ids):
@@ -64,15 +68,19 @@ class SurfaceInfluence:
 _BULGE_MARGIN = 1e-3  # m
 
 
-def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int | None = None,
-                  tangential_steps: int = 4, max_iterations: int = 50) -> ContactSolution:
-    """Exact small-strain contact on the influence matrices, along the FE solver's load path."""
+def solve_influence_contact(influence: SurfaceInfluence, load: LoadCase, *, normal_steps: int | None = None,
+                            tangential_steps: int = 4, max_iterations: int = 50,
+                            report_unconverged: bool = False) -> ReducedContactResult:
+    """Exact small-strain contact on the influence matrices, along the FE solver's load path.
+    ``max_iterations`` caps the active-set iterations of each load step; a step that reaches it
+    raises :class:`ContactNotConverged`, or with ``report_unconverged`` the result says
+    ``converged=False``. Residual: the active-set changes of each step's last iteration."""
     require_nodal_friction(load)
     touch = touch_offset(load.indenter, load.position, influence.nodes)
     stick = load.friction == "stick"
-    if normal_steps is None:
-        normal_steps = 2 if stick and any(load.tangential) else 1
-    path = load_path(load, normal_steps, tangential_steps)
+    path = load_path(load, normal_steps, tangential_steps, holds=stick)
+    log = ConvergenceLog("solve_influence_contact", ACTIVE_SET_MEASURE, load, len(path), max_iterations,
+                         report_unconverged)
     # only nodes the indenter can reach along its path take part: every other node stays out of contact
     # unless the surface bulges up by more than the margin, far beyond what these loads do
     reach = np.zeros(len(influence.nodes), dtype=bool)
@@ -98,8 +106,9 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
         # held nodes follow the indenter tangentially from where they were (the constraints hold
         # exactly, so that is where they were held)
         target = u[:, :2] + (frame - previous_frame)[:2]
-        multipliers, active = exact_contact_step(held, gap, target, stick, active, 1e-6 * max(load.depth, 1e-6),
-                                                 max_iterations)
+        multipliers, active, outcome = exact_contact_step(held, gap, target, stick, active, load.tolerance,
+                                                          max_iterations)
+        log.step(outcome)
         forces = np.zeros_like(x)  # force of the indenter on each node
         if stick:
             forces[:] = multipliers.reshape(-1, 3)
@@ -107,7 +116,8 @@ def solve_contact(influence: SurfaceInfluence, load: LoadCase, normal_steps: int
             forces[:, 2] = multipliers
         u = (compliance @ forces.ravel()).reshape(-1, 3)
         previous_frame = frame
-        states.append((travel, (influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6),
+        states.append((travel, MagnetPoses.from_rigid((influence.magnets[:, local_rows] @ forces.ravel()).reshape(-1, 6)),
                        -forces.sum(axis=0)))
-    _, rigid, force = states[-1]
-    return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=local[active], path=states)
+    _, poses, force = states[-1]
+    return ReducedContactResult(magnet_poses=poses, force=force, contact_nodes=local[active], path=states,
+                                **log.record())

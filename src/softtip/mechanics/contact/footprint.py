@@ -1,6 +1,6 @@
 """Contact enforced on cells of the indenter's footprint: smooth in where the indenter is.
 
-Nodal contact (:mod:`softtip.mechanics.contact`) holds surface *nodes* to the
+Nodal contact (:mod:`softtip.mechanics.contact.nodal`) holds surface *nodes* to the
 indenter. An indenter narrower than a few elements - a 1.6 mm board on a
 1.5 mm mesh - then covers one or two rows of nodes, and the response steps as
 rows enter and leave its footprint as it moves across them (Bz by up to
@@ -26,8 +26,10 @@ travel brings no new material under the indenter (the nodal solvers let nodes
 the moved footprint covers in the *undeformed* configuration join). Cells also
 model Coulomb's law (``"coulomb"``), which the nodal solvers do not.
 
-The contact problem needs only the compliance of the nodes under the cells,
-from any source: influence matrices (:mod:`softtip.rom.influence`) or
+The contact problem needs only the surface and the compliance of the nodes
+under the cells (a :class:`FootprintBody`), from any source: influence
+matrices (:meth:`SurfaceInfluence.compliance_of
+<softtip.mechanics.contact.influence.SurfaceInfluence.compliance_of>`) or
 back-substitutions with a factorised stiffness (:func:`stiffness_compliance`),
 which is the finite-element solve of the same problem.
 """
@@ -40,11 +42,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.mechanics.contact import (ActiveSetIteration, ContactSolution, LoadCase, exact_contact_step, load_path,
-                                      touch_offset)
+from softtip.mechanics.contact.active_set import ACTIVE_SET_MEASURE, ActiveSetIteration, exact_contact_step
+from softtip.mechanics.contact.load import LoadCase, load_path, touch_offset
+from softtip.mechanics.contact.result import ConvergenceLog, ReducedContactResult, StepOutcome
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Board, Indenter
 from softtip.mechanics.linsolve import SPDSolver
+from softtip.mechanics.poses import MagnetPoses
 
 _POINT_SPACING = 0.2e-3  # m, integration points in each cell
 CELL_SIZE = 1.0e-3  # m, about the surface node spacing of a 1.5 mm quadratic mesh
@@ -175,20 +179,41 @@ def stiffness_compliance(body: BodyModel) -> Compliance:
     return compliance
 
 
-def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: LoadCase,
-                            normal_steps: int | None = None, tangential_steps: int = 4, cell: float = CELL_SIZE,
-                            max_iterations: int = 50) -> ContactSolution:
+@dataclass(frozen=True)
+class FootprintBody:
+    """The body as contact on footprint cells sees it: its upward surface, and the compliance of
+    any nodes on it."""
+
+    patch: SurfacePatch
+    compliance: Compliance
+
+
+FOOTPRINT_MEASURES = {
+    "none": ACTIVE_SET_MEASURE,
+    "stick": "share of the load step's path not followed",
+    "coulomb": "relative size of the last semi-smooth Newton update (the contact set must also settle)",
+}
+
+
+def solve_footprint_contact(body: FootprintBody, load: LoadCase, *, normal_steps: int | None = None,
+                            tangential_steps: int = 4, cell: float = CELL_SIZE, max_iterations: int | None = None,
+                            report_unconverged: bool = False) -> ReducedContactResult:
     """Small-strain contact with tractions constant on footprint cells (Lagrange multipliers, exact),
     along the nodal solvers' load path; ``contact_nodes`` are the body nodes under cells in contact.
 
     Friction: ``"none"``, ``"stick"`` (the path followed exactly between its steps, from one change
     of the contact set to the next), or ``"coulomb"`` with ``load.mu``: a cell in contact sticks
     while its tangential traction is below mu times its pressure and otherwise slips, with that
-    traction, against its slip (incremental over the load steps; semi-smooth Newton)."""
+    traction, against its slip (incremental over the load steps; semi-smooth Newton).
+
+    ``max_iterations`` caps each load step: its active-set (``"none"``) or semi-smooth Newton
+    (``"coulomb"``) iterations, 50 by default, or with ``"stick"`` the changes of the contact set
+    along it, by default 20 per cell and 50 more (a cell touches and lets go a few times at most).
+    A step that reaches it raises :class:`ContactNotConverged`, or with ``report_unconverged`` the
+    result says ``converged=False``. Residual: see :data:`FOOTPRINT_MEASURES`."""
+    patch = body.patch
     holds = load.friction in ("stick", "coulomb")  # cells hold on to the material they touch
-    if normal_steps is None:
-        normal_steps = 2 if holds and any(load.tangential) else 1
-    path = load_path(load, normal_steps, tangential_steps)
+    path = load_path(load, normal_steps, tangential_steps, holds=holds)
     reach = patch.radius + float(np.hypot(*load.tangential))
     # cells depend on the plan view of the frame only: those where the indenter starts find the touch
     cells = footprint_cells(patch, load.indenter, np.array([*load.position, 0.0]), reach, cell)
@@ -199,11 +224,15 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
         if not holds and not np.array_equal(travel[:2], plan):
             cells, plan = footprint_cells(patch, load.indenter, touch + travel, reach, cell), travel[:2]
         steps.append(cells)
+    if max_iterations is None:
+        max_iterations = 20 * len(cells.average) + 50 if load.friction == "stick" else 50
+    log = ConvergenceLog("solve_footprint_contact", FOOTPRINT_MEASURES[load.friction], load, len(path),
+                         max_iterations, report_unconverged)
     nodes = np.unique(np.concatenate([c.nodes for c in steps]))
-    body_compliance, magnet_response = compliance(nodes)
+    body_compliance, magnet_response = body.compliance(nodes)
     u = np.zeros(3 * len(nodes))  # surface displacements after the last step
     previous_frame = touch.copy()
-    tolerance = 1e-6 * max(load.depth, 1e-6)
+    tolerance = load.tolerance
     if load.friction == "stick":  # the cells never change: a step starts at the gaps the last ended at
         previous_gap = cells.gaps(load.indenter, touch)
     states = []
@@ -220,9 +249,9 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             multipliers = np.zeros(operator.shape[0])
         gap = cells.gaps(load.indenter, frame)
         if load.friction == "stick":
-            multipliers, active = _stick_segment(schur, multipliers, active, previous_gap,
-                                                 (gap, cells.gaps(load.indenter, frame, extend=True)),
-                                                 (frame - previous_frame)[:2], tolerance)
+            multipliers, active, outcome = _stick_segment(schur, multipliers, active, previous_gap,
+                                                          (gap, cells.gaps(load.indenter, frame, extend=True)),
+                                                          (frame - previous_frame)[:2], tolerance, max_iterations)
             previous_gap = gap
         else:
             cell_u = (spread @ u).reshape(-1, 3)
@@ -234,24 +263,25 @@ def solve_footprint_contact(patch: SurfacePatch, compliance: Compliance, load: L
             # held cells follow the indenter tangentially from where they were
             target = cell_u[:, :2] + (frame - previous_frame)[:2]
             if load.friction == "coulomb":
-                multipliers, active = _coulomb_step(schur, gap, target, load.mu, active, multipliers, tolerance,
-                                                    max_iterations)
+                multipliers, active, outcome = _coulomb_step(schur, gap, target, load.mu, active, multipliers,
+                                                             tolerance, max_iterations)
             else:
-                multipliers, active = exact_contact_step(schur, gap, target, holds, active, tolerance,
-                                                         max_iterations)
+                multipliers, active, outcome = exact_contact_step(schur, gap, target, holds, active, tolerance,
+                                                                  max_iterations)
+        log.step(outcome)
         force_on_nodes = operator.T @ multipliers
         u = body_compliance @ force_on_nodes
         previous_frame = frame
-        states.append((travel, (magnet_response @ force_on_nodes).reshape(-1, 6),
+        states.append((travel, MagnetPoses.from_rigid((magnet_response @ force_on_nodes).reshape(-1, 6)),
                        -force_on_nodes.reshape(-1, 3).sum(axis=0)))
-    _, rigid, force = states[-1]
+    _, poses, force = states[-1]
     touched = cells.nodes[(cells.average[active] != 0).any(axis=0)]
-    return ContactSolution(magnet_rigid=rigid, force=force, contact_nodes=touched, path=states)
+    return ReducedContactResult(magnet_poses=poses, force=force, contact_nodes=touched, path=states, **log.record())
 
 
 def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarray, start: np.ndarray,
-                   end: tuple[np.ndarray, np.ndarray], shift: np.ndarray, tolerance: float
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   end: tuple[np.ndarray, np.ndarray], shift: np.ndarray, tolerance: float, max_events: int
+                   ) -> tuple[np.ndarray, np.ndarray, StepOutcome]:
     """One segment of the load path with sticking cells, followed exactly: with a fixed contact set
     the response is linear along the segment, so the path is solved from one change of the contact
     set to the next (a cell touches: its gap closes; a cell lets go: its pressure vanishes). A cell
@@ -264,9 +294,11 @@ def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarra
     indenter moves ``shift`` tangentially. Cells that change at one point of the path change
     together, whatever their order. A cell that touches with no pressure may be unable to be held
     (it would pull) or left free (it would penetrate): friction needs pressure, so it stays in
-    contact without holding on until the segment ends, and holds on from there."""
+    contact without holding on until the segment ends, and holds on from there.
+
+    Stops after ``max_events`` changes of the contact set, where it has got to (the outcome's
+    residual: the share of the segment not followed)."""
     cells = len(active)
-    max_events = 20 * cells + 50
     reachable = np.isfinite(start) & np.isfinite(end[0])
     free_start, free_end = np.where(reachable, start, 0.0), np.where(reachable, end[0], 0.0)
     active = active.copy()
@@ -274,7 +306,7 @@ def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarra
     flips = np.zeros(cells, dtype=int)  # changes of each cell at the present point of the path
     moved = schur @ multipliers
     done = 0.0  # fraction of the segment travelled
-    for _ in range(max_events):
+    for count in range(1, max_events + 1):
         left = 1.0 - done
         rows = np.flatnonzero(np.column_stack([held, held, active]))  # the components held, cell-major
         target = np.column_stack([moved.reshape(-1, 3)[:, :2] + left * shift, end[1]]).ravel()[rows]
@@ -295,7 +327,7 @@ def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarra
         when[(flips >= 4) & (when <= 1e-12)] = np.inf  # a cell that cannot settle waits for the path to move on
         first = when.min()
         if not np.isfinite(first):
-            return final, active
+            return final, active, StepOutcome(True, count, 0.0)
         changing = np.flatnonzero(when <= first + 1e-12)
         if first > 1e-12:
             flips[:] = 0
@@ -305,16 +337,18 @@ def _stick_segment(schur: np.ndarray, multipliers: np.ndarray, active: np.ndarra
         flips[changing] += 1
         active[changing] = ~active[changing]
         held[changing] = active[changing] & (flips[changing] < 2)
-    raise ArithmeticError(f"sticking contact changed more than {max_events} times in one load step")
+    return multipliers, active, StepOutcome(False, max_events, 1.0 - done)
 
 
 def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: float, active: np.ndarray,
-                  multipliers: np.ndarray, tolerance: float, max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+                  multipliers: np.ndarray, tolerance: float, max_iterations: int
+                  ) -> tuple[np.ndarray, np.ndarray, StepOutcome]:
     """One load step with Coulomb friction: semi-smooth Newton on the contact conditions and on
     Alart and Curnier's friction condition  max(b, |z|) t - b z = 0,  z = t - c s,  b = mu p
     (t tangential traction on the body, s its slip relative to the indenter, p pressure), with
     the damped tangent of Hueber, Stadler and Wohlmuth; contact sets by primal-dual active sets.
-    Starts from the last step's multipliers."""
+    Starts from the last step's multipliers; converged once the contact set has settled and the
+    update is below 1e-9 of the multipliers (the outcome's residual: that relative update)."""
     cells = len(gap)
     augment = 1.0 / np.mean(np.diag(schur))  # c: makes traction and slip commensurate
     rows = schur.reshape(cells, 3, -1)
@@ -355,7 +389,9 @@ def _coulomb_step(schur: np.ndarray, gap: np.ndarray, target: np.ndarray, mu: fl
         step = np.linalg.solve(jacobian.reshape(3 * cells, -1), -residual.ravel())
         multipliers = multipliers + step
         settled = iteration.update(-multipliers[2::3], gap - (schur @ multipliers)[2::3], tolerance)
-        if settled and np.abs(step).max() <= 1e-9 * max(np.abs(multipliers).max(), 1e-12):
-            return multipliers, active
+        scale = max(np.abs(multipliers).max(), 1e-12)
+        update = np.abs(step).max() / scale
+        if settled and np.abs(step).max() <= 1e-9 * scale:
+            return multipliers, active, StepOutcome(True, iteration.iterations, update)
         active = iteration.active
-    raise ArithmeticError(f"Coulomb friction (mu = {mu}) did not converge in {max_iterations} iterations")
+    return multipliers, active, StepOutcome(False, iteration.iterations, update)

@@ -1,4 +1,4 @@
-"""Unilateral contact of the elastomer body with a rigid indenter.
+"""Contact of the finite-element body's outer nodes with a rigid indenter.
 
 Both solvers enforce non-penetration of the body's outer nodes with a penalty
 that is stiff compared to the body (``penalty`` times the mean diagonal of the
@@ -15,91 +15,24 @@ the contact area is an outcome, not an input.
   method with load steps and a backtracking line search on the total energy.
 
 Friction is either ``"none"`` or ``"stick"`` (contact nodes move with the
-indenter tangentially from where they touched). The indenter is lowered until
-it touches the undeformed body, then pushed ``depth`` down, then moved
-``tangential`` (x, y) sideways, in load steps.
+indenter tangentially from where they touched); load paths are those of
+:mod:`softtip.mechanics.contact.load`.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
+from softtip._core.progress import SILENT, Progress
+from softtip.mechanics.contact.active_set import ACTIVE_SET_MEASURE, ActiveSetIteration
+from softtip.mechanics.contact.load import LoadCase, load_path, require_nodal_friction, touch_offset
+from softtip.mechanics.contact.result import ContactResult, ConvergenceLog, StepOutcome
 from softtip.mechanics.fe import BodyModel
-from softtip.mechanics.indenters import Indenter
 from softtip.mechanics.linsolve import NotPositiveDefinite, SPDSolver
-from softtip.mechanics.poses import MagnetPoses
-
-FRICTION_MODES = ("none", "stick")  # of the solvers that hold nodes
-FOOTPRINT_FRICTION_MODES = (*FRICTION_MODES, "coulomb")  # contact on footprint cells adds Coulomb's law
-
-
-@dataclass(frozen=True)
-class LoadCase:
-    indenter: Indenter
-    depth: float  # m, normal travel after first touch
-    tangential: tuple[float, float] = (0.0, 0.0)  # m, travel along x and y after the normal push
-    position: tuple[float, float] = (0.0, 0.0)  # m, (x, y) of the indenter's axis on the fingertip
-    friction: str = "none"
-    mu: float = 0.7  # Coulomb's coefficient, with friction = "coulomb" (soft body on a board, S1)
-
-    def __post_init__(self):
-        if not self.depth >= 0:
-            raise ValueError(f"depth = {self.depth}: expected a non-negative length in metres")
-        if self.friction not in FOOTPRINT_FRICTION_MODES:
-            raise ValueError(f"friction = {self.friction!r}: expected one of {', '.join(FOOTPRINT_FRICTION_MODES)}")
-        if not 0 <= self.mu <= 2:  # where the semi-smooth Newton is checked; friction="stick" never slips
-            raise ValueError(f"mu = {self.mu}: expected a friction coefficient from 0 to 2")
-
-
-def require_nodal_friction(load: LoadCase) -> None:
-    """Refuse friction the solvers that hold nodes do not model."""
-    if load.friction not in FRICTION_MODES:
-        raise ValueError(f"friction = {load.friction!r}: contact on nodes models {' or '.join(FRICTION_MODES)}; "
-                         "Coulomb friction needs contact on footprint cells (softtip.mechanics.footprint)")
-
-
-@dataclass
-class ContactResult:
-    unknowns: np.ndarray
-    magnet_poses: MagnetPoses  # (M, 3)
-    force: np.ndarray  # (3,) N, force of the body on the indenter (its reaction); Fz > 0 when pushing down
-    contact_nodes: np.ndarray  # indices of nodes in contact at the end
-    displacements: np.ndarray  # (n_nodes, 3) m
-    iterations: int
-    factorizations: int
-    timings: dict = field(default_factory=dict)
-
-
-@dataclass
-class ContactSolution:
-    """A contact solve on a reduced view of the body (its surface compliance)."""
-
-    magnet_rigid: np.ndarray  # (M, 6): translation (m) and rotation vector (rad) of each magnet
-    force: np.ndarray  # (3,) N, the fingertip's reaction on the indenter
-    contact_nodes: np.ndarray  # nodes in contact, as the solver numbers them
-    path: list[tuple[np.ndarray, np.ndarray, np.ndarray]]  # (travel (3,), magnet_rigid, force) after every step
-
-
-def touch_offset(indenter: Indenter, position: tuple[float, float], points: np.ndarray) -> np.ndarray:
-    """Where the indenter's frame sits when it first touches the undeformed body."""
-    offset = np.array([position[0], position[1], 0.0])
-    gap = indenter.vertical_gap(points - offset)[0].min()
-    if not np.isfinite(gap):
-        raise ValueError(f"the indenter at position {position} m does not reach the fingertip")
-    offset[2] = -gap
-    return offset
-
-
-def load_path(load: LoadCase, normal_steps: int, tangential_steps: int) -> list[np.ndarray]:
-    path = [np.array([0.0, 0.0, -load.depth * k / normal_steps]) for k in range(1, normal_steps + 1)]
-    if any(load.tangential):
-        path += [np.array([load.tangential[0] * k / tangential_steps, load.tangential[1] * k / tangential_steps,
-                           -load.depth]) for k in range(1, tangential_steps + 1)]
-    return path
 
 
 def contact_candidates(body: BodyModel) -> tuple[np.ndarray, np.ndarray]:
@@ -147,63 +80,6 @@ class StickAnchors:
     def keep_only(self, nodes: np.ndarray) -> None:
         keep = set(int(n) for n in nodes)
         self.points = {n: p for n, p in self.points.items() if n in keep}
-
-
-class ActiveSetIteration:
-    """The primal-dual active-set update shared by the contact solvers.
-
-    A node in contact stays in while it is compressed; a free node enters when
-    it penetrates. Corner nodes of quadratic faces carry ~zero consistent
-    pressure, so only clear tension (below -1e-3 of the peak nodal pressure)
-    releases a node; once an active set repeats (a cycle), nodes are only added.
-    """
-
-    def __init__(self, active: np.ndarray):
-        self.active = active
-        self._seen: set[bytes] = set()
-        self._only_add = False
-
-    def update(self, pressure: np.ndarray, linear_gap: np.ndarray, tolerance: float) -> bool:
-        """Update ``active`` from nodal pressures and gaps; True when it did not change."""
-        release = -1e-3 * max(pressure.max(initial=0.0), 0.0)
-        new = np.where(self.active, pressure > release, linear_gap < -tolerance)
-        if self._only_add:
-            new |= self.active
-        if np.array_equal(new, self.active):
-            return True
-        if new.tobytes() in self._seen:
-            self._only_add = True
-            new |= self.active
-        self._seen.add(self.active.tobytes())
-        self.active = new
-        return False
-
-
-def exact_contact_step(compliance: np.ndarray, gap: np.ndarray, target: np.ndarray, stick: bool,
-                       active: np.ndarray, tolerance: float, max_iterations: int) -> tuple[np.ndarray, np.ndarray]:
-    """One load step of contact enforced exactly (Lagrange multipliers) on the dense ``compliance``
-    of the points it holds (surface nodes or footprint cells): with ``stick`` three components per
-    point (x, y, z), the tangential ones held at ``target`` (n, 2); else only the normal one
-    (``compliance`` of those alone). The gap closes: u_z = ``gap``. Returns the multipliers (the
-    indenter's force on each point, per component) and the contact set, by primal-dual active sets."""
-    components = 3 if stick else 1
-    iteration = ActiveSetIteration(active)
-    for _ in range(max_iterations):
-        index = np.flatnonzero(active)
-        if stick:
-            rows = (3 * index[:, None] + np.arange(3)).ravel()
-            values = np.column_stack([target[index], gap[index]]).ravel()
-        else:
-            rows, values = index, gap[index]
-        multipliers = np.zeros(len(compliance))
-        if len(rows):
-            multipliers[rows] = np.linalg.solve(compliance[np.ix_(rows, rows)], values)
-        normal_u = (compliance @ multipliers).reshape(-1, components)[:, -1]
-        pressure = -multipliers.reshape(-1, components)[:, -1]  # the indenter pushes down
-        if iteration.update(pressure, gap - normal_u, tolerance):
-            break
-        active = iteration.active
-    return multipliers, active
 
 
 class _ActiveSetSystem:
@@ -276,10 +152,13 @@ class _ActiveSetSystem:
         return out
 
 
-def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, normal_steps: int | None = None,
-                         tangential_steps: int = 4, max_iterations: int = 30,
-                         solver: SPDSolver | None = None) -> ContactResult:
-    """Small-strain contact; gaps are linearised about the undeformed body."""
+def solve_linear_contact(body: BodyModel, load: LoadCase, *, penalty: float = 1e4, normal_steps: int | None = None,
+                         tangential_steps: int = 4, max_iterations: int = 30, solver: SPDSolver | None = None,
+                         report_unconverged: bool = False) -> ContactResult:
+    """Small-strain contact; gaps are linearised about the undeformed body. ``max_iterations``
+    caps the active-set iterations of each load step; a step that reaches it raises
+    :class:`ContactNotConverged`, or with ``report_unconverged`` the result says
+    ``converged=False``. Residual: the active-set changes of each step's last iteration."""
     require_nodal_friction(load)
     t0 = time.perf_counter()
     stiffness = body.stiffness
@@ -291,8 +170,9 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     epsilon = penalty * stiffness.diagonal()[: body.n_free].mean()
     touch = touch_offset(load.indenter, load.position, x)
     stick = load.friction == "stick"
-    if normal_steps is None:  # sticking nodes that touch late hold where they touched
-        normal_steps = 2 if stick and any(load.tangential) else 1
+    path = load_path(load, normal_steps, tangential_steps, holds=stick)
+    log = ConvergenceLog("solve_linear_contact", ACTIVE_SET_MEASURE, load, len(path), max_iterations,
+                         report_unconverged)
     # approach-direction gaps share one normal per node for the whole load path
     normal = load.indenter.vertical_gap(x - touch)[1]
     blocks = epsilon * (np.broadcast_to(np.eye(3), (len(x), 3, 3)) if stick
@@ -305,8 +185,7 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     nodal_force = np.zeros_like(x)
     previous_frame = touch.copy()
     active = np.zeros(len(candidates), dtype=bool)
-    iterations = 0
-    for travel in load_path(load, normal_steps, tangential_steps):
+    for travel in path:
         frame = touch + travel
         gap = load.indenter.vertical_gap(x - frame)[0]
         active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
@@ -316,7 +195,6 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
             active &= np.isfinite(gap)
         iteration = ActiveSetIteration(active)
         for _ in range(max_iterations):
-            iterations += 1
             if stick:
                 # contact nodes follow the indenter tangentially; the normal gap closes
                 held = anchors.targets(candidates[active], x[active] + u_candidates[active], previous_frame)
@@ -333,9 +211,10 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
             nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
             pressure = np.einsum("ij,ij->i", nodal_force, normal)
             linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
-            if iteration.update(pressure, linear_gap, 1e-6 * max(load.depth, 1e-6)):
+            if iteration.update(pressure, linear_gap, load.tolerance):
                 break
             active = iteration.active
+        log.step(iteration.outcome)
         u_candidates = u_now
         if stick:
             anchors.keep_only(candidates[active])
@@ -344,9 +223,9 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, penalty: float = 1e4, 
     t_total = time.perf_counter() - t0
     return ContactResult(
         unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-nodal_force.sum(axis=0),
-        contact_nodes=candidates[active], displacements=body.nodal_displacements(unknowns), iterations=iterations,
+        contact_nodes=candidates[active], displacements=body.nodal_displacements(unknowns),
         factorizations=solver.factorizations - factorizations0,
-        timings={"assembly_s": t_assembly, "contact_solve_s": t_total - t_assembly})
+        timings={"assembly_s": t_assembly, "contact_solve_s": t_total - t_assembly}, **log.record())
 
 
 class _RegularizedNewton:
@@ -371,10 +250,19 @@ class _RegularizedNewton:
                     raise
 
 
-def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int = 6, tangential_steps: int = 4,
-                               penalty: float = 1e3, tolerance: float = 1e-7, max_newton: int = 40,
-                               progress=None, monitor=None) -> ContactResult:
-    """Neo-Hookean body under large deformation; contact gaps at the deformed positions."""
+def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, *, normal_steps: int = 6, tangential_steps: int = 4,
+                               penalty: float = 1e3, tolerance: float = 1e-7, max_iterations: int = 40,
+                               report_unconverged: bool = False, progress: Progress = SILENT,
+                               monitor=None) -> ContactResult:
+    """Neo-Hookean body under large deformation; contact gaps at the deformed positions.
+
+    A load step has converged when the Newton residual has fallen below ``tolerance`` times its
+    first value in the step, or when a Newton update moves no unknown by more than ``tolerance``
+    times the depth with the residual below ``sqrt(tolerance)`` times its first.
+    ``max_iterations`` caps the Newton iterations of each load step; a step that reaches it, or
+    ends otherwise unconverged, raises :class:`ContactNotConverged`, or with
+    ``report_unconverged`` the result says ``converged=False``. Residual: the Newton residual norm
+    of each step's last iteration relative to its first."""
     require_nodal_friction(load)
     t0 = time.perf_counter()
     solver = SPDSolver()
@@ -384,7 +272,6 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
     touch = touch_offset(load.indenter, load.position, x)
     anchors: dict[int, np.ndarray] = {}  # sticking nodes (candidate index) -> anchor in the indenter's frame
     unknowns = np.zeros(body.size)
-    iterations = 0
 
     def contact_terms(q: np.ndarray, frame: np.ndarray, with_matrix: bool):
         """Penalty energy, gradient, matrix and nodal forces at ``q``. Nodes held since an earlier
@@ -424,49 +311,60 @@ def solve_hyperelastic_contact(body: BodyModel, load: LoadCase, load_steps: int 
         for i in np.flatnonzero(in_contact & (gap < 0)):
             anchors.setdefault(int(i), p[i] - gap[i] * normal[i] - frame)
 
-    path = load_path(load, load_steps, tangential_steps)
+    path = load_path(load, normal_steps, tangential_steps)
+    log = ConvergenceLog("solve_hyperelastic_contact", "Newton residual norm relative to the load step's first",
+                         load, len(path), max_iterations, report_unconverged)
     newton = _RegularizedNewton(solver)
     previous = unknowns
-    for step, travel in enumerate(path):
-        frame = touch + travel
-        if step == 0:  # the small-strain solution: its approach-direction gaps suit a first deep bite
-            first = LoadCase(load.indenter, -travel[2], position=load.position, friction=load.friction)
-            predicted = solve_linear_contact(body, first, solver=solver).unknowns
-        else:  # secant predictor along the load path
-            predicted = 2 * unknowns - previous
-            previous = unknowns
-        if np.isfinite(total_energy(predicted, frame)):
-            unknowns = predicted
-        reference = None
-        for _ in range(max_newton):
-            iterations += 1
-            elastic, gradient, tangent = body.hyperelastic(unknowns)
-            c_energy, c_gradient, c_matrix, force, _, _, in_contact = contact_terms(unknowns, frame, True)
-            residual = gradient + c_gradient
-            norm = np.linalg.norm(residual)
-            reference = reference or max(norm, 1e-30)
-            if norm < tolerance * reference:
-                break
-            step_vector = newton.step(tangent + c_matrix, residual)
-            energy0 = elastic + c_energy
-            slope = residual @ step_vector
-            alpha = 1.0
-            while alpha > 1e-4:
-                if total_energy(unknowns + alpha * step_vector, frame) <= energy0 + 1e-4 * alpha * slope:
+    with progress.task("Newton load steps", total=len(path)) as task:
+        for step, travel in enumerate(path):
+            frame = touch + travel
+            if step == 0:  # the small-strain solution: its approach-direction gaps suit a first deep bite
+                first = LoadCase(load.indenter, -travel[2], position=load.position, friction=load.friction)
+                # a predictor: the Newton iteration judges convergence
+                predicted = solve_linear_contact(body, first, solver=solver, report_unconverged=True).unknowns
+            else:  # secant predictor along the load path
+                predicted = 2 * unknowns - previous
+                previous = unknowns
+            if np.isfinite(total_energy(predicted, frame)):
+                unknowns = predicted
+            reference = None
+            converged = False
+            for count in range(1, max_iterations + 1):
+                elastic, gradient, tangent = body.hyperelastic(unknowns)
+                c_energy, c_gradient, c_matrix, force, _, _, in_contact = contact_terms(unknowns, frame, True)
+                residual = gradient + c_gradient
+                norm = np.linalg.norm(residual)
+                reference = reference or max(norm, 1e-30)
+                if norm < tolerance * reference:
+                    converged = True
                     break
-                alpha *= 0.5
-            unknowns = unknowns + alpha * step_vector
-            if monitor is not None:
-                monitor({"step": step + 1, "iteration": iterations, "residual": norm, "alpha": alpha,
-                         "contact_nodes": int(in_contact.sum()), "shift": newton.shift})
-            if alpha * np.abs(step_vector).max() < tolerance * max(load.depth, 1e-6):
-                break
-        if load.friction == "stick":
-            update_anchors(unknowns, frame)
-        if progress is not None:
-            progress(step + 1, len(path))
+                try:
+                    step_vector = newton.step(tangent + c_matrix, residual)
+                except NotPositiveDefinite:  # no shift makes the tangent definite: the step cannot go on
+                    break
+                energy0 = elastic + c_energy
+                slope = residual @ step_vector
+                alpha = 1.0
+                while alpha > 1e-4:
+                    if total_energy(unknowns + alpha * step_vector, frame) <= energy0 + 1e-4 * alpha * slope:
+                        break
+                    alpha *= 0.5
+                unknowns = unknowns + alpha * step_vector
+                if monitor is not None:
+                    monitor({"step": step + 1, "iteration": log.iterations + count, "residual": norm, "alpha": alpha,
+                             "contact_nodes": int(in_contact.sum()), "shift": newton.shift})
+                if alpha * np.abs(step_vector).max() < tolerance * max(load.depth, 1e-6):
+                    # near the solution the energy's round-off stalls the line search; far from it, a
+                    # stalled line search is no convergence
+                    converged = norm < math.sqrt(tolerance) * reference
+                    break
+            log.step(StepOutcome(converged, count, norm / reference))
+            if load.friction == "stick":
+                update_anchors(unknowns, frame)
+            task.advance()
     t_total = time.perf_counter() - t0
     return ContactResult(
         unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-force.sum(axis=0),
-        contact_nodes=candidates[in_contact], displacements=body.nodal_displacements(unknowns), iterations=iterations,
-        factorizations=solver.factorizations, timings={"contact_solve_s": t_total})
+        contact_nodes=candidates[in_contact], displacements=body.nodal_displacements(unknowns),
+        factorizations=solver.factorizations, timings={"contact_solve_s": t_total}, **log.record())
