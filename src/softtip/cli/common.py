@@ -7,6 +7,7 @@ import functools
 import typer
 from rich.console import Console
 
+from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress, RichProgress
 
 console = Console()
@@ -25,12 +26,13 @@ def fail(message: str) -> None:
 
 
 def user_errors(function):
-    """Turn the library's validation errors into one-line messages."""
+    """Turn the library's validation errors, and computations that did not converge, into one-line
+    messages."""
     @functools.wraps(function)
     def wrapper(*args, **kwargs):
         try:
             return function(*args, **kwargs)
-        except ValueError as error:  # every config and argument error is one
+        except (ValueError, NotConverged) as error:  # every config and argument error is a ValueError
             fail(str(error))
 
     return wrapper
