@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from softtip.mechanics import viscoelastic
+from softtip._core import signals
 
 
 def _pair(y: ArrayLike, yhat: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -150,8 +150,8 @@ def hysteresis_percent(force: ArrayLike, z: ArrayLike) -> float:
     """Hysteresis (%) of one load–unload cycle (S1 §2): |Z_up − Z_down| / (Z_max − Z_min) · 100,
     with Z_up, Z_down the z-axis MFD on the loading and unloading branches at the force midway
     between the cycle's minimum and maximum; see
-    :func:`softtip.mechanics.viscoelastic.hysteresis_percent`, which computes it."""
-    return viscoelastic.hysteresis_percent(z, force)
+    :func:`softtip._core.signals.hysteresis_percent`, which computes it."""
+    return signals.hysteresis_percent(z, force)
 
 
 def sensitivity(force: ArrayLike, mfd: ArrayLike):
