@@ -77,8 +77,8 @@ def pearson_r(y: ArrayLike, yhat: ArrayLike):
 
 
 def _label_indices(labels: np.ndarray, values: np.ndarray, what: str) -> np.ndarray:
-    """Index of each of ``values`` in ``labels``; a value outside ``labels`` is an error."""
-    order = np.argsort(labels, kind="stable")
+    """Index of each of ``values`` in the distinct ``labels``; a value outside ``labels`` is an error."""
+    order = np.argsort(labels)
     position = np.minimum(np.searchsorted(labels, values, sorter=order), len(labels) - 1)
     index = order[position]
     unknown = labels[index] != values
@@ -165,8 +165,8 @@ def sensitivity(force: ArrayLike, mfd: ArrayLike):
     f = force[rising] - force[rising].mean()
     if not np.any(f):
         raise ValueError("force does not rise on the ascending branch: sensitivity undefined")
-    m = mfd[rising] - mfd[rising].mean(axis=0)
-    slope_ut_per_n = np.tensordot(f, m, axes=(0, 0)) / np.dot(f, f)
+    # f sums to zero, so the MFD needs no centring: Σ f·(m − m̄) = Σ f·m
+    slope_ut_per_n = np.tensordot(f, mfd[rising], axes=(0, 0)) / np.dot(f, f)
     return _reduced(np.asarray(slope_ut_per_n) / 1000.0)
 
 
