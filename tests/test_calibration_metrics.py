@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -133,3 +135,111 @@ def test_mismatched_shapes_are_refused():
         rmse(np.zeros(3), np.zeros(4))
     with pytest.raises(ValueError, match="one label per sample"):
         per_condition(rmse, np.zeros(3), np.zeros(3), [1, 2])
+
+
+# --------------------------------------------------------------------------
+# Edge cases and refusals, worked by hand
+# --------------------------------------------------------------------------
+
+
+def test_one_output_gives_a_plain_float_from_every_metric():
+    y, yhat = np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 3.0])
+    for value in (mean_abs_error(y, yhat), max_abs_error(y, yhat), rmse(y, yhat), r2(y, yhat),
+                  pearson_r(y, yhat), rmse_percent_fs(y, yhat, 10), mae_percent_fs(y, yhat, 10),
+                  sensitivity(y, yhat)):
+        assert type(value) is float
+
+
+def test_a_single_sample_is_enough_and_no_sample_is_refused():
+    assert mean_abs_error([1.0], [3.0]) == 2.0
+    assert rmse([1.0], [-2.0]) == 3.0
+    with pytest.raises(ValueError, match="same non-empty"):
+        rmse([], [])
+
+
+def test_a_full_scale_below_one_is_a_valid_range_and_none_is_refused():
+    # RMSE 1 on a 0.5 N range is 200 %
+    assert rmse_percent_fs([0.0, 0.0], [1.0, -1.0], 0.5) == pytest.approx(200.0)
+    with pytest.raises(ValueError, match=r"^full_scale must be positive \(one value or one per output\), got None$"):
+        rmse_percent_fs([0.0], [1.0], None)
+
+
+def test_r2_and_pearson_of_a_small_spread_by_hand():
+    # y spreads 0..0.2 (SS_tot = 0.02); SS_res = 0.01 -> R² = 0.5
+    y, yhat = np.array([0.0, 0.1, 0.2]), np.array([0.0, 0.1, 0.3])
+    assert r2(y, yhat) == pytest.approx(0.5)
+    # Σ dy·dŷ = 0.03, Σ dy² = 0.02, Σ dŷ² = 0.14/3 -> r = 0.03 / sqrt(0.02 · 0.14/3)
+    assert pearson_r(y, yhat) == pytest.approx(0.03 / np.sqrt(0.02 * 0.14 / 3))
+
+
+def test_a_constant_series_gives_nan_without_a_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(r2(np.ones(5), np.arange(5.0)))  # residual / 0
+        assert np.isnan(r2(np.ones(5), np.ones(5)))  # 0 / 0
+        assert np.isnan(pearson_r(np.ones(5), np.arange(5.0)))
+
+
+def test_labels_must_be_distinct_non_empty_and_one_dimensional():
+    assert confusion(["a", "a"], ["a", "a"], ["a"]).tolist() == [[2]]  # one label is enough
+    for labels in (["a", "a", "b"], [["a", "b"]], []):
+        with pytest.raises(ValueError, match="^labels must be a non-empty 1-D sequence of distinct labels, got "):
+            confusion(["a"], ["a"], labels)
+    with pytest.raises(ValueError, match="^classes must be a non-empty 1-D sequence"):
+        mean_probability_of_true_class([[0.5, 0.5]], ["a"], ["a", "a"])
+
+
+def test_unknown_labels_are_named_up_to_five():
+    with pytest.raises(ValueError, match=r"^y holds labels not in the given classes/labels: \['D'\]$"):
+        mean_probability_of_true_class([[1.0, 0.0]], ["D"], ["A", "B"])
+    with pytest.raises(ValueError, match=r"^y_true holds labels not in the given classes/labels: \[1 2 3 4 5\]$"):
+        confusion([6, 5, 4, 3, 2, 1, 0], [0] * 7, [0])
+
+
+def test_mean_probability_of_one_sample_and_a_proba_of_the_wrong_shape():
+    assert mean_probability_of_true_class([[0.25, 0.75]], ["b"], ["a", "b"]) == 0.75
+    with pytest.raises(ValueError, match=r"^proba must be \(n_samples=2, n_classes=2\), got \(2, 3\)$"):
+        mean_probability_of_true_class(np.full((2, 3), 1 / 3), ["a", "b"], ["a", "b"])
+
+
+def test_confusion_counts_are_integers_and_lengths_must_agree():
+    assert confusion(["a", "b"], ["b", "b"], ["a", "b"]).dtype == np.int64
+    with pytest.raises(ValueError, match=r"^y_true and y_pred must be 1-D of the same length, got \(3,\) and \(4,\)$"):
+        confusion(["a"] * 3, ["a"] * 4, ["a"])
+
+
+def test_per_condition_takes_an_object_array_of_labels_and_refuses_overall():
+    # an object column (as a data frame holds strings) gives its own str keys
+    conditions = np.array(["left", "right", "left"], dtype=object)
+    table = per_condition(max_abs_error, [0.0, 0.0, 0.0], [1.0, 2.0, 3.0], conditions)
+    assert table == {"left": 3.0, "right": 2.0, "overall": 3.0}
+    with pytest.raises(ValueError, match='^conditions must not use the label "overall", which names the all-sample value$'):
+        per_condition(rmse, [0.0, 0.0], [1.0, 1.0], ["a", "overall"])
+
+
+def test_sensitivity_of_two_samples_by_hand_and_refusals():
+    # 0 -> 2 N with 0 -> 4000 µT: 2 mT/N
+    assert sensitivity([0.0, 2.0], [0.0, 4000.0]) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match=r"^force must be 1-D with >= 2 samples and mfd have one row per force sample, "
+                                         r"got shapes \(3,\) and \(2,\)$"):
+        sensitivity([0.0, 1.0, 2.0], [0.0, 1.0])
+    for force, mfd in (([[0.0, 1.0]], [[0.0, 1.0]]), ([0.0, 1.0], np.zeros((2, 3, 1))), ([0.0], [0.0])):
+        with pytest.raises(ValueError, match="^force must be 1-D with >= 2 samples"):
+            sensitivity(force, mfd)
+    with pytest.raises(ValueError, match="^force and mfd must be finite$"):
+        sensitivity([0.0, 1.0], [0.0, np.nan])
+    with pytest.raises(ValueError, match="^force does not rise on the ascending branch: sensitivity undefined$"):
+        sensitivity([3.0, 2.0, 1.0], [0.0, 1.0, 2.0])
+
+
+def test_first_detection_edges_by_hand():
+    force = np.array([0.0, 0.1, 0.2])
+    assert first_detection(force, [1, 1, 1], 1, persistence=3) == 0.2  # as many samples as the persistence
+    assert np.isnan(first_detection(force[:2], [1, 1], 1, persistence=3))  # fewer samples than the persistence
+    for persistence in (True, 2.5):
+        with pytest.raises(ValueError, match=rf"^persistence must be an integer >= 1, got {persistence!r}$"):
+            first_detection(force, [1, 1, 1], 1, persistence=persistence)
+    with pytest.raises(ValueError, match=r"^force and predicted_state must be 1-D of the same length, got \(3,\) and \(2,\)$"):
+        first_detection(force, [1, 1], 1)
+    with pytest.raises(ValueError, match=r"^true_state must be one state or one per sample \(3\), got shape \(2,\)$"):
+        first_detection(force, [1, 1, 1], [1, 1])

@@ -1,5 +1,7 @@
 """MLX90393 model against hand-copied datasheet values and hand-worked numbers."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,13 @@ def test_hallconf_0_scales_sensitivity_by_98_over_75():
     np.testing.assert_allclose(lsb_uT(settings), [0.196, 0.196, 0.316], atol=5e-4)
 
 
+def test_datasheet_tables_are_read_only():
+    for table in (*SENSITIVITY_UT[0xC], *SENSITIVITY_UT[0x0]):
+        assert table.dtype == np.float64 and table.shape == (8, 4)
+        with pytest.raises(ValueError, match="read-only"):
+            table[0, 0] = 1.0
+
+
 def test_each_res_step_doubles_the_lsb():
     # RES selects the next bit of the ADC word: exactly twice the LSB, up to the
     # +-0.0005 rounding of the printed entries (2 x 0.0005 + 0.0005).
@@ -63,6 +72,7 @@ def test_conversion_time_worked_by_hand():
     assert conversion_time_s(settings) == pytest.approx(3321e-6, rel=1e-12)
     assert conversion_time_s(settings, axes=1) == pytest.approx(1651e-6, rel=1e-12)
     assert max_output_rate_hz(settings) == pytest.approx(1 / 3321e-6, rel=1e-12)
+    assert max_output_rate_hz(settings, axes=1) == pytest.approx(1 / 1651e-6, rel=1e-12)
 
 
 def test_temperature_adds_its_conversion():
@@ -166,20 +176,42 @@ def test_full_scale_is_the_highest_count_times_the_lsb():
 
 def test_counts_to_uT_refuses_non_register_input():
     sensor = MLX90393()
-    with pytest.raises(ValueError, match="16-bit"):
-        sensor.counts_to_uT(np.array([[0, 0, 70000]]))
-    with pytest.raises(ValueError, match="integer"):
-        sensor.counts_to_uT(np.zeros((1, 3)))
-    with pytest.raises(ValueError, match=r"\(\.\.\., 3\)"):
-        sensor.counts_to_uT(np.zeros((1, 2), dtype=np.uint16))
+    for decode in (sensor.counts_to_uT, sensor.decode):
+        for words in (np.array([[0, 0, 70000]]), np.array([[0, 0, 65536]]), np.array([[0, -1, 0]])):
+            with pytest.raises(ValueError, match=r"^counts outside 0\.\.65535: expected 16-bit register words$"):
+                decode(words)
+        with pytest.raises(ValueError, match="^counts has dtype float64: expected integer register words$"):
+            decode(np.zeros((1, 3)))
+        with pytest.raises(ValueError, match=r"^counts has shape \(1, 2\): expected \(\.\.\., 3\) for x, y, z$"):
+            decode(np.zeros((1, 2), dtype=np.uint16))
+
+
+def test_words_decode_from_any_integer_container_of_any_batch_shape():
+    sensor = MLX90393(MLX90393Settings(gain_sel=7, res_xyz=(0, 0, 0)))
+    lsb = lsb_uT(sensor.settings)
+    # 65535 is the highest word; 0x8000 is -32768 counts in two's complement
+    np.testing.assert_allclose(sensor.counts_to_uT(np.array([[65535, 0x8000, 1]])), [[-1, -32768, 1] * lsb])
+    np.testing.assert_allclose(sensor.decode([[1, 0, 0xFFFE]])[0], [[1, 0, -2] * lsb])  # a list
+    assert sensor.counts_to_uT(np.zeros((0, 3), dtype=np.int64)).shape == (0, 3)  # an empty batch
+    field, saturated = sensor.decode(np.array([0x8000, 0x7FFF, 0], dtype=np.uint16))  # one reading, shape (3,)
+    np.testing.assert_allclose(field, [-32768, 32767, 0] * lsb)
+    np.testing.assert_array_equal(saturated, [True, True, False])
+    assert sensor.decode(np.zeros((2, 4, 3), dtype=np.uint16))[0].shape == (2, 4, 3)
 
 
 def test_to_counts_refuses_bad_fields():
     sensor = MLX90393()
-    with pytest.raises(ValueError, match=r"\(\.\.\., 3\)"):
+    with pytest.raises(ValueError, match=r"^b_tesla has shape \(4, 2\): expected \(\.\.\., 3\) for x, y, z$"):
         sensor.to_counts(np.zeros((4, 2)))
-    with pytest.raises(ValueError, match="NaN"):
+    with pytest.raises(ValueError, match="^b_tesla contains NaN$"):
         sensor.to_counts([[np.nan, 0.0, 0.0]], noise=False)
+
+
+def test_to_counts_takes_one_field_or_a_batch_of_any_shape():
+    sensor = MLX90393(MLX90393Settings(gain_sel=7, res_xyz=(0, 0, 0)))
+    lsb_t = lsb_uT(sensor.settings) * 1e-6
+    np.testing.assert_array_equal(sensor.to_counts([lsb_t[0], -lsb_t[1], 0.0], noise=False), [1, 0xFFFF, 0])
+    assert sensor.to_counts(np.zeros((2, 4, 3)), noise=False).shape == (2, 4, 3)
 
 
 # --------------------------------------------------------------------------
@@ -213,6 +245,13 @@ def test_noise_is_reproducible_with_a_seeded_rng():
     second = sensor.to_counts(b_t, rng=np.random.default_rng(3))
     np.testing.assert_array_equal(first, second)
     assert np.unique(first[:, 0]).size > 1
+    np.testing.assert_array_equal(sensor.read_uT(b_t, rng=np.random.default_rng(4)),
+                                  sensor.read_uT(b_t, rng=np.random.default_rng(4)))
+
+
+def test_noise_without_an_rng_draws_from_a_fresh_generator():
+    words = MLX90393().to_counts(np.zeros((100, 3)))
+    assert np.unique(words[:, 0]).size > 1
 
 
 # --------------------------------------------------------------------------
@@ -246,9 +285,11 @@ def test_settings_refuse_out_of_range_values(field, value, message):
 
 @pytest.mark.parametrize(("osr", "dig_filt"), [(0, 0), (0, 1), (1, 0)])
 def test_settings_refuse_forbidden_osr_dig_filt(osr, dig_filt):
-    expected = f"sensor.dig_filt = {dig_filt}: not permitted with sensor.osr = {osr}"
-    with pytest.raises(ValueError, match=expected):
+    expected = (f"sensor.dig_filt = {dig_filt}: not permitted with sensor.osr = {osr} by the datasheet; "
+                "use dig_filt >= 2 with osr 0 and dig_filt >= 1 with osr 1")
+    with pytest.raises(ValueError) as raised:
         MLX90393Settings(osr=osr, dig_filt=dig_filt)
+    assert str(raised.value) == expected
 
 
 @pytest.mark.parametrize(("osr", "dig_filt"), [(0, 2), (1, 1), (2, 0), (3, 0)])
@@ -259,6 +300,16 @@ def test_settings_accept_permitted_osr_dig_filt(osr, dig_filt):
 def test_from_dict_refuses_unknown_key():
     with pytest.raises(ValueError, match=r"^sensor\.gain: unknown key \(expected one of dig_filt, gain_sel, "):
         MLX90393Settings.from_dict({"gain": 3})
+    with pytest.raises(ValueError, match=r"^sensor = 3: expected a table$"):
+        MLX90393Settings.from_dict(3)
+
+
+def test_settings_from_numpy_scalars_hold_plain_python_values():
+    # e.g. registers read back from an array: to_dict must still serialise to JSON
+    settings = MLX90393Settings(gain_sel=np.int64(3), res_xyz=np.array([1, 2, 3]), osr=np.uint8(2),
+                                dig_filt=np.int32(5), osr2=np.int16(1), hallconf=np.int64(0), temperature=np.True_)
+    expected = {"gain_sel": 3, "res_xyz": [1, 2, 3], "osr": 2, "dig_filt": 5, "osr2": 1, "hallconf": 0, "temperature": True}
+    assert json.loads(json.dumps(settings.to_dict())) == expected
 
 
 def test_from_dict_round_trips_to_dict():

@@ -2,6 +2,7 @@
 reference, frames against a byte layout built by hand, and a fuzzed streaming
 decoder that never raises, never returns a damaged frame and loses no intact one."""
 
+import binascii
 import itertools
 import struct
 
@@ -280,9 +281,159 @@ def test_simple_commands_carry_only_their_tag():
         ({"raw": [[0, 0, 1.5]], "status": [0]}, "raw: expected integers"),
         ({"raw": [[0, 0, 0]], "status": [0, 0]}, "status has shape"),
         ({"raw": [[0, 0, 0]], "status": [0], "seq": 65536}, "seq = 65536"),
+        ({"raw": [1, 2, 3], "status": [0]}, r"^raw has shape \(3,\): expected \(n, 3\) with n in 1\.\.8$"),
+        ({"raw": [[0, 0, 0, 0]], "status": [0]}, r"^raw has shape \(1, 4\): expected \(n, 3\) with n in 1\.\.8$"),
+        ({"raw": [[0, 0, 0]], "status": [256]}, r"^status: expected integers 0\.\.255$"),
+        ({"raw": [[0, 0, 0]], "status": [0], "temperature_raw": [65536]}, r"^temperature_raw: expected integers 0\.\.65535$"),
+        ({"raw": [[0, 0, 0]], "status": [0], "device_time_us": 2**32},
+         r"^device_time_us = 4294967296: expected an integer 0\.\.4294967295$"),
     ],
 )
 def test_frame_validation_names_the_field(kwargs, message):
     fields = {"seq": 0, "device_time_us": 0, **kwargs}
     with pytest.raises(ValueError, match=message):
         Frame(**fields)
+
+
+def test_a_frame_holds_plain_ints_and_read_only_register_arrays():
+    frame = Frame(seq=np.uint16(7), device_time_us=np.uint32(9), status=[1], raw=[[1, 2, 3]],
+                  temperature_raw=[4], boot=1)
+    assert type(frame.seq) is int and type(frame.device_time_us) is int and frame.boot is True
+    assert (frame.raw.dtype, frame.status.dtype, frame.temperature_raw.dtype) == (np.uint16, np.uint8, np.uint16)
+    for words in (frame.raw, frame.status, frame.temperature_raw):
+        with pytest.raises(ValueError, match="read-only"):
+            words[0] = 0
+
+
+def test_frames_differing_in_any_one_field_are_unequal():
+    fields = {"seq": 1, "device_time_us": 2, "status": [0], "raw": [[3, 4, 5]], "temperature_raw": [6], "boot": False}
+    frame = Frame(**fields)
+    assert frame == Frame(**fields)
+    changes = [("seq", 9), ("device_time_us", 9), ("status", [9]), ("raw", [[3, 4, 9]]), ("temperature_raw", [9]),
+               ("temperature_raw", None), ("boot", True)]
+    for name, value in changes:
+        other = Frame(**{**fields, name: value})
+        assert frame != other and other != frame, name
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: Identity(256, 1, "a"), r"^tag = 256: expected an integer 0\.\.255$"),
+        (lambda: Identity(0, 9, "a"), r"^chips = 9: expected an integer 0\.\.8$"),
+        (lambda: Identity(0, 1, "é"), r"^name = 'é': expected printable ASCII$"),
+        (lambda: Identity(0, 1, "a\x07"), r"^name = 'a\\x07': expected printable ASCII$"),
+        (lambda: Identity(0, 1, "n" * 49), r"^name = 'n{49}': expected at most 48 characters$"),
+        (lambda: Ack(256, 0), r"^command = 256: expected an integer 0\.\.255$"),
+        (lambda: Ack(0, 256), r"^tag = 256: expected an integer 0\.\.255$"),
+        (lambda: Ack(True, 0), r"^command = True: expected an integer 0\.\.255$"),
+        (lambda: Ack(1.0, 0), r"^command = 1\.0: expected an integer 0\.\.255$"),
+        (lambda: ErrorReply(0, 0, 0, 256), r"^detail = 256: expected an integer 0\.\.255$"),
+        (lambda: Command(0x20, 0), r"^code = 32: expected an integer 16\.\.31$"),
+        (lambda: Command(0x10, 256), r"^tag = 256: expected an integer 0\.\.255$"),
+        (lambda: Command(0x10, 0, bytes(16)), r"^args = b'(\\x00){16}': expected at most 15 bytes$"),
+        (lambda: Command(0x10, 0, [1, 2]), r"^args = \[1, 2\]: expected at most 15 bytes$"),
+        (lambda: set_rate_command(0, 1001), r"^rate_hz = 1001: expected an integer 1\.\.1000$"),
+        (lambda: encode_frame("ab"), r"^message = 'ab': expected a Frame, Identity, Ack, ErrorReply or Command$"),
+    ],
+)
+def test_invalid_messages_are_refused_naming_the_field(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_command_arguments_are_bytes_up_to_fifteen():
+    command = Command(0x10, 0, bytearray(range(15)))
+    assert type(command.args) is bytes and command.args == bytes(range(15))
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (b"\x01", ErrorCode.BAD_LENGTH, "SET_RATE has 1 argument bytes: expected 2"),
+        (b"\x01\x00\x00", ErrorCode.BAD_LENGTH, "SET_RATE has 3 argument bytes: expected 2"),
+        (b"\x00\x80", ErrorCode.BAD_RATE, "SET_RATE rate = 32768: expected 1..1000 Hz"),  # 0x8000, unsigned
+    ],
+)
+def test_set_rate_refusals_carry_the_device_error_code_and_say_why(args, code, message):
+    with pytest.raises(CommandError) as refused:
+        decode_set_rate(Command(FrameType.SET_RATE, 0, args))
+    assert (refused.value.code, str(refused.value)) == (code, message)
+
+
+def test_configure_refusals_say_why():
+    for args, message in [(bytes(8), "CONFIGURE has 8 argument bytes: expected 9"),
+                          (bytes([7, 0, 0, 0, 0, 2, 0, 12, 2]), "CONFIGURE temperature = 2: expected 0 or 1")]:
+        with pytest.raises(CommandError) as refused:
+            decode_configure(Command(FrameType.CONFIGURE, 0, args))
+        assert str(refused.value) == message
+    with pytest.raises(CommandError) as refused:
+        decode_configure(Command(FrameType.CONFIGURE, 0, bytes([8, 0, 0, 0, 0, 2, 0, 12, 0])))
+    assert str(refused.value).startswith("CONFIGURE: ") and "gain_sel" in str(refused.value)
+
+
+# --------------------------------------------------------------------------
+# Decoder bookkeeping on hand-built streams
+# --------------------------------------------------------------------------
+
+# Ack(command=0x11, tag=9); its CRC computed here by binascii, independently of the module
+ACK_BODY = bytes([1, 0x03, 2, 0x11, 9])
+ACK = b"\xa5\x5a" + ACK_BODY + struct.pack("<H", binascii.crc_hqx(ACK_BODY, 0xFFFF))
+
+
+def test_decoder_counts_frames_and_discarded_bytes():
+    decoder = FrameDecoder()
+    assert decoder.feed(b"\x00\x01" + ACK + ACK) == [Ack(0x11, 9)] * 2
+    assert (decoder.frames, decoder.bytes_discarded, decoder.pending) == (2, 2, 0)
+
+
+@pytest.mark.parametrize(
+    "header",
+    [
+        bytes([0xA5, 0x5A, 2, 0x03, 2]),  # protocol version 2
+        bytes([0xA5, 0x5A, 1, 0x03, 3]),  # an ACK payload is 2 bytes
+        bytes([0xA5, 0x5A, 1, 0x05, 2]),  # no frame type 0x05
+        bytes([0xA5, 0x5A, 1, 0x02, 51]),  # an IDENTITY payload is at most 2 + 48 bytes
+    ],
+)
+def test_a_header_no_frame_can_have_is_skipped_without_a_crc_check(header):
+    decoder = FrameDecoder()
+    assert decoder.feed(b"\x00\x00" + header) == []
+    assert (decoder.bytes_discarded, decoder.pending) == (7, 0)  # nothing held back for it
+    assert decoder.feed(ACK) == [Ack(0x11, 9)]
+    assert (decoder.crc_errors, decoder.malformed, decoder.bytes_discarded, decoder.pending) == (0, 0, 7, 0)
+
+
+def test_frames_with_a_wrong_crc_are_discarded_whole():
+    damaged = ACK[:-1] + bytes([ACK[-1] ^ 0x01])
+    decoder = FrameDecoder()
+    assert decoder.feed(damaged + damaged + ACK) == [Ack(0x11, 9)]
+    assert (decoder.crc_errors, decoder.bytes_discarded, decoder.frames) == (2, 2 * len(ACK), 1)
+
+
+def test_an_identity_with_the_longest_name_round_trips():
+    frame = with_crc(bytes([1, 0x02, 50, 7, 4]) + b"n" * 48)
+    assert FrameDecoder().feed(frame) == [Identity(7, 4, "n" * 48)]
+    assert encode_frame(Identity(7, 4, "n" * 48)) == frame
+
+
+def test_an_identity_name_with_the_delete_character_is_malformed():
+    decoder = FrameDecoder()
+    assert decoder.feed(with_crc(bytes([1, 0x02, 3, 0, 1, 0x7F])) + ACK) == [Ack(0x11, 9)]
+    assert decoder.malformed == 1
+
+
+def test_a_trailing_first_sync_byte_waits_for_the_next_chunk():
+    decoder = FrameDecoder()
+    assert decoder.feed(b"\x00\x00" + ACK[:1]) == []
+    assert (decoder.pending, decoder.bytes_discarded) == (1, 2)
+    assert decoder.feed(ACK[1:]) == [Ack(0x11, 9)]
+
+
+def test_clear_discards_the_pending_bytes():
+    decoder = FrameDecoder()
+    decoder.feed(b"\x00" + ACK[:4])
+    decoder.clear()
+    assert (decoder.pending, decoder.bytes_discarded) == (0, 5)
+    assert decoder.feed(ACK[4:] + ACK) == [Ack(0x11, 9)]  # the rest of the cut frame is garbage now
+    assert decoder.bytes_discarded == 5 + len(ACK) - 4

@@ -5,5 +5,7 @@
 - :mod:`~softtip._core.progress`: reporting the progress of long jobs;
 - :mod:`~softtip._core.units`: unit constants (SI internally);
 - :mod:`~softtip._core.channels`: the names of the sensor channels;
-- :mod:`~softtip._core.network`: the run-time of the tanh networks (calibration models, reduced twin).
+- :mod:`~softtip._core.network`: the run-time of the tanh networks (calibration models, reduced twin);
+- :mod:`~softtip._core.signals`: signal metrics shared by the physics and the calibration metrics;
+- :mod:`~softtip._core.errors`: errors of computations that did not converge.
 """

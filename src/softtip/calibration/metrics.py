@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from softtip.mechanics import viscoelastic
+from softtip._core import signals
 
 
 def _pair(y: ArrayLike, yhat: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -77,8 +77,8 @@ def pearson_r(y: ArrayLike, yhat: ArrayLike):
 
 
 def _label_indices(labels: np.ndarray, values: np.ndarray, what: str) -> np.ndarray:
-    """Index of each of ``values`` in ``labels``; a value outside ``labels`` is an error."""
-    order = np.argsort(labels, kind="stable")
+    """Index of each of ``values`` in the distinct ``labels``; a value outside ``labels`` is an error."""
+    order = np.argsort(labels)
     position = np.minimum(np.searchsorted(labels, values, sorter=order), len(labels) - 1)
     index = order[position]
     unknown = labels[index] != values
@@ -150,8 +150,8 @@ def hysteresis_percent(force: ArrayLike, z: ArrayLike) -> float:
     """Hysteresis (%) of one load–unload cycle (S1 §2): |Z_up − Z_down| / (Z_max − Z_min) · 100,
     with Z_up, Z_down the z-axis MFD on the loading and unloading branches at the force midway
     between the cycle's minimum and maximum; see
-    :func:`softtip.mechanics.viscoelastic.hysteresis_percent`, which computes it."""
-    return viscoelastic.hysteresis_percent(z, force)
+    :func:`softtip._core.signals.hysteresis_percent`, which computes it."""
+    return signals.hysteresis_percent(z, force)
 
 
 def sensitivity(force: ArrayLike, mfd: ArrayLike):
@@ -165,8 +165,8 @@ def sensitivity(force: ArrayLike, mfd: ArrayLike):
     f = force[rising] - force[rising].mean()
     if not np.any(f):
         raise ValueError("force does not rise on the ascending branch: sensitivity undefined")
-    m = mfd[rising] - mfd[rising].mean(axis=0)
-    slope_ut_per_n = np.tensordot(f, m, axes=(0, 0)) / np.dot(f, f)
+    # f sums to zero, so the MFD needs no centring: Σ f·(m − m̄) = Σ f·m
+    slope_ut_per_n = np.tensordot(f, mfd[rising], axes=(0, 0)) / np.dot(f, f)
     return _reduced(np.asarray(slope_ut_per_n) / 1000.0)
 
 

@@ -17,8 +17,8 @@ with a Poisson's ratio that does not change as the material relaxes, the
 relaxation scales every stress by the same factor: the deformation field — and
 so the magnets' poses and the Hall sensors' output — follows the imposed motion
 instantly, while the force on the indenter relaxes. Sensor output plotted
-against force then traces a loop; :func:`hysteresis_percent` measures it and
-:func:`prony_for_hysteresis` calibrates G to a measured value.
+against force then traces a loop; :func:`softtip._core.signals.hysteresis_percent`
+measures it and :func:`prony_for_hysteresis` calibrates G to a measured value.
 
 Limits. (1) A real elastomer's bulk and shear moduli relax differently, so its
 Poisson's ratio drifts and the deformation under a held indenter creeps a
@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
+
+from softtip._core.signals import hysteresis_percent
 
 
 @dataclass(frozen=True)
@@ -114,45 +116,6 @@ def qlv_response(times: np.ndarray, elastic: np.ndarray, prony: PronySeries) -> 
         memory = decay[n] * memory + gain[n] * increment
         response[n + 1] = prony.g_inf * elastic[n + 1] + memory.sum(axis=0)
     return response
-
-
-def _mean_crossing(force: np.ndarray, sensor_z: np.ndarray, level: float, branch: str) -> float:
-    """The sensor output where a branch's force crosses ``level``: linear
-    interpolation between the two samples either side of each crossing, averaged
-    over all crossings (a noisy branch may cross the level several times)."""
-    above = force - level
-    hits = list(sensor_z[above == 0])
-    for i in np.flatnonzero(above[:-1] * above[1:] < 0):
-        fraction = above[i] / (above[i] - above[i + 1])
-        hits.append(sensor_z[i] + fraction * (sensor_z[i + 1] - sensor_z[i]))
-    if not hits:
-        raise ValueError(f"force: the {branch} branch never reaches the mid force {level:g} N: not a load/unload cycle")
-    return float(np.mean(hits))
-
-
-def hysteresis_percent(sensor_z: np.ndarray, force: np.ndarray) -> float:
-    """Hysteresis (%) of one load/unload cycle, |Z_up − Z_down| / (Z_max − Z_min) × 100.
-
-    Z_up and Z_down are the sensor's z output on the loading branch (start to the
-    maximum force) and the unloading branch (maximum force to end) at the force
-    midway between the cycle's minimum and maximum. On each branch Z is
-    interpolated linearly between the samples either side of the mid force;
-    where noise makes a branch cross it more than once, the crossings are averaged.
-    """
-    sensor_z = np.asarray(sensor_z, dtype=float)
-    force = np.asarray(force, dtype=float)
-    if sensor_z.ndim != 1 or sensor_z.shape != force.shape or len(force) < 3:
-        raise ValueError(f"sensor_z {sensor_z.shape} and force {force.shape}: expected two 1-D arrays of one cycle, same length ≥ 3")
-    if not (np.all(np.isfinite(sensor_z)) and np.all(np.isfinite(force))):
-        raise ValueError("sensor_z and force: expected finite values")
-    z_range = np.ptp(sensor_z)
-    if not np.ptp(force) > 0 or not z_range > 0:
-        raise ValueError("sensor_z and force: expected a cycle along which both vary")
-    peak = int(np.argmax(force))
-    mid = (force.min() + force.max()) / 2
-    z_up = _mean_crossing(force[: peak + 1], sensor_z[: peak + 1], mid, "loading")
-    z_down = _mean_crossing(force[peak:], sensor_z[peak:], mid, "unloading")
-    return float(abs(z_up - z_down) / z_range * 100)
 
 
 def prony_for_hysteresis(
