@@ -32,14 +32,6 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FAST = {"friction": "none", "mesh_size_mm": 3.0}
 
 
-@pytest.fixture(autouse=True, scope="module")
-def private_cache_dir(tmp_path_factory):
-    """Meshes and FE results of these tests stay out of the user's cache (worker processes inherit it)."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path_factory.mktemp("softtip-cache")))
-        yield
-
-
 def small_study(p1: list[float], p2: list[float] | None = None, **extra) -> dict:
     """A study table over explicit values of P1 (and P2), on the coarse fast mesh."""
     def span(values):
