@@ -113,6 +113,7 @@ def test_protocol_mistakes_are_one_line_errors(change, message):
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_a_small_pushing_experiment_gives_a_labelled_trial_dataset(tmp_path):
     path = tmp_path / "push.toml"
     path.write_text(textwrap.dedent("""

@@ -506,6 +506,7 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
                                rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_twenty_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
     # the CI version of `softtip bench live --duration 600`
     report = soak(20.0, rate_hz=500, chips=CHIPS, record_path=tmp_path / "soak.mcap")
