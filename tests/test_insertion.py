@@ -113,7 +113,8 @@ def test_the_left_and_right_clip_cases_are_mirror_images(protocol):
     part's y-z plane, the pads' magnets and chips sit at x = -6 and +6 mm and both pads' frames keep
     the part's x axis: the two clip cases are mirror images through x = 0. All magnets are
     polarised along +z, so in the mirror image chip 0 reads what chip 1 of the other case reads with
-    Bx reversed (the field of a z-polarised magnet at (-x, y, z) is (-Bx, By, Bz) of that at (x, y, z)).
+    Bx reversed (mirroring a z-polarised magnet and the point it is seen from through x = 0 turns its
+    field (Bx, By, Bz) into (-Bx, By, Bz)).
 
     Only the nominal fingertips are mirror images: with fabrication tolerances (0.1 mm magnet and chip
     placement, 2 % magnetisation) chip 0 and chip 1 of a unit differ, and most in Bz: a chip midway
