@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import textwrap
+import tomllib
 
 import numpy as np
 import pytest
@@ -14,12 +15,12 @@ from softtip._core.units import MM
 from softtip.design.model import load_design
 from softtip.lab import load_protocol, protocol_from_dict, run_protocol
 from softtip.lab.engine import HeldPart, _contact_forces, interpolate_path, path_table
-from softtip.lab.protocols import DEFAULTS, RUNNERS
+from softtip.lab.protocols import DEFAULTS, RUNNERS, shipped_protocol_path
 from softtip.lab.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.poses import MagnetPoses
-from softtip.sensors.mlx90393 import MLX90393Settings, noise_rms_uT
+from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
 from softtip._core.config import ConfigError
 from softtip.twin.influence import InfluenceEngine
 
@@ -81,16 +82,23 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
     still = MagnetPoses.at_rest(4, (4000,))
     times = np.arange(4000) / 20.0
     noisy = FabricatedUnit(design, Realism(drift_K_per_sqrt_s=0.0), rng).record(still, times, rng)
-    expected = noise_rms_uT(MLX90393Settings.from_dict(design.sensor_readout))
-    # the first sample is the baseline: every later reading is the difference of two noisy ones
-    np.testing.assert_allclose(noisy[1:, 0].std(axis=0), expected, rtol=0.15)
+    settings = MLX90393Settings.from_dict(design.sensor_readout)
+    # each reading is the field plus the noise, rounded to the LSB (the first sample, the baseline
+    # subtracted from all, is a constant offset of the rest)
+    expected = np.sqrt(noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12)
+    # the standard deviation of n Gaussian samples has a standard error of sd / sqrt(2 (n - 1)): 1.1 %
+    # for these 3999; five of them
+    np.testing.assert_allclose(noisy[1:, 0].std(axis=0), expected, rtol=5 / np.sqrt(2 * (len(still) - 2)))
     assert (exact.record(still, times, rng) == 0).all()
 
 
-def test_every_shipped_protocol_loads_with_every_default():
+def test_every_shipped_protocol_lists_every_parameter_with_its_default_and_loads_as_written():
     for name in RUNNERS:
+        written = tomllib.loads(shipped_protocol_path(name).read_text())
+        assert written["parameters"] == DEFAULTS[name], name  # the files are the parameters' documentation
         protocol = load_protocol(name)
-        assert protocol.name == name and set(protocol.parameters) == set(DEFAULTS[name])
+        assert protocol.name == name and protocol.parameters == written["parameters"]
+        assert protocol.realism.to_dict() == written["realism"] and protocol.seed == written["seed"]
 
 
 @pytest.mark.parametrize("change, message", [
@@ -108,6 +116,7 @@ def test_protocol_mistakes_are_one_line_errors(change, message):
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_a_small_pushing_experiment_gives_a_labelled_trial_dataset(tmp_path):
     path = tmp_path / "push.toml"
     path.write_text(textwrap.dedent("""

@@ -8,6 +8,7 @@ across the lateral surface).
 
 from __future__ import annotations
 
+
 import magpylib as magpy
 import numpy as np
 import pytest

@@ -33,14 +33,6 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FAST = {"friction": "none", "mesh_size_mm": 3.0}
 
 
-@pytest.fixture(autouse=True, scope="module")
-def private_cache_dir(tmp_path_factory):
-    """Meshes and FE results of these tests stay out of the user's cache (worker processes inherit it)."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path_factory.mktemp("softtip-cache")))
-        yield
-
-
 def small_study(p1: list[float], p2: list[float] | None = None, **extra) -> dict:
     """A study table over explicit values of P1 (and P2), on the coarse fast mesh."""
     def span(values):
@@ -267,7 +259,8 @@ def test_infeasible_designs_are_recorded_not_computed(tmp_path, count_fe_runs):
     study = study_from_dict(small_study([8.0, 10.25, 12.5], constraints=["cavity.radius_mm >= 9"]))
     result = run_study(study, InProcessExecutor(), FEResultCache(tmp_path / "fe"))
     by_p1 = {r.params["cavity.radius_mm"]: r for r in result.records}
-    assert by_p1[10.25].status == "ok" and by_p1[10.25].objective > 0.5
+    # the magnet under a board pushed 1 mm moves down by more than half the push, and never more than it
+    assert by_p1[10.25].status == "ok" and 0.5 < by_p1[10.25].objective < 1.0
     assert by_p1[8.0].status == "infeasible" and "constraint 'cavity.radius_mm >= 9' violated" in by_p1[8.0].reason
     assert by_p1[12.5].status == "infeasible" and "cavity.radius_mm = 12.5" in by_p1[12.5].reason
     assert count_fe_runs == [10.25] and result.counts()["infeasible"] == 2
@@ -352,6 +345,7 @@ def test_objectives_register_from_other_modules(tmp_path, monkeypatch):
 # --------------------------------------------------------------------------- executors
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_local_pool_results(tmp_path, monkeypatch):
     from dask.distributed import LocalCluster
 
@@ -402,7 +396,7 @@ def test_cli_json_contract_and_resume(tmp_path, monkeypatch):
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["best"]["params"] == {"cavity.radius_mm": 9.0, "magnets.circle_radius_mm": 4.5}
-    assert report["best"]["objective"] > 0.5
+    assert 0.5 < report["best"]["objective"] < 1.0  # mm, under a 1 mm push
     assert {k: report["evaluations"][k] for k in ("designs", "fe_runs", "cache_hits", "infeasible")} == {
         "designs": 2, "fe_runs": 2, "cache_hits": 0, "infeasible": 2}
     assert [(r["params"]["cavity.radius_mm"], r["feasible"], r["objective"] is not None) for r in report["table"]] == [

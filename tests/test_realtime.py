@@ -564,6 +564,7 @@ def test_live_estimates_recorded_equal_the_saved_models_batch_predictions_on_the
 
 
 @pytest.mark.realtime
+@pytest.mark.slow
 def test_twenty_second_soak_at_500_frames_per_second_loses_no_frame(tmp_path):
     # The CI version of `softtip bench live --duration 600`. How many frames the emulator gets
     # out in 20 s depends on the machine's load (it restarts its schedule when late, as the

@@ -137,15 +137,33 @@ def tiny_twin():
 
 
 def test_reduced_twin_reports_its_held_out_fe_error(tiny_twin):
-    holdout = tiny_twin.report["holdout"]
-    assert holdout["loads"] == 3
-    assert len(holdout["sensor_error_percent_fs"]) == 1  # one sensor
+    holdout, exact = tiny_twin.report["holdout"], tiny_twin.report["exact_holdout"]
+    assert holdout["loads"] == 3 and exact["loads"] == 40
     assert np.array(holdout["magnet_displacement_error_percent_range"]).shape == (4, 3)
     assert holdout["fe_seconds_per_load"] > holdout["reduced_seconds_per_load_unbatched"]
-    exact = tiny_twin.report["exact_holdout"]
-    assert exact["loads"] == 40
-    # the largest error bounds the 99th percentile, on the same full scale
-    assert np.all(np.array(exact["sensor_error_p99_percent_fs"]) <= np.array(exact["sensor_error_percent_fs"]))
+    # What an 8-neuron network fitted to 200 normal pushes achieves (this seeded build: on the FE loads
+    # 12 / 11 / 6.9 % of full scale on x / y / z, force 9.8 % of the largest; on the exact loads 46 / 38
+    # / 5.9 % and 3.7 %). Normal pushes load z: it is followed to a few percent; x and y see only the
+    # small lateral field of an off-centre push (full scale 240 µT against 1280 µT on z), which so small
+    # a network follows coarsely. The bounds leave a third for rounding between machines; a twin that
+    # learnt nothing errs by 100 % of full scale. The realistic build meets 2 % (the slow test below).
+    for report, sensor_bounds, force_bound in ((holdout, [16, 16, 10], 13), (exact, [60, 50, 8], 5)):
+        errors = np.array(report["sensor_error_percent_fs"])
+        assert errors.shape == (1, 3)  # one sensor
+        assert np.all(errors[0] < sensor_bounds)
+        assert report["force_error_percent_of_largest"][:2] == [None, None]  # normal pushes: no shear force
+        assert report["force_error_percent_of_largest"][2] < force_bound
+
+
+@pytest.mark.slow
+def test_a_twin_of_the_default_size_is_within_two_percent_of_full_scale():
+    # the README's reduced twin, as `softtip bench rom` builds it: cylindrical-D, a board, sticking,
+    # 8,000 samples, two 128-128 networks; its held-out errors on FE and on exact solves
+    twin = ReducedTwin.build(load_design("cylindrical-D"), IndenterFamily(friction="stick"))
+    for name in ("holdout", "exact_holdout"):
+        report = twin.report[name]
+        assert np.max(report["sensor_error_percent_fs"]) < 2.0, name
+        assert np.max(report["magnet_displacement_error_percent_range"]) < 2.0, name
 
 
 def test_networks_fit_side_by_side_as_they_would_one_after_the_other(tiny_twin):
@@ -214,8 +232,23 @@ def test_series_of_a_load_unload_cycle_at_any_rate(tiny_twin):
     # single-precision rounding of the networks, which depends on the batch: ~1e-5 µT, far below
     # the sensor's least significant bit)
     np.testing.assert_allclose(slow["readings_uT"][peak], fast["readings_uT"][np.argmax(fast["depth_m"])], atol=1e-3)
-    relaxed = Twin(tiny_twin).series(motion, 20.0, prony=PronySeries(g=(0.3,), tau=(1.0,)), noise=False)
-    elastic = relaxed["elastic_force_N"][:, 2]
-    force = relaxed["force_N"][:, 2]
-    assert force.max() < elastic.max()  # relaxation during loading
-    assert force.min() >= 0  # the contact does not pull
+    prony = PronySeries(g=(0.3, 0.1), tau=(1.0, 0.2))
+    relaxed = Twin(tiny_twin).series(motion, 20.0, prony=prony, noise=False)
+    times, elastic = relaxed["times_s"], relaxed["elastic_force_N"][:, 2]
+    closed = _qlv_of_a_piecewise_linear_history(times, elastic, prony)
+    assert closed.max() < elastic.max() and closed.min() < -0.05 * elastic.max()  # relaxed: it would pull back
+    # the twin's force is the QLV force, clipped where it would pull: a contact only pushes
+    np.testing.assert_allclose(relaxed["force_N"][:, 2], np.maximum(closed, 0.0), rtol=1e-9, atol=1e-12)
+
+
+def _qlv_of_a_piecewise_linear_history(times: np.ndarray, elastic: np.ndarray, prony: PronySeries) -> np.ndarray:
+    """Fung's F(t) = g_inf F_e(t) + sum_k g_k int_0^t exp(-(t - s) / tau_k) dF_e(s) for F_e zero before
+    times[0] and linear between samples: a piece of slope r over [s0, s1] before t contributes
+    r tau (exp(-(t - s1) / tau) - exp(-(t - s0) / tau)), a jump J at times[0] J exp(-(t - times[0]) / tau)."""
+    t, start, end = times[:, None], times[None, :-1], times[None, 1:]
+    slopes = np.diff(elastic) / np.diff(times)
+    force = prony.g_inf * elastic
+    for g, tau in zip(prony.g, prony.tau):
+        pieces = np.where(end <= t, tau * (np.exp(-(t - end) / tau) - np.exp(-(t - start) / tau)), 0.0)
+        force = force + g * (pieces @ slopes + elastic[0] * np.exp(-(times - times[0]) / tau))
+    return force

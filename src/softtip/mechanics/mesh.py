@@ -12,19 +12,18 @@ rigid-body constraints). Boundary triangles are grouped by role:
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from softtip._core.cache import artefact_key, cache_dir, code_hash
+from softtip._core.files import atomic_write
 from softtip._core.units import MM
 from softtip.design.model import Design
 
-MESH_FORMAT = 1  # bump when the meshing recipe changes, so cached meshes are rebuilt
 _GMSH_LOCK = threading.Lock()  # gmsh keeps global state
 
 
@@ -40,22 +39,15 @@ class TetMesh:
         return sum(1 for name in self.boundaries if name.startswith("magnet"))
 
 
-def cache_dir() -> Path:
-    """Where meshes and other derived data are kept (``SOFTTIP_CACHE_DIR`` overrides)."""
-    root = os.environ.get("SOFTTIP_CACHE_DIR") or Path.home() / ".cache" / "softtip"
-    return Path(root)
-
-
 def mesh_key(design: Design, size: float, curvature_points: int,
              contact_layer: tuple[float, float] | None = None) -> str:
+    """The cache key of a mesh: its geometry and settings, the gmsh version and the source of this
+    mesher and of the design model that describes the geometry."""
     import gmsh
 
     recipe = {"geometry": design.geometry_key, "size": size, "curvature_points": curvature_points,
-              "format": MESH_FORMAT, "gmsh": gmsh.__version__}
-    if contact_layer is not None:  # absent otherwise: the keys of existing meshes do not change
-        recipe["contact_layer"] = list(contact_layer)
-    payload = json.dumps(recipe, sort_keys=True)
-    return hashlib.sha256(payload.encode()).hexdigest()[:20]
+              "contact_layer": None if contact_layer is None else list(contact_layer), "gmsh": gmsh.__version__}
+    return artefact_key(recipe, code_hash(__name__, "softtip.design.model"), length=20)
 
 
 def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 10,
@@ -83,11 +75,9 @@ def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 
         mesh = _build(design, size, curvature_points, key, contact_layer)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-        np.savez(tmp, points=mesh.points, tets=mesh.tets,
-                 names=np.array(json.dumps(sorted(mesh.boundaries))),
-                 **{f"boundary_{name}": tris for name, tris in mesh.boundaries.items()})
-        tmp.replace(path)
+        arrays = {"points": mesh.points, "tets": mesh.tets, "names": np.array(json.dumps(sorted(mesh.boundaries))),
+                  **{f"boundary_{name}": tris for name, tris in mesh.boundaries.items()}}
+        atomic_write(path, lambda handle: np.savez(handle, **arrays))
     return mesh
 
 

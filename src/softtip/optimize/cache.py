@@ -2,9 +2,9 @@
 
 The key is a hash of everything that determines a result: the design's
 TOML-level spec (its name and description excluded: they do not change the
-physics), the simulation (load case, friction, model, mesh size), the mesh
-recipe's version and this cache's format version. Bump :data:`CACHE_FORMAT`
-whenever the solver changes what it computes, so stale results are not reused.
+physics), the simulation (load case, friction, model, mesh size) and the source
+of the code that computes it (the twin and the packages it runs on), so a
+result of other code is never reused.
 
 Entries are written atomically (:func:`~softtip._core.files.atomic_write`),
 so a sweep killed at any moment leaves only complete entries, and a re-run
@@ -14,16 +14,14 @@ removed and recomputed, never trusted. Nothing is pickled.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
 
+from softtip._core.cache import artefact_key, cache_dir, code_hash
 from softtip._core.files import atomic_write
-from softtip.mechanics.mesh import MESH_FORMAT, cache_dir
 from softtip.optimize.runs import FEResult, Simulation
 
-CACHE_FORMAT = 1
 _NOT_PHYSICS = ("name", "description")
 
 
@@ -40,9 +38,9 @@ def _canonical(value: Any) -> Any:
 
 def cache_key(design_spec: dict[str, Any], simulation: Simulation) -> str:
     physics = {k: v for k, v in design_spec.items() if k not in _NOT_PHYSICS}
-    payload = json.dumps(_canonical({"cache_format": CACHE_FORMAT, "mesh_format": MESH_FORMAT, "design": physics,
-                                     "simulation": simulation.to_dict()}), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(payload.encode()).hexdigest()[:32]
+    code = code_hash("softtip.twin", "softtip.design", "softtip.magnetics", "softtip.mechanics", "softtip.sensors",
+                     "softtip.optimize.runs")
+    return artefact_key(_canonical({"design": physics, "simulation": simulation.to_dict()}), code)
 
 
 class FEResultCache:
@@ -72,7 +70,7 @@ class FEResultCache:
             seconds: float | None = None) -> Path:
         key = cache_key(design_spec, simulation)
         path = self.path(key)
-        entry = {"key": key, "cache_format": CACHE_FORMAT, "design": design_spec,
+        entry = {"key": key, "design": design_spec,
                  "simulation": simulation.to_dict(), "seconds": seconds, "result": result.to_dict()}
         self.root.mkdir(parents=True, exist_ok=True)
         return atomic_write(path, json.dumps(entry))

@@ -3,18 +3,16 @@ simulated arm for one case (S1 §3)."""
 
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
 
+from softtip._core.cache import artefact_key, cache_dir, code_hash
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.calibration import load_model, save_model
 from softtip.lab import Protocol, load_protocol, run_protocol
 from softtip.lab.insertion import InsertionWorld, SimulatedArm
-from softtip.mechanics.mesh import cache_dir
 from softtip.control.insertion import InsertionController
 from softtip.studies.published import inverter_models
 
@@ -22,18 +20,24 @@ INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A firs
 TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much
 
 
+def trained_model_path(protocol: Protocol, name: str) -> Path:
+    """Where a model trained on ``protocol``'s trials is cached: keyed by the protocol, its design and
+    the source of the whole package (the trials run through nearly every subpackage)."""
+    key = artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec}, code_hash("softtip"),
+                       length=16)
+    return cache_dir() / "models" / f"{name}-{key}.npz"
+
+
 def trained_model_files(protocol: Protocol, progress: Progress = SILENT) -> tuple[Path, Path]:
-    """The inverter's state and force networks as softtip model files, trained once per protocol
-    (and its seed) and kept in the cache."""
-    key = hashlib.sha256(json.dumps(protocol.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
-    folder = cache_dir() / "models"
-    paths = folder / f"inverter-state-{key}.npz", folder / f"inverter-force-{key}.npz"
+    """The inverter's state and force networks as softtip model files, trained once per protocol and
+    code, and kept in the cache."""
+    paths = trained_model_path(protocol, "inverter-state"), trained_model_path(protocol, "inverter-force")
     if all(p.is_file() for p in paths):
         return paths
     dataset, _ = run_protocol(protocol, progress)
     with progress.task("training the contact-state and force networks on the inverter protocol"):
         classifier, regressor = inverter_models(dataset, protocol.seed)
-    folder.mkdir(parents=True, exist_ok=True)
+    paths[0].parent.mkdir(parents=True, exist_ok=True)
     channels = list(dataset.channels)
     save_model(paths[0], classifier, input_channels=channels, input_units=["uT"] * len(channels),
                target_names=["state"], target_units=["1"])

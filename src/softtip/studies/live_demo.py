@@ -19,10 +19,10 @@ from softtip.calibration import LMNetwork, metrics, save_model
 from softtip.lab import load_protocol, run_protocol
 from softtip.lab.experiments import CALIBRATION, VALIDATION
 from softtip.lab.scenario import pushing_scenario
-from softtip.mechanics.mesh import cache_dir
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.sensors import MLX90393Settings
+from softtip.studies.insertion import trained_model_path
 
 FORCES = ("fx_N", "fy_N", "fz_N")
 DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
@@ -30,10 +30,10 @@ DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motio
 
 def calibrate_force_model(seed: int, progress: Progress = SILENT, reuse: bool = False) -> tuple[Path, dict, object]:
     """Run the force calibration on the twin and fit the network (``reuse``: take the model saved by an
-    earlier run with this seed, if there is one)."""
+    earlier run of this protocol and code, if there is one)."""
     protocol = load_protocol("force3")
     protocol.seed = seed
-    path = cache_dir() / "models" / f"demo-force-{seed}.npz"
+    path = trained_model_path(protocol, "demo-force")
     if reuse and path.is_file():
         return path, {}, protocol
     dataset, timings = run_protocol(protocol, progress)

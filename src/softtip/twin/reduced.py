@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from softtip import __version__
+from softtip._core.files import atomic_write
 from softtip._core.network import fold_scaling, predict_batch
 from softtip._core.progress import SILENT, Progress, Task
 from softtip._core.units import MM, UT_PER_T
@@ -222,14 +223,14 @@ class ReducedTwin:
             arrays |= {f"network_{j}_weight_{k}": w for k, w in enumerate(net["weights"])}
             arrays |= {f"network_{j}_bias_{k}": b for k, b in enumerate(net["biases"])}
             arrays |= {f"network_{j}_{k}": net[k] for k in _SCALING}
-        np.savez(path, **arrays)
+        atomic_write(path, lambda handle: np.savez(handle, **arrays))
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         meta = {"schema": SCHEMA, "softtip": __version__, "design": self.design.spec, "design_name": self.design.name,
                 "family": vars(self.family), "ranges": {k: v for k, v in vars(self.ranges).items()},
                 "mesh_size_m": self.mesh_size, "contact_layer_size_m": self.contact_layer_size,
                 "networks": len(self.networks), "layers": len(self.networks[0]["weights"]), "parameters": PARAMETERS,
                 "weights_sha256": digest, "report": self.report}
-        path.with_suffix(".json").write_text(json.dumps(meta, indent=2))
+        atomic_write(path.with_suffix(".json"), json.dumps(meta, indent=2))
         return path
 
     @classmethod
