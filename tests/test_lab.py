@@ -88,7 +88,7 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
     expected = np.sqrt(noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12)
     # the standard deviation of n Gaussian samples has a standard error of sd / sqrt(2 (n - 1)): 1.1 %
     # for these 3999; five of them
-    np.testing.assert_allclose(noisy[1:, 0].std(axis=0), expected, rtol=5 / np.sqrt(2 * (len(still) - 2)))
+    np.testing.assert_allclose(noisy[1:, 0].std(axis=0), expected, rtol=5 / np.sqrt(2 * (len(times) - 2)))
     assert (exact.record(still, times, rng) == 0).all()
 
 
