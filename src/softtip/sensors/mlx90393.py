@@ -262,12 +262,7 @@ class MLX90393:
     def settings(self) -> MLX90393Settings:
         return self._settings
 
-    def to_counts(
-        self,
-        b_tesla: ArrayLike,
-        rng: np.random.Generator | None = None,
-        noise: bool = True,
-    ) -> np.ndarray:
+    def to_counts(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None, noise: bool = True) -> np.ndarray:
         """Register words (uint16, shape of b_tesla) for fields b_tesla of shape (..., 3).
 
         Adds Gaussian noise of noise_rms_uT when noise is true (rng defaults to a
@@ -295,12 +290,7 @@ class MLX90393:
         """Field in uT from register words of shape (..., 3), as a host driver decodes them."""
         return self._signed_counts(counts) * self._lsb_uT
 
-    def read_uT(
-        self,
-        b_tesla: ArrayLike,
-        rng: np.random.Generator | None = None,
-        noise: bool = True,
-    ) -> np.ndarray:
+    def read_uT(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None, noise: bool = True) -> np.ndarray:
         """What the host reads in uT for fields b_tesla (..., 3): counts_to_uT(to_counts(...))."""
         return self.counts_to_uT(self.to_counts(b_tesla, rng=rng, noise=noise))
 
