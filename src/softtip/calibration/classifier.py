@@ -30,6 +30,7 @@ from softtip.calibration.feedforward import (
     pack,
     single_threaded_blas,
     softmax,
+    stop_reason,
     to_unit_range,
     unpack,
 )
@@ -73,21 +74,14 @@ def scaled_conjugate_gradient(layers: list[np.ndarray], train: tuple[np.ndarray,
     vperf = _cross_entropy_only(layers, *validation)
     stopping = EarlyStopping(theta, vperf)
     history = {key: [] for key in ("train", "validation", "test", "lambda", "gradient")}
-    stop_reason = ""
     for epoch in range(max_epochs + 1):
         gradient_norm = float(np.linalg.norm(residual))
         for key, value in zip(history, (perf, vperf, _cross_entropy_only(unpack(theta, shapes), *test),
                                         lambda_k, gradient_norm), strict=True):
             history[key].append(value)
-        if perf <= goal:
-            stop_reason = "goal"
-        elif epoch == max_epochs:
-            stop_reason = "max_epochs"
-        elif gradient_norm <= min_grad:
-            stop_reason = "min_grad"
-        elif stopping.failures >= max_fail:
-            stop_reason = "validation"
-        if stop_reason:
+        reason = stop_reason(epoch, perf, gradient_norm, stopping, max_epochs=max_epochs, goal=goal,
+                             min_grad=min_grad, max_fail=max_fail)
+        if reason:
             break
 
         direction_sq = float(direction @ direction)
@@ -127,7 +121,7 @@ def scaled_conjugate_gradient(layers: list[np.ndarray], train: tuple[np.ndarray,
         vperf = _cross_entropy_only(unpack(theta, shapes), *validation)
         stopping.update(epoch + 1, theta, vperf)
     return TrainingResult(unpack(stopping.best_theta, shapes), {k: np.array(v) for k, v in history.items()},
-                          stop_reason, stopping.best_epoch)
+                          reason, stopping.best_epoch)
 
 
 @schema
@@ -189,10 +183,7 @@ class SoftmaxClassifier(ClassifierMixin, TanhNetworkBase):
                 initial_layers(sizes, rng), *scaled, max_epochs=settings.max_epochs, max_fail=settings.max_fail,
                 sigma=settings.sigma, lambda_init=settings.lambda_init, min_grad=settings.min_grad,
                 goal=settings.goal)
-        self.weights_ = [np.array(w) for w in result.layers]
-        self.history_ = result.history
-        self.stop_reason_ = result.stop_reason
-        self.best_epoch_ = result.best_epoch
+        self._keep_training(result)
         self._set_runtime()
         return self
 

@@ -280,6 +280,24 @@ class EarlyStopping:
             self.failures += 1
 
 
+def stop_reason(epoch: int, perf: float, gradient_norm: float, stopping: EarlyStopping, *, max_epochs: int,
+                goal: float, min_grad: float, max_fail: int, limit_reached: str = "") -> str:
+    """Why training stops after ``epoch``, by the toolbox's rules in their order of precedence, or ""
+    to go on; ``limit_reached`` names a limit of the training method itself that was hit (checked
+    after min_grad, before validation)."""
+    if perf <= goal:
+        return "goal"
+    if epoch == max_epochs:
+        return "max_epochs"
+    if gradient_norm <= min_grad:
+        return "min_grad"
+    if limit_reached:
+        return limit_reached
+    if stopping.failures >= max_fail:
+        return "validation"
+    return ""
+
+
 @functools.cache
 def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()

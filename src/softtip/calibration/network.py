@@ -61,6 +61,7 @@ from softtip.calibration.feedforward import (
     pack,
     runtime_layers,
     single_threaded_blas,
+    stop_reason,
     to_unit_range,
     unpack,
 )
@@ -98,24 +99,15 @@ def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.nd
     stopping = EarlyStopping(theta, vperf)
     history = {key: [] for key in (*HISTORY_KEYS, "mu", "gradient")}
     identity = np.eye(len(theta))
-    stop_reason = ""
     for epoch in range(max_epochs + 1):
         current = unpack(theta, shapes)
         gradient = backprop_gradient(current, activations, errors)  # Jᵀe
         gradient_norm = float(np.linalg.norm(gradient))
         for key, value in zip(history, (perf, vperf, _mse(current, *test), mu, gradient_norm), strict=True):
             history[key].append(value)
-        if perf <= goal:
-            stop_reason = "goal"
-        elif epoch == max_epochs:
-            stop_reason = "max_epochs"
-        elif gradient_norm <= min_grad:
-            stop_reason = "min_grad"
-        elif mu >= mu_max:
-            stop_reason = "mu_max"
-        elif stopping.failures >= max_fail:
-            stop_reason = "validation"
-        if stop_reason:
+        reason = stop_reason(epoch, perf, gradient_norm, stopping, max_epochs=max_epochs, goal=goal,
+                             min_grad=min_grad, max_fail=max_fail, limit_reached="mu_max" if mu >= mu_max else "")
+        if reason:
             break
         curvature = gauss_newton_matrix(current, activations)
         while mu <= mu_max:
@@ -136,7 +128,7 @@ def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.nd
         vperf = _mse(unpack(theta, shapes), *validation)
         stopping.update(epoch + 1, theta, vperf)
     return TrainingResult(unpack(stopping.best_theta, shapes), {k: np.array(v) for k, v in history.items()},
-                          stop_reason, stopping.best_epoch)
+                          reason, stopping.best_epoch)
 
 
 def _one_or_more(sizes):
@@ -226,6 +218,13 @@ class TanhNetworkBase(BaseEstimator):
         state = {"n_features_in": int(self.n_features_in_), "stop_reason": self.stop_reason_,
                  "best_epoch": int(self.best_epoch_)}
         return arrays, state
+
+    def _keep_training(self, result: TrainingResult) -> None:
+        """Set the fitted attributes shared by the networks from a training run."""
+        self.weights_ = [np.array(w) for w in result.layers]
+        self.history_ = result.history
+        self.stop_reason_ = result.stop_reason
+        self.best_epoch_ = result.best_epoch
 
     def _restore_network(self, arrays: dict[str, np.ndarray], state: dict, n_outputs: int) -> None:
         """Set the fitted attributes shared by the networks from saved arrays, checking shapes."""
@@ -326,10 +325,7 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
                 initial_layers(sizes, rng), *scaled, max_epochs=settings.max_epochs, max_fail=settings.max_fail,
                 mu=settings.mu, mu_dec=settings.mu_dec, mu_inc=settings.mu_inc, mu_max=settings.mu_max,
                 min_grad=settings.min_grad, goal=settings.goal)
-        self.weights_ = [np.array(w) for w in result.layers]
-        self.history_ = result.history
-        self.stop_reason_ = result.stop_reason
-        self.best_epoch_ = result.best_epoch
+        self._keep_training(result)
         self._set_runtime_from_scaling()
         return self
 

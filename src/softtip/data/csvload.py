@@ -55,6 +55,7 @@ from softtip.data.dataset import (
     column_to_numpy,
     subtract_trial_baseline,
     trial_runs,
+    unknown_and_missing,
 )
 
 MAGNETIC_UNITS_IN_UT = {"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}  # 1 G = 1e-4 T
@@ -117,12 +118,11 @@ def _check_columns(source: str, columns: Any, labels: Mapping[str, str], conditi
 def _magnetic_units(source: str, units: str | Mapping[str, str], magnetic: list[str]) -> dict[str, str]:
     if isinstance(units, str):
         return dict.fromkeys(magnetic, units)
-    for csv_name in units:
-        if csv_name not in magnetic:
-            raise DatasetError(f"{source}: units: {csv_name!r} is not a CSV column mapped to a channel")
-    for csv_name in magnetic:
-        if csv_name not in units:
-            raise DatasetError(f"{source}: units: no unit for magnetic column {csv_name!r}")
+    unknown, missing = unknown_and_missing(units, magnetic)
+    if unknown:
+        raise DatasetError(f"{source}: units: {unknown[0]!r} is not a CSV column mapped to a channel")
+    if missing:
+        raise DatasetError(f"{source}: units: no unit for magnetic column {missing[0]!r}")
     return dict(units)
 
 

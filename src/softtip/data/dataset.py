@@ -474,6 +474,12 @@ def _first_line(problem: Exception) -> str:
     return str(problem).strip().splitlines()[0] if str(problem).strip() else type(problem).__name__
 
 
+def unknown_and_missing(keys: Iterable[str], expected: Sequence[str]) -> tuple[list[str], list[str]]:
+    """The keys that are not expected and the expected ones that are not among the keys, in order."""
+    keys = list(keys)
+    return [key for key in keys if key not in expected], [key for key in expected if key not in keys]
+
+
 def _parse_document(raw: bytes) -> dict:
     """The metadata document: declarations with units and a DatasetMetadata."""
     try:
@@ -486,12 +492,11 @@ def _parse_document(raw: bytes) -> dict:
     if document.get("schema_version") != SCHEMA_VERSION:
         raise DatasetError(f"schema version {document.get('schema_version')!r} is not supported "
                            f"(this softtip reads version {SCHEMA_VERSION})")
-    for key in _DOCUMENT_KEYS:
-        if key not in document:
-            raise DatasetError(f"metadata field {key!r} is missing")
-    for key in document:
-        if key not in _DOCUMENT_KEYS:
-            raise DatasetError(f"unknown metadata field {key!r}")
+    unknown, missing = unknown_and_missing(document, _DOCUMENT_KEYS)
+    if missing:
+        raise DatasetError(f"metadata field {missing[0]!r} is missing")
+    if unknown:
+        raise DatasetError(f"unknown metadata field {unknown[0]!r}")
     declared = {key: _named_units(document[key], key) for key in ("channels", "labels", "conditions")}
     for name, unit in declared["channels"].items():
         if not is_channel(name) or unit != CHANNEL_UNIT:

@@ -48,6 +48,7 @@ from enum import Enum
 
 import numpy as np
 
+from softtip._core.threads import BackgroundThread
 from softtip._core.units import UT_PER_T
 from softtip.hardware.driver import temperature_to_raw
 from softtip.hardware.protocol import (
@@ -187,8 +188,7 @@ class Emulator:
         self._lock = threading.Lock()  # guards the logs
         self._log: list[LoggedFrame] = []
         self._received: list[tuple[int, Command]] = []
-        self._thread: threading.Thread | None = None
-        self._closing = threading.Event()
+        self._worker = BackgroundThread("fingertip-emulator")
         self._error: BaseException | None = None
         self._directory: str | None = None
         self._master_fd: int | None = None
@@ -201,23 +201,18 @@ class Emulator:
     # ---------------------------------------------------------------- life cycle
 
     def start(self) -> Emulator:
-        if self._thread is not None:
+        if self._worker.running:
             raise RuntimeError("emulator already started")
         self._directory = tempfile.mkdtemp(prefix="softtip-emulator-")
         self._open_pty()
         self._boot_time = self._next_frame = time.perf_counter()
-        self._closing.clear()
-        self._thread = threading.Thread(target=self._run, name="fingertip-emulator", daemon=True)
-        self._thread.start()
+        self._worker.start(self._run)
         return self
 
     def close(self) -> None:
         """Stop the emulator and remove its pty; re-raises a failure of the source."""
-        if self._thread is None:
+        if not self._worker.stop():
             return
-        self._closing.set()
-        self._thread.join()
-        self._thread = None
         self._close_pty()
         if self._directory is not None:
             shutil.rmtree(self._directory, ignore_errors=True)
@@ -310,7 +305,7 @@ class Emulator:
 
     def _run(self) -> None:
         try:
-            while not self._closing.is_set():
+            while not self._worker.closing.is_set():
                 now = time.perf_counter()
                 if self._link_down_until is not None:
                     self._while_link_down(now)
@@ -341,7 +336,7 @@ class Emulator:
             if now >= self._next_frame:
                 self._acquire_and_send()
                 return
-        self._closing.wait(max(0.0, wake - now))
+        self._worker.closing.wait(max(0.0, wake - now))
 
     def _receive(self) -> None:
         try:
@@ -461,7 +456,7 @@ class Emulator:
         if FaultPlan.hits(faults.stall_every, index):
             split = int(rng.integers(1, len(data)))
             written = self._write(bytes(data[:split]))
-            self._closing.wait(faults.stall_ms * 1e-3)
+            self._worker.closing.wait(faults.stall_ms * 1e-3)
             if written == split:
                 written += self._write(bytes(data[split:]))
         else:
@@ -484,7 +479,7 @@ class Emulator:
         empty_readings = 0
         while empty_readings < 2 and time.perf_counter() < deadline:
             empty_readings = empty_readings + 1 if self._unread_bytes() == 0 else 0
-            self._closing.wait(_DRAIN_SETTLE_S)
+            self._worker.closing.wait(_DRAIN_SETTLE_S)
 
     def _disconnect(self) -> None:
         self._drain()

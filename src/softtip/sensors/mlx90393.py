@@ -36,30 +36,24 @@ def _read_only(values: ArrayLike) -> np.ndarray:
 
 
 # [DS] section 15.1.4, Table 17: sensitivity in uT/LSB for HALLCONF = 0xC,
-# rows GAIN_SEL 0..7, columns RES 0..3. Each RES step selects the next bit of
-# the 19-bit ADC word, so a column is exactly twice the previous one up to the
-# table's 3-decimal rounding. The printed XY entry GAIN_SEL 1 / RES 3 reads
-# 4.840 (the Z value of the row above), a misprint: 2 x 2.403 = 4.806 is used.
-SENSITIVITY_XY_HALLCONF_C_UT = _read_only([
-    [0.751, 1.502, 3.004, 6.009],
-    [0.601, 1.202, 2.403, 4.806],
-    [0.451, 0.901, 1.803, 3.605],
-    [0.376, 0.751, 1.502, 3.004],
-    [0.300, 0.601, 1.202, 2.403],
-    [0.250, 0.501, 1.001, 2.003],
-    [0.200, 0.401, 0.801, 1.602],
-    [0.150, 0.300, 0.601, 1.202],
+# rows GAIN_SEL 0..7, columns (XY, Z) for RES 0..3 as printed. Each RES step
+# selects the next bit of the 19-bit ADC word, so an axis's entry is exactly
+# twice the one of the previous RES up to the table's 3-decimal rounding. The
+# printed XY entry GAIN_SEL 1 / RES 3 reads 4.840 (the Z value of the row
+# above), a misprint: 2 x 2.403 = 4.806 is used.
+_TABLE_17_HALLCONF_C_UT = np.array([
+    #  RES 0 XY, Z   RES 1 XY, Z   RES 2 XY, Z   RES 3 XY, Z
+    [0.751, 1.210, 1.502, 2.420, 3.004, 4.840, 6.009, 9.680],
+    [0.601, 0.968, 1.202, 1.936, 2.403, 3.872, 4.806, 7.744],
+    [0.451, 0.726, 0.901, 1.452, 1.803, 2.904, 3.605, 5.808],
+    [0.376, 0.605, 0.751, 1.210, 1.502, 2.420, 3.004, 4.840],
+    [0.300, 0.484, 0.601, 0.968, 1.202, 1.936, 2.403, 3.872],
+    [0.250, 0.403, 0.501, 0.807, 1.001, 1.613, 2.003, 3.227],
+    [0.200, 0.323, 0.401, 0.645, 0.801, 1.291, 1.602, 2.581],
+    [0.150, 0.242, 0.300, 0.484, 0.601, 0.968, 1.202, 1.936],
 ])
-SENSITIVITY_Z_HALLCONF_C_UT = _read_only([
-    [1.210, 2.420, 4.840, 9.680],
-    [0.968, 1.936, 3.872, 7.744],
-    [0.726, 1.452, 2.904, 5.808],
-    [0.605, 1.210, 2.420, 4.840],
-    [0.484, 0.968, 1.936, 3.872],
-    [0.403, 0.807, 1.613, 3.227],
-    [0.323, 0.645, 1.291, 2.581],
-    [0.242, 0.484, 0.968, 1.936],
-])
+SENSITIVITY_XY_HALLCONF_C_UT = _read_only(_TABLE_17_HALLCONF_C_UT[:, 0::2])
+SENSITIVITY_Z_HALLCONF_C_UT = _read_only(_TABLE_17_HALLCONF_C_UT[:, 1::2])
 # [DS] footnote to Table 17: "For HALLCONF = 0x0, the sensitivity scales with
 # a factor 98/75" (0.150 -> 0.196 uT/LSB for XY at GAIN_SEL 7, RES 0).
 HALLCONF_0_SENSITIVITY_FACTOR = 98.0 / 75.0
@@ -268,12 +262,7 @@ class MLX90393:
     def settings(self) -> MLX90393Settings:
         return self._settings
 
-    def to_counts(
-        self,
-        b_tesla: ArrayLike,
-        rng: np.random.Generator | None = None,
-        noise: bool = True,
-    ) -> np.ndarray:
+    def to_counts(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None, noise: bool = True) -> np.ndarray:
         """Register words (uint16, shape of b_tesla) for fields b_tesla of shape (..., 3).
 
         Adds Gaussian noise of noise_rms_uT when noise is true (rng defaults to a
@@ -301,12 +290,7 @@ class MLX90393:
         """Field in uT from register words of shape (..., 3), as a host driver decodes them."""
         return self._signed_counts(counts) * self._lsb_uT
 
-    def read_uT(
-        self,
-        b_tesla: ArrayLike,
-        rng: np.random.Generator | None = None,
-        noise: bool = True,
-    ) -> np.ndarray:
+    def read_uT(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None, noise: bool = True) -> np.ndarray:
         """What the host reads in uT for fields b_tesla (..., 3): counts_to_uT(to_counts(...))."""
         return self.counts_to_uT(self.to_counts(b_tesla, rng=rng, noise=noise))
 

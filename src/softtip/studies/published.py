@@ -47,12 +47,19 @@ def _round(value, digits=3):
     return value
 
 
+def _label_axes(ax, xlabel: str, ylabel: str, legend: dict | None = None) -> None:
+    """Both axis labels, and a legend with the options ``legend`` unless it is None."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if legend is not None:
+        ax.legend(**legend)
+
+
 def _scatter_plot(ax, truth, estimate, title, unit):
     ax.scatter(truth, estimate, s=4, alpha=0.4)
     lo, hi = float(np.min(truth)), float(np.max(truth))
     ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
-    ax.set_xlabel(f"true ({unit})")
-    ax.set_ylabel(f"estimated ({unit})")
+    _label_axes(ax, f"true ({unit})", f"estimated ({unit})")
     ax.set_title(title, fontsize=9)
 
 
@@ -122,8 +129,7 @@ def force3(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, lis
     for trial in dataset.trials[:: max(1, len(dataset.trials) // 6)][:6]:
         rows = dataset.groups == trial
         ax.plot(dataset.column("time_s")[rows], y[rows, 2], lw=0.8)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("Fz (N)")
+    _label_axes(ax, "time (s)", "Fz (N)")
     ax.set_title("Reference normal force of some trials", fontsize=9)
     return results, [("Estimated vs reference force", figure), ("Force time series", series)], [
         "Published: a network with 10 hidden neurons maps the three MFD changes to (Fx, Fy, Fz); "
@@ -149,9 +155,7 @@ def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict,
             "sensitivity_mT_per_N": np.mean(slopes, axis=0).tolist()}
         rows = dataset.groups == np.unique(dataset.groups[speeds == speed])[0]
         ax.plot(force[rows], z[rows] / 1000, lw=1, label=f"{speed:g} mm/s")
-    ax.set_xlabel("normal force (N)")
-    ax.set_ylabel("sensor z MFD change (mT)")
-    ax.legend()
+    _label_axes(ax, "normal force (N)", "sensor z MFD change (mT)", legend={})
     ax.set_title("Load/unload loops (one trial per speed)", fontsize=9)
     v = protocol.viscoelastic
     return results, [("Hysteresis loops", figure)], [
@@ -176,9 +180,7 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, 
                          "per_angle_deg": metrics.per_condition(metrics.mean_abs_error, y[mask], estimate, y[mask])}
         ax.scatter(y[mask], estimate, s=5, alpha=0.5, label=name)
     ax.plot([0, 30], [0, 30], "k--", lw=0.8)
-    ax.legend()
-    ax.set_xlabel("true angle (deg)")
-    ax.set_ylabel("estimated (deg)")
+    _label_axes(ax, "true angle (deg)", "estimated (deg)", legend={})
     return results, [("Two-fingertip grasp: estimated vs true orientation", figure)], [
         "Published: six MFD changes of both sensors into a 20-neuron network; trained 0/10/20/30 deg, "
         "untrained 5/15/25 deg. Samples with a grip force above 10 % of the peak are used."]
@@ -208,9 +210,7 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> tuple[
         axes[0].scatter(y[mask, 0], estimate[:, 0], s=3, alpha=0.4, label=name)
         axes[1].scatter(y[mask, 1], estimate[:, 1], s=3, alpha=0.4, label=name)
     for ax, unit in zip(axes, ("angle (deg)", "grip force (N)")):
-        ax.set_xlabel(f"true {unit}")
-        ax.set_ylabel(f"estimated {unit}")
-        ax.legend(fontsize=7)
+        _label_axes(ax, f"true {unit}", f"estimated {unit}", legend={"fontsize": 7})
     return results, [("Orientation and grip force over contact positions", figure)], [
         "Published: error grows with board thickness (rule: thickness below 10 % of the pad's smaller width). "
         "The twin holds the board face-on with its corner on the pad and closes the gripper by the same "
@@ -252,9 +252,8 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> tuple[d
         for c in classes:
             rows = touching & (state == c)
             ax.scatter(X[rows, 6 * k + 2] / 1000, X[rows, 6 * k + 5] / 1000, s=3, alpha=0.4, label=c)
-        ax.set_xlabel(f"finger {k + 1}, chip 1 Bz change (mT)")
-        ax.set_ylabel(f"finger {k + 1}, chip 2 Bz change (mT)")
-        ax.legend(fontsize=7)
+        _label_axes(ax, f"finger {k + 1}, chip 1 Bz change (mT)", f"finger {k + 1}, chip 2 Bz change (mT)",
+                    legend={"fontsize": 7})
     return results, [("MFD changes of the contact states", figure)], [
         "Published: the simulated MFD changes of the two fingers fall into separate regions for the three "
         "states, and a 12-10-3 network classifies them (mean probability of the correct class per state and "
@@ -306,9 +305,7 @@ def inverter(protocol: Protocol, seed: int, progress: Progress) -> tuple[dict, l
     for s in (1, 2, 3):
         rows = dataset.groups == np.unique(dataset.groups[(nominal == s) & (sets == "trained")])[0]
         ax.plot(dataset.column("time_s")[rows], force[rows], label=f"state {s}")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("normal force (N)")
-    ax.legend()
+    _label_axes(ax, "time (s)", "normal force (N)", legend={})
     return results, [("Insertion force of one trial per state", figure)], [
         "Published: per trial, the normal force at which the correct state is first detected; two networks "
         "with 4 hidden layers of 10 tanh neurons (state, normal force)."]

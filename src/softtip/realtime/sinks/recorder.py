@@ -10,9 +10,9 @@ from __future__ import annotations
 import collections
 import logging
 import os
-import threading
 from pathlib import Path
 
+from softtip._core.threads import BackgroundThread
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import DEFAULT_PREFIX, RecordingError, magnetic_covariance_T2
 from softtip.realtime.recording.writer import McapRecorder
@@ -39,8 +39,7 @@ class RecorderSink(Sink):
         self.flush_interval_s = positive("flush_interval_s", flush_interval_s)
         self._options = {"chunk_size": chunk_size, "compression": compression, "fsync": fsync, "prefix": prefix}
         self._queue: collections.deque[FrameResult] = collections.deque()
-        self._closing = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._writer = BackgroundThread("mcap-writer")
         self.recorder: McapRecorder | None = None
         self.error: BaseException | None = None
         self.frames_flushed = 0  # frames in the file even if the process is killed now
@@ -52,8 +51,7 @@ class RecorderSink(Sink):
         self.recorder = McapRecorder(self.path, stream.chips, target_names=stream.target_names,
                                      target_units=stream.target_units, classes=stream.classes,
                                      covariance_T2=covariance, metadata=stream.metadata, **self._options)
-        self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
-        self._thread.start()
+        self._writer.start(self._run)
 
     def write(self, frame: FrameResult) -> None:
         self._queue.append(frame)
@@ -66,7 +64,7 @@ class RecorderSink(Sink):
 
     def _run(self) -> None:
         try:
-            while not self._closing.wait(self.flush_interval_s):
+            while not self._writer.closing.wait(self.flush_interval_s):
                 self._write_queued()
         except Exception as error:  # the stream goes on; close() reports the failure
             logger.exception("recording to %s failed", self.path)
@@ -74,11 +72,8 @@ class RecorderSink(Sink):
 
     def close(self) -> None:
         """Writes what is queued, then the summary and footer."""
-        if self._thread is None:
+        if not self._writer.stop():
             return
-        self._closing.set()
-        self._thread.join()
-        self._thread = None
         try:
             if self.error is None:
                 self._write_queued()

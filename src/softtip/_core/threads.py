@@ -1,0 +1,34 @@
+"""A named daemon thread that runs until it is asked to stop."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+
+class BackgroundThread:
+    """Runs ``target`` on a daemon thread; :meth:`stop` sets :attr:`closing`, which the target
+    watches (or waits on between passes), and waits for the thread to end."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.closing = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None
+
+    def start(self, target: Callable[[], None]) -> None:
+        self.closing.clear()
+        self._thread = threading.Thread(target=target, name=self.name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> bool:
+        """Stop the thread and wait for it; False if it was not running."""
+        if self._thread is None:
+            return False
+        self.closing.set()
+        self._thread.join()
+        self._thread = None
+        return True
