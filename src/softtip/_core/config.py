@@ -187,7 +187,7 @@ Numbers = Annotated[list[Real], from_numpy, Field(min_length=1), expect("a non-e
 # ---------------------------------------------------------------------------------------------- arguments
 
 
-@functools.cache
+@functools.lru_cache(maxsize=256)  # kinds are module constants: each is built once
 def _validator(kind: Any) -> TypeAdapter:
     return TypeAdapter(kind)
 

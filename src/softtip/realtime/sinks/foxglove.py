@@ -63,6 +63,9 @@ def _vector(values) -> dict:
     return {axis: _finite_or_none(v) for axis, v in zip("xyz", values, strict=True)}
 
 
+Port = integer(0, 65535)
+
+
 class FoxgloveSink(Sink):
     """Serves the stream to Foxglove (``ws://host:port``, "Foxglove WebSocket" connection).
 
@@ -72,7 +75,7 @@ class FoxgloveSink(Sink):
 
     def __init__(self, port: int = 8765, host: str = "127.0.0.1", *, max_rate_hz: float | None = 50.0,
                  prefix: str = DEFAULT_PREFIX, start_timeout_s: float = 10.0) -> None:
-        self.port = checked(integer(0, 65535), "foxglove port", port)
+        self.port = checked(Port, "foxglove port", port)
         self.host = host
         self._min_interval_ns = (0 if max_rate_hz is None
                                  else int(1e9 / checked(PositiveNumber, "max_rate_hz", max_rate_hz)))
