@@ -15,6 +15,8 @@ the schema does not declare is refused with the list of those it does. Checks be
 ``__post_init__`` and raise :class:`Refusal` naming the key at fault. Constructing a schema directly
 validates the same way, located by the ``section`` given to :func:`schema`
 (``MLX90393Settings(gain_sel=9)``: ``sensor.gain_sel = 9: expected an integer 0..7``).
+The arguments of a class that is not a schema are checked with the same types, one at a time:
+``checked(PositiveNumber, "rate_hz", rate_hz)`` (``rate_hz = 0: expected a positive number``).
 
 The validation is pydantic's (v2), on its dataclasses: they stay ordinary frozen dataclasses
 (``dataclasses.replace``, ``asdict``, positional arguments), its strict mode refuses ``true`` for a
