@@ -17,8 +17,11 @@ from softtip._core.config import (
     Number,
     PositiveNumber,
     Refusal,
+    PositiveInteger,
     Text,
+    checked,
     choice,
+    instance,
     integer,
     parse,
     read_toml,
@@ -146,6 +149,26 @@ def test_constructing_a_schema_validates_it_the_same_way():
     with pytest.raises(ConfigError, match=r"^max = 8: expected max >= min = 9\.0$"):
         Span(9, 8)  # positional arguments are named by their field
     assert Search(budget=np.int64(4), tolerance=np.float32(0.5)) == Search(budget=4, tolerance=0.5)
+
+
+def test_an_argument_is_checked_against_a_type_in_one_line_naming_it():
+    assert checked(PositiveNumber, "rate_hz", np.float32(2.5)) == 2.5
+    assert checked(PositiveInteger, "frames", np.int64(3)) == 3 and type(checked(PositiveNumber, "x", 2)) is float
+    for kind, value, message in [
+        (PositiveNumber, 0, "rate_hz = 0: expected a positive number"),
+        (PositiveNumber, True, "rate_hz = True: expected a number"),
+        (PositiveNumber, float("inf"), "rate_hz = inf: expected a number"),
+        (PositiveInteger, 2.0, "rate_hz = 2.0: expected an integer"),
+        (PositiveInteger, 0, "rate_hz = 0: expected a positive integer"),
+        (instance(Search), {"budget": 3}, "rate_hz = {'budget': 3}: expected Search"),
+    ]:
+        with pytest.raises(ConfigError) as error:
+            checked(kind, "rate_hz", value)
+        assert str(error.value) == message
+    with pytest.raises(DesignError, match=r"^port = 7: expected a non-empty string$"):
+        checked(Text, "port", 7, DesignError)
+    search = Search()
+    assert checked(instance(Search), "search", search) is search
 
 
 def test_a_refusal_of_a_parsed_table_is_located_there():

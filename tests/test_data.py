@@ -269,6 +269,11 @@ def test_dataset_refuses_broken_trial_structure():
         Dataset({**base, "trial": [0.0, 0.0, 1.0, 1.0]})
     with pytest.raises(DatasetError, match="metadata design: expected a JSON object"):
         DatasetMetadata(design=[1, 2])
+    with pytest.raises(DatasetError, match=r"^metadata seed = 1\.5: expected an integer or None$"):
+        DatasetMetadata(seed=1.5)
+    with pytest.raises(DatasetError, match=r"^metadata description = 3: expected a string$"):
+        DatasetMetadata(description=3)
+    assert DatasetMetadata(seed=np.int64(7)).seed == 7
 
 
 # --------------------------------------------------------------------------

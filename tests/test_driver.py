@@ -378,8 +378,10 @@ def test_a_silent_device_times_out_on_identify():
     ("kwargs", "message"),
     [
         ({"rate_hz": 0}, "rate_hz = 0"),
-        ({"baudrate": -1}, "baudrate = -1"),
-        ({"settings": {"gain_sel": 7}}, "settings = "),
+        ({"baudrate": -1}, "^baudrate = -1: expected a positive integer$"),
+        ({"queue_size": 1.5}, r"^queue_size = 1\.5: expected an integer$"),
+        ({"settings": {"gain_sel": 7}}, r"^settings = \{'gain_sel': 7\}: expected MLX90393Settings$"),
+        ({"boot_timeout_s": float("inf")}, "^boot_timeout_s = inf: expected a number$"),
         ({"queue_size": 0}, "queue_size = 0 without a callback"),
         ({"reply_timeout_s": 0}, "reply_timeout_s = 0"),
     ],
@@ -392,8 +394,16 @@ def test_driver_arguments_are_validated(kwargs, message):
 def test_fault_plan_is_validated():
     with pytest.raises(ValueError, match=r"faults.corrupt_every = -1"):
         FaultPlan(corrupt_every=-1)
-    with pytest.raises(ValueError, match=r"faults.stall_ms"):
+    with pytest.raises(ValueError, match=r"^faults.stall_ms = -5: expected a duration >= 0 in ms$"):
         FaultPlan(stall_ms=-5)
+    with pytest.raises(ValueError, match=r"^faults.reboot_on_disconnect = 1: expected true or false$"):
+        FaultPlan(reboot_on_disconnect=1)
+    with pytest.raises(ValueError, match=r"^faults = 'none': expected a FaultPlan$"):
+        Emulator(lambda t: np.zeros((4, 3)), faults="none")
+    with pytest.raises(ValueError, match=r"^chips = 0: expected an integer 1\.\.\d+$"):
+        Emulator(lambda t: np.zeros((4, 3)), chips=0)
+    with pytest.raises(ValueError, match=r"^confirm_records = 0: expected a positive integer$"):
+        ReSkinDecoder(confirm_records=0)
 
 
 # --------------------------------------------------------------------------

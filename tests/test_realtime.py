@@ -666,7 +666,12 @@ def test_bad_input_is_refused_with_one_line(tmp_path):
             [state, Estimator(ThresholdClassifier(), ["s0_bx_uT"], name="other")])
     refused(ValueError, "reads chip 3; the stream has 2 chips", Pipeline, 2, [forces])
     refused(ValueError, "free_states", Pipeline, CHIPS, [state], baseline=Baseline(5, drift_time_constant_s=10.0))
-    refused(ValueError, "baseline frames = 0", Baseline, 0)
+    refused(ValueError, "^baseline frames = 0: expected a positive integer$", Baseline, 0)
+    refused(ValueError, "^frames = 2.5: expected an integer$", Baseline(5).take, 2.5)
+    refused(ValueError, "^step_uT = -0.01: expected a positive number$", Baseline, step_uT=-0.01)
+    refused(ValueError, "^refresh_hz = 0: expected a positive number$", DashboardSink, refresh_hz=0)
+    refused(ValueError, "^foxglove port = 70000: expected an integer 0..65535$", FoxgloveSink, port=70000)
+    refused(ValueError, "^max_rate_hz = True: expected a number$", FoxgloveSink, max_rate_hz=True)
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_bytes(b"PAR1 not an mcap file at all")
     refused(RecordingError, "is not an MCAP file", read_recording, not_mcap)

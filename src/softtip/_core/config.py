@@ -15,6 +15,8 @@ the schema does not declare is refused with the list of those it does. Checks be
 ``__post_init__`` and raise :class:`Refusal` naming the key at fault. Constructing a schema directly
 validates the same way, located by the ``section`` given to :func:`schema`
 (``MLX90393Settings(gain_sel=9)``: ``sensor.gain_sel = 9: expected an integer 0..7``).
+The arguments of a class that is not a schema are checked with the same types, one at a time:
+``checked(PositiveNumber, "rate_hz", rate_hz)`` (``rate_hz = 0: expected a positive number``).
 
 The validation is pydantic's (v2), on its dataclasses: they stay ordinary frozen dataclasses
 (``dataclasses.replace``, ``asdict``, positional arguments), its strict mode refuses ``true`` for a
@@ -32,7 +34,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import numpy as np
-from pydantic import BeforeValidator, ConfigDict, Field, Strict, ValidationError, WrapValidator
+from pydantic import BeforeValidator, ConfigDict, Field, InstanceOf, Strict, TypeAdapter, ValidationError, WrapValidator
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 from pydantic_core import ArgsKwargs, PydanticCustomError
 
@@ -170,12 +172,35 @@ def choice(*options: Any, expected: str | None = None) -> Any:
                      expect(expected or f"one of {', '.join(map(str, options))}")]
 
 
+def instance(kind: type, expected: str | None = None) -> Any:
+    """An instance of the class ``kind`` as it is (a table is not turned into one)."""
+    return Annotated[InstanceOf[kind], expect(expected or kind.__name__)]
+
+
 Number = number()
 PositiveNumber = number("a positive number", gt=0)
 NonNegativeNumber = number("a number >= 0", ge=0)
+PositiveInteger = integer(1, expected="a positive integer")
 Flag = Annotated[bool, from_numpy, Strict(), expect("true or false")]
 Text = Annotated[str, Strict(), Field(min_length=1), expect("a non-empty string")]
 Numbers = Annotated[list[Real], from_numpy, Field(min_length=1), expect("a non-empty list of numbers")]
+
+
+# ---------------------------------------------------------------------------------------------- arguments
+
+
+@functools.lru_cache(maxsize=256)  # kinds are module constants: each is built once
+def _validator(kind: Any) -> TypeAdapter:
+    return TypeAdapter(kind)
+
+
+def checked(kind: Any, name: str, value: Any, error: type[ValueError] = ConfigError) -> Any:
+    """``value`` validated as the type ``kind`` (``PositiveNumber``, ``integer(1)`` ...): an argument of a
+    class that is not a schema. A mistake raises ``error`` in one line, ``name = value: expected ...``."""
+    try:
+        return _validator(kind).validate_python(value)
+    except ValidationError as problem:
+        raise error(f"{name} = {value!r}: {problem.errors(include_url=False)[0]['msg']}") from None
 
 
 # ---------------------------------------------------------------------------------------------- schemas

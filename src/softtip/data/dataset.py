@@ -28,16 +28,17 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
+from pydantic import Strict
 
 from softtip import __version__
 from softtip._core.channels import CHANNEL_UNIT, channel_names, channel_order, is_channel
-from softtip._core.config import ConfigError
+from softtip._core.config import ConfigError, Text, Whole, checked, expect
 from softtip._core.files import atomic_write
 
 FORMAT = "softtip-dataset"
@@ -208,6 +209,10 @@ def _json_object(value: Any, name: str) -> dict | None:
         raise DatasetError(f"metadata {name}: not representable as JSON ({problem})") from None
 
 
+Description = Annotated[str, Strict(), expect("a string")]
+Seed = Annotated[Whole, expect("an integer or None")]
+
+
 @dataclass(frozen=True)
 class DatasetMetadata:
     """Provenance of a dataset. ``design``, ``sensor_settings`` and ``protocol`` are opaque JSON objects."""
@@ -221,16 +226,12 @@ class DatasetMetadata:
     created_utc: str = field(default_factory=_utc_now)
 
     def __post_init__(self):
-        if not isinstance(self.description, str):
-            raise DatasetError(f"metadata description: expected a string, got {type(self.description).__name__}")
+        checked(Description, "metadata description", self.description, DatasetError)
         for name in ("design", "sensor_settings", "protocol"):
             object.__setattr__(self, name, _json_object(getattr(self, name), name))
         if self.seed is not None:
-            if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral):
-                raise DatasetError(f"metadata seed: expected an integer or None, got {self.seed!r}")
-            object.__setattr__(self, "seed", int(self.seed))
-        if not isinstance(self.softtip_version, str) or not self.softtip_version:
-            raise DatasetError(f"metadata softtip_version: expected a version string, got {self.softtip_version!r}")
+            object.__setattr__(self, "seed", checked(Seed, "metadata seed", self.seed, DatasetError))
+        checked(Text, "metadata softtip_version", self.softtip_version, DatasetError)
         try:
             datetime.fromisoformat(self.created_utc)
         except (TypeError, ValueError):

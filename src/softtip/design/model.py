@@ -21,12 +21,12 @@ from softtip._core.config import (
     ConfigError,
     NonNegativeNumber,
     Number,
+    PositiveInteger,
     PositiveNumber,
     Real,
     Refusal,
     Text,
     expect,
-    integer,
     number,
     parse,
     read_toml,
@@ -113,7 +113,6 @@ def _not_zero(value: float) -> float:
 PoissonRatio = number("0 < nu < 0.5 (a compressible elastic solid)", gt=0, lt=0.5)
 _REMANENCE = "0 < |J| <= 1.6 T (NdFeB remanence)"
 Polarization = Annotated[number(_REMANENCE, ge=-1.6, le=1.6), AfterValidator(_not_zero), expect(_REMANENCE)]
-MagnetCount = integer(1, expected="a positive integer")
 Points = Annotated[list[tuple[Real, Real, Real]], Field(min_length=1), expect("a list of [x, y, z] in mm")]
 
 
@@ -219,7 +218,7 @@ class CylindricalCavity:
 @schema
 class CylindricalMagnets(_Magnets):
     circle_radius_mm: PositiveNumber
-    count: MagnetCount = 4
+    count: PositiveInteger = 4
     first_angle_deg: Number = 0.0
 
     def __post_init__(self):

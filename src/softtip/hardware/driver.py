@@ -27,6 +27,7 @@ import numpy as np
 import serial
 from numpy.typing import ArrayLike
 
+from softtip._core.config import PositiveInteger, PositiveNumber, checked, instance, integer
 from softtip.hardware.protocol import (
     CHIP_FAULTS,
     Ack,
@@ -237,16 +238,8 @@ class _PendingReply:
 # --------------------------------------------------------------------------
 
 
-def _check_positive(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-        raise ValueError(f"{name} = {value!r}: expected a positive number")
-    return float(value)
-
-
-def _check_settings(settings: object) -> MLX90393Settings:
-    if not isinstance(settings, MLX90393Settings):
-        raise ValueError(f"settings = {settings!r}: expected MLX90393Settings")
-    return settings
+SensorSettings = instance(MLX90393Settings)
+QueueSize = integer(0)
 
 
 class FingertipDriver:
@@ -276,23 +269,21 @@ class FingertipDriver:
     ) -> None:
         if not isinstance(port, str) or not port.strip():
             raise PortError(f"port = {port!r}: expected a serial device path or a pyserial URL")
-        if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
-            raise ValueError(f"baudrate = {baudrate!r}: expected a positive integer")
-        if isinstance(queue_size, bool) or not isinstance(queue_size, int) or queue_size < 0:
-            raise ValueError(f"queue_size = {queue_size!r}: expected an integer >= 0")
+        baudrate = checked(PositiveInteger, "baudrate", baudrate)
+        queue_size = checked(QueueSize, "queue_size", queue_size)
         if callback is not None and not callable(callback):
             raise ValueError(f"callback = {callback!r}: expected a callable taking a Sample")
         if queue_size == 0 and callback is None:
             raise ValueError("queue_size = 0 without a callback: no one would receive the samples")
         self._port_name = port
         self._baudrate = baudrate
-        self._settings = _check_settings(MLX90393Settings() if settings is None else settings)
+        self._settings = checked(SensorSettings, "settings", MLX90393Settings() if settings is None else settings)
         self._rate_hz = checked_rate_hz(rate_hz)
         self._callback = callback
         self._queue: queue.Queue[Sample] | None = queue.Queue(queue_size) if queue_size else None
-        self._reply_timeout_s = _check_positive("reply_timeout_s", reply_timeout_s)
-        self._boot_timeout_s = _check_positive("boot_timeout_s", boot_timeout_s)
-        self._reconnect_interval_s = _check_positive("reconnect_interval_s", reconnect_interval_s)
+        self._reply_timeout_s = checked(PositiveNumber, "reply_timeout_s", reply_timeout_s)
+        self._boot_timeout_s = checked(PositiveNumber, "boot_timeout_s", boot_timeout_s)
+        self._reconnect_interval_s = checked(PositiveNumber, "reconnect_interval_s", reconnect_interval_s)
 
         self._lock = threading.Lock()  # guards _serial, _pending, _next_tag
         self._command_lock = threading.Lock()  # one command in flight at a time
@@ -388,7 +379,7 @@ class FingertipDriver:
 
     def configure(self, settings: MLX90393Settings) -> None:
         """Write settings to every chip; later samples are converted with them."""
-        settings = _check_settings(settings)
+        settings = checked(SensorSettings, "settings", settings)
         self._settings = settings
         model = MLX90393(settings)
 

@@ -48,9 +48,10 @@ from enum import Enum
 
 import numpy as np
 
+from softtip._core.config import Flag, checked, instance, integer, number
 from softtip._core.threads import BackgroundThread
 from softtip._core.units import UT_PER_T
-from softtip.hardware.driver import temperature_to_raw
+from softtip.hardware.driver import SensorSettings, temperature_to_raw
 from softtip.hardware.protocol import (
     BOOT_FRAMES,
     HEADER_SIZE,
@@ -100,16 +101,8 @@ class LoggedFrame:
     fate: FrameFate
 
 
-def _check_every(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ValueError(f"faults.{name} = {value!r}: expected an integer >= 0 (0: never)")
-    return value
-
-
-def _check_duration(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
-        raise ValueError(f"faults.{name} = {value!r}: expected a duration >= 0 in ms")
-    return float(value)
+Every = integer(0, expected="an integer >= 0 (0: never)")
+DurationMs = number("a duration >= 0 in ms", ge=0)
 
 
 @dataclass(frozen=True)
@@ -127,20 +120,20 @@ class FaultPlan:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("corrupt_every", "drop_byte_every", "stall_every", "chip_error_every"):
-            _check_every(name, getattr(self, name))
-        _check_every("disconnect_every", self.disconnect_every)
-        _check_duration("stall_ms", self.stall_ms)
-        _check_duration("disconnect_ms", self.disconnect_ms)
-        if not isinstance(self.reboot_on_disconnect, bool):
-            raise ValueError(
-                f"faults.reboot_on_disconnect = {self.reboot_on_disconnect!r}: expected true or false"
-            )
+        for name in ("corrupt_every", "drop_byte_every", "stall_every", "chip_error_every", "disconnect_every"):
+            checked(Every, f"faults.{name}", getattr(self, name))
+        for name in ("stall_ms", "disconnect_ms"):
+            checked(DurationMs, f"faults.{name}", getattr(self, name))
+        checked(Flag, "faults.reboot_on_disconnect", self.reboot_on_disconnect)
 
     @staticmethod
     def hits(every: int, index: int) -> bool:
         """Whether the frame with 0-based generation index is an Nth frame."""
         return every > 0 and (index + 1) % every == 0
+
+
+Faults = instance(FaultPlan, "a FaultPlan")
+ChipCount = integer(1, MAX_CHIPS)
 
 
 class Emulator:
@@ -167,14 +160,9 @@ class Emulator:
     ) -> None:
         if not callable(source):
             raise ValueError(f"source = {source!r}: expected a callable t_s -> field_uT (chips, 3)")
-        if isinstance(chips, bool) or not isinstance(chips, int) or not 1 <= chips <= MAX_CHIPS:
-            raise ValueError(f"chips = {chips!r}: expected an integer 1..{MAX_CHIPS}")
-        settings = MLX90393Settings() if settings is None else settings
-        if not isinstance(settings, MLX90393Settings):
-            raise ValueError(f"settings = {settings!r}: expected MLX90393Settings")
-        faults = FaultPlan() if faults is None else faults
-        if not isinstance(faults, FaultPlan):
-            raise ValueError(f"faults = {faults!r}: expected a FaultPlan")
+        chips = checked(ChipCount, "chips", chips)
+        settings = checked(SensorSettings, "settings", MLX90393Settings() if settings is None else settings)
+        faults = checked(Faults, "faults", FaultPlan() if faults is None else faults)
         self._source = source
         self._chips = chips
         self._power_on_settings = settings

@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from softtip._core.config import PositiveInteger, checked
 from softtip.hardware.driver import Sample, open_serial
 
 TERMINATOR = b"\r\n"
@@ -46,16 +47,8 @@ class ReSkinDecoder:
     """
 
     def __init__(self, chips: int = RESKIN_CHIPS, confirm_records: int = 2) -> None:
-        if isinstance(chips, bool) or not isinstance(chips, int) or chips < 1:
-            raise ValueError(f"chips = {chips!r}: expected a positive integer")
-        if (
-            isinstance(confirm_records, bool)
-            or not isinstance(confirm_records, int)
-            or confirm_records < 1
-        ):
-            raise ValueError(f"confirm_records = {confirm_records!r}: expected a positive integer")
-        self._chips = chips
-        self._confirm = confirm_records
+        self._chips = chips = checked(PositiveInteger, "chips", chips)
+        self._confirm = checked(PositiveInteger, "confirm_records", confirm_records)
         self.record_size = chips * VALUES_PER_CHIP * 4 + len(TERMINATOR)
         self._buffer = bytearray()
         self._synchronised = False

@@ -26,11 +26,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import MISSING, dataclass, field, fields
-from numbers import Real
+from dataclasses import KW_ONLY, MISSING, dataclass, field, fields
 from typing import Any
 
 import numpy as np
+
+from softtip._core.config import Number, checked, number, schema
 
 State = tuple[float, float, float]  # (depth, tx, ty) in m
 
@@ -40,83 +41,55 @@ State = tuple[float, float, float]  # (depth, tx, ty) in m
 _ON_CLOCK = 1e-6
 
 
-def _number(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value):
-        raise ValueError(f"{name} = {value!r}: expected a finite number")
-    return float(value)
+Length = number("a positive length in m", gt=0)
+Speed = number("a positive speed in m/s", gt=0)
+Duration = number("a positive duration in s", gt=0)
+Depth = number("a non-negative length in m", ge=0)
+SampleRate = number("a positive sample rate in Hz", gt=0)
 
 
-def _positive(name: str, value: Any, unit: str) -> float:
-    number = _number(name, value)
-    if not number > 0:
-        raise ValueError(f"{name} = {value!r}: expected a positive {unit}")
-    return number
-
-
-@dataclass(frozen=True)
+@schema(section="push")
 class Push:
-    depth: float  # m, further normal travel
-    speed: float  # m/s
-
-    def __post_init__(self):
-        _positive("push.depth", self.depth, "length in m")
-        _positive("push.speed", self.speed, "speed in m/s")
+    depth: Length  # m, further normal travel
+    speed: Speed  # m/s
 
     def end(self, start: State) -> State:
         return (start[0] + self.depth, start[1], start[2])
 
 
-@dataclass(frozen=True)
+@schema(section="hold")
 class Hold:
-    seconds: float
-
-    def __post_init__(self):
-        _positive("hold.seconds", self.seconds, "duration in s")
+    seconds: Duration
 
     def end(self, start: State) -> State:
         return start
 
 
-@dataclass(frozen=True)
+@schema(section="release")
 class Release:
-    speed: float  # m/s
-
-    def __post_init__(self):
-        _positive("release.speed", self.speed, "speed in m/s")
+    speed: Speed  # m/s
 
     def end(self, start: State) -> State:
         return (0.0, start[1], start[2])
 
 
-@dataclass(frozen=True)
+@schema(section="shear")
 class Shear:
-    dx: float  # m
-    dy: float  # m
-    speed: float  # m/s
-
-    def __post_init__(self):
-        _number("shear.dx", self.dx)
-        _number("shear.dy", self.dy)
-        _positive("shear.speed", self.speed, "speed in m/s")
+    dx: Number  # m
+    dy: Number  # m
+    speed: Speed  # m/s
 
     def end(self, start: State) -> State:
         return (start[0], start[1] + self.dx, start[2] + self.dy)
 
 
-@dataclass(frozen=True, kw_only=True)
+@schema(section="move_to")
 class MoveTo:
-    speed: float  # m/s
-    depth: float | None = None  # m; None keeps the current value
-    tx: float | None = None
-    ty: float | None = None
-
-    def __post_init__(self):
-        _positive("move_to.speed", self.speed, "speed in m/s")
-        if self.depth is not None and _number("move_to.depth", self.depth) < 0:
-            raise ValueError(f"move_to.depth = {self.depth!r}: expected a non-negative length in m")
-        for name in ("tx", "ty"):
-            if getattr(self, name) is not None:
-                _number(f"move_to.{name}", getattr(self, name))
+    _: KW_ONLY
+    speed: Speed  # m/s
+    depth: Depth | None = None  # m; None keeps the current value
+    tx: Number | None = None
+    ty: Number | None = None
 
     def end(self, start: State) -> State:
         target = (self.depth, self.tx, self.ty)
@@ -225,7 +198,7 @@ class Motion:
 
         Clock samples that fall on a segment end point take its state exactly;
         the others are interpolated linearly along their segment."""
-        rate = _positive("rate_hz", rate_hz, "sample rate in Hz")
+        rate = checked(SampleRate, "rate_hz", rate_hz)
         tolerance = _ON_CLOCK / rate
         ticks = int(math.floor(self.duration * rate + _ON_CLOCK))
         times = np.arange(ticks + 1) / rate

@@ -24,9 +24,10 @@ Readings are changes of flux density from a baseline taken before contact. :clas
 from __future__ import annotations
 
 import math
-import numbers
 
 import numpy as np
+
+from softtip._core.config import PositiveInteger, PositiveNumber, checked
 
 
 def drift_step(filtered: np.ndarray, reading: np.ndarray, alpha: float,
@@ -40,13 +41,6 @@ def drift_step(filtered: np.ndarray, reading: np.ndarray, alpha: float,
     return filtered + alpha * change, True
 
 
-def _positive(name: str, value: object, *, integer: bool = False) -> float:
-    kinds = numbers.Integral if integer else numbers.Real
-    if isinstance(value, bool) or not isinstance(value, kinds) or not value > 0 or not math.isfinite(value):
-        raise ValueError(f"{name} = {value!r}: expected a positive {'integer' if integer else 'number'}")
-    return value
-
-
 class Baseline:
     """The baseline in use, in µT, shape (chips, 3); see the module notes.
 
@@ -56,11 +50,11 @@ class Baseline:
 
     def __init__(self, frames: int = 50, *, drift_time_constant_s: float | None = None,
                  drift_threshold_uT: float = 20.0, step_uT: float = 0.01) -> None:
-        self.frames = int(_positive("baseline frames", frames, integer=True))
+        self.frames = checked(PositiveInteger, "baseline frames", frames)
         self.drift_time_constant_s = (None if drift_time_constant_s is None
-                                      else float(_positive("drift_time_constant_s", drift_time_constant_s)))
-        self.drift_threshold_uT = float(_positive("drift_threshold_uT", drift_threshold_uT))
-        self.step_uT = float(_positive("step_uT", step_uT))
+                                      else checked(PositiveNumber, "drift_time_constant_s", drift_time_constant_s))
+        self.drift_threshold_uT = checked(PositiveNumber, "drift_threshold_uT", drift_threshold_uT)
+        self.step_uT = checked(PositiveNumber, "step_uT", step_uT)
         self.version = 0
         self._value: np.ndarray | None = None
         self._filtered: np.ndarray | None = None
@@ -88,7 +82,7 @@ class Baseline:
 
     def take(self, frames: int | None = None) -> None:
         """Take a new baseline from the next ``frames`` sound frames (default: as configured)."""
-        self._requested_frames = self.frames if frames is None else int(_positive("frames", frames, integer=True))
+        self._requested_frames = self.frames if frames is None else checked(PositiveInteger, "frames", frames)
         self._requests += 1
 
     def update(self, field_uT: np.ndarray, sound: bool, dt_s: float, free: bool = True) -> bool:

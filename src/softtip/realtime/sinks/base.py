@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 from softtip.realtime.frames import FrameResult, StreamInfo
 
 
@@ -20,9 +18,3 @@ class Sink:
     def close(self) -> None:
         """Called once, after the last frame; finishes the sink's work."""
 
-
-def positive(name: str, value: object) -> float:
-    """``value`` as a float, or a one-line ValueError naming ``name`` unless it is a finite positive number."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0 or not math.isfinite(value):
-        raise ValueError(f"{name} = {value!r}: expected a positive number")
-    return float(value)

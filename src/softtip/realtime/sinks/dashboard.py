@@ -16,8 +16,9 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from softtip._core.config import PositiveNumber, checked
 from softtip.realtime.frames import FrameResult, StreamInfo
-from softtip.realtime.sinks.base import Sink, positive
+from softtip.realtime.sinks.base import Sink
 
 
 def _number(value: float, digits: int = 1) -> str:
@@ -30,8 +31,8 @@ class DashboardSink(Sink):
 
     def __init__(self, console: Console | None = None, *, refresh_hz: float = 4.0, window_s: float = 5.0) -> None:
         self.console = console
-        self.refresh_hz = positive("refresh_hz", refresh_hz)
-        self.window_s = positive("window_s", window_s)
+        self.refresh_hz = checked(PositiveNumber, "refresh_hz", refresh_hz)
+        self.window_s = checked(PositiveNumber, "window_s", window_s)
         self._stream: StreamInfo | None = None
         self._latest: FrameResult | None = None
         self._frames = 0

@@ -17,6 +17,7 @@ import socket
 import threading
 import warnings
 
+from softtip._core.config import PositiveNumber, checked, integer
 from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
@@ -29,7 +30,7 @@ from softtip.realtime.recording.format import (
     wrench_mapping,
     wrench_values,
 )
-from softtip.realtime.sinks.base import Sink, positive
+from softtip.realtime.sinks.base import Sink
 
 
 def _schema(properties: dict) -> dict:
@@ -62,6 +63,9 @@ def _vector(values) -> dict:
     return {axis: _finite_or_none(v) for axis, v in zip("xyz", values, strict=True)}
 
 
+Port = integer(0, 65535)
+
+
 class FoxgloveSink(Sink):
     """Serves the stream to Foxglove (``ws://host:port``, "Foxglove WebSocket" connection).
 
@@ -71,11 +75,10 @@ class FoxgloveSink(Sink):
 
     def __init__(self, port: int = 8765, host: str = "127.0.0.1", *, max_rate_hz: float | None = 50.0,
                  prefix: str = DEFAULT_PREFIX, start_timeout_s: float = 10.0) -> None:
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
-            raise ValueError(f"foxglove port = {port!r}: expected an integer 0..65535")
-        self.port = port
+        self.port = checked(Port, "foxglove port", port)
         self.host = host
-        self._min_interval_ns = 0 if max_rate_hz is None else int(1e9 / positive("max_rate_hz", max_rate_hz))
+        self._min_interval_ns = (0 if max_rate_hz is None
+                                 else int(1e9 / checked(PositiveNumber, "max_rate_hz", max_rate_hz)))
         self.prefix = prefix
         self._start_timeout_s = start_timeout_s
         self._loop: asyncio.AbstractEventLoop | None = None

@@ -12,11 +12,12 @@ import logging
 import os
 from pathlib import Path
 
+from softtip._core.config import PositiveNumber, checked
 from softtip._core.threads import BackgroundThread
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import DEFAULT_PREFIX, RecordingError, magnetic_covariance_T2
 from softtip.realtime.recording.writer import McapRecorder
-from softtip.realtime.sinks.base import Sink, positive
+from softtip.realtime.sinks.base import Sink
 from softtip.sensors.mlx90393 import lsb_uT, noise_rms_uT
 
 logger = logging.getLogger(__name__)
@@ -36,7 +37,7 @@ class RecorderSink(Sink):
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise RecordingError(f"recording {self.path}: directory {self.path.parent} does not exist")
-        self.flush_interval_s = positive("flush_interval_s", flush_interval_s)
+        self.flush_interval_s = checked(PositiveNumber, "flush_interval_s", flush_interval_s)
         self._options = {"chunk_size": chunk_size, "compression": compression, "fsync": fsync, "prefix": prefix}
         self._queue: collections.deque[FrameResult] = collections.deque()
         self._writer = BackgroundThread("mcap-writer")
