@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg
 
+from softtip._core.progress import Task
 from softtip._core.units import MM
 from softtip.design.model import load_design
 from softtip.mechanics.contact import (FootprintBody, LoadCase, SurfaceInfluence, SurfacePatch, solve_footprint_contact,
@@ -117,7 +118,7 @@ def test_a_sticking_twin_samples_the_loads_the_board_holds(coarse):
     family = IndenterFamily(friction="stick")
     ranges = LoadRanges(position_radius=2 * MM, depth=1.5 * MM, shear_fraction=1.0)
     params, solutions, (sliding, slid), share = _held_loads(influence, patch, family, ranges,
-                                                            np.random.default_rng(0), 24, 1, lambda d, t: None)
+                                                            np.random.default_rng(0), 24, 1, Task())
     assert len(params) == 24 and 0 < share < 1 and len(sliding)  # shallow drags slide
     assert not family.slides(solutions[:, -3:]).any() and family.slides(slid[:, -3:]).all()
     assert share == pytest.approx(len(params) / (len(params) + len(sliding)), abs=0.1)
