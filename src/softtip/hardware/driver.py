@@ -28,24 +28,9 @@ import serial
 from numpy.typing import ArrayLike
 
 from softtip._core.config import PositiveInteger, PositiveNumber, checked, instance, integer
-from softtip.hardware.protocol import (
-    CHIP_FAULTS,
-    Ack,
-    Command,
-    ErrorCode,
-    ErrorReply,
-    Frame,
-    FrameDecoder,
-    FrameType,
-    Identity,
-    checked_rate_hz,
-    configure_command,
-    encode_frame,
-    identify_command,
-    set_rate_command,
-    start_command,
-    stop_command,
-)
+from softtip.hardware.protocol import (CHIP_FAULTS, Ack, Command, ErrorCode, ErrorReply, Frame, FrameDecoder, FrameType,
+                                       Identity, LinkEnd, checked_rate_hz, configure_command, encode_frame,
+                                       identify_command, set_rate_command, start_command, stop_command)
 from softtip.sensors.mlx90393 import MLX90393, MLX90393Settings
 
 logger = logging.getLogger(__name__)
@@ -242,7 +227,7 @@ SensorSettings = instance(MLX90393Settings)
 QueueSize = integer(0)
 
 
-class FingertipDriver:
+class FingertipDriver(LinkEnd):
     """Streams Samples from a fingertip board on a serial port.
 
     port: a device path (/dev/ttyACM0, COM3) or a pyserial URL. open() opens it,
@@ -349,14 +334,6 @@ class FingertipDriver:
     @property
     def connected(self) -> bool:
         return self._serial is not None
-
-    @property
-    def settings(self) -> MLX90393Settings:
-        return self._settings
-
-    @property
-    def rate_hz(self) -> int:
-        return self._rate_hz
 
     @property
     def stats(self) -> DriverStats:

@@ -52,25 +52,9 @@ from softtip._core.config import Flag, checked, instance, integer, number
 from softtip._core.threads import BackgroundThread
 from softtip._core.units import UT_PER_T
 from softtip.hardware.driver import SensorSettings, temperature_to_raw
-from softtip.hardware.protocol import (
-    BOOT_FRAMES,
-    HEADER_SIZE,
-    MAX_CHIPS,
-    Ack,
-    ChipStatus,
-    Command,
-    CommandError,
-    ErrorCode,
-    ErrorReply,
-    Frame,
-    FrameDecoder,
-    FrameType,
-    Identity,
-    checked_rate_hz,
-    decode_configure,
-    decode_set_rate,
-    encode_frame,
-)
+from softtip.hardware.protocol import (BOOT_FRAMES, HEADER_SIZE, MAX_CHIPS, Ack, ChipStatus, Command, CommandError,
+                                       ErrorCode, ErrorReply, Frame, FrameDecoder, FrameType, Identity, LinkEnd,
+                                       checked_rate_hz, decode_configure, decode_set_rate, encode_frame)
 from softtip.sensors.mlx90393 import MLX90393, MLX90393Settings
 
 logger = logging.getLogger(__name__)
@@ -136,7 +120,7 @@ Faults = instance(FaultPlan, "a FaultPlan")
 ChipCount = integer(1, MAX_CHIPS)
 
 
-class Emulator:
+class Emulator(LinkEnd):
     """A fingertip board on a pseudo-terminal (see the module docstring).
 
     source(t_s) returns the field in uT, shape (chips, 3), at device time t_s
@@ -233,14 +217,6 @@ class Emulator:
         """Every host command received, with the session it arrived in."""
         with self._lock:
             return list(self._received)
-
-    @property
-    def settings(self) -> MLX90393Settings:
-        return self._settings
-
-    @property
-    def rate_hz(self) -> int:
-        return self._rate_hz
 
     @property
     def streaming(self) -> bool:

@@ -436,6 +436,22 @@ def _parse_payload(frame_type: int, payload: bytes) -> Message | None:
     return Command(code=frame_type, tag=payload[0], args=payload[1:])
 
 
+class LinkEnd:
+    """Either end of the serial link (the driver, the emulated board): the sensor settings and the
+    frame rate it has agreed on, set by its constructor and by CONFIGURE / SET RATE."""
+
+    _settings: MLX90393Settings
+    _rate_hz: int
+
+    @property
+    def settings(self) -> MLX90393Settings:
+        return self._settings
+
+    @property
+    def rate_hz(self) -> int:
+        return self._rate_hz
+
+
 class FrameDecoder:
     """Streaming decoder: bytes in, messages out, whatever the bytes are.
 

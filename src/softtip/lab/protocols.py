@@ -33,21 +33,8 @@ import numpy as np
 from pydantic import Field
 from threadpoolctl import threadpool_limits
 
-from softtip._core.config import (
-    Flag,
-    NonNegativeNumber,
-    Numbers,
-    PositiveNumber,
-    Real,
-    Text,
-    choice,
-    expect,
-    integer,
-    parse,
-    read_toml,
-    refused,
-    schema,
-)
+from softtip._core.config import (Flag, NonNegativeNumber, Numbers, PositiveNumber, Real, Text, choice, expect, integer,
+                                  parse, read_toml, refused, schema)
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.data import Dataset

@@ -33,21 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
-from softtip._core.config import (
-    NonNegativeNumber,
-    Number,
-    PositiveNumber,
-    Refusal,
-    Text,
-    choice,
-    expect,
-    integer,
-    parse,
-    read_toml,
-    refused,
-    schema,
-    where,
-)
+from softtip._core.config import (NonNegativeNumber, Number, PositiveNumber, Refusal, Text, choice, expect, integer,
+                                  parse, read_toml, refused, schema, where)
 from softtip.design.model import Design, DesignError, load_design
 from softtip.optimize.errors import StudyError
 from softtip.optimize.objectives import Objective, build_objective
