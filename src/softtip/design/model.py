@@ -198,6 +198,16 @@ def _cut_into_cavity(bottom: float, cavity_height: float) -> Refusal:
 
 
 @schema
+class _Spec:
+    """What every kind of design has besides its body, cavity and magnets."""
+
+    _: KW_ONLY
+    sensor: _Sensor = _Sensor()
+    name: Text | None = None
+    description: str = ""
+
+
+@schema
 class CylindricalBody(_BodyMaterial):
     diameter_mm: PositiveNumber
     height_mm: PositiveNumber
@@ -230,14 +240,11 @@ class CylindricalMagnets(_Magnets):
 
 
 @schema
-class CylindricalSpec:
+class CylindricalSpec(_Spec):
     kind: Literal["cylindrical"]
     body: CylindricalBody
     cavity: CylindricalCavity
     magnets: CylindricalMagnets
-    sensor: _Sensor = _Sensor()
-    name: Text | None = None
-    description: str = ""
 
     def __post_init__(self):
         body, cavity, magnets = self.body, self.cavity, self.magnets
@@ -295,14 +302,11 @@ class RectangularMagnets(_Magnets):
 
 
 @schema
-class RectangularSpec:
+class RectangularSpec(_Spec):
     kind: Literal["rectangular"]
     body: RectangularBody
     cavity: RectangularCavity
     magnets: RectangularMagnets
-    sensor: _Sensor = _Sensor()
-    name: Text | None = None
-    description: str = ""
 
     def __post_init__(self):
         body, cavity, magnets = self.body, self.cavity, self.magnets
