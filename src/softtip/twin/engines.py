@@ -42,6 +42,13 @@ class Response:
     solutions: list[Any] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
 
+    @classmethod
+    def of_solutions(cls, solutions: list[Any], model: str, timings: dict | None = None) -> Response:
+        """The response assembled from per-load contact results (each with magnet poses and force)."""
+        return cls(poses=MagnetPoses.stack([s.magnet_poses for s in solutions]),
+                   force=np.array([s.force for s in solutions]), model=model, solutions=solutions,
+                   timings=timings or {})
+
 
 class Engine(Protocol):
     design: Design
@@ -55,9 +62,7 @@ class FiniteElementEngine:
 
     def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, model: str = "linear",
                  use_cache: bool = True):
-        if model not in MODELS:
-            raise ValueError(f"model = {model!r}: expected one of {', '.join(MODELS)}")
-        self.design, self.mesh_size, self.model = design, mesh_size, model
+        self.design, self.mesh_size, self.model = design, mesh_size, _checked_model(model)
         self.timings: dict[str, float] = {}
         start = time.perf_counter()
         self.mesh: TetMesh = mesh_design(design, mesh_size, use_cache=use_cache)
@@ -73,9 +78,7 @@ class FiniteElementEngine:
         return self._body
 
     def respond(self, loads: Sequence[LoadCase], model: str | None = None, progress: Progress = SILENT) -> Response:
-        model = model or self.model
-        if model not in MODELS:
-            raise ValueError(f"model = {model!r}: expected one of {', '.join(MODELS)}")
+        model = _checked_model(model or self.model)
         body = self.body
         solutions = [solve_linear_contact(body, load) if model == "linear"
                      else solve_hyperelastic_contact(body, load, progress=progress) for load in loads]
@@ -83,6 +86,10 @@ class FiniteElementEngine:
         for solution in solutions:
             for key, seconds in solution.timings.items():
                 timings[key] = timings.get(key, 0.0) + seconds
-        return Response(poses=MagnetPoses.stack([s.magnet_poses for s in solutions]),
-                        force=np.array([s.force for s in solutions]), model=model, solutions=solutions,
-                        timings=timings)
+        return Response.of_solutions(solutions, model, timings)
+
+
+def _checked_model(model: str) -> str:
+    if model not in MODELS:
+        raise ValueError(f"model = {model!r}: expected one of {', '.join(MODELS)}")
+    return model

@@ -11,14 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-import numpy as np
 
 from softtip._core.progress import SILENT, Progress
 from softtip.design.model import Design
 from softtip.mechanics.contact import LoadCase, ReducedContactResult, SurfaceInfluence, solve_influence_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.mesh import mesh_design
-from softtip.mechanics.poses import MagnetPoses
 from softtip.twin.engines import Response
 
 
@@ -43,7 +41,4 @@ class InfluenceEngine:
                                        tangential_steps=tangential_steps)
 
     def respond(self, loads: Sequence[LoadCase]) -> Response:
-        solutions = [self.press(load) for load in loads]
-        return Response(poses=MagnetPoses.stack([s.magnet_poses for s in solutions]),
-                        force=np.array([s.force for s in solutions]), model="influence",
-                        solutions=solutions)
+        return Response.of_solutions([self.press(load) for load in loads], "influence")

@@ -36,6 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from softtip._core.units import UT_PER_T
+from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -143,10 +144,10 @@ def wrench_values(estimates: np.ndarray, mapping: Sequence[tuple[int, int, float
     return wrench
 
 
-def magnetic_covariance_T2(noise_rms_uT: np.ndarray | None, lsb_uT: np.ndarray | None) -> np.ndarray:
-    """Row-major 3x3 covariance in T^2: sensor noise plus uniform quantisation (LSB^2/12)
-    per axis; zeros (ROS: unknown) when the settings are not known."""
-    if noise_rms_uT is None or lsb_uT is None:
+def magnetic_covariance_T2(settings: MLX90393Settings | None) -> np.ndarray:
+    """Row-major 3x3 covariance in T^2 of a chip read with ``settings``: sensor noise plus uniform
+    quantisation (LSB^2/12) per axis; zeros (ROS: unknown) when the settings are not known."""
+    if settings is None:
         return np.zeros(9)
-    variance_uT2 = np.asarray(noise_rms_uT) ** 2 + np.asarray(lsb_uT) ** 2 / 12.0
+    variance_uT2 = noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12.0
     return np.diag(variance_uT2 / UT_PER_T**2).ravel()

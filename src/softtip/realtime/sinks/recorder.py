@@ -18,7 +18,6 @@ from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import DEFAULT_PREFIX, RecordingError, magnetic_covariance_T2
 from softtip.realtime.recording.writer import McapRecorder
 from softtip.realtime.sinks.base import Sink
-from softtip.sensors.mlx90393 import lsb_uT, noise_rms_uT
 
 logger = logging.getLogger(__name__)
 
@@ -46,9 +45,7 @@ class RecorderSink(Sink):
         self.frames_flushed = 0  # frames in the file even if the process is killed now
 
     def open(self, stream: StreamInfo) -> None:
-        settings = stream.settings
-        covariance = magnetic_covariance_T2(None if settings is None else noise_rms_uT(settings),
-                                            None if settings is None else lsb_uT(settings))
+        covariance = magnetic_covariance_T2(stream.settings)
         self.recorder = McapRecorder(self.path, stream.chips, target_names=stream.target_names,
                                      target_units=stream.target_units, classes=stream.classes,
                                      covariance_T2=covariance, metadata=stream.metadata, **self._options)

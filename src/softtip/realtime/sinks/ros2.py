@@ -32,7 +32,6 @@ from softtip.realtime.recording.format import (
     wrench_values,
 )
 from softtip.realtime.sinks.base import Sink
-from softtip.sensors.mlx90393 import lsb_uT, noise_rms_uT
 
 
 def _import_ros():
@@ -78,9 +77,7 @@ class ROS2Sink(Sink):
             self._owns_context = True
         self._stream = stream
         self._wrench = wrench_mapping(stream.target_names, stream.target_units)
-        settings = stream.settings
-        self._covariance = magnetic_covariance_T2(None if settings is None else noise_rms_uT(settings),
-                                                  None if settings is None else lsb_uT(settings)).tolist()
+        self._covariance = magnetic_covariance_T2(stream.settings).tolist()
         node = self._node = rclpy.create_node(self.node_name)
         depth, prefix = self.qos_depth, self.prefix
         self._field_publishers = [node.create_publisher(msg_sensor.MagneticField, f"{prefix}/chip{k}/field", depth)
