@@ -34,6 +34,7 @@ from typing import Self
 import numpy as np
 
 from softtip import __version__
+from softtip._core.config import PositiveInteger, checked
 from softtip.hardware import Sample
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.clock import AcquisitionClock
@@ -74,8 +75,7 @@ class Pipeline:
                  callbacks: Sequence[Callable[[FrameResult], None]] = (), settings: MLX90393Settings | None = None,
                  rate_hz: float | None = None, metadata: Mapping | None = None,
                  source_counters: Callable[[], Mapping] | None = None) -> None:
-        if isinstance(chips, bool) or not isinstance(chips, int) or chips < 1:
-            raise ValueError(f"chips = {chips!r}: expected an integer >= 1")
+        checked(PositiveInteger, "chips", chips)
         self.chips = chips
         self.baseline = Baseline() if baseline is None else baseline
         if not isinstance(self.baseline, Baseline):

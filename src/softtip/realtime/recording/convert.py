@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from softtip._core.channels import channel_columns
+from softtip._core.config import PositiveNumber, checked
 from softtip._core.units import UT_PER_T
 from softtip.data.dataset import (
     DIMENSIONLESS,
@@ -186,8 +187,8 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
             gap_s: float | None = 1.0, baseline_frames: int = 50, prefix: str | None = None,
             description: str | None = None) -> Conversion:
     """Convert an MCAP recording to a dataset (module notes); written to ``parquet_path`` if given."""
-    if gap_s is not None and (isinstance(gap_s, bool) or not isinstance(gap_s, (int, float)) or not gap_s > 0):
-        raise ValueError(f"gap_s = {gap_s!r}: expected a positive number of seconds or None")
+    if gap_s is not None:
+        checked(PositiveNumber, "gap_s", gap_s)
     recording = read_recording(mcap_path)
     prefix, field_topics = _field_topics(recording, prefix)
     stamps, log_times, fields, incomplete = _frames(recording, field_topics)

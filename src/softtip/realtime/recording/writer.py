@@ -20,6 +20,7 @@ from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer
 
 from softtip import __version__
+from softtip._core.config import PositiveInteger, checked, integer
 from softtip._core.units import UT_PER_T
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
@@ -38,6 +39,8 @@ from softtip.realtime.recording.format import (
 )
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+
+CHUNK_SIZE = integer(1024, expected="an integer >= 1024 bytes")  # the smallest MCAP chunk the recorder accepts
 
 
 class _Ros2Writer(Writer):
@@ -79,14 +82,12 @@ class McapRecorder:
                  covariance_T2: np.ndarray | None = None, metadata: Mapping | None = None,
                  prefix: str = DEFAULT_PREFIX, chunk_size: int = 256 * 1024, compression: str = "zstd",
                  fsync: bool = False) -> None:
-        if isinstance(chips, bool) or not isinstance(chips, int) or chips < 1:
-            raise RecordingError(f"chips = {chips!r}: expected an integer >= 1")
+        checked(PositiveInteger, "chips", chips, RecordingError)
         if len(target_names) != len(target_units):
             raise RecordingError(f"target_units: expected {len(target_names)} units, got {len(target_units)}")
         if compression not in COMPRESSIONS:
             raise RecordingError(f"compression = {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
-        if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1024:
-            raise RecordingError(f"chunk_size = {chunk_size!r}: expected an integer >= 1024 bytes")
+        checked(CHUNK_SIZE, "chunk_size", chunk_size, RecordingError)
         if not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", prefix):
             raise RecordingError(f"prefix = {prefix!r}: expected a ROS topic namespace such as /fingertip")
         path = Path(path)
