@@ -6,7 +6,9 @@ re-seated: its preload and the chip's place along the nail change), the seven tr
 :mod:`softtip.lab.human_force` on every contact shape of the protocol. The history of each trial is
 simulated on a fine grid from the finger's placement ``lead_in_s`` before the recording, so the
 pad's creep from placing it carries into the trial; both sensors then sample it at ``rate_hz``.
-Every trial's first sample is its tare: subtracted from its readings and kept as a condition.
+Every trial's first sample is its tare: subtracted from its readings and kept as a condition. After
+each seating, the chip's pressure with the finger in the air (its static offset: the ring's preload)
+is read once and kept as the run's condition ``side_air_fz_N``.
 
 One dataset holds the whole protocol, with participant, run, motion and contact as conditions: the
 study fits per participant (select a participant), splits by trial (a motion, a run) or by time
@@ -36,13 +38,13 @@ from softtip.lab.human_force import MOTIONS, Effort, intended_force
 from softtip.lab.realism import WearableRealism
 from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, object_radii, scaled
 from softtip.mechanics.viscoelastic import PronySeries
-from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP
+from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
 from softtip.twin.wearable import WearableTwin
 
 AXES = ("x", "y", "z")
 CHANNELS = {f"side_f{axis}_N": "N" for axis in AXES}
 LABELS = {**{f"f{axis}_N": "N" for axis in AXES}, "cop_x_mm": "mm", "cop_y_mm": "mm", "sliding": "1"}
-CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1",
+CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "side_air_fz_N": "N",
               **{f"side_tare_f{axis}_N": "N" for axis in AXES}, **{f"table_tare_f{axis}_N": "N" for axis in AXES}}
 
 Motions = Annotated[list[choice(*MOTIONS)], Field(min_length=1), expect(f"a non-empty list of: {', '.join(MOTIONS)}")]
@@ -172,6 +174,8 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
             mount = ChipMount(side=p["sensor_side"],
                               position_y=(p["sensor_offset_mm"] + bench.scatter(realism.sensor_position_sd_mm)) * MM,
                               preload=max(p["ring_preload_N"] * (1 + bench.scatter(realism.ring_preload_sd)), 0.0))
+            noise = rng if realism.noise else None
+            air = read_forces(np.array([0.0, 0.0, mount.preload]), TACTILE_CHIP, noise)[0][2]
             skew = rng.uniform(-1, 1) * realism.stream_skew_ms / 1000  # s
             intended = np.stack([intended_force(motion, times, p["trial_s"], rng, effort) for motion, _ in trials],
                                 axis=1)
@@ -179,7 +183,7 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
             yaw = np.radians(bench.scatter(realism.finger_yaw_sd_deg, len(trials)))
             twin = WearableTwin(finger, mount)
             response = twin.respond(times, intended, radii, rest, p["lean_share"])
-            read = twin.read(times, response, instants, rng if realism.noise else None, skew, yaw)
+            read = twin.read(times, response, instants, noise, skew, yaw)
             for k, (motion, contact) in enumerate(trials):
                 chip, table = read.chip[:, k], read.table[:, k]
                 writer.add({"time_s": instants,
@@ -188,6 +192,7 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
                             "cop_x_mm": read.centre[:, k, 0] / MM, "cop_y_mm": read.centre[:, k, 1] / MM,
                             "sliding": read.sliding[:, k]},
                            {"participant": participant, "run": run, "motion": motion, "contact": contact,
+                            "side_air_fz_N": air,
                             **{f"side_tare_f{axis}_N": chip[0, a] for a, axis in enumerate(AXES)},
                             **{f"table_tare_f{axis}_N": table[0, a] for a, axis in enumerate(AXES)}})
     return writer.to_dataset()

@@ -185,7 +185,7 @@ def contact_points(centre, semi_axes):
 
 
 def lateral_outflow(volume, moment, centre, semi_axes, side_y, side, width, tip_y):
-    """Outflow per unit side length (m²) at ``side_y`` on ``side``: the ``volume`` (...) pushed in
+    """Outflow per unit side length (m²) at ``side_y`` (...) on ``side``: the ``volume`` (...) pushed in
     over the contact ellipse (``centre`` (..., 2), ``semi_axes`` (..., 2)) plus the dipole of the
     sheared column's volume ``moment`` (..., 2) (m⁴). Contact points keep a margin from the free
     edges, where the strip's kernel is singular."""
@@ -193,7 +193,7 @@ def lateral_outflow(volume, moment, centre, semi_axes, side_y, side, width, tip_
     margin = _EDGE_MARGIN * width
     x = np.clip(points[..., 0], -width / 2 + margin, width / 2 - margin)
     y = np.minimum(points[..., 1], tip_y - margin)
-    kernel, d_x, d_y = side_outflow(x, y, side_y, side, width, tip_y)
+    kernel, d_x, d_y = side_outflow(x, y, np.asarray(side_y, dtype=float)[..., None], side, width, tip_y)
     moment = np.asarray(moment)
     dipole = moment[..., 0, None] * d_x + moment[..., 1, None] * d_y
     return volume * (kernel @ compression) + dipole @ area
