@@ -16,12 +16,11 @@ import pytest
 from scipy.integrate import quad
 
 from softtip._core.config import ConfigError
+from softtip._core.units import MM
 from softtip.mechanics.fingerpad import (SIDES, ChipMount, FingerPad, chip_forces, contact_points, exponential_force,
-                                         indentation_volume, lateral_outflow, object_radii, pad_response,
+                                         indentation_volume, lateral_outflow, pad_response, shape_radii,
                                          side_outflow, winkler_pressure)
 from softtip.mechanics.viscoelastic import PronySeries
-
-MM = 1e-3
 ELASTIC = PronySeries((), ())  # no relaxation: the instantaneous laws alone
 PAD = FingerPad()
 
@@ -52,7 +51,7 @@ def test_force_depth_is_the_cited_exponential_law_at_the_cited_points():
 @pytest.mark.parametrize("shape", ["flat", "curved", "edge", "point"])
 def test_the_winkler_pressure_over_the_contact_integrates_to_the_law(shape):
     # the distributed pressure summed over the pad-object overlap on a grid, against (R̄'/R̄) F_flat(δ)
-    object_ = object_radii(shape, 20 * MM, 1 * MM, 1 * MM)
+    object_ = shape_radii(shape, 20 * MM, 1 * MM, 1 * MM)
     radii = PAD.contact_radii(np.array(object_))
     depth = PAD.depth(1.0, object_) if shape == "point" else PAD.depth(4.0, object_)
     x, y, cell = grid(math.sqrt(2 * max(radii) * depth) * 1.05)
@@ -64,7 +63,7 @@ def test_the_winkler_pressure_over_the_contact_integrates_to_the_law(shape):
 
 @pytest.mark.parametrize("shape", ["flat", "curved", "edge", "point"])
 def test_indentation_volume_is_the_overlap_of_pad_and_object(shape):
-    radii = PAD.contact_radii(np.array(object_radii(shape, 20 * MM, 1 * MM, 1 * MM)))
+    radii = PAD.contact_radii(np.array(shape_radii(shape, 20 * MM, 1 * MM, 1 * MM)))
     depth = 1.5 * MM
     x, y, cell = grid(math.sqrt(2 * max(radii) * depth) * 1.05)
     overlap = np.maximum(depth - gap(x, y, radii), 0.0).sum() * cell
@@ -74,7 +73,7 @@ def test_indentation_volume_is_the_overlap_of_pad_and_object(shape):
 def test_a_point_pushes_in_less_volume_than_a_flat_plate_for_the_same_force():
     volumes = {}
     for shape in ("flat", "point"):
-        object_ = object_radii(shape, 20 * MM, 1 * MM, 1 * MM)
+        object_ = shape_radii(shape, 20 * MM, 1 * MM, 1 * MM)
         radii = PAD.contact_radii(np.array(object_))
         volumes[shape] = indentation_volume(PAD.depth(3.0, object_), *radii)
     assert volumes["point"] < 0.5 * volumes["flat"]
@@ -247,5 +246,5 @@ def test_mistakes_in_the_finger_and_ring_are_one_line_errors():
     with pytest.raises(ConfigError, match=r"^ring.side = 'left': expected one of radial, ulnar$"):
         ChipMount(side="left")
     with pytest.raises(ValueError, match="contact shape 'cone'"):
-        object_radii("cone", 1.0, 1.0, 1.0)
+        shape_radii("cone", 1.0, 1.0, 1.0)
     assert set(SIDES) == {"radial", "ulnar"}

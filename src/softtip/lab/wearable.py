@@ -24,19 +24,19 @@ radial and distal; NaN when the pad is off the object: a 3-axis table sensor cou
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Annotated
 
 import numpy as np
 from pydantic import Field
 
-from softtip._core.config import (NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal, choice,
-                                  expect, number, schema)
+from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
+                                  choice, expect, schema)
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.human_force import MOTIONS, Effort, intended_force
 from softtip.lab.realism import WearableRealism
-from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, object_radii, scaled
+from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, scaled, shape_radii
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
 from softtip.twin.wearable import WearableTwin
@@ -50,7 +50,6 @@ CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "si
 Motions = Annotated[list[choice(*MOTIONS)], Field(min_length=1), expect(f"a non-empty list of: {', '.join(MOTIONS)}")]
 Contacts = Annotated[list[choice(*CONTACT_SHAPES)], Field(min_length=1),
                      expect(f"a non-empty list of: {', '.join(CONTACT_SHAPES)}")]
-Fraction = number("a number from 0 to 1", ge=0, le=1)
 
 
 @schema(section="parameters")
@@ -157,7 +156,7 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
         / p["simulation_rate_hz"]
     instants = np.arange(round(p["trial_s"] * p["rate_hz"])) / p["rate_hz"]
     trials = [(motion, contact) for contact in p["contacts"] for motion in p["motions"]]
-    radii = np.array([object_radii(contact, p["curved_radius_mm"] * MM, p["edge_radius_mm"] * MM,
+    radii = np.array([shape_radii(contact, p["curved_radius_mm"] * MM, p["edge_radius_mm"] * MM,
                                    p["point_radius_mm"] * MM) for _, contact in trials])
     nominal = FingerPad(width=p["finger_width_mm"] * MM, stiffness=p["pad_stiffness_N_per_mm"] / MM,
                         stiffening=p["pad_stiffening_per_mm"] / MM, friction=p["friction"],

@@ -87,7 +87,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from softtip._core.config import NonNegativeNumber, PositiveNumber, Real, choice, instance, number, schema
+from softtip._core.config import Fraction, NonNegativeNumber, PositiveNumber, Real, choice, instance, schema
 from softtip.mechanics.viscoelastic import PronySeries, qlv_elastic_history, qlv_response
 
 MINDLIN_TANGENTIAL_RATIO = 2.0 / 3.0  # 2(1 − ν)/(2 − ν) at ν = 0.5: incompressible tissue
@@ -201,7 +201,7 @@ def lateral_outflow(volume, moment, centre, semi_axes, side_y, side, width, tip_
 
 # ---------------------------------------------------------------------------------------------- parameters
 
-Fraction = number("a number from 0 to 1", ge=0, le=1)
+Relaxation = instance(PronySeries, "a PronySeries")
 
 
 @schema(section="finger")
@@ -220,7 +220,7 @@ class FingerPad:
     stiffening: PositiveNumber = 1700.0
     friction: PositiveNumber = 0.9
     transmission: Fraction = 0.1
-    prony: instance(PronySeries, "a PronySeries") = PAD_RELAXATION
+    prony: Relaxation = PAD_RELAXATION
 
     # lengths as shares of the breadth (assumed, for a 15 mm index fingertip): the pad's radii of
     # curvature 7.5 and 12 mm, its distal free edge 9 mm ahead of the contact, a pulp 4 mm thick under
@@ -262,15 +262,17 @@ class FingerPad:
         """The gap's relative radii R'_x, R'_y (..., 2) for an object of principal radii (..., 2)."""
         return relative_radius(np.array([self.radius_x, self.radius_y]), object_radii)
 
-    def force(self, depth, radii=(np.inf, np.inf)):
-        """Instantaneous elastic force (N) at ``depth`` against an object of radii ``radii``."""
-        share = np.sqrt(np.prod(self.contact_radii(radii), axis=-1)) / self.mean_radius
-        return share * exponential_force(depth, self.stiffness, self.stiffening)
+    def share(self, object_radii) -> np.ndarray:
+        """R̄'/R̄ (...): the share of a flat plate's force an object of radii (..., 2) meets at one depth."""
+        return np.sqrt(np.prod(self.contact_radii(object_radii), axis=-1)) / self.mean_radius
 
-    def depth(self, force, radii=(np.inf, np.inf)):
+    def force(self, depth, object_radii=(np.inf, np.inf)):
+        """Instantaneous elastic force (N) at ``depth`` against an object of radii ``object_radii``."""
+        return self.share(object_radii) * exponential_force(depth, self.stiffness, self.stiffening)
+
+    def depth(self, force, object_radii=(np.inf, np.inf)):
         """The depth (m) at which :meth:`force` reaches ``force``."""
-        share = np.sqrt(np.prod(self.contact_radii(radii), axis=-1)) / self.mean_radius
-        return exponential_depth(np.asarray(force) / share, self.stiffness, self.stiffening)
+        return exponential_depth(np.asarray(force) / self.share(object_radii), self.stiffness, self.stiffening)
 
 
 @schema(section="ring")
@@ -319,8 +321,7 @@ def pad_response(times, intended, pad: FingerPad, mount: ChipMount, object_radii
     force, sliding = friction_limited(intended, pad.friction)
     elastic = qlv_elastic_history(times, force, pad.prony)
     normal = np.maximum(elastic[..., 2], 0.0)  # F ≥ 0 gives F_e ≥ 0: this only clears round-off
-    radii = pad.contact_radii(object_radii)
-    share = np.sqrt(np.prod(radii, axis=-1)) / pad.mean_radius
+    radii, share = pad.contact_radii(object_radii), pad.share(object_radii)
     depth = exponential_depth(normal / share, pad.stiffness, pad.stiffening)
     volume = indentation_volume(depth, radii[..., 0], radii[..., 1])
     area = contact_area(depth, radii[..., 0], radii[..., 1])
@@ -356,7 +357,7 @@ def chip_forces(times, skin, pad: FingerPad, mount: ChipMount) -> np.ndarray:
     return np.concatenate([shear, pressure[..., None]], axis=-1)
 
 
-def object_radii(shape: str, curved_radius: float, edge_radius: float, point_radius: float) -> tuple[float, float]:
+def shape_radii(shape: str, curved_radius: float, edge_radius: float, point_radius: float) -> tuple[float, float]:
     """Principal radii (across, along the finger; m) of each contact shape: a flat plate; a sphere
     (curved); a straight edge running across the finger, rounded to ``edge_radius``; a point, a
     hemispherical tip."""
