@@ -44,6 +44,7 @@ MOTIONS = ("palmar", "dorsal", "radial", "ulnar", "distal", "proximal", "combine
 TILT_AXES = {"radial": (1.0, 0.0), "ulnar": (-1.0, 0.0), "distal": (0.0, 1.0), "proximal": (0.0, -1.0)}
 PLACE_S = 0.5  # placing the finger on the object
 EDGE_S = 1.0  # quiet time after the tare and before the end
+MINIMUM_TRIAL_S = 5.0  # between the quiet start (up to 1.5 s) and end (1 s), room for a press
 
 
 @dataclass(frozen=True)

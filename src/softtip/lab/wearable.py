@@ -34,7 +34,7 @@ from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, Positive
                                   choice, expect, schema)
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
-from softtip.lab.human_force import MOTIONS, Effort, intended_force
+from softtip.lab.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.lab.realism import WearableRealism
 from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, scaled, shape_radii
 from softtip.mechanics.viscoelastic import PronySeries
@@ -86,6 +86,8 @@ class WearableParameters:
     def __post_init__(self) -> None:
         if self.simulation_rate_hz < 2 * self.rate_hz:
             raise Refusal("simulation_rate_hz", f"expected at least twice rate_hz = {self.rate_hz:g}")
+        if self.trial_s < MINIMUM_TRIAL_S:
+            raise Refusal("trial_s", f"expected at least {MINIMUM_TRIAL_S:g} s: a quiet tare, a press and a quiet end")
         if self.trial_s * self.rate_hz < 2:
             raise Refusal("trial_s", f"expected at least two samples at rate_hz = {self.rate_hz:g}")
         for key in ("motions", "contacts"):
@@ -129,7 +131,7 @@ class WearableDevice:
     @property
     def spec(self) -> dict:
         return {"name": self.name, "side": self.side, "sensor_offset_mm": self.offset_mm,
-                "ring_preload_N": self.preload_N, "chip": TACTILE_CHIP.to_dict(), "table": NANO17.to_dict()}
+                "ring_preload_N": self.preload_N}
 
 
 @dataclass
