@@ -299,6 +299,83 @@ def test_concat_refuses_different_declarations(grasps):
 
 
 # --------------------------------------------------------------------------
+# Channels of other sensors
+# --------------------------------------------------------------------------
+
+FORCE_CHANNELS = {"side_fx_N": "N", "side_fy_N": "N", "side_fz_N": "N"}
+
+
+def chip_trial(n: int = 4, **changes) -> dict:
+    return {"time_s": np.arange(n) / 10.0, **{name: np.linspace(0, k + 1, n) for k, name in enumerate(FORCE_CHANNELS)},
+            "fz_N": np.linspace(0, 2, n), **changes}
+
+
+def test_channels_of_another_sensor_keep_their_units_through_a_file(tmp_path):
+    writer = TrialWriter(FORCE_CHANNELS, {"fz_N": "N"}, {"participant": "1"}, METADATA)
+    writer.add(chip_trial(), {"participant": 0})
+    writer.add(chip_trial(6), {"participant": 1})
+    path = tmp_path / "wearable.parquet"
+    writer.write(path)
+    back = Dataset.read(path)
+    assert back.channels == tuple(FORCE_CHANNELS) and back.channel_units == FORCE_CHANNELS
+    np.testing.assert_array_equal(back.X(), writer.to_dataset().X())
+    # the document lists them as it always listed channels: name and unit, no new schema version
+    document = json.loads(pq.read_schema(path).metadata[b"softtip"])
+    assert document["schema_version"] == 1
+    assert document["channels"] == [{"name": name, "unit": "N"} for name in FORCE_CHANNELS]
+    assert back.select(trials=[1]).channel_units == FORCE_CHANNELS
+    assert concat([back, back], renumber_trials=True).channel_units == FORCE_CHANNELS
+
+
+def test_magnetic_channels_come_first_then_the_declared_ones_in_their_order():
+    columns = {"trial": [0, 0], "time_s": [0.0, 0.1], "side_fz_N": [1.0, 2.0], "s0_bz_uT": [0.0, 1.0],
+               "s0_bx_uT": [0.0, 0.0], "s0_by_uT": [0.0, 0.0], "side_fx_N": [0.0, 0.5]}
+    dataset = Dataset(columns, channel_units={"side_fz_N": "N", "side_fx_N": "N"})
+    assert dataset.channels == ("s0_bx_uT", "s0_by_uT", "s0_bz_uT", "side_fz_N", "side_fx_N")
+    assert dataset.channel_units["s0_bz_uT"] == "uT" and dataset.channel_units["side_fx_N"] == "N"
+    # an old dataset of Hall sensors declares nothing and reads as before
+    assert Dataset({k: v for k, v in columns.items() if not k.startswith("side")}).channel_units == dict.fromkeys(
+        ("s0_bx_uT", "s0_by_uT", "s0_bz_uT"), "uT")
+
+
+@pytest.mark.parametrize("build, message", [
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [0.0], "side_fz_N": [1.0]}),
+     "column 'side_fz_N' is neither a channel"),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "side_fz_N": [1.0]}), "no channel columns"),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0]}, channel_units={"side_fz_N": "N"}),
+     "missing column side_fz_N .declared as a channel."),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]}, channel_units={"s0_bz_uT": "mT"}),
+     "channels: s0_bz_uT .mT. is a magnetic channel, in uT"),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "side_fz_N": [1.0]}, labels={"side_fz_N": "N"},
+                     channel_units={"side_fz_N": "N"}), "side_fz_N is declared both as a channel and as a label"),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "side_fz_N": [1.0]}, channel_units={"side_fz_N": ""}),
+     "channels: side_fz_N has no unit"),
+    (lambda: Dataset({"trial": [0], "time_s": [0.0], "side_fz_N": [np.nan]}, channel_units={"side_fz_N": "N"}),
+     "column side_fz_N: row 0 is not finite"),
+    (lambda: TrialWriter({"side fz": "N"}), "channels: 'side fz' is not a valid column name"),
+])
+def test_declared_channels_are_checked_like_every_column(build, message):
+    with pytest.raises(DatasetError, match=message):
+        build()
+
+
+def test_concat_refuses_the_same_channel_in_another_unit():
+    one = Dataset({"trial": [0], "time_s": [0.0], "side_fz_N": [1.0]}, channel_units={"side_fz_N": "N"})
+    other = Dataset({"trial": [1], "time_s": [0.0], "side_fz_N": [1.0]}, channel_units={"side_fz_N": "mN"})
+    with pytest.raises(DatasetError, match="dataset 1 has channels {'side_fz_N': 'mN'}"):
+        concat([one, other])
+
+
+def test_a_file_declaring_a_magnetic_channel_in_another_unit_is_refused(tmp_path):
+    path = every_dtype().write(tmp_path / "trials.parquet")
+    document = json.loads(pq.read_schema(path).metadata[b"softtip"])
+    document["channels"][0]["unit"] = "mT"
+    rewrite(path, document)
+    with pytest.raises(DatasetError, match="metadata channels: s0_bx_uT .mT. is a magnetic channel, in uT"):
+        Dataset.read(path)
+
+
+# --------------------------------------------------------------------------
 # Splits
 # --------------------------------------------------------------------------
 

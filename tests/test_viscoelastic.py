@@ -1,7 +1,8 @@
 """Load histories and quasi-linear viscoelasticity against independent references.
 
 References: the relaxation function written out here, the closed-form QLV
-response to a constant-rate ramp, and the published definition of hysteresis
+response to a constant-rate ramp, the creep under a held force derived by hand
+from a one-term Prony series, and the published definition of hysteresis
 evaluated with np.interp on monotone branches.
 """
 
@@ -14,7 +15,7 @@ import pytest
 
 from softtip._core.signals import hysteresis_percent
 from softtip.mechanics.motion import Motion
-from softtip.mechanics.viscoelastic import PronySeries, prony_for_hysteresis, qlv_response
+from softtip.mechanics.viscoelastic import PronySeries, prony_for_hysteresis, qlv_elastic_history, qlv_response
 
 # A fingertip-like cycle: 3 mm at 0.25 mm/s, 1 s rest, back at 0.25 mm/s (12 + 1 + 12 s).
 FULL_DEPTH = 3e-3
@@ -101,6 +102,31 @@ def test_a_purely_elastic_series_returns_the_input():
     elastic = np.random.default_rng(3).normal(size=(40, 2, 3))
     for prony in (PronySeries((), ()), PronySeries((0.0, 0.0), (1.0, 5.0))):
         np.testing.assert_array_equal(qlv_response(times, elastic, prony), elastic)
+
+
+def test_a_held_force_creeps_by_the_prony_creep_function():
+    # G = g_inf + g e^{-t/τ}: in Laplace, F = s Ĝ F_e = (s + g_inf/τ)/(s + 1/τ) F_e, so a force step F0
+    # held from 0 needs F_e = F0 (s + 1/τ)/(s (s + g_inf/τ)) = (F0/g_inf)(1 - g e^{-g_inf t/τ}): the
+    # elastic response starts at F0 and creeps to F0/g_inf with the retardation time τ/g_inf
+    g, tau, force = 0.6, 1.4, 2.0
+    times = np.linspace(0.0, 10.0, 20001)
+    elastic = qlv_elastic_history(times, np.full(len(times), force), PronySeries((g,), (tau,)))
+    g_inf = 1 - g
+    creep = force / g_inf * (1 - g * np.exp(-g_inf * times / tau))
+    # the scheme takes F_e piecewise linear between samples: an O(Δ²) error on an exponential
+    np.testing.assert_allclose(elastic, creep, rtol=1e-6)
+
+
+def test_force_control_inverts_the_qlv_response_on_an_irregular_clock():
+    prony = PronySeries((0.25, 0.15, 0.2), (0.004, 0.07, 1.4))
+    rng = np.random.default_rng(0)
+    times = np.cumsum(rng.uniform(1e-3, 2e-2, 400))
+    force = np.abs(rng.normal(size=(400, 2, 3))).cumsum(axis=0)
+    elastic = qlv_elastic_history(times, force, prony)
+    np.testing.assert_allclose(qlv_response(times, elastic, prony), force, rtol=1e-12, atol=1e-12)
+    # and the other way round: the imposed elastic history is recovered from its response
+    np.testing.assert_allclose(qlv_elastic_history(times, qlv_response(times, force, prony), prony), force,
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_prony_series_is_validated():

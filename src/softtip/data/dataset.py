@@ -4,8 +4,10 @@ Columns, in this order:
 
 - ``trial`` (int64): the trial id; the rows of a trial are contiguous;
 - ``time_s`` (float64): time from the start of the trial, strictly increasing within it;
-- channels ``s{k}_b{x|y|z}_uT`` (float64, finite): the change of flux density of sensor k
-  from its baseline, in µT, in the order sensor, then axis;
+- channels (float64, finite): the magnetic ones, ``s{k}_b{x|y|z}_uT``, the change of flux density
+  of Hall sensor k from its baseline in µT, in the order sensor, then axis, recognised by their
+  names; then the channels of other sensors (a tactile chip's forces, say), declared with their
+  units, in the order declared;
 - labels: per-sample targets (forces, angles, contact states...), numeric or string;
 - conditions: per-trial constants (board angle, contact position, trained or not...),
   numeric, boolean or string.
@@ -15,6 +17,9 @@ for categories (string columns). The Parquet schema metadata holds one JSON docu
 ``softtip``: format name, schema version, the channel, label and condition lists with units,
 and the provenance (description, design, sensor settings, protocol, seed, softtip version,
 creation time). Nothing is pickled.
+
+Channels of other sensors need no new schema version: the document has always listed every
+channel with its unit; a version-1 file of magnetic channels reads as before.
 """
 
 from __future__ import annotations
@@ -173,7 +178,8 @@ def column_to_numpy(name: str, column: pa.ChunkedArray | pa.Array, *, row_word: 
 
 
 def _declared(units: Mapping[str, str] | None, role: str) -> dict[str, str]:
-    """Validated label or condition declarations: identifier names, each with a unit string."""
+    """Validated label, condition or channel declarations: identifier names, each with a unit string.
+    A magnetic channel's name is reserved for its channel, in µT."""
     if units is None:
         return {}
     if not isinstance(units, Mapping):
@@ -181,10 +187,12 @@ def _declared(units: Mapping[str, str] | None, role: str) -> dict[str, str]:
     for name, unit in units.items():
         if not isinstance(name, str) or not _NAME_PATTERN.fullmatch(name):
             raise DatasetError(f"{role}: {name!r} is not a valid column name (letters, digits, underscores)")
-        if name in (TRIAL, TIME) or is_channel(name):
+        if name in (TRIAL, TIME) or (is_channel(name) and role != "channels"):
             raise DatasetError(f"{role}: {name!r} is reserved for the trial id, the time or a channel")
         if not isinstance(unit, str) or not unit.strip():
             raise DatasetError(f"{role}: {name} has no unit (give a unit string; \"{DIMENSIONLESS}\" if dimensionless)")
+        if role == "channels" and is_channel(name) and unit != CHANNEL_UNIT:
+            raise DatasetError(f"channels: {name} [{unit}] is a magnetic channel, in {CHANNEL_UNIT}")
     return dict(units)
 
 
@@ -248,38 +256,46 @@ class Dataset:
     """Trials of samples: channels, labels and per-trial conditions; validated and read-only.
 
     ``columns`` maps names to 1-D arrays of one length: ``trial``, ``time_s``, every channel
-    (recognised by its name), and every declared label and condition. The stored columns are
-    copies, in canonical order, made read-only.
+    (a magnetic one recognised by its name, any other declared in ``channel_units``: name -> unit),
+    and every declared label and condition. The stored columns are copies, in canonical order, made
+    read-only; ``channel_units`` then holds every channel with its unit, in storage order.
     """
 
     columns: Mapping[str, Any]
     labels: Mapping[str, str] = field(default_factory=dict)
     conditions: Mapping[str, str] = field(default_factory=dict)
     metadata: DatasetMetadata = field(default_factory=DatasetMetadata)
+    channel_units: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         labels = _declared(self.labels, "labels")
         conditions = _declared(self.conditions, "conditions")
+        declared = _declared(self.channel_units, "channels")
         both = sorted(set(labels) & set(conditions))
         if both:
             raise DatasetError(f"{both[0]} is declared both as a label and as a condition")
+        twice = [name for name in declared if name in labels or name in conditions]
+        if twice:
+            raise DatasetError(f"{twice[0]} is declared both as a channel and as a label or condition")
         if not isinstance(self.metadata, DatasetMetadata):
             raise DatasetError(f"metadata: expected a DatasetMetadata, got {type(self.metadata).__name__}")
         given = dict(self.columns)
         for required in (TRIAL, TIME):
             if required not in given:
                 raise DatasetError(f"missing column {required}")
-        channels = sorted((name for name in given if isinstance(name, str) and is_channel(name)), key=channel_order)
+        magnetic = sorted((name for name in given if isinstance(name, str) and is_channel(name)), key=channel_order)
+        channels = {**{name: CHANNEL_UNIT for name in magnetic},
+                    **{name: unit for name, unit in declared.items() if not is_channel(name)}}
         if not channels:
-            raise DatasetError("no channel columns (expected names like s0_bx_uT)")
+            raise DatasetError("no channel columns (expected names like s0_bx_uT, or channels declared with units)")
         for name in given:
             if name not in (TRIAL, TIME) and name not in labels and name not in conditions and name not in channels:
-                raise DatasetError(f"column {name!r} is neither a channel (s<k>_b<x|y|z>_uT) "
-                                   "nor a declared label or condition")
-        for name in (*labels, *conditions):
-            if name not in given:
-                role = "label" if name in labels else "condition"
-                raise DatasetError(f"missing column {name} (declared as a {role})")
+                raise DatasetError(f"column {name!r} is neither a channel (s<k>_b<x|y|z>_uT, or declared with its "
+                                   "unit) nor a declared label or condition")
+        for role, names in (("channel", declared), ("label", labels), ("condition", conditions)):
+            for name in names:
+                if name not in given:
+                    raise DatasetError(f"missing column {name} (declared as a {role})")
 
         columns = {TRIAL: _trial_column(given[TRIAL]), TIME: _float_column(TIME, given[TIME])}
         for name in channels:
@@ -303,6 +319,7 @@ class Dataset:
         object.__setattr__(self, "columns", columns)
         object.__setattr__(self, "labels", labels)
         object.__setattr__(self, "conditions", conditions)
+        object.__setattr__(self, "channel_units", channels)
 
     # -- structure --------------------------------------------------------
 
@@ -315,7 +332,7 @@ class Dataset:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        return tuple(name for name in self.columns if is_channel(name))
+        return tuple(self.channel_units)
 
     @property
     def groups(self) -> np.ndarray:
@@ -402,7 +419,7 @@ class Dataset:
         else:
             raise DatasetError(f"select: rows must be a boolean mask or 1-D integer indices, got {rows.dtype}")
         return Dataset({name: values[rows] for name, values in self.columns.items()},
-                       self.labels, self.conditions, self.metadata)
+                       self.labels, self.conditions, self.metadata, self.channel_units)
 
     # -- files ------------------------------------------------------------
 
@@ -412,7 +429,7 @@ class Dataset:
             "format": FORMAT,
             "schema_version": SCHEMA_VERSION,
             "description": meta.description,
-            "channels": [{"name": name, "unit": CHANNEL_UNIT} for name in self.channels],
+            "channels": [{"name": name, "unit": unit} for name, unit in self.channel_units.items()],
             "labels": [{"name": name, "unit": unit} for name, unit in self.labels.items()],
             "conditions": [{"name": name, "unit": unit} for name, unit in self.conditions.items()],
             "design": meta.design,
@@ -468,7 +485,7 @@ class Dataset:
         except (pa.ArrowException, OSError) as problem:
             raise DatasetError(f"unreadable Parquet data ({_first_line(problem)})") from None
         columns = {name: column_to_numpy(name, table.column(name)) for name in declared}
-        return cls(columns, document["labels"], document["conditions"], document["metadata"])
+        return cls(columns, document["labels"], document["conditions"], document["metadata"], document["channels"])
 
 
 def _first_line(problem: Exception) -> str:
@@ -499,9 +516,10 @@ def _parse_document(raw: bytes) -> dict:
     if unknown:
         raise DatasetError(f"unknown metadata field {unknown[0]!r}")
     declared = {key: _named_units(document[key], key) for key in ("channels", "labels", "conditions")}
-    for name, unit in declared["channels"].items():
-        if not is_channel(name) or unit != CHANNEL_UNIT:
-            raise DatasetError(f"metadata channels: {name} [{unit}] is not a channel in {CHANNEL_UNIT}")
+    try:
+        _declared(declared["channels"], "channels")
+    except DatasetError as problem:
+        raise DatasetError(f"metadata {problem}") from None
     metadata = DatasetMetadata(**{key: document[key] for key in ("description", "design", "sensor_settings",
                                                                  "protocol", "seed", "softtip_version",
                                                                  "created_utc")})
@@ -556,9 +574,9 @@ def concat(datasets: Iterable[Dataset], *, renumber_trials: bool = False) -> Dat
         raise DatasetError("concat: no datasets given")
     first = parts[0]
     for index, part in enumerate(parts[1:], start=1):
-        for what in ("channels", "labels", "conditions"):
+        for what in ("channel_units", "labels", "conditions"):
             if getattr(part, what) != getattr(first, what):
-                raise DatasetError(f"concat: dataset {index} has {what} {getattr(part, what)}, "
+                raise DatasetError(f"concat: dataset {index} has {what.replace('_units', 's')} {getattr(part, what)}, "
                                    f"dataset 0 has {getattr(first, what)}")
         for what in ("design", "sensor_settings"):
             if getattr(part.metadata, what) != getattr(first.metadata, what):
@@ -579,7 +597,7 @@ def concat(datasets: Iterable[Dataset], *, renumber_trials: bool = False) -> Dat
         trial = np.concatenate([part.groups for part in parts])
     columns = {name: np.concatenate([part.columns[name] for part in parts]) for name in first.columns if name != TRIAL}
     return Dataset({TRIAL: trial, **columns}, first.labels, first.conditions,
-                   _merged_metadata([part.metadata for part in parts]))
+                   _merged_metadata([part.metadata for part in parts]), first.channel_units)
 
 
 class TrialWriter:
@@ -588,14 +606,20 @@ class TrialWriter:
     Every trial is checked when it is added, so an error names the trial at fault.
     """
 
-    def __init__(self, channels: int | Sequence[str], labels: Mapping[str, str] | None = None,
+    def __init__(self, channels: int | Sequence[str] | Mapping[str, str], labels: Mapping[str, str] | None = None,
                  conditions: Mapping[str, str] | None = None, metadata: DatasetMetadata | None = None):
-        self.channels = channel_names(channels) if isinstance(channels, numbers.Integral) else tuple(channels)
-        for name in self.channels:
-            if not isinstance(name, str) or not is_channel(name):
-                raise DatasetError(f"channels: {name!r} is not a channel name (s<k>_b<x|y|z>_uT)")
-        if len(set(self.channels)) != len(self.channels) or not self.channels:
+        if isinstance(channels, Mapping):  # any sensor's channels, each with its unit
+            self.channel_units = _declared(channels, "channels")
+            names = tuple(self.channel_units)
+        else:  # magnetic channels: a number of 3-axis Hall sensors, or their channel names
+            names = channel_names(channels) if isinstance(channels, numbers.Integral) else tuple(channels)
+            for name in names:
+                if not isinstance(name, str) or not is_channel(name):
+                    raise DatasetError(f"channels: {name!r} is not a channel name (s<k>_b<x|y|z>_uT)")
+            self.channel_units = dict.fromkeys(names, CHANNEL_UNIT)
+        if len(set(names)) != len(names) or not names:
             raise DatasetError("channels: expected distinct channel names, at least one")
+        self.channels = names
         self.labels = _declared(labels, "labels")
         self.conditions = _declared(conditions, "conditions")
         self.metadata = DatasetMetadata() if metadata is None else metadata
@@ -633,7 +657,7 @@ class TrialWriter:
                 raise DatasetError(f"trial {trial}: condition {name} must be one value, got shape {np.shape(value)}")
             columns[name] = np.full(n, value)
         try:
-            part = Dataset(columns, self.labels, self.conditions, self.metadata)
+            part = Dataset(columns, self.labels, self.conditions, self.metadata, self.channel_units)
         except DatasetError as problem:
             raise DatasetError(f"trial {trial}: {problem}") from None
         self._trials.append(part)

@@ -1,8 +1,11 @@
 """Protocol files: a validated TOML per experiment, reproducible from the file and its seed.
 
-A protocol file names the experiment, the design, the seed, and overrides any of the protocol's
-parameters (every key and its default is in :data:`DEFAULTS`; the shipped files under
-``softtip/lab/protocols/`` list them all, with units in their names)::
+Each protocol runs on a bench (:data:`BENCHES`): the magnetic fingertip's (S1: a design's
+mechanics on the twin) or the wearable's (S2: a person's finger with a chip on the side of the
+nail, :mod:`softtip.lab.wearable`). A fingertip protocol file names the experiment, the design, the
+seed, and overrides any of the protocol's parameters (every key and its default is in
+:data:`DEFAULTS`; the shipped files under ``softtip/lab/protocols/`` list them all, with units in
+their names)::
 
     protocol = "pushing"
     design = "cylindrical-A"     # a shipped design or a design TOML file
@@ -16,6 +19,10 @@ parameters (every key and its default is in :data:`DEFAULTS`; the shipped files 
 
     [viscoelastic]               # the material's relaxation, set from one published cycle
     rest_s = 1.0
+
+A wearable protocol file has no design: its ``[parameters]``, ``[realism]`` and ``[viscoelastic]``
+are the wearable bench's (:class:`~softtip.lab.wearable.WearableParameters`,
+:class:`~softtip.lab.realism.WearableRealism`, :class:`~softtip.lab.wearable.PadViscoelastic`).
 """
 
 from __future__ import annotations
@@ -39,8 +46,8 @@ from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.data import Dataset
 from softtip.design.model import Design, load_design
-from softtip.lab import experiments
-from softtip.lab.realism import Realism
+from softtip.lab import experiments, wearable
+from softtip.lab.realism import Realism, WearableRealism
 from softtip.published import published_table
 from softtip.twin.influence import InfluenceEngine
 
@@ -75,12 +82,18 @@ DEFAULTS: dict[str, dict[str, Any]] = {
                  "untrained_offsets_mm": [-5.0, 5.0], "grip_depth_mm": 1.0, "part_thickness_mm": 3.0,
                  "clip_spacing_mm": 60.0, "part_depth_mm": 50.0, "travel_mm": 1.5, "speed_mm_s": 5.0,
                  "seat_compliance_mm_per_N": 1.0, "rim_compliance_mm_per_N": 0.2},
+    "wearable": asdict(wearable.WearableParameters()),
 }
 RUNNERS: dict[str, Callable] = {
     "pushing": experiments.pushing, "force3": experiments.force3, "hysteresis": experiments.hysteresis,
     "grasp-two": experiments.grasp_two, "grasp-positions": experiments.grasp_positions,
     "contact-states": experiments.contact_states, "inverter": experiments.inverter,
+    "wearable": wearable.wearable,
 }
+FINGERTIP, WEARABLE = "fingertip", "wearable"
+BENCHES: dict[str, str] = {name: WEARABLE if name == "wearable" else FINGERTIP for name in RUNNERS}
+# protocols whose [parameters] table has a schema of its own rather than one derived from DEFAULTS
+_PARAMETER_SCHEMAS: dict[str, type] = {"wearable": wearable.WearableParameters}
 
 
 PUBLISHED_HYSTERESIS_PERCENT = published_table("hysteresis").value("hysteresis", "calibration cycle").low
@@ -100,11 +113,15 @@ class Viscoelastic:
 @dataclass
 class Protocol:
     name: str
-    design: Design
+    design: Design | wearable.WearableDevice  # what the bench is built from
     seed: int
     parameters: dict[str, Any]
-    realism: Realism = field(default_factory=Realism)
-    viscoelastic: dict[str, float] = field(default_factory=lambda: asdict(Viscoelastic()))
+    realism: Realism | WearableRealism = field(default_factory=Realism)
+    viscoelastic: dict[str, Any] = field(default_factory=lambda: asdict(Viscoelastic()))
+
+    @property
+    def bench(self) -> str:
+        return BENCHES[self.name]
 
     def to_dict(self) -> dict:
         return {"protocol": self.name, "design": self.design.name, "seed": self.seed, "parameters": self.parameters,
@@ -123,6 +140,15 @@ class _ProtocolFile:
     parameters: dict[str, Any] = field(default_factory=dict)  # checked against the protocol's own
     realism: Realism = Realism()
     viscoelastic: Viscoelastic = Viscoelastic()
+
+
+@schema
+class _WearableProtocolFile:
+    protocol: choice(*sorted(name for name, bench in BENCHES.items() if bench == WEARABLE))
+    seed: integer() = 0
+    parameters: dict[str, Any] = field(default_factory=dict)  # checked against WearableParameters
+    realism: WearableRealism = WearableRealism()
+    viscoelastic: wearable.PadViscoelastic = wearable.PadViscoelastic()
 
 
 PointsMM = Annotated[list[Annotated[list[Real], Field(min_length=2, max_length=2)]], Field(min_length=1),
@@ -144,12 +170,20 @@ def _parameter_type(key: str, default: Any) -> Any:
 @functools.cache
 def _parameters_schema(name: str) -> type:
     """The schema of the ``[parameters]`` table of protocol ``name``: every key of :data:`DEFAULTS`."""
+    if name in _PARAMETER_SCHEMAS:
+        return _PARAMETER_SCHEMAS[name]
     fields = [(key, _parameter_type(key, default), field(default_factory=functools.partial(copy.deepcopy, default)))
               for key, default in DEFAULTS[name].items()]
     return schema(dataclasses.make_dataclass("ProtocolParameters", fields, frozen=True))
 
 
 def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Protocol:
+    name = table.get("protocol") if isinstance(table, dict) else None
+    if isinstance(name, str) and BENCHES.get(name) == WEARABLE:
+        top = parse(_WearableProtocolFile, table, source)
+        parameters = asdict(parse(_parameters_schema(top.protocol), top.parameters, source, "parameters"))
+        return Protocol(name=top.protocol, design=wearable.WearableDevice.from_parameters(parameters), seed=top.seed,
+                        parameters=parameters, realism=top.realism, viscoelastic=asdict(top.viscoelastic))
     top = parse(_ProtocolFile, table, source)
     try:
         design = load_design(top.design if base is None or not (base / top.design).is_file() else base / top.design)
@@ -182,6 +216,8 @@ def fingertip_for(design: Design, parameters: dict, progress: Progress = SILENT)
 
 def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Dataset, dict]:
     """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage."""
+    if protocol.bench == WEARABLE:
+        return _run_wearable(protocol, progress)
     timings = {}
     start = time.perf_counter()
     fingertip = fingertip_for(protocol.design, protocol.parameters, progress)
@@ -200,3 +236,15 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Datas
                                                      "realism": protocol.realism.to_dict()}, protocol.seed)
     timings["trials_s"] = time.perf_counter() - start
     return dataset, timings
+
+
+def _run_wearable(protocol: Protocol, progress: Progress) -> tuple[Dataset, dict]:
+    start = time.perf_counter()
+    p = protocol.parameters
+    with progress.task(f"{protocol.name}: {p['participants']} participants x {p['runs']} runs on {protocol.design.name}"):
+        prony = wearable.PadViscoelastic(**protocol.viscoelastic).prony()
+        bench = wearable.WearableBench(prony=prony, realism=protocol.realism,
+                                       rng=np.random.default_rng(protocol.seed), rate_hz=p["rate_hz"])
+        dataset = RUNNERS[protocol.name](bench, {**p, "viscoelastic": protocol.viscoelastic,
+                                                 "realism": protocol.realism.to_dict()}, protocol.seed)
+    return dataset, {"trials_s": time.perf_counter() - start}

@@ -20,11 +20,19 @@ instantly, while the force on the indenter relaxes. Sensor output plotted
 against force then traces a loop; :func:`softtip._core.signals.hysteresis_percent`
 measures it and :func:`prony_for_hysteresis` calibrates G to a measured value.
 
+Force control. When the force is imposed (a person pressing with a chosen force)
+the deformation creeps instead: :func:`qlv_elastic_history` inverts the same
+discrete hereditary operator exactly, giving the elastic response F_e (and so,
+through the elastic law, the deformation) whose QLV response is the imposed
+force. For a force step F_0 held from t = 0 and one Prony term it is Fung's creep
+of the reduced relaxation function, F_e(t) = (F_0/g_inf)(1 − g e^{−g_inf t/τ}):
+the retardation time is τ/g_inf, longer than the relaxation time.
+
 Limits. (1) A real elastomer's bulk and shear moduli relax differently, so its
 Poisson's ratio drifts and the deformation under a held indenter creeps a
 little; the sensor output's own drift is not modelled. (2) Under force control
-(a constant load) the deformation creeps by the creep function, which QLV of
-the force does not give here. (3) On unloading, QLV predicts a negative (pulling)
+the creep follows from QLV of the force (above), with the same single relaxation
+function for loading and unloading. (3) On unloading, QLV predicts a negative (pulling)
 normal force near zero depth: a contact without adhesion lets go instead (the
 load cell reads 0; :func:`prony_for_hysteresis` takes max(F, 0)), and the
 surface then lags the indenter, so the deformation no longer follows the motion.
@@ -91,22 +99,8 @@ def qlv_response(times: np.ndarray, elastic: np.ndarray, prony: PronySeries) -> 
     so the result depends on the sample rate only through the linear
     interpolation of F_e. O(N·K) for K terms; vectorised over trailing axes.
     """
-    times = np.asarray(times, dtype=float)
     elastic = np.asarray(elastic, dtype=float)
-    if times.ndim != 1 or len(times) == 0:
-        raise ValueError(f"times has shape {times.shape}: expected a non-empty 1-D array")
-    if elastic.shape[:1] != times.shape:
-        raise ValueError(f"elastic has shape {elastic.shape}: expected ({len(times)}, ...) to match times")
-    steps = np.diff(times)
-    if not np.all(steps > 0):
-        raise ValueError("times: expected strictly increasing sample times")
-
-    trailing = (1,) * (elastic.ndim - 1)
-    g = np.array(prony.g).reshape(-1, *trailing)  # (K, 1, ...) broadcasts over the trailing axes
-    ratio = steps[:, None] / np.array(prony.tau)  # (N-1, K), Δ/τ
-    decay = np.exp(-ratio).reshape(len(steps), -1, *trailing)
-    # (τ/Δ)(1 − e^{−Δ/τ}) by expm1: exact to round-off even when Δ ≪ τ
-    gain = g * (-np.expm1(-ratio) / ratio).reshape(len(steps), -1, *trailing)
+    g, decay, gain = _step_coefficients(times, elastic, prony, "elastic")
     increments = np.diff(elastic, axis=0)
 
     response = np.empty_like(elastic)
@@ -116,6 +110,52 @@ def qlv_response(times: np.ndarray, elastic: np.ndarray, prony: PronySeries) -> 
         memory = decay[n] * memory + gain[n] * increment
         response[n + 1] = prony.g_inf * elastic[n + 1] + memory.sum(axis=0)
     return response
+
+
+def qlv_elastic_history(times: np.ndarray, response: np.ndarray, prony: PronySeries) -> np.ndarray:
+    """The elastic response history F_e (N, ...) whose viscoelastic response
+    (:func:`qlv_response`) is ``response``, sampled at ``times``: force control.
+
+    The exact inverse of :func:`qlv_response`'s recursion: at every step the new
+    sample enters F linearly, F(t + Δ) = (g_inf + Σ_k gain_k) F_e(t + Δ) + (what the
+    memory already holds), so it is solved for in closed form. Imposing a force
+    history and mapping F_e through the elastic law gives the creeping deformation.
+    """
+    response = np.asarray(response, dtype=float)
+    g, decay, gain = _step_coefficients(times, response, prony, "response")
+    # every step's instantaneous factor g_inf + Σ gain > 0, since g_inf > 0 and gains >= 0
+    instantaneous = prony.g_inf + gain.sum(axis=1)
+
+    elastic = np.empty_like(response)
+    elastic[0] = response[0]  # a step at times[0]: G(0) = 1
+    memory = g * elastic[0]
+    for n in range(len(response) - 1):
+        carried = decay[n] * memory - gain[n] * elastic[n]
+        elastic[n + 1] = (response[n + 1] - carried.sum(axis=0)) / instantaneous[n]
+        memory = carried + gain[n] * elastic[n + 1]
+    return elastic
+
+
+def _step_coefficients(times: np.ndarray, values: np.ndarray, prony: PronySeries,
+                       name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The weights g (K, 1, ...) and, per step Δ of ``times``, each term's decay e^{−Δ/τ_k} and
+    gain g_k (τ_k/Δ)(1 − e^{−Δ/τ_k}), both (N-1, K, 1, ...), shaped to broadcast over the
+    trailing axes of ``values`` (N, ...)."""
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1 or len(times) == 0:
+        raise ValueError(f"times has shape {times.shape}: expected a non-empty 1-D array")
+    if values.shape[:1] != times.shape:
+        raise ValueError(f"{name} has shape {values.shape}: expected ({len(times)}, ...) to match times")
+    steps = np.diff(times)
+    if not np.all(steps > 0):
+        raise ValueError("times: expected strictly increasing sample times")
+    trailing = (1,) * (values.ndim - 1)
+    g = np.array(prony.g).reshape(-1, *trailing)  # (K, 1, ...) broadcasts over the trailing axes
+    ratio = steps[:, None] / np.array(prony.tau)  # (N-1, K), Δ/τ
+    decay = np.exp(-ratio).reshape(len(steps), -1, *trailing)
+    # (τ/Δ)(1 − e^{−Δ/τ}) by expm1: exact to round-off even when Δ ≪ τ
+    gain = g * (-np.expm1(-ratio) / ratio).reshape(len(steps), -1, *trailing)
+    return g, decay, gain
 
 
 def prony_for_hysteresis(

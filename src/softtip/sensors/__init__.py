@@ -1,5 +1,7 @@
-"""Sensor models: the MLX90393 3-axis Hall magnetometer."""
+"""Sensor models: the MLX90393 3-axis Hall magnetometer, and 3-axis force sensors (S2's tactile chip
+on the side of the nail and the Nano17 under the table)."""
 
+from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, ForceSensorSpec, read_forces
 from softtip.sensors.mlx90393 import (
     MLX90393,
     MLX90393Settings,
@@ -14,10 +16,14 @@ from softtip.sensors.mlx90393 import (
 __all__ = [
     "MLX90393",
     "MLX90393Settings",
+    "NANO17",
+    "TACTILE_CHIP",
+    "ForceSensorSpec",
     "averaging_count",
     "conversion_time_s",
     "full_scale_uT",
     "lsb_uT",
     "max_output_rate_hz",
     "noise_rms_uT",
+    "read_forces",
 ]

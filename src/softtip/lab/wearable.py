@@ -1,0 +1,200 @@
+"""S2's calibration protocol on the wearable twin: participants press a table force sensor while the
+chip on the side of their nail and the table are recorded together, unfiltered.
+
+Per participant (a finger of their own: breadth, pad stiffness, friction), per run (the ring
+re-seated: its preload and the chip's place along the nail change), the seven trials of
+:mod:`softtip.lab.human_force` on every contact shape of the protocol. The history of each trial is
+simulated on a fine grid from the finger's placement ``lead_in_s`` before the recording, so the
+pad's creep from placing it carries into the trial; both sensors then sample it at ``rate_hz``.
+Every trial's first sample is its tare: subtracted from its readings and kept as a condition. After
+each seating, the chip's pressure with the finger in the air (its static offset: the ring's preload)
+is read once and kept as the run's condition ``side_air_fz_N``.
+
+One dataset holds the whole protocol, with participant, run, motion and contact as conditions: the
+study fits per participant (select a participant), splits by trial (a motion, a run) or by time
+block within trials (``time_s``), and compares contact shapes, from one file with one provenance.
+
+Channels: ``side_fx_N`` (the chip's distal shear), ``side_fy_N`` (dorsal shear), ``side_fz_N``
+(pressure). Labels: ``fx_N``, ``fy_N``, ``fz_N`` (the table sensor, in its own axes), ``cop_x_mm``,
+``cop_y_mm`` (the twin's true centre of force on the pad, from the pad's nominal contact point,
+radial and distal; NaN when the pad is off the object: a 3-axis table sensor could not measure it),
+``sliding`` (the finger slides on the object).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field
+
+from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
+                                  choice, expect, schema)
+from softtip._core.units import MM
+from softtip.data import Dataset, DatasetMetadata, TrialWriter
+from softtip.lab.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
+from softtip.lab.realism import WearableRealism
+from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, scaled, shape_radii
+from softtip.mechanics.viscoelastic import PronySeries
+from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
+from softtip.twin.wearable import WearableTwin
+
+AXES = ("x", "y", "z")
+CHANNELS = {f"side_f{axis}_N": "N" for axis in AXES}
+LABELS = {**{f"f{axis}_N": "N" for axis in AXES}, "cop_x_mm": "mm", "cop_y_mm": "mm", "sliding": "1"}
+CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "side_air_fz_N": "N",
+              **{f"side_tare_f{axis}_N": "N" for axis in AXES}, **{f"table_tare_f{axis}_N": "N" for axis in AXES}}
+
+Motions = Annotated[list[choice(*MOTIONS)], Field(min_length=1), expect(f"a non-empty list of: {', '.join(MOTIONS)}")]
+Contacts = Annotated[list[choice(*CONTACT_SHAPES)], Field(min_length=1),
+                     expect(f"a non-empty list of: {', '.join(CONTACT_SHAPES)}")]
+
+
+@schema(section="parameters")
+class WearableParameters:
+    """The ``[parameters]`` table of the wearable protocol (S2; units in the names)."""
+
+    rate_hz: PositiveNumber = 10.0  # both sensors, unfiltered
+    simulation_rate_hz: PositiveNumber = 100.0  # the grid the continuous history is simulated on
+    participants: PositiveInteger = 3
+    runs: PositiveInteger = 3
+    motions: Motions = field(default_factory=lambda: list(MOTIONS))
+    trial_s: PositiveNumber = 15.0
+    lead_in_s: NonNegativeNumber = 5.0  # from placing the finger to the start of the recording
+    contacts: Contacts = field(default_factory=lambda: ["flat"])
+    curved_radius_mm: PositiveNumber = 20.0  # a sphere
+    edge_radius_mm: PositiveNumber = 1.0  # a straight edge across the finger, rounded
+    point_radius_mm: PositiveNumber = 1.0  # a hemispherical tip
+    press_peak_N: PositiveNumber = 4.0
+    rest_N: PositiveNumber = 0.5
+    dorsal_hold_N: PositiveNumber = 2.5
+    tilt_normal_N: PositiveNumber = 3.0
+    tangential_effort: PositiveNumber = 1.0  # tilts reach up to 1.1 x this share of the friction limit
+    normal_coupling: NonNegativeNumber = 0.3
+    lean_share: Fraction = 0.5
+    finger_width_mm: PositiveNumber = 15.0
+    pad_stiffness_N_per_mm: PositiveNumber = 0.33
+    pad_stiffening_per_mm: PositiveNumber = 1.7
+    friction: PositiveNumber = 0.9
+    nail_fold_transmission: Fraction = 0.1
+    sensor_side: choice(*SIDES) = "radial"
+    sensor_offset_mm: Real = -3.0  # along the finger from the pad's contact point, distal > 0
+    ring_preload_N: NonNegativeNumber = 0.5
+
+    def __post_init__(self) -> None:
+        if self.simulation_rate_hz < 2 * self.rate_hz:
+            raise Refusal("simulation_rate_hz", f"expected at least twice rate_hz = {self.rate_hz:g}")
+        if self.trial_s < MINIMUM_TRIAL_S:
+            raise Refusal("trial_s", f"expected at least {MINIMUM_TRIAL_S:g} s: a quiet tare, a press and a quiet end")
+        if self.trial_s * self.rate_hz < 2:
+            raise Refusal("trial_s", f"expected at least two samples at rate_hz = {self.rate_hz:g}")
+        for key in ("motions", "contacts"):
+            values = getattr(self, key)
+            if len(set(values)) != len(values):
+                raise Refusal(key, "expected each entry once")
+
+
+@schema(section="viscoelastic")
+class PadViscoelastic:
+    """The finger tissue's reduced relaxation function: Prony weights ``g`` and times ``tau_s``
+    (Pawluk & Howe 1999's time constants; the weights are assumed, see softtip.mechanics.fingerpad)."""
+
+    g: Numbers = field(default_factory=lambda: [0.25, 0.15, 0.2])
+    tau_s: Numbers = field(default_factory=lambda: [0.004, 0.07, 1.4])
+
+    def __post_init__(self) -> None:
+        try:
+            self.prony()
+        except ValueError as error:
+            raise Refusal("g" if "prony.g" in str(error) else "tau_s", str(error).split(": ", 1)[-1]) from None
+
+    def prony(self) -> PronySeries:
+        return PronySeries(tuple(self.g), tuple(self.tau_s))
+
+
+@dataclass(frozen=True)
+class WearableDevice:
+    """What the wearable protocol records with: the ring holding the chip, and the table sensor."""
+
+    name: str
+    side: str
+    offset_mm: float
+    preload_N: float
+
+    @classmethod
+    def from_parameters(cls, p: dict) -> "WearableDevice":
+        return cls(name=f"nail-ring-{p['sensor_side']}", side=p["sensor_side"], offset_mm=p["sensor_offset_mm"],
+                   preload_N=p["ring_preload_N"])
+
+    @property
+    def spec(self) -> dict:
+        return {"name": self.name, "side": self.side, "sensor_offset_mm": self.offset_mm,
+                "ring_preload_N": self.preload_N}
+
+
+@dataclass
+class WearableBench:
+    """What the wearable protocol needs: the tissue's relaxation, the realism and a seeded stream."""
+
+    prony: PronySeries
+    realism: WearableRealism
+    rng: np.random.Generator
+    rate_hz: float
+
+    def scatter(self, sd: float, size=None):
+        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
+
+
+def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
+    """S2's calibration protocol: participants x runs x (contacts x motions) trials, one dataset."""
+    realism, rng = bench.realism, bench.rng
+    device = WearableDevice.from_parameters(p)
+    writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
+        description="wearable fingertip force: side-of-nail chip and table force sensor", design=device.spec,
+        sensor_settings={"chip": TACTILE_CHIP.to_dict(), "table": NANO17.to_dict()}, protocol=p, seed=seed))
+    times = np.arange(-p["lead_in_s"] * p["simulation_rate_hz"], p["trial_s"] * p["simulation_rate_hz"] + 1) \
+        / p["simulation_rate_hz"]
+    instants = np.arange(round(p["trial_s"] * p["rate_hz"])) / p["rate_hz"]
+    trials = [(motion, contact) for contact in p["contacts"] for motion in p["motions"]]
+    radii = np.array([shape_radii(contact, p["curved_radius_mm"] * MM, p["edge_radius_mm"] * MM,
+                                   p["point_radius_mm"] * MM) for _, contact in trials])
+    nominal = FingerPad(width=p["finger_width_mm"] * MM, stiffness=p["pad_stiffness_N_per_mm"] / MM,
+                        stiffening=p["pad_stiffening_per_mm"] / MM, friction=p["friction"],
+                        transmission=p["nail_fold_transmission"], prony=bench.prony)
+    effort = Effort(press_peak=p["press_peak_N"], rest=p["rest_N"], dorsal_hold=p["dorsal_hold_N"],
+                    tilt_normal=p["tilt_normal_N"], tangential_effort=p["tangential_effort"],
+                    friction_sense=p["friction"], normal_coupling=p["normal_coupling"],
+                    cross_talk=realism.cross_talk, tremor=realism.force_tremor)
+    for participant in range(p["participants"]):
+        finger = scaled(nominal, (p["finger_width_mm"] + bench.scatter(realism.finger_width_sd_mm)) * MM,
+                        math.exp(bench.scatter(realism.pad_stiffness_sd)),
+                        max(p["friction"] + bench.scatter(realism.friction_sd), 0.3))
+        for run in range(p["runs"]):
+            mount = ChipMount(side=p["sensor_side"],
+                              position_y=(p["sensor_offset_mm"] + bench.scatter(realism.sensor_position_sd_mm)) * MM,
+                              preload=max(p["ring_preload_N"] * (1 + bench.scatter(realism.ring_preload_sd)), 0.0))
+            noise = rng if realism.noise else None
+            air = read_forces(np.array([0.0, 0.0, mount.preload]), TACTILE_CHIP, noise)[0][2]
+            skew = rng.uniform(-1, 1) * realism.stream_skew_ms / 1000  # s
+            intended = np.stack([intended_force(motion, times, p["trial_s"], rng, effort) for motion, _ in trials],
+                                axis=1)
+            rest = bench.scatter(realism.placement_sd_mm * MM, (len(trials), 2))
+            yaw = np.radians(bench.scatter(realism.finger_yaw_sd_deg, len(trials)))
+            twin = WearableTwin(finger, mount)
+            response = twin.respond(times, intended, radii, rest, p["lean_share"])
+            read = twin.read(times, response, instants, noise, skew, yaw)
+            for k, (motion, contact) in enumerate(trials):
+                chip, table = read.chip[:, k], read.table[:, k]
+                writer.add({"time_s": instants,
+                            **{f"side_f{axis}_N": chip[:, a] - chip[0, a] for a, axis in enumerate(AXES)},
+                            **{f"f{axis}_N": table[:, a] - table[0, a] for a, axis in enumerate(AXES)},
+                            "cop_x_mm": read.centre[:, k, 0] / MM, "cop_y_mm": read.centre[:, k, 1] / MM,
+                            "sliding": read.sliding[:, k]},
+                           {"participant": participant, "run": run, "motion": motion, "contact": contact,
+                            "side_air_fz_N": air,
+                            **{f"side_tare_f{axis}_N": chip[0, a] for a, axis in enumerate(AXES)},
+                            **{f"table_tare_f{axis}_N": table[0, a] for a, axis in enumerate(AXES)}})
+    return writer.to_dataset()
+
