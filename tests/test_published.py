@@ -53,15 +53,20 @@ def _toy(**changes) -> PublishedTable:
 def test_verdicts_follow_the_stated_tolerance():
     toy = _toy()
     number, bound, band = toy.cells[0]
-    assert [toy.verdict(v, number) for v in (1.0, 4.0, 0.99, 4.01, -2.0)] == [WITHIN, WITHIN, OUTSIDE, OUTSIDE, OUTSIDE]
-    assert [toy.verdict(v, bound) for v in (0.49, 0.5, 0.51, math.nan)] == [WITHIN, WITHIN, OUTSIDE, OUTSIDE]
-    assert [toy.verdict(v, band) for v in (0.8, 0.95)] == [WITHIN, OUTSIDE]
+    assert [toy.verdict(v, number, "x") for v in (1.0, 4.0, 0.99, 4.01, -2.0)] == [WITHIN, WITHIN, OUTSIDE, OUTSIDE,
+                                                                                   OUTSIDE]
+    assert [toy.verdict(v, bound, "y") for v in (0.49, 0.5, 0.51, math.nan)] == [WITHIN, WITHIN, OUTSIDE, OUTSIDE]
+    assert [toy.verdict(v, band, "z") for v in (0.8, 0.95)] == [WITHIN, OUTSIDE]
     absolute = _toy(close={"absolute": 0.1, "why": "w"})
-    assert [absolute.verdict(v, number) for v in (2.1, 2.11)] == [WITHIN, OUTSIDE]
+    assert [absolute.verdict(v, number, "x") for v in (2.1, 2.11)] == [WITHIN, OUTSIDE]
     higher = _toy(better="higher")
-    assert higher.verdict(0.95, band) == BETTER and higher.verdict(0.7, band) == OUTSIDE
+    assert higher.verdict(0.95, band, "z") == BETTER and higher.verdict(0.7, band, "z") == OUTSIDE
+    # one direction per column: lower is better for x only
+    mixed = _toy(better=["lower", "", "higher"])
+    assert mixed.verdict(0.5, number, "x") == BETTER and mixed.verdict(0.95, band, "z") == BETTER
+    assert mixed.verdict(0.3, bound, "y") == WITHIN
     fitted = _toy(fitted=True)
-    assert fitted.verdict(2.5, number) == FITTED and fitted.verdict(5.0, number) == OUTSIDE
+    assert fitted.verdict(2.5, number, "x") == FITTED and fitted.verdict(5.0, number, "x") == OUTSIDE
 
 
 def test_malformed_tables_are_refused_in_one_line():
@@ -71,6 +76,8 @@ def test_malformed_tables_are_refused_in_one_line():
         _toy(values=[[1.0, 1.0]])
     with pytest.raises(ConfigError, match="need a close"):
         _toy(close=None)
+    with pytest.raises(ConfigError, match="toy.better has 1 directions for 3 columns"):
+        _toy(better=["lower"])
     with pytest.raises(ConfigError, match="exactly one of ratio or absolute"):
         _toy(close={"ratio": 2.0, "absolute": 1.0, "why": "w"})
 
@@ -99,3 +106,19 @@ def test_numbers_keep_the_published_decimals_but_two_significant_figures():
 def test_a_table_without_a_publication_shows_only_softtips_figures():
     table = Table("t", "r", ["a"], ["x"], {("a", "x"): 1.0}, unit="N")
     assert table.comparisons() == [] and "published" not in table.html() and "x (N)" in table.html()
+
+
+def test_several_of_softtips_rows_face_one_published_row():
+    # S2 publishes one range over the three force axes: each axis faces it
+    published = published_table("wearable-offline")
+    rows = {f"transfer function, order 6 · {axis}": "transfer function, order 6" for axis in ("Fx", "Fy", "Fz")}
+    table = paper_table(published, {("transfer function, order 6 · Fx", "R²"): 0.85,
+                                    ("transfer function, order 6 · Fy", "R²"): 0.7,
+                                    ("transfer function, order 6 · Fz", "R²"): 0.95,
+                                    ("transfer function, order 6 · Fz", "RMSE (% FS)"): 12.0}, rows=rows)
+    verdicts = {(c.row[-2:], c.column): c.verdict for c in table.comparisons()}
+    assert verdicts == {("Fx", "R²"): WITHIN, ("Fy", "R²"): OUTSIDE, ("Fz", "R²"): BETTER,
+                        ("Fz", "RMSE (% FS)"): OUTSIDE}
+    assert table.rows == list(rows)
+    with pytest.raises(KeyError, match="no row"):
+        paper_table(published, {}, rows={"a": "nope"})

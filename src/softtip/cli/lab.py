@@ -69,7 +69,8 @@ def reproduce(
         if not json_output:
             headline = everything[name]["headline"]
             published = f", published {headline['published']} ({headline['verdict']})" if headline["published"] else ""
-            console.print(f"{name}: {headline['label']} = {headline['softtip']} {headline['unit']}{published}; "
+            value = "n/a" if headline["softtip"] is None else f"{headline['softtip']:.4g}"
+            console.print(f"{name}: {headline['label']} = {value} {headline['unit']}{published}; "
                           f"{report} ({study.seconds:.0f} s)")
     index = write_index(output)
     if json_output:

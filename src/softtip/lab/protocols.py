@@ -110,6 +110,19 @@ class Viscoelastic:
     rest_s: NonNegativeNumber = 1.0
 
 
+# each bench's [viscoelastic] table and where its defaults come from (the reports print it)
+_HYSTERESIS = published_table("hysteresis")
+VISCOELASTIC_SOURCES: dict[str, tuple[type, dict[str, str]]] = {
+    FINGERTIP: (Viscoelastic, {
+        "hysteresis_percent": f"published: {_HYSTERESIS.source} ({_HYSTERESIS.system})",
+        **{key: "the calibration cycle: the article's hysteresis test" for key in ("depth_mm", "speed_mm_s",
+                                                                                   "rest_s")}}),
+    WEARABLE: (wearable.PadViscoelastic, {
+        "g": "assumed weights (softtip.mechanics.fingerpad)",
+        "tau_s": "time constants of Pawluk & Howe 1999 (softtip.mechanics.fingerpad)"}),
+}
+
+
 @dataclass
 class Protocol:
     name: str

@@ -4,8 +4,8 @@ the tests. No published number is typed anywhere else.
 
 A cell is a number as printed, a bound the publication states (``"< 0.5"``, ``"<= 10"``, ``"> 0.9"``),
 a range (``"0.8..0.92"``) or blank (``""``). A table's ``close`` says when softtip's figure counts
-as close to a published number, and why; ``better = "lower"`` or ``"higher"`` makes a figure past
-the published one on that side count as meeting it; ``fitted = true`` marks a figure a model
+as close to a published number, and why; ``better = "lower"`` or ``"higher"`` (or a list, one per
+column, ``""`` for none) makes a figure past the published one on that side count as meeting it; ``fitted = true`` marks a figure a model
 parameter was set from (agreement by construction, not a prediction).
 """
 
@@ -104,7 +104,7 @@ class _TableFile:
     columns: list[Text]
     values: list[list[Any]]
     close: Closeness | None = None
-    better: Direction | None = None
+    better: Direction | list[Direction | Literal[""]] | None = None
     fitted: Flag = False
 
 
@@ -124,7 +124,7 @@ class PublishedTable:
     columns: tuple[str, ...]
     cells: tuple[tuple[PublishedValue | None, ...], ...]
     close: Closeness | None
-    better: Literal["lower", "higher"] | None
+    better: tuple[str | None, ...]  # per column: "lower", "higher" or None
     fitted: bool
 
     def value(self, row: str, column: str) -> PublishedValue | None:
@@ -133,12 +133,13 @@ class PublishedTable:
                            f"columns {list(self.columns)}")
         return self.cells[self.rows.index(row)][self.columns.index(column)]
 
-    def verdict(self, value: float, published: PublishedValue) -> str:
-        """``within``, ``outside``, ``better`` (past the published figure on the table's better side)
+    def verdict(self, value: float, published: PublishedValue, column: str) -> str:
+        """``within``, ``outside``, ``better`` (past the published figure on its column's better side)
         or ``fitted`` (a figure the model was set from, judged within/outside all the same)."""
         if not math.isfinite(value):
             return OUTSIDE
-        if self.better == "lower" and value < published.low or self.better == "higher" and value > published.high:
+        better = self.better[self.columns.index(column)]
+        if better == "lower" and value < published.low or better == "higher" and value > published.high:
             return BETTER
         if published.is_number and self.close is not None:
             close = self.close.holds(value, published.low)
@@ -166,12 +167,15 @@ def _table(system: str, key: str, table: dict) -> PublishedTable:
             raise ConfigError(f"{source}: {key}.values[{i}] has {len(row)} cells for {len(parsed.columns)} columns")
         cells.append(tuple(parse_value(value, parsed.digits, f"{source}: {key}.values[{i}][{j}]")
                            for j, value in enumerate(row)))
+    better = parsed.better if isinstance(parsed.better, list) else [parsed.better] * len(parsed.columns)
+    if len(better) != len(parsed.columns):
+        raise ConfigError(f"{source}: {key}.better has {len(better)} directions for {len(parsed.columns)} columns")
     numbers = [cell for row in cells for cell in row if cell is not None and cell.is_number]
     if numbers and parsed.close is None:
         raise ConfigError(f"{source}: {key}: its numbers need a close = {{ ratio or absolute, why }}")
     return PublishedTable(key=key, system=system, study=parsed.study, title=parsed.title, source=parsed.source,
                           unit=parsed.unit, digits=parsed.digits, row_label=parsed.row_label, rows=tuple(parsed.rows),
-                          columns=tuple(parsed.columns), cells=tuple(cells), close=parsed.close, better=parsed.better,
+                          columns=tuple(parsed.columns), cells=tuple(cells), close=parsed.close, better=tuple(b or None for b in better),
                           fitted=parsed.fitted)
 
 

@@ -80,6 +80,7 @@ class Table:
     notes: Mapping[str, str] = field(default_factory=dict)
     published: PublishedTable | None = None
     layout: Literal["columns", "rows"] = "columns"
+    published_rows: Mapping[str, str] = field(default_factory=dict)  # a row -> the published row it faces
 
     def comparisons(self) -> list[Comparison]:
         """Every cell that has both softtip's number and a published figure."""
@@ -91,11 +92,12 @@ class Table:
                 value, published = self.cells.get((row, column)), self._published(row, column)
                 if isinstance(value, (int, float)) and published is not None:
                     found.append(Comparison(self.published.key, row, column, float(value), published,
-                                            self.published.unit, self.published.verdict(float(value), published),
+                                            self.published.unit, self.published.verdict(float(value), published, column),
                                             self.published.source))
         return found
 
     def _published(self, row: str, column: str) -> PublishedValue | None:
+        row = self.published_rows.get(row, row)
         if self.published is None or row not in self.published.rows or column not in self.published.columns:
             return None
         return self.published.value(row, column)
@@ -173,14 +175,22 @@ class Table:
 
 
 def paper_table(published: PublishedTable, cells: Mapping[tuple[str, str], Value], *, caption: str = "",
-                notes: Mapping[str, str] | None = None, layout: Literal["columns", "rows"] | None = None) -> Table:
-    """The publication's table with softtip's figures in its cells (rows and columns as published)."""
-    unknown = [key for key in cells if key[0] not in published.rows or key[1] not in published.columns]
+                notes: Mapping[str, str] | None = None, layout: Literal["columns", "rows"] | None = None,
+                rows: Mapping[str, str] | None = None) -> Table:
+    """The publication's table with softtip's figures in its cells (rows and columns as published).
+    ``rows`` maps softtip's own rows to the published row each faces, when the publication gives one
+    figure for several of softtip's (a range over axes, say); softtip's rows then replace the published."""
+    rows = dict(rows or {})
+    names = list(rows) if rows else list(published.rows)
+    unknown = [r for r, p in rows.items() if p not in published.rows]
     if unknown:
-        raise KeyError(f"published table {published.key} has no cell {unknown[0]}: rows {list(published.rows)}, "
+        raise KeyError(f"published table {published.key} has no row {rows[unknown[0]]!r}: rows {list(published.rows)}")
+    unknown = [key for key in cells if key[0] not in names or key[1] not in published.columns]
+    if unknown:
+        raise KeyError(f"published table {published.key} has no cell {unknown[0]}: rows {names}, "
                        f"columns {list(published.columns)}")
     if layout is None:
         layout = "columns" if len(published.columns) <= 4 else "rows"
-    return Table(title=published.title, row_label=published.row_label, rows=list(published.rows),
-                 columns=list(published.columns), cells=dict(cells), unit=published.unit, digits=published.digits,
-                 caption=caption, notes=dict(notes or {}), published=published, layout=layout)
+    return Table(title=published.title, row_label=published.row_label, rows=names, columns=list(published.columns),
+                 cells=dict(cells), unit=published.unit, digits=published.digits, caption=caption,
+                 notes=dict(notes or {}), published=published, layout=layout, published_rows=rows)

@@ -21,9 +21,9 @@ from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.progress import SILENT, Progress
 from softtip.lab import Protocol, load_protocol
-from softtip.lab.protocols import DEFAULTS, Viscoelastic, shipped_protocol_path
-from softtip.lab.realism import REALISM_SOURCES, Realism
-from softtip.published import OUTSIDE, published_table
+from softtip.lab.protocols import DEFAULTS, VISCOELASTIC_SOURCES, shipped_protocol_path
+from softtip.lab.realism import REALISM_SOURCES, WEARABLE_REALISM_SOURCES, Realism
+from softtip.published import OUTSIDE
 from softtip.report.document import Report, Section
 from softtip.report.index import index_report
 from softtip.report.tables import Table
@@ -75,15 +75,15 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str]) -> Tab
     for key, value in protocol.parameters.items():
         add("parameters", key, value, DEFAULTS[protocol.name][key],
             f"softtip's {protocol.name} protocol, after the publication's procedure")
-    defaults = asdict(Realism())
+    realism = type(protocol.realism)
+    sources = REALISM_SOURCES if realism is Realism else WEARABLE_REALISM_SOURCES
+    defaults = asdict(realism())
     for key, value in protocol.realism.to_dict().items():
-        add("realism", key, value, defaults[key], REALISM_SOURCES[key])
-    viscoelastic_defaults = asdict(Viscoelastic())
-    hysteresis = published_table("hysteresis")
+        add("realism", key, value, defaults[key], sources[key])
+    viscoelastic, sources = VISCOELASTIC_SOURCES[protocol.bench]
+    defaults = asdict(viscoelastic())
     for key, value in protocol.viscoelastic.items():
-        origin = (f"published: {hysteresis.source} ({hysteresis.system})" if key == "hysteresis_percent"
-                  else "the calibration cycle: the article's hysteresis test")
-        add("viscoelastic", key, value, viscoelastic_defaults[key], origin)
+        add("viscoelastic", key, value, defaults[key], sources[key])
     return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from"], cells,
                  caption="Every setting of this run; realism effects are set to 0 to switch them off.")
 
