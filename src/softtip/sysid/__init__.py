@@ -1,0 +1,1 @@
+"""System identification: linear models of a system from sampled input/output recordings."""
