@@ -1,0 +1,1 @@
+"""System identification: continuous-time transfer-function and state-space models from sampled input/output data."""
