@@ -90,7 +90,10 @@ def _units(value: Any, count: int, what: str, source: str) -> tuple[str, ...]:
 
 @dataclass(frozen=True, eq=False)
 class Recording:
-    """Trials of one system's inputs and outputs at one sample time ``ts`` (s); validated, read-only."""
+    """Trials of one system's inputs and outputs at one sample time ``ts`` (s); validated, read-only.
+
+    A recording without outputs (``outputs`` empty) can be simulated, not identified or scored.
+    """
 
     ts: float
     inputs: tuple[str, ...]
@@ -105,9 +108,11 @@ class Recording:
         source = self.source
         object.__setattr__(self, "ts", float(checked(PositiveNumber, f"{source}: ts", self.ts, DatasetError)))
         inputs, outputs = tuple(self.inputs), tuple(self.outputs)
+        if not inputs:
+            raise DatasetError(f"{source}: inputs: expected at least one name")
         for role, names in (("inputs", inputs), ("outputs", outputs)):
-            if not names or not all(isinstance(name, str) and name for name in names):
-                raise DatasetError(f"{source}: {role}: expected at least one non-empty name, got {names!r}")
+            if not all(isinstance(name, str) and name for name in names):
+                raise DatasetError(f"{source}: {role}: expected non-empty names, got {names!r}")
         everything = inputs + outputs
         repeated = sorted({name for name in everything if everything.count(name) > 1})
         if repeated:
@@ -247,7 +252,10 @@ class Recording:
     # -- checks before identification ---------------------------------------
 
     def require_excitation(self) -> None:
-        """Refuses a recording in which an input never changes: its effect cannot be identified."""
+        """Refuses a recording without outputs, or in which an input never changes: its effect cannot be
+        identified."""
+        if not self.outputs:
+            raise DatasetError(f"{self.source}: no outputs: nothing to identify")
         u = np.concatenate([trial.u for trial in self.trials])
         flat = np.flatnonzero(np.ptp(u, axis=0) == 0)
         if flat.size:
@@ -306,7 +314,8 @@ def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: 
     else:
         ts = sample_time(source, time_column, trial, time, ts, tolerance)
     u = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in inputs])
-    y = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in outputs])
+    y = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in outputs]) if outputs \
+        else np.zeros((len(trial), 0))
     trials = [Trial(u[a:a + n], y[a:a + n], int(trial[a])) for a, n in zip(starts, lengths, strict=True)]
     return Recording(ts, tuple(inputs), tuple(outputs), tuple(trials), input_units, output_units, source)
 
@@ -354,6 +363,21 @@ def _is_dataset_file(path: Path) -> bool:
         return False
 
 
+def file_columns(path: str | os.PathLike) -> list[str]:
+    """The column names of a CSV (``.csv``) or Parquet (``.parquet``) file."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"recording {path} does not exist")
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise DatasetError(f"recording {path}: expected a .csv or .parquet file")
+    try:
+        return pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
+    except (pa.ArrowException, OSError) as problem:
+        kind = "CSV" if suffix == ".csv" else "Parquet"
+        raise DatasetError(f"{path}: cannot be read as {kind} ({_first_line(problem)})") from None
+
+
 def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequence[str], *,
                    ts: float | None = None, time_column: str | None = None, trial_column: str | None = None,
                    units: Mapping[str, str] | None = None, time_tolerance: float = 0.02) -> Recording:
@@ -365,22 +389,14 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     contiguous; default ``trial`` when present, else one trial), ``units`` a mapping of column to unit.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"recording {path} does not exist")
+    present = file_columns(path)
     suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet"):
-        raise DatasetError(f"recording {path}: expected a .csv or .parquet file")
     if suffix == ".parquet" and _is_dataset_file(path):
         if time_column is not None or trial_column is not None or units is not None:
             raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units")
         return Recording.from_dataset(Dataset.read(path), inputs, outputs, ts=ts, time_tolerance=time_tolerance,
                                       source=str(path))
     reader = _csv_columns if suffix == ".csv" else _parquet_columns
-    try:
-        present = pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
-    except (pa.ArrowException, OSError) as problem:
-        kind = "CSV" if suffix == ".csv" else "Parquet"
-        raise DatasetError(f"{path}: cannot be read as {kind} ({_first_line(problem)})") from None
     time_name = time_column if time_column is not None else (TIME if TIME in present else None)
     trial_name = trial_column if trial_column is not None else (TRIAL if TRIAL in present else None)
     own = [name for name in (time_name, trial_name) if name is not None]

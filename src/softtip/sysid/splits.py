@@ -106,7 +106,9 @@ def split_by_sample(recording: Recording, fraction: float = 0.8, *,
         mask = kept[groups == k]
         index = np.arange(len(trial))
         if mask.any():
-            filled = np.column_stack([np.interp(index, index[mask], column[mask]) for column in trial.y.T])
+            filled = trial.y.copy()
+            for column in range(filled.shape[1]):
+                filled[:, column] = np.interp(index, index[mask], trial.y[mask, column])
             estimation.append(replace(trial, y=filled, scored=None))
         if not mask.all():
             validation.append(replace(trial, scored=~mask if trial.scored is None else trial.scored & ~mask))

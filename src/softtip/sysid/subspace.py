@@ -22,9 +22,12 @@ their Hankel columns side by side. Then:
 - B, D and each trial's initial state solve a linear least-squares problem on the outputs
   (each output scaled by its standard deviation), which keeps B and D unbiased for coloured
   inputs;
-- the state sequences X_i = Γ^+ O_i and X_i+1 = Γ_up^+ O_i-1 give the residuals of the state
-  and output equations; their covariances (Q, S, R) give the Kalman gain K of the innovations
-  form through the discrete Riccati equation (scipy.linalg.solve_discrete_are).
+- the state sequences X_i = Γ^+ O_i and X_i+1 = Γ_up^+ O_i-1, regressed jointly with the outputs
+  Y_i|i on [X_i; U_i|i] (N4SID's second algorithm), leave the residuals of the state and output
+  equations; their covariances (Q, S, R) give the Kalman gain K of the innovations form through
+  the discrete Riccati equation (scipy.linalg.solve_discrete_are). (The residuals of A and C from
+  Γ and of B and D from the output error would carry those estimators' biases into Q and R, and
+  give a worse predictor.)
 
 Order rule (``order="auto"``): the n in 1..max_order with the largest drop between consecutive
 singular values, ``argmax log(σ_n / σ_n+1)``. Unstable poles of A are reflected into the unit
@@ -232,13 +235,14 @@ def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, 
     scale = np.where(scale > 0, scale, 1.0)
     B, D = input_matrices(A, C, segments, scale)
 
-    # residuals of the state and output equations along the state sequences X_i and X_i+1
+    # the innovations' statistics from the state sequences X_i and X_i+1
     states = np.linalg.pinv(gamma) @ projection
     shifted_projection = g.oblique(g.rows(g.y(i + 1, 2 * i)), g.rows(g.u(i + 1, 2 * i)),
                                    g.rows(g.u(0, i + 1), g.y(0, i + 1)))
     next_states = np.linalg.pinv(gamma[:-ny]) @ shifted_projection
     u_now, y_now = g.rows(g.u(i, i + 1)), g.rows(g.y(i, i + 1))
-    residuals = np.vstack([next_states - A @ states - B @ u_now, y_now - C @ states - D @ u_now])
+    regressors, targets = np.vstack([states, u_now]), np.vstack([next_states, y_now])
+    residuals = targets - _Geometry.regress(targets, regressors) @ regressors
     covariance = residuals @ residuals.T / g.columns
     K, innovations, kalman = _kalman_gain(A, C, covariance, np.trace(y_now @ y_now.T) / (g.columns * ny))
     system = StateSpace(A, B, C, D, ts, K, innovations)
