@@ -19,13 +19,13 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
+from softtip._core.archive import write_archive
 from softtip.calibration import (
     LMNetwork,
     ModelFileError,
     PolynomialFit,
     SoftmaxClassifier,
     load_model,
-    persistence,
     save_model,
 )
 from softtip.calibration import feedforward as ff
@@ -361,7 +361,7 @@ def _rewrite(path, edit_metadata=None, edit_arrays=None, keep_checksum=False):
             np.savez(handle, metadata=np.array(json.dumps(metadata)), **arrays)
     else:
         metadata.pop("sha256")
-        persistence._write(path, metadata, arrays)
+        write_archive(path, metadata, arrays)
 
 
 def test_tampered_arrays_fail_the_checksum(tmp_path, fitted):

@@ -159,8 +159,9 @@ def test_designs_lists_the_shipped_designs():
 
 
 @pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["demo", "insertion"], ["bench"],
-                                     ["bench", "twin"], ["bench", "rom"], ["bench", "live"], ["lab", "run"], ["reproduce"],
-                                     ["calibrate"], ["evaluate"], ["live"], ["convert"]])
+                                     ["bench", "twin"], ["bench", "rom"], ["bench", "live"], ["bench", "sysid"], ["lab", "run"],
+                                     ["reproduce"], ["calibrate"], ["evaluate"], ["live"], ["convert"], ["sysid"],
+                                     ["sysid", "fit"], ["sysid", "orders"], ["sysid", "predict"]])
 def test_every_command_has_help(command):
     result = run(*command, "--help")
     assert result.exit_code == 0 and "Usage" in result.output
@@ -202,7 +203,7 @@ def test_calibrate_names_a_missing_target(tmp_path):
 
 
 EVERY_COMMAND = {"designs", "simulate", "live", "convert", "optimize", "reproduce", "calibrate", "evaluate", "lab",
-                 "demo", "bench"}
+                 "demo", "bench", "sysid"}
 
 
 def test_python_dash_m_softtip_lists_every_command_in_a_fresh_interpreter():
@@ -217,5 +218,5 @@ def test_python_dash_m_softtip_lists_every_command_in_a_fresh_interpreter():
     assert EVERY_COMMAND <= names, EVERY_COMMAND - names
     bench = subprocess.run([sys.executable, "-m", "softtip", "bench", "--help"], capture_output=True, text=True,
                            env={**os.environ, "COLUMNS": "200"}, check=True).stdout
-    for name in ("twin", "rom", "live", "magnetics", "calibration"):
+    for name in ("twin", "rom", "live", "magnetics", "calibration", "sysid"):
         assert f"│ {name} " in bench

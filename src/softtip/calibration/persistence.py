@@ -15,9 +15,7 @@ array of the model under a path-like name (``model/weights/0``, ``model/input_mi
                     reading before contact subtracted)
     scaling         the scaling each step applies to inputs and outputs
     extra           free JSON object for the caller
-    sha256          hex digest of the metadata without this field (canonical JSON: sorted
-                    keys, no spaces) followed, for each array in sorted name order, by
-                    name NUL dtype NUL shape NUL and the C-order bytes
+    sha256          the checksum of metadata and arrays (:mod:`softtip._core.archive`)
 
 Saved: :class:`LMNetwork`, :class:`SoftmaxClassifier`, :class:`PolynomialFit`, and a
 scikit-learn ``Pipeline`` of ``StandardScaler``/``MinMaxScaler`` steps ending in one of them.
@@ -28,11 +26,8 @@ they only shape training, not the fitted model. Every refusal raises
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
-import zipfile
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +37,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 
 from softtip import __version__
-from softtip._core.files import atomic_write
+from softtip._core.archive import canonical_json, read_archive, write_archive
 from softtip.calibration import checks
 from softtip.calibration.classifier import SoftmaxClassifier
 from softtip.calibration.network import LMNetwork
@@ -55,7 +50,6 @@ SCALERS = {
     "StandardScaler": (StandardScaler, ("mean_", "var_", "scale_")),
     "MinMaxScaler": (MinMaxScaler, ("min_", "scale_", "data_min_", "data_max_", "data_range_")),
 }
-ZIP_MAGIC = b"PK\x03\x04"
 
 
 class ModelFileError(ValueError):
@@ -165,30 +159,6 @@ def _scaling(step) -> dict:
     return {"input": f"{type(step).__name__} (scikit-learn)", "output": "none"}
 
 
-# --------------------------------------------------------------------------
-# Checksum and file I/O
-# --------------------------------------------------------------------------
-
-
-def _canonical(metadata: dict) -> bytes:
-    return json.dumps(metadata, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
-
-
-def _digest(metadata: dict, arrays: dict[str, np.ndarray]) -> str:
-    digest = hashlib.sha256(_canonical({k: v for k, v in metadata.items() if k != "sha256"}))
-    for name in sorted(arrays):
-        array = np.ascontiguousarray(arrays[name])
-        digest.update(f"{name}\0{array.dtype.str}\0{array.shape}\0".encode())
-        digest.update(array.tobytes())
-    return digest.hexdigest()
-
-
-def _write(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Write atomically: a crash leaves either the old file or the new one, never half of it."""
-    metadata = metadata | {"sha256": _digest(metadata, arrays)}
-    atomic_write(path, lambda handle: np.savez(handle, metadata=np.array(_canonical(metadata).decode()), **arrays))
-
-
 def _names(value, count: int, what: str, *, broadcast: bool) -> tuple[str, ...]:
     if broadcast and isinstance(value, str):
         value = [value] * count
@@ -250,45 +220,17 @@ def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str],
         "extra": extra or {},
     }
     try:
-        _canonical(metadata)
+        canonical_json(metadata)
     except (TypeError, ValueError) as problem:
         raise ModelFileError(f"extra must hold JSON values only ({problem})") from None
-    _write(path, metadata, {k: np.asarray(v) for k, v in arrays.items()})
+    write_archive(path, metadata, {k: np.asarray(v) for k, v in arrays.items()})
     return path
-
-
-def _read(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
-    if not path.is_file():
-        raise ModelFileError(f"model file {path} does not exist")
-    with path.open("rb") as handle:
-        if handle.read(len(ZIP_MAGIC)) != ZIP_MAGIC:
-            raise ModelFileError(f"{path} is not a softtip model file (not an npz archive)")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            arrays = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as problem:
-        raise ModelFileError(f"{path} is truncated or unreadable ({type(problem).__name__}: {problem})") from None
-    text = arrays.pop("metadata", None)
-    if text is None or text.dtype.kind != "U" or text.ndim != 0:
-        raise ModelFileError(f"{path} is not a softtip model file (no metadata entry)")
-    try:
-        metadata = json.loads(str(text))
-    except json.JSONDecodeError:
-        metadata = None
-    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT:
-        raise ModelFileError(f"{path} is not a softtip model file (format is not {FORMAT!r})")
-    return metadata, arrays
 
 
 def load_model(path: str | os.PathLike):
     """The fitted estimator saved in ``path`` and its :class:`ModelMetadata`."""
     path = Path(path)
-    metadata, arrays = _read(path)
-    if metadata.get("schema_version") != SCHEMA_VERSION:
-        raise ModelFileError(f"{path}: unsupported schema version {metadata.get('schema_version')!r} "
-                             f"(this softtip reads version {SCHEMA_VERSION})")
-    if metadata.get("sha256") != _digest(metadata, arrays):
-        raise ModelFileError(f"{path}: checksum mismatch: the file was altered or damaged after it was written")
+    metadata, arrays = read_archive(path, FORMAT, SCHEMA_VERSION, "model", ModelFileError)
     description = metadata.get("model")
     if not isinstance(description, dict):
         raise ModelFileError(f"{path}: metadata has no model description")

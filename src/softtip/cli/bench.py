@@ -131,3 +131,34 @@ def bench_calibration(
                   f"{training['epochs']} epochs, stop: {training['stop_reason']}")
     for name, ratio in report["ratios"].items():
         console.print(f"  {name:50s} {ratio:12.1f}x")
+
+
+def bench_sysid(
+    calls: int = typer.Option(20_000, "--calls", help="Streaming steps timed per model."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the synthetic recordings."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Fit times and validation fit % of a 3x3 transfer function (order 6) and state-space model (order 8)
+    on 1,500 samples beside nfoursid (and SIPPY if installed), and streaming-step latency beside a numpy step."""
+    from softtip.bench.sysid import bench_sysid as run
+
+    if calls < 100:
+        fail("--calls: expected at least 100")
+    with progress_for(json_output).task("identifying and timing"):
+        report = run(calls, seed)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print(f"{report['data']['estimation_samples']} estimation samples, {report['data']['validation_samples']} "
+                  f"validation samples at {report['data']['ts']:g} s; {report['machine']['cpus']} CPUs")
+    for name in ("transfer_function_order_6", "state_space_order_8", "state_space_order_8_refined", "nfoursid_order_8"):
+        figures = report[name]
+        fits = ", ".join(f"{v:.1f}" for v in figures["validation_fit_percent"])
+        console.print(f"  {name:30s} {figures['seconds']:7.3f} s   validation fit % {fits}")
+    console.print(f"  SIPPY: {report['sippy']['note']}")
+    for name, figures in report["streaming_step_us"].items():
+        console.print(f"  step {name:28s} median {figures['median_us']:6.2f} µs   p99 {figures['p99_us']:6.2f} µs")
+    for name, met in report["targets_met"].items():
+        console.print(f"  target {name} <= {report['targets'][name]:g}: {'met' if met else '[red]missed[/]'}")
+    for name, ratio in report["ratios"].items():
+        console.print(f"  {name:45s} {ratio:10.2f}")

@@ -1,7 +1,7 @@
 """The ``softtip`` command line: a thin layer over the library, every command registered here.
 
 Each command lives in the module of its stage (:mod:`.twin`, :mod:`.lab`, :mod:`.optimize`,
-:mod:`.live`, :mod:`.demo`, :mod:`.bench`); they share only :mod:`.common`. ``softtip`` and
+:mod:`.live`, :mod:`.demo`, :mod:`.sysid`, :mod:`.bench`); they share only :mod:`.common`. ``softtip`` and
 ``python -m softtip`` run this same application.
 """
 
@@ -12,7 +12,7 @@ import sys
 import typer
 
 from softtip import __version__
-from softtip.cli import bench, demo, lab, live, optimize, twin
+from softtip.cli import bench, demo, lab, live, optimize, sysid, twin
 from softtip.cli.common import console, user_errors
 
 app = typer.Typer(help="softtip: soft magnetic tactile fingertips, from design to real-time estimates.",
@@ -41,9 +41,11 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
 _group("demo", "Demonstrations on the built-in simulated sensor.", {"insertion": demo.demo_insertion},
        callback=demo.demo)
+_group("sysid", "System identification: transfer-function and state-space models from recordings.",
+       {"fit": sysid.sysid_fit, "orders": sysid.sysid_orders, "predict": sysid.sysid_predict})
 _group("bench", "Benchmarks measured on this machine (ratios against baselines of the same run).",
        {"twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live,
-        "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration})
+        "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration, "sysid": bench.bench_sysid})
 
 
 if __name__ == "__main__":  # pragma: no cover

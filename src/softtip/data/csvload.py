@@ -126,7 +126,7 @@ def _magnetic_units(source: str, units: str | Mapping[str, str], magnetic: list[
     return dict(units)
 
 
-def _numbers(path: Path, csv_name: str, column: pa.ChunkedArray) -> np.ndarray:
+def parse_numbers(path: Path, csv_name: str, column: pa.ChunkedArray) -> np.ndarray:
     """A CSV column read as text, parsed as float64, with the first bad cell named on failure."""
     text = pc.utf8_trim_whitespace(column)
     try:
@@ -233,7 +233,7 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     if options.trial_column is None:
         trial = np.zeros(table.num_rows, dtype=np.int64)
     else:
-        ids = _numbers(path, options.trial_column, table.column(options.trial_column))
+        ids = parse_numbers(path, options.trial_column, table.column(options.trial_column))
         if not np.all(np.isfinite(ids) & (ids == np.round(ids))):
             raise DatasetError(f"{path}: trial column {options.trial_column!r} holds values that are not integers")
         trial = ids.astype(np.int64)
@@ -242,7 +242,7 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     if options.rate_hz is not None:
         time = (np.arange(len(trial)) - first_row) / options.rate_hz
     else:
-        time = _numbers(path, options.time_column, table.column(options.time_column))
+        time = parse_numbers(path, options.time_column, table.column(options.time_column))
         time = (time - time[first_row]) * TIME_UNITS_IN_S[options.time_unit]
 
     data: dict[str, Any] = {TRIAL: trial, TIME: time}
@@ -250,7 +250,7 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     for csv_name, name in layout.columns.items():
         column = table.column(csv_name)
         if csv_name in layout.magnetic_units:
-            values = _numbers(path, csv_name, column) * MAGNETIC_UNITS_IN_UT[layout.magnetic_units[csv_name]]
+            values = parse_numbers(path, csv_name, column) * MAGNETIC_UNITS_IN_UT[layout.magnetic_units[csv_name]]
             if options.baseline_samples:
                 try:
                     values = subtract_trial_baseline(values, trial, options.baseline_samples)
@@ -258,7 +258,7 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
                     raise DatasetError(f"{path}: {problem}") from None
             data[name] = values
         elif _is_text(column) and units_of[name] != DIMENSIONLESS:
-            data[name] = _numbers(path, csv_name, column)  # a physical quantity read as text: name the bad cell
+            data[name] = parse_numbers(path, csv_name, column)  # a physical quantity read as text: name the bad cell
         else:
             try:
                 data[name] = column_to_numpy(repr(csv_name), column, row_word="line", first_row=_FIRST_DATA_LINE)

@@ -23,7 +23,8 @@ class LeakageWarning(UserWarning):
     """A split puts samples of one trial on both sides."""
 
 
-def _fraction(value: Any, name: str) -> float:
+def check_fraction(value: Any, name: str) -> float:
+    """``value`` as a float if it is a fraction in (0, 1), else an error naming the parameter ``name``."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < 1:
         raise DatasetError(f"{name}: expected a fraction in (0, 1), got {value!r}")
     return float(value)
@@ -38,15 +39,23 @@ def _hashable(value: np.generic) -> Any:
     return None if isinstance(item, float) and math.isnan(item) else item
 
 
-def _calibration_count(per_condition: Any, n_trials: int, where: str) -> int:
-    if isinstance(per_condition, numbers.Integral) and not isinstance(per_condition, bool):
-        if per_condition < 1:
-            raise DatasetError(f"calibration_per_condition: expected a trial count >= 1, got {per_condition}")
-        if per_condition > n_trials:
-            raise DatasetError(f"{where} has {n_trials} trials, fewer than the {per_condition} asked for calibration")
-        return int(per_condition)
-    fraction = _fraction(per_condition, "calibration_per_condition")
-    return _round_half_up(fraction * n_trials)
+def trial_count(value: Any, n_trials: int, name: str, where: str, purpose: str) -> int:
+    """How many of ``n_trials`` trials the parameter ``name`` asks for ``purpose`` ("calibration"): a
+    count k >= 1, or a fraction of them rounded half up; ``where`` names the trials in messages ("the
+    dataset", "condition a=1")."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        if value < 1:
+            raise DatasetError(f"{name}: expected a trial count >= 1, got {value}")
+        if value > n_trials:
+            raise DatasetError(f"{where} has {n_trials} trials, fewer than the {value} asked for {purpose}")
+        return int(value)
+    return _round_half_up(check_fraction(value, name) * n_trials)
+
+
+def chosen_trials(n_trials: int, k: int, seed: int | np.random.Generator | None) -> np.ndarray:
+    """The positions, in order, of the k trials chosen of ``n_trials``: the first k without a seed, k
+    drawn at random with one."""
+    return np.arange(k) if seed is None else np.sort(np.random.default_rng(seed).permutation(n_trials)[:k])
 
 
 def split_by_trial(dataset: Dataset, calibration_per_condition: int | float,
@@ -68,14 +77,14 @@ def split_by_trial(dataset: Dataset, calibration_per_condition: int | float,
     for row, trial in enumerate(table[TRIAL]):
         key = tuple(_hashable(table[name][row]) for name in condition_columns)
         members.setdefault(key, []).append(int(trial))
-    rng = None if seed is None else np.random.default_rng(seed)
+    rng = None if seed is None else np.random.default_rng(seed)  # one stream for every group
     calibration: list[int] = []
     for key, trials in members.items():
         where = ("condition " + ", ".join(f"{name}={value}" for name, value in zip(condition_columns, key, strict=True))
                  if condition_columns else "the dataset")
-        k = _calibration_count(calibration_per_condition, len(trials), where)
-        chosen = np.arange(k) if rng is None else np.sort(rng.permutation(len(trials))[:k])
-        calibration.extend(np.asarray(trials)[chosen].tolist())
+        k = trial_count(calibration_per_condition, len(trials), "calibration_per_condition", where,
+                        "calibration")
+        calibration.extend(np.asarray(trials)[chosen_trials(len(trials), k, rng)].tolist())
     in_calibration = np.isin(dataset.groups, calibration)
     return dataset.select(in_calibration), dataset.select(~in_calibration)
 
@@ -167,16 +176,26 @@ def leave_condition_out(dataset: Dataset, column: str, values: Iterable[Any]) ->
     return dataset.select(~untrained), dataset.select(untrained)
 
 
+def sample_mask(groups: np.ndarray, fraction: float, seed: int | None, caller: str, advice: str) -> np.ndarray:
+    """A random ``fraction`` of the rows (``groups``: the trial id of each), regardless of trials, as a mask.
+
+    Warns with :class:`LeakageWarning` in the name of ``caller``, counting the trials with rows on
+    both sides and giving ``advice`` (the honest split to use instead).
+    """
+    fraction = check_fraction(fraction, "fraction")
+    first = np.zeros(len(groups), dtype=bool)
+    first[np.random.default_rng(seed).permutation(len(groups))[:_round_half_up(fraction * len(groups))]] = True
+    shared = np.intersect1d(groups[first], groups[~first]).size
+    warnings.warn(f"{caller}: {shared} of {np.unique(groups).size} trials have samples on both sides; "
+                  f"errors measured on this split are optimistic ({advice})", LeakageWarning, stacklevel=3)
+    return first
+
+
 def split_by_sample(dataset: Dataset, fraction: float, *, seed: int | None = None) -> tuple[Dataset, Dataset]:
     """(first, second): a random ``fraction`` of the samples, and the rest, regardless of trials.
 
     Warns with :class:`LeakageWarning`: samples of one trial end up on both sides, so an error
     measured on the second part is optimistic. Use :func:`split_by_trial` for validation.
     """
-    fraction = _fraction(fraction, "fraction")
-    first = np.zeros(len(dataset), dtype=bool)
-    first[np.random.default_rng(seed).permutation(len(dataset))[:_round_half_up(fraction * len(dataset))]] = True
-    shared = np.intersect1d(dataset.groups[first], dataset.groups[~first]).size
-    warnings.warn(f"split_by_sample: {shared} of {len(dataset.trials)} trials have samples on both sides; "
-                  "errors measured on this split are optimistic (use split_by_trial)", LeakageWarning, stacklevel=2)
+    first = sample_mask(dataset.groups, fraction, seed, "split_by_sample", "use split_by_trial")
     return dataset.select(first), dataset.select(~first)

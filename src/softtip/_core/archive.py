@@ -1,0 +1,86 @@
+"""Model files: one ``.npz`` archive of arrays and one JSON metadata entry, checksummed, never pickled.
+
+The archive (written by ``numpy.savez``, read with ``allow_pickle=False``) holds the arrays under
+their names and one text entry, ``metadata``: a JSON object whose ``format`` names the kind of file
+and whose ``sha256`` is the hex digest of the metadata without this field (canonical JSON: sorted
+keys, no spaces) followed, for each array in sorted name order, by name NUL dtype NUL shape NUL and
+the C-order bytes. Writing is atomic; every refusal is one line naming the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from softtip._core.files import atomic_write
+
+ZIP_MAGIC = b"PK\x03\x04"
+
+
+def canonical_json(value: dict) -> bytes:
+    """``value`` as canonical JSON: sorted keys, no spaces, no NaN."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+
+
+def hash_arrays(digest, arrays: dict[str, np.ndarray]) -> None:
+    """Feeds ``digest`` (a hashlib object) with each array in sorted name order: name NUL dtype NUL
+    shape NUL and the C-order bytes."""
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}\0{array.dtype.str}\0{array.shape}\0".encode())
+        digest.update(array.tobytes())
+
+
+def archive_digest(metadata: dict, arrays: dict[str, np.ndarray]) -> str:
+    """The checksum of a model file: its metadata without ``sha256``, then its arrays."""
+    digest = hashlib.sha256(canonical_json({k: v for k, v in metadata.items() if k != "sha256"}))
+    hash_arrays(digest, arrays)
+    return digest.hexdigest()
+
+
+def write_archive(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> Path:
+    """Writes ``arrays`` and ``metadata`` (with its checksum added) atomically: a crash leaves either
+    the old file or the new one, never half of it."""
+    metadata = metadata | {"sha256": archive_digest(metadata, arrays)}
+    return atomic_write(path, lambda handle: np.savez(handle, metadata=np.array(canonical_json(metadata).decode()),
+                                                      **arrays))
+
+
+def read_archive(path: Path, format_name: str, schema_version: int, what: str,
+                 error: type[ValueError]) -> tuple[dict, dict[str, np.ndarray]]:
+    """(metadata, arrays) of the ``what`` file ("model" ...) ``path`` of format ``format_name``.
+
+    Refuses, with ``error``, a missing file, one that is not an npz archive, a truncated one, one
+    without a JSON metadata entry of that format, one of another schema version, and one whose
+    checksum does not match its content.
+    """
+    if not path.is_file():
+        raise error(f"{what} file {path} does not exist")
+    with path.open("rb") as handle:
+        if handle.read(len(ZIP_MAGIC)) != ZIP_MAGIC:
+            raise error(f"{path} is not a softtip {what} file (not an npz archive)")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as problem:
+        raise error(f"{path} is truncated or unreadable ({type(problem).__name__}: {problem})") from None
+    text = arrays.pop("metadata", None)
+    if text is None or text.dtype.kind != "U" or text.ndim != 0:
+        raise error(f"{path} is not a softtip {what} file (no metadata entry)")
+    try:
+        metadata = json.loads(str(text))
+    except json.JSONDecodeError:
+        metadata = None
+    if not isinstance(metadata, dict) or metadata.get("format") != format_name:
+        raise error(f"{path} is not a softtip {what} file (format is not {format_name!r})")
+    if metadata.get("schema_version") != schema_version:
+        raise error(f"{path}: unsupported schema version {metadata.get('schema_version')!r} "
+                    f"(this softtip reads version {schema_version})")
+    if metadata.get("sha256") != archive_digest(metadata, arrays):
+        raise error(f"{path}: checksum mismatch: the file was altered or damaged after it was written")
+    return metadata, arrays

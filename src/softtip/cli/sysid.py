@@ -1,0 +1,263 @@
+"""``softtip sysid fit``, ``softtip sysid orders``, ``softtip sysid predict``: system identification from
+recordings (CSV, Parquet or softtip datasets)."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from softtip.cli.common import console, fail
+
+
+class Kind(str, Enum):
+    tf = "tf"
+    ss = "ss"
+
+
+class Method(str, Enum):
+    n4sid = "n4sid"
+    moesp = "moesp"
+    cva = "cva"
+
+
+DATA = typer.Option(..., "--data", help="Recording: .csv, .parquet, or a softtip dataset (.parquet).")
+INPUTS = typer.Option(..., "--input", "-u", help="Input column (repeat, or separate by commas).")
+OUTPUTS = typer.Option(..., "--output", "-y", help="Output column (repeat, or separate by commas).")
+TS = typer.Option(None, "--ts", help="Sample time (s); default from the time column.")
+TIME_COLUMN = typer.Option(None, "--time-column", help="Time column (s) of a plain file (default: time_s if present).")
+TRIAL_COLUMN = typer.Option(None, "--trial-column", help="Trial id column of a plain file (default: trial if present).")
+VALIDATE = typer.Option(None, "--validate", help="Recording to validate on (same columns).")
+FULL_SCALE = typer.Option(None, "--full-scale", help="Rated full-scale range of each output, in its unit "
+                                                     "(repeat; default: the measured range max - min).")
+JSON = typer.Option(False, "--json", help="Print JSON.")
+
+
+def _names(values: list[str]) -> list[str]:
+    return [name.strip() for value in values for name in value.split(",") if name.strip()]
+
+
+def _read(path: Path, inputs: list[str], outputs: list[str], ts, time_column, trial_column):
+    from softtip.sysid import read_recording
+
+    return read_recording(path, inputs, outputs, ts=ts, time_column=time_column, trial_column=trial_column)
+
+
+def _full_scale(values: list[float] | None):
+    from softtip.sysid import MEASURED, rated
+
+    return rated(values) if values else MEASURED
+
+
+def _order(kind: Kind, order: str) -> int | str:
+    if kind is Kind.ss and order == "auto":
+        return order
+    try:
+        value = int(order)
+    except ValueError:
+        value = 0
+    if value < 1:
+        fail(f"--order = {order!r}: expected a positive integer{' or auto' if kind is Kind.ss else ''}")
+    return value
+
+
+def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool):
+    from softtip.sysid import StateSpaceModel, TransferFunctionModel
+
+    if kind is Kind.tf:
+        if continuous:
+            fail("--continuous: a transfer function is continuous already (it runs discretised)")
+        return TransferFunctionModel(order, zeros, **({} if refine is None else {"refine": refine}))
+    if zeros is not None:
+        fail("--zeros: only for --kind tf")
+    return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete",
+                           **({} if refine is None else {"refine": refine}))
+
+
+def _scores_table(title: str, scores: dict) -> Table:
+    table = Table(title=title)
+    for heading in ("output", "R²", "r", "RMSE", "RMSE % FS", "MAE % FS", "fit %", "full scale"):
+        table.add_column(heading, justify="left" if heading == "output" else "right")
+    for name, row in scores["outputs"].items():
+        table.add_row(name, *(f"{row[key]:.3f}" if row[key] is not None else "—" for key in ("r2", "r")),
+                      f"{row['rmse']:.4g} {row['unit']}".strip(),
+                      *(f"{row[key]:.2f}" for key in ("rmse_fs_percent", "mae_fs_percent")),
+                      f"{row['fit_percent']:.1f}" if row["fit_percent"] is not None else "—",
+                      f"{row['full_scale']:.4g} {row['unit']}".strip())
+    table.caption = f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples"
+    return table
+
+
+def _print_summary(summary: dict) -> None:
+    console.print(f"[bold]{summary['kind']}[/] model, {summary['states']} states, {summary['parameters']} parameters, "
+                  f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
+                  f"fitted in {summary['fit_seconds']:.2f} s on {summary['data']['trials']} trials "
+                  f"({summary['data']['samples']} samples)")
+    console.print("fit % on the estimation data (simulated): " +
+                  ", ".join(f"{name} {value:.1f}" for name, value in summary["fit_percent"].items()))
+    report = summary.get("report") or summary.get("refinement")
+    if report is not None:
+        console.print(f"estimation: {'converged' if report.get('converged') else '[red]not converged[/]'}: "
+                      f"{report['message']}")
+
+
+def sysid_fit(
+    data: Path = DATA,
+    input: list[str] = INPUTS,
+    output: list[str] = OUTPUTS,
+    kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
+    order: str = typer.Option(..., "--order", help="Poles per entry (tf) or states (ss; or auto)."),
+    zeros: int = typer.Option(None, "--zeros", help="Zeros per entry (tf; default order - 1)."),
+    method: Method = typer.Option(Method.n4sid, "--method", help="Subspace method (ss)."),
+    refine: bool = typer.Option(None, "--refine/--no-refine",
+                                help="Prediction-error refinement (default: tf yes, ss no)."),
+    continuous: bool = typer.Option(False, "--continuous", help="A continuous state-space model (ss)."),
+    ts: float = TS,
+    time_column: str = TIME_COLUMN,
+    trial_column: str = TRIAL_COLUMN,
+    validate: Path = VALIDATE,
+    full_scale: list[float] = FULL_SCALE,
+    model_file: Path = typer.Option(None, "--model", "-o", help="Save the model here (.npz)."),
+    json_output: bool = JSON,
+) -> None:
+    """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
+    R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated, from rest)."""
+    from softtip.sysid import save_model
+
+    inputs, outputs = _names(input), _names(output)
+    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous)
+    recording = _read(data, inputs, outputs, ts, time_column, trial_column)
+    estimator.fit(recording)
+    result = {"model": estimator.summary()}
+    if validate is not None:
+        validation = _read(validate, inputs, outputs, ts, time_column, trial_column)
+        result["validation"] = estimator.evaluate(validation, full_scale=_full_scale(full_scale)).to_dict()
+    if model_file is not None:
+        result["saved"] = str(save_model(model_file, estimator))
+    if json_output:
+        print(json.dumps(result, indent=2))
+        return
+    _print_summary(result["model"])
+    if validate is not None:
+        console.print(_scores_table(f"validation on {validate} (simulated)", result["validation"]))
+    if model_file is not None:
+        console.print(f"saved -> {result['saved']}")
+
+
+def _order_range(text: str) -> list[int]:
+    try:
+        if "-" in text:
+            first, last = (int(part) for part in text.split("-"))
+            orders = list(range(first, last + 1))
+        else:
+            orders = [int(part) for part in text.split(",")]
+    except ValueError:
+        orders = []
+    if not orders or min(orders) < 1:
+        fail(f"--orders = {text!r}: expected a range like 2-8 or a list like 2,4,6 of positive integers")
+    return orders
+
+
+def sysid_orders(
+    data: Path = DATA,
+    input: list[str] = INPUTS,
+    output: list[str] = OUTPUTS,
+    kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
+    orders: str = typer.Option(None, "--orders", help="Orders, e.g. 2-8 or 2,4,6 (default: tf 2-8, ss 2-12)."),
+    method: Method = typer.Option(Method.n4sid, "--method", help="Subspace method (ss)."),
+    ts: float = TS,
+    time_column: str = TIME_COLUMN,
+    trial_column: str = TRIAL_COLUMN,
+    validate: Path = VALIDATE,
+    json_output: bool = JSON,
+) -> None:
+    """Fit every order and tabulate fit %, AIC, BIC and time (fit % on --validate if given; AIC and BIC on the
+    estimation data: N ln det Σ + 2p (AIC) or + p ln N (BIC), + N ny (ln 2π + 1), Σ the residual covariance)."""
+    from softtip.sysid import order_table
+
+    inputs, outputs = _names(input), _names(output)
+    recording = _read(data, inputs, outputs, ts, time_column, trial_column)
+    validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
+    params = {"method": method.value} if kind is Kind.ss else {}
+    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation, **params)
+    if json_output:
+        print(json.dumps(rows, indent=2))
+        return
+    where = f"on {validate}" if validate is not None else "on the estimation data"
+    table = Table(title=f"{'transfer functions (poles per entry)' if kind is Kind.tf else 'state space (states)'}: "
+                        f"fit % {where}")
+    for heading in ("order", "parameters", "fit %", *outputs, "AIC", "BIC", "stable", "seconds"):
+        table.add_column(heading, justify="right")
+    best_bic = min(rows, key=lambda row: row["bic"])["order"]
+    for row in rows:
+        table.add_row(f"{row['order']}{' *' if row['order'] == best_bic else ''}", str(row["parameters"]),
+                      f"{row['fit_percent']:.1f}", *(f"{row['fit_percent_per_output'][name]:.1f}" for name in outputs),
+                      f"{row['aic']:.1f}", f"{row['bic']:.1f}", "yes" if row["stable"] else "no",
+                      f"{row['seconds']:.2f}")
+    table.caption = "* lowest BIC"
+    console.print(table)
+
+
+def sysid_predict(
+    model_file: Path = typer.Argument(..., help="Saved model (.npz) from softtip sysid fit."),
+    data: Path = DATA,
+    horizon: int = typer.Option(None, "--horizon", "-k",
+                                help="Predict k steps ahead from the measured outputs (default: simulate)."),
+    ts: float = TS,
+    time_column: str = TIME_COLUMN,
+    trial_column: str = TRIAL_COLUMN,
+    full_scale: list[float] = FULL_SCALE,
+    out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
+    json_output: bool = JSON,
+) -> None:
+    """Run a saved model on a recording; score it where the recording has the model's outputs."""
+    from softtip.sysid import load_model
+    from softtip.sysid.recording import file_columns
+
+    if horizon is not None and horizon < 1:
+        fail(f"--horizon = {horizon}: expected an integer >= 1")
+    model = load_model(model_file)
+    present = file_columns(data)
+    measured = all(name in present for name in model.outputs_)
+    if horizon is not None and not measured:
+        fail(f"{data}: --horizon needs the measured outputs {', '.join(model.outputs_)}")
+    recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], ts, time_column,
+                      trial_column)
+    predicted = model.predict(recording, horizon) if measured else model.simulate(recording)
+    result = {"model": str(model_file), "horizon": horizon, "trials": len(recording.trials),
+              "samples": recording.n_samples,
+              "scores": model.evaluate(recording, horizon, _full_scale(full_scale)).to_dict() if measured else None}
+    if out is not None:
+        result["written"] = str(_write_predictions(out, recording, predicted, model.outputs_, model_file, horizon))
+    if json_output:
+        print(json.dumps(result, indent=2))
+        return
+    what = "simulated" if horizon is None else f"{horizon}-step-ahead predictions"
+    if measured:
+        console.print(_scores_table(f"{model_file} on {data} ({what})", result["scores"]))
+    else:
+        console.print(f"{data} has no measured outputs: {what} only")
+    if out is not None:
+        console.print(f"{recording.n_samples} samples -> {result['written']}")
+
+
+def _write_predictions(path: Path, recording, predicted, outputs, model_file: Path, horizon: int | None) -> Path:
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from softtip._core.files import atomic_write
+
+    columns = {"trial": np.concatenate([np.full(len(trial), trial.id) for trial in recording.trials]),
+               "time_s": np.concatenate([recording.time(k) for k in range(len(recording.trials))])}
+    stacked = np.vstack(predicted)
+    for k, name in enumerate(outputs):
+        columns[f"{name}_predicted"] = stacked[:, k]
+    note = {"model": str(model_file), "horizon": horizon, "data": recording.source}
+    table = pa.table(columns).replace_schema_metadata({b"softtip-sysid": json.dumps(note).encode()})
+    if not path.parent.is_dir():
+        fail(f"--out {path}: directory {path.parent} does not exist")
+    return atomic_write(path, lambda handle: pq.write_table(table, handle))

@@ -1,0 +1,57 @@
+"""System identification: linear models of a system from sampled input/output recordings.
+
+What a MATLAB System Identification Toolbox user expects, for recordings such as the wearable
+force sensor's (side-sensor forces in, table-sensor forces out, at 10 Hz):
+
+- :mod:`~softtip.sysid.recording`: :class:`Recording` (sample time, named channels with units,
+  trials) from a softtip dataset, a CSV or a plain Parquet file, with detrending;
+- :mod:`~softtip.sysid.splits`: estimation / validation splits by trial and by contiguous time
+  (honest for time series) and the published random split by sample (leaky: it warns);
+- :mod:`~softtip.sysid.transfer`: continuous transfer-function matrices (``tfest``);
+- :mod:`~softtip.sysid.subspace` and :mod:`~softtip.sysid.refine`: state-space models by N4SID,
+  MOESP or CVA and prediction-error refinement (``n4sid``, ``ssest``);
+- :mod:`~softtip.sysid.statespace`, :mod:`~softtip.sysid.realisation`,
+  :mod:`~softtip.sysid.simulation`: state-space systems, zero-order-hold conversions, transfer
+  functions as state space, simulation, k-step prediction and frame-by-frame streaming;
+- :mod:`~softtip.sysid.metrics`: R², r, RMSE, MAE (in units and % of a stated full scale) and
+  the NRMSE fit % per output;
+- :mod:`~softtip.sysid.models`: :class:`StateSpaceModel` and :class:`TransferFunctionModel`
+  (``fit``/``simulate``/``predict``/``score``), order-selection tables with AIC and BIC;
+- :mod:`~softtip.sysid.files`: :func:`save_model` / :func:`load_model` (npz + JSON).
+"""
+
+from softtip.sysid.files import load_model, save_model
+from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, rated, score_outputs
+from softtip.sysid.models import StateSpaceModel, TransferFunctionModel, information_criteria, order_table
+from softtip.sysid.recording import Recording, Trial, read_recording
+from softtip.sysid.simulation import StreamingSimulator, predict, simulate
+from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
+from softtip.sysid.statespace import IdentificationError, StateSpace
+from softtip.sysid.transfer import TransferFunctionMatrix
+
+__all__ = [
+    "MEASURED",
+    "FullScale",
+    "IdentificationError",
+    "Recording",
+    "Scores",
+    "StateSpace",
+    "StateSpaceModel",
+    "StreamingSimulator",
+    "TransferFunctionMatrix",
+    "TransferFunctionModel",
+    "Trial",
+    "fit_percent",
+    "information_criteria",
+    "load_model",
+    "order_table",
+    "predict",
+    "rated",
+    "read_recording",
+    "save_model",
+    "score_outputs",
+    "simulate",
+    "split_by_sample",
+    "split_by_time",
+    "split_by_trial",
+]

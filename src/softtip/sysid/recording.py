@@ -1,0 +1,422 @@
+"""Recordings for system identification: evenly sampled inputs and outputs, trial by trial.
+
+A :class:`Recording` holds the sample time, the input and output channel names and units, and
+its trials (:class:`Trial`: u (N, nu) and y (N, ny), the trial id in the source, where in that
+trial it starts, and optionally which samples are scored). It comes from a softtip
+:class:`~softtip.data.Dataset` (any channels and numeric labels), from a CSV file or from a plain
+Parquet file (:func:`read_recording`), or from arrays (:meth:`Recording.from_arrays`).
+
+The sample time comes from the time column (``time_s`` by default) or is given; steps that
+differ from it by more than ``time_tolerance`` (a fraction of the sample time) are refused, as
+are a given sample time that disagrees with the time column, non-finite values, unknown columns
+and text where numbers are expected; every refusal is one :class:`~softtip.data.DatasetError`
+line naming the file and the column.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+import scipy.signal
+
+from softtip._core.archive import hash_arrays
+from softtip._core.channels import CHANNEL_UNIT
+from softtip._core.config import PositiveNumber, checked, number
+from softtip.data.csvload import parse_numbers
+from softtip.data.dataset import (
+    METADATA_KEY,
+    TIME,
+    TRIAL,
+    Dataset,
+    DatasetError,
+    column_to_numpy,
+    trial_runs,
+)
+
+DETRENDS = ("none", "mean", "linear")
+Fraction = number("a fraction in (0, 1)", gt=0, lt=1)
+
+
+@dataclass(frozen=True, eq=False)
+class Trial:
+    """One evenly sampled run: inputs ``u`` (N, nu), outputs ``y`` (N, ny).
+
+    ``id`` is the trial's id in the source, ``start`` the index of its first sample there (a trial
+    cut by a time split starts later); ``scored`` marks the samples that count in metrics (None:
+    all of them).
+    """
+
+    u: np.ndarray
+    y: np.ndarray
+    id: int = 0
+    start: int = 0
+    scored: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.u)
+
+
+def _names(value: Any, count: int, default: str, what: str, source: str) -> tuple[str, ...]:
+    if value is None:
+        return tuple(f"{default}{k}" for k in range(count))
+    if isinstance(value, str):
+        value = [value]
+    names = tuple(value)
+    if len(names) != count or not all(isinstance(name, str) for name in names):
+        raise DatasetError(f"{source}: {what}: expected {count} names, got {value!r}")
+    return names
+
+
+def _units(value: Any, count: int, what: str, source: str) -> tuple[str, ...]:
+    if value is None or value == ():
+        return ("",) * count
+    if isinstance(value, str):
+        return (value,) * count
+    units = tuple(value)
+    if len(units) != count or not all(isinstance(unit, str) for unit in units):
+        raise DatasetError(f"{source}: {what}: expected a unit or {count} units, got {value!r}")
+    return units
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """Trials of one system's inputs and outputs at one sample time ``ts`` (s); validated, read-only.
+
+    A recording without outputs (``outputs`` empty) can be simulated, not identified or scored.
+    """
+
+    ts: float
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    trials: tuple[Trial, ...]
+    input_units: tuple[str, ...] = ()
+    output_units: tuple[str, ...] = ()
+    source: str = "arrays"
+    detrended: str = "none"
+
+    def __post_init__(self):
+        source = self.source
+        object.__setattr__(self, "ts", float(checked(PositiveNumber, f"{source}: ts", self.ts, DatasetError)))
+        inputs, outputs = tuple(self.inputs), tuple(self.outputs)
+        if not inputs:
+            raise DatasetError(f"{source}: inputs: expected at least one name")
+        for role, names in (("inputs", inputs), ("outputs", outputs)):
+            if not all(isinstance(name, str) and name for name in names):
+                raise DatasetError(f"{source}: {role}: expected non-empty names, got {names!r}")
+        everything = inputs + outputs
+        repeated = sorted({name for name in everything if everything.count(name) > 1})
+        if repeated:
+            raise DatasetError(f"{source}: column {repeated[0]!r} is named more than once among inputs and outputs")
+        if self.detrended not in DETRENDS:
+            raise DatasetError(f"{source}: detrended: expected one of {', '.join(DETRENDS)}, got {self.detrended!r}")
+        object.__setattr__(self, "inputs", inputs)
+        object.__setattr__(self, "outputs", outputs)
+        object.__setattr__(self, "input_units", _units(self.input_units, len(inputs), "input_units", source))
+        object.__setattr__(self, "output_units", _units(self.output_units, len(outputs), "output_units", source))
+        trials = tuple(self.trials)
+        if not trials:
+            raise DatasetError(f"{source}: no trials")
+        object.__setattr__(self, "trials", tuple(self._checked(trial) for trial in trials))
+
+    def _checked(self, trial: Trial) -> Trial:
+        where = f"{self.source}: trial {trial.id}"
+        u, y = np.array(trial.u, dtype=np.float64), np.array(trial.y, dtype=np.float64)
+        for role, values, names in (("u", u, self.inputs), ("y", y, self.outputs)):
+            if values.ndim != 2 or values.shape[1] != len(names):
+                raise DatasetError(f"{where}: {role}: expected shape (samples, {len(names)}), got {values.shape}")
+            bad = ~np.isfinite(values)
+            if bad.any():
+                row, column = np.argwhere(bad)[0]
+                raise DatasetError(f"{where}: column {names[column]!r}, sample {trial.start + row}: "
+                                   f"{values[row, column]} is not a finite number")
+        if len(u) != len(y):
+            raise DatasetError(f"{where}: {len(u)} input samples but {len(y)} output samples")
+        if len(u) < 2:
+            raise DatasetError(f"{where}: {len(u)} sample(s); a trial needs at least 2")
+        scored = None
+        if trial.scored is not None:
+            scored = np.array(trial.scored, dtype=bool)
+            if scored.shape != (len(u),):
+                raise DatasetError(f"{where}: scored: expected {len(u)} flags, got shape {scored.shape}")
+            scored.setflags(write=False)
+        for values in (u, y):
+            values.setflags(write=False)
+        return Trial(u, y, int(trial.id), int(trial.start), scored)
+
+    # -- construction ------------------------------------------------------
+
+    @classmethod
+    def from_arrays(cls, u: Any, y: Any, ts: float, *, inputs: Sequence[str] | None = None,
+                    outputs: Sequence[str] | None = None, input_units: Any = None, output_units: Any = None,
+                    source: str = "arrays") -> Recording:
+        """A recording of one trial (u (N, nu), y (N, ny); 1-D for one channel) or of several (lists of
+        such arrays, one per trial). Channels are named u0, u1 ... and y0, y1 ... unless named."""
+        several = isinstance(u, (list, tuple))
+        if several != isinstance(y, (list, tuple)) or (several and len(u) != len(y)):
+            raise DatasetError(f"{source}: u and y: expected two arrays, or two lists of as many arrays")
+        pairs = list(zip(u, y, strict=True)) if several else [(u, y)]
+        trials = [Trial(np.asarray(a, dtype=np.float64).reshape(len(a), -1),
+                        np.asarray(b, dtype=np.float64).reshape(len(b), -1), k) for k, (a, b) in enumerate(pairs)]
+        nu, ny = trials[0].u.shape[1], trials[0].y.shape[1]
+        return cls(ts, _names(inputs, nu, "u", "inputs", source), _names(outputs, ny, "y", "outputs", source),
+                   tuple(trials), input_units, output_units, source)
+
+    @classmethod
+    def from_dataset(cls, dataset: Dataset, inputs: Sequence[str], outputs: Sequence[str], *,
+                     ts: float | None = None, time_tolerance: float = 0.02, source: str = "dataset") -> Recording:
+        """The dataset's channels or numeric labels ``inputs`` and ``outputs``, trial by trial; the sample
+        time from its ``time_s`` column (checked against ``ts`` when given)."""
+        units = {**dict.fromkeys(dataset.channels, CHANNEL_UNIT), **dataset.labels}
+        for name in (*inputs, *outputs):
+            if name in dataset.conditions:
+                raise DatasetError(f"{source}: {name!r} is a condition (constant over each trial), not a signal")
+            if name not in units:
+                raise DatasetError(f"{source}: no channel or label {name!r} "
+                                   f"(channels and labels: {', '.join(units)})")
+            if dataset.columns[name].dtype.kind not in "biuf":
+                raise DatasetError(f"{source}: label {name!r} holds text, expected numbers")
+        return _assemble(source, dataset.groups, dataset.columns[TIME], dataset.columns, list(inputs), list(outputs),
+                         [units[name] for name in inputs], [units[name] for name in outputs], ts, time_tolerance)
+
+    # -- structure ---------------------------------------------------------
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.inputs)
+
+    @property
+    def n_outputs(self) -> int:
+        return len(self.outputs)
+
+    @property
+    def n_samples(self) -> int:
+        return sum(len(trial) for trial in self.trials)
+
+    @property
+    def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(u, y) of every trial."""
+        return [(trial.u, trial.y) for trial in self.trials]
+
+    def time(self, index: int) -> np.ndarray:
+        """The time stamps (s) of trial ``index``, from the start of its source trial."""
+        trial = self.trials[index]
+        return (trial.start + np.arange(len(trial))) * self.ts
+
+    @cached_property
+    def sha256(self) -> str:
+        """Hex digest of the sample time and every trial's arrays (see :func:`softtip._core.archive.hash_arrays`)."""
+        digest = hashlib.sha256(np.float64(self.ts).tobytes())
+        hash_arrays(digest, {f"{k:06d}/{role}": getattr(trial, role)
+                             for k, trial in enumerate(self.trials) for role in ("u", "y")})
+        return digest.hexdigest()
+
+    def describe(self) -> dict:
+        """What a model file keeps of the data it was identified on."""
+        return {"source": self.source, "ts": self.ts, "inputs": list(self.inputs), "outputs": list(self.outputs),
+                "input_units": list(self.input_units), "output_units": list(self.output_units),
+                "trials": len(self.trials), "samples": self.n_samples, "detrended": self.detrended,
+                "sha256": self.sha256}
+
+    # -- derived recordings ---------------------------------------------------
+
+    def with_trials(self, trials: Sequence[Trial], source: str | None = None) -> Recording:
+        return replace(self, trials=tuple(trials), source=self.source if source is None else source)
+
+    def select(self, indices: Sequence[int]) -> Recording:
+        """The trials at ``indices`` (positions in :attr:`trials`)."""
+        return self.with_trials([self.trials[k] for k in indices])
+
+    def detrend(self, kind: str) -> Recording:
+        """Every trial's inputs and outputs less their mean (``"mean"``) or least-squares line (``"linear"``).
+
+        A model identified on detrended data runs on data detrended the same way.
+        """
+        if kind not in ("mean", "linear"):
+            raise DatasetError(f"detrend: expected 'mean' or 'linear', got {kind!r}")
+        how = "constant" if kind == "mean" else "linear"
+        trials = [replace(trial, u=scipy.signal.detrend(trial.u, axis=0, type=how),
+                          y=scipy.signal.detrend(trial.y, axis=0, type=how)) for trial in self.trials]
+        detrended = "linear" if "linear" in (kind, self.detrended) else "mean"
+        return replace(self, trials=tuple(trials), detrended=detrended)
+
+    # -- checks before identification ---------------------------------------
+
+    def require_excitation(self) -> None:
+        """Refuses a recording without outputs, or in which an input never changes: its effect cannot be
+        identified."""
+        if not self.outputs:
+            raise DatasetError(f"{self.source}: no outputs: nothing to identify")
+        u = np.concatenate([trial.u for trial in self.trials])
+        flat = np.flatnonzero(np.ptp(u, axis=0) == 0)
+        if flat.size:
+            raise DatasetError(f"{self.source}: input {self.inputs[flat[0]]!r} is constant "
+                               f"({u[0, flat[0]]:g}) over the whole recording: its effect cannot be identified")
+
+    def require_samples(self, minimum: int, purpose: str) -> None:
+        """Refuses a recording of fewer than ``minimum`` samples in all, naming ``purpose``."""
+        if self.n_samples < minimum:
+            raise DatasetError(f"{self.source}: {self.n_samples} samples, too few for {purpose} "
+                               f"(needs at least {minimum})")
+
+
+# ------------------------------------------------------------------------------------------- assembling
+
+
+def sample_time(source: str, column: str, trial: np.ndarray, time: np.ndarray, ts: float | None,
+                tolerance: float) -> float:
+    """The sample time of the time column ``time`` (the median step within trials), refusing steps that
+    differ from it, and a given ``ts`` that differs from it, by more than ``tolerance`` of it."""
+    tolerance = checked(Fraction, "time_tolerance", tolerance, DatasetError)
+    same = trial[1:] == trial[:-1]
+    steps = np.diff(time)[same]
+    if steps.size == 0:
+        if ts is None:
+            raise DatasetError(f"{source}: no trial has two samples: give the sample time")
+        return ts
+    step = float(np.median(steps))
+    if not step > 0:
+        raise DatasetError(f"{source}: column {column!r}: time does not increase (median step {step:g} s)")
+    off = np.abs(steps - step) > tolerance * step
+    if off.any():
+        row = int(np.flatnonzero(same)[np.argmax(off)]) + 1
+        raise DatasetError(f"{source}: column {column!r}: irregular sample times in trial {trial[row]}: a step of "
+                           f"{steps[np.argmax(off)]:g} s at row {row}, the sample time is {step:g} s "
+                           f"(tolerance {100 * tolerance:g} %)")
+    if ts is not None and abs(ts - step) > tolerance * step:
+        raise DatasetError(f"{source}: the sample time given, {ts:g} s, does not match the {step:g} s of "
+                           f"column {column!r}")
+    return step if ts is None else ts
+
+
+def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: Mapping[str, np.ndarray],
+              inputs: list[str], outputs: list[str], input_units: Any, output_units: Any, ts: float | None,
+              tolerance: float, time_column: str = TIME) -> Recording:
+    """A recording from per-row columns: trial ids (rows of a trial contiguous), times or None, signals."""
+    if ts is not None:
+        ts = checked(PositiveNumber, f"{source}: ts", ts, DatasetError)
+    starts, lengths = trial_runs(trial)
+    ids, counts = np.unique(trial[starts], return_counts=True)
+    if np.any(counts > 1):
+        raise DatasetError(f"{source}: the rows of trial {ids[counts > 1][0]} are not contiguous")
+    if time is None:
+        if ts is None:
+            raise DatasetError(f"{source}: no time column: give the sample time")
+    else:
+        ts = sample_time(source, time_column, trial, time, ts, tolerance)
+    u = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in inputs])
+    y = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in outputs]) if outputs \
+        else np.zeros((len(trial), 0))
+    trials = [Trial(u[a:a + n], y[a:a + n], int(trial[a])) for a, n in zip(starts, lengths, strict=True)]
+    return Recording(ts, tuple(inputs), tuple(outputs), tuple(trials), input_units, output_units, source)
+
+
+def _first_line(problem: Exception) -> str:
+    return str(problem).strip().splitlines()[0] if str(problem).strip() else type(problem).__name__
+
+
+def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
+    try:
+        table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(
+            include_columns=wanted, column_types=dict.fromkeys(wanted, pa.string())))
+    except (pa.ArrowException, OSError) as problem:
+        raise DatasetError(f"{path}: cannot be read as CSV ({_first_line(problem)})") from None
+    return {name: parse_numbers(path, name, table.column(name)) for name in wanted}
+
+
+def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
+    try:
+        table = pq.read_table(path, columns=wanted)
+    except (pa.ArrowException, OSError) as problem:
+        raise DatasetError(f"{path}: unreadable Parquet data ({_first_line(problem)})") from None
+    values = {}
+    for name in wanted:
+        column = table.column(name)
+        if not (pa.types.is_integer(column.type) or pa.types.is_floating(column.type)
+                or pa.types.is_boolean(column.type)):
+            raise DatasetError(f"{path}: column {name!r} holds {column.type} values, expected numbers")
+        values[name] = column_to_numpy(repr(name), column)
+    return values
+
+
+def _check_columns(path: Path, wanted: list[str], present: list[str]) -> None:
+    for name in wanted:
+        if name not in present:
+            raise DatasetError(f"{path}: no column {name!r} (columns: {', '.join(present)})")
+        if present.count(name) > 1:
+            raise DatasetError(f"{path}: column {name!r} appears more than once")
+
+
+def _is_dataset_file(path: Path) -> bool:
+    try:
+        return METADATA_KEY in (pq.read_schema(path).metadata or {})
+    except (pa.ArrowException, OSError):
+        return False
+
+
+def file_columns(path: str | os.PathLike) -> list[str]:
+    """The column names of a CSV (``.csv``) or Parquet (``.parquet``) file."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"recording {path} does not exist")
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise DatasetError(f"recording {path}: expected a .csv or .parquet file")
+    try:
+        return pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
+    except (pa.ArrowException, OSError) as problem:
+        kind = "CSV" if suffix == ".csv" else "Parquet"
+        raise DatasetError(f"{path}: cannot be read as {kind} ({_first_line(problem)})") from None
+
+
+def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequence[str], *,
+                   ts: float | None = None, time_column: str | None = None, trial_column: str | None = None,
+                   units: Mapping[str, str] | None = None, time_tolerance: float = 0.02) -> Recording:
+    """The columns ``inputs`` and ``outputs`` of a CSV file (``.csv``) or a Parquet file (``.parquet``).
+
+    A softtip dataset file is read as a :class:`~softtip.data.Dataset` (its channels and labels, with
+    their units). Any other file is read as plain columns: ``time_column`` (seconds; default ``time_s``
+    when present, else ``ts`` must be given) and ``trial_column`` (integer ids, the rows of a trial
+    contiguous; default ``trial`` when present, else one trial), ``units`` a mapping of column to unit.
+    """
+    path = Path(path)
+    present = file_columns(path)
+    suffix = path.suffix.lower()
+    if suffix == ".parquet" and _is_dataset_file(path):
+        if time_column is not None or trial_column is not None or units is not None:
+            raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units")
+        return Recording.from_dataset(Dataset.read(path), inputs, outputs, ts=ts, time_tolerance=time_tolerance,
+                                      source=str(path))
+    reader = _csv_columns if suffix == ".csv" else _parquet_columns
+    time_name = time_column if time_column is not None else (TIME if TIME in present else None)
+    trial_name = trial_column if trial_column is not None else (TRIAL if TRIAL in present else None)
+    own = [name for name in (time_name, trial_name) if name is not None]
+    for name in (*inputs, *outputs):
+        if name in own:
+            raise DatasetError(f"{path}: column {name!r} is the time or trial column, not a signal")
+    wanted = list(dict.fromkeys([*own, *inputs, *outputs]))
+    _check_columns(path, wanted, present)
+    columns = reader(path, wanted)
+    if trial_name is None:
+        trial = np.zeros(len(columns[wanted[0]]), dtype=np.int64)
+    else:
+        ids = columns[trial_name]
+        if not np.all(np.isfinite(ids) & (ids == np.round(ids))):
+            raise DatasetError(f"{path}: trial column {trial_name!r} holds values that are not integers")
+        trial = ids.astype(np.int64)
+    units = dict(units or {})
+    unknown = [name for name in units if name not in (*inputs, *outputs)]
+    if unknown:
+        raise DatasetError(f"{path}: units: {unknown[0]!r} is not an input or output")
+    return _assemble(str(path), trial, None if time_name is None else columns[time_name], columns, list(inputs),
+                     list(outputs), [units.get(name, "") for name in inputs], [units.get(name, "") for name in outputs],
+                     ts, time_tolerance, time_name or TIME)

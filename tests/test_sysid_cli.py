@@ -1,0 +1,154 @@
+"""``softtip sysid fit | orders | predict`` on small CSV recordings: JSON contracts and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from softtip.cli.main import app
+from softtip.sysid.simulation import simulate
+from softtip.sysid.statespace import StateSpace
+
+runner = CliRunner()
+TS = 0.1
+# a continuous system of 3 states (poles -1 ± 2j, -4), two inputs (side forces), two outputs (table forces)
+SYSTEM = StateSpace(np.array([[-1.0, 2.0, 0], [-2.0, -1.0, 0], [0, 0, -4.0]]), [[1.0, 0.0], [0.5, 1.0], [0.0, 2.0]],
+                    [[1.0, 0.0, 0.5], [0.0, 1.0, 1.0]], np.zeros((2, 2))).to_discrete(TS)
+
+
+def _write(path, trials: range, seed: int, outputs: bool = True):
+    rng = np.random.default_rng(seed)
+    lines = ["trial,time_s,Fx_side,Fz_side" + (",Fx,Fz" if outputs else "")]
+    for trial in trials:
+        u = rng.normal(size=(200, 2))
+        y = simulate(SYSTEM, u) + 0.01 * rng.normal(size=(200, 2))
+        for k in range(200):
+            cells = [trial, 5.0 + k * TS, *u[k], *(y[k] if outputs else ())]
+            lines.append(",".join(str(v) for v in cells))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture
+def files(tmp_path):
+    return _write(tmp_path / "estimation.csv", range(3), 0), _write(tmp_path / "validation.csv", range(3, 5), 1)
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+COLUMNS = ("--input", "Fx_side,Fz_side", "--output", "Fx", "--output", "Fz")
+
+
+@pytest.mark.parametrize("kind, order", [("ss", "3"), ("tf", "2")])
+def test_fit_prints_the_summary_and_validation_metrics_and_saves_the_model(files, tmp_path, kind, order):
+    estimation, validation = files
+    result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", kind, "--order", order,
+                 "--validate", validation, "-o", tmp_path / "model.npz", "--json")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["model"]["ts"] == pytest.approx(TS) and report["model"]["inputs"] == ["Fx_side", "Fz_side"]
+    assert report["saved"] == str(tmp_path / "model.npz") and (tmp_path / "model.npz").is_file()
+    scored = report["validation"]
+    assert scored["full_scale"]["definition"] == "measured" and scored["samples"] == 400
+    for name in ("Fx", "Fz"):
+        row = scored["outputs"][name]
+        assert {"r2", "r", "rmse", "rmse_fs_percent", "mae_fs_percent", "fit_percent"} <= set(row)
+        assert row["r2"] > 0.99 and row["fit_percent"] > 90 and row["rmse_fs_percent"] < 2
+
+
+def test_fit_with_a_rated_full_scale_reports_it(files):
+    estimation, validation = files
+    result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "--validate",
+                 validation, "--full-scale", 100, "--full-scale", 50, "--json")
+    scored = json.loads(result.output)["validation"]
+    assert scored["full_scale"]["definition"] == "rated"
+    assert scored["outputs"]["Fz"]["full_scale"] == 50.0
+    assert scored["outputs"]["Fx"]["rmse_fs_percent"] == pytest.approx(scored["outputs"]["Fx"]["rmse"])
+
+
+def test_orders_tabulates_every_order(files):
+    estimation, validation = files
+    result = run("sysid", "orders", "--data", estimation, *COLUMNS, "--kind", "ss", "--orders", "1-5",
+                 "--validate", validation, "--json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.output)
+    assert [row["order"] for row in rows] == [1, 2, 3, 4, 5]
+    assert min(rows, key=lambda row: row["bic"])["order"] == 3  # the true order
+    assert rows[2]["fit_percent"] > 95 and rows[0]["fit_percent"] < rows[2]["fit_percent"]
+    printed = run("sysid", "orders", "--data", estimation, *COLUMNS, "--kind", "tf", "--orders", "1,2")
+    assert printed.exit_code == 0 and "lowest BIC" in printed.output
+
+
+def test_predict_scores_simulation_and_k_step_predictions_and_writes_them(files, tmp_path):
+    estimation, validation = files
+    model = tmp_path / "model.npz"
+    run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "-o", model)
+    simulated = json.loads(run("sysid", "predict", model, "--data", validation, "--json").output)
+    result = run("sysid", "predict", model, "--data", validation, "--horizon", 1, "-o", tmp_path / "out.parquet",
+                 "--json")
+    assert result.exit_code == 0, result.output
+    one_step = json.loads(result.output)
+    assert one_step["horizon"] == 1 and one_step["samples"] == 400
+    assert one_step["scores"]["outputs"]["Fx"]["r2"] > 0.99 and simulated["scores"]["outputs"]["Fz"]["r2"] > 0.99
+    table = pq.read_table(tmp_path / "out.parquet")
+    assert table.column_names == ["trial", "time_s", "Fx_predicted", "Fz_predicted"]
+    np.testing.assert_allclose(table.column("time_s").to_numpy()[:3], [0.0, 0.1, 0.2])
+    assert json.loads(table.schema.metadata[b"softtip-sysid"])["horizon"] == 1
+
+
+def test_predict_simulates_a_recording_without_outputs(files, tmp_path):
+    estimation, _ = files
+    model = tmp_path / "model.npz"
+    run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "-o", model)
+    inputs_only = _write(tmp_path / "live.csv", range(1), 2, outputs=False)
+    result = run("sysid", "predict", model, "--data", inputs_only, "-o", tmp_path / "out.parquet", "--json")
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["scores"] is None
+    predicted = pq.read_table(tmp_path / "out.parquet").column("Fx_predicted").to_numpy()
+    rng = np.random.default_rng(2)
+    np.testing.assert_allclose(predicted, simulate(SYSTEM, rng.normal(size=(200, 2)))[:, 0], atol=0.05)
+    refused = run("sysid", "predict", model, "--data", inputs_only, "--horizon", 2)
+    assert refused.exit_code == 2 and "--horizon needs the measured outputs Fx, Fz" in refused.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--input", "Fy_side", "--output", "Fx", "--kind", "ss", "--order", "3"), "no column 'Fy_side'"),
+    ((*COLUMNS, "--kind", "ss", "--order", "zero"), "--order = 'zero': expected a positive integer or auto"),
+    ((*COLUMNS, "--kind", "tf", "--order", "auto"), "--order = 'auto': expected a positive integer"),
+    ((*COLUMNS, "--kind", "ss", "--order", "3", "--zeros", "1"), "--zeros: only for --kind tf"),
+    ((*COLUMNS, "--kind", "ss", "--order", "3", "--ts", "0.05"), "does not match the 0.1 s of column 'time_s'"),
+    ((*COLUMNS, "--kind", "ss", "--order", "150"), "too few samples for order 150"),
+])
+def test_fit_mistakes_give_one_line_and_exit_code_2(files, args, message):
+    result = run("sysid", "fit", "--data", files[0], *args)
+    assert result.exit_code == 2, result.output
+    assert message in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_a_damaged_model_file_gives_one_line(files, tmp_path):
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(b"PK\x03\x04 not really")
+    result = run("sysid", "predict", broken, "--data", files[1])
+    assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1
+    assert "truncated or unreadable" in result.output
+
+
+def test_bench_sysid_reports_every_figure_beside_its_baseline():
+    result = run("bench", "sysid", "--calls", 200, "--json")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["data"]["estimation_samples"] == 1500
+    for name in ("transfer_function_order_6", "state_space_order_8", "state_space_order_8_refined", "nfoursid_order_8"):
+        assert report[name]["seconds"] > 0 and len(report[name]["validation_fit_percent"]) == 3
+    assert set(report["streaming_step_us"]) == {"state_space_order_10", "transfer_function_order_6",
+                                                "numpy_step_order_10"}
+    assert set(report["ratios"]) == {"nfoursid_time_over_state_space", "state_space_mean_fit_minus_nfoursid",
+                                     "transfer_function_time_over_nfoursid", "numpy_step_over_streaming_step"}
+    assert report["ratios"]["state_space_mean_fit_minus_nfoursid"] > -5  # as good as nfoursid on the same data
+    assert report["sippy"]["note"]
