@@ -37,6 +37,9 @@ FEWER_CONDITIONS = {"contact-states": """
     untrained_psi_deg = [12.0]
     approach_inclines_deg = [45.0]
     positions_mm = [[0.0, 0.0], [5.0, 5.0]]
+""", "wearable": """
+    participants = 2
+    runs = 2
 """}
 
 
@@ -49,13 +52,10 @@ def coarse_protocol(tmp_path_factory):
 
     def write(name: str, design: str, mesh: float = 3.0, extra: str = "", seed: int = 2, fewer: bool = False):
         path = directory / f"{name}-{next(numbers)}.toml"
-        path.write_text(textwrap.dedent(f"""
-            protocol = "{name}"
-            design = "{design}"
-            seed = {seed}
-            [parameters]
-            mesh_size_mm = {mesh}
-        """) + textwrap.dedent(extra) + textwrap.dedent(FEWER_CONDITIONS.get(name, "") if fewer else ""))
+        fixture = (f'design = "{design}"\n' f"[parameters]\nmesh_size_mm = {mesh}\n" if name != "wearable"
+                   else "[parameters]\n")  # the wearable bench has no design and no mesh
+        path.write_text(f'protocol = "{name}"\nseed = {seed}\n' + fixture + textwrap.dedent(extra)
+                        + textwrap.dedent(FEWER_CONDITIONS.get(name, "") if fewer else ""))
         return path
 
     return write

@@ -7,7 +7,7 @@ Light to import (names only), so the command line lists the studies without load
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
@@ -17,6 +17,9 @@ class Study:
     module: str  # the module of softtip.studies that analyses it
     analysis: str  # its function there
     follows: str  # what of the publication it reproduces
+    # protocol parameters the study sets over the protocol file's, and why (printed in the report)
+    sets: dict[str, object] = field(default_factory=dict)
+    because: str = ""
 
 
 STUDIES: dict[str, Study] = {study.name: study for study in (
@@ -29,4 +32,8 @@ STUDIES: dict[str, Study] = {study.name: study for study in (
           "S1 §2: orientation and grip force at 49 contact positions, trained and untrained"),
     Study("contact-states", "contact-states", "hall_fingertip", "contact_states", "S1 §2: contact states of a grasped thin board"),
     Study("inverter", "inverter", "hall_fingertip", "inverter", "S1 §2: contact states of the inverter assembly, detection force"),
+    Study("wearable", "wearable", "wearable", "wearable",
+          "S2: fingertip force from the side of the nail, transfer-function and state-space models per participant",
+          sets={"contacts": ["flat", "curved", "edge", "point"]},
+          because="the authors' extension: calibrate on flat contact, test on curved, edge and point contacts"),
 )}

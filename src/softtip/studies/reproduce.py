@@ -58,7 +58,7 @@ def _shown(value) -> str:
     return json.dumps(value, ensure_ascii=False) if isinstance(value, (list, dict)) else str(value)
 
 
-def protocol_table(protocol: Protocol, source: str, quick_keys: set[str]) -> Table:
+def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study: Study) -> Table:
     """Every setting of the run: value, unit, default or changed, and where the value comes from."""
     rows, cells = [], {}
 
@@ -67,6 +67,7 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str]) -> Tab
         rows.append(row)
         changed = value != default
         where = ("--quick (a smoke run)" if key in quick_keys and section == "parameters"
+                 else f"set by the study: {study.because}" if key in study.sets and section == "parameters"
                  else f"changed in {source}" if changed else origin)
         cells.update({(row, "value"): _shown(value), (row, "unit"): parameter_unit(key),
                       (row, "default or changed"): f"changed (default {_shown(default)})" if changed else "default",
@@ -147,6 +148,7 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
     study = STUDIES[name]
     protocol = load_protocol(protocol_path or study.protocol)
     protocol.seed = seed
+    protocol.parameters.update(study.sets)
     quick_keys = set()
     if quick:
         for key, count in QUICK_TRIALS.items():
@@ -156,7 +158,7 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
     started = datetime.now(timezone.utc)
     start = time.perf_counter()
     source = str(protocol_path) if protocol_path else f"the shipped protocol {shipped_protocol_path(study.protocol).name}"
-    table = protocol_table(protocol, source, quick_keys)  # before the analysis, which may change the design
+    table = protocol_table(protocol, source, quick_keys, study)  # before the analysis, which may change the design
     analysis = getattr(import_module(f"softtip.studies.{study.module}"), study.analysis)
     outcome = analysis(protocol, seed, progress)
     seconds = time.perf_counter() - start

@@ -1,0 +1,274 @@
+"""The S2 study (fingertip force from the side of the nail) on the wearable twin: per participant,
+continuous transfer-function and subspace state-space models from the side chip's three forces to
+the table's three forces, scored per axis beside the published figures; the published random
+split by sample beside the honest splits by trial and by time block; the authors' extensions
+(calibrate on flat contact, test on curved, edge and point contacts; the centre of force).
+
+Full scale is the measured range (max - min) of each axis in the validation data scored (the
+publication does not define it). The honest split holds out whole trials: a 10 Hz series' neighbouring
+samples are nearly equal, so a random split by sample validates on samples the model has in effect seen.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from softtip._core.progress import Progress  # noqa: E402
+from softtip.data import Dataset, LeakageWarning  # noqa: E402
+from softtip.lab import Protocol, run_protocol  # noqa: E402
+from softtip.published import published_table  # noqa: E402
+from softtip.report.document import Figure  # noqa: E402
+from softtip.report.tables import Table, paper_table  # noqa: E402
+from softtip.studies.outcome import Headline, StudyOutcome  # noqa: E402
+from softtip.sysid.models import StateSpaceModel, TransferFunctionModel  # noqa: E402
+from softtip.sysid.recording import Recording  # noqa: E402
+from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial  # noqa: E402
+
+INPUTS = ("side_fx_N", "side_fy_N", "side_fz_N")
+OUTPUTS = ("fx_N", "fy_N", "fz_N")
+CENTRE = ("cop_x_mm", "cop_y_mm")
+AXES = ("Fx", "Fy", "Fz")
+TF_ORDERS, SS_ORDERS = (4, 5, 6), (7, 8, 9, 10)
+TF, SS = "transfer function, order 6", "state space, order 8"
+SPLITS = ("random 80/20 by sample (published)", "by trial (80 % of trials)", "by time block (first 80 % of each trial)")
+EXTENSION_CONTACTS = ("curved", "edge", "point")
+
+
+def _models() -> dict[str, object]:
+    return {TF: TransferFunctionModel(6), SS: StateSpaceModel(8)}
+
+
+def _split(recording: Recording, split: str, seed: int) -> tuple[Recording, Recording]:
+    if split == SPLITS[0]:
+        with warnings.catch_warnings():  # the leak is the point of this comparison
+            warnings.simplefilter("ignore", LeakageWarning)
+            return split_by_sample(recording, 0.8, seed=seed)
+    if split == SPLITS[1]:
+        return split_by_trial(recording, 0.8, seed=seed)
+    return split_by_time(recording, 0.8)
+
+
+def _recording(dataset: Dataset, rows: np.ndarray, outputs=OUTPUTS) -> Recording:
+    return Recording.from_dataset(dataset.select(rows=rows), INPUTS, outputs, source="wearable")
+
+
+def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    participant, contact = dataset.column("participant"), dataset.column("contact")
+    participants = [int(p) for p in np.unique(participant)]
+    flat = contact == "flat"
+    results = {"timings_s": timings, "full_scale": "measured range (max - min) of each axis in the validation data",
+               "participants": {}}
+    offline, splits, orders, extension, centre = {}, {}, {}, {}, {}
+    started = time.perf_counter()
+    example = None
+    with progress.task("wearable: identification per participant", total=len(participants)) as task:
+        for p in participants:
+            recording = _recording(dataset, flat & (participant == p))
+            entry = results["participants"][str(p)] = {"splits": {}, "orders": {}}
+            for split in SPLITS:
+                estimation, validation = _split(recording, split, seed)
+                entry["splits"][split] = {}
+                for name, model in _models().items():
+                    model.fit(estimation)
+                    scores = model.evaluate(validation)
+                    entry["splits"][split][name] = scores.to_dict()
+                    if split == SPLITS[1]:
+                        offline.setdefault(name, []).append(scores)
+                        if name == TF:
+                            entry["streaming_r2"] = _streamed_r2(model, validation)
+                            if example is None:
+                                example = (p, model, validation)
+                    splits.setdefault((split, name), []).append(scores)
+            estimation, validation = split_by_trial(recording, 0.8, seed=seed)
+            for kind, values in (("tf", TF_ORDERS), ("ss", SS_ORDERS)):
+                for order in values:
+                    model = TransferFunctionModel(order) if kind == "tf" else StateSpaceModel(order)
+                    scores = model.fit(estimation).evaluate(validation)
+                    entry["orders"][f"{kind}{order}"] = {"r2_mean": scores.mean("r2"),
+                                                         "rmse_fs_percent_mean": scores.mean("rmse_fs_percent")}
+                    orders.setdefault((kind, order), []).append(scores)
+            others = np.isin(contact, EXTENSION_CONTACTS) & (participant == p)
+            if others.any():
+                model = TransferFunctionModel(6).fit(recording)
+                for shape in EXTENSION_CONTACTS:
+                    rows = (contact == shape) & (participant == p)
+                    if rows.any():
+                        scores = model.evaluate(_recording(dataset, rows))
+                        extension.setdefault(shape, []).append(scores)
+                        entry.setdefault("contacts", {})[shape] = scores.to_dict()
+            centre_rows = flat & (participant == p) & _finite_trials(dataset, CENTRE)
+            if centre_rows.any():
+                located = _recording(dataset, centre_rows, OUTPUTS + CENTRE)
+                estimation, validation = split_by_trial(located, 0.8, seed=seed)
+                scores = StateSpaceModel(8).fit(estimation).evaluate(validation)
+                centre.setdefault("state space, order 8", []).append(scores)
+                entry["centre_of_force"] = scores.to_dict()
+            task.advance()
+    results["identification_s"] = time.perf_counter() - started
+    tables = [_offline_table(offline), _participant_table(results), _split_table(splits), _order_table(orders)]
+    if extension:
+        tables.append(_extension_table(extension))
+    if centre:
+        tables.append(_centre_table(centre))
+    headline = Headline.of(tables[0], f"{TF} · mean", "R²", "transfer function, order 6: R² (mean over axes)")
+    return StudyOutcome(results, tables, [_series_figure(*example)] if example else [], headline, [
+        "Models per participant on flat contact, inputs the side chip's (Fx, Fy, Fz), outputs the table's. The "
+        "continuous transfer functions (6 poles, 5 zeros per entry) are initialised by SRIVC and refined by "
+        "output-error minimisation; the state-space models by N4SID. Scores are open-loop simulations of whole "
+        "validation trials from rest.",
+        "Full scale is the measured range (max - min) of each axis in the validation data (the publication does "
+        "not define it): RMSE % FS is relative to what the person actually pressed.",
+        "The twin has no published data to fit: where its figures differ from the publication the physics of "
+        "the twin, not a tuning, decides (see the S2 section of the README for why x shear is weak here)."])
+
+
+def _finite_trials(dataset: Dataset, columns) -> np.ndarray:
+    """Rows of the trials whose ``columns`` are finite throughout (the centre of force is undefined while
+    the pad is off the object)."""
+    finite = np.all([np.isfinite(dataset.column(c)) for c in columns], axis=0)
+    groups = dataset.groups
+    bad = np.unique(groups[~finite])
+    return ~np.isin(groups, bad)
+
+
+def _streamed_r2(model, validation: Recording) -> float:
+    """R² (mean over axes) of the model run frame by frame over the validation trials: the real-time path."""
+    estimates, truth = [], []
+    for trial in validation.trials:
+        stream = model.streaming()
+        estimates.append(np.array([stream.step(u) for u in trial.u]))
+        truth.append(trial.y)
+    y, yhat = np.vstack(truth), np.vstack(estimates)
+    return float(np.mean(1 - ((y - yhat) ** 2).sum(axis=0) / ((y - y.mean(axis=0)) ** 2).sum(axis=0)))
+
+
+def _mean(scores_list, metric: str) -> np.ndarray:
+    return np.mean([s.values[metric] for s in scores_list], axis=0)
+
+
+def _offline_table(offline) -> Table:
+    published = published_table("wearable-offline")
+    cells, rows = {}, {}
+    for name in (TF, SS):
+        for k, axis in enumerate(AXES):
+            row = f"{name} · {axis}"
+            rows[row] = name
+            cells.update({(row, "R²"): _mean(offline[name], "r2")[k], (row, "|r|"): abs(_mean(offline[name], "r")[k]),
+                          (row, "RMSE (% FS)"): _mean(offline[name], "rmse_fs_percent")[k]})
+        rows[f"{name} · mean"] = name
+        cells.update({(f"{name} · mean", "R²"): float(np.mean(_mean(offline[name], "r2"))),
+                      (f"{name} · mean", "|r|"): float(np.mean(np.abs(_mean(offline[name], "r")))),
+                      (f"{name} · mean", "RMSE (% FS)"): float(np.mean(_mean(offline[name], "rmse_fs_percent")))})
+    return paper_table(published, cells, rows=rows, caption=(
+        "Mean over the participants, validated on held-out trials (the honest split); the published ranges span "
+        "the axes and participants. Look at which axis is weakest (published: y, distal/proximal shear)."),
+        notes={f"{TF} · Fx": "Radial/ulnar shear moves the displaced volume sideways exactly as placing the finger "
+                             "off-centre does; one chip on one side cannot tell them apart when the placement "
+                             "changes from trial to trial (README, S2).",
+               f"{SS} · mean": "Published: the state-space model lost 10-20 points of R². Both are linear models "
+                               "of the same data here; the realised transfer function runs frame by frame with "
+                               "no loss (see the per-participant table)."})
+
+
+def _participant_table(results) -> Table:
+    cells, rows = {}, []
+    columns = [f"{axis} R²" for axis in AXES] + [f"{axis} RMSE (% FS)" for axis in AXES] + ["streamed R² (mean)"]
+    for p, entry in results["participants"].items():
+        for name in (TF, SS):
+            row = f"participant {int(p) + 1} · {name}"
+            rows.append(row)
+            scores = entry["splits"][SPLITS[1]][name]["outputs"]
+            for axis, output in zip(AXES, OUTPUTS):
+                cells[(row, f"{axis} R²")] = scores[output]["r2"]
+                cells[(row, f"{axis} RMSE (% FS)")] = scores[output]["rmse_fs_percent"]
+            if name == TF:
+                cells[(row, "streamed R² (mean)")] = entry["streaming_r2"]
+    return Table("Per participant, validated on held-out trials", "participant · model", rows, columns, cells,
+                 digits=2, caption=("The published figures are per participant too. 'Streamed': the transfer function "
+                                    "realised as state space and run one frame at a time, as in real time; it "
+                                    "equals the offline R² (the published real-time model lost 10-20 points)."))
+
+
+def _split_table(splits) -> Table:
+    cells = {}
+    for (split, name), scores in splits.items():
+        cells[(split, f"{name}: R²")] = float(np.mean(_mean(scores, "r2")))
+        cells[(split, f"{name}: RMSE (% FS)")] = float(np.mean(_mean(scores, "rmse_fs_percent")))
+    columns = [f"{name}: {metric}" for name in (TF, SS) for metric in ("R²", "RMSE (% FS)")]
+    flattered = cells[(SPLITS[0], f"{TF}: R²")] - cells[(SPLITS[1], f"{TF}: R²")]
+    return Table("How much the random split flatters the models", "split", list(SPLITS), columns, cells, digits=3,
+                 caption=(f"Mean over axes and participants. The random split by sample scores the transfer function "
+                          f"{flattered:+.3f} in R² against the split by trial."),
+                 notes={SPLITS[0]: "A 10 Hz series changes little from one sample to the next: with 80 % of the "
+                                   "samples in estimation, each validation sample lies between two estimation "
+                                   "samples of the same press, so the validation data is not new. The held-out "
+                                   "trial (a press the model never saw) is the honest test.",
+                        SPLITS[2]: "The last 3 s of a 15 s trial hold about one press, often the release to rest: "
+                                   "a short block with little variance, on which R² (relative to that variance) "
+                                   "is harsh; RMSE % FS compares better across splits."})
+
+
+def _order_table(orders) -> Table:
+    cells, rows = {}, []
+    for (kind, order), scores in orders.items():
+        row = f"{'transfer function' if kind == 'tf' else 'state space'}, order {order}"
+        rows.append(row)
+        for k, axis in enumerate(AXES):
+            cells[(row, f"{axis} R²")] = _mean(scores, "r2")[k]
+        cells[(row, "RMSE (% FS, mean)")] = float(np.mean(_mean(scores, "rmse_fs_percent")))
+    return Table("Model orders (published: TF 4-6, 6 best; SS 7-10, 8 chosen)", "model", rows,
+                 [f"{axis} R²" for axis in AXES] + ["RMSE (% FS, mean)"], cells, digits=3,
+                 caption="Mean over participants on held-out trials: look for where more poles stop helping.")
+
+
+def _extension_table(extension) -> Table:
+    cells = {}
+    for shape, scores in extension.items():
+        for k, axis in enumerate(AXES):
+            cells[(shape, f"{axis} R²")] = _mean(scores, "r2")[k]
+            cells[(shape, f"{axis} RMSE (% FS)")] = _mean(scores, "rmse_fs_percent")[k]
+    columns = [f"{axis} R²" for axis in AXES] + [f"{axis} RMSE (% FS)" for axis in AXES]
+    return Table("Extension: calibrated on flat contact, tested on other contact shapes", "contact", list(extension),
+                 columns, cells, digits=2, caption=(
+                     "The transfer function of order 6 fitted on every flat trial of each participant, then run on "
+                     "that participant's curved, edge and point trials. A smaller contact presses the pad more "
+                     "deeply for the same force and moves less tissue sideways: the same calibration mis-scales."))
+
+
+def _centre_table(centre) -> Table:
+    cells = {}
+    names = {"cop_x_mm": "centre x", "cop_y_mm": "centre y", **dict(zip(OUTPUTS, AXES))}
+    [(model, scores)] = centre.items()
+    for k, output in enumerate(OUTPUTS + CENTRE):
+        cells[(names[output], "R²")] = _mean(scores, "r2")[k]
+        cells[(names[output], "RMSE")] = _mean(scores, "rmse")[k]
+        cells[(names[output], "unit")] = "mm" if output in CENTRE else "N"
+    return Table("Extension: the centre of force with the force vector", "output", list(names.values()),
+                 ["R²", "RMSE", "unit"], cells, digits=2, caption=(
+                     f"One {model} model with five outputs, on held-out flat trials where the pad never left the "
+                     "object (the centre is undefined off it)."))
+
+
+def _series_figure(participant: int, model, validation: Recording) -> Figure:
+    trial = validation.trials[0]
+    estimate = model.simulate(trial.u)
+    t = np.arange(len(trial.u)) * validation.ts
+    figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    for k, (ax, axis) in enumerate(zip(axes, AXES)):
+        ax.plot(t, trial.y[:, k], "k", lw=1.2, label="table sensor (measured)")
+        ax.plot(t, estimate[:, k], "tab:orange", lw=1.0, label="transfer function, order 6")
+        ax.set_ylabel(f"{axis} (N)")
+    axes[0].legend(fontsize=8, loc="upper right")
+    axes[-1].set_xlabel("time (s)")
+    figure.tight_layout()
+    return Figure.of("Estimated against measured force, one held-out trial",
+                     f"Participant {participant + 1}, trial {trial.id}: the model sees only the side chip. Look "
+                     "for the axis that tracks worst and for lags after fast presses.", figure)
