@@ -25,7 +25,7 @@ from softtip.data import Dataset  # noqa: E402
 from softtip.design.model import load_design  # noqa: E402
 from softtip.lab import Protocol, run_protocol  # noqa: E402
 from softtip.lab.experiments import CALIBRATION, VALIDATION  # noqa: E402
-from softtip.published import published_table  # noqa: E402
+from softtip.published import OUTSIDE, published_table  # noqa: E402
 from softtip.report.document import Figure  # noqa: E402
 from softtip.report.tables import Table, paper_table  # noqa: E402
 from softtip.studies.outcome import Headline, StudyOutcome  # noqa: E402
@@ -68,6 +68,32 @@ def _parity_plot(ax, truth, estimate, title: str, quantity: str, unit: str, band
         ax.legend(fontsize=7, loc="upper left")
     _label_axes(ax, f"true {quantity} ({unit})", f"estimated {quantity} ({unit})")
     ax.set_title(title, fontsize=9)
+
+
+def _explain(table: Table, explanations: dict[str, str]) -> Table:
+    """Put each row's explanation beside it when the row has a figure outside its published tolerance."""
+    outside = {c.row for c in table.comparisons() if c.verdict == OUTSIDE}
+    table.notes = {**table.notes, **{row: text for row, text in explanations.items() if row in outside}}
+    return table
+
+
+def _worst(per_condition: dict, count: int = 2) -> str:
+    """The conditions with the largest errors, e.g. '0° (13.5) and 90° (14.0)'."""
+    items = sorted(((k, v) for k, v in per_condition.items() if k != "overall"), key=lambda kv: -kv[1])[:count]
+    return " and ".join(f"{_degrees(k)} ({v:.1f})" for k, v in items)
+
+
+def _confused(report: dict, state: str, names: dict[str, str]) -> str:
+    """How often ``state`` was classified right, and what it was most often taken for."""
+    labels = report["labels"]
+    row = np.asarray(report["confusion"][labels.index(state)], dtype=float)
+    right = labels.index(state)
+    wrong = [(count, label) for k, (count, label) in enumerate(zip(row, labels)) if k != right]
+    count, label = max(wrong)
+    if count == 0:
+        return f"all {int(row.sum())} of its samples classified right, some with little confidence"
+    return (f"{int(row[right])} of {int(row.sum())} of its samples classified right; most often taken for "
+            f"{names.get(label, label)} ({int(count)})")
 
 
 def _time_one_estimate_ms(model, x: np.ndarray, repeats: int = 200) -> float:
@@ -121,6 +147,11 @@ def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "Published, the network beat the polynomial on every design and the optimised design D (largest magnet "
         "displacement) had the lowest error. Compare which design is lowest here and how the gap between methods "
         "compares."), notes={best: f"softtip's lowest network error is design {best}'s."})
+    _explain(table, {_design_letter(name): (
+        f"{'The lowest network error; ' if _design_letter(name) == best else ''}errors concentrate where the angle is "
+        f"least observable, network worst at {_worst(results[name]['network']['per_angle_deg'])} deg: the 0°/90° "
+        "ambiguity explained under the per-angle table, which the publication's trials do not show.")
+        for name in results if name.startswith("cylindrical")})
     angles = sorted({column for _, column in per_angle}, key=lambda c: float(c[:-1]))
     rows = [f"{_design_letter(n)} · {m}" for n in results if n.startswith("cylindrical") for m in METHODS]
     matrix = Table("Orientation error per board angle (validation trials)", "design · method", rows, angles, per_angle,
@@ -264,6 +295,9 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
                                     if row is not None and key[1] in published.columns}, caption=(
         f"The study runs design {letter} (the protocol's); the other design's row shows the publication alone. "
         "Trained angles 0/10/20/30°, untrained 5/15/25° (never seen in calibration)."))
+    _explain(table, {letter: (
+        f"Largest errors at {_worst(results['trained']['per_angle_deg'])} (trained) and "
+        f"{_worst(results['untrained']['per_angle_deg'], 1)} deg (untrained); the figure shows the scatter per angle.")})
     return StudyOutcome(results, [table], [Figure.of(
         "Two-fingertip grasp: estimated against true orientation",
         "Trained angles (validation trials) and untrained angles; the band is the published overall error on "
@@ -316,7 +350,9 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyO
                 return "overall" if a == "overall" else _degrees(a)
             cells = {**{("φ (°)", column(a)): e for a, e in angle.items()},
                      **{("Fg (N)", column(a)): e for a, e in grip.items()}}
-            tables.append(paper_table(published, {k: v for k, v in cells.items() if k[1] in published.columns}))
+            tables.append(_explain(paper_table(published, {k: v for k, v in cells.items() if k[1] in published.columns}),
+                                   {"φ (°)": f"Largest errors at {_worst(angle)} deg.",
+                                    "Fg (N)": f"Largest errors at the boards of {_worst(grip)} deg."}))
         results[name] = entry
         axes[0].scatter(y[mask, 0], estimate[:, 0], s=3, alpha=0.4, label=name)
         axes[1].scatter(y[mask, 1], estimate[:, 1], s=3, alpha=0.4, label=name)
@@ -393,6 +429,14 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
     table = paper_table(published, cells, caption=(
         "Mean probability the classifier gives the correct state, per state; untrained orientations and the "
         "untrained approach direction were never seen in calibration."))
+    sources = {"trained φ 10/20/30°": "trained", "untrained approach, φ 20°": "untrained-approach",
+               **{row: "untrained-angles" for row in published.rows if row.startswith("untrained φ")}}
+    outside = {(c.row, c.column) for c in table.comparisons() if c.verdict == OUTSIDE}
+    _explain(table, {row: "; ".join(f"{STATE_NAMES[state]}: {_confused(results[name], state, STATE_NAMES)}"
+                                    for state in classes if (row, STATE_NAMES[state]) in outside)
+                     + f" (over every {name} sample). The edge contact lies between the two point contacts in the "
+                       "chips' readings (figure)."
+                     for row, name in sources.items()})
     figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
     state = dataset.column("state")
     for k, ax in enumerate(axes):
@@ -468,11 +512,17 @@ def inverter(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     detection = paper_table(published_table("inverter-detection-force"), per_trial, caption=(
         "Per trial with the untrained flange orientation (tilted about x and y beyond calibration); a blank "
         "softtip cell is a trial this run did not make, 'n/a' a trial where the state was never detected."))
+    tilt = results["untrained-tilt"]["states"]
+    _explain(detection, {row: (f"The untrained tilt: {_confused(tilt, key, {})}; a state detected late is detected "
+                               "at a higher force. softtip runs the protocol's untrained trials per state (the "
+                               "thesis ran 10).") for key, row in INVERTER_STATES.items()})
     offsets = {(INVERTER_STATES[state], "largest over the trials"): float(np.max(detected(values)))
                for state, values in results["untrained-offset"]["force_at_detection_N"].items()}
     offset = paper_table(published_table("inverter-untrained-position"), offsets, caption=(
         "Grasped ±5 mm from the calibration position; the largest detection force over every trial ('n/a': a "
         "state missed in some trial)."))
+    shifted = results["untrained-offset"]["states"]
+    _explain(offset, {row: f"Grasped off-centre: {_confused(shifted, key, {})}." for key, row in INVERTER_STATES.items()})
     figure, (ax, strip) = plt.subplots(1, 2, figsize=(12, 4))
     for s in (1, 2, 3):
         rows = dataset.groups == np.unique(dataset.groups[(nominal == s) & (sets == "trained")])[0]
