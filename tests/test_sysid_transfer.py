@@ -193,12 +193,14 @@ def test_the_error_shrinks_as_the_data_grow():
 
 
 def test_per_entry_orders():
-    # entries of orders 1, 2 / 3, 2 with 0, 1 / 2, 2 zeros (the last biproper); the data come from scipy
+    # entries of orders 1, 2 / 3, 2 with 0, 1 / 2, 2 zeros (the last biproper)
     numerators = [[[2.0], [1.0, 3.0]], [[0.5, 1.0, 4.0], [1.0, 0.4, 9.0]]]
     denominators = [[[1.0, 2.0], np.poly(_pair(4.0, 0.3)).real],
                     [np.poly([-2.0] + _pair(5.0, 0.5)).real, np.poly([-1.5, -6.0])]]
     rng = np.random.default_rng(4)
-    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2) for _ in range(2))]
+    # two trials of different lengths
+    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2),
+                                                                            _multilevel(rng, 220, 2))]
     model, report = fit(segments, TS, np.array([[1, 2], [3, 2]]), np.array([[0, 1], [2, 2]]))
     assert report.converged
     assert np.array_equal(model.n_poles, [[1, 2], [3, 2]]) and np.array_equal(model.n_zeros, [[0, 1], [2, 2]])
@@ -221,13 +223,29 @@ def test_unstable_estimates_are_reflected_and_reported():
     assert report.cost <= 0.5 * np.sum((y - gain * mirrored) ** 2)
 
 
-def test_a_capped_search_says_it_did_not_converge():
+def test_the_report_scores_the_returned_model():
+    # the cost and MATLAB's NRMSE fit, over both trials together, from scipy's simulation of the model
     numerators, denominators = _small_system()
     rng = np.random.default_rng(6)
-    u = rng.standard_normal((400, 2))
-    y = _scipy_response(numerators, denominators, u) + 0.05 * rng.standard_normal((400, 2))
-    _, report = fit([(u, y)], TS, np.array([[3, 2], [3, 3]]), max_iterations=2)
-    assert not report.converged and "did not converge" in report.message
+    segments = []
+    for samples in (400, 300):
+        u = rng.standard_normal((samples, 2))
+        y = _scipy_response(numerators, denominators, u)
+        segments.append((u, y + 0.05 * rng.standard_normal(y.shape)))
+    model, report = fit(segments, TS, np.array([[3, 2], [3, 3]]), np.array([[1, 0], [2, 3]]))
+    assert report.converged
+    y = np.concatenate([y for _, y in segments])
+    simulated = np.concatenate([_scipy_response(model.numerators, model.denominators, u) for u, _ in segments])
+    assert report.cost == pytest.approx(0.5 * np.sum((y - simulated) ** 2), rel=1e-9)
+    expected = 100 * (1 - np.linalg.norm(y - simulated, axis=0) / np.linalg.norm(y - y.mean(axis=0), axis=0))
+    assert report.per_output_fit_percent == pytest.approx(expected, rel=1e-9)
+    # the simulation error is minimised: the returned model fits at least as well as the true system
+    truth = np.concatenate([_scipy_response(numerators, denominators, u) for u, _ in segments])
+    assert np.all(report.per_output_fit_percent
+                  >= 100 * (1 - np.linalg.norm(y - truth, axis=0) / np.linalg.norm(y - y.mean(axis=0), axis=0)))
+
+    _, capped = fit(segments, TS, np.array([[3, 2], [3, 3]]), max_iterations=2)
+    assert not capped.converged and "did not converge" in capped.message
 
 
 @pytest.mark.parametrize(("call", "argument"), [
