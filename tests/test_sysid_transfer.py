@@ -37,13 +37,13 @@ def _known_system() -> tuple[list, list]:
     return numerators, denominators
 
 
-def _scipy_response(numerators, denominators, u: np.ndarray) -> np.ndarray:
+def _scipy_response(numerators, denominators, u: np.ndarray, ts: float = TS) -> np.ndarray:
     """y from scipy.signal: each entry to a state-space model, cont2discrete (ZOH), dlsim, summed."""
     y = np.zeros((len(u), len(numerators)))
     for i, (row_b, row_a) in enumerate(zip(numerators, denominators)):
         for j, (b, a) in enumerate(zip(row_b, row_a)):
-            discrete = signal.cont2discrete(signal.tf2ss(b, a), TS, method="zoh")
-            y[:, i] += signal.dlsim(discrete[:4] + (TS,), u[:, j])[1][:, 0]
+            discrete = signal.cont2discrete(signal.tf2ss(b, a), ts, method="zoh")
+            y[:, i] += signal.dlsim(discrete[:4] + (ts,), u[:, j])[1][:, 0]
     return y
 
 
@@ -167,6 +167,27 @@ def test_noise_free_data_give_the_system_back(noise_free_fit):
             assert np.abs(found - true).max() < 1e-6 * np.abs(true).min()
     omega = np.linspace(0.0, np.pi / TS, 300)  # up to the Nyquist frequency
     assert _relative_error(model, numerators, denominators, omega).max() < 1e-6
+
+
+def test_srivc_alone_gives_noise_free_systems_back():
+    # the Rao-Garnier benchmark (4th order, two resonances, a non-minimum-phase zero) from a PRBS
+    # held 15 samples at 100 Hz: SRIVC converges on its own, without the refinement
+    u = np.repeat(_prbs(np.random.default_rng(9), 270), 15)[:4000, None]
+    numerator, denominator = [-6400.0, 1600.0], [1.0, 5.0, 408.0, 416.0, 1600.0]
+    y = _scipy_response([[numerator]], [[denominator]], u, ts=0.01)
+    model, report = fit([(u, y)], 0.01, 4, 1, refine=False)
+    assert report.converged and report.iterations == 0
+    assert model.numerators[0][0] == pytest.approx(numerator, rel=1e-8)
+    assert model.denominators[0][0] == pytest.approx(denominator, rel=1e-8)
+    # 2 x 2, a denominator of its own per entry: the backfitting converges on its own too
+    numerators = [[[2.0, 3.0], [-1.0, 4.0]], [[0.5, 6.0], [1.0, 1.0]]]
+    denominators = [[np.poly(_pair(3.0, 0.3)).real, np.poly([-1.0, -4.0])],
+                    [np.poly([-2.0, -6.0]), np.poly(_pair(5.0, 0.5)).real]]
+    rng = np.random.default_rng(10)
+    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2) for _ in range(2))]
+    model, report = fit(segments, TS, 2, refine=False)
+    assert report.converged and report.srivc_iterations > 1
+    assert _relative_error(model, numerators, denominators, np.linspace(0.0, np.pi / TS, 200)).max() < 1e-6
 
 
 def test_the_error_shrinks_as_the_data_grow():

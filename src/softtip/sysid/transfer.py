@@ -623,10 +623,13 @@ def _srivc(inputs, outputs, mask, n_poles, n_zeros, ts, bounds, max_iterations, 
     cutoff = np.clip(_rms_frequency(outputs, mask, ts), *bounds)
     progress = [_Progress((np.array([comb(n, k) for k in range(n)], dtype=float), [np.zeros(size) for size in sizes],
                            cutoff[i])) for i, n, sizes in problems]
+
+    def sweep_common(active, sweep):
+        return _common_sweep([progress[p].estimate for p in active], [problems[p] for p in active], inputs, outputs,
+                             mask, ts, bounds, instruments=sweep > 1)
+
     common_sweeps = _run(progress, max_iterations, tolerance if nu == 1 else max(tolerance, _STARTING_TOLERANCE),
-                         lambda active, sweep: _common_sweep(
-        [progress[p].estimate for p in active], [problems[p] for p in active], inputs, outputs, mask, ts, bounds,
-        instruments=sweep > 1))
+                         sweep_common)
     common = {problems[p][:2]: state.result() for p, state in enumerate(progress)}
     converged = all(state.converged for state in progress)
     rows = [_Row([common[i, n][0] for n in n_poles[i]], [common[i, n][1][j] for j, n in enumerate(n_poles[i])],
@@ -673,7 +676,7 @@ def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, sta
                     n = len(a)
                     prediction = prediction + _response(a, b, x[:n], v)
                     columns += [-x[n:], _derivatives(a, len(b), x[:n], v)]
-            residual = target - prediction[mask]
+                residual = target - prediction[mask]
             # a trial model that blew up (or left the stable ones) is refused: the trust region shrinks
             if not np.all(np.abs(residual) < 1e150) or (stable_only and not trial.is_stable()):
                 residual = np.full_like(residual, np.nan)
