@@ -20,9 +20,9 @@ def _pair(natural: float, damping: float) -> list[complex]:
 
 
 def _known_system() -> tuple[list, list]:
-    """3 x 3, six poles per entry, all distinct: a lightly damped pair (damping 0.2), a well damped
-    pair and two real poles, time constants 0.2-0.4 s (a few sample times); five zeros, all stable
-    and none near a pole."""
+    """3 x 3, six poles per entry, all distinct: two real poles and a well damped pair with time
+    constants 0.2-0.4 s (a few sample times), a lightly damped pair (damping 0.2, natural frequency
+    3-5 rad/s); five zeros, all stable and none near a pole."""
     numerators, denominators = [], []
     for i in range(3):
         numerators.append([]), denominators.append([])
@@ -184,8 +184,8 @@ def test_srivc_alone_gives_noise_free_systems_back():
     denominators = [[np.poly(_pair(3.0, 0.3)).real, np.poly([-1.0, -4.0])],
                     [np.poly([-2.0, -6.0]), np.poly(_pair(5.0, 0.5)).real]]
     rng = np.random.default_rng(10)
-    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2) for _ in range(2))]
-    model, report = fit(segments, TS, 2, refine=False)
+    inputs = [_multilevel(rng, 300, 2) for _ in range(2)]
+    model, report = fit([(v, _scipy_response(numerators, denominators, v)) for v in inputs], TS, 2, refine=False)
     assert report.converged and report.srivc_iterations > 1
     assert _relative_error(model, numerators, denominators, np.linspace(0.0, np.pi / TS, 200)).max() < 1e-6
 
