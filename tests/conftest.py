@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
+import textwrap
+
 import pytest
 
 
@@ -24,3 +27,35 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if SLOW_FIXTURES.get(item.path.name, set()) & set(item.fixturenames):
             item.add_marker(pytest.mark.slow)
+
+
+# The fewest conditions that still exercise every part of a study (its default has hundreds of trials)
+FEWER_CONDITIONS = {"contact-states": """
+    phi_deg = [20.0]
+    psi_deg = [10.0]
+    untrained_phi_deg = [25.0]
+    untrained_psi_deg = [12.0]
+    approach_inclines_deg = [45.0]
+    positions_mm = [[0.0, 0.0], [5.0, 5.0]]
+"""}
+
+
+@pytest.fixture(scope="session")
+def coarse_protocol(tmp_path_factory):
+    """Write a protocol file for ``name`` on ``design`` with a coarse mesh (and, with ``fewer``, the fewest
+    conditions of :data:`FEWER_CONDITIONS`); returns its path."""
+    directory = tmp_path_factory.mktemp("protocols")
+    numbers = itertools.count()
+
+    def write(name: str, design: str, mesh: float = 3.0, extra: str = "", seed: int = 2, fewer: bool = False):
+        path = directory / f"{name}-{next(numbers)}.toml"
+        path.write_text(textwrap.dedent(f"""
+            protocol = "{name}"
+            design = "{design}"
+            seed = {seed}
+            [parameters]
+            mesh_size_mm = {mesh}
+        """) + textwrap.dedent(extra) + textwrap.dedent(FEWER_CONDITIONS.get(name, "") if fewer else ""))
+        return path
+
+    return write

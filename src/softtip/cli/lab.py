@@ -42,37 +42,40 @@ def lab_run(
 
 
 def reproduce(
-    study: str = typer.Argument(..., help=f"One of {', '.join(STUDY_NAMES)}, or all."),
-    output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML report(s)."),
+    studies: list[str] = typer.Argument(..., help=f"One or more of {', '.join(STUDY_NAMES)}, or all."),
+    output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML reports and index.html."),
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments and the models."),
     quick: bool = typer.Option(False, "--quick", help="Two trials per condition: a smoke run, not the study."),
-    json_output: bool = typer.Option(False, "--json", help="Print the results as JSON."),
+    json_output: bool = typer.Option(False, "--json", help="Print each study's results beside the published figures as JSON."),
 ) -> None:
-    """Run a published study end to end (experiments on the twin -> models -> metrics) and write a
-    self-contained HTML report with tables and figures beside the published figures."""
-    from softtip.report.html import write_report
-    from softtip.studies.published import run_published_study
+    """Run published studies end to end (experiments on the twin -> models -> metrics); write one
+    self-contained HTML report per study, the publication's tables beside softtip's, and index.html."""
+    import sys
 
-    names = STUDY_NAMES if study == "all" else (study,)
-    if study != "all" and study not in STUDY_NAMES:
-        fail(f"study = {study!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    from softtip.studies.reproduce import reproduce_study, write_index
+
+    names = STUDY_NAMES if studies == ["all"] else tuple(dict.fromkeys(studies))
+    unknown = [name for name in names if name not in STUDY_NAMES]
+    if unknown:
+        fail(f"study = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    command = "softtip " + " ".join(sys.argv[1:])
     everything = {}
     progress = progress_for(json_output)
     for name in names:
-        start = time.perf_counter()
         with progress.task(f"reproducing {name}"):
-            results, figures, notes, protocol = run_published_study(name, seed=seed, quick=quick, progress=progress)
-        seconds = time.perf_counter() - start
-        report = write_report(output / f"{name}.html", f"softtip reproduce {name}", [
-            {"heading": "Twin beside the publication", "notes": notes},
-            {"heading": "Results (validation trials)", "results": results},
-            {"heading": "Figures", "figures": figures},
-            {"heading": "Protocol", "text": json.dumps(protocol.to_dict())}])
-        everything[name] = {"results": results, "report": str(report), "seconds": round(seconds, 1)}
+            study = reproduce_study(name, seed=seed, quick=quick, progress=progress, command=command)
+        report = study.write(output)
+        everything[name] = study.to_json(str(report))
         if not json_output:
-            console.print(f"{name}: {report} ({seconds:.0f} s)")
+            headline = everything[name]["headline"]
+            published = f", published {headline['published']} ({headline['verdict']})" if headline["published"] else ""
+            console.print(f"{name}: {headline['label']} = {headline['softtip']} {headline['unit']}{published}; "
+                          f"{report} ({study.seconds:.0f} s)")
+    index = write_index(output)
     if json_output:
-        print(json.dumps(everything[study] if study != "all" else everything, indent=2))
+        print(json.dumps({"index": str(index), "studies": everything}, indent=2))
+    else:
+        console.print(f"index: {index}")
 
 
 def calibrate(

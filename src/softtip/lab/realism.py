@@ -1,24 +1,7 @@
 """What makes a virtual experiment look like a real one, with the source of every number.
 
 On by default; each effect can be switched off (set to 0) in a protocol's ``[realism]`` table.
-
-==========================  ==========  ===========================================================
-effect                      default     source / reasoning
-==========================  ==========  ===========================================================
-sensor noise                on          MLX90393 datasheet noise at the design's GAIN/OSR/DIG_FILT
-                                        (:func:`softtip.sensors.mlx90393.noise_rms_uT`), quantised
-                                        to the register's LSB, clipped at full scale
-magnet placement            0.10 mm     per magnet and axis, per fabricated unit: cast or printed
-                                        pockets hold a magnet to about +-0.1 mm
-magnetisation               2 %         per magnet: NdFeB grades specify Br within about +-2-3 %
-sensor placement            0.10 mm     per chip and axis: reflow and pick-and-place tolerance
-contact position scatter    0.20 mm     per trial and axis: a hand-set or fixture-set contact
-angle scatter               0.5 deg     per trial: a rotary stage set by hand
-speed scatter               2 %         per trial: the robot's speed is exact, its start is not
-baseline drift              0.02 K/rt s temperature random walk of the magnets during a trial;
-                                        the field follows Br's reversible coefficient, -0.12 %/K
-                                        for sintered NdFeB
-==========================  ==========  ===========================================================
+:data:`REALISM_SOURCES` gives, for each, where its default comes from (the reports print it).
 
 Nothing here is tuned to make a result look better: the numbers are the sources' and are the same
 for every experiment and design.
@@ -37,6 +20,21 @@ from softtip.mechanics.poses import MagnetPoses
 from softtip.twin import Readout
 
 BR_TEMPERATURE_COEFFICIENT = -0.0012  # 1/K, sintered NdFeB, reversible
+
+
+REALISM_SOURCES = {
+    "noise": "MLX90393 datasheet noise at the design's GAIN/OSR/DIG_FILT (softtip.sensors.mlx90393.noise_rms_uT), "
+             "quantised to the register's LSB, clipped at full scale",
+    "magnet_position_sd_mm": "per magnet and axis, per fabricated unit: cast or printed pockets hold a magnet to "
+                             "about ±0.1 mm",
+    "magnetisation_sd": "per magnet: NdFeB grades specify Br within about ±2-3 %",
+    "sensor_position_sd_mm": "per chip and axis: reflow and pick-and-place tolerance",
+    "position_sd_mm": "per trial and axis: a hand-set or fixture-set contact",
+    "angle_sd_deg": "per trial: a rotary stage set by hand",
+    "speed_sd": "per trial: the robot's speed is exact, its start is not",
+    "drift_K_per_sqrt_s": "temperature random walk of the magnets during a trial; the field follows Br's reversible "
+                          "coefficient, -0.12 %/K for sintered NdFeB",
+}
 
 
 @schema(section="realism")

@@ -14,7 +14,7 @@ from softtip.calibration import load_model, save_model
 from softtip.lab import Protocol, load_protocol, run_protocol
 from softtip.lab.insertion import InsertionWorld, SimulatedArm
 from softtip.control.insertion import InsertionController
-from softtip.studies.published import inverter_models
+from softtip.studies.hall_fingertip import inverter_models
 
 INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A first touches part B
 TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much

@@ -1,0 +1,203 @@
+"""The published figures each study follows, as data: one TOML file per system (``S1.toml`` ...),
+laid out as the publications' tables, read by the reports, by ``softtip reproduce --json`` and by
+the tests. No published number is typed anywhere else.
+
+A cell is a number as printed, a bound the publication states (``"< 0.5"``, ``"<= 10"``, ``"> 0.9"``),
+a range (``"0.8..0.92"``) or blank (``""``). A table's ``close`` says when softtip's figure counts
+as close to a published number, and why; ``better = "lower"`` or ``"higher"`` makes a figure past
+the published one on that side count as meeting it; ``fitted = true`` marks a figure a model
+parameter was set from (agreement by construction, not a prediction).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import dataclass
+from importlib import resources
+from typing import Any, Literal
+
+from softtip._core.config import ConfigError, Flag, PositiveNumber, Text, choice, integer, parse, schema
+
+WITHIN, OUTSIDE, BETTER, FITTED = "within", "outside", "better", "fitted"
+Direction = choice("lower", "higher")
+_BOUND = re.compile(r"\s*(<=|>=|<|>)\s*([-+0-9.eE]+)\s*")
+_RANGE = re.compile(r"\s*([-+0-9.eE]+)\s*\.\.\s*([-+0-9.eE]+)\s*")
+
+
+@dataclass(frozen=True)
+class PublishedValue:
+    """One cell: a number (``low == high``), a bound (one side infinite) or a range, as printed."""
+
+    low: float
+    high: float
+    text: str
+
+    @property
+    def is_number(self) -> bool:
+        return self.low == self.high
+
+    @property
+    def centre(self) -> float | None:
+        """The number, or the middle of a range; None for a one-sided bound."""
+        return (self.low + self.high) / 2 if math.isfinite(self.low) and math.isfinite(self.high) else None
+
+
+def parse_value(value: Any, digits: int, where: str) -> PublishedValue | None:
+    """A cell of a published table: None for a blank."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{where}: expected a number, a bound like '< 0.5', a range like '0.8..0.92' or ''")
+    if isinstance(value, (int, float)):
+        return PublishedValue(float(value), float(value), f"{value:.{digits}f}")
+    if isinstance(value, str) and not value.strip():
+        return None
+    if isinstance(value, str) and (bound := _BOUND.fullmatch(value)):
+        limit = float(bound[2])
+        low, high = (-math.inf, limit) if bound[1].startswith("<") else (limit, math.inf)
+        return PublishedValue(low, high, f"{bound[1]} {bound[2]}")
+    if isinstance(value, str) and (span := _RANGE.fullmatch(value)):
+        low, high = float(span[1]), float(span[2])
+        if low < high:
+            return PublishedValue(low, high, f"{span[1]}–{span[2]}")
+    raise ConfigError(f"{where} = {value!r}: expected a number, a bound like '< 0.5', a range like '0.8..0.92' or ''")
+
+
+@schema
+class Closeness:
+    """When softtip's figure is close to a published number: within a ``ratio`` or an ``absolute`` gap."""
+
+    why: Text
+    ratio: PositiveNumber | None = None
+    absolute: PositiveNumber | None = None
+
+    def __post_init__(self):
+        if (self.ratio is None) == (self.absolute is None):
+            raise ConfigError("close: expected exactly one of ratio or absolute")
+        if self.ratio is not None and self.ratio <= 1:
+            raise ConfigError(f"close.ratio = {self.ratio}: expected a factor > 1")
+
+    def describe(self, unit: str) -> str:
+        if self.ratio is not None:
+            return f"within a factor {self.ratio:g}"
+        return f"within ±{self.absolute:g}{' ' + unit if unit else ''}"
+
+    def holds(self, value: float, published: float) -> bool:
+        slack = 1 + 1e-12  # a gap equal to the tolerance holds, whatever the binary rounding
+        if self.absolute is not None:
+            return abs(value - published) <= self.absolute * slack
+        if published == 0 or value == 0:
+            return value == published
+        ratio = value / published
+        return ratio > 0 and 1 / (self.ratio * slack) <= ratio <= self.ratio * slack
+
+
+@schema
+class _TableFile:
+    study: Text
+    title: Text
+    source: Text
+    unit: str
+    digits: integer(0, 6)
+    row_label: Text
+    rows: list[Text]
+    columns: list[Text]
+    values: list[list[Any]]
+    close: Closeness | None = None
+    better: Direction | None = None
+    fitted: Flag = False
+
+
+@dataclass(frozen=True)
+class PublishedTable:
+    """One table of a publication: its cells by (row, column), what close means for them, and where it is."""
+
+    key: str
+    system: str
+    study: str
+    title: str
+    source: str
+    unit: str
+    digits: int
+    row_label: str
+    rows: tuple[str, ...]
+    columns: tuple[str, ...]
+    cells: tuple[tuple[PublishedValue | None, ...], ...]
+    close: Closeness | None
+    better: Literal["lower", "higher"] | None
+    fitted: bool
+
+    def value(self, row: str, column: str) -> PublishedValue | None:
+        if row not in self.rows or column not in self.columns:
+            raise KeyError(f"published table {self.key} has no cell ({row!r}, {column!r}): rows {list(self.rows)}, "
+                           f"columns {list(self.columns)}")
+        return self.cells[self.rows.index(row)][self.columns.index(column)]
+
+    def verdict(self, value: float, published: PublishedValue) -> str:
+        """``within``, ``outside``, ``better`` (past the published figure on the table's better side)
+        or ``fitted`` (a figure the model was set from, judged within/outside all the same)."""
+        if not math.isfinite(value):
+            return OUTSIDE
+        if self.better == "lower" and value < published.low or self.better == "higher" and value > published.high:
+            return BETTER
+        if published.is_number and self.close is not None:
+            close = self.close.holds(value, published.low)
+        else:
+            close = published.low <= value <= published.high
+        if self.fitted:
+            return FITTED if close else OUTSIDE
+        return WITHIN if close else OUTSIDE
+
+    def tolerance(self) -> str:
+        """What close means, in words, with its reason."""
+        if self.close is None:
+            return "within the stated bound"
+        return f"{self.close.describe(self.unit)} ({self.close.why})"
+
+
+def _table(system: str, key: str, table: dict) -> PublishedTable:
+    source = f"published/{system}.toml"
+    parsed = parse(_TableFile, table, source, key)
+    if len(parsed.values) != len(parsed.rows):
+        raise ConfigError(f"{source}: {key}.values has {len(parsed.values)} rows for {len(parsed.rows)} row names")
+    cells = []
+    for i, row in enumerate(parsed.values):
+        if len(row) != len(parsed.columns):
+            raise ConfigError(f"{source}: {key}.values[{i}] has {len(row)} cells for {len(parsed.columns)} columns")
+        cells.append(tuple(parse_value(value, parsed.digits, f"{source}: {key}.values[{i}][{j}]")
+                           for j, value in enumerate(row)))
+    numbers = [cell for row in cells for cell in row if cell is not None and cell.is_number]
+    if numbers and parsed.close is None:
+        raise ConfigError(f"{source}: {key}: its numbers need a close = {{ ratio or absolute, why }}")
+    return PublishedTable(key=key, system=system, study=parsed.study, title=parsed.title, source=parsed.source,
+                          unit=parsed.unit, digits=parsed.digits, row_label=parsed.row_label, rows=tuple(parsed.rows),
+                          columns=tuple(parsed.columns), cells=tuple(cells), close=parsed.close, better=parsed.better,
+                          fitted=parsed.fitted)
+
+
+@functools.cache
+def published_tables() -> dict[str, PublishedTable]:
+    """Every published table of every system, by key."""
+    import tomllib
+
+    tables: dict[str, PublishedTable] = {}
+    for entry in sorted(resources.files(__package__).iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".toml"):
+            system = entry.name.removesuffix(".toml")
+            for key, table in tomllib.loads(entry.read_text(encoding="utf-8")).items():
+                if key in tables:
+                    raise ConfigError(f"published/{system}.toml: table {key} is also in {tables[key].system}.toml")
+                tables[key] = _table(system, key, table)
+    return tables
+
+
+def published_table(key: str) -> PublishedTable:
+    tables = published_tables()
+    if key not in tables:
+        raise KeyError(f"no published table {key!r}: expected one of {', '.join(tables)}")
+    return tables[key]
+
+
+def tables_of(study: str) -> list[PublishedTable]:
+    """The published tables study ``study`` follows, in file order."""
+    return [table for table in published_tables().values() if table.study == study]

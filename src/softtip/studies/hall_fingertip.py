@@ -1,0 +1,499 @@
+"""The S1 studies (the magnetic fingertip), end to end: protocol(s) -> dataset(s) -> models -> metrics ->
+the publications' tables and figures.
+
+Each analysis returns a :class:`~softtip.studies.outcome.StudyOutcome`: nested JSON-able results, the
+tables laid out as the publications laid them out (the published figures beside softtip's, from
+:mod:`softtip.published`), figures with captions, and the notes that explain each gap. Models are
+trained on calibration trials only and scored on validation trials (never split by sample);
+untrained conditions are left out of calibration entirely.
+"""
+
+from __future__ import annotations
+
+import time
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from softtip._core.progress import Progress  # noqa: E402
+from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier  # noqa: E402
+from softtip.calibration import metrics  # noqa: E402
+from softtip.data import Dataset  # noqa: E402
+from softtip.design.model import load_design  # noqa: E402
+from softtip.lab import Protocol, run_protocol  # noqa: E402
+from softtip.lab.experiments import CALIBRATION, VALIDATION  # noqa: E402
+from softtip.published import published_table  # noqa: E402
+from softtip.report.document import Figure  # noqa: E402
+from softtip.report.tables import Table, paper_table  # noqa: E402
+from softtip.studies.outcome import Headline, StudyOutcome  # noqa: E402
+
+METHODS = {"polynomial": "polynomial (PFM)", "network": "network (FNN)"}  # softtip's name -> the article's
+
+
+def _rows(dataset: Dataset, mask_rows: np.ndarray, role: str | None) -> np.ndarray:
+    keep = mask_rows.copy()
+    if role is not None:
+        keep &= dataset.column("role") == role
+    return keep
+
+
+def _degrees(value: float) -> str:
+    return f"{value:g}°"
+
+
+def _design_letter(name: str) -> str:
+    """The publication's name of a shipped design: ``cylindrical-D`` -> ``D``."""
+    return name.rsplit("-", 1)[-1]
+
+
+def _label_axes(ax, xlabel: str, ylabel: str, legend: dict | None = None) -> None:
+    """Both axis labels, and a legend with the options ``legend`` unless it is None."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if legend is not None:
+        ax.legend(**legend)
+
+
+def _parity_plot(ax, truth, estimate, title: str, quantity: str, unit: str, band: float | None = None, **style):
+    """Estimated against true, the diagonal, and ``band`` (the published mean error) either side of it."""
+    ax.scatter(truth, estimate, s=4, alpha=0.4, **style)
+    lo, hi = float(np.min(truth)), float(np.max(truth))
+    ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
+    if band is not None:
+        ax.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="tab:blue", alpha=0.12, lw=0,
+                        label=f"published mean error ±{band:g} {unit}")
+        ax.legend(fontsize=7, loc="upper left")
+    _label_axes(ax, f"true {quantity} ({unit})", f"estimated {quantity} ({unit})")
+    ax.set_title(title, fontsize=9)
+
+
+def _time_one_estimate_ms(model, x: np.ndarray, repeats: int = 200) -> float:
+    """Median time of one estimate from one reading (the article timed one estimate on a desktop PC)."""
+    x = x[None, :]
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        model.predict(x)
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)) * 1e3
+
+
+# ---------------------------------------------------------------------------------------------- studies
+
+def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    """Designs A-D, polynomial vs network, board angle from one sensor's three readings."""
+    results = {}
+    errors = published_table("pushing-orientation-error")
+    figure, axes = plt.subplots(2, 4, figsize=(14, 6.8))
+    cells, per_angle, timing = {}, {}, {method: [] for method in METHODS}
+    for column, name in enumerate(("cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D")):
+        protocol.design = load_design(name)
+        dataset, timings = run_protocol(protocol, progress)
+        # orientation is only defined once the board presses: samples 1 mm deep or more
+        pressed = dataset.column("depth_mm") >= 1.0
+        train = _rows(dataset, pressed, CALIBRATION)
+        test = _rows(dataset, pressed, VALIDATION)
+        X, y = dataset.X(), dataset.column("angle_deg")
+        letter = _design_letter(name)
+        results[name] = {}
+        for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
+                                               ("network", LMNetwork((10,), random_state=seed)))):
+            model.fit(X[train], y[train], groups=dataset.groups[train])
+            estimate = model.predict(X[test])
+            by_angle = metrics.per_condition(metrics.mean_abs_error, y[test], estimate, y[test])
+            results[name][method] = {
+                "mean_abs_error_deg": metrics.mean_abs_error(y[test], estimate), "per_angle_deg": by_angle,
+                "rmse_deg": metrics.rmse(y[test], estimate), "r2": metrics.r2(y[test], estimate)}
+            cells[(letter, METHODS[method])] = results[name][method]["mean_abs_error_deg"]
+            per_angle.update({(f"{letter} · {method}", _degrees(a)): e for a, e in by_angle.items() if a != "overall"})
+            timing[method].append(_time_one_estimate_ms(model, X[test][0]))
+            band = errors.value(letter, METHODS[method]).centre
+            _parity_plot(axes[row, column], y[test], estimate, f"{name} {method}", "board angle", "deg", band)
+        results[name]["peak_bz_change_uT"] = float(np.abs(X[:, 2]).max())
+        results[name]["timings_s"] = timings
+    results["estimate_time_ms"] = {method: float(np.median(values)) for method, values in timing.items()}
+    figure.tight_layout()
+    best = min(("A", "B", "C", "D"), key=lambda d: cells[(d, METHODS["network"])])
+    table = paper_table(errors, cells, caption=(
+        "Published, the network beat the polynomial on every design and the optimised design D (largest magnet "
+        "displacement) had the lowest error. Compare which design is lowest here and how the gap between methods "
+        "compares."), notes={best: f"softtip's lowest network error is design {best}'s."})
+    angles = sorted({column for _, column in per_angle}, key=lambda c: float(c[:-1]))
+    rows = [f"{_design_letter(n)} · {m}" for n in results if n.startswith("cylindrical") for m in METHODS]
+    matrix = Table("Orientation error per board angle (validation trials)", "design · method", rows, angles, per_angle,
+                   unit="deg", digits=2, caption=(
+                       "The publication gives only the means (Table 2). Look for the large errors at 0° and 90° (and "
+                       "15°/75°), on every design: four magnets at 90° spacing over one sensor on the axis make a "
+                       "board at angle a and at a + 90° the same load, and a board through the axis at 0° or 45° gives "
+                       "Bx = By = 0 by mirror symmetry. Only Bx and By separate a from 90° - a, and they are a few µT "
+                       "against the board-position scatter; only fabrication tolerances separate 0° from 90°. The "
+                       "estimation-quality objective finds the same: the orientation bound is worst for magnets "
+                       "closest to the axis (design D's P2 = 4.5 mm)."))
+    timing_table = paper_table(published_table("pushing-estimate-time"), {
+        ("one estimate", METHODS[m]): results["estimate_time_ms"][m] for m in METHODS}, caption=(
+        "Median over 200 single-reading estimates on this computer, against the article's desktop PC."))
+    return StudyOutcome(results, [table, matrix, timing_table], [Figure.of(
+        "Estimated against true board angle (validation trials)",
+        "One panel per design and method; the shaded band is the published mean error either side of the "
+        "diagonal. Points outside it at 0° and 90° are the ambiguity the per-angle table explains.", figure)],
+        Headline.of(table, "D", METHODS["network"], "design D, network: mean orientation error"),
+        ["Samples from 1 mm depth on are used (before that the board barely touches and the angle is not observable "
+         "above the sensor's noise)."], designs=[n for n in results if n.startswith("cylindrical")])
+
+
+FORCE_AXES = ("Fx", "Fy", "Fz")
+
+
+def force3(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    X = dataset.X()
+    y = np.column_stack([dataset.column(k) for k in ("fx_N", "fy_N", "fz_N")])
+    contact = np.abs(y).max(axis=1) > 0.05
+    train, test = _rows(dataset, contact, CALIBRATION), _rows(dataset, contact, VALIDATION)
+    full_scale = np.abs(y).max(axis=0)
+    results = {"timings_s": timings, "full_scale_N": full_scale.tolist()}
+    figure, axes = plt.subplots(2, 3, figsize=(12, 7))
+    cells = {}
+    for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
+                                           ("network", LMNetwork((10,), random_state=seed)))):
+        model.fit(X[train], y[train], groups=dataset.groups[train])
+        estimate = model.predict(X[test])
+        results[method] = {}
+        for k, axis in enumerate(FORCE_AXES):
+            scores = {"mean_abs_error_N": metrics.mean_abs_error(y[test, k], estimate[:, k]),
+                      "rmse_percent_fs": metrics.rmse_percent_fs(y[test, k], estimate[:, k], full_scale[k]),
+                      "r2": metrics.r2(y[test, k], estimate[:, k])}
+            results[method][axis.lower()] = scores
+            cells.update({(f"{axis} · {method}", "MAE (N)"): scores["mean_abs_error_N"],
+                          (f"{axis} · {method}", "RMSE (% FS)"): scores["rmse_percent_fs"],
+                          (f"{axis} · {method}", "R²"): scores["r2"]})
+            _parity_plot(axes[row, k], y[test, k], estimate[:, k], f"{method} {axis}", axis, "N")
+    figure.tight_layout()
+    rows = [f"{axis} · {method}" for axis in FORCE_AXES for method in ("polynomial", "network")]
+    table = Table("3-axis force on the validation trials", "axis · method", rows, ["MAE (N)", "RMSE (% FS)", "R²"],
+                  cells, digits=3, caption=(
+                      "The article reports 3-axis force only as curves (no table): there is no published figure "
+                      "to put beside these. Full scale is the largest |force| of each axis in the data."))
+    series, ax = plt.subplots(figsize=(9, 3.5))
+    for trial in dataset.trials[:: max(1, len(dataset.trials) // 6)][:6]:
+        rows_of_trial = dataset.groups == trial
+        ax.plot(dataset.column("time_s")[rows_of_trial], y[rows_of_trial, 2], lw=0.8)
+    _label_axes(ax, "time (s)", "reference normal force Fz (N)")
+    return StudyOutcome(results, [table], [
+        Figure.of("Estimated against reference force (validation trials)",
+                  "Top row polynomial, bottom row network; a model that tracks the reference keeps to the diagonal. "
+                  "Shear (Fx, Fy) scatters more than Fz: the magnets move less sideways than down.", figure),
+        Figure.of("Reference normal force of some trials", "Each curve one trial: press, shear, release.", series)],
+        Headline("network Fz: mean absolute error", cells[("Fz · network", "MAE (N)")], "N"),
+        ["Published: a network with 10 hidden neurons maps the three MFD changes to (Fx, Fy, Fz)."])
+
+
+def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    speeds = dataset.column("speed_mm_s")
+    results = {"timings_s": timings, "per_speed": {}}
+    figure, ax = plt.subplots(figsize=(6, 4.5))
+    z = dataset.column("s0_bz_uT")
+    force = dataset.column("fz_N")
+    cells = {}
+    for speed in np.unique(speeds):
+        values, slopes = [], []
+        for trial in np.unique(dataset.groups[speeds == speed]):
+            rows = dataset.groups == trial
+            values.append(metrics.hysteresis_percent(force[rows], z[rows]))
+            peak = np.argmax(force[rows])
+            slopes.append(metrics.sensitivity(force[rows][:peak + 1], dataset.X()[rows][:peak + 1]))
+        entry = {"hysteresis_percent_mean": float(np.mean(values)), "hysteresis_percent_sd": float(np.std(values)),
+                 "sensitivity_mT_per_N": np.mean(slopes, axis=0).tolist()}
+        results["per_speed"][f"{speed:g}"] = entry
+        label = f"{speed:g} mm/s"
+        cells.update({(label, "hysteresis (%)"): entry["hysteresis_percent_mean"],
+                      (label, "sd (%)"): entry["hysteresis_percent_sd"],
+                      **{(label, f"dB{axis}/dF (mT/N)"): v for axis, v in zip("xyz", entry["sensitivity_mT_per_N"])}})
+        rows = dataset.groups == np.unique(dataset.groups[speeds == speed])[0]
+        ax.plot(force[rows], z[rows] / 1000, lw=1, label=label)
+    _label_axes(ax, "normal force (N)", "sensor z MFD change (mT)", legend={})
+    v = protocol.viscoelastic
+    calibration = results["per_speed"].get(f"{v['speed_mm_s']:g}")
+    published = paper_table(published_table("hysteresis"), {} if calibration is None else {
+        ("hysteresis", "calibration cycle"): calibration["hysteresis_percent_mean"]}, caption=(
+        f"The twin's material relaxation is set from this one figure on a cycle at {v['speed_mm_s']:g} mm/s with a "
+        f"{v['rest_s']:g} s rest, so it agrees by construction (up to noise and trial scatter)."))
+    speeds_table = Table("Hysteresis and sensitivity per loading speed", "speed", sorted(
+        {row for row, _ in cells}, key=lambda r: float(r.split()[0])),
+        ["hysteresis (%)", "sd (%)", "dBx/dF (mT/N)", "dBy/dF (mT/N)", "dBz/dF (mT/N)"], cells, digits=2, caption=(
+            "Predictions of the model at the speeds it was not set from: a faster cycle leaves the material less "
+            "time to relax, so the loop narrows."))
+    return StudyOutcome(results, [published, speeds_table], [Figure.of(
+        "Load/unload loops, one trial per speed",
+        "The sensor's z reading against the normal force: loading and unloading follow different branches, and "
+        "the gap between them at mid force, as a share of the full range, is the hysteresis.", figure)],
+        Headline.of(published, "hysteresis", "calibration cycle", "hysteresis on the calibration cycle"))
+
+
+def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    X, y = dataset.X(), dataset.column("angle_deg")
+    gripped = dataset.column("grip_force_N") > 0.1 * dataset.column("grip_force_N").max()
+    trained = dataset.column("trained")
+    train = _rows(dataset, gripped & trained, CALIBRATION)
+    results = {"timings_s": timings}
+    published = published_table("grasp-two-orientation-error")
+    letter = _design_letter(protocol.design.name)
+    figure, ax = plt.subplots(figsize=(6, 4.5))
+    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    cells = {}
+    for name, mask in (("trained", gripped & trained & (dataset.column("role") == VALIDATION)),
+                       ("untrained", gripped & ~trained)):
+        estimate = model.predict(X[mask])
+        by_angle = metrics.per_condition(metrics.mean_abs_error, y[mask], estimate, y[mask])
+        results[name] = {"mean_abs_error_deg": metrics.mean_abs_error(y[mask], estimate), "per_angle_deg": by_angle}
+        cells.update({(letter, _degrees(a) if a != "overall" else f"{name} overall"): e for a, e in by_angle.items()})
+        ax.scatter(y[mask], estimate, s=5, alpha=0.5, label=name)
+    row = letter if letter in published.rows else None
+    ax.plot([0, 30], [0, 30], "k--", lw=0.8)
+    if row is not None:
+        band = published.value(row, "trained overall").centre
+        ax.fill_between([0, 30], [-band, 30 - band], [band, 30 + band], color="tab:blue", alpha=0.12, lw=0,
+                        label=f"published mean error ±{band:g} deg")
+    _label_axes(ax, "true board angle (deg)", "estimated board angle (deg)", legend={})
+    table = paper_table(published, {key: value for key, value in cells.items()
+                                    if row is not None and key[1] in published.columns}, caption=(
+        f"The study runs design {letter} (the protocol's); the other design's row shows the publication alone. "
+        "Trained angles 0/10/20/30°, untrained 5/15/25° (never seen in calibration)."))
+    return StudyOutcome(results, [table], [Figure.of(
+        "Two-fingertip grasp: estimated against true orientation",
+        "Trained angles (validation trials) and untrained angles; the band is the published overall error on "
+        "trained angles either side of the diagonal.", figure)],
+        Headline.of(table, letter, "untrained overall", f"design {letter}: untrained-angle orientation error"),
+        ["Published: six MFD changes of both sensors into a 20-neuron network. Samples with a grip force above "
+         "10 % of the peak are used."])
+
+
+GRASP_SETS = {"trained": "grasp-positions-trained", "untrained-position": "grasp-positions-untrained",
+              "untrained-position-orientation": "grasp-positions-untrained-orientation"}
+
+
+def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    X = dataset.X()
+    y = np.column_stack([dataset.column("angle_deg"), dataset.column("grip_force_N")])
+    gripped = y[:, 1] > 0.1 * y[:, 1].max()
+    sets = dataset.column("set")
+    train = _rows(dataset, gripped & (sets == "trained"), CALIBRATION)
+    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    results = {"timings_s": timings}
+    tables = []
+    figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    for name in ("trained", "untrained-position", "untrained-position-orientation", "thickness"):
+        mask = gripped & (sets == name) & (dataset.column("role") == VALIDATION)
+        if not mask.any():
+            continue
+        estimate = model.predict(X[mask])
+        angle = metrics.per_condition(metrics.mean_abs_error, y[mask, 0], estimate[:, 0], y[mask, 0])
+        grip = metrics.per_condition(metrics.mean_abs_error, y[mask, 1], estimate[:, 1], y[mask, 0])
+        entry = {"angle_mean_abs_error_deg": angle["overall"], "grip_force_mean_abs_error_N": grip["overall"],
+                 "angle_per_angle_deg": angle, "grip_force_per_angle_N": grip}
+        if name == "thickness":
+            by_thickness = metrics.per_condition(metrics.mean_abs_error, y[mask, 0], estimate[:, 0],
+                                                 dataset.column("thickness_mm")[mask])
+            entry["angle_mean_abs_error_deg_per_thickness_mm"] = by_thickness
+            published = published_table("grasp-positions-thickness")
+            tables.append(paper_table(published, {
+                ("φ (°)", f"{t:g} mm"): e for t, e in by_thickness.items()
+                if t != "overall" and f"{t:g} mm" in published.columns}, caption=(
+                "The thesis shows the error slightly increasing with board thickness, each within 5°."), notes={
+                "φ (°)": "The twin holds the board face-on with its corner on the pad and closes the gripper by the "
+                         "same displacement whatever the board, so thickness does not change its contact: it cannot "
+                         "show the published trend, which comes from the board's edge pressing into the pad's side."}))
+        else:
+            published = published_table(GRASP_SETS[name])
+
+            def column(a):
+                return "overall" if a == "overall" else _degrees(a)
+            cells = {**{("φ (°)", column(a)): e for a, e in angle.items()},
+                     **{("Fg (N)", column(a)): e for a, e in grip.items()}}
+            tables.append(paper_table(published, {k: v for k, v in cells.items() if k[1] in published.columns}))
+        results[name] = entry
+        axes[0].scatter(y[mask, 0], estimate[:, 0], s=3, alpha=0.4, label=name)
+        axes[1].scatter(y[mask, 1], estimate[:, 1], s=3, alpha=0.4, label=name)
+    trained_table = tables[0]
+    for ax, (quantity, unit), band in zip(axes, (("board angle", "deg"), ("grip force", "N")),
+                                          (trained_table.published.value("φ (°)", "overall").centre, 0.5)):
+        lo, hi = ax.get_xlim()
+        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
+        ax.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="tab:blue", alpha=0.12, lw=0,
+                        label=f"published (trained) ±{band:g} {unit}")
+        _label_axes(ax, f"true {quantity} ({unit})", f"estimated {quantity} ({unit})", legend={"fontsize": 7})
+    return StudyOutcome(results, tables, [Figure.of(
+        "Orientation and grip force over contact positions",
+        "Validation trials of every assessment; the band is the published trained-position error (φ 1.96°, "
+        "Fg < 0.5 N) either side of the diagonal.", figure)],
+        Headline.of(trained_table, "φ (°)", "overall", "trained positions: orientation error", "deg"),
+        ["Samples with a grip force above 10 % of the peak are used; one network estimates φ and Fg together."])
+
+
+def _classifier_report(dataset, model, mask, classes) -> dict:
+    y = dataset.column("state")[mask]
+    proba = model.predict_proba(dataset.X()[mask])
+    predicted = model.classes_[np.argmax(proba, axis=1)]
+    per_state = {str(c): metrics.mean_probability_of_true_class(proba[y == c], y[y == c], model.classes_)
+                 for c in classes if (y == c).any()}
+    return {"accuracy": float(np.mean(predicted == y)), "mean_probability_of_true_class": per_state,
+            "confusion": metrics.confusion(y, predicted, classes).tolist(), "labels": [str(c) for c in classes]}
+
+
+def _confusion_table(title: str, report: dict, names: dict[str, str], caption: str) -> Table:
+    labels = [names.get(label, label) for label in report["labels"]]
+    cells = {(labels[i], labels[j]): count for i, row in enumerate(report["confusion"]) for j, count in enumerate(row)}
+    return Table(title, "true state \\ predicted", labels, labels, cells, digits=0, caption=caption)
+
+
+STATE_NAMES = {"point-a": "Point A", "point-b": "Point B", "edge": "Edge"}
+
+
+def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    X = dataset.X()
+    touching = dataset.column("normal_force_N") > 0.05
+    sets, roles, phi = dataset.column("set"), dataset.column("role"), dataset.column("phi_deg")
+    classes = np.array(["point-a", "point-b", "edge"])
+    train = touching & (sets == "trained") & (roles == CALIBRATION)
+    model = SoftmaxClassifier((10,), random_state=seed).fit(X[train], dataset.column("state")[train],
+                                                            groups=dataset.groups[train])
+    results = {"timings_s": timings}
+    published = published_table("contact-states")
+    cells, confusions = {}, []
+
+    def fill(row: str, probabilities: dict) -> None:
+        values = {STATE_NAMES[state]: p for state, p in probabilities.items()}
+        cells.update({(row, column): p for column, p in values.items()})
+        if len(values) == len(classes):
+            cells[(row, "average")] = float(np.mean(list(values.values())))
+
+    for name in ("trained", "untrained-angles", "untrained-approach"):
+        mask = touching & (sets == name) & (roles == VALIDATION)
+        results[name] = _classifier_report(dataset, model, mask, classes)
+        results[name]["mean_probability_per_phi"] = {
+            f"{p:g}": _classifier_report(dataset, model, mask & (phi == p), classes)["mean_probability_of_true_class"]
+            for p in np.unique(phi[mask])}
+        if name == "trained":
+            fill("trained φ 10/20/30°", results[name]["mean_probability_of_true_class"])
+        elif name == "untrained-angles":
+            for p, probabilities in results[name]["mean_probability_per_phi"].items():
+                if f"untrained φ {p}°" in published.rows:
+                    fill(f"untrained φ {p}°", probabilities)
+        else:
+            fill("untrained approach, φ 20°", results[name]["mean_probability_of_true_class"])
+        confusions.append(_confusion_table(f"Confusion matrix: {name} (validation samples)", results[name],
+                                           STATE_NAMES, "Counts of samples; the diagonal is right."))
+    table = paper_table(published, cells, caption=(
+        "Mean probability the classifier gives the correct state, per state; untrained orientations and the "
+        "untrained approach direction were never seen in calibration."))
+    figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    state = dataset.column("state")
+    for k, ax in enumerate(axes):
+        for c in classes:
+            rows = touching & (state == c)
+            ax.scatter(X[rows, 6 * k + 2] / 1000, X[rows, 6 * k + 5] / 1000, s=3, alpha=0.4, label=STATE_NAMES[c])
+        _label_axes(ax, f"finger {k + 1}, chip 1 Bz change (mT)", f"finger {k + 1}, chip 2 Bz change (mT)",
+                    legend={"fontsize": 7})
+    return StudyOutcome(results, [table, *confusions], [Figure.of(
+        "MFD changes of the contact states",
+        "Each point one sample in contact; the three states fall into separate regions of the two chips' z "
+        "readings when they can be told apart (the publication shows the same separation in simulation).", figure)],
+        Headline.of(table, "trained φ 10/20/30°", "average", "trained orientations: probability of the correct state"),
+        ["Published: a 12-10-3 network classifies the states. Samples with a collision force above 0.05 N are "
+         "classified."])
+
+
+def inverter_models(dataset: Dataset, seed: int):
+    """The published pair of networks (12 inputs, 4 hidden layers of 10 tanh neurons): the contact
+    state (4 classes) from the calibration windows - state 1 at 0.3-0.5 N, states 2 and 3 at
+    0.6-0.8 N, state 0 in the air - and the normal force from every calibration sample."""
+    X = dataset.X()
+    force, state, nominal = dataset.column("normal_force_N"), dataset.column("state"), dataset.column("state_nominal")
+    calibration = (dataset.column("set") == "trained") & (dataset.column("role") == CALIBRATION)
+    window = ((nominal == 0) | ((nominal == 1) & (force >= 0.3) & (force <= 0.5))
+              | ((nominal >= 2) & (force >= 0.6) & (force <= 0.8)))
+    train = calibration & window
+    classifier = SoftmaxClassifier((10, 10, 10, 10), random_state=seed).fit(X[train], state[train],
+                                                                            groups=dataset.groups[train])
+    regressor = LMNetwork((10, 10, 10, 10), random_state=seed).fit(X[calibration], force[calibration],
+                                                                   groups=dataset.groups[calibration])
+    return classifier, regressor
+
+
+INVERTER_STATES = {"1": "1 (inserted)", "2": "2 (left clip hits)", "3": "3 (right clip hits)"}
+
+
+def inverter(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    dataset, timings = run_protocol(protocol, progress)
+    X = dataset.X()
+    force = dataset.column("normal_force_N")
+    nominal, sets, roles = dataset.column("state_nominal"), dataset.column("set"), dataset.column("role")
+    classifier, regressor = inverter_models(dataset, seed)
+    results = {"timings_s": timings}
+    confusions = []
+    for name in ("trained", "untrained-tilt", "untrained-offset"):
+        mask = (sets == name) & (roles == VALIDATION)
+        detections = {}
+        for trial in np.unique(dataset.groups[mask]):
+            rows = dataset.groups == trial
+            nominal_state = int(nominal[rows][0])
+            if nominal_state == 0:
+                continue
+            predicted = classifier.predict(X[rows])
+            detections.setdefault(str(nominal_state), []).append(
+                metrics.first_detection(force[rows], predicted, nominal_state))
+        estimate = regressor.predict(X[mask])
+        results[name] = {
+            "states": _classifier_report(dataset, classifier, mask, np.array([0, 1, 2, 3])),
+            "force_at_detection_N": {k: [None if np.isnan(v) else float(v) for v in vals]
+                                     for k, vals in detections.items()},
+            "normal_force_mean_abs_error_N": metrics.mean_abs_error(force[mask], estimate)}
+        confusions.append(_confusion_table(f"Confusion matrix of the contact states: {name}", results[name]["states"],
+                                           {}, "Counts of samples; state 0 is the part in the air."))
+
+    def detected(values):
+        return [np.nan if v is None else v for v in values]
+    per_trial = {}
+    for state, values in results["untrained-tilt"]["force_at_detection_N"].items():
+        forces = detected(values)
+        per_trial.update({(INVERTER_STATES[state], str(k + 1)): v for k, v in enumerate(forces[:10])})
+        per_trial[(INVERTER_STATES[state], "average")] = float(np.mean(forces))
+    detection = paper_table(published_table("inverter-detection-force"), per_trial, caption=(
+        "Per trial with the untrained flange orientation (tilted about x and y beyond calibration); a blank "
+        "softtip cell is a trial this run did not make, 'n/a' a trial where the state was never detected."))
+    offsets = {(INVERTER_STATES[state], "largest over the trials"): float(np.max(detected(values)))
+               for state, values in results["untrained-offset"]["force_at_detection_N"].items()}
+    offset = paper_table(published_table("inverter-untrained-position"), offsets, caption=(
+        "Grasped ±5 mm from the calibration position; the largest detection force over every trial ('n/a': a "
+        "state missed in some trial)."))
+    figure, (ax, strip) = plt.subplots(1, 2, figsize=(12, 4))
+    for s in (1, 2, 3):
+        rows = dataset.groups == np.unique(dataset.groups[(nominal == s) & (sets == "trained")])[0]
+        ax.plot(dataset.column("time_s")[rows], force[rows], label=f"state {s}")
+    _label_axes(ax, "time (s)", "normal force (N)", legend={})
+    ax.set_title("Insertion force of one trial per state", fontsize=9)
+    published = published_table("inverter-detection-force")
+    for k, (key, row) in enumerate(INVERTER_STATES.items()):
+        values = [c.centre for c in published.cells[published.rows.index(row)][:10]]
+        strip.scatter(np.full(len(values), k - 0.12), values, marker="s", color="tab:blue", alpha=0.6,
+                      label="published" if k == 0 else None)
+        mine = detected(results["untrained-tilt"]["force_at_detection_N"].get(key, []))
+        strip.scatter(np.full(len(mine), k + 0.12), mine, marker="o", color="tab:orange", alpha=0.8,
+                      label="softtip" if k == 0 else None)
+    strip.set_xticks(range(3), list(INVERTER_STATES.values()))
+    _label_axes(strip, "state", "normal force at first detection (N)", legend={"fontsize": 8})
+    strip.set_title("Detection force per trial, untrained flange orientation", fontsize=9)
+    figure.tight_layout()
+    return StudyOutcome(results, [detection, offset, *confusions], [Figure.of(
+        "Insertion forces and detection forces",
+        "Left: the normal force over one trial per state. Right: the force at which the correct state is first "
+        "detected, each trial a point, the publication's ten trials beside softtip's.", figure)],
+        Headline.of(detection, INVERTER_STATES["1"], "average", "state 1: average detection force"),
+        ["Published: two networks with 4 hidden layers of 10 tanh neurons estimate the state and the normal force."])

@@ -1,0 +1,185 @@
+"""Reproduce a published study: run it, and report it as the publication's tables beside softtip's,
+with its protocol and provenance; an index of every study in a report directory.
+
+``reproduce_study("pushing")`` returns a :class:`StudyReport`: it renders in Jupyter, writes one
+self-contained HTML file and a JSON of its results, and heads one row of ``index.html``.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from dataclasses import asdict, dataclass
+from datetime import datetime, timezone
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+
+from softtip import __version__
+from softtip._core.files import atomic_write
+from softtip._core.progress import SILENT, Progress
+from softtip.lab import Protocol, load_protocol
+from softtip.lab.protocols import DEFAULTS, Viscoelastic, shipped_protocol_path
+from softtip.lab.realism import REALISM_SOURCES, Realism
+from softtip.published import OUTSIDE, published_table
+from softtip.report.document import Report, Section
+from softtip.report.index import index_report
+from softtip.report.tables import Table
+from softtip.studies.outcome import StudyOutcome
+from softtip.studies.registry import STUDIES, Study
+
+REPORT_FORMAT = "softtip-study-report"
+QUICK_TRIALS = {"calibration_trials": 2, "validation_trials": 2, "trials": 2, "untrained_trials": 1}
+_UNITS = (("_mm_per_N", "mm/N"), ("_K_per_sqrt_s", "K/√s"), ("_mm_s", "mm/s"), ("_percent", "%"), ("_mm", "mm"),
+          ("_deg", "deg"), ("_hz", "Hz"), ("_s", "s"), ("_N", "N"), ("_sd", "fraction"))
+
+
+def parameter_unit(key: str) -> str:
+    """The unit a parameter's name carries (``speed_mm_s`` -> ``mm/s``); '' for counts and switches."""
+    return next((unit for suffix, unit in _UNITS if key.endswith(suffix)), "")
+
+
+def _rounded(value, digits=3):
+    """Results as JSON: floats to ``digits`` decimals, numpy values as Python ones, keys as text."""
+    if isinstance(value, dict):
+        return {str(k): _rounded(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_rounded(v, digits) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return round(float(value), digits) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _shown(value) -> str:
+    return json.dumps(value, ensure_ascii=False) if isinstance(value, (list, dict)) else str(value)
+
+
+def protocol_table(protocol: Protocol, source: str, quick_keys: set[str]) -> Table:
+    """Every setting of the run: value, unit, default or changed, and where the value comes from."""
+    rows, cells = [], {}
+
+    def add(section: str, key: str, value, default, origin: str) -> None:
+        row = f"{section}.{key}"
+        rows.append(row)
+        changed = value != default
+        where = ("--quick (a smoke run)" if key in quick_keys and section == "parameters"
+                 else f"changed in {source}" if changed else origin)
+        cells.update({(row, "value"): _shown(value), (row, "unit"): parameter_unit(key),
+                      (row, "default or changed"): f"changed (default {_shown(default)})" if changed else "default",
+                      (row, "where from"): where})
+
+    for key, value in protocol.parameters.items():
+        add("parameters", key, value, DEFAULTS[protocol.name][key],
+            f"softtip's {protocol.name} protocol, after the publication's procedure")
+    defaults = asdict(Realism())
+    for key, value in protocol.realism.to_dict().items():
+        add("realism", key, value, defaults[key], REALISM_SOURCES[key])
+    viscoelastic_defaults = asdict(Viscoelastic())
+    hysteresis = published_table("hysteresis")
+    for key, value in protocol.viscoelastic.items():
+        origin = (f"published: {hysteresis.source} ({hysteresis.system})" if key == "hysteresis_percent"
+                  else "the calibration cycle: the article's hysteresis test")
+        add("viscoelastic", key, value, viscoelastic_defaults[key], origin)
+    return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from"], cells,
+                 caption="Every setting of this run; realism effects are set to 0 to switch them off.")
+
+
+@dataclass
+class StudyReport:
+    """One reproduced study: its outcome, the protocol it ran and how it was run."""
+
+    study: Study
+    outcome: StudyOutcome
+    protocol_table: Table
+    provenance: dict[str, str]
+    seconds: float
+
+    @property
+    def name(self) -> str:
+        return self.study.name
+
+    def comparisons(self) -> list[dict]:
+        """Each published figure beside softtip's, with their difference and verdict."""
+        return [c.to_dict() for table in self.outcome.tables for c in table.comparisons()]
+
+    def to_json(self, report_file: str | None = None) -> dict:
+        comparisons = self.comparisons()
+        return {"format": REPORT_FORMAT, "study": self.name, "follows": self.study.follows,
+                "headline": self.outcome.headline.to_dict(), "comparisons": comparisons,
+                "outside": sum(c["verdict"] == OUTSIDE for c in comparisons),
+                "results": _rounded(self.outcome.results), "seconds": round(self.seconds, 1),
+                "provenance": self.provenance, "report": report_file}
+
+    def report(self) -> Report:
+        headline = self.outcome.headline
+        lead = f"{self.study.follows}. Headline: {headline.label} = " + (
+            "n/a" if headline.value is None else f"{headline.value:.3g} {headline.unit}".strip())
+        if headline.comparison is not None:
+            lead += f" (published {headline.comparison.published.text}; {headline.comparison.verdict})"
+        provenance = Table("Provenance", "item", list(self.provenance), ["value"],
+                           {(k, "value"): v for k, v in self.provenance.items()})
+        return Report(f"softtip reproduce {self.name}", lead, [
+            Section("softtip beside the publication", self.outcome.notes, self.outcome.tables),
+            Section("Figures", figures=self.outcome.figures),
+            Section("Protocol and provenance", tables=[self.protocol_table, provenance])])
+
+    def _repr_html_(self) -> str:
+        return self.report()._repr_html_()
+
+    def write(self, directory: str | Path) -> Path:
+        """``NAME.html`` (the report) and ``NAME.json`` (what the index reads) in ``directory``."""
+        directory = Path(directory)
+        path = self.report().write(directory / f"{self.name}.html")
+        atomic_write(directory / f"{self.name}.json", json.dumps(self.to_json(path.name), indent=2))
+        return path
+
+
+def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path: str | Path | None = None,
+                    progress: Progress = SILENT, command: str | None = None) -> StudyReport:
+    """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
+    count to a minimum (a smoke run, not the study)."""
+    if name not in STUDIES:
+        raise KeyError(f"study {name!r}: expected one of {', '.join(STUDIES)}")
+    study = STUDIES[name]
+    protocol = load_protocol(protocol_path or study.protocol)
+    protocol.seed = seed
+    quick_keys = set()
+    if quick:
+        for key, count in QUICK_TRIALS.items():
+            if key in protocol.parameters and protocol.parameters[key] > count:
+                protocol.parameters[key] = count
+                quick_keys.add(key)
+    started = datetime.now(timezone.utc)
+    start = time.perf_counter()
+    source = str(protocol_path) if protocol_path else f"the shipped protocol {shipped_protocol_path(study.protocol).name}"
+    table = protocol_table(protocol, source, quick_keys)  # before the analysis, which may change the design
+    analysis = getattr(import_module(f"softtip.studies.{study.module}"), study.analysis)
+    outcome = analysis(protocol, seed, progress)
+    seconds = time.perf_counter() - start
+    provenance = {
+        "softtip version": __version__, "study": f"{name}: {study.follows}", "protocol": source,
+        "design(s)": ", ".join(outcome.designs or [protocol.design.name]), "seed": str(seed),
+        "quick (smoke run)": "yes: fewer trials than the study" if quick else "no",
+        "command": command or f"softtip.studies.reproduce.reproduce_study({name!r}, seed={seed}, quick={quick})",
+        "started (UTC)": started.strftime("%Y-%m-%d %H:%M:%S"), "run time": f"{seconds:.1f} s",
+        "python / platform": f"{platform.python_version()} / {platform.platform(terse=True)}"}
+    return StudyReport(study, outcome, table, provenance, seconds)
+
+
+def write_index(directory: str | Path) -> Path:
+    """``index.html`` of every study report (``*.json``) in ``directory``, in the registry's order."""
+    directory = Path(directory)
+    entries = []
+    for path in sorted(directory.glob("*.json")):
+        try:
+            entry = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        if isinstance(entry, dict) and entry.get("format") == REPORT_FORMAT and entry.get("study") in STUDIES:
+            entries.append(entry)
+    entries.sort(key=lambda e: list(STUDIES).index(e["study"]))
+    return index_report(entries).write(directory / "index.html")
