@@ -32,9 +32,10 @@ from softtip.sysid.recording import Fraction, Recording
 from softtip.sysid.refine import RefinementReport, refine
 from softtip.sysid.simulation import StreamingSimulator, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
-from softtip.sysid.subspace import MAX_ORDER, METHODS, subspace_identify
+from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 
 DOMAINS = ("discrete", "continuous")
+ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
 
 
@@ -174,12 +175,11 @@ class StateSpaceModel(IdentifiedModel):
     ``max_iterations`` and ``tolerance``: the refinement's stopping rules (:mod:`softtip.sysid.refine`).
     """
 
-    _PARAMETERS = {"order": Annotated[Union[choice("auto"), PositiveInteger], expect('"auto" or a positive integer')],
-                   "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag, "enforce_stability": Flag,
-                   "horizon": Optional[integer(2)], "max_order": PositiveInteger, "max_iterations": PositiveInteger,
-                   "tolerance": Fraction}
+    _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
+                   "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
+                   "max_iterations": PositiveInteger, "tolerance": Fraction}
 
-    def __init__(self, order: int | str = "auto", method: str = "n4sid", *, refine: bool = False,
+    def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4):
         self.order = order
