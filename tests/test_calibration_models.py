@@ -20,6 +20,7 @@ from sklearn.preprocessing import MinMaxScaler, StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from softtip._core.archive import write_archive
+from softtip._core.threads import single_threaded_blas
 from softtip.calibration import (
     LMNetwork,
     ModelFileError,
@@ -172,7 +173,7 @@ def test_lm_network_beats_mlp_regressor_on_held_out_data(smooth_problem):
     network_scores, mlp_scores = [], []
     for seed in range(3):
         network = LMNetwork((10,), random_state=seed).fit(x_train, y_train)
-        with ff.single_threaded_blas():  # a second BLAS thread on these thin products only thrashes
+        with single_threaded_blas():  # a second BLAS thread on these thin products only thrashes
             mlp = MLPRegressor(hidden_layer_sizes=(10,), activation="tanh", solver="lbfgs", max_iter=1000,
                                random_state=seed).fit(x_train, y_train)
         network_scores.append(r2_score(y_test, network.predict(x_test)))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from softtip.sysid import transfer
 from softtip.sysid.transfer import TransferFunctionMatrix, fit, simulate
 
 TS = 0.1
@@ -36,13 +37,13 @@ def _known_system() -> tuple[list, list]:
     return numerators, denominators
 
 
-def _scipy_response(numerators, denominators, u: np.ndarray) -> np.ndarray:
+def _scipy_response(numerators, denominators, u: np.ndarray, ts: float = TS) -> np.ndarray:
     """y from scipy.signal: each entry to a state-space model, cont2discrete (ZOH), dlsim, summed."""
     y = np.zeros((len(u), len(numerators)))
     for i, (row_b, row_a) in enumerate(zip(numerators, denominators)):
         for j, (b, a) in enumerate(zip(row_b, row_a)):
-            discrete = signal.cont2discrete(signal.tf2ss(b, a), TS, method="zoh")
-            y[:, i] += signal.dlsim(discrete[:4] + (TS,), u[:, j])[1][:, 0]
+            discrete = signal.cont2discrete(signal.tf2ss(b, a), ts, method="zoh")
+            y[:, i] += signal.dlsim(discrete[:4] + (ts,), u[:, j])[1][:, 0]
     return y
 
 
@@ -85,6 +86,15 @@ def test_simulate_agrees_with_scipy_and_python_control():
     scale = np.abs(by_scipy).max()
     assert np.abs(y - by_scipy).max() < 1e-10 * scale
     assert np.abs(y - by_control).max() < 1e-10 * scale
+
+
+def test_a_long_record_is_simulated_in_chunks(monkeypatch):
+    numerators, denominators = _small_system()
+    u = np.random.default_rng(8).standard_normal((500, 2))
+    monkeypatch.setattr(transfer, "_CHUNK", 37)
+    y = simulate(TransferFunctionMatrix(numerators, denominators), u, TS)
+    reference = _scipy_response(numerators, denominators, u)
+    assert np.abs(y - reference).max() < 1e-10 * np.abs(reference).max()
 
 
 def test_first_order_against_the_exact_zoh_recursion():
@@ -159,13 +169,59 @@ def test_noise_free_data_give_the_system_back(noise_free_fit):
     assert _relative_error(model, numerators, denominators, omega).max() < 1e-6
 
 
+def test_srivc_alone_gives_noise_free_systems_back():
+    # the Rao-Garnier benchmark (4th order, two resonances, a non-minimum-phase zero) from a PRBS
+    # held 15 samples at 100 Hz: SRIVC converges on its own, without the refinement
+    u = np.repeat(_prbs(np.random.default_rng(9), 270), 15)[:4000, None]
+    numerator, denominator = [-6400.0, 1600.0], [1.0, 5.0, 408.0, 416.0, 1600.0]
+    y = _scipy_response([[numerator]], [[denominator]], u, ts=0.01)
+    model, report = fit([(u, y)], 0.01, 4, 1, refine=False)
+    assert report.converged and report.iterations == 0
+    assert model.numerators[0][0] == pytest.approx(numerator, rel=1e-8)
+    assert model.denominators[0][0] == pytest.approx(denominator, rel=1e-8)
+    # 2 x 2, a denominator of its own per entry: the backfitting converges on its own too
+    numerators = [[[2.0, 3.0], [-1.0, 4.0]], [[0.5, 6.0], [1.0, 1.0]]]
+    denominators = [[np.poly(_pair(3.0, 0.3)).real, np.poly([-1.0, -4.0])],
+                    [np.poly([-2.0, -6.0]), np.poly(_pair(5.0, 0.5)).real]]
+    rng = np.random.default_rng(10)
+    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2) for _ in range(2))]
+    model, report = fit(segments, TS, 2, refine=False)
+    assert report.converged and report.srivc_iterations > 1
+    assert _relative_error(model, numerators, denominators, np.linspace(0.0, np.pi / TS, 200)).max() < 1e-6
+
+
+def test_the_error_shrinks_as_the_data_grow():
+    # white output noise, about 30 dB below the outputs: four times the data about halve the typical
+    # relative error of the frequency response (from the lowest frequency one 50 s segment resolves
+    # to the Nyquist frequency), averaged over three noise and input draws
+    numerators, denominators = _known_system()
+    omega = np.linspace(2 * np.pi / 50.0, np.pi / TS, 200)
+    errors = {2: [], 8: []}
+    for seed in range(3):
+        rng = np.random.default_rng(10 + seed)
+        segments = []
+        for _ in range(8):
+            u = np.column_stack([_multilevel(rng, 500, 2), _prbs(rng, 500)])
+            y = _scipy_response(numerators, denominators, u)
+            segments.append((u, y + 0.1 * rng.standard_normal(y.shape)))
+        for count, found in errors.items():
+            model, report = fit(segments[:count], TS, 6)
+            assert report.converged and model.is_stable()
+            found.append(np.median(_relative_error(model, numerators, denominators, omega)))
+    small, large = np.mean(errors[2]), np.mean(errors[8])
+    assert small < 0.03
+    assert large < 0.7 * small
+
+
 def test_per_entry_orders():
-    # entries of orders 1, 2 / 3, 2 with 0, 1 / 2, 2 zeros (the last biproper); the data come from scipy
+    # entries of orders 1, 2 / 3, 2 with 0, 1 / 2, 2 zeros (the last biproper)
     numerators = [[[2.0], [1.0, 3.0]], [[0.5, 1.0, 4.0], [1.0, 0.4, 9.0]]]
     denominators = [[[1.0, 2.0], np.poly(_pair(4.0, 0.3)).real],
                     [np.poly([-2.0] + _pair(5.0, 0.5)).real, np.poly([-1.5, -6.0])]]
     rng = np.random.default_rng(4)
-    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2) for _ in range(2))]
+    # two trials of different lengths
+    segments = [(u, _scipy_response(numerators, denominators, u)) for u in (_multilevel(rng, 300, 2),
+                                                                            _multilevel(rng, 220, 2))]
     model, report = fit(segments, TS, np.array([[1, 2], [3, 2]]), np.array([[0, 1], [2, 2]]))
     assert report.converged
     assert np.array_equal(model.n_poles, [[1, 2], [3, 2]]) and np.array_equal(model.n_zeros, [[0, 1], [2, 2]])
@@ -181,18 +237,36 @@ def test_unstable_estimates_are_reflected_and_reported():
     assert model.poles()[0][0] == pytest.approx([0.5], rel=1e-8)
     assert not model.is_stable() and report.reflected_poles == 0 and "unstable" in report.message
     model, report = fit([(u, y)], TS, 1)
-    assert model.is_stable() and report.reflected_poles == 1
-    assert model.poles()[0][0] == pytest.approx([-0.5], rel=1e-8)
-    assert "mirrored" in report.message
+    assert model.is_stable() and report.reflected_poles == 1 and "mirrored" in report.message
+    # refined among stable models from the mirror image b/(s + 0.5), b by least squares: no worse than it
+    mirrored = _scipy_response([[[1.0]]], [[[1.0, 0.5]]], u)
+    gain = np.linalg.lstsq(mirrored, y, rcond=None)[0]
+    assert report.cost <= 0.5 * np.sum((y - gain * mirrored) ** 2)
 
 
-def test_a_capped_search_says_it_did_not_converge():
+def test_the_report_scores_the_returned_model():
+    # the cost and MATLAB's NRMSE fit, over both trials together, from scipy's simulation of the model
     numerators, denominators = _small_system()
     rng = np.random.default_rng(6)
-    u = rng.standard_normal((400, 2))
-    y = _scipy_response(numerators, denominators, u) + 0.05 * rng.standard_normal((400, 2))
-    _, report = fit([(u, y)], TS, np.array([[3, 2], [3, 3]]), max_iterations=2)
-    assert not report.converged and "did not converge" in report.message
+    segments = []
+    for samples in (400, 300):
+        u = rng.standard_normal((samples, 2))
+        y = _scipy_response(numerators, denominators, u)
+        segments.append((u, y + 0.05 * rng.standard_normal(y.shape)))
+    model, report = fit(segments, TS, np.array([[3, 2], [3, 3]]), np.array([[1, 0], [2, 3]]))
+    assert report.converged
+    y = np.concatenate([y for _, y in segments])
+    simulated = np.concatenate([_scipy_response(model.numerators, model.denominators, u) for u, _ in segments])
+    assert report.cost == pytest.approx(0.5 * np.sum((y - simulated) ** 2), rel=1e-9)
+    expected = 100 * (1 - np.linalg.norm(y - simulated, axis=0) / np.linalg.norm(y - y.mean(axis=0), axis=0))
+    assert report.per_output_fit_percent == pytest.approx(expected, rel=1e-9)
+    # the simulation error is minimised: the returned model fits at least as well as the true system
+    truth = np.concatenate([_scipy_response(numerators, denominators, u) for u, _ in segments])
+    assert np.all(report.per_output_fit_percent
+                  >= 100 * (1 - np.linalg.norm(y - truth, axis=0) / np.linalg.norm(y - y.mean(axis=0), axis=0)))
+
+    _, capped = fit(segments, TS, np.array([[3, 2], [3, 3]]), max_iterations=2)
+    assert not capped.converged and "did not converge" in capped.message
 
 
 @pytest.mark.parametrize(("call", "argument"), [

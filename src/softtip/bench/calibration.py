@@ -20,9 +20,9 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.neural_network import MLPRegressor
 
+from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import best_of, latency, timed
 from softtip.calibration import LMNetwork, PolynomialFit
-from softtip.calibration.feedforward import single_threaded_blas
 
 PUBLISHED_NETWORK_S = 82e-3
 PUBLISHED_POLYNOMIAL_S = 108e-3

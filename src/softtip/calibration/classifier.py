@@ -20,6 +20,7 @@ from sklearn.utils.validation import column_or_1d, validate_data
 
 from softtip._core.config import PositiveNumber, schema
 from softtip._core.network import forward_one
+from softtip._core.threads import single_threaded_blas
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
     EarlyStopping,
@@ -28,7 +29,6 @@ from softtip.calibration.feedforward import (
     forward,
     initial_layers,
     pack,
-    single_threaded_blas,
     softmax,
     stop_reason,
     to_unit_range,

@@ -9,11 +9,9 @@ matrices, so the parameters feeding output ``k`` of the last layer form one cont
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from softtip._core.network import fold_scaling
 
@@ -296,14 +294,3 @@ def stop_reason(epoch: int, perf: float, gradient_norm: float, stopping: EarlySt
     if stopping.failures >= max_fail:
         return "validation"
     return ""
-
-
-@functools.cache
-def _blas_controller() -> ThreadpoolController:
-    return ThreadpoolController()
-
-
-def single_threaded_blas():
-    """Context limiting BLAS to one thread. The products here are thin (few columns); on a
-    shared 2-core machine a second BLAS thread made training 15× slower, not faster."""
-    return _blas_controller().limit(limits=1, user_api="blas")

@@ -48,6 +48,7 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.network import PREDICT_CHUNK, forward_one, predict_batch
+from softtip._core.threads import single_threaded_blas
 from softtip.calibration import checks
 from softtip.calibration.feedforward import (
     EarlyStopping,
@@ -60,7 +61,6 @@ from softtip.calibration.feedforward import (
     minmax_gain,
     pack,
     runtime_layers,
-    single_threaded_blas,
     stop_reason,
     to_unit_range,
     unpack,

@@ -24,7 +24,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from softtip._core.config import Flag, PositiveInteger, checked, choice, expect, integer
-from softtip.calibration.feedforward import single_threaded_blas
+from softtip._core.threads import single_threaded_blas
 from softtip.sysid import transfer
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
@@ -279,10 +279,8 @@ class TransferFunctionModel(IdentifiedModel):
         started = time.perf_counter()
         self._check_params()
         recording.require_excitation()
-        with single_threaded_blas():
-            tf, report = transfer.fit(recording.segments, recording.ts, self.n_poles, self.n_zeros,
-                                      refine=self.refine, max_iterations=self.max_iterations,
-                                      enforce_stability=self.enforce_stability)
+        tf, report = transfer.fit(recording.segments, recording.ts, self.n_poles, self.n_zeros, refine=self.refine,
+                                  max_iterations=self.max_iterations, enforce_stability=self.enforce_stability)
         self._set_transfer_function(tf, recording.ts)
         self.report_ = report
         self._remember(recording, started)

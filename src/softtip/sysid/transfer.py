@@ -15,25 +15,34 @@ inside a block, a short loop over blocks).
 Method.
 
 1. Initialisation by the simplified refined instrumental-variable method for continuous-time
-   systems, SRIVC (Young & Jakeman 1980), for MISO systems with different denominators by
-   iterative backfitting (Garnier, Gilson, Young & Huselstein 2007): for entry (i, j) the output
-   less the current simulated responses of the other inputs is prefiltered by 1/A_ij, and
-   (A_ij, B_ij) are re-estimated by instrumental variables whose instruments are the prefiltered
-   noise-free response B_ij/A_ij u_j; entries are updated in turn (Gauss–Seidel), sweep after sweep.
-   The first sweep uses a state-variable filter 1/(s + lambda)^n as prefilter and least squares;
-   lambda is the output's root-mean-square frequency (no setting). With ZOH inputs filtered exactly,
-   the true parameters are a fixed point of the iteration whatever the output's intersample
-   behaviour (Pan, González, Welsh & Rojas 2020). An estimate with unstable poles is reflected into
-   the left half-plane before it is used as a prefilter (as in the CONTSID toolbox).
+   systems, SRIVC (Young & Jakeman 1980): the data are prefiltered by 1/A of the current estimate
+   and (A, B) re-estimated by instrumental variables whose instruments are the prefiltered
+   noise-free response B/A u, until the estimate stops moving. For MISO systems with different
+   denominators it runs in two stages (Garnier, Gilson, Young & Huselstein 2007):
+   a. the MISO model with one common denominator per output (of each order its entries have),
+      started from a state-variable filter 1/(s + lambda)^n as prefilter and least squares, lambda
+      the output's root-mean-square frequency (no setting), taken to a loose tolerance;
+   b. every entry with its own denominator from there by iterative backfitting: entry (i, j) is
+      re-estimated from the output less the current simulated responses of the other inputs
+      (Gauss–Seidel over the inputs), sweep after sweep.
+   With ZOH inputs filtered exactly the true parameters are a fixed point of the iteration whatever
+   the output's intersample behaviour (Pan, González, Welsh & Rojas 2020); the output is
+   interpolated linearly between samples (first-order hold), filtered exactly too. An estimate with
+   unstable poles is reflected into the left half-plane before it serves as a prefilter (as in the
+   CONTSID toolbox). The iteration is not a contraction for every order and noise level (high orders
+   with poorly determined poles wander), so each problem stops when its simulation error has not
+   improved for a few sweeps and keeps its best iterate; the report says whether SRIVC converged.
 2. Refinement (``refine=True``) by prediction-error minimisation for the output-error model: the
-   sum of squared simulation errors over all segments, per output, by
-   ``scipy.optimize.least_squares`` (trust region) with the analytic Jacobian. The output
+   sum of squared simulation errors over all segments, output by output, by
+   ``scipy.optimize.least_squares`` (trust region reflective) with the analytic Jacobian. The output
    sensitivities are filtered signals, d y/d b_k = s^k/A u and d y/d a_k = -s^k B/A^2 u: they are the
    states of the 2n-state system 1/A driven by u followed by 1/A driven by B/A u, simulated with the
-   same exact ZOH machinery (they are also SRIVC's instruments).
-3. Stability: if the final estimate of an entry has unstable poles and ``enforce_stability`` is set,
-   they are reflected into the left half-plane, the numerators of that output are re-fitted by
-   linear least squares (the simulation error is linear in them) and the count is reported.
+   same exact ZOH machinery (they are also SRIVC's instruments). Its tolerance bounds the relative
+   decrease of the cost in an iteration (like MATLAB's); steps and gradients must fall below its square.
+3. Stability (``enforce_stability=True``): if the refined estimate of an output has unstable poles,
+   they are mirrored into the left half-plane, that output's numerators re-fitted by linear least
+   squares (the simulation error is linear in them) and the refinement run again among stable
+   models only (an unstable trial step is refused); the number of mirrored poles is reported.
 
 Scaling: every entry is parametrised in a time unit of its own, 1/omega with omega the geometric
 mean of its poles' magnitudes (the state-variable filter's cutoff at the start), so that the
@@ -63,10 +72,14 @@ from math import comb
 import numpy as np
 from scipy import linalg, optimize
 
-# SRIVC sweeps without a better simulation fit after which an SRIVC problem keeps its best iterate
-_PATIENCE = 5
-# steps per block of the lifted state recursion
-_BLOCK = 16
+from softtip._core.threads import single_threaded_blas
+
+# SRIVC sweeps without a relative improvement of the simulation error after which an SRIVC problem
+# keeps its best iterate; the common-denominator stage before backfitting only starts it, to this
+# relative change of its parameters
+_PATIENCE, _IMPROVEMENT, _STARTING_TOLERANCE = 5, 1e-5, 1e-3
+# steps per block of the lifted state recursion; samples per chunk of a long simulation
+_BLOCK, _CHUNK = 16, 1 << 15
 
 
 # ------------------------------------------------------------------------------------------ the model
@@ -156,14 +169,20 @@ class TransferFunctionMatrix:
 # ------------------------------------------------------------------------- exact ZOH simulation kernels
 
 
-def _companions(a: np.ndarray) -> np.ndarray:
-    """Controllable canonical state matrices of 1/A for monic A with ascending lower coefficients
-    ``a`` (E, n): the states are s^k/A v, k = 0..n-1."""
-    count, n = a.shape
-    matrices = np.zeros((count, n, n))
-    matrices[:, np.arange(n - 1), np.arange(1, n)] = 1.0
-    matrices[:, -1, :] = -a
-    return matrices
+def _companion(a: np.ndarray) -> np.ndarray:
+    """The controllable canonical state matrix of 1/A for the monic A with ascending lower
+    coefficients ``a``: its states are s^k/A v, k = 0..n-1."""
+    n = len(a)
+    matrix = np.eye(n, k=1)
+    matrix[-1] = -a
+    return matrix
+
+
+def _rescaled(a: np.ndarray, numerators: list[np.ndarray], ratio: float):
+    """Ascending coefficients of A (monic, degree len(a)) and of its numerators in a time unit
+    ``ratio`` times shorter: a_k ratio^(n - k)."""
+    n = len(a)
+    return a * ratio ** (n - np.arange(n)), [b * ratio ** (n - np.arange(len(b))) for b in numerators]
 
 
 def _discretised(matrices: np.ndarray, inputs: np.ndarray, steps: np.ndarray, linear: bool):
@@ -234,32 +253,49 @@ def _output_map(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
     return np.concatenate([b, np.zeros(n - len(b))]), 0.0
 
 
-def _states(systems, steps, v: np.ndarray, linear: bool = False) -> list[np.ndarray]:
-    """Exact states from rest of E continuous systems (M, g) of any sizes, each driven by its own c
-    signals held between samples (``linear``: interpolated linearly): v (E, c, N) -> [(n_e, c, N)]."""
+def _discrete_systems(systems, steps, linear: bool = False):
+    """E continuous systems (M, g) of any sizes, padded to the largest, discretised over their steps:
+    (Phi, Gamma0, Gamma1) as :func:`_discretised` gives them."""
     size = max(len(g) for _, g in systems)
     matrices = np.zeros((len(systems), size, size))
     gains = np.zeros((len(systems), size))
     for e, (matrix, gain) in enumerate(systems):
         matrices[e, :len(gain), :len(gain)] = matrix
         gains[e, :len(gain)] = gain
-    phi, gamma, ramp = _discretised(matrices, gains, np.asarray(steps, dtype=float), linear)
-    # x[k+1] = Phi x[k] + gamma v[k] + ramp v[k+1]: z[k] = x[k] - ramp v[k] follows
-    # z[k+1] = Phi z[k] + (gamma + Phi ramp) v[k] from z[0] = -ramp v[0] (x[0] = 0)
-    states = _recursion_states(phi, gamma + (phi @ ramp[..., None])[..., 0], v, -ramp[:, :, None] * v[:, None, :, 0])
+    return _discretised(matrices, gains, np.asarray(steps, dtype=float), linear)
+
+
+def _advanced(phi, gamma, ramp, v: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """States x[k], k = 0..N-1, of x[k+1] = Phi x[k] + Gamma0 v[k] + Gamma1 v[k+1] from x[0] = ``initial``
+    (E, n, c): z[k] = x[k] - Gamma1 v[k] follows z[k+1] = Phi z[k] + (Gamma0 + Phi Gamma1) v[k]."""
+    states = _recursion_states(phi, gamma + (phi @ ramp[..., None])[..., 0], v,
+                               initial - ramp[:, :, None] * v[:, None, :, 0])
     states += ramp[:, :, None, None] * v[:, None]
+    return states
+
+
+def _states(systems, steps, v: np.ndarray, linear: bool = False) -> list[np.ndarray]:
+    """Exact states from rest of E continuous systems (M, g) of any sizes, each driven by its own c
+    signals held between samples (``linear``: interpolated linearly): v (E, c, N) -> [(n_e, c, N)]."""
+    phi, gamma, ramp = _discrete_systems(systems, steps, linear)
+    states = _advanced(phi, gamma, ramp, v, np.zeros(gamma.shape + v.shape[1:2]))
     return [states[e, :len(gain)] for e, (_, gain) in enumerate(systems)]
 
 
-def _filter_states(a_list, steps, v: np.ndarray, linear: bool = False) -> list[np.ndarray]:
-    """States s^k/A v (k < n) of the filters 1/A, ascending normalised coefficients ``a``, for v held
-    between samples (``linear``: interpolated linearly)."""
+def _filter_systems(a_list) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The filters 1/A (ascending normalised coefficients ``a``) in controllable canonical form."""
     systems = []
     for a in a_list:
         gain = np.zeros(len(a))
         gain[-1] = 1.0
-        systems.append((_companions(a[None])[0], gain))
-    return _states(systems, steps, v, linear)
+        systems.append((_companion(a), gain))
+    return systems
+
+
+def _filter_states(a_list, steps, v: np.ndarray, linear: bool = False) -> list[np.ndarray]:
+    """States s^k/A v (k < n) of the filters 1/A for v held between samples (``linear``:
+    interpolated linearly)."""
+    return _states(_filter_systems(a_list), steps, v, linear)
 
 
 def _sensitivity_states(a_list, b_list, steps, v: np.ndarray) -> list[np.ndarray]:
@@ -271,7 +307,7 @@ def _sensitivity_states(a_list, b_list, steps, v: np.ndarray) -> list[np.ndarray
         n = len(a)
         output, direct = _output_map(a, b)
         matrix = np.zeros((2 * n, 2 * n))
-        matrix[:n, :n] = matrix[n:, n:] = _companions(a[None])[0]
+        matrix[:n, :n] = matrix[n:, n:] = _companion(a)
         matrix[-1, :n] += output
         gain = np.zeros(2 * n)
         gain[n - 1], gain[-1] = 1.0, direct
@@ -287,13 +323,9 @@ def _response(a: np.ndarray, b: np.ndarray, xi: np.ndarray, v: np.ndarray) -> np
 
 def _normalised(tf: TransferFunctionMatrix, omega: float):
     """Ascending coefficients of every entry in the time unit 1/omega: a_k omega^(k - n)."""
-    a_list, b_list = [], []
-    for row_b, row_a in zip(tf.numerators, tf.denominators):
-        for b, a in zip(row_b, row_a):
-            n = len(a) - 1
-            a_list.append(a[::-1][:n] * omega ** (np.arange(n) - n))
-            b_list.append(b[::-1] * omega ** (np.arange(len(b)) - n))
-    return a_list, b_list
+    scaled = [_rescaled(a[:0:-1], [b[::-1]], 1.0 / omega) for row_b, row_a in zip(tf.numerators, tf.denominators)
+              for b, a in zip(row_b, row_a)]
+    return [a for a, _ in scaled], [b for _, (b,) in scaled]
 
 
 def simulate(tf: TransferFunctionMatrix, u: np.ndarray, ts: float) -> np.ndarray:
@@ -308,10 +340,17 @@ def simulate(tf: TransferFunctionMatrix, u: np.ndarray, ts: float) -> np.ndarray
         raise ValueError("u: contains NaN or infinite values")
     # time in samples: the entries' coefficients in units of ts
     a_list, b_list = _normalised(tf, 1.0 / ts)
-    inputs = np.tile(u.T[:, None, :], (ny, 1, 1))  # entry (i, j) is driven by u_j
-    states = _filter_states(a_list, np.ones(ny * nu), inputs)
-    responses = np.stack([_response(a, b, xi, v) for a, b, xi, v in zip(a_list, b_list, states, inputs)])
-    return responses[:, 0, :].reshape(ny, nu, -1).sum(axis=1).T
+    y = np.empty((len(u), ny))
+    with single_threaded_blas():
+        phi, gamma, ramp = _discrete_systems(_filter_systems(a_list), np.ones(ny * nu))
+        state = np.zeros(gamma.shape + (1,))
+        for start in range(0, len(u), _CHUNK):  # the states of a long record in chunks
+            inputs = np.tile(u[start:start + _CHUNK].T[:, None, :], (ny, 1, 1))  # entry (i, j) is driven by u_j
+            states = _advanced(phi, gamma, ramp, inputs, state)
+            responses = [_response(a, b, x[:len(a), 0], v[0]) for a, b, x, v in zip(a_list, b_list, states, inputs)]
+            y[start:start + _CHUNK] = np.reshape(responses, (ny, nu, -1)).sum(axis=1).T
+            state = phi @ states[..., -1] + gamma[..., None] * inputs[:, None, :, -1]
+    return y
 
 
 # --------------------------------------------------------------------------------------- argument checks
@@ -383,41 +422,22 @@ def _orders(n_poles, n_zeros, ny: int, nu: int) -> tuple[np.ndarray, np.ndarray]
 
 @dataclass(frozen=True, eq=False)
 class FitReport:
-    """What the estimation did. ``iterations`` and ``srivc_iterations`` are the most any output
-    needed (each output is estimated on its own); ``cost`` is half the sum of squared simulation
-    errors of the returned model over all outputs and samples; ``per_output_fit_percent`` is
-    MATLAB's NRMSE fit 100 (1 - |y - y_hat| / |y - mean(y)|) over all segments together."""
+    """What the estimation did, output by output summed up. ``converged``: the refinement of every
+    output met its tolerance (without ``refine``: SRIVC converged for every output); ``iterations``:
+    the most model evaluations one output's refinement used (``max_iterations`` caps each pass);
+    ``srivc_iterations``: SRIVC's sweeps (common-denominator stage, then backfitting); ``cost``:
+    half the sum of squared simulation errors of the returned model over all outputs and samples;
+    ``reflected_poles``: poles of the returned model that were mirrored from the right into the left
+    half-plane; ``per_output_fit_percent``: MATLAB's NRMSE fit 100 (1 - |y - y_hat| / |y - mean y|)
+    over all segments together."""
 
     converged: bool
     iterations: int
     cost: float
     message: str
     srivc_iterations: int
-    reflected_poles: int  # unstable poles moved into the left half-plane (stability enforced)
+    reflected_poles: int
     per_output_fit_percent: np.ndarray
-
-
-class _Entries:
-    """The estimate of every entry in its own time unit 1/omega: ascending lower coefficients of the
-    monic denominator (a) and of the numerator (b), [output][input]."""
-
-    def __init__(self, a, b, omega: np.ndarray):
-        self.a, self.b, self.omega = a, b, omega
-
-    @classmethod
-    def of(cls, rows) -> _Entries:
-        """From one (a list, b list, omega array) per output."""
-        return cls([list(a) for a, _, _ in rows], [list(b) for _, b, _ in rows], np.array([omega for _, _, omega in rows]))
-
-    def transfer_function(self) -> TransferFunctionMatrix:
-        numerators, denominators = [], []
-        for row_a, row_b, row_omega in zip(self.a, self.b, self.omega):
-            numerators.append([]), denominators.append([])
-            for a, b, omega in zip(row_a, row_b, row_omega):
-                n = len(a)
-                denominators[-1].append(np.concatenate([[1.0], (a * omega ** (n - np.arange(n)))[::-1]]))
-                numerators[-1].append((b * omega ** (n - np.arange(len(b))))[::-1])
-        return TransferFunctionMatrix(numerators, denominators)
 
 
 def _roots(a: np.ndarray) -> np.ndarray:
@@ -430,22 +450,60 @@ def _reflected(a: np.ndarray) -> tuple[np.ndarray, int]:
     unstable = roots.real > 0
     if not np.any(unstable):
         return a, 0
-    roots = np.where(unstable, -roots.conj(), roots)
-    return np.poly(roots).real[:0:-1].copy(), int(np.count_nonzero(unstable))
+    return np.poly(np.where(unstable, -roots.conj(), roots)).real[:0:-1].copy(), int(np.count_nonzero(unstable))
 
 
-def _rescaled(a: np.ndarray, numerators: list[np.ndarray], ratio: float):
-    """Coefficients in a time unit ``ratio`` times shorter (omega_old / omega_new = ratio)."""
-    n = len(a)
-    return a * ratio ** (n - np.arange(n)), [b * ratio ** (n - np.arange(len(b))) for b in numerators]
-
-
-def _with_scale(a, numerators, omega, bounds):
-    """(a, numerators, omega) in the time unit of the geometric mean of the poles' magnitudes
-    (within bounds)."""
+def _updated(a, numerators, omega, bounds):
+    """A new SRIVC estimate made usable as the next prefilter, stable (unstable poles mirrored), in
+    the time unit of the geometric mean of its poles' magnitudes (within bounds)."""
+    a = _reflected(a)[0]
     magnitudes = np.abs(_roots(a)) * omega
     scale = float(np.clip(np.exp(np.mean(np.log(np.maximum(magnitudes, bounds[0])))), *bounds))
     return (*_rescaled(a, numerators, omega / scale), scale)
+
+
+@dataclass
+class _Row:
+    """One output's estimate: per input, the ascending lower coefficients of the entry's monic
+    denominator (a) and of its numerator (b), in the entry's own time unit 1/omega (omega in rad/s)."""
+
+    a: list
+    b: list
+    omega: np.ndarray
+
+    def copy(self) -> _Row:
+        return _Row(list(self.a), list(self.b), self.omega.copy())
+
+    def parameters(self) -> np.ndarray:
+        return np.concatenate([part for a, b in zip(self.a, self.b) for part in (a, b)])
+
+    def with_parameters(self, theta: np.ndarray) -> _Row:
+        sizes = np.cumsum([size for a, b in zip(self.a, self.b) for size in (len(a), len(b))])[:-1]
+        parts = np.split(theta, sizes)
+        return _Row(parts[0::2], parts[1::2], self.omega)
+
+    def is_stable(self) -> bool:
+        return all(np.all(_roots(a).real < 0) for a in self.a)
+
+
+def _transfer_function(rows: list[_Row]) -> TransferFunctionMatrix:
+    """The estimate in seconds: a_k omega^(n - k), b_k omega^(n - k), descending."""
+    numerators, denominators = [], []
+    for row in rows:
+        scaled = [_rescaled(a, [b], omega) for a, b, omega in zip(row.a, row.b, row.omega)]
+        denominators.append([np.concatenate([[1.0], a[::-1]]) for a, _ in scaled])
+        numerators.append([b[::-1] for _, (b,) in scaled])
+    return TransferFunctionMatrix(numerators, denominators)
+
+
+def _responses(rows: list[_Row], inputs: np.ndarray, ts: float) -> np.ndarray:
+    """Every entry's simulated response to its input, (rows, nu, S, N)."""
+    a_list = [a for row in rows for a in row.a]
+    b_list = [b for row in rows for b in row.b]
+    driven = np.tile(inputs, (len(rows), 1, 1))
+    states = _filter_states(a_list, ts * np.concatenate([row.omega for row in rows]), driven)
+    responses = np.stack([_response(a, b, xi, v) for a, b, xi, v in zip(a_list, b_list, states, driven)])
+    return responses.reshape((len(rows),) + inputs.shape)
 
 
 def _derivatives(a: np.ndarray, n_b: int, xi: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -485,25 +543,22 @@ def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
     return float(np.linalg.norm(new - old) / max(np.linalg.norm(new), np.finfo(float).tiny))
 
 
-def _updated(a, numerators, omega, bounds):
-    """A new estimate made usable as the next prefilter (stable: unstable poles mirrored) in its
-    own time unit."""
-    return _with_scale(_reflected(a)[0], numerators, omega, bounds)
-
-
 class _Progress:
-    """The sweeps of one SRIVC problem: it stops when the estimate no longer changes (converged)
-    or when the simulation error has not improved for ``_PATIENCE`` sweeps; the iteration is not
-    a contraction at every noise level, so its best iterate by simulation error is kept."""
+    """The sweeps of one SRIVC problem. It stops when the estimate no longer moves (converged) or when
+    the simulation error has not improved by a relative ``_IMPROVEMENT`` for ``_PATIENCE`` sweeps:
+    the iteration is not a contraction at every noise level and order, so its best iterate by
+    simulation error is kept."""
 
     def __init__(self, estimate):
         self.estimate, self.best, self.error, self.best_sweep = estimate, estimate, np.inf, 0
         self.converged = self.stopped = False
 
     def record(self, sweep: int, error: float, estimate, change: float, tolerance: float):
-        """The simulation ``error`` of the current estimate, then the next ``estimate`` and how much it moved."""
+        """The simulation ``error`` of the current estimate, the next ``estimate`` and how far it moved."""
         if error < self.error:
-            self.best, self.error, self.best_sweep = self.estimate, error, sweep
+            if error < self.error * (1.0 - _IMPROVEMENT):
+                self.best_sweep = sweep
+            self.best, self.error = self.estimate, error
         self.estimate = estimate
         self.converged = sweep > 1 and change < tolerance
         self.stopped = self.converged or sweep - self.best_sweep >= _PATIENCE
@@ -512,143 +567,142 @@ class _Progress:
         return self.estimate if self.converged else self.best
 
 
-def _common_srivc(inputs, outputs, mask, problems, ts, bounds, max_iterations, tolerance):
-    """SRIVC of the MISO models y_i = sum_j B_j/A u_j with one denominator per problem (i, n, numerator
-    lengths per input), all problems at once, from the state-variable filter 1/(s + lambda)^n with
-    lambda the output's rms frequency: ([(a, numerators, omega)], sweeps, all converged)."""
+def _common_sweep(models, problems, inputs, outputs, mask, ts, bounds, instruments: bool):
+    """One SRIVC step of each MISO model y_i = sum_j B_j/A u_j with one denominator: for every
+    problem the simulation error of its model, the next model and how far it moved."""
     nu = len(inputs)
-    cutoff = np.clip(_rms_frequency(outputs, mask, ts), *bounds)
-    progress = [_Progress((np.array([comb(n, k) for k in range(n)], dtype=float), [np.zeros(size) for size in sizes],
-                           cutoff[i])) for i, n, sizes in problems]
-    sweep = 0
-    while sweep < max_iterations and not all(state.stopped for state in progress):
-        sweep += 1
-        active = [p for p, state in enumerate(progress) if not state.stopped]
-        models = [progress[p].estimate for p in active]
-        steps = ts * np.array([omega for _, _, omega in models])
-        sensitivities = _sensitivity_states([a for a, _, _ in models for _ in range(nu)],
-                                            [b for _, numerators, _ in models for b in numerators],
-                                            np.repeat(steps, nu), np.tile(inputs, (len(active), 1, 1)))
-        filtered = _filter_states([a for a, _, _ in models], steps, outputs[[problems[p][0] for p in active]],
-                                  linear=True)
-        for slot, (p, (a, numerators, omega)) in enumerate(zip(active, models)):
-            i, n, sizes = problems[p]
-            states = sensitivities[slot * nu:(slot + 1) * nu]
-            simulated = sum(_response(a, b, x[:n], u) for b, x, u in zip(numerators, states, inputs))
-            columns = [_derivatives(a, size, x[:n], u) for size, x, u in zip(sizes, states, inputs)]
-            instruments = sum(x[n:] for x in states) if sweep > 1 else None
-            theta = _iv_estimate(a, filtered[slot], outputs[i], columns, instruments, mask)
-            parts = np.split(theta, np.cumsum([n, *sizes])[:-1])
-            progress[p].record(sweep, np.linalg.norm((outputs[i] - simulated)[mask]),
-                               _updated(parts[0], parts[1:], omega, bounds),
-                               _relative_change(theta, np.concatenate([a, *numerators])), tolerance)
-    return [state.result() for state in progress], sweep, all(state.converged for state in progress)
+    steps = ts * np.array([omega for _, _, omega in models])
+    sensitivities = _sensitivity_states([a for a, _, _ in models for _ in range(nu)],
+                                        [b for _, numerators, _ in models for b in numerators],
+                                        np.repeat(steps, nu), np.tile(inputs, (len(models), 1, 1)))
+    filtered = _filter_states([a for a, _, _ in models], steps, outputs[[i for i, _, _ in problems]], linear=True)
+    for slot, ((i, n, sizes), (a, numerators, omega)) in enumerate(zip(problems, models)):
+        states = sensitivities[slot * nu:(slot + 1) * nu]
+        simulated = sum(_response(a, b, x[:n], u) for b, x, u in zip(numerators, states, inputs))
+        columns = [_derivatives(a, size, x[:n], u) for size, x, u in zip(sizes, states, inputs)]
+        theta = _iv_estimate(a, filtered[slot], outputs[i], columns, sum(x[n:] for x in states) if instruments else None,
+                             mask)
+        parts = np.split(theta, np.cumsum([n, *sizes])[:-1])
+        yield (np.linalg.norm((outputs[i] - simulated)[mask]), _updated(parts[0], parts[1:], omega, bounds),
+               _relative_change(theta, np.concatenate([a, *numerators])))
+
+
+def _backfitting_sweep(rows: list[_Row], inputs, outputs, mask, ts, bounds):
+    """One SRIVC sweep over the inputs of each output's MISO model (Gauss-Seidel backfitting): entry
+    j is re-estimated from the output less the current responses of the other entries. Updates
+    ``rows`` in place; returns the simulation errors of the rows as they were and how far they moved."""
+    responses = _responses(rows, inputs, ts)
+    errors = np.linalg.norm((outputs - responses.sum(axis=1))[:, mask], axis=1)
+    changes = np.zeros(len(rows))
+    driven_shape = (len(rows),) + mask.shape
+    for j, u in enumerate(inputs):
+        a_list, b_list = [row.a[j] for row in rows], [row.b[j] for row in rows]
+        steps = ts * np.array([row.omega[j] for row in rows])
+        sensitivities = _sensitivity_states(a_list, b_list, steps, np.broadcast_to(u, driven_shape))
+        others = outputs - responses.sum(axis=1) + responses[:, j]
+        filtered = _filter_states(a_list, steps, others, linear=True)
+        for slot, row in enumerate(rows):
+            a, b, x = a_list[slot], b_list[slot], sensitivities[slot]
+            n = len(a)
+            theta = _iv_estimate(a, filtered[slot], others[slot], [_derivatives(a, len(b), x[:n], u)], x[n:], mask)
+            changes[slot] = max(changes[slot], _relative_change(theta, np.concatenate([a, b])))
+            row.a[j], (row.b[j],), row.omega[j] = _updated(theta[:n], [theta[n:]], row.omega[j], bounds)
+        states = _filter_states([row.a[j] for row in rows], ts * np.array([row.omega[j] for row in rows]),
+                                np.broadcast_to(u, driven_shape))
+        responses[:, j] = [_response(row.a[j], row.b[j], xi, u) for row, xi in zip(rows, states)]
+    return errors, changes
 
 
 def _srivc(inputs, outputs, mask, n_poles, n_zeros, ts, bounds, max_iterations, tolerance):
-    """SRIVC of every entry with its own denominator by backfitting over the inputs, all outputs at
-    once, started from the common-denominator models of each order: (entries, sweeps, converged)."""
+    """SRIVC of every entry with its own denominator, all outputs at once: first the MISO model with
+    one common denominator of each order an output's entries have, from the state-variable filter
+    1/(s + lambda)^n (lambda the output's rms frequency; least squares in the first sweep), then
+    backfitting from it. Returns (rows, sweeps, converged)."""
     ny, nu = n_poles.shape
     problems = [(i, n, [min(m, n) + 1 for m in n_zeros[i]]) for i in range(ny) for n in np.unique(n_poles[i])]
-    common, sweeps, converged = _common_srivc(inputs, outputs, mask, problems, ts, bounds, max_iterations, tolerance)
-    start = {(i, n): model for (i, n, _), model in zip(problems, common)}
-    progress = [_Progress(([start[i, n][0] for n in n_poles[i]], [start[i, n][1][j] for j, n in enumerate(n_poles[i])],
-                           np.array([start[i, n][2] for n in n_poles[i]]))) for i in range(ny)]
+    cutoff = np.clip(_rms_frequency(outputs, mask, ts), *bounds)
+    progress = [_Progress((np.array([comb(n, k) for k in range(n)], dtype=float), [np.zeros(size) for size in sizes],
+                           cutoff[i])) for i, n, sizes in problems]
+
+    def sweep_common(active, sweep):
+        return _common_sweep([progress[p].estimate for p in active], [problems[p] for p in active], inputs, outputs,
+                             mask, ts, bounds, instruments=sweep > 1)
+
+    common_sweeps = _run(progress, max_iterations, tolerance if nu == 1 else max(tolerance, _STARTING_TOLERANCE),
+                         sweep_common)
+    common = {problems[p][:2]: state.result() for p, state in enumerate(progress)}
+    converged = all(state.converged for state in progress)
+    rows = [_Row([common[i, n][0] for n in n_poles[i]], [common[i, n][1][j] for j, n in enumerate(n_poles[i])],
+                 np.array([common[i, n][2] for n in n_poles[i]])) for i in range(ny)]
     if nu == 1:  # the common-denominator model is the entry's SRIVC estimate
-        return _Entries.of([state.result() for state in progress]), sweeps, converged
-    sweep = 0
-    while sweep < max_iterations and not all(state.stopped for state in progress):
-        sweep += 1
-        active = [i for i, state in enumerate(progress) if not state.stopped]
-        estimates = [[list(progress[i].estimate[0]), list(progress[i].estimate[1]), progress[i].estimate[2].copy()]
-                     for i in active]
-        responses = _entry_responses([e[0] for e in estimates], [e[1] for e in estimates],
-                                     np.array([e[2] for e in estimates]), inputs, ts)
-        errors = np.linalg.norm((outputs[active] - responses.sum(axis=1))[:, mask], axis=1)
-        change = np.zeros(len(active))
-        for j in range(nu):
-            a_list, b_list = [e[0][j] for e in estimates], [e[1][j] for e in estimates]
-            steps = ts * np.array([e[2][j] for e in estimates])
-            driven = np.broadcast_to(inputs[j], (len(active),) + mask.shape)
-            sensitivities = _sensitivity_states(a_list, b_list, steps, driven)
-            others = outputs[active] - responses.sum(axis=1) + responses[:, j]
-            filtered = _filter_states(a_list, steps, others, linear=True)
-            for slot, estimate in enumerate(estimates):
-                a, b, n = a_list[slot], b_list[slot], len(a_list[slot])
-                columns = [_derivatives(a, len(b), sensitivities[slot][:n], inputs[j])]
-                theta = _iv_estimate(a, filtered[slot], others[slot], columns, sensitivities[slot][n:], mask)
-                change[slot] = max(change[slot], _relative_change(theta, np.concatenate([a, b])))
-                estimate[0][j], (estimate[1][j],), estimate[2][j] = _updated(theta[:n], [theta[n:]], estimate[2][j],
-                                                                              bounds)
-            states = _filter_states([e[0][j] for e in estimates], ts * np.array([e[2][j] for e in estimates]), driven)
-            responses[:, j] = [_response(e[0][j], e[1][j], xi, inputs[j]) for e, xi in zip(estimates, states)]
-        for slot, i in enumerate(active):
-            progress[i].record(sweep, errors[slot], tuple(estimates[slot]), change[slot], tolerance)
-    return (_Entries.of([state.result() for state in progress]), sweeps + sweep,
+        return rows, common_sweeps, converged
+    progress = [_Progress(row) for row in rows]
+
+    def sweep_rows(active, sweep):
+        working = [progress[i].estimate.copy() for i in active]
+        errors, changes = _backfitting_sweep(working, inputs, outputs[active], mask, ts, bounds)
+        return zip(errors, working, changes)
+
+    sweeps = _run(progress, max_iterations, tolerance, sweep_rows)
+    return ([state.result() for state in progress], common_sweeps + sweeps,
             converged and all(state.converged for state in progress))
 
 
-def _output_error(i, entries, inputs, target, mask, ts):
-    """Residual and Jacobian functions of output i's simulation error in its parameters
-    (a_i0, b_i0, a_i1, b_i1, ...), evaluated together once per parameter vector."""
-    sizes = [(len(a), len(b)) for a, b in zip(entries.a[i], entries.b[i])]
-    steps = ts * entries.omega[i]
-    last = {}
+def _run(progress: list[_Progress], max_iterations: int, tolerance: float, sweep) -> int:
+    """Sweeps until every problem has stopped or ``max_iterations``; ``sweep(active, number)`` yields
+    (error, next estimate, change) per active problem. Returns the number of sweeps."""
+    number = 0
+    while number < max_iterations and not all(state.stopped for state in progress):
+        number += 1
+        active = [p for p, state in enumerate(progress) if not state.stopped]
+        for p, (error, estimate, change) in zip(active, sweep(active, number)):
+            progress[p].record(number, error, estimate, change, tolerance)
+    return number
 
-    def unpack(theta):
-        a_list, b_list, start = [], [], 0
-        for n, n_b in sizes:
-            a_list.append(theta[start:start + n])
-            b_list.append(theta[start + n:start + n + n_b])
-            start += n + n_b
-        return a_list, b_list
+
+def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, stable_only: bool):
+    """Output-error refinement of one output's row by least squares on the simulation error with the
+    analytic Jacobian (an unstable trial model is refused when ``stable_only``): (row, result)."""
+    steps = ts * row.omega
+    last = {}
 
     def evaluate(theta):
         if last.get("theta") is None or not np.array_equal(last["theta"], theta):
-            a_list, b_list = unpack(theta)
+            trial = row.with_parameters(theta)
             with np.errstate(over="ignore", invalid="ignore"):
-                states = _sensitivity_states(a_list, b_list, steps, inputs)
+                states = _sensitivity_states(trial.a, trial.b, steps, inputs)
                 prediction, columns = 0.0, []
-                for a, b, x, v in zip(a_list, b_list, states, inputs):
+                for a, b, x, v in zip(trial.a, trial.b, states, inputs):
                     n = len(a)
                     prediction = prediction + _response(a, b, x[:n], v)
                     columns += [-x[n:], _derivatives(a, len(b), x[:n], v)]
-            residual = target - prediction[mask]
-            if not np.all(np.abs(residual) < 1e150):  # an unstable trial model blew up: the step is refused
+                residual = target - prediction[mask]
+            # a trial model that blew up (or left the stable ones) is refused: the trust region shrinks
+            if not np.all(np.abs(residual) < 1e150) or (stable_only and not trial.is_stable()):
                 residual = np.full_like(residual, np.nan)
             last.update(theta=theta.copy(), residual=residual, jacobian=-np.concatenate(columns)[:, mask].T)
         return last
 
-    theta = np.concatenate([np.concatenate([a, b]) for a, b in zip(entries.a[i], entries.b[i])])
-    return theta, unpack, (lambda theta: evaluate(theta)["residual"]), (lambda theta: evaluate(theta)["jacobian"])
+    result = optimize.least_squares(lambda theta: evaluate(theta)["residual"], row.parameters(),
+                                    jac=lambda theta: evaluate(theta)["jacobian"], method="trf", x_scale="jac",
+                                    ftol=tolerance, xtol=tolerance**2, gtol=tolerance**2, max_nfev=max_iterations)
+    return row.with_parameters(result.x), result
 
 
-def _refit_numerators(i, entries, inputs, target, mask, ts):
-    """Output i's numerators by linear least squares for its fixed denominators (the simulation
-    error is linear in them)."""
-    states = _filter_states(entries.a[i], ts * entries.omega[i], inputs)
-    columns = [_derivatives(a, len(b), xi, v) for a, b, xi, v in zip(entries.a[i], entries.b[i], states, inputs)]
-    regressors = np.concatenate(columns)[:, mask].T
+def _with_refitted_numerators(row: _Row, inputs, target, mask, ts) -> _Row:
+    """The row's numerators by linear least squares for its denominators (the simulation error is
+    linear in them)."""
+    states = _filter_states(row.a, ts * row.omega, inputs)
+    regressors = np.concatenate([_derivatives(a, len(b), xi, v)
+                                 for a, b, xi, v in zip(row.a, row.b, states, inputs)])[:, mask].T
     scale = np.linalg.norm(regressors, axis=0)
     scale[scale == 0] = 1.0
     theta = np.linalg.lstsq(regressors / scale, target, rcond=None)[0] / scale
-    for j, column in enumerate(np.split(theta, np.cumsum([len(b) for b in entries.b[i]])[:-1])):
-        entries.b[i][j] = column
-
-
-def _entry_responses(a_rows, b_rows, omega, inputs, ts) -> np.ndarray:
-    """The simulated response of every entry to its input, (ny, nu, S, N)."""
-    ny, nu = omega.shape
-    a_list = [a for row in a_rows for a in row]
-    b_list = [b for row in b_rows for b in row]
-    driven = np.tile(inputs, (ny, 1, 1))
-    states = _filter_states(a_list, ts * omega.ravel(), driven)
-    responses = np.stack([_response(a, b, xi, v) for a, b, xi, v in zip(a_list, b_list, states, driven)])
-    return responses.reshape((ny, nu) + inputs.shape[1:])
+    return _Row(row.a, np.split(theta, np.cumsum([len(b) for b in row.b])[:-1]), row.omega)
 
 
 def fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], ts: float, n_poles, n_zeros=None, *,
-        refine: bool = True, max_iterations: int = 100, tolerance: float = 1e-8, enforce_stability: bool = True,
+        refine: bool = True, max_iterations: int = 100, tolerance: float = 1e-6, enforce_stability: bool = True,
         ) -> tuple[TransferFunctionMatrix, FitReport]:
     """A continuous-time transfer-function matrix G(s) (ny x nu) from sampled input/output records.
 
@@ -656,10 +710,12 @@ def fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], ts: float, n_poles, n
     joined; the inputs are held constant between samples (zero-order hold). ``n_poles`` and
     ``n_zeros``: an integer for every entry or (ny, nu) integer arrays; ``n_zeros`` defaults to
     ``n_poles - 1`` (strictly proper). ``refine``: follow SRIVC by the output-error refinement.
-    ``max_iterations`` caps both SRIVC's sweeps and the refinement's evaluations, per output;
-    ``tolerance`` is their relative convergence threshold. ``enforce_stability``: mirror unstable
-    final poles into the left half-plane (counted in the report); without it an unstable estimate
-    is returned and said so in the report's message. See the module notes for the method.
+    ``max_iterations`` caps SRIVC's sweeps (each stage) and each refinement pass's model evaluations;
+    ``tolerance`` is their relative convergence threshold. ``enforce_stability``: mirror the
+    unstable poles of a refined estimate into the left half-plane, re-fit its numerators and refine
+    again among stable models only (counted in the report); without it an unstable estimate is
+    returned and said so in the report's message (SRIVC's own estimates are always stable: they
+    serve as its prefilters). See the module notes for the method.
     """
     ts = _sample_time(ts)
     inputs, outputs, mask = _segments(segments)
@@ -674,48 +730,52 @@ def fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], ts: float, n_poles, n
     if samples < parameters:
         raise ValueError(f"segments: {samples} samples in all, fewer than the {parameters} parameters of one "
                          f"output's model")
-    bounds = (1.0 / (ts * samples), np.pi / ts)
+    with single_threaded_blas():  # small thin products: a second BLAS thread only thrashes
+        return _estimated(inputs, outputs, mask, ts, n_poles, n_zeros, refine, max_iterations, tolerance,
+                          enforce_stability)
 
-    entries, sweeps, srivc_converged = _srivc(inputs, outputs, mask, n_poles, n_zeros, ts, bounds,
-                                              max_iterations, tolerance)
-    notes = [] if srivc_converged else [f"SRIVC did not converge in {sweeps} sweeps"]
-    converged, iterations = srivc_converged, 0
+
+def _estimated(inputs, outputs, mask, ts, n_poles, n_zeros, refine, max_iterations, tolerance, enforce_stability):
+    """``fit`` on checked arguments."""
+    bounds = (1.0 / (ts * mask.sum()), np.pi / ts)
+    # SRIVC only starts a refinement: to the square root of its tolerance then
+    rows, sweeps, converged = _srivc(inputs, outputs, mask, n_poles, n_zeros, ts, bounds, max_iterations,
+                                     np.sqrt(tolerance) if refine else tolerance)
+    notes = [] if converged else [f"SRIVC stopped after {sweeps} sweeps without converging"]
+    iterations = reflected = 0
     if refine:
         converged = True
-        for i in range(ny):
-            theta, unpack, residual, jacobian = _output_error(i, entries, inputs, outputs[i][mask], mask, ts)
-            result = optimize.least_squares(residual, theta, jac=jacobian, method="trf", x_scale="jac",
-                                            ftol=tolerance, xtol=tolerance, gtol=tolerance,
-                                            max_nfev=max_iterations)
-            entries.a[i], entries.b[i] = (list(part) for part in unpack(result.x))
-            iterations = max(iterations, int(result.njev))
+        for i, row in enumerate(rows):
+            target = outputs[i][mask]
+            row, result = _refined(row, inputs, target, mask, ts, max_iterations, tolerance, stable_only=False)
+            evaluations = result.nfev
+            moved = 0
+            if enforce_stability:
+                mirrored = [_reflected(a) for a in row.a]
+                moved = sum(count for _, count in mirrored)
+            if moved:
+                row = _with_refitted_numerators(_Row([a for a, _ in mirrored], row.b, row.omega), inputs, target,
+                                                mask, ts)
+                row, result = _refined(row, inputs, target, mask, ts, max_iterations, tolerance, stable_only=True)
+                evaluations += result.nfev
+                reflected += moved
+                notes.append(f"output {i}: {moved} unstable poles mirrored into the left half-plane, "
+                             f"then refined among stable models")
             if result.status <= 0:
                 converged = False
                 notes.append(f"output {i}: refinement did not converge ({result.message})")
-    reflected = 0
-    for i in range(ny):
-        moved = 0
-        for j in range(nu):
-            if enforce_stability:
-                entries.a[i][j], count = _reflected(entries.a[i][j])
-                moved += count
-            elif np.any(_roots(entries.a[i][j]).real >= 0):
+            iterations = max(iterations, evaluations)
+            rows[i] = row
+    model = _transfer_function(rows)
+    for i, row in enumerate(model.poles()):
+        for j, poles in enumerate(row):
+            if np.any(poles.real >= 0):
+                converged = converged and not enforce_stability
                 notes.append(f"entry ({i}, {j}) is unstable")
-        if moved:
-            _refit_numerators(i, entries, inputs, outputs[i][mask], mask, ts)
-            reflected += moved
-    if reflected:
-        notes.append(f"{reflected} unstable poles mirrored into the left half-plane and the numerators re-fitted: "
-                     f"the model is not a minimum of the simulation error")
-    model = entries.transfer_function()
-    if enforce_stability and not model.is_stable():
-        converged = False
-        notes.append("the model has poles on the imaginary axis")
-    errors = outputs[:, mask] - _entry_responses(entries.a, entries.b, entries.omega, inputs, ts).sum(axis=1)[:, mask]
+    errors = outputs[:, mask] - _responses(rows, inputs, ts).sum(axis=1)[:, mask]
     centred = outputs[:, mask] - outputs[:, mask].mean(axis=1, keepdims=True)
     report = FitReport(
         converged=converged, iterations=iterations, cost=0.5 * float(np.sum(errors**2)),
-        message="; ".join(notes) if notes else "converged",
-        srivc_iterations=sweeps, reflected_poles=reflected,
+        message="; ".join(notes) if notes else "converged", srivc_iterations=sweeps, reflected_poles=reflected,
         per_output_fit_percent=100.0 * (1.0 - np.linalg.norm(errors, axis=1) / np.linalg.norm(centred, axis=1)))
     return model, report
