@@ -20,8 +20,8 @@ import platform
 import numpy as np
 import scipy.signal
 
+from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import latency, timed
-from softtip.calibration.feedforward import single_threaded_blas
 from softtip.sysid import transfer
 from softtip.sysid.metrics import fit_percent
 from softtip.sysid.models import StateSpaceModel, TransferFunctionModel

@@ -24,7 +24,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from softtip._core.config import Flag, PositiveInteger, checked, choice, expect, integer
-from softtip.calibration.feedforward import single_threaded_blas
+from softtip._core.threads import single_threaded_blas
 from softtip.sysid import transfer
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
@@ -32,9 +32,10 @@ from softtip.sysid.recording import Fraction, Recording
 from softtip.sysid.refine import RefinementReport, refine
 from softtip.sysid.simulation import StreamingSimulator, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
-from softtip.sysid.subspace import MAX_ORDER, METHODS, subspace_identify
+from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 
 DOMAINS = ("discrete", "continuous")
+ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
 
 
@@ -174,12 +175,11 @@ class StateSpaceModel(IdentifiedModel):
     ``max_iterations`` and ``tolerance``: the refinement's stopping rules (:mod:`softtip.sysid.refine`).
     """
 
-    _PARAMETERS = {"order": Annotated[Union[choice("auto"), PositiveInteger], expect('"auto" or a positive integer')],
-                   "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag, "enforce_stability": Flag,
-                   "horizon": Optional[integer(2)], "max_order": PositiveInteger, "max_iterations": PositiveInteger,
-                   "tolerance": Fraction}
+    _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
+                   "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
+                   "max_iterations": PositiveInteger, "tolerance": Fraction}
 
-    def __init__(self, order: int | str = "auto", method: str = "n4sid", *, refine: bool = False,
+    def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4):
         self.order = order
@@ -279,10 +279,8 @@ class TransferFunctionModel(IdentifiedModel):
         started = time.perf_counter()
         self._check_params()
         recording.require_excitation()
-        with single_threaded_blas():
-            tf, report = transfer.fit(recording.segments, recording.ts, self.n_poles, self.n_zeros,
-                                      refine=self.refine, max_iterations=self.max_iterations,
-                                      enforce_stability=self.enforce_stability)
+        tf, report = transfer.fit(recording.segments, recording.ts, self.n_poles, self.n_zeros, refine=self.refine,
+                                  max_iterations=self.max_iterations, enforce_stability=self.enforce_stability)
         self._set_transfer_function(tf, recording.ts)
         self.report_ = report
         self._remember(recording, started)

@@ -88,6 +88,12 @@ def _units(value: Any, count: int, what: str, source: str) -> tuple[str, ...]:
     return units
 
 
+def _columns(values: Any) -> np.ndarray:
+    """Samples of one channel (1-D) as a column; anything else as given, for the recording to check."""
+    values = np.asarray(values, dtype=np.float64)
+    return values[:, None] if values.ndim == 1 else values
+
+
 @dataclass(frozen=True, eq=False)
 class Recording:
     """Trials of one system's inputs and outputs at one sample time ``ts`` (s); validated, read-only.
@@ -165,9 +171,8 @@ class Recording:
         if several != isinstance(y, (list, tuple)) or (several and len(u) != len(y)):
             raise DatasetError(f"{source}: u and y: expected two arrays, or two lists of as many arrays")
         pairs = list(zip(u, y, strict=True)) if several else [(u, y)]
-        trials = [Trial(np.asarray(a, dtype=np.float64).reshape(len(a), -1),
-                        np.asarray(b, dtype=np.float64).reshape(len(b), -1), k) for k, (a, b) in enumerate(pairs)]
-        nu, ny = trials[0].u.shape[1], trials[0].y.shape[1]
+        trials = [Trial(_columns(a), _columns(b), k) for k, (a, b) in enumerate(pairs)]
+        nu, ny = (np.shape(trials[0].u)[1:] or (1,))[0], (np.shape(trials[0].y)[1:] or (1,))[0]
         return cls(ts, _names(inputs, nu, "u", "inputs", source), _names(outputs, ny, "y", "outputs", source),
                    tuple(trials), input_units, output_units, source)
 

@@ -45,6 +45,7 @@ import scipy.linalg
 from softtip.sysid.statespace import IdentificationError, StateSpace
 
 METHODS = ("n4sid", "moesp", "cva")
+AUTO = "auto"  # the order from the singular values
 MAX_ORDER = 12
 
 
@@ -186,14 +187,14 @@ def _kalman_gain(A: np.ndarray, C: np.ndarray, covariance: np.ndarray, output_sc
     return K, (innovations + innovations.T) / 2, "Kalman gain from the residual covariances (Riccati)"
 
 
-def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, order: int | str = "auto",
+def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, order: int | str = AUTO,
                       method: str = "n4sid", *, horizon: int | None = None, max_order: int = MAX_ORDER,
                       enforce_stability: bool = True) -> SubspaceResult:
     """A discrete innovations-form model of the trials ``segments`` ((u, y) each) at sample time ``ts``."""
     if method not in METHODS:
         raise IdentificationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     nu, ny = segments[0][0].shape[1], segments[0][1].shape[1]
-    largest = max_order if order == "auto" else order
+    largest = max_order if order == AUTO else order
     i = default_horizon(largest, ny) if horizon is None else horizon
     if i * ny <= largest or (i - 1) * ny < largest:
         raise IdentificationError(f"horizon = {i}: too short for order {largest} with {ny} output(s) "
@@ -222,7 +223,7 @@ def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, 
             unweight = (vectors * np.sqrt(values)) @ vectors.T
     left, singular_values, _ = np.linalg.svd(weighted, full_matrices=False)
     n = order_from_singular_values(singular_values, min(max_order, len(singular_values) - 1)) \
-        if order == "auto" else int(order)
+        if order == AUTO else int(order)
     gamma = left[:, :n] * np.sqrt(singular_values[:n])
     if unweight is not None:
         gamma = unweight @ gamma
