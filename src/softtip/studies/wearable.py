@@ -239,8 +239,9 @@ def _extension_table(extension) -> Table:
     return Table("Extension: calibrated on flat contact, tested on other contact shapes", "contact", list(extension),
                  columns, cells, digits=2, caption=(
                      "The transfer function of order 6 fitted on every flat trial of each participant, then run on "
-                     "that participant's curved, edge and point trials. A smaller contact presses the pad more "
-                     "deeply for the same force and moves less tissue sideways: the same calibration mis-scales."))
+                     "that participant's curved, edge and point trials. Another contact shape deforms the pad "
+                     "differently under the same force, so a flat calibration mis-scales it: compare with the flat "
+                     "R² on held-out trials in the first table."))
 
 
 def _centre_table(centre) -> Table:
