@@ -30,7 +30,7 @@ def check_fraction(value: Any, name: str) -> float:
     return float(value)
 
 
-def _round_half_up(x: float) -> int:
+def round_half_up(x: float) -> int:
     return math.floor(x + 0.5)
 
 
@@ -49,7 +49,7 @@ def trial_count(value: Any, n_trials: int, name: str, where: str, purpose: str) 
         if value > n_trials:
             raise DatasetError(f"{where} has {n_trials} trials, fewer than the {value} asked for {purpose}")
         return int(value)
-    return _round_half_up(check_fraction(value, name) * n_trials)
+    return round_half_up(check_fraction(value, name) * n_trials)
 
 
 def chosen_trials(n_trials: int, k: int, seed: int | np.random.Generator | None) -> np.ndarray:
@@ -184,7 +184,7 @@ def sample_mask(groups: np.ndarray, fraction: float, seed: int | None, caller: s
     """
     fraction = check_fraction(fraction, "fraction")
     first = np.zeros(len(groups), dtype=bool)
-    first[np.random.default_rng(seed).permutation(len(groups))[:_round_half_up(fraction * len(groups))]] = True
+    first[np.random.default_rng(seed).permutation(len(groups))[:round_half_up(fraction * len(groups))]] = True
     shared = np.intersect1d(groups[first], groups[~first]).size
     warnings.warn(f"{caller}: {shared} of {np.unique(groups).size} trials have samples on both sides; "
                   f"errors measured on this split are optimistic ({advice})", LeakageWarning, stacklevel=3)

@@ -35,6 +35,8 @@ of a held fingertip force is a few percent: Galganski, Fuglevand & Enoka, J. Neu
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,11 +125,15 @@ def _direction(rng: np.random.Generator, axis: np.ndarray, cross_talk: float) ->
     return axis + np.where(axis == 0, error, 0.0)
 
 
+@functools.lru_cache
+def _tremor_band(rate: float) -> np.ndarray:
+    """The tremor's 1-12 Hz band-pass at ``rate`` (capped below Nyquist): one design per grid, not per trial."""
+    return butter(2, [1.0, min(12.0, 0.45 * rate)], btype="band", fs=rate, output="sos")
+
+
 def _tremor(rng: np.random.Generator, times: np.ndarray, size: float) -> np.ndarray:
     """Unit-variance noise (N, 3) in 1-12 Hz (the band capped below the grid's Nyquist), times ``size``."""
     if size == 0 or len(times) < 16:
         return np.zeros((len(times), 3))
-    rate = 1.0 / np.median(np.diff(times))
-    band = butter(2, [1.0, min(12.0, 0.45 * rate)], btype="band", fs=rate, output="sos")
-    noise = sosfiltfilt(band, rng.normal(size=(len(times), 3)), axis=0)
+    noise = sosfiltfilt(_tremor_band(1.0 / np.median(np.diff(times))), rng.normal(size=(len(times), 3)), axis=0)
     return size * noise / noise.std(axis=0)

@@ -96,7 +96,8 @@ BENCHES: dict[str, str] = {name: WEARABLE if name == "wearable" else FINGERTIP f
 _PARAMETER_SCHEMAS: dict[str, type] = {"wearable": wearable.WearableParameters}
 
 
-PUBLISHED_HYSTERESIS_PERCENT = published_table("hysteresis").value("hysteresis", "calibration cycle").low
+_HYSTERESIS = published_table("hysteresis")
+PUBLISHED_HYSTERESIS_PERCENT = _HYSTERESIS.value("hysteresis", "calibration cycle").low
 
 
 @schema(section="viscoelastic")
@@ -111,7 +112,6 @@ class Viscoelastic:
 
 
 # each bench's [viscoelastic] table and where its defaults come from (the reports print it)
-_HYSTERESIS = published_table("hysteresis")
 VISCOELASTIC_SOURCES: dict[str, tuple[type, dict[str, str]]] = {
     FINGERTIP: (Viscoelastic, {
         "hysteresis_percent": f"published: {_HYSTERESIS.source} ({_HYSTERESIS.system})",

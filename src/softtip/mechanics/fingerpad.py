@@ -345,9 +345,10 @@ def chip_forces(times, skin, pad: FingerPad, mount: ChipMount) -> np.ndarray:
     displacement, so the tissue's force relaxes. The history is taken relative to the relaxed preload
     (the ring was seated long before); the pressure never pulls and the shear is limited by friction."""
     face = mount.face_area * pad.edge_pressure * pad.stiffening  # b of the side tissue under the face
-    seated = exponential_depth(mount.preload / pad.prony.g_inf, face, pad.stiffening)
+    relaxed = mount.preload / pad.prony.g_inf  # the elastic force that relaxes to the preload
+    seated = exponential_depth(relaxed, face, pad.stiffening)
     normal_elastic = exponential_force(seated + skin[..., 2], face, pad.stiffening)
-    pressure = mount.preload + qlv_response(times, normal_elastic - mount.preload / pad.prony.g_inf, pad.prony)
+    pressure = mount.preload + qlv_response(times, normal_elastic - relaxed, pad.prony)
     pressure = np.maximum(pressure, 0.0)
     tangent = face + pad.stiffening * np.maximum(normal_elastic, 0.0)
     shear = qlv_response(times, MINDLIN_TANGENTIAL_RATIO * tangent[..., None] * skin[..., :2], pad.prony)

@@ -16,9 +16,10 @@ import math
 import re
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 from typing import Any, Literal
 
-from softtip._core.config import ConfigError, Flag, PositiveNumber, Text, choice, integer, parse, schema
+from softtip._core.config import ConfigError, Flag, PositiveNumber, Text, choice, integer, parse, read_toml, schema
 
 WITHIN, OUTSIDE, BETTER, FITTED = "within", "outside", "better", "fitted"
 Direction = choice("lower", "higher")
@@ -182,16 +183,13 @@ def _table(system: str, key: str, table: dict) -> PublishedTable:
 @functools.cache
 def published_tables() -> dict[str, PublishedTable]:
     """Every published table of every system, by key."""
-    import tomllib
-
     tables: dict[str, PublishedTable] = {}
-    for entry in sorted(resources.files(__package__).iterdir(), key=lambda e: e.name):
-        if entry.name.endswith(".toml"):
-            system = entry.name.removesuffix(".toml")
-            for key, table in tomllib.loads(entry.read_text(encoding="utf-8")).items():
-                if key in tables:
-                    raise ConfigError(f"published/{system}.toml: table {key} is also in {tables[key].system}.toml")
-                tables[key] = _table(system, key, table)
+    for path in sorted(Path(str(resources.files(__package__))).glob("*.toml")):
+        system = path.stem
+        for key, table in read_toml(path, "published figures").items():
+            if key in tables:
+                raise ConfigError(f"published/{system}.toml: table {key} is also in {tables[key].system}.toml")
+            tables[key] = _table(system, key, table)
     return tables
 
 

@@ -113,10 +113,9 @@ class Table:
             return "<td class='blank'>—</td>"
         if isinstance(value, str):
             return f"<td>{html.escape(value)}</td>"
-        verdict = verdicts.get((row, column))
-        if verdict is None:
+        comparison = verdicts.get((row, column))
+        if comparison is None:
             return f"<td class='num'>{format_number(value, self.digits)}</td>"
-        comparison = verdicts[(row, column)]
         difference = comparison.difference
         tip = f"published {comparison.published.text}" + ("" if difference is None else f"; difference {difference:+.3g}")
         return (f"<td class='num {comparison.verdict}' title='{html.escape(tip)}'>"

@@ -57,14 +57,20 @@ def _label_axes(ax, xlabel: str, ylabel: str, legend: dict | None = None) -> Non
         ax.legend(**legend)
 
 
-def _parity_plot(ax, truth, estimate, title: str, quantity: str, unit: str, band: float | None = None, **style):
-    """Estimated against true, the diagonal, and ``band`` (the published mean error) either side of it."""
-    ax.scatter(truth, estimate, s=4, alpha=0.4, **style)
-    lo, hi = float(np.min(truth)), float(np.max(truth))
+def _diagonal(ax, lo: float, hi: float, band: float | None = None, label: str = "published mean error",
+              unit: str = "") -> None:
+    """The diagonal from ``lo`` to ``hi`` and, when given, ``band`` (a published error) shaded either side of it."""
     ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
     if band is not None:
         ax.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="tab:blue", alpha=0.12, lw=0,
-                        label=f"published mean error ±{band:g} {unit}")
+                        label=f"{label} ±{band:g} {unit}")
+
+
+def _parity_plot(ax, truth, estimate, title: str, quantity: str, unit: str, band: float | None = None, **style):
+    """Estimated against true, the diagonal, and ``band`` (the published mean error) either side of it."""
+    ax.scatter(truth, estimate, s=4, alpha=0.4, **style)
+    _diagonal(ax, float(np.min(truth)), float(np.max(truth)), band, unit=unit)
+    if band is not None:
         ax.legend(fontsize=7, loc="upper left")
     _label_axes(ax, f"true {quantity} ({unit})", f"estimated {quantity} ({unit})")
     ax.set_title(title, fontsize=9)
@@ -285,11 +291,8 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
         cells.update({(letter, _degrees(a) if a != "overall" else f"{name} overall"): e for a, e in by_angle.items()})
         ax.scatter(y[mask], estimate, s=5, alpha=0.5, label=name)
     row = letter if letter in published.rows else None
-    ax.plot([0, 30], [0, 30], "k--", lw=0.8)
-    if row is not None:
-        band = published.value(row, "trained overall").centre
-        ax.fill_between([0, 30], [-band, 30 - band], [band, 30 + band], color="tab:blue", alpha=0.12, lw=0,
-                        label=f"published mean error ±{band:g} deg")
+    band = None if row is None else published.value(row, "trained overall").centre
+    _diagonal(ax, 0, 30, band, unit="deg")
     _label_axes(ax, "true board angle (deg)", "estimated board angle (deg)", legend={})
     table = paper_table(published, {key: value for key, value in cells.items()
                                     if row is not None and key[1] in published.columns}, caption=(
@@ -359,10 +362,7 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyO
     trained_table = tables[0]
     for ax, (quantity, unit), band in zip(axes, (("board angle", "deg"), ("grip force", "N")),
                                           (trained_table.published.value("φ (°)", "overall").centre, 0.5)):
-        lo, hi = ax.get_xlim()
-        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
-        ax.fill_between([lo, hi], [lo - band, hi - band], [lo + band, hi + band], color="tab:blue", alpha=0.12, lw=0,
-                        label=f"published (trained) ±{band:g} {unit}")
+        _diagonal(ax, *ax.get_xlim(), band, "published (trained)", unit)
         _label_axes(ax, f"true {quantity} ({unit})", f"estimated {quantity} ({unit})", legend={"fontsize": 7})
     return StudyOutcome(results, tables, [Figure.of(
         "Orientation and grip force over contact positions",

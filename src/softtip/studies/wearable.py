@@ -21,6 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from softtip._core.progress import Progress  # noqa: E402
+from softtip.calibration.metrics import r2  # noqa: E402
 from softtip.data import Dataset, LeakageWarning  # noqa: E402
 from softtip.lab import Protocol, run_protocol  # noqa: E402
 from softtip.published import published_table  # noqa: E402
@@ -146,8 +147,7 @@ def _streamed_r2(model, validation: Recording) -> float:
         stream = model.streaming()
         estimates.append(np.array([stream.step(u) for u in trial.u]))
         truth.append(trial.y)
-    y, yhat = np.vstack(truth), np.vstack(estimates)
-    return float(np.mean(1 - ((y - yhat) ** 2).sum(axis=0) / ((y - y.mean(axis=0)) ** 2).sum(axis=0)))
+    return float(np.mean(r2(np.vstack(truth), np.vstack(estimates))))
 
 
 def _mean(scores_list, metric: str) -> np.ndarray:

@@ -30,7 +30,6 @@ import pyarrow.parquet as pq
 import scipy.signal
 
 from softtip._core.archive import hash_arrays
-from softtip._core.channels import CHANNEL_UNIT
 from softtip._core.config import PositiveNumber, checked, number
 from softtip.data.csvload import parse_numbers
 from softtip.data.dataset import (
@@ -181,7 +180,7 @@ class Recording:
                      ts: float | None = None, time_tolerance: float = 0.02, source: str = "dataset") -> Recording:
         """The dataset's channels or numeric labels ``inputs`` and ``outputs``, trial by trial; the sample
         time from its ``time_s`` column (checked against ``ts`` when given)."""
-        units = {**dict.fromkeys(dataset.channels, CHANNEL_UNIT), **dataset.labels}
+        units = {**dataset.channel_units, **dataset.labels}
         for name in (*inputs, *outputs):
             if name in dataset.conditions:
                 raise DatasetError(f"{source}: {name!r} is a condition (constant over each trial), not a signal")

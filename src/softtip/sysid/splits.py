@@ -11,14 +11,13 @@ keep time together: whole trials (:func:`split_by_trial`), or a contiguous block
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
 from softtip._core.config import NonNegativeNumber, PositiveNumber, checked
 from softtip.data.dataset import DatasetError
-from softtip.data.splits import check_fraction, chosen_trials, sample_mask, trial_count
+from softtip.data.splits import check_fraction, chosen_trials, round_half_up, sample_mask, trial_count
 from softtip.sysid.recording import Recording, Trial
 
 
@@ -61,7 +60,7 @@ def split_by_time(recording: Recording, fraction: float | None = None, *, estima
         fraction = check_fraction(fraction, "fraction")
         estimation, validation = [], []
         for trial in recording.trials:
-            cut = math.floor(fraction * len(trial) + 0.5)
+            cut = round_half_up(fraction * len(trial))
             if min(cut, len(trial) - cut) < 2:
                 raise DatasetError(f"{source}: trial {trial.id} has {len(trial)} samples: a {fraction:g} split "
                                    "leaves fewer than 2 on one side")
