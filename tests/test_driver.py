@@ -101,7 +101,7 @@ def assert_fields_match_source(samples, settings):
     tolerance = datasheet_lsb_uT(settings) / 2 + 1e-9 + np.abs(SLOPES_UT_PER_S) * 1e-6  # device clock in whole us
     for sample in samples:
         ok = sample.chip_ok
-        error = np.abs(sample.field_uT[ok] - linear_field(sample.device_time_s)[ok])
+        error = np.abs(sample.reading[ok] - linear_field(sample.device_time_s)[ok])
         assert (error <= tolerance).all(), (sample.seq, error.max())
 
 
@@ -204,7 +204,7 @@ def test_every_fault_is_accounted_for_frame_by_frame(caplog):
     assert failed
     for sample in failed:
         (chip,) = np.flatnonzero(~sample.chip_ok)
-        assert sample.status[chip] == ChipStatus.CHIP_ERROR and np.isnan(sample.field_uT[chip]).all()
+        assert sample.status[chip] == ChipStatus.CHIP_ERROR and np.isnan(sample.reading[chip]).all()
     assert_fields_match_source(samples, MLX90393Settings())
 
 
@@ -248,7 +248,7 @@ def test_samples_after_a_configure_reply_use_the_new_settings():
     datasheet_lsb_uT(first)
     step = datasheet_lsb_uT(second) / 2 + 1e-9
     for sample in samples:
-        error = np.abs(sample.field_uT - linear_field(sample.device_time_s))
+        error = np.abs(sample.reading - linear_field(sample.device_time_s))
         assert (error <= step + np.abs(SLOPES_UT_PER_S) * 1e-6).all()
 
 
@@ -282,7 +282,7 @@ def test_saturated_axes_are_flagged():
     assert sample is not None
     np.testing.assert_array_equal(sample.saturated, [[False] * 3, [False, False, True]])
     # RES 0 z saturates at the signed 16-bit limit: 32767 counts x 0.242 uT.
-    assert sample.field_uT[1, 2] == pytest.approx(32767 * 0.242)
+    assert sample.reading[1, 2] == pytest.approx(32767 * 0.242)
 
 
 # --------------------------------------------------------------------------
@@ -468,7 +468,7 @@ def test_reskin_decoder_finds_record_boundaries_despite_crlf_inside_the_data():
         samples += decoder.feed(stream[start : start + 13], host_time_s=float(start))
     assert len(samples) == len(records)
     for sample, values in zip(samples, records, strict=True):
-        np.testing.assert_array_equal(sample.field_uT, values[:, 1:].astype(np.float64))
+        np.testing.assert_array_equal(sample.reading, values[:, 1:].astype(np.float64))
         np.testing.assert_array_equal(sample.temperature_C, values[:, 0].astype(np.float64))
         assert sample.device_time_s is None and sample.chip_ok.all()
     assert [sample.seq for sample in samples] == list(range(8))
@@ -485,7 +485,7 @@ def test_reskin_decoder_resynchronises_after_a_lost_byte():
     expected = records[:4] + records[5:]
     assert len(samples) == len(expected) and decoder.resyncs == 1
     for sample, values in zip(samples, expected, strict=True):
-        np.testing.assert_array_equal(sample.field_uT, values[:, 1:].astype(np.float64))
+        np.testing.assert_array_equal(sample.reading, values[:, 1:].astype(np.float64))
 
 
 def test_reskin_reader_on_a_pty():
@@ -502,4 +502,4 @@ def test_reskin_reader_on_a_pty():
         os.close(master_fd)
         os.close(slave_fd)
     assert len(samples) == 4
-    np.testing.assert_array_equal(samples[3].field_uT, reskin_record(3)[:, 1:].astype(np.float64))
+    np.testing.assert_array_equal(samples[3].reading, reskin_record(3)[:, 1:].astype(np.float64))

@@ -104,7 +104,7 @@ def make_sample(seq, device_time_s, field_uT, host_zero_s, faulty=()):
     field = np.array(field_uT, dtype=np.float64)
     field[~chip_ok] = np.nan
     return Sample(seq=seq, device_time_s=device_time_s, host_time_s=host_zero_s + device_time_s + 3e-4,
-                  field_uT=field, status=np.where(chip_ok, 0, 2).astype(np.uint8), chip_ok=chip_ok,
+                  reading=field, status=np.where(chip_ok, 0, 2).astype(np.uint8), chip_ok=chip_ok,
                   saturated=np.zeros((CHIPS, 3), dtype=bool))
 
 
@@ -146,11 +146,11 @@ def test_estimates_equal_the_models_of_the_change_from_the_initial_baseline():
     baseline = fields[:10].mean(axis=0)
     for i, result in enumerate(results):
         if i < 10:  # the baseline is taken from these frames
-            assert result.baseline_uT is None and result.estimates is None and result.state is None
+            assert result.baseline is None and result.estimates is None and result.state is None
             continue
         change = fields[i] - baseline
-        np.testing.assert_allclose(result.baseline_uT, baseline, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(result.change_uT, change, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.baseline, baseline, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.change, change, rtol=0, atol=1e-9)
         expected_forces = forces.model.weights @ change.ravel() + forces.model.bias
         grip_inputs = np.array([change[3, 2], change[0, 0], change[1, 1]]) * 1e-3  # uT -> mT
         expected_grip = grip.model.weights @ grip_inputs + grip.model.bias
@@ -169,9 +169,9 @@ def test_frames_with_a_faulty_chip_are_neither_estimated_nor_in_the_baseline():
         results = run(pipeline, times, fields, faulty={3: [1], 25: [0, 2]})
     sound_first = [i for i in range(11) if i != 3]  # ten sound frames: 0-2 and 4-10
     baseline = fields[sound_first].mean(axis=0)
-    np.testing.assert_allclose(results[12].baseline_uT, baseline, atol=1e-9)
+    np.testing.assert_allclose(results[12].baseline, baseline, atol=1e-9)
     assert results[10].estimates is None  # the tenth sound frame completes the baseline
-    assert results[25].estimates is None and np.isnan(results[25].field_uT[[0, 2]]).all()
+    assert results[25].estimates is None and np.isnan(results[25].reading[[0, 2]]).all()
     assert results[26].estimates is not None
     counters = pipeline.counters()
     assert counters["with_chip_fault"] == 2 and counters["estimated"] == 40 - 11 - 1
@@ -185,10 +185,10 @@ def test_a_new_baseline_on_command_replaces_the_old_one_once_complete():
         results = run(pipeline, times, fields, before=lambda i: pipeline.take_baseline(5) if i == 30 else None)
     first, second = fields[:10].mean(axis=0), fields[30:35].mean(axis=0)
     for i in range(30, 35):  # while the new one is taken the old one stays in use
-        np.testing.assert_allclose(results[i].change_uT, fields[i] - first, atol=1e-9)
+        np.testing.assert_allclose(results[i].change, fields[i] - first, atol=1e-9)
         assert results[i].baseline_version == 1
     for i in range(35, 60):
-        np.testing.assert_allclose(results[i].change_uT, fields[i] - second, atol=1e-9)
+        np.testing.assert_allclose(results[i].change, fields[i] - second, atol=1e-9)
         assert results[i].baseline_version == 2
 
 
@@ -196,14 +196,14 @@ def test_drift_tracking_follows_a_slow_ramp_with_the_filters_lag_and_freezes_dur
     dt, tau, slope = 0.1, 1.0, 1.0  # s, s, uT/s
     alpha = -math.expm1(-dt / tau)
     lag = slope * dt * (1 - alpha) / alpha  # steady lag of x - b for b <- b + a (x - b) on a ramp
-    baseline = Baseline(1, drift_time_constant_s=tau, drift_threshold_uT=20.0, step_uT=1e-6)
+    baseline = Baseline(1, drift_time_constant_s=tau, drift_threshold=20.0, step=1e-6)
     resting = np.linspace(-300, 300, 12).reshape(CHIPS, 3)
     history = []
     for k in range(600):  # 60 s of ramp; a contact from 30 s to 35 s
         t = k * dt
         contact = 200.0 if 30.0 <= t < 35.0 else 0.0
         baseline.update(resting + slope * t + contact, True, dt)
-        history.append((t, baseline.value_uT.copy()))
+        history.append((t, baseline.value.copy()))
     ramp_error = [resting + slope * t - b for t, b in history if 20.0 <= t < 30.0]
     np.testing.assert_allclose(ramp_error, lag, atol=1e-5)
     during = np.array([b for t, b in history if 30.0 <= t < 35.0])
@@ -212,9 +212,9 @@ def test_drift_tracking_follows_a_slow_ramp_with_the_filters_lag_and_freezes_dur
     # After the release the change (ramp + lag, below the threshold) is tracked again.
     np.testing.assert_allclose(resting + slope * history[-1][0] - history[-1][1], lag, atol=1e-5)
     # A contact state stops it as well, whatever the change.
-    frozen = baseline.value_uT.copy()
+    frozen = baseline.value.copy()
     assert not baseline.update(resting + slope * 61.0, True, dt, free=False)
-    np.testing.assert_array_equal(baseline.value_uT, frozen)
+    np.testing.assert_array_equal(baseline.value, frozen)
 
 
 def test_drift_step_is_one_gated_exponential_step():
@@ -463,8 +463,8 @@ def test_convert_reproduces_the_pipelines_changes_labels_and_trials(tmp_path):
     dataset = Dataset.read(tmp_path / "live.parquet")
     assert conversion.frames == 119 and conversion.fault_frames == 1 and not conversion.truncated
     kept = [r for i, r in enumerate(results) if i != 70]
-    first_baseline = kept[20].baseline_uT
-    expected_change = np.array([r.field_uT - (first_baseline if r.baseline_uT is None else r.baseline_uT)
+    first_baseline = kept[20].baseline
+    expected_change = np.array([r.reading - (first_baseline if r.baseline is None else r.baseline)
                                 for r in kept])
     np.testing.assert_allclose(dataset.X(), expected_change.reshape(len(kept), -1), rtol=0, atol=1e-9)
     assert list(dataset.trials) == [0, 1] and list(dataset.trial_lengths) == [60, 59]
@@ -531,15 +531,15 @@ def test_emulated_stream_with_faults_delivers_every_intact_frame_and_counts_the_
     generation = np.arange(log.seq.size)
     assert summary["with_chip_fault"] == np.count_nonzero(sent & ((generation + 1) % 13 == 0)) > 0
     sound = [f for f in frames if f.chip_ok.all()]
-    np.testing.assert_allclose(frames[-1].baseline_uT, np.mean([f.field_uT for f in sound[:20]], axis=0),
+    np.testing.assert_allclose(frames[-1].baseline, np.mean([f.reading for f in sound[:20]], axis=0),
                                atol=1e-9)
     for f in frames:
         if f.estimates is not None:
-            change = f.field_uT - f.baseline_uT
+            change = f.reading - f.baseline
             np.testing.assert_allclose(f.estimates, forces.model.weights @ change.ravel() + forces.model.bias,
                                        rtol=1e-12, atol=1e-9)
         else:
-            assert f.baseline_uT is None or not f.chip_ok.all()
+            assert f.baseline is None or not f.chip_ok.all()
 
 
 @pytest.mark.realtime
@@ -668,7 +668,7 @@ def test_bad_input_is_refused_with_one_line(tmp_path):
     refused(ValueError, "free_states", Pipeline, CHIPS, [state], baseline=Baseline(5, drift_time_constant_s=10.0))
     refused(ValueError, "^baseline frames = 0: expected a positive integer$", Baseline, 0)
     refused(ValueError, "^frames = 2.5: expected an integer$", Baseline(5).take, 2.5)
-    refused(ValueError, "^step_uT = -0.01: expected a positive number$", Baseline, step_uT=-0.01)
+    refused(ValueError, "^step = -0.01: expected a positive number$", Baseline, step=-0.01)
     refused(ValueError, "^refresh_hz = 0: expected a positive number$", DashboardSink, refresh_hz=0)
     refused(ValueError, "^foxglove port = 70000: expected an integer 0..65535$", FoxgloveSink, port=70000)
     refused(ValueError, "^max_rate_hz = True: expected a number$", FoxgloveSink, max_rate_hz=True)

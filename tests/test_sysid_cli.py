@@ -147,7 +147,7 @@ def test_bench_sysid_reports_every_figure_beside_its_baseline():
     for name in ("transfer_function_order_6", "state_space_order_8", "state_space_order_8_refined", "nfoursid_order_8"):
         assert report[name]["seconds"] > 0 and len(report[name]["validation_fit_percent"]) == 3
     assert set(report["streaming_step_us"]) == {"state_space_order_10", "transfer_function_order_6",
-                                                "numpy_step_order_10"}
+                                                "live_estimator_transfer_function_order_6", "numpy_step_order_10"}
     assert set(report["ratios"]) == {"nfoursid_time_over_state_space", "state_space_mean_fit_minus_nfoursid",
                                      "transfer_function_time_over_nfoursid", "numpy_step_over_streaming_step"}
     assert report["ratios"]["state_space_mean_fit_minus_nfoursid"] > -5  # as good as nfoursid on the same data

@@ -51,6 +51,17 @@ def write_archive(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> 
                                                       **arrays))
 
 
+def archive_format(path: Path) -> str | None:
+    """The ``format`` an archive's metadata names, or None for anything that is not a readable archive
+    (its reader then says why)."""
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            metadata = json.loads(str(archive["metadata"]))
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError):
+        return None
+    return metadata.get("format") if isinstance(metadata, dict) else None
+
+
 def read_archive(path: Path, format_name: str, schema_version: int, what: str,
                  error: type[ValueError]) -> tuple[dict, dict[str, np.ndarray]]:
     """(metadata, arrays) of the ``what`` file ("model" ...) ``path`` of format ``format_name``.

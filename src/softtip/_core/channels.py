@@ -1,57 +1,122 @@
-"""Sensor channels: the change of flux density of one axis of one 3-axis sensor, in µT.
+"""Sensor channels: one axis of one 3-axis sensor, named after what the sensor reads.
 
-Channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k; channels are stored sensor by sensor,
-x, y, z within each (the order of a reading of shape (sensors, 3) flattened).
+A :class:`Reading` is what a stream's 3-axis sensors read, in one unit, and how their channels
+are named. Two are known:
+
+- :data:`MAGNETIC`: the change of flux density of a Hall chip (MLX90393), in µT; channel
+  ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k;
+- :data:`FORCE`: the force of a 3-axis tactile force chip (the wearable sensor on the side of the
+  nail), in N; channel ``side_f{x|y|z}_N`` is its axis (a second chip would be ``side1_f...``).
+
+Channels are stored sensor by sensor, x, y, z within each (the order of a reading of shape
+(sensors, 3) flattened). The module-level functions name magnetic channels, the datasets' default.
 """
 
 from __future__ import annotations
 
 import numbers
 import re
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-CHANNEL_UNIT = "uT"
 AXES = ("x", "y", "z")
-CHANNEL_PATTERN = re.compile(r"s(0|[1-9][0-9]*)_b([xyz])_uT")
 
 
-def channel_name(sensor: int, axis: str) -> str:
-    """The column of one axis (``"x"``, ``"y"`` or ``"z"``) of sensor ``sensor``."""
+def _checked_sensor(sensor: Any, axis: str) -> int:
     if axis not in AXES or isinstance(sensor, bool) or not isinstance(sensor, numbers.Integral) or sensor < 0:
         raise ValueError(f"channel: expected a sensor index >= 0 and an axis in x, y, z, got {sensor!r}, {axis!r}")
-    return f"s{int(sensor)}_b{axis}_uT"
+    return int(sensor)
 
 
-def channel_names(n_sensors: int) -> tuple[str, ...]:
-    """Every channel of ``n_sensors`` 3-axis sensors, in storage order."""
-    if isinstance(n_sensors, bool) or not isinstance(n_sensors, numbers.Integral) or n_sensors < 1:
-        raise ValueError(f"n_sensors: expected an integer >= 1, got {n_sensors!r}")
-    return tuple(channel_name(k, axis) for k in range(n_sensors) for axis in AXES)
+@dataclass(frozen=True)
+class Reading:
+    """What a stream's 3-axis sensors read (``quantity``, in ``unit``) and how its channels are named.
+
+    ``symbol``: the quantity's symbol in displays (ΔBx, ΔFx); ``units``: the units a model's inputs
+    may be in, each as its value per ``unit`` (a model fitted in mT reads µT channels times 1e-3);
+    ``drift_threshold``: the default change (in ``unit``) below which a free sensor's baseline may
+    follow slow drift; ``baseline_step``: the default change of that filtered baseline that replaces
+    the one in use (:class:`softtip.realtime.Baseline`).
+    """
+
+    quantity: str
+    unit: str
+    symbol: str
+    prefix: str  # channel name before the sensor number
+    infix: str  # between the sensor number and the axis
+    units: dict[str, float] = field(compare=False)
+    drift_threshold: float
+    baseline_step: float
+    first_numbered: bool = True  # the first sensor's number is written (s0_...), or not (side_...)
+    pattern: re.Pattern = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "pattern", re.compile(
+            rf"{self.prefix}(|0|[1-9][0-9]*)_{self.infix}([xyz])_{re.escape(self.unit)}"))
+
+    def channel_name(self, sensor: int, axis: str) -> str:
+        """The column of one axis (``"x"``, ``"y"`` or ``"z"``) of sensor ``sensor``."""
+        sensor = _checked_sensor(sensor, axis)
+        number = "" if sensor == 0 and not self.first_numbered else str(sensor)
+        return f"{self.prefix}{number}_{self.infix}{axis}_{self.unit}"
+
+    def channel_names(self, n_sensors: int) -> tuple[str, ...]:
+        """Every channel of ``n_sensors`` 3-axis sensors, in storage order."""
+        if isinstance(n_sensors, bool) or not isinstance(n_sensors, numbers.Integral) or n_sensors < 1:
+            raise ValueError(f"n_sensors: expected an integer >= 1, got {n_sensors!r}")
+        return tuple(self.channel_name(k, axis) for k in range(n_sensors) for axis in AXES)
+
+    def is_channel(self, name: str) -> bool:
+        match = self.pattern.fullmatch(name) if isinstance(name, str) else None
+        return match is not None and self.channel_name(int(match[1] or 0), match[2]) == name
+
+    def channel_order(self, name: str) -> tuple[int, int]:
+        """(sensor, axis index) of a channel: sorting by it gives the storage order."""
+        if not self.is_channel(name):
+            raise ValueError(f"channel {name!r}: expected a {self.quantity} channel like {self.channel_name(0, 'x')}")
+        match = self.pattern.fullmatch(name)
+        return int(match[1] or 0), AXES.index(match[2])
+
+    def columns(self, values: Any) -> dict[str, np.ndarray]:
+        """Named channel columns from readings of shape (n_samples, n_sensors, 3) in this unit."""
+        values = np.asarray(values, dtype=np.float64)
+        if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
+            raise ValueError(f"readings: expected shape (n_samples, n_sensors, 3), got {values.shape}")
+        return {self.channel_name(k, axis): values[:, k, a] for k in range(values.shape[1])
+                for a, axis in enumerate(AXES)}
+
+    def channel_index(self, name: str) -> int:
+        """Position of a channel in a flattened (sensors, 3) reading."""
+        sensor, axis = self.channel_order(name)
+        return 3 * sensor + axis
 
 
-def is_channel(name: str) -> bool:
-    return CHANNEL_PATTERN.fullmatch(name) is not None
+MAGNETIC = Reading("flux density", "uT", "B", prefix="s", infix="b",
+                   units={"uT": 1.0, "µT": 1.0, "mT": 1e-3, "T": 1e-6}, drift_threshold=20.0,
+                   baseline_step=0.01)
+FORCE = Reading("force", "N", "F", prefix="side", infix="f", units={"N": 1.0, "mN": 1e3}, drift_threshold=0.05,
+                baseline_step=1e-4, first_numbered=False)
+READINGS = (MAGNETIC, FORCE)
+CHANNEL_UNIT = MAGNETIC.unit
+channel_name = MAGNETIC.channel_name
+channel_names = MAGNETIC.channel_names
+is_channel = MAGNETIC.is_channel
+channel_order = MAGNETIC.channel_order
+channel_columns = MAGNETIC.columns
 
 
-def channel_order(name: str) -> tuple[int, int]:
-    """(sensor, axis index) of a channel: sorting by it gives the storage order."""
-    match = CHANNEL_PATTERN.fullmatch(name)
-    return int(match[1]), AXES.index(match[2])
-
-
-def channel_columns(field_uT: Any) -> dict[str, np.ndarray]:
-    """Named channel columns from readings of shape (n_samples, n_sensors, 3) in µT."""
-    values = np.asarray(field_uT, dtype=np.float64)
-    if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
-        raise ValueError(f"field_uT: expected shape (n_samples, n_sensors, 3), got {values.shape}")
-    return {channel_name(k, axis): values[:, k, a] for k in range(values.shape[1]) for a, axis in enumerate(AXES)}
-
-
-def channel_index(name: str) -> int:
-    """Position of channel ``s{k}_b{axis}_uT`` in a flattened (sensors, 3) reading."""
-    match = CHANNEL_PATTERN.fullmatch(name) if isinstance(name, str) else None
-    if match is None:
-        raise ValueError(f"input channel {name!r}: expected a channel name like s0_bx_uT")
-    return 3 * int(match[1]) + AXES.index(match[2])
+def reading_of(channels: Iterable[str]) -> Reading:
+    """The reading whose channels ``channels`` all are."""
+    channels = list(channels)
+    for reading in READINGS:
+        if channels and all(reading.is_channel(name) for name in channels):
+            return reading
+    strangers = [name for name in channels if not any(r.is_channel(name) for r in READINGS)]
+    if strangers or not channels:
+        raise ValueError(f"input channel {strangers[0] if strangers else None!r}: expected a channel name like "
+                         + " or ".join(r.channel_name(0, "x") for r in READINGS))
+    raise ValueError(f"input channels {channels}: expected channels of one sensor kind, not "
+                     + " and ".join(r.quantity for r in READINGS if any(r.is_channel(n) for n in channels)))

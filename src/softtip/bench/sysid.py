@@ -5,7 +5,8 @@ forces out), 10 Hz, smooth random presses, 3 % output noise; 1,500 estimation sa
 trials) and three validation trials. Timed: the transfer-function model of order 6 (target
 <= 1.5 s), the state-space model of order 8 (subspace; target <= 1 s; and with its prediction-error
 refinement), and one streaming step of an order-10 3 x 3 state-space model and of the order-6
-transfer function's realisation (target <= 50 µs at p99). Baselines: nfoursid (PO-MOESP) at order 8
+transfer function's realisation, alone and as the live pipeline's estimator (its channel selection
+and checks included; target <= 50 µs at p99). Baselines: nfoursid (PO-MOESP) at order 8
 on the same data (time, and fit % on the validation trials simulated from rest by the same code),
 SIPPY when it is installed, and a plain numpy step (x = Ax + Bu, y = Cx + Du) for streaming. Every
 fit runs with BLAS on one thread.
@@ -20,8 +21,10 @@ import platform
 import numpy as np
 import scipy.signal
 
+from softtip._core.channels import FORCE
 from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import latency, timed
+from softtip.realtime.estimator import Estimator
 from softtip.sysid import transfer
 from softtip.sysid.metrics import fit_percent
 from softtip.sysid.models import StateSpaceModel, TransferFunctionModel
@@ -133,6 +136,9 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     streaming = {
         "state_space_order_10": latency(StreamingSimulator(order_10.system_).step, frame, calls),
         "transfer_function_order_6": latency(transfer_model.streaming().step, frame, calls),
+        "live_estimator_transfer_function_order_6": latency(
+            Estimator(transfer_model, FORCE.channel_names(1), target_names=OUTPUTS, target_units="N").estimate,
+            frame, calls),
         "numpy_step_order_10": latency(_naive_step(order_10.system_), frame, calls),
     }
     report = transfer_model.report_
@@ -155,7 +161,8 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     results["targets_met"] = {
         "transfer_function_s": tf_seconds <= TARGETS["transfer_function_s"],
         "state_space_s": ss_seconds <= TARGETS["state_space_s"],
-        "streaming_p99_us": max(ours["p99_us"], streaming["transfer_function_order_6"]["p99_us"])
+        "streaming_p99_us": max(ours["p99_us"], streaming["transfer_function_order_6"]["p99_us"],
+                                streaming["live_estimator_transfer_function_order_6"]["p99_us"])
         <= TARGETS["streaming_p99_us"],
     }
     results["ratios"] = {

@@ -157,7 +157,7 @@ def bench_sysid(
         console.print(f"  {name:30s} {figures['seconds']:7.3f} s   validation fit % {fits}")
     console.print(f"  SIPPY: {report['sippy']['note']}")
     for name, figures in report["streaming_step_us"].items():
-        console.print(f"  step {name:28s} median {figures['median_us']:6.2f} µs   p99 {figures['p99_us']:6.2f} µs")
+        console.print(f"  step {name:42s} median {figures['median_us']:6.2f} µs   p99 {figures['p99_us']:6.2f} µs")
     for name, met in report["targets_met"].items():
         console.print(f"  target {name} <= {report['targets'][name]:g}: {'met' if met else '[red]missed[/]'}")
     for name, ratio in report["ratios"].items():

@@ -115,7 +115,8 @@ def calibrate(
     estimator.fit(X[train], y[train], groups=data.groups[train])
     seconds = time.perf_counter() - start
     report = _score(estimator, model, X[test], y[test], target) if test.any() else {}
-    save_model(output, estimator, input_channels=list(data.channels), input_units=["uT"] * len(data.channels),
+    save_model(output, estimator, input_channels=list(data.channels),
+               input_units=[data.channel_units[c] for c in data.channels],
                target_names=list(target) if model != "classifier" else [target[0]],
                target_units=[data.labels[t] for t in target][: 1 if model == "classifier" else None],
                extra={"dataset": str(dataset), "validation": report})

@@ -1,10 +1,12 @@
-"""Hardware layer: the fingertip serial protocol, the host driver, a ReSkin reader and a pty emulator
-(in this process or a child process)."""
+"""Hardware layer: the fingertip serial protocol, the host driver, a ReSkin reader, a pty emulator
+(in this process or a child process) and a paced source (readings played at their rate, for a
+sensor with no softtip firmware)."""
 
 from softtip.hardware.driver import (DeviceDisconnected, DeviceError, DeviceTimeout, DriverStats, FingertipDriver,
                                      PortError, Sample, StreamTracker, open_serial, temperature_C, temperature_to_raw)
 from softtip.hardware.emulator import Emulator, FaultPlan, FrameFate, LoggedFrame
 from softtip.hardware.emulator_process import EmulatorLog, EmulatorProcess, PressCycle
+from softtip.hardware.paced import PacedSource
 from softtip.hardware.protocol import (Ack, ChipStatus, Command, CommandError, DataFlag, ErrorCode, ErrorReply, Frame,
                                        FrameDecoder, FrameType, Identity, crc16_ccitt_false, encode_frame)
 from softtip.hardware.reskin import ReSkinDecoder, ReSkinReader
@@ -32,6 +34,7 @@ __all__ = [
     "FrameType",
     "Identity",
     "LoggedFrame",
+    "PacedSource",
     "PortError",
     "PressCycle",
     "ReSkinDecoder",

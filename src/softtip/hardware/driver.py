@@ -131,7 +131,8 @@ class Sample(NamedTuple):
       for streams without one. device_time_s: the device clock at the trigger,
       unwrapped, or None when the stream has no device clock. host_time_s:
       time.perf_counter_ns() / 1e9 when the bytes completing the frame arrived.
-    field_uT: (n, 3) flux density in uT, NaN for chips whose status reports a fault.
+    reading: (n, 3) what each chip reads (flux density in µT for the fingertip's Hall chips), NaN for
+      chips whose status reports a fault.
     status: (n,) ChipStatus bytes; chip_ok: (n,) no fault bit set;
     saturated: (n, 3) axes at the limit of their output range.
     temperature_C: (n,) chip temperatures in degC, or None.
@@ -140,7 +141,7 @@ class Sample(NamedTuple):
     seq: int
     device_time_s: float | None
     host_time_s: float
-    field_uT: np.ndarray
+    reading: np.ndarray
     status: np.ndarray
     chip_ok: np.ndarray
     saturated: np.ndarray
@@ -573,7 +574,7 @@ class FingertipDriver(LinkEnd):
             seq=frame.seq,
             device_time_s=device_time_s,
             host_time_s=host_time_s,
-            field_uT=field,
+            reading=field,
             status=frame.status,
             chip_ok=chip_ok,
             saturated=saturated,

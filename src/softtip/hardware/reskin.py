@@ -126,7 +126,7 @@ class ReSkinDecoder:
             seq=self.records,
             device_time_s=None,
             host_time_s=host_time_s,
-            field_uT=values[:, 1:].copy(),
+            reading=values[:, 1:].copy(),
             status=np.zeros(self._chips, dtype=np.uint8),
             chip_ok=np.ones(self._chips, dtype=bool),
             saturated=np.zeros((self._chips, 3), dtype=bool),

@@ -8,6 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from softtip._core.channels import MAGNETIC, Reading
 from softtip.sensors.mlx90393 import MLX90393Settings
 
 
@@ -16,10 +17,11 @@ class FrameResult(NamedTuple):
 
     stamp_ns: acquisition time, ns since the Unix epoch; host_time_s: the driver's arrival
     stamp (perf_counter clock); device_time_s: the device clock, or None.
-    field_uT: (chips, 3) reading, NaN for a faulty chip; chip_ok (chips,), saturated (chips, 3).
-    baseline_uT: the baseline in use (read-only, replaced when it changes) or None before
+    reading: (chips, 3) reading in the stream's unit (:attr:`StreamInfo.reading`), NaN for a
+    faulty chip; chip_ok (chips,), saturated (chips, 3).
+    baseline: the baseline in use (read-only, replaced when it changes) or None before
     the first one; baseline_version counts the baselines used so far.
-    change_uT: field minus baseline, or None. estimates: the regression targets in
+    change: reading minus baseline, or None. estimates: the regression targets in
     :attr:`StreamInfo.target_names` order, state: the contact state; both None when the
     frame was not estimated. latency_s: arrival to estimate ready.
     """
@@ -28,12 +30,12 @@ class FrameResult(NamedTuple):
     stamp_ns: int
     host_time_s: float
     device_time_s: float | None
-    field_uT: np.ndarray
+    reading: np.ndarray
     chip_ok: np.ndarray
     saturated: np.ndarray
-    baseline_uT: np.ndarray | None
+    baseline: np.ndarray | None
     baseline_version: int
-    change_uT: np.ndarray | None
+    change: np.ndarray | None
     estimates: np.ndarray | None
     state: str | None
     latency_s: float
@@ -42,6 +44,9 @@ class FrameResult(NamedTuple):
 @dataclass(frozen=True)
 class StreamInfo:
     """What sinks are told when the pipeline opens.
+
+    ``reading``: what the chips read and in which unit (flux density in µT, or force in N);
+    ``settings``: the Hall chips' settings (None for other sensors).
 
     counters(latency_window=None) returns the live counters (frames, lost frames, latency
     percentiles over the last latency_window frames...) as a dict; take_baseline() asks
@@ -55,5 +60,6 @@ class StreamInfo:
     settings: MLX90393Settings | None
     rate_hz: float | None
     metadata: dict = field(default_factory=dict)
+    reading: Reading = MAGNETIC
     counters: Callable[..., dict] = lambda latency_window=None: {}
     take_baseline: Callable[[], None] = lambda: None

@@ -6,10 +6,14 @@
 1. the frame is stamped with its acquisition time on the host's wall clock
    (:class:`~softtip.realtime.clock.AcquisitionClock`);
 2. the baseline in use is subtracted (:mod:`softtip.realtime.baseline`), giving the
-   change of flux density per chip and axis in µT;
-3. every estimator (a calibration model, :class:`~softtip.realtime.estimator.Estimator`) maps the changes of its
-   input channels to its targets: regression models to values, one classifier to a
-   contact state. Frames in which a chip reported a fault are not estimated;
+   change per chip and axis (of flux density in µT for the fingertip's Hall chips, of force in
+   N for the wearable's chip: the stream's :class:`~softtip._core.channels.Reading`);
+3. every estimator (a calibration model or an identified system,
+   :class:`~softtip.realtime.estimator.Estimator`) maps the changes of its input channels to its
+   targets: regression models to values, one classifier to a contact state. Frames in which a
+   chip reported a fault are not estimated. A dynamic model (an identified system) keeps its
+   state from frame to frame and restarts from rest with every baseline taken (at start, on
+   command; not with drift steps): its estimates are the simulation of the frames since;
 4. the result goes to every sink (recorder, dashboard, live view, ROS 2; see
    :mod:`softtip.realtime.sinks`) and callback, in the acquisition thread: sinks only
    hand the frame to their own thread, callbacks must be as quick (a controller that
@@ -34,6 +38,7 @@ from typing import Self
 import numpy as np
 
 from softtip import __version__
+from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import PositiveInteger, checked
 from softtip.hardware import Sample
 from softtip.realtime.baseline import Baseline
@@ -64,7 +69,8 @@ class Pipeline:
     states in which the fingertip touches nothing; with a classifier, drift tracking only
     runs in them. ``callbacks``: functions of a :class:`FrameResult`, called after the
     sinks. ``settings``, ``rate_hz``, ``metadata``: passed on to the sinks;
-    ``source_counters``: the source's counters, merged into :meth:`counters`.
+    ``source_counters``: the source's counters, merged into :meth:`counters`. ``reading``: what
+    the chips read (default: flux density); every model's inputs must be channels of it.
 
     Use it as a context manager (opens and closes the sinks) and call :meth:`process`
     for every sample, from one thread.
@@ -74,16 +80,27 @@ class Pipeline:
                  baseline: Baseline | None = None, free_states: Sequence[str] = (),
                  callbacks: Sequence[Callable[[FrameResult], None]] = (), settings: MLX90393Settings | None = None,
                  rate_hz: float | None = None, metadata: Mapping | None = None,
-                 source_counters: Callable[[], Mapping] | None = None) -> None:
+                 source_counters: Callable[[], Mapping] | None = None, reading: Reading = MAGNETIC) -> None:
         checked(PositiveInteger, "chips", chips)
         self.chips = chips
-        self.baseline = Baseline() if baseline is None else baseline
+        self.reading = reading
+        self.baseline = Baseline(reading=reading) if baseline is None else baseline
         if not isinstance(self.baseline, Baseline):
             raise ValueError(f"baseline = {baseline!r}: expected a Baseline")
+        if self.baseline.reading != reading:
+            raise ValueError(f"baseline: a baseline of {self.baseline.reading.quantity} for a stream of "
+                             f"{reading.quantity}")
         estimators = list(estimators)
         for estimator in estimators:
             if not isinstance(estimator, Estimator):
                 raise ValueError(f"estimators: expected Estimator objects, got {type(estimator).__name__}")
+            if estimator.sample_time_s is not None and rate_hz is not None \
+                    and abs(rate_hz * estimator.sample_time_s - 1.0) > 1e-6:
+                raise ValueError(f"model {estimator.name} runs at {1 / estimator.sample_time_s:g} Hz "
+                                 f"(sample time {estimator.sample_time_s:g} s); the stream runs at {rate_hz:g} Hz")
+            if estimator.reading != reading:
+                raise ValueError(f"model {estimator.name} reads {estimator.reading.quantity} "
+                                 f"({estimator.input_channels[0]}, ...); the stream reads {reading.quantity}")
             if estimator.chips_needed > chips:
                 raise ValueError(f"model {estimator.name} reads chip {estimator.chips_needed - 1}; "
                                  f"the stream has {chips} chips")
@@ -92,6 +109,9 @@ class Pipeline:
             raise ValueError(f"models {', '.join(e.name for e in classifiers)}: at most one contact-state classifier")
         self._classifier = classifiers[0] if classifiers else None
         self._regressors = [e for e in estimators if e.kind == "regression"]
+        self._dynamic = [e for e in estimators if e.dynamic]
+        self._dynamic_since = 0  # the taken baseline the dynamic models' state started from (drift steps are
+        # not a new start: the state carries over them)
         names = [n for e in self._regressors for n in e.target_names]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
@@ -118,13 +138,14 @@ class Pipeline:
         self.stream = StreamInfo(
             chips=chips, target_names=self.target_names, target_units=self.target_units,
             classes=None if self._classifier is None else self._classifier.classes, settings=settings,
-            rate_hz=rate_hz, metadata={
+            rate_hz=rate_hz, reading=reading, metadata={
                 "softtip_version": __version__,
                 "models": [e.describe() for e in estimators],
                 "baseline": {"frames": self.baseline.frames,
                              "drift_time_constant_s": self.baseline.drift_time_constant_s,
-                             "drift_threshold_uT": self.baseline.drift_threshold_uT,
-                             "step_uT": self.baseline.step_uT, "free_states": sorted(self.free_states)},
+                             "drift_threshold": self.baseline.drift_threshold,
+                             "step": self.baseline.step, "free_states": sorted(self.free_states)},
+                "reading": {"quantity": reading.quantity, "unit": reading.unit},
                 "sensor_settings": None if settings is None else settings.to_dict(),
                 "rate_hz": rate_hz, **dict(metadata or {})},
             counters=self.counters, take_baseline=self.take_baseline)
@@ -191,15 +212,19 @@ class Pipeline:
         dt_s = 0.0 if self._last_time_s is None else now_s - self._last_time_s
         self._last_time_s = now_s
 
-        field_uT = sample.field_uT
+        reading = sample.reading
         sound = bool(sample.chip_ok.all())
-        baseline = self.baseline.value_uT
+        baseline = self.baseline.value
         version = self.baseline.version
         change = estimates = state = None
         if baseline is not None:
-            change = field_uT - baseline
+            change = reading - baseline
             if sound:
                 flat = change.reshape(-1)
+                if self._dynamic and self.baseline.taken != self._dynamic_since:
+                    self._dynamic_since = self.baseline.taken
+                    for estimator in self._dynamic:
+                        estimator.reset()
                 if self._regressors:
                     estimates = self._estimate(flat)
                 if self._classifier is not None:
@@ -209,9 +234,9 @@ class Pipeline:
         if not sound:
             self.unsound += 1
         free = self._classifier is None or state in self.free_states
-        self.baseline.update(field_uT, sound, dt_s, free)
+        self.baseline.update(reading, sound, dt_s, free)
 
-        result = FrameResult(sample.seq, stamp_ns, host_time_s, device_time_s, field_uT, sample.chip_ok,
+        result = FrameResult(sample.seq, stamp_ns, host_time_s, device_time_s, reading, sample.chip_ok,
                              sample.saturated, baseline, version, change, estimates, state, latency_s)
         self.frames += 1
         self.latencies_s.append(latency_s)

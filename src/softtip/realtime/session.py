@@ -1,4 +1,5 @@
-"""A fingertip (or an emulated one in a child process), its driver and a live pipeline, run together.
+"""A fingertip (or an emulated one in a child process, or a paced source), its driver and a live
+pipeline, run together.
 
 :class:`LiveSession` runs a source, a driver and a :class:`~softtip.realtime.pipeline.Pipeline`
 together; :func:`run_live` is its one-call form for the command line.
@@ -16,7 +17,8 @@ from typing import Self
 
 import numpy as np
 
-from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PressCycle, Sample
+from softtip._core.channels import MAGNETIC
+from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PacedSource, PressCycle, Sample
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.estimator import Estimator
 from softtip.realtime.frames import FrameResult
@@ -29,7 +31,9 @@ EMULATOR = "emulator"
 
 class LiveSession:
     """A fingertip (``source_spec``: a serial device path or pyserial URL, or
-    ``"emulator"`` for an emulated one in a child process), its driver and a pipeline.
+    ``"emulator"`` for an emulated one in a child process), its driver and a pipeline; or a
+    :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, such as the
+    emulated wearable force chip) and a pipeline of its reading.
 
     ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
     :meth:`summary` reports frames, lost frames, latency and the CPU time of this process
@@ -37,18 +41,19 @@ class LiveSession:
     models' chips, or 4). Other arguments: see :class:`Pipeline` and :class:`Baseline`.
     """
 
-    def __init__(self, source_spec: str, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
+    def __init__(self, source_spec: str | PacedSource, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
                  rate_hz: int = 50, chips: int | None = None, settings: MLX90393Settings | None = None,
                  baudrate: int = 1_000_000, baseline: Baseline | None = None, free_states: Sequence[str] = (),
                  callbacks: Sequence[Callable[[FrameResult], None]] = (),
                  emulator_source: Callable[[float], np.ndarray] | None = None,
                  emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0) -> None:
-        if not isinstance(source_spec, str) or not source_spec.strip():
-            raise ValueError(f"source = {source_spec!r}: expected a serial port or {EMULATOR!r}")
-        self.source_spec = source_spec
+        self.paced = source_spec if isinstance(source_spec, PacedSource) else None
+        if self.paced is None and (not isinstance(source_spec, str) or not source_spec.strip()):
+            raise ValueError(f"source = {source_spec!r}: expected a serial port, {EMULATOR!r} or a PacedSource")
+        self.source_spec = source_spec if self.paced is None else self.paced.name
         self.estimators = list(estimators)
         self.sinks = list(sinks)
-        self.rate_hz = rate_hz
+        self.rate_hz = rate_hz if self.paced is None else self.paced.rate_hz
         self.settings = MLX90393Settings() if settings is None else settings
         self.baudrate = baudrate
         self.baseline = baseline
@@ -56,7 +61,8 @@ class LiveSession:
         self.callbacks = list(callbacks)
         self.emulated = source_spec == EMULATOR
         needed = max((e.chips_needed for e in self.estimators), default=1)
-        self.chips = chips if chips is not None else (max(needed, 4) if self.emulated else None)
+        self.chips = (self.paced.chips if self.paced is not None else
+                      chips if chips is not None else (max(needed, 4) if self.emulated else None))
         self._emulator = (EmulatorProcess(emulator_source or PressCycle(self.chips), rate_hz, self.chips,
                                           self.settings, emulator_faults, emulator_seed)
                           if self.emulated else None)
@@ -67,6 +73,8 @@ class LiveSession:
         self._started = False
 
     def start(self) -> LiveSession:
+        if self.paced is not None:
+            return self._start_paced()
         try:
             port = self._emulator.start().port if self._emulator is not None else self.source_spec
             self.driver = FingertipDriver(port, self.baudrate, self.settings, self.rate_hz,
@@ -90,6 +98,22 @@ class LiveSession:
             raise
         return self
 
+    def _start_paced(self) -> LiveSession:
+        source = self.paced
+        try:
+            self.pipeline = Pipeline(source.chips, self.estimators, self.sinks, baseline=self.baseline,
+                                     free_states=self.free_states, callbacks=self.callbacks, settings=None,
+                                     rate_hz=source.rate_hz, metadata={"source": source.name, "device": source.name},
+                                     source_counters=source.counters, reading=source.reading)
+            self.pipeline.open()
+            self._cpu_s, self._wall_s = time.process_time(), time.perf_counter()
+            source.start(self._forward)
+            self._started = True
+        except BaseException:
+            self.close()
+            raise
+        return self
+
     def _forward(self, sample: Sample) -> None:
         self.pipeline.process(sample)  # the pipeline exists once the device has said how many chips
 
@@ -100,15 +124,16 @@ class LiveSession:
                 "reconnects": stats.reconnects}
 
     def wait(self, duration_s: float | None = None, stop: threading.Event | None = None) -> None:
-        """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C)."""
+        """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C), or until a paced
+        source that does not loop has delivered its last frame."""
         stop = threading.Event() if stop is None else stop
         deadline = None if duration_s is None else time.monotonic() + duration_s
         try:
-            while not stop.is_set():
+            while not stop.is_set() and not (self.paced is not None and self.paced.finished):
                 remaining = None if deadline is None else deadline - time.monotonic()
                 if remaining is not None and remaining <= 0:
                     break
-                stop.wait(0.5 if remaining is None else min(remaining, 0.5))
+                stop.wait(0.1 if remaining is None else min(remaining, 0.1))
         except KeyboardInterrupt:
             pass
 
@@ -121,6 +146,8 @@ class LiveSession:
         try:
             if self.driver is not None:
                 self.driver.close()
+            if self.paced is not None:
+                self.paced.close()
         finally:
             try:
                 if self.pipeline is not None:
@@ -147,20 +174,23 @@ class LiveSession:
         return summary
 
 
-def run_live(source_spec: str, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
+def run_live(source_spec: str | PacedSource, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
              duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
              settings: MLX90393Settings | None = None, baudrate: int = 1_000_000, baseline_frames: int = 50,
-             drift_time_constant_s: float | None = None, drift_threshold_uT: float = 20.0,
+             drift_time_constant_s: float | None = None, drift_threshold: float | None = None,
              free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),
              stop: threading.Event | None = None, emulator_source: Callable[[float], np.ndarray] | None = None) -> dict:
-    """Stream from a fingertip (or ``"emulator"``) through the saved models in
+    """Stream from a fingertip (or ``"emulator"``, or a :class:`~softtip.hardware.PacedSource`) through
+    the saved models (calibration models or identified systems) in
     ``model_paths`` to ``sinks`` for ``duration_s`` seconds (None: until Ctrl-C or
     ``stop``), and return :meth:`LiveSession.summary`. In the main thread, SIGUSR1
     takes a new baseline (``kill -USR1 <pid>``). ``emulator_source``: what the emulated
-    fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT)."""
+    fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT). ``drift_threshold``:
+    in the reading's unit (default: the reading's)."""
     estimators = [Estimator.from_file(path) for path in model_paths]
+    reading = source_spec.reading if isinstance(source_spec, PacedSource) else MAGNETIC
     baseline = Baseline(baseline_frames, drift_time_constant_s=drift_time_constant_s,
-                        drift_threshold_uT=drift_threshold_uT)
+                        drift_threshold=drift_threshold, reading=reading)
     session = LiveSession(source_spec, estimators, sinks, rate_hz=rate_hz, chips=chips, settings=settings,
                           baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)

@@ -1,7 +1,8 @@
 """MCAP recordings to the Parquet trial dataset (:mod:`softtip.data.dataset`).
 
-A frame is a header stamp at which every chip's ``{prefix}/chip{k}/field`` message is
-present. Its channels are the change from the baseline in µT: the recorded
+A frame is a header stamp at which every chip's ``{prefix}/chip{k}/field`` message (a Hall
+chip; ``.../force`` for a force chip) is present. Its channels are the change from the baseline
+(in µT; in N, channels ``side_f{x|y|z}_N``, for a force chip): the recorded
 ``{prefix}/chip{k}/baseline`` in use at that stamp (frames before the first baseline use
 the first one: it was taken from them), or, in recordings without baselines, the mean of
 the first ``baseline_frames`` frames of each trial (initial-value subtraction). Frames in
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.channels import channel_columns
+from softtip._core.channels import FORCE, MAGNETIC, Reading
 from softtip._core.config import PositiveNumber, checked
 from softtip._core.units import UT_PER_T
 from softtip.data.dataset import (
@@ -40,9 +41,9 @@ from softtip.data.dataset import (
 )
 from softtip.realtime.recording.format import (
     FLOAT64_MULTI_ARRAY,
-    MAGNETIC_FIELD,
     MESSAGE_ENCODING,
     METADATA_NAME,
+    READING_TOPICS,
     STRING,
     WRENCH_LABELS,
     WRENCH_STAMPED,
@@ -52,7 +53,9 @@ from softtip.realtime.recording.format import (
 from softtip.realtime.recording.reader import Recording, TopicMessages, read_recording
 
 CONTACT_STATE = "contact_state"
-_FIELD_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/field")
+_READINGS = {READING_TOPICS[reading.quantity]: reading for reading in (MAGNETIC, FORCE)}
+_READING_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/(?P<leaf>{})".format(
+    "|".join(leaf for leaf, _ in _READINGS)))
 
 
 @dataclass(frozen=True)
@@ -84,46 +87,55 @@ def _vectors(vectors) -> np.ndarray:
     return np.array([(v.x, v.y, v.z) for v in vectors], dtype=np.float64).reshape(-1, 3)
 
 
-def _magnetic_fields(topic: TopicMessages) -> tuple[np.ndarray, np.ndarray]:
-    """(header stamps in ns, fields (n, 3) in T) of a topic of MagneticField messages."""
+def _readings(topic: TopicMessages, reading: Reading) -> tuple[np.ndarray, np.ndarray]:
+    """(header stamps in ns, readings (n, 3) in the reading's unit) of a topic of a chip's messages."""
     messages = topic.decoded()
     stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
-    return stamps, _vectors(m.magnetic_field for m in messages)
+    if reading == MAGNETIC:
+        return stamps, _vectors(m.magnetic_field for m in messages) * UT_PER_T
+    return stamps, _vectors(m.wrench.force for m in messages)
 
 
-def _field_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str]]:
+def _reading_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str], Reading]:
     found: dict[str, dict[int, str]] = {}
+    readings: dict[str, set[Reading]] = {}
     for name, topic in recording.topics.items():
-        match = _FIELD_TOPIC.fullmatch(name)
-        if match and topic.schema_name == MAGNETIC_FIELD and topic.data:
+        match = _READING_TOPIC.fullmatch(name)
+        reading = _READINGS.get((match["leaf"], topic.schema_name)) if match else None
+        if reading is not None and topic.data:
             found.setdefault(match["prefix"], {})[int(match["chip"])] = name
+            readings.setdefault(match["prefix"], set()).add(reading)
     if prefix is None:
         if len(found) != 1:
             raise RecordingError(f"{recording.path}: " + (
-                "no <prefix>/chip<k>/field topics of sensor_msgs/msg/MagneticField messages" if not found else
+                "no <prefix>/chip<k>/field topics of sensor_msgs/msg/MagneticField messages (nor chip<k>/force "
+                "topics of geometry_msgs/msg/WrenchStamped)" if not found else
                 f"fingertips under several prefixes ({', '.join(sorted(found))}): pass prefix"))
         prefix = next(iter(found))
     chips = found.get(prefix, {})
     if not chips:
         raise RecordingError(f"{recording.path}: no {prefix}/chip<k>/field topics")
+    if len(readings[prefix]) > 1:
+        raise RecordingError(f"{recording.path}: {prefix} holds both field and force chips")
     if sorted(chips) != list(range(len(chips))):
         raise RecordingError(f"{recording.path}: chips {sorted(chips)} recorded; expected chips 0..{len(chips) - 1}")
-    return prefix, [chips[k] for k in range(len(chips))]
+    return prefix, [chips[k] for k in range(len(chips))], next(iter(readings[prefix]))
 
 
-def _frames(recording: Recording, topics: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(stamps in ns, log times of chip 0, fields (n, chips, 3) in µT, stamps left out as incomplete)."""
+def _frames(recording: Recording, topics: list[str],
+            reading: Reading) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(stamps in ns, log times of chip 0, readings (n, chips, 3), stamps left out as incomplete)."""
     decoded = []
     for name in topics:
         topic = recording.topics[name]
-        stamps, values = _magnetic_fields(topic)
+        stamps, values = _readings(topic, reading)
         decoded.append((stamps, np.asarray(topic.log_times, dtype=np.int64), values))
     every = np.unique(np.concatenate([stamps for stamps, _, _ in decoded]))
     common = every
     for stamps, _, _ in decoded:
         common = np.intersect1d(common, stamps)
     rows = [_matched(stamps, common) for stamps, _, _ in decoded]
-    fields = np.stack([values[r] for (_, _, values), r in zip(decoded, rows, strict=True)], axis=1) * UT_PER_T
+    fields = np.stack([values[r] for (_, _, values), r in zip(decoded, rows, strict=True)], axis=1)
     return common, decoded[0][1][rows[0]], fields, len(every) - len(common)
 
 
@@ -190,17 +202,18 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
     if gap_s is not None:
         checked(PositiveNumber, "gap_s", gap_s)
     recording = read_recording(mcap_path)
-    prefix, field_topics = _field_topics(recording, prefix)
-    stamps, log_times, fields, incomplete = _frames(recording, field_topics)
-    chips = len(field_topics)
+    prefix, reading_topics, reading = _reading_topics(recording, prefix)
+    stamps, log_times, fields, incomplete = _frames(recording, reading_topics, reading)
+    chips = len(reading_topics)
 
-    baselines = [_topic(recording, f"{prefix}/chip{k}/baseline", MAGNETIC_FIELD) for k in range(chips)]
+    schema = READING_TOPICS[reading.quantity][1]
+    baselines = [_topic(recording, f"{prefix}/chip{k}/baseline", schema) for k in range(chips)]
     recorded_baseline = all(topic is not None for topic in baselines)
     if recorded_baseline:
         for k, topic in enumerate(baselines):
-            baseline_stamps, values = _magnetic_fields(topic)
+            baseline_stamps, values = _readings(topic, reading)
             order = np.argsort(baseline_stamps, kind="stable")
-            fields[:, k] -= values[order][_held(baseline_stamps[order], stamps)] * UT_PER_T
+            fields[:, k] -= values[order][_held(baseline_stamps[order], stamps)]
 
     sound = np.isfinite(fields).all(axis=(1, 2))
     labels, units = _labels(recording, prefix, stamps, log_times)
@@ -213,7 +226,8 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
         fields = subtract_trial_baseline(fields, trial, baseline_frames)
     starts = np.flatnonzero(np.r_[True, trial[1:] != trial[:-1]])
     first_stamp = np.repeat(stamps[starts], np.diff(np.r_[starts, len(stamps)]))
-    columns = {TRIAL: trial, TIME: (stamps - first_stamp) * 1e-9, **channel_columns(fields), **labels}
+    channels = reading.columns(fields)
+    columns = {TRIAL: trial, TIME: (stamps - first_stamp) * 1e-9, **channels, **labels}
 
     recorded = recording.metadata.get(METADATA_NAME, {})
     extra = json.loads(recorded.get("extra", "{}"))
@@ -224,7 +238,7 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
                   "gap_s": gap_s, "baseline": "recorded" if recorded_baseline else
                   f"initial value: mean of the first {baseline_frames} frames of each trial",
                   "rate_hz": extra.get("rate_hz"), "models": extra.get("models"), "device": extra.get("device")})
-    dataset = Dataset(columns, units, {}, metadata)
+    dataset = Dataset(columns, units, {}, metadata, dict.fromkeys(channels, reading.unit))
     if parquet_path is not None:
         dataset.write(parquet_path)
     return Conversion(dataset, len(stamps), incomplete, int(np.count_nonzero(~sound)), recording.truncated)

@@ -9,11 +9,13 @@ schemas.
 Topics (``prefix`` is ``/fingertip`` by default):
 
 ==============================  ===========================  =======================================
-``{prefix}/chip{k}/field``      sensor_msgs/msg/MagneticField  the reading of chip k, in tesla (NaN
-                                                               when the chip reported a fault);
+``{prefix}/chip{k}/field``      sensor_msgs/msg/MagneticField  the reading of Hall chip k, in tesla
+                                                               (NaN when the chip reported a fault);
                                                                covariance: the sensor model's noise
                                                                plus quantisation, at start-up settings
-``{prefix}/chip{k}/baseline``   sensor_msgs/msg/MagneticField  the baseline subtracted from chip k,
+``{prefix}/chip{k}/force``      geometry_msgs/msg/WrenchStamped  instead, the reading of force chip k
+                                                               (the wearable's), in N; torque NaN
+``{prefix}/chip{k}/baseline``   the chip's message type        the baseline subtracted from chip k,
                                                                written whenever it changes
 ``{prefix}/wrench``             geometry_msgs/msg/WrenchStamped  estimated force (N) and torque (N m);
                                                                components no model estimates are NaN
@@ -31,10 +33,11 @@ frame's sequence number.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from softtip._core.channels import FORCE, MAGNETIC, Reading
 from softtip._core.units import UT_PER_T
 from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
 
@@ -46,6 +49,7 @@ RECORDING_FORMAT = "softtip-recording"
 DEFAULT_PREFIX = "/fingertip"
 
 _SEPARATOR = "=" * 80
+_NO_TORQUE = np.full(3, np.nan)  # a force chip measures no torque
 
 # Message definitions as the ROS 2 packages state them (comments left out).
 DEFINITIONS = {
@@ -66,6 +70,9 @@ MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
 STRING = "std_msgs/msg/String"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+
+# A chip's reading and baseline, by what the stream reads: (topic leaf, message type).
+READING_TOPICS = {MAGNETIC.quantity: ("field", MAGNETIC_FIELD), FORCE.quantity: ("force", WRENCH_STAMPED)}
 
 WRENCH_FLOATS = 6  # force (3) + torque (3)
 
@@ -109,6 +116,23 @@ def schema_text(schema_name: str) -> str:
     return "\n".join(parts) + "\n"
 
 
+def reading_topic(reading: Reading) -> tuple[str, str]:
+    """(topic leaf, message type) of a chip's reading: ``field`` MagneticField, ``force`` WrenchStamped."""
+    if reading.quantity not in READING_TOPICS:
+        raise RecordingError(f"reading {reading.quantity!r}: not recordable (known: {', '.join(READING_TOPICS)})")
+    return READING_TOPICS[reading.quantity]
+
+
+def reading_fields(reading: Reading, values: np.ndarray, vector: Callable[[np.ndarray], dict],
+                   covariance: list | None = None) -> dict:
+    """The fields of a chip's reading message after its header: ``values`` (3, in the reading's
+    unit) in SI, each vector encoded by ``vector``; a MagneticField carries ``covariance``
+    (9 values, T², default unknown: zeros), a force chip's WrenchStamped a NaN torque."""
+    if reading.quantity == MAGNETIC.quantity:
+        return {"magnetic_field": vector(values / UT_PER_T), "magnetic_field_covariance": covariance or [0.0] * 9}
+    return {"wrench": {"force": vector(values), "torque": vector(_NO_TORQUE)}}
+
+
 def frame_id(prefix: str, chip: int | None = None) -> str:
     """The header frame id under ``prefix``: ``fingertip_chip{k}`` for a chip, ``fingertip`` for the wrench."""
     base = prefix.strip("/").replace("/", "_")
@@ -117,10 +141,11 @@ def frame_id(prefix: str, chip: int | None = None) -> str:
 
 def wrench_mapping(target_names: Sequence[str], target_units: Sequence[str]) -> list[tuple[int, int, float]]:
     """(target index, wrench component 0..5, factor to N or N m) for every target that is a
-    force or torque component (Fx, force_x, normal_force, Tz, ...)."""
+    force or torque component (Fx, force_x, normal_force, Tz, ..., also with its unit after an
+    underscore: fx_N)."""
     mapping = []
     for index, (name, unit) in enumerate(zip(target_names, target_units, strict=True)):
-        component = WRENCH_COMPONENTS.get(name.lower())
+        component = WRENCH_COMPONENTS.get(name.lower().removesuffix(f"_{unit}".lower()))
         if component is None:
             continue
         units = FORCE_UNITS_IN_N if component < 3 else TORQUE_UNITS_IN_NM

@@ -20,8 +20,8 @@ from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer
 
 from softtip import __version__
+from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import PositiveInteger, checked, integer
-from softtip._core.units import UT_PER_T
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
@@ -33,6 +33,8 @@ from softtip.realtime.recording.format import (
     WRENCH_STAMPED,
     RecordingError,
     frame_id,
+    reading_fields,
+    reading_topic,
     schema_text,
     wrench_mapping,
     wrench_values,
@@ -68,9 +70,10 @@ def _header(stamp_ns: int, frame: str) -> dict:
 class McapRecorder:
     """Writes frames of the live stream to an MCAP file (see the module notes).
 
-    ``chips``: sensors per frame; ``target_names``/``target_units``: the regression
+    ``chips``: sensors per frame, reading ``reading`` (flux density or force);
+    ``target_names``/``target_units``: the regression
     estimates in order; ``classes``: the contact states (None without a classifier);
-    ``covariance_T2``: the MagneticField covariance (9 values); ``metadata``: JSON values
+    ``covariance_T2``: the MagneticField covariance (9 values; Hall chips); ``metadata``: JSON values
     stored in the file's ``softtip`` metadata record. ``chunk_size`` bytes per chunk
     before compression (``compression``: zstd, lz4 or none); :meth:`flush` closes the
     chunk in progress and hands the bytes to the operating system (and, with ``fsync``,
@@ -81,8 +84,10 @@ class McapRecorder:
                  target_units: Sequence[str] = (), classes: Sequence[str] | None = None,
                  covariance_T2: np.ndarray | None = None, metadata: Mapping | None = None,
                  prefix: str = DEFAULT_PREFIX, chunk_size: int = 256 * 1024, compression: str = "zstd",
-                 fsync: bool = False) -> None:
+                 fsync: bool = False, reading: Reading = MAGNETIC) -> None:
         checked(PositiveInteger, "chips", chips, RecordingError)
+        self.reading = reading
+        leaf, reading_schema = reading_topic(reading)
         if len(target_names) != len(target_units):
             raise RecordingError(f"target_units: expected {len(target_names)} units, got {len(target_units)}")
         if compression not in COMPRESSIONS:
@@ -114,6 +119,7 @@ class McapRecorder:
         self._writer.add_metadata(METADATA_NAME, {
             "format": RECORDING_FORMAT,
             "chips": str(chips),
+            "reading": json.dumps({"quantity": reading.quantity, "unit": reading.unit}),
             "target_names": json.dumps(self.target_names),
             "target_units": json.dumps(self.target_units),
             "classes": json.dumps(self.classes),
@@ -127,8 +133,8 @@ class McapRecorder:
             self._writer.register_channel(topic, schemas[schema], metadata or {})
             return topic, schemas[schema]
 
-        self._field_channels = [channel(f"{prefix}/chip{k}/field", MAGNETIC_FIELD) for k in range(chips)]
-        self._baseline_channels = [channel(f"{prefix}/chip{k}/baseline", MAGNETIC_FIELD) for k in range(chips)]
+        self._reading_channels = [channel(f"{prefix}/chip{k}/{leaf}", reading_schema) for k in range(chips)]
+        self._baseline_channels = [channel(f"{prefix}/chip{k}/baseline", reading_schema) for k in range(chips)]
         self._wrench_channel = channel(f"{prefix}/wrench", WRENCH_STAMPED) if self._wrench else None
         self._estimates_channel = (channel(f"{prefix}/estimates", FLOAT64_MULTI_ARRAY,
                                            {"names": json.dumps(self.target_names),
@@ -138,29 +144,29 @@ class McapRecorder:
         self._state_channel = (channel(f"{prefix}/contact_state", STRING, {"classes": json.dumps(self.classes)})
                                if self.classes is not None else None)
 
-    def _magnetic_field(self, stamp_ns: int, chip: int, field_T: np.ndarray, covariance: list[float]) -> dict:
-        return {"header": _header(stamp_ns, self._frame_ids[chip]), "magnetic_field": _vector(field_T),
-                "magnetic_field_covariance": covariance}
+    def _reading(self, stamp_ns: int, chip: int, values: np.ndarray, covariance: list[float] | None) -> dict:
+        return {"header": _header(stamp_ns, self._frame_ids[chip]),
+                **reading_fields(self.reading, values, _vector, covariance)}
 
     def write_frames(self, frames: Sequence) -> None:
-        """Adds frames (objects with seq, stamp_ns, field_uT, baseline_uT, baseline_version,
+        """Adds frames (objects with seq, stamp_ns, reading, baseline, baseline_version,
         estimates, state)."""
         if not frames:
             return
-        fields_T = np.stack([f.field_uT for f in frames]) / UT_PER_T
-        if fields_T.shape[1:] != (self.chips, 3):
-            raise RecordingError(f"frames hold fields of shape {fields_T.shape[1:]}, the recording {(self.chips, 3)}")
+        readings = np.stack([f.reading for f in frames])
+        if readings.shape[1:] != (self.chips, 3):
+            raise RecordingError(f"frames hold readings of shape {readings.shape[1:]}, the recording "
+                                 f"{(self.chips, 3)}")
         write = self._writer.write_message
-        unknown = [0.0] * 9  # a baseline has no covariance of its own
-        for frame, field_T in zip(frames, fields_T, strict=True):
+        for frame, reading in zip(frames, readings, strict=True):
             stamp, seq = frame.stamp_ns, frame.seq
-            if frame.baseline_uT is not None and frame.baseline_version != self._baseline_version:
+            if frame.baseline is not None and frame.baseline_version != self._baseline_version:
                 self._baseline_version = frame.baseline_version
                 for k, (topic, schema) in enumerate(self._baseline_channels):
-                    write(topic, schema, self._magnetic_field(stamp, k, frame.baseline_uT[k] / UT_PER_T, unknown),
-                          stamp, stamp, seq)
-            for k, (topic, schema) in enumerate(self._field_channels):
-                write(topic, schema, self._magnetic_field(stamp, k, field_T[k], self._covariance), stamp, stamp, seq)
+                    # a baseline has no covariance of its own
+                    write(topic, schema, self._reading(stamp, k, frame.baseline[k], None), stamp, stamp, seq)
+            for k, (topic, schema) in enumerate(self._reading_channels):
+                write(topic, schema, self._reading(stamp, k, reading[k], self._covariance), stamp, stamp, seq)
             if frame.estimates is not None and self._estimates_channel is not None:
                 if self._wrench_channel is not None:
                     wrench = wrench_values(frame.estimates, self._wrench)

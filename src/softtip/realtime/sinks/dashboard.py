@@ -69,14 +69,16 @@ class DashboardSink(Sink):
         rate = self._rate_hz()
         nominal_hz = stream.rate_hz or (rate if math.isfinite(rate) else 1.0)
         counters = stream.counters(latency_window=max(1, int(nominal_hz * self.window_s)))
-        chips = Table(title="Change of flux density (µT)", expand=False)
-        for column in ("chip", "ΔBx", "ΔBy", "ΔBz", ""):
+        reading = stream.reading
+        unit = "µT" if reading.unit == "uT" else reading.unit
+        chips = Table(title=f"Change of {reading.quantity} ({unit})", expand=False)
+        for column in ("chip", *(f"Δ{reading.symbol}{axis}" for axis in "xyz"), ""):
             chips.add_column(column, justify="right")
         for k in range(stream.chips):
-            if frame is None or frame.change_uT is None:
+            if frame is None or frame.change is None:
                 values = ["—"] * 3
             else:
-                values = [_number(v) for v in frame.change_uT[k]]
+                values = [_number(v) for v in frame.change[k]]
             flags = "" if frame is None else (
                 "fault" if not frame.chip_ok[k] else ("saturated" if frame.saturated[k].any() else "ok"))
             chips.add_row(str(k), *values, flags)

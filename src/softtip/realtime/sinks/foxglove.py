@@ -3,7 +3,8 @@
 :class:`FoxgloveSink` serves the stream to Foxglove over its WebSocket protocol
 (``foxglove-websocket``), JSON-encoded with JSON schemas, on the recording's topics and
 with the same field layout (so one Foxglove layout serves live and recorded data), plus
-``{prefix}/field_change`` (the change per chip in µT, for live plots); at most
+``{prefix}/field_change`` (the change per chip in µT, for live plots; ``force_change`` in N for
+a force chip); at most
 ``max_rate_hz`` frames per second, only on channels a client subscribed to.
 """
 
@@ -18,7 +19,6 @@ import threading
 import warnings
 
 from softtip._core.config import PositiveNumber, checked, integer
-from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
@@ -27,6 +27,8 @@ from softtip.realtime.recording.format import (
     STRING,
     WRENCH_STAMPED,
     frame_id,
+    reading_fields,
+    reading_topic,
     wrench_mapping,
     wrench_values,
 )
@@ -51,8 +53,9 @@ ESTIMATES_SCHEMA = _schema({
                        "data_offset": {"type": "integer"}}),
     "data": {"type": "array", "items": _NUMBER}})
 STATE_SCHEMA = _schema({"data": {"type": "string"}})
-FIELD_CHANGE_SCHEMA = _schema({"stamp": _schema({"sec": {"type": "integer"}, "nanosec": {"type": "integer"}}),
-                               "chips": {"type": "array", "items": _VECTOR3}})
+CHANGE_SCHEMA = _schema({"stamp": _schema({"sec": {"type": "integer"}, "nanosec": {"type": "integer"}}),
+                         "chips": {"type": "array", "items": _VECTOR3}})
+READING_SCHEMAS = {MAGNETIC_FIELD: MAGNETIC_FIELD_SCHEMA, WRENCH_STAMPED: WRENCH_SCHEMA}
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -180,9 +183,10 @@ class FoxgloveSink(Sink):
 
     def _topics(self) -> list[tuple[str, str, dict]]:
         stream, prefix = self._stream, self.prefix
-        topics = [(f"{prefix}/chip{k}/{kind}", MAGNETIC_FIELD, MAGNETIC_FIELD_SCHEMA)
-                  for k in range(stream.chips) for kind in ("field", "baseline")]
-        topics.append((f"{prefix}/field_change", "softtip/FieldChange", FIELD_CHANGE_SCHEMA))
+        leaf, kind = reading_topic(stream.reading)
+        topics = [(f"{prefix}/chip{k}/{topic}", kind, READING_SCHEMAS[kind])
+                  for k in range(stream.chips) for topic in (leaf, "baseline")]
+        topics.append((f"{prefix}/{leaf}_change", f"softtip/{leaf.capitalize()}Change", CHANGE_SCHEMA))
         if self._wrench:
             topics.append((f"{prefix}/wrench", WRENCH_STAMPED, WRENCH_SCHEMA))
         if stream.target_names:
@@ -203,21 +207,26 @@ class FoxgloveSink(Sink):
                                                                 json.dumps(message).encode()))
         self.frames_sent += 1
 
+    def _reading_fields(self, values) -> dict:
+        fields = reading_fields(self._stream.reading, values, _vector)
+        fields.pop("magnetic_field_covariance", None)  # not sent live: it is in the recording
+        return fields
+
     def messages(self, frame: FrameResult) -> dict[str, dict]:
-        """The JSON messages of one frame, by topic (field values in T, as in the recording)."""
+        """The JSON messages of one frame, by topic (field values in T, forces in N, as in the recording)."""
         prefix, stream = self.prefix, self._stream
+        leaf, _ = reading_topic(stream.reading)
         sec, nanosec = divmod(frame.stamp_ns, 1_000_000_000)
         stamp = {"sec": sec, "nanosec": nanosec}
         messages = {}
         for k in range(stream.chips):
             header = {"stamp": stamp, "frame_id": frame_id(prefix, k)}
-            messages[f"{prefix}/chip{k}/field"] = {"header": header,
-                                                   "magnetic_field": _vector(frame.field_uT[k] / UT_PER_T)}
-            if frame.baseline_uT is not None:
+            messages[f"{prefix}/chip{k}/{leaf}"] = {"header": header, **self._reading_fields(frame.reading[k])}
+            if frame.baseline is not None:
                 messages[f"{prefix}/chip{k}/baseline"] = {"header": header,
-                                                          "magnetic_field": _vector(frame.baseline_uT[k] / UT_PER_T)}
-        if frame.change_uT is not None:
-            messages[f"{prefix}/field_change"] = {"stamp": stamp, "chips": [_vector(c) for c in frame.change_uT]}
+                                                          **self._reading_fields(frame.baseline[k])}
+        if frame.change is not None:
+            messages[f"{prefix}/{leaf}_change"] = {"stamp": stamp, "chips": [_vector(c) for c in frame.change]}
         if frame.estimates is not None:
             if self._wrench:
                 wrench = wrench_values(frame.estimates, self._wrench)

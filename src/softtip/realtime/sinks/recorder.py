@@ -48,7 +48,8 @@ class RecorderSink(Sink):
         covariance = magnetic_covariance_T2(stream.settings)
         self.recorder = McapRecorder(self.path, stream.chips, target_names=stream.target_names,
                                      target_units=stream.target_units, classes=stream.classes,
-                                     covariance_T2=covariance, metadata=stream.metadata, **self._options)
+                                     covariance_T2=covariance, metadata=stream.metadata, reading=stream.reading,
+                                     **self._options)
         self._writer.start(self._run)
 
     def write(self, frame: FrameResult) -> None:

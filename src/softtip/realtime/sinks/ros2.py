@@ -5,8 +5,9 @@ Needs ``rclpy`` and the standard message packages (``sensor_msgs``, ``geometry_m
 the ROS 2 setup script before starting Python. Without them this module still imports;
 :func:`ros2_available` says False and :class:`ROS2Sink` refuses with one line.
 
-Topics and types are those of :mod:`softtip.realtime.recording.format` (MagneticField per chip
-and per baseline, WrenchStamped, Float64MultiArray of the estimates, String contact state),
+Topics and types are those of :mod:`softtip.realtime.recording.format` (MagneticField per Hall
+chip and per baseline, or WrenchStamped per force chip, WrenchStamped estimates, Float64MultiArray
+of the estimates, String contact state),
 so a node subscribed to the live topics also reads ``ros2 bag play`` of a recording. The
 node offers the service ``~/take_baseline`` (std_srvs/srv/Trigger): the insertion task's
 "take the baseline" step. A publisher thread sends the frames queued since its last pass
@@ -22,12 +23,14 @@ import threading
 
 import numpy as np
 
+from softtip._core.channels import MAGNETIC
 from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     frame_id,
     magnetic_covariance_T2,
+    reading_topic,
     wrench_mapping,
     wrench_values,
 )
@@ -80,10 +83,13 @@ class ROS2Sink(Sink):
         self._covariance = magnetic_covariance_T2(stream.settings).tolist()
         node = self._node = rclpy.create_node(self.node_name)
         depth, prefix = self.qos_depth, self.prefix
-        self._field_publishers = [node.create_publisher(msg_sensor.MagneticField, f"{prefix}/chip{k}/field", depth)
-                                  for k in range(stream.chips)]
-        self._baseline_publishers = [node.create_publisher(msg_sensor.MagneticField, f"{prefix}/chip{k}/baseline",
-                                                           depth) for k in range(stream.chips)]
+        self._magnetic = stream.reading == MAGNETIC
+        leaf, _ = reading_topic(stream.reading)
+        kind = msg_sensor.MagneticField if self._magnetic else msg_geometry.WrenchStamped
+        self._reading_publishers = [node.create_publisher(kind, f"{prefix}/chip{k}/{leaf}", depth)
+                                    for k in range(stream.chips)]
+        self._baseline_publishers = [node.create_publisher(kind, f"{prefix}/chip{k}/baseline", depth)
+                                     for k in range(stream.chips)]
         self._wrench_publisher = (node.create_publisher(msg_geometry.WrenchStamped, f"{prefix}/wrench", depth)
                                   if self._wrench else None)
         self._estimates_publisher = (node.create_publisher(msg_std.Float64MultiArray, f"{prefix}/estimates", depth)
@@ -118,28 +124,35 @@ class ROS2Sink(Sink):
         header.stamp.sec, header.stamp.nanosec = divmod(frame.stamp_ns, 1_000_000_000)
         return header
 
-    def _magnetic_field(self, frame: FrameResult, chip: int, field_uT: np.ndarray):
+    def _wrench_stamped(self, frame: FrameResult, frame_id: str, wrench: np.ndarray):
+        """A WrenchStamped of force (N) and torque (N m): 6 values."""
+        message = self._ros["geometry_msgs.msg"].WrenchStamped(header=self._header(frame, frame_id))
+        (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z,
+         message.wrench.torque.x, message.wrench.torque.y, message.wrench.torque.z) = map(float, wrench)
+        return message
+
+    def _reading(self, frame: FrameResult, chip: int, reading: np.ndarray):
+        """Chip ``chip``'s reading: a MagneticField (T), or a force chip's WrenchStamped (N, torque NaN)."""
+        if not self._magnetic:
+            return self._wrench_stamped(frame, frame_id(self.prefix, chip), np.r_[reading, np.full(3, np.nan)])
         msg_sensor, msg_geometry = self._ros["sensor_msgs.msg"], self._ros["geometry_msgs.msg"]
-        x, y, z = (float(v) / UT_PER_T for v in field_uT)
+        x, y, z = (float(v) / UT_PER_T for v in reading)
         return msg_sensor.MagneticField(header=self._header(frame, frame_id(self.prefix, chip)),
                                         magnetic_field=msg_geometry.Vector3(x=x, y=y, z=z),
                                         magnetic_field_covariance=self._covariance)
 
     def _publish(self, frame: FrameResult) -> None:
-        msg_geometry, msg_std = self._ros["geometry_msgs.msg"], self._ros["std_msgs.msg"]
-        if frame.baseline_uT is not None and frame.baseline_version != self._baseline_version:
+        msg_std = self._ros["std_msgs.msg"]
+        if frame.baseline is not None and frame.baseline_version != self._baseline_version:
             self._baseline_version = frame.baseline_version
             for k, publisher in enumerate(self._baseline_publishers):
-                publisher.publish(self._magnetic_field(frame, k, frame.baseline_uT[k]))
-        for k, publisher in enumerate(self._field_publishers):
-            publisher.publish(self._magnetic_field(frame, k, frame.field_uT[k]))
+                publisher.publish(self._reading(frame, k, frame.baseline[k]))
+        for k, publisher in enumerate(self._reading_publishers):
+            publisher.publish(self._reading(frame, k, frame.reading[k]))
         if frame.estimates is not None:
             if self._wrench_publisher is not None:
-                wrench = wrench_values(frame.estimates, self._wrench)
-                message = msg_geometry.WrenchStamped(header=self._header(frame, frame_id(self.prefix)))
-                (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z,
-                 message.wrench.torque.x, message.wrench.torque.y, message.wrench.torque.z) = map(float, wrench)
-                self._wrench_publisher.publish(message)
+                self._wrench_publisher.publish(self._wrench_stamped(frame, frame_id(self.prefix),
+                                                                    wrench_values(frame.estimates, self._wrench)))
             if self._estimates_publisher is not None:
                 n = len(frame.estimates)
                 message = msg_std.Float64MultiArray(data=[float(v) for v in frame.estimates])

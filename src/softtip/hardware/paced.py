@@ -1,0 +1,85 @@
+"""Readings played at their sample rate in this process: a sensor with no softtip firmware.
+
+The wearable's force chip (S2) has no firmware of softtip's and no published interface, so its
+emulated stream does not go through a serial link: :class:`PacedSource` hands the live pipeline
+one frame of ``readings`` per sample period on a thread of its own, as a driver would on arrival.
+The same serves to replay readings of any sensor at their rate.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Self
+
+import numpy as np
+
+from softtip._core.channels import FORCE, Reading
+from softtip._core.config import PositiveNumber, checked
+from softtip._core.threads import BackgroundThread
+from softtip.hardware.driver import Sample
+
+_SEQ_MODULUS = 1 << 16  # sequence numbers wrap as the firmware's do
+
+
+class PacedSource:
+    """``readings`` (N, chips, 3, in the unit of ``reading``) delivered one per ``1 / rate_hz``
+    seconds, from the first again after the last when ``loop``; ``saturated`` (N, chips, 3) marks
+    axes at the end of their range. ``start(deliver)`` calls ``deliver(sample)`` for every frame
+    on the source's thread; the device time of frame k is k / rate_hz. A frame the thread wakes
+    for more than one period late is still delivered, and counted as late.
+    """
+
+    def __init__(self, readings: np.ndarray, rate_hz: float, *, reading: Reading = FORCE,
+                 saturated: np.ndarray | None = None, loop: bool = True, name: str = "replay") -> None:
+        readings = np.asarray(readings, dtype=np.float64)
+        if readings.ndim != 3 or readings.shape[2] != 3 or not len(readings) or readings.shape[1] < 1:
+            raise ValueError(f"readings: expected shape (frames, chips, 3) with frames and chips >= 1, "
+                             f"got {readings.shape}")
+        self.readings = readings
+        self.rate_hz = checked(PositiveNumber, "rate_hz", rate_hz)
+        self.reading = reading
+        self.saturated = np.zeros(readings.shape, bool) if saturated is None else np.asarray(saturated, bool)
+        if self.saturated.shape != readings.shape:
+            raise ValueError(f"saturated: expected shape {readings.shape}, got {self.saturated.shape}")
+        self.loop = loop
+        self.name = name
+        self.chips = readings.shape[1]
+        self.delivered = 0
+        self.late = 0
+        self._thread = BackgroundThread(f"paced-{name}")
+        self._ok = np.ones(self.chips, bool)
+        self._status = np.zeros(self.chips, np.uint8)
+
+    @property
+    def finished(self) -> bool:
+        """Every frame delivered (never, when looping)."""
+        return not self.loop and self.delivered >= len(self.readings)
+
+    def start(self, deliver: Callable[[Sample], None]) -> Self:
+        self._thread.start(lambda: self._run(deliver))
+        return self
+
+    def _run(self, deliver: Callable[[Sample], None]) -> None:
+        period, frames = 1.0 / self.rate_hz, len(self.readings)
+        started = time.perf_counter()
+        k = 0
+        while self.loop or k < frames:
+            due = started + k * period
+            if self._thread.closing.wait(max(due - time.perf_counter(), 0.0)):
+                return
+            now = time.perf_counter()
+            if now - due > period:
+                self.late += 1
+            row = k % frames
+            deliver(Sample(seq=k % _SEQ_MODULUS, device_time_s=k * period, host_time_s=now,
+                           reading=self.readings[row], status=self._status, chip_ok=self._ok,
+                           saturated=self.saturated[row]))
+            self.delivered += 1
+            k += 1
+
+    def counters(self) -> dict:
+        return {"delivered": self.delivered, "late": self.late}
+
+    def close(self) -> None:
+        self._thread.stop()
