@@ -145,3 +145,14 @@ def test_softtip_live_streams_the_emulated_wearable_sensor_through_its_identifie
     assert list(dataset.channels) == list(INPUTS) and {"fx_N", "fy_N", "fz_N"} <= set(dataset.labels)
     refusal = CliRunner().invoke(app, ["live", "--emulate", "--scenario", "wearable", "--chips", "2"])
     assert refusal.exit_code != 0 and "--chips = 2: the wearable sensor has one chip" in refusal.output
+
+
+@pytest.mark.slow
+def test_the_wearable_demo_tares_each_trial_and_its_live_estimates_are_the_offline_simulation():
+    from softtip.studies.live_demo import run_wearable_demo
+
+    report = run_wearable_demo(seed=1, duration_s=17.0, dashboard=False)  # past the first trial's 150 frames
+    assert report["estimated_frames"] >= 160 and report["pipeline"]["late"] == 0
+    assert report["pipeline"]["baseline_version"] == 2  # at start and at the second trial's first frame
+    assert max(report["live_minus_offline_over_full_scale"]) < 1e-9
+    assert report["live"]["samples"] == report["estimated_frames"] - 1  # the second trial's tare frame is not scored

@@ -39,7 +39,7 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
                 lab.calibrate, lab.evaluate):
     app.command()(user_errors(command))
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
-_group("demo", "Demonstrations on the built-in simulated sensor.", {"insertion": demo.demo_insertion},
+_group("demo", "Demonstrations on the built-in simulated sensor.", {"insertion": demo.demo_insertion, "wearable": demo.demo_wearable},
        callback=demo.demo)
 _group("sysid", "System identification: transfer-function and state-space models from recordings.",
        {"fit": sysid.sysid_fit, "orders": sysid.sysid_orders, "predict": sysid.sysid_predict})

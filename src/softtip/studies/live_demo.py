@@ -1,5 +1,5 @@
 """The main job, end to end on the built-in simulated sensor: twin -> calibration -> live estimates;
-and the wearable sensor's live scenario (:func:`wearable_live_setup`).
+and the wearable sensor's (:func:`wearable_live_setup`, :func:`run_wearable_demo`).
 
 1. the 3-axis force calibration protocol runs on the twin (cylindrical-D): a dataset of trials;
 2. a 3-10-3 Levenberg-Marquardt network is fitted on its calibration trials, scored on its
@@ -24,11 +24,14 @@ from softtip.lab.experiments import CALIBRATION, VALIDATION
 from softtip.hardware import PacedSource
 from softtip.lab.scenario import pushing_scenario
 from softtip.realtime.session import run_live
+from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.sensors import MLX90393Settings
 from softtip.studies.insertion import trained_model_path
 from softtip.sysid import Recording, TransferFunctionModel
+from softtip.sysid import load_model as load_system
 from softtip.sysid import save_model as save_system
+from softtip.sysid.metrics import score_outputs
 
 FORCES = ("fx_N", "fy_N", "fz_N")
 DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
@@ -95,12 +98,13 @@ class WearableStream:
     calibration runs (``model``: its file), and a further seating of the ring to stream.
 
     ``readings`` (N, 1, 3): the side chip's absolute readings (N) of that seating's seven trials, one
-    after the other, at ``rate_hz``; ``force_N`` (N, 3): the table force over the same samples, tared
-    at the first sample as the live baseline is; ``validation``: the model's per-trial offline scores
-    on that seating (the study's metrics)."""
+    after the other, at ``rate_hz``; ``trial_starts``: the first frame of each trial; ``force_N``
+    (N, 3): the table force, tared per trial as the study's is; ``validation``: the model's offline
+    scores on that seating, trial by trial (the study's metrics)."""
 
     model: Path
     readings: np.ndarray
+    trial_starts: np.ndarray
     force_N: np.ndarray
     rate_hz: float
     validation: dict
@@ -109,10 +113,9 @@ class WearableStream:
         """The emulated wearable sensor playing ``readings`` at ``rate_hz``."""
         return PacedSource(self.readings, self.rate_hz, reading=FORCE, loop=loop, name="emulated wearable sensor")
 
-
-def _absolute(dataset, names: tuple[str, ...], tares: tuple[str, ...]) -> np.ndarray:
-    """Tared columns with each trial's tare added back: what the sensor read."""
-    return np.column_stack([dataset.column(n) + dataset.column(t) for n, t in zip(names, tares, strict=True)])
+    def frame(self, device_time_s: float) -> int:
+        """The row of ``readings`` a frame of the source plays."""
+        return round(device_time_s * self.rate_hz) % len(self.readings)
 
 
 def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) -> WearableStream:
@@ -133,7 +136,65 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     path = trained_model_path(protocol, "wearable-force")
     path.parent.mkdir(parents=True, exist_ok=True)
     save_system(path, model)
-    readings = _absolute(streamed, WEARABLE_INPUTS, tuple(f"side_tare_{n.removeprefix('side_')}" for n in
-                                                           WEARABLE_INPUTS))
-    table = _absolute(streamed, FORCES, tuple(f"table_tare_{n}" for n in FORCES))
-    return WearableStream(path, readings[:, None, :], table - table[0], protocol.parameters["rate_hz"], scores.to_dict())
+    # what the chip read: each trial's tare added back to its tared readings
+    readings = np.column_stack([streamed.column(name) + streamed.column(f"side_tare_{name.removeprefix('side_')}")
+                                for name in WEARABLE_INPUTS])
+    starts = np.flatnonzero(np.r_[True, streamed.groups[1:] != streamed.groups[:-1]])
+    return WearableStream(path, readings[:, None, :], starts, streamed.y(list(FORCES)),
+                          protocol.parameters["rate_hz"], scores.to_dict())
+
+
+class _TareEachTrial(Sink):
+    """Asks for a baseline on the frame before each trial starts, so the trial's first frame is its tare,
+    as in the protocol (the pipeline takes a baseline from the frame after the request)."""
+
+    def __init__(self, stream: WearableStream) -> None:
+        self.before_start = set(((stream.trial_starts - 1) % len(stream.readings)).tolist())
+        self.stream = stream
+
+    def open(self, info) -> None:
+        self.take_baseline = info.take_baseline
+
+    def write(self, frame) -> None:
+        if self.stream.frame(frame.device_time_s) in self.before_start:
+            self.take_baseline()
+
+    def close(self) -> None:
+        pass
+
+
+def run_wearable_demo(seed: int = 1, duration_s: float | None = None, dashboard: bool = True,
+                      record: str | None = None, progress: Progress = SILENT) -> dict:
+    """The wearable sensor end to end: its twin's calibration seatings, the identified model, and the
+    emulated chip streaming a further seating through the live pipeline (``duration_s``: default the
+    whole seating once), tared at each trial's first frame as the protocol does (a baseline taken on
+    command). Scores the live estimates against the table force, and against the offline simulation of
+    the same frames by the same model from each tare (what real time may lose: nothing)."""
+    stream = wearable_live_setup(seed, progress)
+    duration_s = len(stream.readings) / stream.rate_hz if duration_s is None else duration_s
+    live = []
+
+    def collect(frame) -> None:
+        if frame.estimates is not None:
+            live.append((stream.frame(frame.device_time_s), frame.change[0].copy(), frame.estimates.copy()))
+
+    with progress.task(f"live: the emulated wearable chip for {duration_s:g} s at {stream.rate_hz:g} Hz"):
+        summary = run_live(stream.source(), [stream.model],
+                           [_TareEachTrial(stream), *live_sinks(dashboard=dashboard, record=record)],
+                           duration_s, baseline_frames=1, callbacks=[collect])
+    report = {"model": str(stream.model), "offline_next_seating": stream.validation, "pipeline": summary,
+              "estimated_frames": len(live)}
+    if len(live) > 1:
+        rows = np.array([k for k, _, _ in live])
+        changes, estimates = np.array([c for _, c, _ in live]), np.array([e for _, _, e in live])
+        # A trial's first frame is its tare: estimated before the baseline is taken from it, it ends the
+        # previous segment; the model restarts from rest on the next frame.
+        tared = np.isin(rows, stream.trial_starts)
+        model = load_system(stream.model)
+        segments = np.split(np.arange(len(rows)), np.flatnonzero(tared) + 1)
+        offline = np.vstack([model.simulate(changes[segment]) for segment in segments if len(segment)])
+        scored = ~tared
+        report["live"] = score_outputs(stream.force_N[rows[scored]], estimates[scored], FORCES, ("N",) * 3).to_dict()
+        report["live_minus_offline_over_full_scale"] = (np.abs(estimates - offline).max(axis=0)
+                                                         / (offline.max(axis=0) - offline.min(axis=0))).tolist()
+    return report
