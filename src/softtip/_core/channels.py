@@ -39,7 +39,7 @@ class Reading:
     may be in, each as its value per ``unit`` (a model fitted in mT reads µT channels times 1e-3);
     ``drift_threshold``: the default change (in ``unit``) below which a free sensor's baseline may
     follow slow drift; ``baseline_step``: the default change of that filtered baseline that replaces
-    the one in use (:class:`softtip.realtime.Baseline`).
+    the one in use (:class:`softtip.realtime.Baseline`); ``decimals``: the decimals a display shows.
     """
 
     quantity: str
@@ -50,6 +50,7 @@ class Reading:
     units: dict[str, float] = field(compare=False)
     drift_threshold: float
     baseline_step: float
+    decimals: int  # shown in live displays: a tenth of a µT, a mN
     first_numbered: bool = True  # the first sensor's number is written (s0_...), or not (side_...)
     pattern: re.Pattern = field(init=False, repr=False, compare=False)
 
@@ -96,9 +97,9 @@ class Reading:
 
 MAGNETIC = Reading("flux density", "uT", "B", prefix="s", infix="b",
                    units={"uT": 1.0, "µT": 1.0, "mT": 1e-3, "T": 1e-6}, drift_threshold=20.0,
-                   baseline_step=0.01)
+                   baseline_step=0.01, decimals=1)
 FORCE = Reading("force", "N", "F", prefix="side", infix="f", units={"N": 1.0, "mN": 1e3}, drift_threshold=0.05,
-                baseline_step=1e-4, first_numbered=False)
+                baseline_step=1e-4, decimals=3, first_numbered=False)
 READINGS = (MAGNETIC, FORCE)
 CHANNEL_UNIT = MAGNETIC.unit
 channel_name = MAGNETIC.channel_name

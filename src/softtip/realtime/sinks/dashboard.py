@@ -78,7 +78,7 @@ class DashboardSink(Sink):
             if frame is None or frame.change is None:
                 values = ["—"] * 3
             else:
-                values = [_number(v) for v in frame.change[k]]
+                values = [_number(v, reading.decimals) for v in frame.change[k]]
             flags = "" if frame is None else (
                 "fault" if not frame.chip_ok[k] else ("saturated" if frame.saturated[k].any() else "ok"))
             chips.add_row(str(k), *values, flags)
