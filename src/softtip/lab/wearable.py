@@ -34,6 +34,7 @@ from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, Positive
                                   choice, expect, schema)
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
+from softtip.lab.experiments import SeededBench
 from softtip.lab.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.lab.realism import WearableRealism
 from softtip.mechanics.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
@@ -140,16 +141,10 @@ class WearableDevice:
 
 
 @dataclass
-class WearableBench:
+class WearableBench(SeededBench):
     """What the wearable protocol needs: the tissue's relaxation, the realism and a seeded stream."""
 
-    prony: PronySeries
     realism: WearableRealism
-    rng: np.random.Generator
-    rate_hz: float
-
-    def scatter(self, sd: float, size=None):
-        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
 
 
 def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
