@@ -23,12 +23,12 @@ from typing import Annotated, Any, Optional, Union
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from softtip._core.config import Flag, PositiveInteger, checked, choice, expect, integer
+from softtip._core.config import Flag, OpenFraction, PositiveInteger, checked, choice, expect, integer
 from softtip._core.threads import single_threaded_blas
 from softtip.sysid import transfer
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
-from softtip.sysid.recording import Fraction, Recording
+from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, refine
 from softtip.sysid.simulation import StreamingSimulator, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -177,7 +177,7 @@ class StateSpaceModel(IdentifiedModel):
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
                    "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
-                   "max_iterations": PositiveInteger, "tolerance": Fraction}
+                   "max_iterations": PositiveInteger, "tolerance": OpenFraction}
 
     def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,

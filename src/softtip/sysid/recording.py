@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 import scipy.signal
 
 from softtip._core.archive import hash_arrays
-from softtip._core.config import PositiveNumber, checked, number
+from softtip._core.config import OpenFraction, PositiveNumber, checked
 from softtip.data.csvload import parse_numbers
 from softtip.data.dataset import (
     METADATA_KEY,
@@ -43,7 +43,6 @@ from softtip.data.dataset import (
 )
 
 DETRENDS = ("none", "mean", "linear")
-Fraction = number("a fraction in (0, 1)", gt=0, lt=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,7 +279,7 @@ def sample_time(source: str, column: str, trial: np.ndarray, time: np.ndarray, t
                 tolerance: float) -> float:
     """The sample time of the time column ``time`` (the median step within trials), refusing steps that
     differ from it, and a given ``ts`` that differs from it, by more than ``tolerance`` of it."""
-    tolerance = checked(Fraction, "time_tolerance", tolerance, DatasetError)
+    tolerance = checked(OpenFraction, "time_tolerance", tolerance, DatasetError)
     same = trial[1:] == trial[:-1]
     steps = np.diff(time)[same]
     if steps.size == 0:
