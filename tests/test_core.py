@@ -13,8 +13,10 @@ from rich.console import Console
 
 from softtip._core.config import (
     ConfigError,
+    Fraction,
     NonNegativeNumber,
     Number,
+    OpenFraction,
     PositiveNumber,
     Refusal,
     PositiveInteger,
@@ -169,6 +171,16 @@ def test_an_argument_is_checked_against_a_type_in_one_line_naming_it():
         checked(Text, "port", 7, DesignError)
     search = Search()
     assert checked(instance(Search), "search", search) is search
+
+
+def test_a_fraction_includes_its_ends_and_an_open_fraction_excludes_them():
+    assert checked(Fraction, "share", 0) == 0.0 and checked(Fraction, "share", 1) == 1.0
+    assert checked(OpenFraction, "tolerance", 0.02) == 0.02
+    for value in (0, 1, -0.5, 1.5):
+        with pytest.raises(ConfigError, match=rf"^tolerance = {value}: expected a number strictly between 0 and 1$"):
+            checked(OpenFraction, "tolerance", value)
+    with pytest.raises(ConfigError, match=r"^share = 1.5: expected a number from 0 to 1$"):
+        checked(Fraction, "share", 1.5)
 
 
 def test_a_refusal_of_a_parsed_table_is_located_there():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from scipy.optimize import brentq
@@ -79,3 +80,34 @@ def test_contact_states_are_told_apart_by_the_two_fingers(coarse_protocol):
     # Point A and Point B load the two fingers in mirror image: a classifier cannot confuse them
     assert trained["point-a"] > 0.8 and trained["point-b"] > 0.8
     assert results["trained"]["accuracy"] > 0.7
+
+
+@pytest.mark.slow
+def test_each_untrained_contact_angle_is_explained_by_its_own_confusion(coarse_protocol):
+    path = coarse_protocol("contact-states", "rectangular", 3.0, """
+        phi_deg = [20.0]
+        psi_deg = [10.0]
+        untrained_phi_deg = [15.0, 35.0]
+        untrained_psi_deg = [12.0]
+        approach_inclines_deg = [45.0]
+        positions_mm = [[0.0, 0.0], [5.0, 5.0]]
+    """)
+    outcome = reproduce_study("contact-states", protocol_path=path).outcome
+    pooled = outcome.results["untrained-angles"]
+    names = {"Point A": "point-a", "Point B": "point-b", "Edge": "edge"}
+    counts = {}  # state -> [(right, samples) of each angle whose note names it]
+    for angle in (15, 35):
+        note = outcome.tables[0].notes.get(f"untrained φ {angle}°")
+        if note is None:  # every cell of the row within the published tolerance
+            continue
+        assert f"(over the untrained-angles samples at φ {angle}°)" in note
+        for name, right, samples in re.findall(r"(Point A|Point B|Edge): (\d+) of (\d+) of its samples", note):
+            counts.setdefault(names[name], []).append((int(right), int(samples)))
+    assert counts, "no untrained angle has a figure outside its tolerance: nothing to check"
+    for state, per_angle in counts.items():
+        k = pooled["labels"].index(state)
+        row = pooled["confusion"][k]
+        # each angle has samples of every state: one angle's count is below the pooled one ...
+        assert all(samples < sum(row) for _, samples in per_angle), state
+        if len(per_angle) == 2:  # ... and the two angles' counts are the pooled ones
+            assert [sum(column) for column in zip(*per_angle)] == [row[k], sum(row)], state

@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
+from softtip.sysid import simulation
 from softtip.sysid.simulation import simulate
 from softtip.sysid.statespace import StateSpace
 
@@ -100,6 +101,18 @@ def test_predict_scores_simulation_and_k_step_predictions_and_writes_them(files,
     assert table.column_names == ["trial", "time_s", "Fx_predicted", "Fz_predicted"]
     np.testing.assert_allclose(table.column("time_s").to_numpy()[:3], [0.0, 0.1, 0.2])
     assert json.loads(table.schema.metadata[b"softtip-sysid"])["horizon"] == 1
+
+
+@pytest.mark.parametrize("horizon", [(), ("--horizon", 2)])
+def test_predict_runs_the_model_over_each_trial_once(files, tmp_path, monkeypatch, horizon):
+    estimation, validation = files
+    model = tmp_path / "model.npz"
+    run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "-o", model)
+    runs, original = [], simulation.state_sequence
+    monkeypatch.setattr(simulation, "state_sequence", lambda A, drive, x0: runs.append(len(drive)) or original(A, drive, x0))
+    result = run("sysid", "predict", model, "--data", validation, *horizon, "--json")
+    assert result.exit_code == 0, result.output
+    assert runs == [200, 200] and json.loads(result.output)["scores"]["samples"] == 400  # two trials of 200
 
 
 def test_predict_simulates_a_recording_without_outputs(files, tmp_path):

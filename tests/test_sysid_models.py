@@ -11,7 +11,7 @@ from softtip._core.archive import write_archive
 from softtip.bench.sysid import INPUTS, OUTPUTS, wearable_like
 from softtip.calibration import ModelFileError
 from softtip.data import DatasetError
-from softtip.sysid import transfer
+from softtip.sysid import simulation, transfer
 from softtip.sysid.files import load_model, save_model
 from softtip.sysid.metrics import MEASURED, fit_percent, rated, score_outputs
 from softtip.sysid.models import StateSpaceModel, TransferFunctionModel, information_criteria, order_table
@@ -163,6 +163,21 @@ def test_an_order_table_of_transfer_functions_counts_their_parameters(split):
     assert set(table[0]["fit_percent_per_output"]) == set(OUTPUTS)
 
 
+@pytest.mark.parametrize("kind, runs_per_order", [("tf", 1), ("ss", 2)])
+def test_an_order_table_reuses_each_fits_simulation_of_the_estimation_data(split, monkeypatch, kind, runs_per_order):
+    """Per order and trial: the fit's simulation (its fit % there, and a transfer function's one-step
+    prediction, which is its simulation) and, for a state-space model, its Kalman predictor."""
+    estimation, _ = split
+    runs, original = [], simulation.state_sequence
+    monkeypatch.setattr(simulation, "state_sequence", lambda A, drive, x0: runs.append(len(drive)) or original(A, drive, x0))
+    table = order_table(estimation, kind, [1, 2], **({"refine": False} if kind == "tf" else {}))
+    assert len(runs) == 2 * runs_per_order * len(estimation.trials)
+    fitted = (TransferFunctionModel(2, refine=False) if kind == "tf" else StateSpaceModel(2)).fit(estimation)
+    aic, _ = information_criteria(fitted.residuals(estimation), fitted.n_parameters)
+    assert table[1]["fit_percent"] == pytest.approx(fitted.evaluate(estimation).mean("fit_percent"), abs=1e-9)
+    assert table[1]["aic"] == pytest.approx(aic, rel=1e-12)
+
+
 # ---------------------------------------------------------------------------------------------- mistakes
 
 
@@ -211,6 +226,9 @@ def test_a_saved_model_loads_as_the_same_model(tmp_path, split, continuous_recor
     np.testing.assert_array_equal(np.vstack(loaded.simulate(validation)), np.vstack(model.simulate(validation)))
     np.testing.assert_array_equal(np.vstack(loaded.predict(validation, 2)), np.vstack(model.predict(validation, 2)))
     assert json.dumps(loaded.summary(), sort_keys=True) == json.dumps(model.summary(), sort_keys=True)
+    if data == "transfer":
+        np.testing.assert_array_equal(loaded.report_.per_output_fit_percent, model.report_.per_output_fit_percent)
+        assert loaded.report_.to_dict() == model.report_.to_dict()
     with np.load(path, allow_pickle=False) as archive:
         metadata = json.loads(str(archive["metadata"]))
     assert metadata["fitted"]["data"]["sha256"] == estimation.sha256

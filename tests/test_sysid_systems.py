@@ -14,6 +14,7 @@ import scipy.signal
 from nfoursid.nfoursid import NFourSID
 
 from softtip.sysid.realisation import realise
+from softtip.sysid import refine as refine_module
 from softtip.sysid.refine import _Predictor, refine
 from softtip.sysid.simulation import StreamingSimulator, predict, simulate, state_sequence
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -203,6 +204,20 @@ def test_the_refinement_jacobian_is_exact_and_refinement_recovers_a_perturbed_mo
     assert report.used and report.cost_after < 0.2 * report.cost_before
     np.testing.assert_allclose(np.sort_complex(refined.poles()), np.sort_complex(true.poles()), atol=0.03)
     np.testing.assert_allclose(refined.noise_covariance, 0.04 * np.eye(2), atol=0.006)
+
+
+def test_the_refinement_runs_the_predictor_once_per_parameter_vector(monkeypatch):
+    true = _known_system()
+    segments = [_innovations_data(true, GAIN, 0.2, 300, seed)[:2] for seed in (21, 22)]
+    problem = _Predictor(segments, 4, np.ones(2))
+    runs, original = [], refine_module.state_sequence
+    monkeypatch.setattr(refine_module, "state_sequence", lambda A, drive, x0: runs.append(len(drive)) or original(A, drive, x0))
+    theta = problem.pack(StateSpace(0.9 * true.A, true.B, true.C, true.D, 1.0, 0.5 * GAIN))
+    problem.residuals(theta)
+    problem.jacobian(theta)
+    assert len(runs) == 2  # the errors' states serve the Jacobian: one run per trial
+    problem.jacobian(theta + 1e-3)
+    assert len(runs) == 4
 
 
 def test_a_refinement_cut_short_reports_that_it_did_not_converge():

@@ -9,6 +9,7 @@ import pytest
 from scipy import signal
 
 from softtip.sysid import transfer
+from softtip.sysid.statespace import IdentificationError
 from softtip.sysid.transfer import TransferFunctionMatrix, fit, simulate
 
 TS = 0.1
@@ -294,3 +295,15 @@ def test_bad_arguments_get_one_line_naming_them(call, argument):
     with pytest.raises(ValueError, match=f"^{argument}") as raised:
         call(u, y)
     assert "\n" not in str(raised.value)
+
+
+@pytest.mark.parametrize(("segment", "message"), [
+    (lambda u, y: (u[:4], y[:4]), r"^segments: 4 samples in all, fewer than the 8 parameters of one output's model$"),
+    (lambda u, y: (np.column_stack([u[:, 0], np.full(100, 2.0)]), y),
+     r"^segments: input 1 is constant \(2\) in every segment: expected a signal that varies$"),
+])
+def test_data_that_cannot_identify_the_model_is_an_identification_error(segment, message):
+    rng = np.random.default_rng(7)
+    u, y = rng.standard_normal((100, 2)), rng.standard_normal((100, 1))
+    with pytest.raises(IdentificationError, match=message):
+        fit([segment(u, y)], TS, 2)

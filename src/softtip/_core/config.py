@@ -181,6 +181,7 @@ Number = number()
 PositiveNumber = number("a positive number", gt=0)
 NonNegativeNumber = number("a number >= 0", ge=0)
 Fraction = number("a number from 0 to 1", ge=0, le=1)
+OpenFraction = number("a number strictly between 0 and 1", gt=0, lt=1)
 PositiveInteger = integer(1, expected="a positive integer")
 Flag = Annotated[bool, from_numpy, Strict(), expect("true or false")]
 Text = Annotated[str, Strict(), Field(min_length=1), expect("a non-empty string")]

@@ -37,6 +37,7 @@ from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 from softtip._core.config import (
     NonNegativeNumber,
     Number,
+    OpenFraction,
     PositiveNumber,
     Real,
     Refusal,
@@ -145,7 +146,6 @@ LayerSizes = Annotated[tuple[integer(1), ...], BeforeValidator(_one_or_more), Fi
                        expect("one or more positive integers")]
 Division = Annotated[tuple[Real, Real, Real], AfterValidator(_fractions),
                      expect("(train, validation, test) fractions >= 0 summing to 1 with train > 0")]
-Fraction = number("a number between 0 and 1", gt=0, lt=1)
 Growth = number("a number > 1", gt=1)
 RandomState = Annotated[None | Whole | np.random.Generator, expect("None, an int or a numpy Generator")]
 
@@ -166,7 +166,7 @@ class TanhNetworkSettings:
 @schema
 class LMSettings(TanhNetworkSettings):
     mu: PositiveNumber
-    mu_dec: Fraction
+    mu_dec: OpenFraction
     mu_inc: Growth
     mu_max: Number
 

@@ -227,9 +227,9 @@ def sysid_predict(
     recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], ts, time_column,
                       trial_column)
     predicted = model.predict(recording, horizon) if measured else model.simulate(recording)
+    scores = model.evaluate_predictions(recording, predicted, _full_scale(full_scale)) if measured else None
     result = {"model": str(model_file), "horizon": horizon, "trials": len(recording.trials),
-              "samples": recording.n_samples,
-              "scores": model.evaluate(recording, horizon, _full_scale(full_scale)).to_dict() if measured else None}
+              "samples": recording.n_samples, "scores": None if scores is None else scores.to_dict()}
     if out is not None:
         result["written"] = str(_write_predictions(out, recording, predicted, model.outputs_, model_file, horizon))
     if json_output:

@@ -53,6 +53,8 @@ from softtip.data.dataset import (
     DatasetError,
     DatasetMetadata,
     column_to_numpy,
+    first_line,
+    require_columns,
     subtract_trial_baseline,
     trial_runs,
     unknown_and_missing,
@@ -196,12 +198,8 @@ def _read_table(path: Path, layout: _Layout) -> pa.Table:
             path, parse_options=pacsv.ParseOptions(delimiter=layout.options.delimiter),
             convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(layout.numeric, pa.string())))
     except (pa.ArrowException, OSError) as problem:
-        raise DatasetError(f"{path}: cannot be read as CSV ({str(problem).strip().splitlines()[0]})") from None
-    for csv_name in [*layout.columns, *layout.numeric]:
-        if csv_name not in table.column_names:
-            raise DatasetError(f"{path}: no column {csv_name!r} (columns: {', '.join(table.column_names)})")
-        if table.column_names.count(csv_name) > 1:
-            raise DatasetError(f"{path}: column {csv_name!r} appears more than once")
+        raise DatasetError(f"{path}: cannot be read as CSV ({first_line(problem)})") from None
+    require_columns(path, [*layout.columns, *layout.numeric], table.column_names)
     return table
 
 

@@ -459,7 +459,7 @@ class Dataset:
         try:
             schema = pq.read_schema(path)
         except (pa.ArrowException, OSError) as problem:
-            raise DatasetError(f"{path}: not a Parquet file ({_first_line(problem)})") from None
+            raise DatasetError(f"{path}: not a Parquet file ({first_line(problem)})") from None
         try:
             return cls._from_file(path, schema)
         except DatasetError as problem:
@@ -483,13 +483,24 @@ class Dataset:
         try:
             table = pq.read_table(path)
         except (pa.ArrowException, OSError) as problem:
-            raise DatasetError(f"unreadable Parquet data ({_first_line(problem)})") from None
+            raise DatasetError(f"unreadable Parquet data ({first_line(problem)})") from None
         columns = {name: column_to_numpy(name, table.column(name)) for name in declared}
         return cls(columns, document["labels"], document["conditions"], document["metadata"], document["channels"])
 
 
-def _first_line(problem: Exception) -> str:
+def first_line(problem: Exception) -> str:
+    """The first line of an error's message (its type's name if it has none), for a one-line refusal."""
     return str(problem).strip().splitlines()[0] if str(problem).strip() else type(problem).__name__
+
+
+def require_columns(source: str | os.PathLike, wanted: Iterable[str], present: Sequence[str]) -> None:
+    """Refuses, in one line naming ``source``, a column of ``wanted`` that is not among the columns
+    ``present`` of a file, or that is there more than once."""
+    for name in wanted:
+        if name not in present:
+            raise DatasetError(f"{source}: no column {name!r} (columns: {', '.join(present)})")
+        if present.count(name) > 1:
+            raise DatasetError(f"{source}: column {name!r} appears more than once")
 
 
 def unknown_and_missing(keys: Iterable[str], expected: Sequence[str]) -> tuple[list[str], list[str]]:

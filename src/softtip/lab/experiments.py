@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -33,15 +33,27 @@ CALIBRATION, VALIDATION = "calibration", "validation"
 
 
 @dataclass
-class Bench:
-    """What every protocol needs: the fingertip's mechanics, its material's viscoelasticity,
-    the realism settings and a seeded random stream."""
+class SeededBench:
+    """What every bench gives its protocols: the relaxation of what is pressed, the realism settings, a
+    seeded random stream and the sample rate."""
 
-    fingertip: InfluenceEngine
     prony: PronySeries
-    realism: Realism
+    realism: Any
     rng: np.random.Generator
     rate_hz: float
+
+    def scatter(self, sd: float, size=None):
+        """A normal scatter of standard deviation ``sd`` (zeros when ``sd`` is 0, drawing nothing)."""
+        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
+
+
+@dataclass
+class Bench(SeededBench):
+    """What every fingertip protocol needs: the fingertip's mechanics, its material's viscoelasticity,
+    the realism settings and a seeded random stream."""
+
+    realism: Realism
+    fingertip: InfluenceEngine
 
     @property
     def design(self) -> Design:
@@ -49,9 +61,6 @@ class Bench:
 
     def unit(self) -> FabricatedUnit:
         return FabricatedUnit(self.design, self.realism, self.rng)
-
-    def scatter(self, sd: float, size=None):
-        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
 
     def times(self, duration: float) -> np.ndarray:
         return np.arange(0.0, duration + 1e-9, 1.0 / self.rate_hz)

@@ -51,17 +51,18 @@ MINIMUM_TRIAL_S = 5.0  # between the quiet start (up to 1.5 s) and end (1 s), ro
 
 @dataclass(frozen=True)
 class Effort:
-    """How a person presses in the seven trials (forces in N; see the module notes)."""
+    """How a person presses in the seven trials (forces in N; see the module notes). The values are the
+    protocol's (:class:`softtip.lab.wearable.WearableParameters`, the realism's cross-talk and tremor)."""
 
-    press_peak: float = 4.0
-    rest: float = 0.5
-    dorsal_hold: float = 2.5
-    tilt_normal: float = 3.0
-    tangential_effort: float = 1.0
-    friction_sense: float = 0.9  # the friction limit the person expects
-    normal_coupling: float = 0.3
-    cross_talk: float = 0.1
-    tremor: float = 0.02
+    press_peak: float
+    rest: float
+    dorsal_hold: float
+    tilt_normal: float
+    tangential_effort: float
+    friction_sense: float  # the friction limit the person expects
+    normal_coupling: float
+    cross_talk: float
+    tremor: float
 
 
 def minimum_jerk(s):

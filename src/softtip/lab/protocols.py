@@ -23,6 +23,10 @@ their names)::
 A wearable protocol file has no design: its ``[parameters]``, ``[realism]`` and ``[viscoelastic]``
 are the wearable bench's (:class:`~softtip.lab.wearable.WearableParameters`,
 :class:`~softtip.lab.realism.WearableRealism`, :class:`~softtip.lab.wearable.PadViscoelastic`).
+
+Every protocol's ``[parameters]`` table has a schema (:data:`PARAMETER_SCHEMAS`); a fingertip
+protocol's follows from its defaults. A run goes the same way on either bench: the bench is set up
+from the protocol (:data:`BENCHES`), then the protocol's trials run on it (:data:`RUNNERS`).
 """
 
 from __future__ import annotations
@@ -55,7 +59,31 @@ GEN1 = {"rate_hz": 20.0, "mesh_size_mm": 1.5, "curvature_points": 10, "reach_mm"
         "board_thickness_mm": 1.6}
 GEN2 = {"rate_hz": 50.0, "mesh_size_mm": 2.5, "curvature_points": 3, "reach_mm": 3.5, "pre_contact_s": 0.2}
 
-DEFAULTS: dict[str, dict[str, Any]] = {
+PointsMM = Annotated[list[Annotated[list[Real], Field(min_length=2, max_length=2)]], Field(min_length=1),
+                     expect("a list of [x, y] pairs in mm")]
+
+
+def _parameter_type(key: str, default: Any) -> Any:
+    """What a fingertip protocol's parameter may be, from its default: true/false, an integer >= 0, a
+    number >= 0 (the rate > 0), a list of numbers or a list of [x, y] pairs."""
+    if isinstance(default, bool):
+        return Flag
+    if isinstance(default, int):
+        return integer()
+    if isinstance(default, float):
+        return PositiveNumber if key == "rate_hz" else NonNegativeNumber
+    return PointsMM if isinstance(default[0], list) else Numbers
+
+
+def _parameters_schema(defaults: dict[str, Any]) -> type:
+    """The schema of a ``[parameters]`` table whose keys are those of ``defaults``, each typed by its default."""
+    fields = [(key, _parameter_type(key, default), field(default_factory=functools.partial(copy.deepcopy, default)))
+              for key, default in defaults.items()]
+    return schema(dataclasses.make_dataclass("ProtocolParameters", fields, frozen=True))
+
+
+# the fingertip protocols' parameters and their defaults
+_FINGERTIP_DEFAULTS: dict[str, dict[str, Any]] = {
     "pushing": {**GEN1, "angles_deg": [0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0], "calibration_trials": 10,
                 "validation_trials": 5, "depth_mm": 3.0, "speed_mm_s": 1.0},
     "force3": {**GEN1, "calibration_trials": 10, "validation_trials": 5, "normal_depth_mm": 3.0,
@@ -82,18 +110,18 @@ DEFAULTS: dict[str, dict[str, Any]] = {
                  "untrained_offsets_mm": [-5.0, 5.0], "grip_depth_mm": 1.0, "part_thickness_mm": 3.0,
                  "clip_spacing_mm": 60.0, "part_depth_mm": 50.0, "travel_mm": 1.5, "speed_mm_s": 5.0,
                  "seat_compliance_mm_per_N": 1.0, "rim_compliance_mm_per_N": 0.2},
-    "wearable": asdict(wearable.WearableParameters()),
 }
+FINGERTIP, WEARABLE = "fingertip", "wearable"
+PROTOCOL_BENCHES: dict[str, str] = {**dict.fromkeys(_FINGERTIP_DEFAULTS, FINGERTIP), "wearable": WEARABLE}
+PARAMETER_SCHEMAS: dict[str, type] = {**{name: _parameters_schema(defaults) for name, defaults in
+                                         _FINGERTIP_DEFAULTS.items()}, "wearable": wearable.WearableParameters}
+DEFAULTS: dict[str, dict[str, Any]] = {name: asdict(kind()) for name, kind in PARAMETER_SCHEMAS.items()}
 RUNNERS: dict[str, Callable] = {
     "pushing": experiments.pushing, "force3": experiments.force3, "hysteresis": experiments.hysteresis,
     "grasp-two": experiments.grasp_two, "grasp-positions": experiments.grasp_positions,
     "contact-states": experiments.contact_states, "inverter": experiments.inverter,
     "wearable": wearable.wearable,
 }
-FINGERTIP, WEARABLE = "fingertip", "wearable"
-BENCHES: dict[str, str] = {name: WEARABLE if name == "wearable" else FINGERTIP for name in RUNNERS}
-# protocols whose [parameters] table has a schema of its own rather than one derived from DEFAULTS
-_PARAMETER_SCHEMAS: dict[str, type] = {"wearable": wearable.WearableParameters}
 
 
 _HYSTERESIS = published_table("hysteresis")
@@ -134,7 +162,7 @@ class Protocol:
 
     @property
     def bench(self) -> str:
-        return BENCHES[self.name]
+        return PROTOCOL_BENCHES[self.name]
 
     def to_dict(self) -> dict:
         return {"protocol": self.name, "design": self.design.name, "seed": self.seed, "parameters": self.parameters,
@@ -145,9 +173,12 @@ def shipped_protocol_path(name: str) -> Path:
     return Path(str(resources.files("softtip.lab") / "protocols" / f"{name}.toml"))
 
 
+ProtocolName = choice(*sorted(RUNNERS))  # any protocol: its name chose the file's schema (protocol_from_dict)
+
+
 @schema
-class _ProtocolFile:
-    protocol: choice(*sorted(RUNNERS))
+class _FingertipProtocolFile:
+    protocol: ProtocolName
     design: Text  # a shipped design or a design TOML file
     seed: integer() = 0
     parameters: dict[str, Any] = field(default_factory=dict)  # checked against the protocol's own
@@ -157,54 +188,21 @@ class _ProtocolFile:
 
 @schema
 class _WearableProtocolFile:
-    protocol: choice(*sorted(name for name, bench in BENCHES.items() if bench == WEARABLE))
+    protocol: ProtocolName
     seed: integer() = 0
     parameters: dict[str, Any] = field(default_factory=dict)  # checked against WearableParameters
     realism: WearableRealism = WearableRealism()
     viscoelastic: wearable.PadViscoelastic = wearable.PadViscoelastic()
 
 
-PointsMM = Annotated[list[Annotated[list[Real], Field(min_length=2, max_length=2)]], Field(min_length=1),
-                     expect("a list of [x, y] pairs in mm")]
-
-
-def _parameter_type(key: str, default: Any) -> Any:
-    """What a protocol parameter may be, from its default: true/false, an integer >= 0, a number >= 0
-    (the rate > 0), a list of numbers or a list of [x, y] pairs."""
-    if isinstance(default, bool):
-        return Flag
-    if isinstance(default, int):
-        return integer()
-    if isinstance(default, float):
-        return PositiveNumber if key == "rate_hz" else NonNegativeNumber
-    return PointsMM if isinstance(default[0], list) else Numbers
-
-
-@functools.cache
-def _parameters_schema(name: str) -> type:
-    """The schema of the ``[parameters]`` table of protocol ``name``: every key of :data:`DEFAULTS`."""
-    if name in _PARAMETER_SCHEMAS:
-        return _PARAMETER_SCHEMAS[name]
-    fields = [(key, _parameter_type(key, default), field(default_factory=functools.partial(copy.deepcopy, default)))
-              for key, default in DEFAULTS[name].items()]
-    return schema(dataclasses.make_dataclass("ProtocolParameters", fields, frozen=True))
-
-
 def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Protocol:
     name = table.get("protocol") if isinstance(table, dict) else None
-    if isinstance(name, str) and BENCHES.get(name) == WEARABLE:
-        top = parse(_WearableProtocolFile, table, source)
-        parameters = asdict(parse(_parameters_schema(top.protocol), top.parameters, source, "parameters"))
-        return Protocol(name=top.protocol, design=wearable.WearableDevice.from_parameters(parameters), seed=top.seed,
-                        parameters=parameters, realism=top.realism, viscoelastic=asdict(top.viscoelastic))
-    top = parse(_ProtocolFile, table, source)
-    try:
-        design = load_design(top.design if base is None or not (base / top.design).is_file() else base / top.design)
-    except ValueError as error:
-        raise refused(str(error), source, "design", value=top.design) from None
-    parameters = parse(_parameters_schema(top.protocol), top.parameters, source, "parameters")
-    return Protocol(name=top.protocol, design=design, seed=top.seed, parameters=asdict(parameters),
-                    realism=top.realism, viscoelastic=asdict(top.viscoelastic))
+    # the name chooses the bench; a missing or unknown name is refused by the fingertip file's schema
+    bench = BENCHES[PROTOCOL_BENCHES.get(name, FINGERTIP) if isinstance(name, str) else FINGERTIP]
+    top = parse(bench.protocol_file, table, source)
+    parameters = asdict(parse(PARAMETER_SCHEMAS[top.protocol], top.parameters, source, "parameters"))
+    return Protocol(name=top.protocol, design=bench.device(top, parameters, source, base), seed=top.seed,
+                    parameters=parameters, realism=top.realism, viscoelastic=asdict(top.viscoelastic))
 
 
 def load_protocol(path: str | Path) -> Protocol:
@@ -227,37 +225,73 @@ def fingertip_for(design: Design, parameters: dict, progress: Progress = SILENT)
     return _FINGERTIPS[key]
 
 
-def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Dataset, dict]:
-    """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage."""
-    if protocol.bench == WEARABLE:
-        return _run_wearable(protocol, progress)
-    timings = {}
+# ---------------------------------------------------------------------------------------------- benches
+
+
+@dataclass(frozen=True)
+class BenchKind:
+    """A bench protocols run on: the schema of their files, what the bench is built from and how it is set up.
+
+    ``device(file, parameters, source, folder)``: what the protocol file describes the bench with;
+    ``setup(protocol, progress, timings)``: the bench for one run, what the dataset records of it beyond
+    the protocol's tables, and the description of the trials' stage (building what it needs is timed
+    into ``timings``).
+    """
+
+    protocol_file: type
+    device: Callable[[Any, dict, str, Path | None], Design | wearable.WearableDevice]
+    setup: Callable[[Protocol, Progress, dict], tuple[Any, dict, str]]
+
+
+def _design(file: _FingertipProtocolFile, parameters: dict, source: str, base: Path | None) -> Design:
+    """The file's design: a shipped one or a design file, found beside the protocol file first."""
+    try:
+        return load_design(file.design if base is None or not (base / file.design).is_file() else base / file.design)
+    except ValueError as error:
+        raise refused(str(error), source, "design", value=file.design) from None
+
+
+def _fingertip_bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[experiments.Bench, dict, str]:
+    """The design's mechanics (``mechanics_s``) and its material's relaxation, set from the ``[viscoelastic]``
+    cycle; the dataset records that relaxation."""
     start = time.perf_counter()
     fingertip = fingertip_for(protocol.design, protocol.parameters, progress)
     timings["mechanics_s"] = time.perf_counter() - start
+    v = protocol.viscoelastic
+    prony = experiments.material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM, v["speed_mm_s"] * MM,
+                                       v["rest_s"])
+    bench = experiments.Bench(fingertip=fingertip, prony=prony, realism=protocol.realism,
+                              rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters["rate_hz"])
+    return (bench, {"prony": {"g": list(prony.g), "tau_s": list(prony.tau)}},
+            f"{protocol.name}: trials on {protocol.design.name}")
+
+
+def _wearable_device(file: _WearableProtocolFile, parameters: dict, source: str,
+                     base: Path | None) -> wearable.WearableDevice:
+    return wearable.WearableDevice.from_parameters(parameters)
+
+
+def _wearable_bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[wearable.WearableBench, dict, str]:
+    """The finger tissue's relaxation, given by the ``[viscoelastic]`` table."""
+    p = protocol.parameters
+    bench = wearable.WearableBench(prony=wearable.PadViscoelastic(**protocol.viscoelastic).prony(),
+                                   realism=protocol.realism, rng=np.random.default_rng(protocol.seed),
+                                   rate_hz=p["rate_hz"])
+    return bench, {}, f"{protocol.name}: {p['participants']} participants x {p['runs']} runs on {protocol.design.name}"
+
+
+BENCHES: dict[str, BenchKind] = {FINGERTIP: BenchKind(_FingertipProtocolFile, _design, _fingertip_bench),
+                                 WEARABLE: BenchKind(_WearableProtocolFile, _wearable_device, _wearable_bench)}
+
+
+def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Dataset, dict]:
+    """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage."""
+    timings = {}
+    bench, recorded, stage = BENCHES[protocol.bench].setup(protocol, progress, timings)
     start = time.perf_counter()
-    with progress.task(f"{protocol.name}: trials on {protocol.design.name}"):
-        v = protocol.viscoelastic
-        prony = experiments.material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM,
-                                           v["speed_mm_s"] * MM, v["rest_s"])
-        bench = experiments.Bench(fingertip=fingertip, prony=prony, realism=protocol.realism,
-                                  rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters["rate_hz"])
-        # the trials' dense solves are small: a second BLAS thread only fights for a shared core
-        with threadpool_limits(limits=1):
-            dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
-                                                     "prony": {"g": list(prony.g), "tau_s": list(prony.tau)},
-                                                     "realism": protocol.realism.to_dict()}, protocol.seed)
+    # the trials' dense solves are small: a second BLAS thread only fights for a shared core
+    with progress.task(stage), threadpool_limits(limits=1):
+        dataset = RUNNERS[protocol.name](bench, {**protocol.parameters, "viscoelastic": protocol.viscoelastic,
+                                                 **recorded, "realism": protocol.realism.to_dict()}, protocol.seed)
     timings["trials_s"] = time.perf_counter() - start
     return dataset, timings
-
-
-def _run_wearable(protocol: Protocol, progress: Progress) -> tuple[Dataset, dict]:
-    start = time.perf_counter()
-    p = protocol.parameters
-    with progress.task(f"{protocol.name}: {p['participants']} participants x {p['runs']} runs on {protocol.design.name}"):
-        prony = wearable.PadViscoelastic(**protocol.viscoelastic).prony()
-        bench = wearable.WearableBench(prony=prony, realism=protocol.realism,
-                                       rng=np.random.default_rng(protocol.seed), rate_hz=p["rate_hz"])
-        dataset = RUNNERS[protocol.name](bench, {**p, "viscoelastic": protocol.viscoelastic,
-                                                 "realism": protocol.realism.to_dict()}, protocol.seed)
-    return dataset, {"trials_s": time.perf_counter() - start}

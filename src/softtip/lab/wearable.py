@@ -34,9 +34,11 @@ from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, Positive
                                   choice, expect, schema)
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
+from softtip.lab.experiments import SeededBench
 from softtip.lab.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.lab.realism import WearableRealism
-from softtip.mechanics.fingerpad import CONTACT_SHAPES, SIDES, ChipMount, FingerPad, scaled, shape_radii
+from softtip.mechanics.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
+                                         shape_radii)
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
 from softtip.twin.wearable import WearableTwin
@@ -50,11 +52,15 @@ CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "si
 Motions = Annotated[list[choice(*MOTIONS)], Field(min_length=1), expect(f"a non-empty list of: {', '.join(MOTIONS)}")]
 Contacts = Annotated[list[choice(*CONTACT_SHAPES)], Field(min_length=1),
                      expect(f"a non-empty list of: {', '.join(CONTACT_SHAPES)}")]
+# the finger's and the ring's defaults are the mechanics' (softtip.mechanics.fingerpad, SI units)
+_PAD, _MOUNT = FingerPad(), ChipMount()
 
 
 @schema(section="parameters")
 class WearableParameters:
-    """The ``[parameters]`` table of the wearable protocol (S2; units in the names)."""
+    """The ``[parameters]`` table of the wearable protocol (S2; units in the names). The finger's and the
+    ring's defaults are those of :class:`~softtip.mechanics.fingerpad.FingerPad` and
+    :class:`~softtip.mechanics.fingerpad.ChipMount`."""
 
     rate_hz: PositiveNumber = 10.0  # both sensors, unfiltered
     simulation_rate_hz: PositiveNumber = 100.0  # the grid the continuous history is simulated on
@@ -74,14 +80,14 @@ class WearableParameters:
     tangential_effort: PositiveNumber = 1.0  # tilts reach up to 1.1 x this share of the friction limit
     normal_coupling: NonNegativeNumber = 0.3
     lean_share: Fraction = 0.5
-    finger_width_mm: PositiveNumber = 15.0
-    pad_stiffness_N_per_mm: PositiveNumber = 0.33
-    pad_stiffening_per_mm: PositiveNumber = 1.7
-    friction: PositiveNumber = 0.9
-    nail_fold_transmission: Fraction = 0.1
-    sensor_side: choice(*SIDES) = "radial"
-    sensor_offset_mm: Real = -3.0  # along the finger from the pad's contact point, distal > 0
-    ring_preload_N: NonNegativeNumber = 0.5
+    finger_width_mm: PositiveNumber = _PAD.width / MM
+    pad_stiffness_N_per_mm: PositiveNumber = _PAD.stiffness * MM
+    pad_stiffening_per_mm: PositiveNumber = _PAD.stiffening * MM
+    friction: PositiveNumber = _PAD.friction
+    nail_fold_transmission: Fraction = _PAD.transmission
+    sensor_side: choice(*SIDES) = _MOUNT.side
+    sensor_offset_mm: Real = _MOUNT.position_y / MM  # along the finger from the pad's contact point, distal > 0
+    ring_preload_N: NonNegativeNumber = _MOUNT.preload
 
     def __post_init__(self) -> None:
         if self.simulation_rate_hz < 2 * self.rate_hz:
@@ -98,11 +104,11 @@ class WearableParameters:
 
 @schema(section="viscoelastic")
 class PadViscoelastic:
-    """The finger tissue's reduced relaxation function: Prony weights ``g`` and times ``tau_s``
-    (Pawluk & Howe 1999's time constants; the weights are assumed, see softtip.mechanics.fingerpad)."""
+    """The finger tissue's reduced relaxation function: Prony weights ``g`` and times ``tau_s``; default
+    :data:`~softtip.mechanics.fingerpad.PAD_RELAXATION` (Pawluk & Howe 1999's time constants, assumed weights)."""
 
-    g: Numbers = field(default_factory=lambda: [0.25, 0.15, 0.2])
-    tau_s: Numbers = field(default_factory=lambda: [0.004, 0.07, 1.4])
+    g: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.g))
+    tau_s: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.tau))
 
     def __post_init__(self) -> None:
         try:
@@ -135,16 +141,10 @@ class WearableDevice:
 
 
 @dataclass
-class WearableBench:
+class WearableBench(SeededBench):
     """What the wearable protocol needs: the tissue's relaxation, the realism and a seeded stream."""
 
-    prony: PronySeries
     realism: WearableRealism
-    rng: np.random.Generator
-    rate_hz: float
-
-    def scatter(self, sd: float, size=None):
-        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
 
 
 def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:

@@ -402,7 +402,7 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
                                                             groups=dataset.groups[train])
     results = {"timings_s": timings}
     published = published_table("contact-states")
-    cells, confusions = {}, []
+    cells, confusions, per_phi = {}, [], {}
 
     def fill(row: str, probabilities: dict) -> None:
         values = {STATE_NAMES[state]: p for state, p in probabilities.items()}
@@ -413,9 +413,10 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
     for name in ("trained", "untrained-angles", "untrained-approach"):
         mask = touching & (sets == name) & (roles == VALIDATION)
         results[name] = _classifier_report(dataset, model, mask, classes)
+        per_phi[name] = {f"{p:g}": _classifier_report(dataset, model, mask & (phi == p), classes)
+                         for p in np.unique(phi[mask])}
         results[name]["mean_probability_per_phi"] = {
-            f"{p:g}": _classifier_report(dataset, model, mask & (phi == p), classes)["mean_probability_of_true_class"]
-            for p in np.unique(phi[mask])}
+            p: report["mean_probability_of_true_class"] for p, report in per_phi[name].items()}
         if name == "trained":
             fill("trained φ 10/20/30°", results[name]["mean_probability_of_true_class"])
         elif name == "untrained-angles":
@@ -429,14 +430,17 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
     table = paper_table(published, cells, caption=(
         "Mean probability the classifier gives the correct state, per state; untrained orientations and the "
         "untrained approach direction were never seen in calibration."))
-    sources = {"trained φ 10/20/30°": "trained", "untrained approach, φ 20°": "untrained-approach",
-               **{row: "untrained-angles" for row in published.rows if row.startswith("untrained φ")}}
+    # each row's confusion over its own samples: an untrained angle's over that angle's
+    sources = {"trained φ 10/20/30°": (results["trained"], "every trained sample"),
+               "untrained approach, φ 20°": (results["untrained-approach"], "every untrained-approach sample"),
+               **{f"untrained φ {p}°": (report, f"the untrained-angles samples at φ {p}°")
+                  for p, report in per_phi["untrained-angles"].items()}}
     outside = {(c.row, c.column) for c in table.comparisons() if c.verdict == OUTSIDE}
-    _explain(table, {row: "; ".join(f"{STATE_NAMES[state]}: {_confused(results[name], state, STATE_NAMES)}"
+    _explain(table, {row: "; ".join(f"{STATE_NAMES[state]}: {_confused(report, state, STATE_NAMES)}"
                                     for state in classes if (row, STATE_NAMES[state]) in outside)
-                     + f" (over every {name} sample). The edge contact lies between the two point contacts in the "
-                       "chips' readings (figure)."
-                     for row, name in sources.items()})
+                     + f" (over {samples}). The edge contact lies between the two point contacts in the chips' "
+                       "readings (figure)."
+                     for row, (report, samples) in sources.items() if row in published.rows})
     figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
     state = dataset.column("state")
     for k, ax in enumerate(axes):

@@ -18,17 +18,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from typing import Annotated, Any, Optional, Union
+from typing import Annotated, Any, Optional, Self, Union
 
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from softtip._core.config import Flag, PositiveInteger, checked, choice, expect, integer
+from softtip._core.config import Flag, OpenFraction, PositiveInteger, checked, choice, expect, integer
 from softtip._core.threads import single_threaded_blas
 from softtip.sysid import transfer
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
-from softtip.sysid.recording import Fraction, Recording
+from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, refine
 from softtip.sysid.simulation import StreamingSimulator, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -44,7 +44,11 @@ def _poles(values: np.ndarray) -> list[list[float]]:
 
 
 class IdentifiedModel(BaseEstimator):
-    """What both kinds share once fitted: the discrete system ``system_`` at the sample time ``ts_``."""
+    """What both kinds share once fitted: the discrete system ``system_`` at the sample time ``ts_``.
+
+    Each kind identifies itself in ``_identify(recording)``, which returns its simulation of the
+    recording (what ``fit_percent_`` scores, and :func:`order_table` reuses).
+    """
 
     _PARAMETERS: dict[str, Any] = {}  # parameter -> the type it must have
 
@@ -52,14 +56,21 @@ class IdentifiedModel(BaseEstimator):
         for name, kind in self._PARAMETERS.items():
             checked(kind, name, getattr(self, name), IdentificationError)
 
-    def _remember(self, recording: Recording, started: float) -> None:
+    def fit(self, recording: Recording) -> Self:
+        """Identifies the model on ``recording``; returns it."""
+        self._identify(recording)
+        return self
+
+    def _remember(self, recording: Recording, started: float) -> list[np.ndarray]:
+        """Keeps what the fit was made on and how well it simulates it; returns that simulation."""
         self.ts_ = recording.ts
         self.inputs_, self.outputs_ = recording.inputs, recording.outputs
         self.input_units_, self.output_units_ = recording.input_units, recording.output_units
         self.data_ = recording.describe()
-        y = np.vstack([trial.y for trial in recording.trials])
-        self.fit_percent_ = fit_percent(y, np.vstack(self.simulate(recording)))
+        simulated = self.simulate(recording)
+        self.fit_percent_ = fit_percent(np.vstack([trial.y for trial in recording.trials]), np.vstack(simulated))
         self.fit_seconds_ = time.perf_counter() - started
+        return simulated
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "system_"):
@@ -102,7 +113,13 @@ class IdentifiedModel(BaseEstimator):
     def evaluate(self, recording: Recording, k: int | None = None, full_scale: FullScale = MEASURED) -> Scores:
         """Every metric per output on the scored samples of ``recording``, simulated (``k`` None) or
         predicted ``k`` steps ahead."""
-        predicted = self.predict(recording, k)
+        return self.evaluate_predictions(recording, self.predict(recording, k), full_scale)
+
+    def evaluate_predictions(self, recording: Recording, predicted: list[np.ndarray],
+                             full_scale: FullScale = MEASURED) -> Scores:
+        """Every metric per output of the model's outputs ``predicted`` for ``recording`` (one array per
+        trial: its simulation or predictions) on the scored samples of ``recording``."""
+        self._check_outputs(recording)
         masks = [np.ones(len(trial), bool) if trial.scored is None else trial.scored for trial in recording.trials]
         y = np.vstack([trial.y[mask] for trial, mask in zip(recording.trials, masks, strict=True)])
         yhat = np.vstack([values[mask] for values, mask in zip(predicted, masks, strict=True)])
@@ -119,8 +136,7 @@ class IdentifiedModel(BaseEstimator):
 
     def residuals(self, recording: Recording) -> np.ndarray:
         """One-step prediction errors of every trial, stacked (N, ny)."""
-        return np.vstack([trial.y - yhat for trial, yhat in zip(recording.trials, self.predict(recording, 1),
-                                                                   strict=True)])
+        return _errors(recording, self.predict(recording, 1))
 
     # -- model files (softtip.sysid.files) ----------------------------------------
 
@@ -177,7 +193,7 @@ class StateSpaceModel(IdentifiedModel):
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
                    "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
-                   "max_iterations": PositiveInteger, "tolerance": Fraction}
+                   "max_iterations": PositiveInteger, "tolerance": OpenFraction}
 
     def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
@@ -192,7 +208,7 @@ class StateSpaceModel(IdentifiedModel):
         self.max_iterations = max_iterations
         self.tolerance = tolerance
 
-    def fit(self, recording: Recording) -> StateSpaceModel:
+    def _identify(self, recording: Recording) -> list[np.ndarray]:
         started = time.perf_counter()
         self._check_params()
         recording.require_excitation()
@@ -210,8 +226,7 @@ class StateSpaceModel(IdentifiedModel):
         self.singular_values_ = found.singular_values
         self.reflected_poles_, self.kalman_ = found.reflected_poles, found.kalman
         self.refinement_: RefinementReport | None = report
-        self._remember(recording, started)
-        return self
+        return self._remember(recording, started)
 
     @property
     def n_parameters(self) -> int:
@@ -275,7 +290,7 @@ class TransferFunctionModel(IdentifiedModel):
             checked(integer(0, self.n_poles, f"an integer 0..n_poles ({self.n_poles})"), "n_zeros", self.n_zeros,
                     IdentificationError)
 
-    def fit(self, recording: Recording) -> TransferFunctionModel:
+    def _identify(self, recording: Recording) -> list[np.ndarray]:
         started = time.perf_counter()
         self._check_params()
         recording.require_excitation()
@@ -283,8 +298,7 @@ class TransferFunctionModel(IdentifiedModel):
                                   max_iterations=self.max_iterations, enforce_stability=self.enforce_stability)
         self._set_transfer_function(tf, recording.ts)
         self.report_ = report
-        self._remember(recording, started)
-        return self
+        return self._remember(recording, started)
 
     def _set_transfer_function(self, tf: transfer.TransferFunctionMatrix, ts: float) -> None:
         self.tf_ = tf
@@ -297,12 +311,7 @@ class TransferFunctionModel(IdentifiedModel):
             for i, row in enumerate(getattr(self.tf_, role)):
                 for j, coefficients in enumerate(row):
                     arrays[f"tf/{role}/{i}/{j}"] = coefficients
-        report = self.report_
-        state["report"] = {"converged": bool(report.converged), "iterations": int(report.iterations),
-                           "cost": float(report.cost), "message": report.message,
-                           "srivc_iterations": int(report.srivc_iterations),
-                           "reflected_poles": int(report.reflected_poles),
-                           "per_output_fit_percent": [float(v) for v in report.per_output_fit_percent]}
+        state["report"] = self.report_.to_dict()
         return state, arrays
 
     def _restore(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -319,9 +328,7 @@ class TransferFunctionModel(IdentifiedModel):
                 np.allclose(getattr(self.system_, name), getattr(saved, name), rtol=1e-9, atol=1e-12)
                 for name in ("A", "B", "C", "D")):
             raise IdentificationError("the saved discrete system is not the realisation of the saved transfer function")
-        report = dict(state["report"])
-        report["per_output_fit_percent"] = np.asarray(report["per_output_fit_percent"], dtype=np.float64)
-        self.report_ = transfer.FitReport(**report)
+        self.report_ = transfer.FitReport.from_dict(state["report"])
 
     @property
     def n_parameters(self) -> int:
@@ -329,21 +336,24 @@ class TransferFunctionModel(IdentifiedModel):
         return int(np.sum(self.tf_.n_poles + self.tf_.n_zeros + 1))
 
     def summary(self) -> dict:
-        report = self.report_
         return self._summary("transfer function") | {
             "n_poles": self.tf_.n_poles.tolist(), "n_zeros": self.tf_.n_zeros.tolist(),
             "continuous_stable": self.tf_.is_stable(),
             "numerators": [[b.tolist() for b in row] for row in self.tf_.numerators],
             "denominators": [[a.tolist() for a in row] for row in self.tf_.denominators],
-            "report": {"converged": bool(report.converged), "iterations": int(report.iterations),
-                       "srivc_iterations": int(report.srivc_iterations), "cost": float(report.cost),
-                       "reflected_poles": int(report.reflected_poles), "message": report.message}}
+            # the summary's fit % per output is by name, above
+            "report": {key: value for key, value in self.report_.to_dict().items() if key != "per_output_fit_percent"}}
 
 
 # ------------------------------------------------------------------------------------------- order tables
 
 KINDS = {"tf": TransferFunctionModel, "ss": StateSpaceModel}
 DEFAULT_ORDERS = {"tf": range(2, 9), "ss": range(2, 13)}
+
+
+def _errors(recording: Recording, predicted: list[np.ndarray]) -> np.ndarray:
+    """The errors of ``predicted`` (one array per trial) against the outputs of ``recording``, stacked (N, ny)."""
+    return np.vstack([trial.y - yhat for trial, yhat in zip(recording.trials, predicted, strict=True)])
 
 
 def information_criteria(errors: np.ndarray, n_parameters: int) -> tuple[float, float]:
@@ -372,10 +382,16 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
     for order in orders:
         model = KINDS[kind](order, **params) if kind == "ss" else KINDS[kind](n_poles=order, **params)
         started = time.perf_counter()
-        model.fit(recording)
+        simulated = model._identify(recording)
         seconds = time.perf_counter() - started
-        scores = model.evaluate(validation if validation is not None else recording)
-        aic, bic = information_criteria(model.residuals(recording), model.n_parameters)
+        # the fit's simulation of the estimation data scores it there, and is the one-step prediction of a
+        # model without a noise model
+        if validation is None:
+            scores = model.evaluate_predictions(recording, simulated)
+        else:
+            scores = model.evaluate(validation)
+        one_step = simulated if model.system_.K is None else model.predict(recording, 1)
+        aic, bic = information_criteria(_errors(recording, one_step), model.n_parameters)
         fits = scores.values["fit_percent"]
         rows.append({"order": order, "parameters": model.n_parameters, "fit_percent": float(np.mean(fits)),
                      "fit_percent_per_output": {name: float(v) for name, v in zip(model.outputs_, fits, strict=True)},

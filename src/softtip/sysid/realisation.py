@@ -2,7 +2,8 @@
 
 Entry G_ij(s) = b(s) / a(s) (descending powers of s, a monic) becomes the controller canonical
 form of scipy.signal.tf2ss: A_ij the companion matrix of a (first row -a_1 .. -a_n, ones below
-the diagonal), B_ij = e_1, C_ij = b_1..n - b_0 a_1..n, D_ij = b_0; each companion block is then
+the diagonal), B_ij = e_1, C_ij = b_1..n - b_0 a_1..n, D_ij = b_0 (:func:`companion` and
+:func:`output_map`, whose states s^k/A run the other way, reversed); each companion block is then
 scaled by a diagonal similarity (scipy.linalg.matrix_balance, powers of 2: exact) because the
 coefficients of a sixth-order polynomial span many decades. The blocks are stacked
 block-diagonally: input j drives the blocks of column j, output i sums the blocks of row i. An
@@ -19,6 +20,24 @@ import scipy.linalg
 from softtip.sysid.statespace import IdentificationError, StateSpace
 
 
+def companion(a: np.ndarray) -> np.ndarray:
+    """The controller canonical state matrix of 1/A, A monic with ascending lower coefficients ``a``
+    (a_0 .. a_n-1): ones above the diagonal, last row -a; its states are s^k/A v, k = 0..n-1."""
+    n = len(a)
+    matrix = np.eye(n, k=1)
+    matrix[-1] = -a
+    return matrix
+
+
+def output_map(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """C and D of B/A v = C xi + D v on the states xi_k = s^k/A v of :func:`companion` (``b`` ascending,
+    of degree n at most): a biproper B (degree n) adds b_n s^n/A v = b_n (v - a . xi)."""
+    n = len(a)
+    if len(b) > n:
+        return b[:n] - b[n] * a, float(b[n])
+    return np.concatenate([b, np.zeros(n - len(b))]), 0.0
+
+
 def _entry(numerator: np.ndarray, denominator: np.ndarray, where: str
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(A, B (n,), C (n,), D) of one entry in balanced controller canonical form."""
@@ -30,16 +49,14 @@ def _entry(numerator: np.ndarray, denominator: np.ndarray, where: str
     n = len(denominator) - 1
     if len(numerator) > n + 1:
         raise IdentificationError(f"transfer function {where}: improper ({len(numerator) - 1} zeros, {n} poles)")
-    numerator = np.concatenate([np.zeros(n + 1 - len(numerator)), numerator])
-    feedthrough = numerator[0]
+    ascending = denominator[:0:-1]
+    output, feedthrough = output_map(ascending, numerator[::-1])
     if n == 0:
         return np.zeros((0, 0)), np.zeros(0), np.zeros(0), feedthrough
-    A = np.zeros((n, n))
-    A[0] = -denominator[1:]
-    A[np.arange(1, n), np.arange(n - 1)] = 1.0
+    A = companion(ascending)[::-1, ::-1]
     B = np.zeros(n)
     B[0] = 1.0
-    C = numerator[1:] - feedthrough * denominator[1:]
+    C = output[::-1]
     A, (scaling, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
     return A, B / scaling, C * scaling, feedthrough
 

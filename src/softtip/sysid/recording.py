@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 import scipy.signal
 
 from softtip._core.archive import hash_arrays
-from softtip._core.config import PositiveNumber, checked, number
+from softtip._core.config import OpenFraction, PositiveNumber, checked
 from softtip.data.csvload import parse_numbers
 from softtip.data.dataset import (
     METADATA_KEY,
@@ -39,11 +39,12 @@ from softtip.data.dataset import (
     Dataset,
     DatasetError,
     column_to_numpy,
+    first_line,
+    require_columns,
     trial_runs,
 )
 
 DETRENDS = ("none", "mean", "linear")
-Fraction = number("a fraction in (0, 1)", gt=0, lt=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,7 +281,7 @@ def sample_time(source: str, column: str, trial: np.ndarray, time: np.ndarray, t
                 tolerance: float) -> float:
     """The sample time of the time column ``time`` (the median step within trials), refusing steps that
     differ from it, and a given ``ts`` that differs from it, by more than ``tolerance`` of it."""
-    tolerance = checked(Fraction, "time_tolerance", tolerance, DatasetError)
+    tolerance = checked(OpenFraction, "time_tolerance", tolerance, DatasetError)
     same = trial[1:] == trial[:-1]
     steps = np.diff(time)[same]
     if steps.size == 0:
@@ -324,16 +325,12 @@ def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: 
     return Recording(ts, tuple(inputs), tuple(outputs), tuple(trials), input_units, output_units, source)
 
 
-def _first_line(problem: Exception) -> str:
-    return str(problem).strip().splitlines()[0] if str(problem).strip() else type(problem).__name__
-
-
 def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     try:
         table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(
             include_columns=wanted, column_types=dict.fromkeys(wanted, pa.string())))
     except (pa.ArrowException, OSError) as problem:
-        raise DatasetError(f"{path}: cannot be read as CSV ({_first_line(problem)})") from None
+        raise DatasetError(f"{path}: cannot be read as CSV ({first_line(problem)})") from None
     return {name: parse_numbers(path, name, table.column(name)) for name in wanted}
 
 
@@ -341,7 +338,7 @@ def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     try:
         table = pq.read_table(path, columns=wanted)
     except (pa.ArrowException, OSError) as problem:
-        raise DatasetError(f"{path}: unreadable Parquet data ({_first_line(problem)})") from None
+        raise DatasetError(f"{path}: unreadable Parquet data ({first_line(problem)})") from None
     values = {}
     for name in wanted:
         column = table.column(name)
@@ -350,14 +347,6 @@ def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
             raise DatasetError(f"{path}: column {name!r} holds {column.type} values, expected numbers")
         values[name] = column_to_numpy(repr(name), column)
     return values
-
-
-def _check_columns(path: Path, wanted: list[str], present: list[str]) -> None:
-    for name in wanted:
-        if name not in present:
-            raise DatasetError(f"{path}: no column {name!r} (columns: {', '.join(present)})")
-        if present.count(name) > 1:
-            raise DatasetError(f"{path}: column {name!r} appears more than once")
 
 
 def _is_dataset_file(path: Path) -> bool:
@@ -379,7 +368,7 @@ def file_columns(path: str | os.PathLike) -> list[str]:
         return pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
     except (pa.ArrowException, OSError) as problem:
         kind = "CSV" if suffix == ".csv" else "Parquet"
-        raise DatasetError(f"{path}: cannot be read as {kind} ({_first_line(problem)})") from None
+        raise DatasetError(f"{path}: cannot be read as {kind} ({first_line(problem)})") from None
 
 
 def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequence[str], *,
@@ -408,7 +397,7 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
         if name in own:
             raise DatasetError(f"{path}: column {name!r} is the time or trial column, not a signal")
     wanted = list(dict.fromkeys([*own, *inputs, *outputs]))
-    _check_columns(path, wanted, present)
+    require_columns(path, wanted, present)
     columns = reader(path, wanted)
     if trial_name is None:
         trial = np.zeros(len(columns[wanted[0]]), dtype=np.int64)

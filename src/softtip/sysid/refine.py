@@ -7,7 +7,8 @@ deviation, so that outputs in different units weigh alike). Parameters: every en
 K, C and D, moved only across the n² directions of the similarity transforms x -> T x, which
 change nothing of the predictor (MATLAB's data-driven local coordinates: θ = θ0 + Q η, Q an
 orthonormal basis of the complement of those directions at the start). The Jacobian is exact:
-the predictor's sensitivities to each entry are the responses of Ā to the signals x, u and y.
+the predictor's sensitivities to each entry are the responses of Ā to the signals x, u and y. The
+states of one parameter vector serve both its errors and its Jacobian (the solver asks for both).
 
 It stops when a step lowers the cost by less than ``tolerance`` of it (default 1e-4, MATLAB's
 0.01 %) or after ``max_iterations`` evaluations (default 20, MATLAB's ``ssest`` default).
@@ -26,6 +27,7 @@ import scipy.optimize
 
 from softtip.sysid.simulation import state_sequence
 from softtip.sysid.statespace import StateSpace
+from softtip.sysid.subspace import filtered_inputs
 
 
 @dataclass(frozen=True)
@@ -60,8 +62,7 @@ class _Predictor:
                                                      n * n + n * nu + a * ny + (c - n - nu)))
         self.order = np.empty(signals * n, dtype=np.intp)
         self.order[within.ravel()] = np.arange(signals * n)
-        self.diagonal = (np.arange(n)[None, :] * (signals * n) + np.arange(signals)[:, None] * n
-                         + np.arange(n)[None, :]).ravel()
+        self._last: tuple[np.ndarray, list[np.ndarray]] | None = None  # the parameters last run and their states
 
     def pack(self, system: StateSpace) -> np.ndarray:
         A, B, C, D, K = system.A, system.B, system.C, system.D, system.K
@@ -94,8 +95,12 @@ class _Predictor:
         return StateSpace(A_bar + K @ C, B_bar + K @ D, C, D, ts, K, covariance)
 
     def _states(self, theta: np.ndarray) -> list[np.ndarray]:
-        A_bar, B_bar, K, _, _ = self.unpack(theta)
-        return [state_sequence(A_bar, u @ B_bar.T + y @ K.T, np.zeros(self.n)) for u, y in self.segments]
+        """The predictor's states of every trial, run once per parameter vector."""
+        if self._last is None or not np.array_equal(self._last[0], theta):
+            A_bar, B_bar, K, _, _ = self.unpack(theta)
+            self._last = theta.copy(), [state_sequence(A_bar, u @ B_bar.T + y @ K.T, np.zeros(self.n))
+                                        for u, y in self.segments]
+        return self._last[1]
 
     def errors(self, theta: np.ndarray) -> np.ndarray:
         """(N, ny) one-step errors, unscaled."""
@@ -112,17 +117,10 @@ class _Predictor:
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         A_bar, _, _, C, _ = self.unpack(theta)
         n, nu, ny = self.n, self.nu, self.ny
-        signals = n + nu + ny
         blocks = []
         for (u, y), x in zip(self.segments, self._states(theta), strict=True):
             N = len(u)
-            drive = np.hstack([x, u, y])
-            sensitivity = np.zeros((n, signals * n))
-            dynamic = np.empty((N, ny, signals * n))
-            for t in range(N):
-                dynamic[t] = C @ sensitivity
-                sensitivity = A_bar @ sensitivity
-                sensitivity.flat[self.diagonal] += np.repeat(drive[t], n)
+            dynamic = filtered_inputs(A_bar, C, np.hstack([x, u, y]))
             eye = np.eye(ny)
             static = np.concatenate([np.einsum("ab,tc->tabc", eye, x).reshape(N, ny, ny * n),
                                      np.einsum("ab,tc->tabc", eye, u).reshape(N, ny, ny * nu)], axis=2)

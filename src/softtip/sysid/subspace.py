@@ -130,9 +130,9 @@ def _reflect_unstable(A: np.ndarray) -> tuple[np.ndarray, int]:
     return np.real(vectors @ np.diag(values) @ np.linalg.inv(vectors)), int(outside.sum())
 
 
-def _filtered_inputs(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> np.ndarray:
+def filtered_inputs(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> np.ndarray:
     """For every sample t, C Σ_s<t A^(t-1-s) E_ab u_b(s) for every entry (a, b) of B: (N, ny, nu n),
-    column b n + a, the outputs' sensitivity to B."""
+    column b n + a, the outputs' sensitivity to B in x[t+1] = A x + B u, y = C x (from the zero state)."""
     n, nu = A.shape[0], u.shape[1]
     diagonal = (np.arange(n)[None, :] * (nu * n) + np.arange(nu)[:, None] * n + np.arange(n)[None, :]).ravel()
     response = np.zeros((n, nu * n))
@@ -154,7 +154,7 @@ def input_matrices(A: np.ndarray, C: np.ndarray, segments: list[tuple[np.ndarray
     for k, (u, y) in enumerate(segments):
         N = len(u)
         rows = np.zeros((N, ny, shared + n * len(segments)))
-        rows[:, :, :nu * n] = _filtered_inputs(A, C, u)
+        rows[:, :, :nu * n] = filtered_inputs(A, C, u)
         rows[:, :, nu * n:shared] = np.einsum("ac,tb->tacb", np.eye(ny), u).reshape(N, ny, ny * nu)
         free = np.empty((N, ny, n))
         power = C

@@ -73,6 +73,9 @@ import numpy as np
 from scipy import linalg, optimize
 
 from softtip._core.threads import single_threaded_blas
+from softtip.sysid.metrics import fit_percent
+from softtip.sysid.realisation import companion, output_map
+from softtip.sysid.statespace import IdentificationError
 
 # SRIVC sweeps without a relative improvement of the simulation error after which an SRIVC problem
 # keeps its best iterate; the common-denominator stage before backfitting only starts it, to this
@@ -169,15 +172,6 @@ class TransferFunctionMatrix:
 # ------------------------------------------------------------------------- exact ZOH simulation kernels
 
 
-def _companion(a: np.ndarray) -> np.ndarray:
-    """The controllable canonical state matrix of 1/A for the monic A with ascending lower
-    coefficients ``a``: its states are s^k/A v, k = 0..n-1."""
-    n = len(a)
-    matrix = np.eye(n, k=1)
-    matrix[-1] = -a
-    return matrix
-
-
 def _rescaled(a: np.ndarray, numerators: list[np.ndarray], ratio: float):
     """Ascending coefficients of A (monic, degree len(a)) and of its numerators in a time unit
     ``ratio`` times shorter: a_k ratio^(n - k)."""
@@ -244,15 +238,6 @@ def _recursion_states(phi: np.ndarray, gamma: np.ndarray, v: np.ndarray, initial
     return states.transpose(0, 2, 3, 4, 1).reshape(count, n, signals, blocks * steps)[..., :length]
 
 
-def _output_map(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
-    """C and D of B/A v = C xi + D v on the states xi_k = s^k/A v: a biproper B (degree n) adds
-    b_n s^n/A v = b_n (v - a . xi)."""
-    n = len(a)
-    if len(b) > n:
-        return b[:n] - b[n] * a, float(b[n])
-    return np.concatenate([b, np.zeros(n - len(b))]), 0.0
-
-
 def _discrete_systems(systems, steps, linear: bool = False):
     """E continuous systems (M, g) of any sizes, padded to the largest, discretised over their steps:
     (Phi, Gamma0, Gamma1) as :func:`_discretised` gives them."""
@@ -288,7 +273,7 @@ def _filter_systems(a_list) -> list[tuple[np.ndarray, np.ndarray]]:
     for a in a_list:
         gain = np.zeros(len(a))
         gain[-1] = 1.0
-        systems.append((_companion(a), gain))
+        systems.append((companion(a), gain))
     return systems
 
 
@@ -305,9 +290,9 @@ def _sensitivity_states(a_list, b_list, steps, v: np.ndarray) -> list[np.ndarray
     systems = []
     for a, b in zip(a_list, b_list):
         n = len(a)
-        output, direct = _output_map(a, b)
+        output, direct = output_map(a, b)
         matrix = np.zeros((2 * n, 2 * n))
-        matrix[:n, :n] = matrix[n:, n:] = _companion(a)
+        matrix[:n, :n] = matrix[n:, n:] = companion(a)
         matrix[-1, :n] += output
         gain = np.zeros(2 * n)
         gain[n - 1], gain[-1] = 1.0, direct
@@ -317,7 +302,7 @@ def _sensitivity_states(a_list, b_list, steps, v: np.ndarray) -> list[np.ndarray
 
 def _response(a: np.ndarray, b: np.ndarray, xi: np.ndarray, v: np.ndarray) -> np.ndarray:
     """B/A v from the states xi_k = s^k/A v (n, ...) and v."""
-    output, direct = _output_map(a, b)
+    output, direct = output_map(a, b)
     return np.tensordot(output, xi, axes=1) + direct * v
 
 
@@ -394,8 +379,8 @@ def _segments(segments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     for name, signals in (("input", inputs), ("output", outputs)):
         values = signals[:, mask]
         for channel in np.flatnonzero(np.ptp(values, axis=1) == 0):
-            raise ValueError(f"segments: {name} {channel} is constant ({values[channel, 0]:g}) in every segment: "
-                             f"expected a signal that varies")
+            raise IdentificationError(f"segments: {name} {channel} is constant ({values[channel, 0]:g}) in every "
+                                      f"segment: expected a signal that varies")
     return inputs, outputs, mask
 
 
@@ -438,6 +423,19 @@ class FitReport:
     srivc_iterations: int
     reflected_poles: int
     per_output_fit_percent: np.ndarray
+
+    def to_dict(self) -> dict:
+        """JSON-able: every field, the fit % per output as a list."""
+        return {"converged": bool(self.converged), "iterations": int(self.iterations), "cost": float(self.cost),
+                "message": self.message, "srivc_iterations": int(self.srivc_iterations),
+                "reflected_poles": int(self.reflected_poles),
+                "per_output_fit_percent": [float(v) for v in self.per_output_fit_percent]}
+
+    @classmethod
+    def from_dict(cls, fields: dict) -> FitReport:
+        """The report :meth:`to_dict` gave."""
+        return cls(**{**fields, "per_output_fit_percent": np.asarray(fields["per_output_fit_percent"],
+                                                                     dtype=np.float64)})
 
 
 def _roots(a: np.ndarray) -> np.ndarray:
@@ -716,6 +714,10 @@ def fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], ts: float, n_poles, n
     again among stable models only (counted in the report); without it an unstable estimate is
     returned and said so in the report's message (SRIVC's own estimates are always stable: they
     serve as its prefilters). See the module notes for the method.
+
+    A mistaken argument raises ValueError; data that cannot identify the model (fewer samples than one
+    output's parameters, a signal constant in every segment) raise :class:`IdentificationError`, as in
+    the rest of :mod:`softtip.sysid`.
     """
     ts = _sample_time(ts)
     inputs, outputs, mask = _segments(segments)
@@ -728,8 +730,8 @@ def fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], ts: float, n_poles, n
     samples = int(mask.sum())
     parameters = int((n_poles + n_zeros + 1).sum(axis=1).max())
     if samples < parameters:
-        raise ValueError(f"segments: {samples} samples in all, fewer than the {parameters} parameters of one "
-                         f"output's model")
+        raise IdentificationError(f"segments: {samples} samples in all, fewer than the {parameters} parameters "
+                                  f"of one output's model")
     with single_threaded_blas():  # small thin products: a second BLAS thread only thrashes
         return _estimated(inputs, outputs, mask, ts, n_poles, n_zeros, refine, max_iterations, tolerance,
                           enforce_stability)
@@ -772,10 +774,10 @@ def _estimated(inputs, outputs, mask, ts, n_poles, n_zeros, refine, max_iteratio
             if np.any(poles.real >= 0):
                 converged = converged and not enforce_stability
                 notes.append(f"entry ({i}, {j}) is unstable")
-    errors = outputs[:, mask] - _responses(rows, inputs, ts).sum(axis=1)[:, mask]
-    centred = outputs[:, mask] - outputs[:, mask].mean(axis=1, keepdims=True)
+    measured, simulated = outputs[:, mask], _responses(rows, inputs, ts).sum(axis=1)[:, mask]
+    errors = measured - simulated
     report = FitReport(
         converged=converged, iterations=iterations, cost=0.5 * float(np.sum(errors**2)),
         message="; ".join(notes) if notes else "converged", srivc_iterations=sweeps, reflected_poles=reflected,
-        per_output_fit_percent=100.0 * (1.0 - np.linalg.norm(errors, axis=1) / np.linalg.norm(centred, axis=1)))
+        per_output_fit_percent=fit_percent(measured.T, simulated.T))
     return model, report
