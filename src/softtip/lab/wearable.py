@@ -30,6 +30,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
+from softtip._core.channels import AXES, FORCE
 from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
                                   choice, expect, schema)
 from softtip._core.units import MM
@@ -43,8 +44,7 @@ from softtip.mechanics.viscoelastic import PronySeries
 from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
 from softtip.twin.wearable import WearableTwin
 
-AXES = ("x", "y", "z")
-CHANNELS = {f"side_f{axis}_N": "N" for axis in AXES}
+CHANNELS = dict.fromkeys(FORCE.channel_names(1), FORCE.unit)  # the side chip
 LABELS = {**{f"f{axis}_N": "N" for axis in AXES}, "cop_x_mm": "mm", "cop_y_mm": "mm", "sliding": "1"}
 CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "side_air_fz_N": "N",
               **{f"side_tare_f{axis}_N": "N" for axis in AXES}, **{f"table_tare_f{axis}_N": "N" for axis in AXES}}
@@ -188,7 +188,7 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
             for k, (motion, contact) in enumerate(trials):
                 chip, table = read.chip[:, k], read.table[:, k]
                 writer.add({"time_s": instants,
-                            **{f"side_f{axis}_N": chip[:, a] - chip[0, a] for a, axis in enumerate(AXES)},
+                            **FORCE.columns(chip[:, None, :] - chip[0]),
                             **{f"f{axis}_N": table[:, a] - table[0, a] for a, axis in enumerate(AXES)},
                             "cop_x_mm": read.centre[:, k, 0] / MM, "cop_y_mm": read.centre[:, k, 1] / MM,
                             "sliding": read.sliding[:, k]},
