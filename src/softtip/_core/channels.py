@@ -35,8 +35,9 @@ def _checked_sensor(sensor: Any, axis: str) -> int:
 class Reading:
     """What a stream's 3-axis sensors read (``quantity``, in ``unit``) and how its channels are named.
 
-    ``symbol``: the quantity's symbol in displays (ΔBx, ΔFx); ``units``: the units a model's inputs
-    may be in, each as its value per ``unit`` (a model fitted in mT reads µT channels times 1e-3);
+    ``symbol``: the quantity's symbol in displays (ΔBx, ΔFx), ``shown_unit`` its unit there;
+    ``units``: the units values of this quantity may come in (a CSV column, a model's inputs), each as
+    how many ``unit`` one of it is (1 mT = 1000 µT);
     ``drift_threshold``: the default change (in ``unit``) below which a free sensor's baseline may
     follow slow drift; ``baseline_step``: the default change of that filtered baseline that replaces
     the one in use (:class:`softtip.realtime.Baseline`); ``decimals``: the decimals a display shows.
@@ -45,6 +46,7 @@ class Reading:
     quantity: str
     unit: str
     symbol: str
+    shown_unit: str
     prefix: str  # channel name before the sensor number
     infix: str  # between the sensor number and the axis
     units: dict[str, float] = field(compare=False)
@@ -95,10 +97,10 @@ class Reading:
         return 3 * sensor + axis
 
 
-MAGNETIC = Reading("flux density", "uT", "B", prefix="s", infix="b",
-                   units={"uT": 1.0, "µT": 1.0, "mT": 1e-3, "T": 1e-6}, drift_threshold=20.0,
+MAGNETIC = Reading("flux density", "uT", "B", "µT", prefix="s", infix="b",  # 1 G = 1e-4 T
+                   units={"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}, drift_threshold=20.0,
                    baseline_step=0.01, decimals=1)
-FORCE = Reading("force", "N", "F", prefix="side", infix="f", units={"N": 1.0, "mN": 1e3}, drift_threshold=0.05,
+FORCE = Reading("force", "N", "F", "N", prefix="side", infix="f", units={"N": 1.0, "mN": 1e-3}, drift_threshold=0.05,
                 baseline_step=1e-4, decimals=3, first_numbered=False)
 READINGS = (MAGNETIC, FORCE)
 CHANNEL_UNIT = MAGNETIC.unit

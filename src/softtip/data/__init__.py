@@ -12,7 +12,7 @@
 """
 
 from softtip._core.channels import channel_columns, channel_name, channel_names
-from softtip.data.csvload import MAGNETIC_UNITS_IN_UT, TIME_UNITS_IN_S, read_csv_recording
+from softtip.data.csvload import TIME_UNITS_IN_S, read_csv_recording
 from softtip.data.dataset import (
     FORMAT,
     SCHEMA_VERSION,
@@ -34,7 +34,6 @@ from softtip.data.splits import (
 
 __all__ = [
     "FORMAT",
-    "MAGNETIC_UNITS_IN_UT",
     "SCHEMA_VERSION",
     "TIME_UNITS_IN_S",
     "Dataset",

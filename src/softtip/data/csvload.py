@@ -42,7 +42,7 @@ import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 from pydantic import Field, Strict
 
-from softtip._core.channels import is_channel
+from softtip._core.channels import MAGNETIC, is_channel
 from softtip._core.config import choice, expect, integer, number, parse, read_toml, schema
 
 from softtip.data.dataset import (
@@ -60,14 +60,13 @@ from softtip.data.dataset import (
     unknown_and_missing,
 )
 
-MAGNETIC_UNITS_IN_UT = {"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}  # 1 G = 1e-4 T
 TIME_UNITS_IN_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
 _FIRST_DATA_LINE = 2  # line 1 is the header
 
 ColumnName = Annotated[str, Strict(), Field(min_length=1), expect("a CSV column name")]
-_MagneticUnit = Literal[tuple(MAGNETIC_UNITS_IN_UT)]
+_MagneticUnit = Literal[tuple(MAGNETIC.units)]
 MagneticUnits = Annotated[_MagneticUnit | dict[str, _MagneticUnit], expect(
-    f"a magnetic unit ({', '.join(MAGNETIC_UNITS_IN_UT)}) or a table of them per CSV column")]
+    f"a magnetic unit ({', '.join(MAGNETIC.units)}) or a table of them per CSV column")]
 UnitTable = Annotated[dict[str, Any], expect("a table of name = unit")]  # names and units: checked by the dataset
 Delimiter = Annotated[str, Strict(), Field(min_length=1, max_length=1), expect("one character")]
 SamplingRate = number("a positive sampling rate in Hz", gt=0)
@@ -248,7 +247,7 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
     for csv_name, name in layout.columns.items():
         column = table.column(csv_name)
         if csv_name in layout.magnetic_units:
-            values = parse_numbers(path, csv_name, column) * MAGNETIC_UNITS_IN_UT[layout.magnetic_units[csv_name]]
+            values = parse_numbers(path, csv_name, column) * MAGNETIC.units[layout.magnetic_units[csv_name]]
             if options.baseline_samples:
                 try:
                     values = subtract_trial_baseline(values, trial, options.baseline_samples)

@@ -60,7 +60,7 @@ class Estimator:
         unknown = sorted({u for u in units if u not in self.reading.units})
         if unknown:
             raise ValueError(f"model {name}: input unit {unknown[0]!r} is not one of {', '.join(self.reading.units)}")
-        scale = np.array([self.reading.units[u] for u in units])
+        scale = 1.0 / np.array([self.reading.units[u] for u in units])  # model units per reading unit
         self._scale = None if np.all(scale == 1.0) else scale
         self.chips_needed = int(self.input_index.max()) // 3 + 1
         if kind == "auto":

@@ -29,7 +29,6 @@ from softtip.realtime.sinks.factory import live_sinks
 from softtip.sensors import MLX90393Settings
 from softtip.studies.insertion import trained_model_path
 from softtip.sysid import Recording, TransferFunctionModel
-from softtip.sysid import load_model as load_system
 from softtip.sysid import save_model as save_system
 from softtip.sysid.metrics import score_outputs
 
@@ -95,13 +94,14 @@ WEARABLE_CALIBRATION_RUNS = 3  # seatings of the ring the model is identified on
 @dataclass(frozen=True)
 class WearableStream:
     """The wearable live scenario: a 6th-order transfer-function model identified on one participant's
-    calibration runs (``model``: its file), and a further seating of the ring to stream.
+    calibration runs (``system``; ``model``: its file), and a further seating of the ring to stream.
 
     ``readings`` (N, 1, 3): the side chip's absolute readings (N) of that seating's seven trials, one
     after the other, at ``rate_hz``; ``trial_starts``: the first frame of each trial; ``force_N``
     (N, 3): the table force, tared per trial as the study's is; ``validation``: the model's offline
     scores on that seating, trial by trial (the study's metrics)."""
 
+    system: TransferFunctionModel
     model: Path
     readings: np.ndarray
     trial_starts: np.ndarray
@@ -140,7 +140,7 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     readings = np.column_stack([streamed.column(name) + streamed.column(f"side_tare_{name.removeprefix('side_')}")
                                 for name in WEARABLE_INPUTS])
     starts = np.flatnonzero(np.r_[True, streamed.groups[1:] != streamed.groups[:-1]])
-    return WearableStream(path, readings[:, None, :], starts, streamed.y(list(FORCES)),
+    return WearableStream(model, path, readings[:, None, :], starts, streamed.y(list(FORCES)),
                           protocol.parameters["rate_hz"], scores.to_dict())
 
 
@@ -190,7 +190,7 @@ def run_wearable_demo(seed: int = 1, duration_s: float | None = None, dashboard:
         # A trial's first frame is its tare: estimated before the baseline is taken from it, it ends the
         # previous segment; the model restarts from rest on the next frame.
         tared = np.isin(rows, stream.trial_starts)
-        model = load_system(stream.model)
+        model = stream.system
         segments = np.split(np.arange(len(rows)), np.flatnonzero(tared) + 1)
         offline = np.vstack([model.simulate(changes[segment]) for segment in segments if len(segment)])
         scored = ~tared

@@ -49,6 +49,7 @@ from softtip.realtime.recording.format import (
     WRENCH_STAMPED,
     WRENCH_UNITS,
     RecordingError,
+    reading_topic,
 )
 from softtip.realtime.recording.reader import Recording, TopicMessages, read_recording
 
@@ -206,7 +207,7 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
     stamps, log_times, fields, incomplete = _frames(recording, reading_topics, reading)
     chips = len(reading_topics)
 
-    schema = READING_TOPICS[reading.quantity][1]
+    _, schema = reading_topic(reading)
     baselines = [_topic(recording, f"{prefix}/chip{k}/baseline", schema) for k in range(chips)]
     recorded_baseline = all(topic is not None for topic in baselines)
     if recorded_baseline:

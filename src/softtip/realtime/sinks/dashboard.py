@@ -70,8 +70,7 @@ class DashboardSink(Sink):
         nominal_hz = stream.rate_hz or (rate if math.isfinite(rate) else 1.0)
         counters = stream.counters(latency_window=max(1, int(nominal_hz * self.window_s)))
         reading = stream.reading
-        unit = "µT" if reading.unit == "uT" else reading.unit
-        chips = Table(title=f"Change of {reading.quantity} ({unit})", expand=False)
+        chips = Table(title=f"Change of {reading.quantity} ({reading.shown_unit})", expand=False)
         for column in ("chip", *(f"Δ{reading.symbol}{axis}" for axis in "xyz"), ""):
             chips.add_column(column, justify="right")
         for k in range(stream.chips):
