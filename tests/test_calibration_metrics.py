@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 from sklearn import metrics as skm
 
-from softtip.calibration.metrics import (
+from softtip.metrics import (
     confusion,
     first_detection,
     hysteresis_percent,

@@ -22,6 +22,10 @@ from softtip._core.files import atomic_write
 ZIP_MAGIC = b"PK\x03\x04"
 
 
+class ModelFileError(ValueError):
+    """A model file that cannot be written or trusted."""
+
+
 def canonical_json(value: dict) -> bytes:
     """``value`` as canonical JSON: sorted keys, no spaces, no NaN."""
     return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()

@@ -1,6 +1,6 @@
 """Signal kernels: pure numpy functions of sampled series that both the physics
 (:mod:`softtip.mechanics.viscoelastic`) and the calibration metrics
-(:mod:`softtip.calibration.metrics`) compute.
+(:mod:`softtip.metrics`) compute.
 
 The hysteresis of a load/unload cycle is defined in S1 §2: |Z_up − Z_down| /
 (Z_max − Z_min) × 100, with Z_up and Z_down the sensor output on the loading and

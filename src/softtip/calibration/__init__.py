@@ -1,4 +1,4 @@
-"""Calibration: models from sensor readings to what a robot needs, their metrics, their files.
+"""Calibration: models from sensor readings to what a robot needs, and their files.
 
 * :class:`PolynomialFit` — per-channel polynomial without cross terms, by pseudo-inverse
   (the published "PFM");
@@ -8,7 +8,7 @@
   conjugate gradient (``patternnet``/``trainscg``).
 
 All three are scikit-learn estimators with an unchecked ``predict_one`` for real time.
-:mod:`~softtip.calibration.metrics` holds the papers' metrics; :func:`save_model` and
+:mod:`softtip.metrics` holds the papers' metrics; :func:`save_model` and
 :func:`load_model` store fitted models as ``.npz`` + JSON, never pickle.
 """
 

@@ -37,7 +37,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 
 from softtip import __version__
-from softtip._core.archive import canonical_json, read_archive, write_archive
+from softtip._core.archive import ModelFileError, canonical_json, read_archive, write_archive
 from softtip.calibration import checks
 from softtip.calibration.classifier import SoftmaxClassifier
 from softtip.calibration.network import LMNetwork
@@ -50,10 +50,6 @@ SCALERS = {
     "StandardScaler": (StandardScaler, ("mean_", "var_", "scale_")),
     "MinMaxScaler": (MinMaxScaler, ("min_", "scale_", "data_min_", "data_max_", "data_range_")),
 }
-
-
-class ModelFileError(ValueError):
-    """A model file that cannot be written or trusted."""
 
 
 @dataclass(frozen=True)

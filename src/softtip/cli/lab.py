@@ -175,7 +175,7 @@ def _targets(data, target: list[str], kind: str) -> np.ndarray:
 
 
 def _score(estimator, kind: str, X: np.ndarray, y: np.ndarray, target: list[str]) -> dict:
-    from softtip.calibration import metrics
+    from softtip import metrics
 
     if kind == "classifier":
         predicted = estimator.predict(X)

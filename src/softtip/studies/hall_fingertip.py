@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 
 from softtip._core.progress import Progress  # noqa: E402
 from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier  # noqa: E402
-from softtip.calibration import metrics  # noqa: E402
+from softtip import metrics  # noqa: E402
 from softtip.data import Dataset  # noqa: E402
 from softtip.design.model import load_design  # noqa: E402
 from softtip.lab import Protocol, run_protocol  # noqa: E402

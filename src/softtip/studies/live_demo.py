@@ -18,7 +18,8 @@ import numpy as np
 
 from softtip._core.channels import FORCE
 from softtip._core.progress import SILENT, Progress
-from softtip.calibration import LMNetwork, metrics, save_model
+from softtip import metrics
+from softtip.calibration import LMNetwork, save_model
 from softtip.lab import load_protocol, run_protocol
 from softtip.lab.experiments import CALIBRATION, VALIDATION
 from softtip.hardware import PacedSource

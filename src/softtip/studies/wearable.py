@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from softtip._core.progress import Progress  # noqa: E402
-from softtip.calibration.metrics import r2  # noqa: E402
+from softtip.metrics import r2  # noqa: E402
 from softtip.data import Dataset, LeakageWarning  # noqa: E402
 from softtip.lab import Protocol, run_protocol  # noqa: E402
 from softtip.published import published_table  # noqa: E402

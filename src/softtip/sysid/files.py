@@ -25,7 +25,7 @@ from pathlib import Path
 
 from softtip import __version__
 from softtip._core.archive import read_archive, write_archive
-from softtip.calibration.persistence import ModelFileError
+from softtip._core.archive import ModelFileError
 from softtip.sysid.models import KINDS, IdentifiedModel
 from softtip.sysid.statespace import IdentificationError
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.calibration.metrics import mae_percent_fs, mean_abs_error, pearson_r, r2, rmse, rmse_percent_fs
+from softtip.metrics import mae_percent_fs, mean_abs_error, pearson_r, r2, rmse, rmse_percent_fs
 from softtip.sysid.statespace import IdentificationError
 
 

@@ -1,4 +1,4 @@
-"""Metrics of calibrated fingertips, as reported in the papers' tables.
+"""Metrics of calibrated sensors and identified systems, as reported in the papers' tables.
 
 Error metrics take reference values ``y`` and estimates ``yhat`` of the same shape, 1-D
 (one output: a float) or 2-D (n_samples, n_outputs: one value per output, an array).
