@@ -10,7 +10,7 @@ import pytest
 
 import softtip.mechanics.mesh
 import softtip.optimize.cache
-import softtip.studies.insertion
+import softtip.lab.protocols
 from softtip._core.cache import artefact_key, cache_dir, code_hash
 from softtip.design.model import MM, load_design
 from softtip.lab import load_protocol
@@ -62,7 +62,7 @@ def test_an_artefact_key_changes_with_its_inputs_and_with_its_code():
     (softtip.mechanics.mesh, lambda: softtip.mechanics.mesh.mesh_key(load_design("cylindrical-A"), 2.5 * MM, 10)),
     (softtip.optimize.cache, lambda: softtip.optimize.cache.cache_key(load_design("cylindrical-A").spec,
                                                                       Simulation(friction="none"))),
-    (softtip.studies.insertion, lambda: softtip.studies.insertion.trained_model_path(load_protocol("inverter"),
+    (softtip.lab.protocols, lambda: softtip.lab.protocols.trained_model_path(load_protocol("inverter"),
                                                                                      "inverter-state").name),
 ])
 def test_meshes_fe_results_and_models_are_keyed_by_the_code_that_made_them(monkeypatch, module, key_of):

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
-from softtip.design.model import SHIPPED_DIR
+from softtip.design.model import load_design, shipped_design_path
 from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
 
 runner = CliRunner()
@@ -55,7 +55,7 @@ def test_printed_poses_reproduce_the_printed_field_in_magpylib(board_push):
         return magpylib.getB(magnets, sensor, sumup=True)
 
     loaded = field([(m["position_mm"], m["rotvec"]) for m in board_push["magnets"]])
-    from softtip.design.model import load_design
+    from softtip.design.model import load_design, shipped_design_path
 
     rest = field([(np.array(m.center) * 1e3, [0, 0, 0]) for m in load_design("cylindrical-D").magnets])
     np.testing.assert_allclose(board_push["sensors"][0]["dB_exact_uT"], (loaded - rest) * 1e6, atol=0.01)
@@ -65,7 +65,7 @@ def test_noise_off_gives_the_exact_field_and_noise_on_has_the_noise_models_sprea
     # cylindrical-D with 16 chips on a 4 x 4 grid in its cavity: 48 noisy axes from one push
     grid = [[x, y, 0.8] for x in (-4.5, -1.5, 1.5, 4.5) for y in (-4.5, -1.5, 1.5, 4.5)]
     design = tmp_path / "sixteen-chips.toml"
-    design.write_text((SHIPPED_DIR / "cylindrical-D.toml").read_text().replace(
+    design.write_text(shipped_design_path("cylindrical-D").read_text().replace(
         "positions_mm = [[0.0, 0.0, 0.8]]", f"positions_mm = {grid}"))
     push = ("simulate", "--design", str(design), "--angle", "45", "--json", *FAST)
     off, on = (json.loads(run(*push, "--noise", switch).output)["sensors"] for switch in ("off", "on"))

@@ -11,18 +11,18 @@ import pytest
 
 from softtip.design.model import (
     MM,
-    SHIPPED_DIR,
     DesignError,
     design_from_dict,
     load_design,
     polarization_from_surface_field,
+    shipped_design_path,
     shipped_designs,
 )
 from softtip.magnetics import axial_cylinder_field
 
 
 def spec(name: str) -> dict:
-    return tomllib.loads((SHIPPED_DIR / f"{name}.toml").read_text())
+    return tomllib.loads(shipped_design_path(name).read_text())
 
 
 def with_value(base: dict, dotted: str, value) -> dict:
@@ -118,12 +118,11 @@ def test_unknown_or_conflicting_keys_are_refused(change, message):
         design_from_dict(data)
 
 
-def test_bad_sensor_settings_are_refused_when_the_twin_is_built():
-    from softtip.twin import Twin
-
-    design = design_from_dict(with_value(spec("cylindrical-A"), "sensor.gain_sel", 9))
-    with pytest.raises(DesignError, match="gain_sel"):
-        Twin.finite_element(design, mesh_size=3 * MM)
+def test_bad_sensor_settings_are_refused_when_the_design_is_read():
+    with pytest.raises(DesignError, match=r"^mine.toml: sensor.gain_sel = 9: expected an integer 0..7$"):
+        design_from_dict(with_value(spec("cylindrical-A"), "sensor.gain_sel", 9), source="mine.toml")
+    with pytest.raises(DesignError, match=r"^mine.toml: sensor.dig_filt = 0: not permitted with sensor.osr = 0 by the datasheet"):
+        design_from_dict(with_value(spec("cylindrical-A"), "sensor.dig_filt", 0), source="mine.toml")
 
 
 def test_with_params_revalidates_and_rejects_unknown_parameters():

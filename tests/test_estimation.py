@@ -68,7 +68,7 @@ def test_bounds_of_a_linear_sensor_match_the_analytic_formula():
                          [5.0, -3e5, 1e4, 1e4]])
     force_jacobian = np.array([[0.0, 800.0, 0.0], [0.0, 0.0, 800.0], [3000.0, 0.0, 0.0]])  # N per m
     bounds = estimation_bounds(design, _linear_results(jacobian, force_jacobian, steps, base), steps)
-    variance = reading_covariance_uT2(MLX90393Settings.from_dict(design.sensor_readout), 1)
+    variance = reading_covariance_uT2(design.sensor_settings, 1)
     weights = np.diag(1 / variance)
     angle_depth = jacobian[:, :2]
     expected_angle = math.degrees(math.sqrt(np.linalg.inv(angle_depth.T @ weights @ angle_depth)[0, 0]))

@@ -17,7 +17,7 @@ from scipy.integrate import quad
 
 from softtip._core.config import ConfigError
 from softtip._core.units import MM
-from softtip.mechanics.fingerpad import (SIDES, ChipMount, FingerPad, chip_forces, contact_points, exponential_force,
+from softtip.systems.wearable.fingerpad import (SIDES, ChipMount, FingerPad, chip_forces, contact_points, exponential_force,
                                          indentation_volume, lateral_outflow, pad_response, shape_radii,
                                          side_outflow, winkler_pressure)
 from softtip.mechanics.viscoelastic import PronySeries

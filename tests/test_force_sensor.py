@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from softtip._core.config import ConfigError
-from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, ForceSensorSpec, read_forces
+from softtip.sensors.force_sensor import NANO17, ForceSensorSpec, read_forces
+from softtip.systems.wearable.chip import TACTILE_CHIP
 
 
 def test_the_nano17_reads_in_steps_of_1_320_N_within_12_and_17_N():
@@ -56,3 +57,24 @@ def test_a_spec_whose_range_is_empty_is_refused_naming_the_axis():
     with pytest.raises(ConfigError, match=r"^sensor.resolution = "):
         ForceSensorSpec(name="x", lowest=(-1, -1, -1), highest=(1, 1, 1), resolution=(0, 1, 1), noise=(0, 0, 0),
                         source="test")
+
+
+def test_the_hall_chip_and_a_force_sensor_keep_one_sensor_contract():
+    from softtip._core.channels import MAGNETIC
+    from softtip.sensors import MLX90393, ForceSensor, MLX90393Settings, Sensor, lsb_uT
+    from softtip.systems.wearable.chip import FORCE
+
+    hall = MLX90393(MLX90393Settings(gain_sel=7))
+    chip = ForceSensor(NANO17, FORCE)
+    assert isinstance(hall, Sensor) and isinstance(chip, Sensor)
+    assert hall.reading is MAGNETIC and chip.reading is FORCE
+    field = np.array([[1.0e-3, -2.0e-3, 5.0e-3]])  # T
+    step = lsb_uT(hall.settings)  # the datasheet's µT per count at GAIN_SEL 7, RES 0
+    got = hall.acquire(field)
+    np.testing.assert_array_equal(got.values, np.rint(field * 1e6 / step) * step)
+    assert got.raw.dtype == np.uint16 and not got.saturated.any()
+    pushed = chip.acquire(np.array([13.0, -1.0, 0.5]))  # beyond the Nano17's ±12 N on x
+    np.testing.assert_array_equal(pushed.values, [12.0, -1.0, 0.5])
+    np.testing.assert_array_equal(pushed.saturated, [True, False, False])
+    with pytest.raises(ValueError, match="a force sensor's reading is in N, not uT"):
+        ForceSensor(NANO17, MAGNETIC)

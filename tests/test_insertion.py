@@ -9,17 +9,16 @@ import numpy as np
 import pytest
 
 from softtip.lab import load_protocol
-from softtip.control.insertion import InsertionController
-from softtip.lab.insertion import InsertionWorld, SimulatedArm
-from softtip.lab.realism import Realism
-from softtip.studies.insertion import INITIAL_HEIGHT, TARGET_DEPTH, run_insertion
+from softtip.systems.hall_fingertip.controller import InsertionController
+from softtip.systems.hall_fingertip.insertion_world import InsertionWorld, SimulatedArm
+from softtip.systems.hall_fingertip.realism import Realism
+from softtip.systems.hall_fingertip.insertion import INITIAL_HEIGHT, TARGET_DEPTH, run_insertion
 
 
 @pytest.fixture(scope="module")
 def protocol():
-    protocol = load_protocol("inverter")  # the shipped protocol: its calibration trials train the models
-    protocol.parameters.update(validation_trials=0, untrained_trials=0)
-    return protocol
+    # the shipped protocol: its calibration trials train the models
+    return load_protocol("inverter").changed(validation_trials=0, untrained_trials=0)
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +92,7 @@ def test_one_false_reading_does_not_stop_the_arm_but_two_do():
 
 @pytest.mark.slow
 def test_the_emulated_insertion_replays_the_three_cases_with_both_fingertips(protocol):
-    from softtip.lab.scenario import insertion_scenario
+    from softtip.systems.hall_fingertip.scenarios import insertion_scenario
 
     scenario = insertion_scenario(protocol, seed=1)
     assert scenario.field_uT.shape[1:] == (4, 3)
@@ -121,7 +120,7 @@ def test_the_left_and_right_clip_cases_are_mirror_images(protocol):
     between two magnets along y, which the clip's push moves along y, sees Bz change only to second
     order of the motion, so a 0.1 mm offset changes Bz by as much as the push does (at the peak force
     chip 2 reads -11.5 µT in the left case, chip 3 -4.4 µT in the right). Realism is therefore off."""
-    from softtip.lab.scenario import insertion_scenario
+    from softtip.systems.hall_fingertip.scenarios import insertion_scenario
 
     nominal = insertion_scenario(replace(protocol, realism=Realism.off()), seed=1)
     thirds = np.array_split(np.arange(len(nominal.times_s)), 3)

@@ -14,9 +14,11 @@ from softtip.data import Dataset
 from softtip._core.units import MM
 from softtip.design.model import load_design
 from softtip.lab import load_protocol, protocol_from_dict, run_protocol
-from softtip.lab.engine import HeldPart, _contact_forces, interpolate_path, path_table
-from softtip.lab.protocols import DEFAULTS, RUNNERS, shipped_protocol_path
-from softtip.lab.realism import FabricatedUnit, Realism
+from softtip.systems.hall_fingertip.engine import HeldPart, _contact_forces, interpolate_path, path_table
+from softtip._core.systems import names
+from softtip.lab.protocols import bench_of, shipped_protocol_path
+from dataclasses import asdict
+from softtip.systems.hall_fingertip.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.poses import MagnetPoses
@@ -82,7 +84,7 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
     still = MagnetPoses.at_rest(4, (4000,))
     times = np.arange(4000) / 20.0
     noisy = FabricatedUnit(design, Realism(drift_K_per_sqrt_s=0.0), rng).record(still, times, rng)
-    settings = MLX90393Settings.from_dict(design.sensor_readout)
+    settings = design.sensor_settings
     # each reading is the field plus the noise, rounded to the LSB (the first sample, the baseline
     # subtracted from all, is a constant offset of the rest)
     expected = np.sqrt(noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12)
@@ -93,11 +95,11 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
 
 
 def test_every_shipped_protocol_lists_every_parameter_with_its_default_and_loads_as_written():
-    for name in RUNNERS:
+    for name in names("protocol"):
         written = tomllib.loads(shipped_protocol_path(name).read_text())
-        assert written["parameters"] == DEFAULTS[name], name  # the files are the parameters' documentation
+        assert written["parameters"] == bench_of(name).defaults(name), name  # the files are the parameters' documentation
         protocol = load_protocol(name)
-        assert protocol.name == name and protocol.parameters == written["parameters"]
+        assert protocol.name == name and asdict(protocol.parameters) == written["parameters"]
         assert protocol.realism.to_dict() == written["realism"] and protocol.seed == written["seed"]
 
 

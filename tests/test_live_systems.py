@@ -10,7 +10,8 @@ import pytest
 import scipy.signal
 from typer.testing import CliRunner
 
-from softtip._core.channels import FORCE, MAGNETIC
+from softtip._core.channels import MAGNETIC
+from softtip.systems.wearable.chip import FORCE
 from softtip.calibration import ModelFileError
 from softtip.cli.main import app
 from softtip.hardware import PacedSource, Sample
@@ -126,8 +127,8 @@ def test_a_saved_system_is_loaded_with_its_channels_and_bad_inputs_are_refused_w
             target_names=OUTPUTS, target_units="N")
     refused(ValueError, "a baseline of flux density for a stream of force", Pipeline, 1, [estimator],
             baseline=Baseline(reading=MAGNETIC), reading=FORCE)
-    refused(ValueError, r"readings: expected shape \(frames, chips, 3\)", PacedSource, np.zeros((5, 3)), 10)
-    refused(ValueError, "rate_hz", PacedSource, np.zeros((5, 1, 3)), 0)
+    refused(ValueError, r"readings: expected shape \(frames, chips, 3\)", PacedSource, np.zeros((5, 3)), 10, reading=FORCE)
+    refused(ValueError, "rate_hz", PacedSource, np.zeros((5, 1, 3)), 0, reading=FORCE)
     truncated = tmp_path / "truncated.npz"
     truncated.write_bytes(path.read_bytes()[:200])
     refused(ModelFileError, "truncated.npz", Estimator.from_file, truncated)
@@ -144,12 +145,12 @@ def test_softtip_live_streams_the_emulated_wearable_sensor_through_its_identifie
     dataset = convert(record).dataset
     assert list(dataset.channels) == list(INPUTS) and {"fx_N", "fy_N", "fz_N"} <= set(dataset.labels)
     refusal = CliRunner().invoke(app, ["live", "--emulate", "--scenario", "wearable", "--chips", "2"])
-    assert refusal.exit_code != 0 and "--chips = 2: the wearable sensor has one chip" in refusal.output
+    assert refusal.exit_code != 0 and "--chips = 2: the wearable scenario streams 1" in refusal.output
 
 
 @pytest.mark.slow
 def test_the_wearable_demo_tares_each_trial_and_its_live_estimates_are_the_offline_simulation():
-    from softtip.studies.live_demo import run_wearable_demo
+    from softtip.systems.wearable.live import run_wearable_demo
 
     report = run_wearable_demo(seed=1, duration_s=17.0, dashboard=False)  # past the first trial's 150 frames
     assert report["estimated_frames"] >= 160 and report["pipeline"]["late"] == 0

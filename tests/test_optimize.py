@@ -15,6 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
+from softtip.design.model import shipped_design_path
 from softtip.optimize.bayes import BayesianSearch, expected_improvement
 from softtip.optimize.cache import FEResultCache, cache_key
 from softtip.optimize.config import load_study, study_from_dict
@@ -134,7 +135,7 @@ def test_study_mistakes_are_one_line_errors_naming_the_key(change, message):
 
 def test_design_paths_are_relative_to_the_study_file(tmp_path):
     (tmp_path / "designs").mkdir()
-    design = (EXAMPLES.parent / "src/softtip/design/shipped/cylindrical-A.toml").read_text()
+    design = shipped_design_path("cylindrical-A").read_text()
     (tmp_path / "designs" / "mine.toml").write_text(design)
     (tmp_path / "study.toml").write_text(textwrap.dedent("""
         design = "designs/mine.toml"

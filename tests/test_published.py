@@ -10,7 +10,7 @@ from softtip._core.config import ConfigError
 from softtip.published import (BETTER, FITTED, OUTSIDE, WITHIN, PublishedTable, _table, parse_value, published_table,
                                published_tables, tables_of)
 from softtip.report.tables import Table, format_number, paper_table
-from softtip.studies.registry import STUDIES
+from softtip._core.systems import studies
 
 
 def test_cells_read_as_printed_numbers_bounds_ranges_and_blanks():
@@ -38,7 +38,7 @@ def test_the_s1_tables_hold_the_publications_cells():
         cells = table.cells[table.rows.index(row)]
         assert sum(c.low for c in cells[:10]) / 10 == pytest.approx(cells[10].low, abs=0.006), row
     # every table belongs to a study softtip reproduces
-    assert {t.study for t in published_tables().values()} <= set(STUDIES)
+    assert {t.study for t in published_tables().values()} <= set(studies())
     assert [t.key for t in tables_of("pushing")] == ["pushing-orientation-error", "pushing-estimate-time"]
 
 
@@ -47,7 +47,7 @@ def _toy(**changes) -> PublishedTable:
              "rows": ["a"], "columns": ["x", "y", "z"], "values": [[2.0, "< 0.5", "0.8..0.92"]],
              "close": {"ratio": 2.0, "why": "same size"}}
     table.update(changes)
-    return _table("S0", "toy", table)
+    return _table("S0", "a system: published.toml", "toy", table)
 
 
 def test_verdicts_follow_the_stated_tolerance():

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg
 
+from softtip._core.archive import write_archive
 from softtip._core.progress import Task
 from softtip._core.units import MM
 from softtip.design.model import load_design
@@ -194,7 +195,7 @@ def test_errors_are_percent_of_the_full_scale_over_the_load_ranges(tiny_twin):
     np.testing.assert_allclose(errors["sensor_error_percent_fs"], field_change / 1e-3 * 100)
 
 
-def test_reduced_twin_round_trips_through_npz_and_json(tiny_twin, tmp_path):
+def test_reduced_twin_round_trips_through_its_archive(tiny_twin, tmp_path):
     path = tiny_twin.save(tmp_path / "twin")
     again = ReducedTwin.load(path)
     params = tiny_twin.ranges.sample(np.random.default_rng(3), 50)
@@ -207,14 +208,15 @@ def test_tampered_truncated_and_foreign_files_are_refused(tiny_twin, tmp_path):
     path = tiny_twin.save(tmp_path / "twin")
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
-    with pytest.raises(ValueError, match="truncated or modified"):
+    with pytest.raises(ValueError, match="truncated or unreadable"):
         ReducedTwin.load(path)
-    path.with_suffix(".json").write_text(json.dumps({"schema": "someone-else/3"}))
-    with pytest.raises(ValueError, match="not a softtip reduced twin"):
-        ReducedTwin.load(path)
-    path.with_suffix(".json").write_text("{ not json")
-    with pytest.raises(ValueError, match="not a readable JSON"):
-        ReducedTwin.load(path)
+    foreign = tmp_path / "model.npz"
+    write_archive(foreign, {"format": "someone-else", "schema_version": 3}, {"weights": np.zeros(3)})
+    with pytest.raises(ValueError, match="not a softtip reduced twin file"):
+        ReducedTwin.load(foreign)
+    np.savez(foreign, network_0_weight_0=np.zeros(3))
+    with pytest.raises(ValueError, match="no metadata entry"):
+        ReducedTwin.load(foreign)
 
 
 def test_no_contact_no_response(tiny_twin):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from softtip._core.archive import write_archive
-from softtip.bench.sysid import INPUTS, OUTPUTS, wearable_like
+from softtip.bench.sysid import INPUTS, OUTPUTS, force_like
 from softtip.calibration import ModelFileError
 from softtip.data import DatasetError
 from softtip.sysid import simulation, transfer
@@ -27,7 +27,7 @@ TS = 0.1
 def split() -> tuple[Recording, Recording]:
     """Eight estimation and two validation trials (15 s at 10 Hz) of a 3 x 3 system of second-order
     entries, outputs with 1 % noise."""
-    return wearable_like(estimation_trials=8, validation_trials=2, noise=0.01, seed=1)
+    return force_like(estimation_trials=8, validation_trials=2, noise=0.01, seed=1)
 
 
 # --------------------------------------------------------------------------------------------- metrics

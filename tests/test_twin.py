@@ -13,7 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from softtip.design.model import MM, load_design
-from softtip.lab.realism import FabricatedUnit, Realism
+from softtip.systems.hall_fingertip.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board, Sphere
 from softtip.mechanics.poses import MagnetPoses

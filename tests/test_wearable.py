@@ -11,19 +11,18 @@ import pytest
 
 from softtip._core.config import ConfigError
 from softtip.data import Dataset
+from softtip._core.systems import load, owner
 from softtip.lab import load_protocol, protocol_from_dict, run_protocol
-from softtip.lab.human_force import MOTIONS
-from softtip.lab.realism import WearableRealism
+from softtip.systems.wearable.human_force import MOTIONS
+from softtip.systems.wearable.realism import WearableRealism
 
 FORCES = ["fx_N", "fy_N", "fz_N"]
 
 
 def run(seed: int = 1, realism: WearableRealism | None = None, **parameters) -> Dataset:
-    protocol = load_protocol("wearable")
-    protocol.seed = seed
-    protocol.parameters.update(parameters)
+    protocol = load_protocol("wearable").changed(seed=seed, **parameters)
     if realism is not None:
-        protocol.realism = realism
+        protocol = dataclasses.replace(protocol, realism=realism)
     return run_protocol(protocol)[0]
 
 
@@ -177,6 +176,6 @@ def test_mistakes_in_a_wearable_protocol_are_one_line_errors_naming_the_key(chan
 
 def test_a_wearable_protocol_names_its_bench_and_device():
     protocol = protocol_from_dict({"protocol": "wearable", "parameters": {"sensor_side": "ulnar"}}, "w.toml")
-    assert protocol.bench == "wearable" and protocol.design.name == "nail-ring-ulnar"
+    assert protocol.bench is load(owner("protocol", "wearable").benches["wearable"]) and protocol.design.name == "nail-ring-ulnar"
     assert protocol.to_dict()["design"] == "nail-ring-ulnar" and protocol.to_dict()["realism"]["noise"] is True
-    assert load_protocol("pushing").bench == "fingertip"
+    assert load_protocol("pushing").bench is not protocol.bench

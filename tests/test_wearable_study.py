@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from softtip.studies.reproduce import reproduce_study
-from softtip.studies.wearable import SPLITS, SS, TF
+from softtip.systems.wearable.study import SPLITS, SS, TF
 
 
 @pytest.fixture(scope="module")

@@ -1,12 +1,9 @@
 """Sensor channels: one axis of one 3-axis sensor, named after what the sensor reads.
 
 A :class:`Reading` is what a stream's 3-axis sensors read, in one unit, and how their channels
-are named. Two are known:
-
-- :data:`MAGNETIC`: the change of flux density of a Hall chip (MLX90393), in µT; channel
-  ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k;
-- :data:`FORCE`: the force of a 3-axis tactile force chip (the wearable sensor on the side of the
-  nail), in N; channel ``side_f{x|y|z}_N`` is its axis (a second chip would be ``side1_f...``).
+are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip
+(MLX90393), in µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register
+their own (:class:`softtip._core.systems.System`), e.g. a force chip's in N.
 
 Channels are stored sensor by sensor, x, y, z within each (the order of a reading of shape
 (sensors, 3) flattened). The module-level functions name magnetic channels, the datasets' default.
@@ -38,6 +35,7 @@ class Reading:
     ``symbol``: the quantity's symbol in displays (ΔBx, ΔFx), ``shown_unit`` its unit there;
     ``units``: the units values of this quantity may come in (a CSV column, a model's inputs), each as
     how many ``unit`` one of it is (1 mT = 1000 µT);
+    ``topic`` and ``message``: how a chip's readings go out (softtip.realtime.recording.format);
     ``drift_threshold``: the default change (in ``unit``) below which a free sensor's baseline may
     follow slow drift; ``baseline_step``: the default change of that filtered baseline that replaces
     the one in use (:class:`softtip.realtime.Baseline`); ``decimals``: the decimals a display shows.
@@ -53,6 +51,8 @@ class Reading:
     drift_threshold: float
     baseline_step: float
     decimals: int  # shown in live displays: a tenth of a µT, a mN
+    topic: str  # a chip's topic leaf in recordings and live views (/fingertip/chip0/field)
+    message: str  # the ROS 2 message type it is recorded and published as, in its SI unit
     first_numbered: bool = True  # the first sensor's number is written (s0_...), or not (side_...)
     pattern: re.Pattern = field(init=False, repr=False, compare=False)
 
@@ -99,10 +99,8 @@ class Reading:
 
 MAGNETIC = Reading("flux density", "uT", "B", "µT", prefix="s", infix="b",  # 1 G = 1e-4 T
                    units={"uT": 1.0, "µT": 1.0, "μT": 1.0, "mT": 1e3, "G": 1e2, "T": 1e6}, drift_threshold=20.0,
-                   baseline_step=0.01, decimals=1)
-FORCE = Reading("force", "N", "F", "N", prefix="side", infix="f", units={"N": 1.0, "mN": 1e-3}, drift_threshold=0.05,
-                baseline_step=1e-4, decimals=3, first_numbered=False)
-READINGS = (MAGNETIC, FORCE)
+                   baseline_step=0.01, decimals=1, topic="field",
+                   message="sensor_msgs/msg/MagneticField")
 CHANNEL_UNIT = MAGNETIC.unit
 channel_name = MAGNETIC.channel_name
 channel_names = MAGNETIC.channel_names
@@ -111,9 +109,17 @@ channel_order = MAGNETIC.channel_order
 channel_columns = MAGNETIC.columns
 
 
+def known_readings() -> tuple[Reading, ...]:
+    """The toolkit's reading and every registered system's."""
+    from softtip._core.systems import readings  # the registry reads its records' readings from here
+
+    return (MAGNETIC, *readings())
+
+
 def reading_of(channels: Iterable[str]) -> Reading:
     """The reading whose channels ``channels`` all are."""
     channels = list(channels)
+    READINGS = known_readings()
     for reading in READINGS:
         if channels and all(reading.is_channel(name) for name in channels):
             return reading

@@ -3,3 +3,4 @@ leaves: ``depth_mm * MM`` is metres, ``depth_m / MM`` millimetres, ``field_T * U
 
 MM = 1e-3  # metres per millimetre
 UT_PER_T = 1e6  # microtesla per tesla
+FORCE_UNITS = {"N": 1.0, "mN": 1e-3}  # newtons per unit

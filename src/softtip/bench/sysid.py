@@ -1,4 +1,4 @@
-"""Speed and quality of system identification on wearable-force-like data, beside baselines of the same run.
+"""Speed and quality of system identification on force-sensor-like data, beside baselines of the same run.
 
 Data: a 3 x 3 system of second-order entries with one zero each (side-sensor forces in, table
 forces out), 10 Hz, smooth random presses, 3 % output noise; 1,500 estimation samples (ten 15 s
@@ -21,7 +21,7 @@ import platform
 import numpy as np
 import scipy.signal
 
-from softtip._core.channels import FORCE
+from softtip._core.channels import MAGNETIC
 from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import latency, timed
 from softtip.realtime.estimator import Estimator
@@ -37,7 +37,7 @@ TARGETS = {"transfer_function_s": 1.5, "state_space_s": 1.0, "streaming_p99_us":
 INPUTS, OUTPUTS = ("Fx_side", "Fy_side", "Fz_side"), ("Fx", "Fy", "Fz")
 
 
-def wearable_like(estimation_trials: int = 10, validation_trials: int = 3, length: int = 150,
+def force_like(estimation_trials: int = 10, validation_trials: int = 3, length: int = 150,
                   noise: float = 0.03, seed: int = 0) -> tuple[Recording, Recording]:
     """(estimation, validation) recordings of a 3 x 3 force system; see the module notes."""
     rng = np.random.default_rng(seed)
@@ -125,7 +125,7 @@ def _naive_step(system: StateSpace):
 def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     """Fit times and validation fit % of the transfer-function (order 6) and state-space (order 8) models
     beside nfoursid, and streaming-step latencies beside a plain numpy step."""
-    estimation, validation = wearable_like(seed=seed)
+    estimation, validation = force_like(seed=seed)
     transfer_model, tf_seconds = timed(TransferFunctionModel(6).fit, estimation)
     state_space, ss_seconds = timed(StateSpaceModel(8).fit, estimation)
     refined, refined_seconds = timed(StateSpaceModel(8, refine=True).fit, estimation)
@@ -137,7 +137,7 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
         "state_space_order_10": latency(StreamingSimulator(order_10.system_).step, frame, calls),
         "transfer_function_order_6": latency(transfer_model.streaming().step, frame, calls),
         "live_estimator_transfer_function_order_6": latency(
-            Estimator(transfer_model, FORCE.channel_names(1), target_names=OUTPUTS, target_units="N").estimate,
+            Estimator(transfer_model, MAGNETIC.channel_names(1), target_names=OUTPUTS, target_units="N").estimate,
             frame, calls),
         "numpy_step_order_10": latency(_naive_step(order_10.system_), frame, calls),
     }

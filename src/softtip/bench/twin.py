@@ -20,7 +20,7 @@ from softtip.mechanics.poses import MagnetPoses
 from softtip.twin import Readout, Twin
 
 
-def bench_twin(design_name: str = "cylindrical-D", mesh_size_mm: float = 1.0, poses: int = 200_000,
+def bench_twin(design_name: str, mesh_size_mm: float = 1.0, poses: int = 200_000,
                include_neo_hookean: bool = True, log: Callable[[str], None] | None = None) -> dict:
     from threadpoolctl import threadpool_limits
 
@@ -101,7 +101,7 @@ def _bench_readings(readout: Readout, poses: int, say) -> dict:
             "speedup_vs_magpylib": ours / theirs}
 
 
-def bench_rom(design_name: str = "cylindrical-D", samples: int | None = None, holdout: int = 12, batch: int = 200_000,
+def bench_rom(design_name: str, samples: int | None = None, holdout: int = 12, batch: int = 200_000,
               save: str | None = None, contact_layer_mm: float | None = None, friction: str = "stick",
               log: Callable[[str], None] | None = None, progress: Progress = SILENT) -> dict:
     """Build a reduced-order twin (timed), report its held-out errors and its batch speed,

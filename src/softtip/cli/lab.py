@@ -11,15 +11,15 @@ from pathlib import Path
 import numpy as np
 import typer
 
+from softtip._core.systems import names, studies
 from softtip.cli.common import console, fail, progress_for
-from softtip.studies.registry import STUDIES
 
-STUDY_NAMES = tuple(STUDIES)
+STUDY_NAMES = tuple(studies())
 MODEL_KINDS = ("polynomial", "network", "classifier")
 
 
 def lab_run(
-    protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(s.protocol for s in STUDIES.values())}."),
+    protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(names('protocol'))}."),
     output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
     seed: int = typer.Option(None, "--seed", help="Override the protocol's seed."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
@@ -27,9 +27,7 @@ def lab_run(
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
     from softtip.lab import load_protocol, run_protocol
 
-    loaded = load_protocol(protocol)
-    if seed is not None:
-        loaded.seed = seed
+    loaded = load_protocol(protocol).changed(seed=seed)
     dataset, timings = run_protocol(loaded, progress_for(json_output))
     path = dataset.write(output or Path(f"{loaded.name}.parquet"))
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
@@ -92,6 +90,7 @@ def calibrate(
     """Fit a model on the calibration trials of a dataset, score it on its validation trials, save it."""
     from softtip.calibration import save_model
     from softtip.data import Dataset
+    from softtip.data.splits import by_role
 
     if model not in MODEL_KINDS:
         fail(f"--model = {model!r}: expected one of {', '.join(MODEL_KINDS)}")
@@ -106,9 +105,8 @@ def calibrate(
     estimator = _make_model(model, sizes, seed)
     X, y = data.X(), _targets(data, target, model)
     keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
-    role = data.column("role") if "role" in data.conditions else np.full(len(X), "calibration")
-    train = keep & (role == "calibration")
-    test = keep & (role != "calibration")
+    calibration, _ = by_role(data)
+    train, test = keep & calibration, keep & ~calibration
     if not train.any():
         fail(f"{dataset}: no calibration samples (role = calibration) to fit on")
     start = time.perf_counter()

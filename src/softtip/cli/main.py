@@ -12,11 +12,13 @@ import sys
 import typer
 
 from softtip import __version__
-from softtip.cli import bench, demo, lab, live, optimize, sysid, twin
+from softtip._core.systems import load, systems
+from softtip.cli import bench, lab, live, optimize, sysid, twin
 from softtip.cli.common import console, user_errors
 
-app = typer.Typer(help="softtip: soft magnetic tactile fingertips, from design to real-time estimates.",
-                  no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
+    f"{system.name} ({system.label}): {system.title}" for system in systems().values()),
+    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
 
 
 @app.callback(invoke_without_command=True)
@@ -39,13 +41,21 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
                 lab.calibrate, lab.evaluate):
     app.command()(user_errors(command))
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
-_group("demo", "Demonstrations on the built-in simulated sensor.", {"insertion": demo.demo_insertion, "wearable": demo.demo_wearable},
-       callback=demo.demo)
+_registered = systems().values()
+_main_demo = next((load(system.main_demo) for system in _registered if system.main_demo), None)
+_group("demo", "Demonstrations on the built-in simulated sensors."
+       + (f"\n\nPlain softtip demo: {' '.join(_main_demo.__doc__.split())}" if _main_demo else ""),
+       {name: load(reference) for system in _registered for name, reference in system.demos.items()},
+       callback=_main_demo)
 _group("sysid", "System identification: transfer-function and state-space models from recordings.",
        {"fit": sysid.sysid_fit, "orders": sysid.sysid_orders, "predict": sysid.sysid_predict})
 _group("bench", "Benchmarks measured on this machine (ratios against baselines of the same run).",
        {"twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live,
-        "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration, "sysid": bench.bench_sysid})
+        "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration, "sysid": bench.bench_sysid,
+        **{name: load(reference) for system in _registered for name, reference in system.bench_commands.items()}})
+for _system in _registered:
+    for _name, _reference in _system.commands.items():
+        app.add_typer(load(_reference), name=_name)
 
 
 if __name__ == "__main__":  # pragma: no cover

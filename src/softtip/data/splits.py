@@ -18,6 +18,19 @@ import numpy as np
 
 from softtip.data.dataset import TRIAL, Dataset, DatasetError
 
+# the roles a protocol gives its trials, in the condition ``role``
+CALIBRATION, VALIDATION = "calibration", "validation"
+
+
+def by_role(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
+    """(calibration rows, validation rows) as the protocol split the trials (the condition ``role``);
+    a dataset without roles is all calibration."""
+    if "role" not in dataset.conditions:
+        rows = len(dataset.groups)
+        return np.ones(rows, dtype=bool), np.zeros(rows, dtype=bool)
+    role = dataset.column("role")
+    return role == CALIBRATION, role == VALIDATION
+
 
 class LeakageWarning(UserWarning):
     """A split puts samples of one trial on both sides."""

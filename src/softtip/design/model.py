@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
+from softtip._core.systems import systems
 from softtip._core.config import (
     ConfigError,
     NonNegativeNumber,
@@ -34,6 +35,7 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.units import MM
+from softtip.sensors.mlx90393 import MLX90393Settings
 
 
 class DesignError(ConfigError):
@@ -79,7 +81,7 @@ class Design:
     height: float  # m, the top surface is the plane z = height (before the fillet)
     magnets: tuple[Magnet, ...]
     sensor_positions: np.ndarray  # (S, 3) m, the Hall sensors' sensitive points
-    sensor_readout: dict  # MLX90393 register settings; validated by the sensor model when the twin is built
+    sensor_settings: MLX90393Settings  # the chips' register settings, validated when the design is read
 
     @property
     def geometry_key(self) -> dict:
@@ -361,7 +363,8 @@ def _design(spec: CylindricalSpec | RectangularSpec, raw: dict, source: str, mag
         height=spec.body.height_mm * MM,
         magnets=tuple(Magnet(center=(x, y, center_z), diameter=magnets.diameter_mm * MM,
                              height=magnets.height_mm * MM, polarization=polarization) for x, y in magnets_xy),
-        sensor_positions=np.asarray(spec.sensor_positions_mm, dtype=float) * MM, sensor_readout=spec.sensor.readout)
+        sensor_positions=np.asarray(spec.sensor_positions_mm, dtype=float) * MM,
+        sensor_settings=parse(MLX90393Settings, spec.sensor.readout, source, "sensor", error=DesignError))
 
 
 def _cylindrical(spec: CylindricalSpec, raw: dict, source: str) -> Design:
@@ -392,22 +395,36 @@ def design_from_dict(spec: dict, source: str = "design") -> Design:
     return build(parse(schema_of_kind, raw, source, error=DesignError), raw, source)
 
 
-SHIPPED_DIR = Path(__file__).with_name("shipped")
+def _shipped() -> dict[str, Path]:
+    """The registered systems' shipped designs, by name."""
+    return {name: Path(str(entry)) for system in systems().values() for name, entry in system.designs().items()}
 
 
 def shipped_designs() -> list[str]:
-    return sorted(p.stem for p in SHIPPED_DIR.glob("*.toml"))
+    return sorted(_shipped())
+
+
+def reference_design(use: str) -> str | None:
+    """The shipped design the first registered system that names one gives for ``use`` ("simulate",
+    "bench"): what the toolkit's commands default to."""
+    return next((system.reference_designs[use] for system in systems().values() if use in system.reference_designs),
+                None)
+
+
+def shipped_design_path(name: str) -> Path:
+    """The file of shipped design ``name``."""
+    designs = _shipped()
+    if name not in designs:
+        raise DesignError(f"design {name!r} is neither a file nor a shipped design ({', '.join(sorted(designs))})")
+    return designs[name]
 
 
 def load_design(name_or_path: str | Path) -> Design:
-    """A shipped design by name (``cylindrical-A``) or a TOML file by path."""
+    """A shipped design by name (a registered system's ``designs/NAME.toml``) or a TOML file by path."""
     path = Path(name_or_path)
-    if not path.suffix:
-        shipped = SHIPPED_DIR / f"{name_or_path}.toml"
-        if not shipped.exists():
-            raise DesignError(f"design {name_or_path!r} is neither a file nor a shipped design "
-                              f"({', '.join(shipped_designs())})")
-        path = shipped
+    shipped = not path.suffix
+    if shipped:
+        path = shipped_design_path(str(name_or_path))
     spec = read_toml(path, "design", DesignError)
     spec.setdefault("name", path.stem)
-    return design_from_dict(spec, source=str(path.name if path.parent == SHIPPED_DIR else path))
+    return design_from_dict(spec, source=str(path.name if shipped else path))

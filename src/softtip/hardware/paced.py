@@ -1,9 +1,9 @@
 """Readings played at their sample rate in this process: a sensor with no softtip firmware.
 
-The wearable's force chip (S2) has no firmware of softtip's and no published interface, so its
-emulated stream does not go through a serial link: :class:`PacedSource` hands the live pipeline
-one frame of ``readings`` per sample period on a thread of its own, as a driver would on arrival.
-The same serves to replay readings of any sensor at their rate.
+A sensor with no firmware of softtip's and no published interface (a system's force chip) is not
+emulated behind a serial link: :class:`PacedSource` hands the live pipeline one frame of
+``readings`` per sample period on a thread of its own, as a driver would on arrival. The same
+serves to replay readings of any sensor at their rate.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Self
 
 import numpy as np
 
-from softtip._core.channels import FORCE, Reading
+from softtip._core.channels import Reading
 from softtip._core.config import PositiveNumber, checked
 from softtip._core.threads import BackgroundThread
 from softtip.hardware.driver import Sample
@@ -30,7 +30,7 @@ class PacedSource:
     for more than one period late is still delivered, and counted as late.
     """
 
-    def __init__(self, readings: np.ndarray, rate_hz: float, *, reading: Reading = FORCE,
+    def __init__(self, readings: np.ndarray, rate_hz: float, *, reading: Reading,
                  saturated: np.ndarray | None = None, loop: bool = True, name: str = "replay") -> None:
         readings = np.asarray(readings, dtype=np.float64)
         if readings.ndim != 3 or readings.shape[2] != 3 or not len(readings) or readings.shape[1] < 1:

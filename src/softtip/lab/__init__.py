@@ -1,5 +1,5 @@
-"""The virtual lab: the published experiments run on the twin, each producing a dataset of trials."""
+"""The virtual lab: registered systems' experiments run on their benches, each producing a dataset of trials."""
 
-from softtip.lab.protocols import DEFAULTS, Protocol, load_protocol, protocol_from_dict, run_protocol
+from softtip.lab.protocols import BenchKind, Protocol, load_protocol, protocol_from_dict, run_protocol
 
-__all__ = ["DEFAULTS", "Protocol", "load_protocol", "protocol_from_dict", "run_protocol"]
+__all__ = ["BenchKind", "Protocol", "load_protocol", "protocol_from_dict", "run_protocol"]

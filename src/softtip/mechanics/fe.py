@@ -119,7 +119,8 @@ class P2Space:
     def __init__(self, mesh: TetMesh):
         import skfem
 
-        skmesh = skfem.MeshTet(mesh.points.T, mesh.tets)
+        # contiguous, as scikit-fem keeps them (it would copy them and log a warning)
+        skmesh = skfem.MeshTet(np.ascontiguousarray(mesh.points.T), mesh.tets)
         basis = skfem.CellBasis(skmesh, skfem.ElementTetP2(), intorder=2)
         self.nodes = basis.doflocs.T.copy()  # (n, 3): vertices first, then edges
         self.cell_nodes = basis.element_dofs.T.copy()  # (ne, 10)

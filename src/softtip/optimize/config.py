@@ -3,7 +3,7 @@
 A study is a TOML file::
 
     name = "published-grid"            # optional; default: the file's stem
-    design = "cylindrical-A"           # a shipped design, or a path relative to this file
+    design = "my-design.toml"          # a shipped design, or a path relative to this file
     method = "grid"                    # or "bayes"
     output = "optimize-results"        # optional; relative to the working directory
 

@@ -96,7 +96,7 @@ def estimation_bounds(design: Design, results: Sequence[FEResult], steps: Steps)
     """Both bounds from the results of :func:`_simulations`, in that order."""
     base, angle_up, angle_down, deeper, shallower, shear_x, shear_y, deepest = results
     readings = [r.field_change_T.ravel() * UT_PER_T for r in results]  # µT, sensor-major
-    settings = MLX90393Settings.from_dict(design.sensor_readout)
+    settings = design.sensor_settings
     variance = reading_covariance_uT2(settings, len(base.field_change_T))
     d_angle = (readings[1] - readings[2]) / np.radians(2 * steps.angle_deg)
     d_depth = (readings[3] - readings[4]) / (2 * steps.depth_mm * MM)

@@ -40,10 +40,7 @@ def _csv_text(result: StudyResult) -> str:
 def plot_objective(result: StudyResult, path: Path) -> Path:
     """The objective over the first two parameters (others held at the best design's values) as a
     heat map - or over the only parameter as a curve; grey: infeasible, failed or not evaluated."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure as PlotFigure
 
     config, best = result.config, result.best
     objective = config.objective
@@ -51,7 +48,8 @@ def plot_objective(result: StudyResult, path: Path) -> Path:
     parameters = config.parameters
     fixed = {p.name: best.params[p.name] for p in parameters[2:]} if best else {}
     on_slice = [r for r in result.records if all(r.params[n] == v for n, v in fixed.items())]
-    figure, axes = plt.subplots(figsize=(7.5, 5.0))
+    figure = PlotFigure(figsize=(7.5, 5.0))
+    axes = figure.subplots()
     title = f"{config.name}: {label}, goal {objective.goal}"
     if fixed:
         title += "\n" + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
@@ -93,7 +91,6 @@ def plot_objective(result: StudyResult, path: Path) -> Path:
     axes.set_title(title, fontsize=10)
     figure.tight_layout()
     atomic_write(path, lambda handle: figure.savefig(handle, format=path.suffix[1:] or "png", dpi=120))
-    plt.close(figure)
     return path
 
 

@@ -1,4 +1,4 @@
-"""The published figures each study follows, as data: one TOML file per system (``S1.toml`` ...),
+"""The published figures each study follows, as data: one ``published.toml`` per registered system,
 laid out as the publications' tables, read by the reports, by ``softtip reproduce --json`` and by
 the tests. No published number is typed anywhere else.
 
@@ -15,10 +15,10 @@ import functools
 import math
 import re
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
+from softtip._core.systems import systems
 from softtip._core.config import ConfigError, Flag, PositiveNumber, Text, choice, integer, parse, read_toml, schema
 
 WITHIN, OUTSIDE, BETTER, FITTED = "within", "outside", "better", "fitted"
@@ -157,8 +157,7 @@ class PublishedTable:
         return f"{self.close.describe(self.unit)} ({self.close.why})"
 
 
-def _table(system: str, key: str, table: dict) -> PublishedTable:
-    source = f"published/{system}.toml"
+def _table(system: str, source: str, key: str, table: dict) -> PublishedTable:
     parsed = parse(_TableFile, table, source, key)
     if len(parsed.values) != len(parsed.rows):
         raise ConfigError(f"{source}: {key}.values has {len(parsed.values)} rows for {len(parsed.rows)} row names")
@@ -182,14 +181,16 @@ def _table(system: str, key: str, table: dict) -> PublishedTable:
 
 @functools.cache
 def published_tables() -> dict[str, PublishedTable]:
-    """Every published table of every system, by key."""
+    """Every published table of every registered system, by key."""
     tables: dict[str, PublishedTable] = {}
-    for path in sorted(Path(str(resources.files(__package__))).glob("*.toml")):
-        system = path.stem
+    for system in systems().values():
+        if (file := system.published()) is None:
+            continue
+        path, source = Path(str(file)), f"{system.name}: published.toml"
         for key, table in read_toml(path, "published figures").items():
             if key in tables:
-                raise ConfigError(f"published/{system}.toml: table {key} is also in {tables[key].system}.toml")
-            tables[key] = _table(system, key, table)
+                raise ConfigError(f"{source}: table {key} is also {tables[key].system}'s")
+            tables[key] = _table(system.label, source, key, table)
     return tables
 
 

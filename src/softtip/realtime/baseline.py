@@ -2,7 +2,7 @@
 optional slow drift tracking.
 
 Readings are changes from a baseline taken before contact (of flux density for the fingertip's Hall
-chips, of force for the wearable's chip; :class:`~softtip._core.channels.Reading`). :class:`Baseline`
+chips, of force for a force chip; :class:`~softtip._core.channels.Reading`). :class:`Baseline`
 
 * takes the mean of ``frames`` readings in which every chip is sound (per chip and axis):
   at start, and again whenever :meth:`Baseline.take` is called (for instance after a grasp,

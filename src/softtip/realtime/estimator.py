@@ -26,7 +26,7 @@ class Estimator:
     ``predict_one(x)`` (x 1-D float64) is used when present; a model with ``streaming()``
     (returning an object with ``step(u)`` and ``reset()``) is dynamic: its state is kept from
     frame to frame and restarts from rest with every new baseline. ``input_channels``: the
-    channel of each input, e.g. ``s0_bx_uT`` (flux density) or ``side_fx_N`` (the wearable's
+    channel of each input, e.g. ``s0_bx_uT`` (flux density) or ``side_fx_N`` (a force chip's
     force chip), all of one sensor kind (:attr:`reading`); ``input_units``: their unit (the
     reading's, as stored in datasets, or another of its :attr:`~softtip._core.channels.Reading.units`).
     ``kind``: ``"regression"`` (``target_names`` and ``target_units`` required) or

@@ -7,7 +7,7 @@
    (:class:`~softtip.realtime.clock.AcquisitionClock`);
 2. the baseline in use is subtracted (:mod:`softtip.realtime.baseline`), giving the
    change per chip and axis (of flux density in µT for the fingertip's Hall chips, of force in
-   N for the wearable's chip: the stream's :class:`~softtip._core.channels.Reading`);
+   N for a force chip: the stream's :class:`~softtip._core.channels.Reading`);
 3. every estimator (a calibration model or an identified system,
    :class:`~softtip.realtime.estimator.Estimator`) maps the changes of its input channels to its
    targets: regression models to values, one classifier to a contact state. Frames in which a

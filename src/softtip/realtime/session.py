@@ -32,8 +32,8 @@ EMULATOR = "emulator"
 class LiveSession:
     """A fingertip (``source_spec``: a serial device path or pyserial URL, or
     ``"emulator"`` for an emulated one in a child process), its driver and a pipeline; or a
-    :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, such as the
-    emulated wearable force chip) and a pipeline of its reading.
+    :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, such as an
+    emulated force chip) and a pipeline of its reading.
 
     ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
     :meth:`summary` reports frames, lost frames, latency and the CPU time of this process

@@ -58,12 +58,8 @@ class Figure:
 
     @classmethod
     def of(cls, title: str, caption: str, figure) -> Figure:
-        """Render a matplotlib figure, and close it."""
-        import matplotlib.pyplot as plt
-
-        png = figure_png(figure)
-        plt.close(figure)
-        return cls(title, caption, png)
+        """Render a matplotlib figure."""
+        return cls(title, caption, figure_png(figure))
 
     def html(self) -> str:
         data = base64.b64encode(self.png).decode()

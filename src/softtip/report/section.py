@@ -34,10 +34,8 @@ def section_polygons(points: np.ndarray, tets: np.ndarray, origin: np.ndarray, n
 def plot_section(result, mesh, path: str | Path) -> Path:
     """Draw the deformed section of ``result`` (a finite-element twin result on ``mesh``) across the
     indenter, coloured by |u|."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure as PlotFigure
+    from matplotlib.patches import Circle
     from matplotlib.collections import PolyCollection
 
     contact = result.solution
@@ -65,7 +63,8 @@ def plot_section(result, mesh, path: str | Path) -> Path:
         order = np.argsort(np.arctan2(xyz[:, 2] - centre[1], h - centre[0]))
         polygons.append(np.column_stack([h[order], xyz[order, 2]]) / MM)
         colours.append(np.mean(mags) / MM)
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig = PlotFigure(figsize=(8, 4.2))
+    ax = fig.subplots()
     collection = PolyCollection(polygons, array=np.array(colours), cmap="viridis", edgecolors="face", linewidths=0.2)
     ax.add_collection(collection)
     fig.colorbar(collection, ax=ax, label="|u| (mm)")
@@ -85,7 +84,7 @@ def plot_section(result, mesh, path: str | Path) -> Path:
         ax.fill(np.array([-t, t, t, -t]) / MM, np.array([frame_z, frame_z, frame_z + 3 * MM, frame_z + 3 * MM]) / MM,
                 color="0.6", zorder=4)
     elif isinstance(indenter, Sphere):
-        ax.add_patch(plt.Circle((0, (frame_z + indenter.radius) / MM), indenter.radius / MM, color="0.6", zorder=4))
+        ax.add_patch(Circle((0, (frame_z + indenter.radius) / MM), indenter.radius / MM, color="0.6", zorder=4))
     else:
         ax.axhspan(frame_z / MM, frame_z / MM + 1.5, color="0.6", zorder=4)
     for position in design.sensor_positions:
@@ -99,5 +98,4 @@ def plot_section(result, mesh, path: str | Path) -> Path:
     path = Path(path)
     fig.tight_layout()
     atomic_write(path, lambda handle: fig.savefig(handle, format=path.suffix[1:] or "png", dpi=150))
-    plt.close(fig)
     return path

@@ -1,7 +1,8 @@
-"""Sensor models: the MLX90393 3-axis Hall magnetometer, and 3-axis force sensors (S2's tactile chip
-on the side of the nail and the Nano17 under the table)."""
+"""Sensor models: the MLX90393 3-axis Hall magnetometer, and 3-axis force sensors (range, output
+step, noise, saturation; the Nano17 reference among them)."""
 
-from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, ForceSensorSpec, read_forces
+from softtip.sensors.contract import Acquisition, Sensor
+from softtip.sensors.force_sensor import NANO17, ForceSensor, ForceSensorSpec, read_forces
 from softtip.sensors.mlx90393 import (
     MLX90393,
     MLX90393Settings,
@@ -17,7 +18,9 @@ __all__ = [
     "MLX90393",
     "MLX90393Settings",
     "NANO17",
-    "TACTILE_CHIP",
+    "Acquisition",
+    "ForceSensor",
+    "Sensor",
     "ForceSensorSpec",
     "averaging_count",
     "conversion_time_s",

@@ -4,28 +4,25 @@ A reading is the force plus the sensor's white noise, rounded to its resolution 
 and held within its range; a value outside the range reads as the range's end and is flagged.
 Vectorised over arrays (..., 3) of x, y, z forces in N.
 
-Two sensors of S2 (the wearable fingertip-force study) are described:
-
-- :data:`TACTILE_CHIP`, a MEMS 3-axis tactile chip of the ShokacChip class (Touchence): pressure
-  on its z axis, shear on x and y, held against the side of the nail. No datasheet of the chip was
-  available to us; its figures are assumptions for a piezoresistive MEMS chip of that class read by
-  a 12-bit converter: pressure 0–5 N (a compression-only axis: the chip cannot be pulled), shear
-  ±2.5 N, so one step of 5 N / 4096 = 1.22 mN on every axis, and 2 mN RMS noise.
-- :data:`NANO17`, the table's reference, ATI Industrial Automation's Nano17 with its SI-12-0.12
+:data:`NANO17` is the common reference sensor: ATI Industrial Automation's Nano17 with its SI-12-0.12
   calibration (datasheet: sensing ranges Fx, Fy ±12 N and Fz ±17 N, resolution 1/320 N on each
   force axis). ATI's resolution is the smallest change its data acquisition resolves; we take the
   noise as one resolution step RMS (an assumption: ATI gives no separate noise figure).
 
-The sampling instant and rate are the caller's (the S2 protocol reads both at 10 Hz, unfiltered).
+The sampling instant and rate are the caller's.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from softtip._core.channels import Reading
 from softtip._core.config import NonNegativeNumber, PositiveNumber, Real, Refusal, Text, expect, from_numpy, schema
+from softtip.sensors.contract import Acquisition
 
 Triple = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 numbers (x, y, z)")]
 PositiveTriple = Annotated[tuple[PositiveNumber, PositiveNumber, PositiveNumber], from_numpy,
@@ -55,14 +52,31 @@ class ForceSensorSpec:
                 "resolution_N": list(self.resolution), "noise_N": list(self.noise), "source": self.source}
 
 
-TACTILE_CHIP = ForceSensorSpec(
-    name="ShokacChip-class MEMS 3-axis tactile chip", lowest=(-2.5, -2.5, 0.0), highest=(2.5, 2.5, 5.0),
-    resolution=(5.0 / 4096,) * 3, noise=(2e-3,) * 3,
-    source="assumed: no datasheet available; a 12-bit reading of a 5 N span per axis, 2 mN RMS noise")
 NANO17 = ForceSensorSpec(
     name="ATI Nano17 SI-12-0.12", lowest=(-12.0, -12.0, -17.0), highest=(12.0, 12.0, 17.0),
     resolution=(1 / 320,) * 3, noise=(1 / 320,) * 3,
     source="ATI Nano17 datasheet (SI-12-0.12 ranges and resolution); noise taken as one resolution step")
+
+
+@dataclass(frozen=True)
+class ForceSensor:
+    """A 3-axis force sensor of ``spec`` whose channels are named by ``reading`` (a force reading in N):
+    the sensor contract (:class:`~softtip.sensors.contract.Sensor`) over :func:`read_forces`."""
+
+    spec: ForceSensorSpec
+    reading: Reading
+
+    def __post_init__(self) -> None:
+        if self.reading.units.get("N") != 1.0:
+            raise ValueError(f"reading {self.reading.quantity!r}: a force sensor's reading is in N, "
+                             f"not {self.reading.unit}")
+
+    def acquire(self, force: ArrayLike, rng: np.random.Generator | None = None) -> Acquisition:
+        values, saturated = read_forces(np.asarray(force, dtype=float), self.spec, rng)
+        return Acquisition(values=values, raw=values, saturated=saturated)
+
+    def to_dict(self) -> dict:
+        return self.spec.to_dict()
 
 
 def read_forces(force: np.ndarray, spec: ForceSensorSpec,

@@ -21,8 +21,10 @@ from typing import Annotated, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import Flag, Refusal, choice, expect, from_numpy, integer, parse, schema
 from softtip._core.units import UT_PER_T
+from softtip.sensors.contract import Acquisition
 
 # --------------------------------------------------------------------------
 # Datasheet facts
@@ -261,6 +263,20 @@ class MLX90393:
     @property
     def settings(self) -> MLX90393Settings:
         return self._settings
+
+    @property
+    def reading(self) -> Reading:
+        return MAGNETIC
+
+    def acquire(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None) -> Acquisition:
+        """The sensor contract (:class:`~softtip.sensors.contract.Sensor`): register words for fields
+        ``b_tesla`` (..., 3), with noise drawn from ``rng`` if given, decoded to µT as a host does."""
+        counts = self.to_counts(b_tesla, rng=rng, noise=rng is not None)
+        values, saturated = self.decode(counts)
+        return Acquisition(values=values, raw=counts, saturated=saturated)
+
+    def to_dict(self) -> dict:
+        return self._settings.to_dict()
 
     def to_counts(self, b_tesla: ArrayLike, rng: np.random.Generator | None = None, noise: bool = True) -> np.ndarray:
         """Register words (uint16, shape of b_tesla) for fields b_tesla of shape (..., 3).

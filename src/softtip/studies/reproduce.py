@@ -12,7 +12,6 @@ import platform
 import time
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
-from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -20,15 +19,14 @@ import numpy as np
 from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.progress import SILENT, Progress
+from softtip._core.systems import Study, load, owner, studies
 from softtip.lab import Protocol, load_protocol
-from softtip.lab.protocols import DEFAULTS, VISCOELASTIC_SOURCES, shipped_protocol_path
-from softtip.lab.realism import REALISM_SOURCES, WEARABLE_REALISM_SOURCES, Realism
+from softtip.lab.protocols import shipped_protocol_path
 from softtip.published import OUTSIDE
 from softtip.report.document import Report, Section
 from softtip.report.index import index_report
 from softtip.report.tables import Table
 from softtip.studies.outcome import StudyOutcome
-from softtip.studies.registry import STUDIES, Study
 
 REPORT_FORMAT = "softtip-study-report"
 QUICK_TRIALS = {"calibration_trials": 2, "validation_trials": 2, "trials": 2, "untrained_trials": 1}
@@ -73,18 +71,17 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study:
                       (row, "default or changed"): f"changed (default {_shown(default)})" if changed else "default",
                       (row, "where from"): where})
 
-    for key, value in protocol.parameters.items():
-        add("parameters", key, value, DEFAULTS[protocol.name][key],
-            f"softtip's {protocol.name} protocol, after the publication's procedure")
-    realism = type(protocol.realism)
-    sources = REALISM_SOURCES if realism is Realism else WEARABLE_REALISM_SOURCES
-    defaults = asdict(realism())
+    bench = protocol.bench
+    defaults = bench.defaults(protocol.name)
+    for key, value in asdict(protocol.parameters).items():
+        add("parameters", key, value, defaults[key], f"softtip's {protocol.name} protocol, after the publication's "
+                                                    "procedure")
+    defaults = asdict(type(protocol.realism)())
     for key, value in protocol.realism.to_dict().items():
-        add("realism", key, value, defaults[key], sources[key])
-    viscoelastic, sources = VISCOELASTIC_SOURCES[protocol.bench]
-    defaults = asdict(viscoelastic())
-    for key, value in protocol.viscoelastic.items():
-        add("viscoelastic", key, value, defaults[key], sources[key])
+        add("realism", key, value, defaults[key], bench.realism_sources[key])
+    defaults = asdict(bench.viscoelastic())
+    for key, value in asdict(protocol.viscoelastic).items():
+        add("viscoelastic", key, value, defaults[key], bench.viscoelastic_sources[key])
     return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from"], cells,
                  caption="Every setting of this run; realism effects are set to 0 to switch them off.")
 
@@ -143,23 +140,16 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
                     progress: Progress = SILENT, command: str | None = None) -> StudyReport:
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
     count to a minimum (a smoke run, not the study)."""
-    if name not in STUDIES:
-        raise KeyError(f"study {name!r}: expected one of {', '.join(STUDIES)}")
-    study = STUDIES[name]
-    protocol = load_protocol(protocol_path or study.protocol)
-    protocol.seed = seed
-    protocol.parameters.update(study.sets)
-    quick_keys = set()
-    if quick:
-        for key, count in QUICK_TRIALS.items():
-            if key in protocol.parameters and protocol.parameters[key] > count:
-                protocol.parameters[key] = count
-                quick_keys.add(key)
+    study = studies().get(name) or owner("study", name)  # the second refuses an unknown name
+    protocol = load_protocol(protocol_path or study.protocol).changed(seed=seed, **study.sets)
+    parameters = asdict(protocol.parameters)
+    cuts = {key: count for key, count in QUICK_TRIALS.items() if quick and parameters.get(key, 0) > count}
+    protocol, quick_keys = protocol.changed(**cuts), set(cuts)
     started = datetime.now(timezone.utc)
     start = time.perf_counter()
     source = str(protocol_path) if protocol_path else f"the shipped protocol {shipped_protocol_path(study.protocol).name}"
-    table = protocol_table(protocol, source, quick_keys, study)  # before the analysis, which may change the design
-    analysis = getattr(import_module(f"softtip.studies.{study.module}"), study.analysis)
+    table = protocol_table(protocol, source, quick_keys, study)
+    analysis = load(study.analysis)
     outcome = analysis(protocol, seed, progress)
     seconds = time.perf_counter() - start
     provenance = {
@@ -175,13 +165,13 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
 def write_index(directory: str | Path) -> Path:
     """``index.html`` of every study report (``*.json``) in ``directory``, in the registry's order."""
     directory = Path(directory)
-    entries = []
+    entries, order = [], list(studies())
     for path in sorted(directory.glob("*.json")):
         try:
             entry = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
             continue
-        if isinstance(entry, dict) and entry.get("format") == REPORT_FORMAT and entry.get("study") in STUDIES:
+        if isinstance(entry, dict) and entry.get("format") == REPORT_FORMAT and entry.get("study") in order:
             entries.append(entry)
-    entries.sort(key=lambda e: list(STUDIES).index(e["study"]))
+    entries.sort(key=lambda e: order.index(e["study"]))
     return index_report(entries).write(directory / "index.html")

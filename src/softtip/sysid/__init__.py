@@ -1,6 +1,6 @@
 """System identification: linear models of a system from sampled input/output recordings.
 
-What a MATLAB System Identification Toolbox user expects, for recordings such as the wearable
+What a MATLAB System Identification Toolbox user expects, for recordings such as a fingertip
 force sensor's (side-sensor forces in, table-sensor forces out, at 10 Hz):
 
 - :mod:`~softtip.sysid.recording`: :class:`Recording` (sample time, named channels with units,

@@ -2,7 +2,7 @@
 read through the MLX90393 model, relative to the unloaded state.
 
 The geometry is the design's (nominal) unless a fabricated unit's own magnet centres,
-polarisations and chip positions are given (see :class:`softtip.lab.realism.FabricatedUnit`).
+polarisations and chip positions are given (a fabricated unit of a design).
 """
 
 from __future__ import annotations
@@ -10,20 +10,18 @@ from __future__ import annotations
 import numpy as np
 
 from softtip._core.units import UT_PER_T
-from softtip.design.model import Design, DesignError
+from softtip.design.model import Design
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.poses import MagnetPoses
-from softtip.sensors import MLX90393, MLX90393Settings
+from softtip.sensors import MLX90393, Sensor
 
 
 class Readout:
     def __init__(self, design: Design, *, magnet_centers: np.ndarray | None = None,
                  polarizations: np.ndarray | None = None, sensor_positions: np.ndarray | None = None,
-                 ambient_field: np.ndarray | None = None):
-        try:
-            self.sensor = MLX90393(MLX90393Settings.from_dict(design.sensor_readout))
-        except ValueError as error:
-            raise DesignError(f"{design.name}: {error}") from None
+                 ambient_field: np.ndarray | None = None, sensor: Sensor | None = None):
+        # any 3-axis magnetometer through the sensor contract; the design's MLX90393 by default
+        self.sensor = MLX90393(design.sensor_settings) if sensor is None else sensor
         magnets = design.magnets
         self.design = design
         self.rest_positions = (np.array([m.center for m in magnets]) if magnet_centers is None
@@ -62,8 +60,8 @@ class Readout:
         With noise, both the baseline and the loaded reading go through the sensor model
         (quantisation, noise, clipping) like a real acquisition."""
         if not noise:
-            return (loaded - self.rest_field) * UT_PER_T, self.sensor.to_counts(loaded, noise=False)
+            return (loaded - self.rest_field) * UT_PER_T, self.sensor.acquire(loaded).raw
         rng = rng or np.random.default_rng()
-        counts = self.sensor.to_counts(loaded, rng=rng)
-        baseline = self.sensor.read_uT(np.broadcast_to(self.rest_field, loaded.shape), rng=rng)
-        return self.sensor.counts_to_uT(counts) - baseline, counts
+        read = self.sensor.acquire(loaded, rng)
+        baseline = self.sensor.acquire(np.broadcast_to(self.rest_field, loaded.shape), rng).values
+        return read.values - baseline, read.raw

@@ -34,7 +34,6 @@ gives the error on them too.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -48,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from softtip import __version__
-from softtip._core.files import atomic_write
+from softtip._core.archive import read_archive, write_archive
 from softtip._core.network import fold_scaling, predict_batch
 from softtip._core.progress import SILENT, Progress, Task
 from softtip._core.units import MM, UT_PER_T
@@ -61,7 +60,11 @@ from softtip.twin.engines import Response
 from softtip.twin.readout import Readout
 
 # 2: a board enters by the foot of its centre line; 3: footprint contact; 4: an ensemble of networks
-SCHEMA = "softtip.reduced-twin/4"
+FORMAT, SCHEMA_VERSION = "softtip-reduced-twin", 5
+
+
+class ReducedTwinError(ValueError):
+    """A reduced-twin file that cannot be trusted."""
 PARAMETERS = ("x_m", "y_m", "angle_rad", "depth_m", "tx_m", "ty_m")
 # with contact on footprint cells the samples are smooth, and more of them lower the error's tail:
 # over 500 held-out loads (one network, sliding loads included), the largest sensor error was
@@ -216,45 +219,33 @@ class ReducedTwin:
     # ------------------------------------------------------------------ storage
 
     def save(self, path: str | Path) -> Path:
-        """Write ``path`` (.npz, the weights) and ``path`` with .json (everything else)."""
+        """Write ``path`` (.npz: the weights, and everything else as its checksummed JSON metadata)."""
         path = Path(path).with_suffix(".npz")
         arrays = {}
         for j, net in enumerate(self.networks):
             arrays |= {f"network_{j}_weight_{k}": w for k, w in enumerate(net["weights"])}
             arrays |= {f"network_{j}_bias_{k}": b for k, b in enumerate(net["biases"])}
             arrays |= {f"network_{j}_{k}": net[k] for k in _SCALING}
-        atomic_write(path, lambda handle: np.savez(handle, **arrays))
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-        meta = {"schema": SCHEMA, "softtip": __version__, "design": self.design.spec, "design_name": self.design.name,
-                "family": vars(self.family), "ranges": {k: v for k, v in vars(self.ranges).items()},
-                "mesh_size_m": self.mesh_size, "contact_layer_size_m": self.contact_layer_size,
-                "networks": len(self.networks), "layers": len(self.networks[0]["weights"]), "parameters": PARAMETERS,
-                "weights_sha256": digest, "report": self.report}
-        atomic_write(path.with_suffix(".json"), json.dumps(meta, indent=2))
-        return path
+        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION, "softtip": __version__, "design": self.design.spec,
+                "design_name": self.design.name, "family": vars(self.family),
+                "ranges": {k: v for k, v in vars(self.ranges).items()}, "mesh_size_m": self.mesh_size,
+                "contact_layer_size_m": self.contact_layer_size, "networks": len(self.networks),
+                "layers": len(self.networks[0]["weights"]), "parameters": PARAMETERS,
+                "report": json.loads(json.dumps(self.report, default=float))}
+        return write_archive(path, meta, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "ReducedTwin":
         """Read a saved reduced twin; refuses foreign, truncated or tampered files with one line."""
         path = Path(path).with_suffix(".npz")
-        meta_path = path.with_suffix(".json")
+        meta, data = read_archive(path, FORMAT, SCHEMA_VERSION, "reduced twin", ReducedTwinError)
+        layers = int(meta["layers"])
         try:
-            meta = json.loads(meta_path.read_text())
-        except (OSError, json.JSONDecodeError) as error:
-            raise ValueError(f"reduced twin {meta_path}: not a readable JSON file ({error})") from None
-        if not isinstance(meta, dict) or meta.get("schema") != SCHEMA:
-            raise ValueError(f"reduced twin {meta_path}: not a softtip reduced twin (expected schema {SCHEMA})")
-        try:
-            raw = path.read_bytes()
-        except OSError as error:
-            raise ValueError(f"reduced twin {path}: cannot be read ({error})") from None
-        if hashlib.sha256(raw).hexdigest() != meta.get("weights_sha256"):
-            raise ValueError(f"reduced twin {path}: weights do not match their JSON (truncated or modified)")
-        with np.load(path, allow_pickle=False) as data:
-            layers = int(meta["layers"])
             networks = [{"weights": [data[f"network_{j}_weight_{k}"] for k in range(layers)],
                          "biases": [data[f"network_{j}_bias_{k}"] for k in range(layers)],
                          **{k: data[f"network_{j}_{k}"] for k in _SCALING}} for j in range(int(meta["networks"]))]
+        except KeyError as missing:
+            raise ReducedTwinError(f"{path}: inconsistent reduced twin: array {missing.args[0]!r} is missing") from None
         ranges = meta["ranges"]
         ranges["angle"] = tuple(ranges["angle"])
         return cls(design=design_from_dict(meta["design"], source=meta["design_name"]),

@@ -28,9 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.channels import FORCE, MAGNETIC, Reading
+from softtip._core.channels import Reading, known_readings
 from softtip._core.config import PositiveNumber, checked
-from softtip._core.units import UT_PER_T
 from softtip.data.dataset import (
     DIMENSIONLESS,
     TIME,
@@ -43,20 +42,20 @@ from softtip.realtime.recording.format import (
     FLOAT64_MULTI_ARRAY,
     MESSAGE_ENCODING,
     METADATA_NAME,
-    READING_TOPICS,
+    MAGNETIC_FIELD,
+    VECTOR3_STAMPED,
     STRING,
     WRENCH_LABELS,
     WRENCH_STAMPED,
     WRENCH_UNITS,
     RecordingError,
+    per_message_unit,
     reading_topic,
 )
 from softtip.realtime.recording.reader import Recording, TopicMessages, read_recording
 
 CONTACT_STATE = "contact_state"
-_READINGS = {READING_TOPICS[reading.quantity]: reading for reading in (MAGNETIC, FORCE)}
-_READING_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/(?P<leaf>{})".format(
-    "|".join(leaf for leaf, _ in _READINGS)))
+_READING_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/(?P<leaf>[A-Za-z0-9_]+)")
 
 
 @dataclass(frozen=True)
@@ -92,32 +91,37 @@ def _readings(topic: TopicMessages, reading: Reading) -> tuple[np.ndarray, np.nd
     """(header stamps in ns, readings (n, 3) in the reading's unit) of a topic of a chip's messages."""
     messages = topic.decoded()
     stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
-    if reading == MAGNETIC:
-        return stamps, _vectors(m.magnetic_field for m in messages) * UT_PER_T
-    return stamps, _vectors(m.wrench.force for m in messages)
+    per_message = per_message_unit(reading)
+    if reading.message == MAGNETIC_FIELD:
+        return stamps, _vectors(m.magnetic_field for m in messages) * per_message
+    if reading.message == VECTOR3_STAMPED:
+        return stamps, _vectors(m.vector for m in messages) * per_message
+    return stamps, _vectors(m.wrench.force for m in messages) * per_message
 
 
 def _reading_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str], Reading]:
     found: dict[str, dict[int, str]] = {}
     readings: dict[str, set[Reading]] = {}
+    known = {(reading.topic, reading.message): reading for reading in known_readings()}
     for name, topic in recording.topics.items():
         match = _READING_TOPIC.fullmatch(name)
-        reading = _READINGS.get((match["leaf"], topic.schema_name)) if match else None
+        reading = known.get((match["leaf"], topic.schema_name)) if match else None
         if reading is not None and topic.data:
             found.setdefault(match["prefix"], {})[int(match["chip"])] = name
             readings.setdefault(match["prefix"], set()).add(reading)
     if prefix is None:
         if len(found) != 1:
             raise RecordingError(f"{recording.path}: " + (
-                "no <prefix>/chip<k>/field topics of sensor_msgs/msg/MagneticField messages (nor chip<k>/force "
-                "topics of geometry_msgs/msg/WrenchStamped)" if not found else
+                "no chip readings: expected topics " + " or ".join(
+                    f"<prefix>/chip<k>/{r.topic} of {r.message}" for r in known.values()) if not found else
                 f"fingertips under several prefixes ({', '.join(sorted(found))}): pass prefix"))
         prefix = next(iter(found))
     chips = found.get(prefix, {})
     if not chips:
         raise RecordingError(f"{recording.path}: no {prefix}/chip<k>/field topics")
     if len(readings[prefix]) > 1:
-        raise RecordingError(f"{recording.path}: {prefix} holds both field and force chips")
+        raise RecordingError(f"{recording.path}: {prefix} holds chips of different readings "
+                              f"({', '.join(sorted(r.quantity for r in readings[prefix]))})")
     if sorted(chips) != list(range(len(chips))):
         raise RecordingError(f"{recording.path}: chips {sorted(chips)} recorded; expected chips 0..{len(chips) - 1}")
     return prefix, [chips[k] for k in range(len(chips))], next(iter(readings[prefix]))

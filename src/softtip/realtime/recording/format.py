@@ -14,7 +14,7 @@ Topics (``prefix`` is ``/fingertip`` by default):
                                                                covariance: the sensor model's noise
                                                                plus quantisation, at start-up settings
 ``{prefix}/chip{k}/force``      geometry_msgs/msg/WrenchStamped  instead, the reading of force chip k
-                                                               (the wearable's), in N; torque NaN
+                                                               in N; torque NaN
 ``{prefix}/chip{k}/baseline``   the chip's message type        the baseline subtracted from chip k,
                                                                written whenever it changes
 ``{prefix}/wrench``             geometry_msgs/msg/WrenchStamped  estimated force (N) and torque (N m);
@@ -37,7 +37,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from softtip._core.channels import FORCE, MAGNETIC, Reading
+from softtip._core.channels import Reading
+from softtip._core.units import FORCE_UNITS
 from softtip._core.units import UT_PER_T
 from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
 
@@ -61,6 +62,7 @@ DEFINITIONS = {
         "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] magnetic_field_covariance"
     ),
     "geometry_msgs/WrenchStamped": "std_msgs/Header header\ngeometry_msgs/Wrench wrench",
+    "geometry_msgs/Vector3Stamped": "std_msgs/Header header\ngeometry_msgs/Vector3 vector",
     "std_msgs/String": "string data",
     "std_msgs/MultiArrayDimension": "string label\nuint32 size\nuint32 stride",
     "std_msgs/MultiArrayLayout": "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset",
@@ -68,11 +70,12 @@ DEFINITIONS = {
 }
 MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
+VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
 STRING = "std_msgs/msg/String"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 
-# A chip's reading and baseline, by what the stream reads: (topic leaf, message type).
-READING_TOPICS = {MAGNETIC.quantity: ("field", MAGNETIC_FIELD), FORCE.quantity: ("force", WRENCH_STAMPED)}
+# the unit a chip's reading message carries, by message type (a Vector3Stamped: the reading's own)
+READING_MESSAGES = {MAGNETIC_FIELD: "T", WRENCH_STAMPED: "N", VECTOR3_STAMPED: None}
 
 WRENCH_FLOATS = 6  # force (3) + torque (3)
 
@@ -83,7 +86,6 @@ WRENCH_COMPONENTS = {
 }
 WRENCH_LABELS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 WRENCH_UNITS = ("N", "N", "N", "N m", "N m", "N m")
-FORCE_UNITS_IN_N = {"N": 1.0, "mN": 1e-3}
 TORQUE_UNITS_IN_NM = {"N m": 1.0, "N*m": 1.0, "Nm": 1.0, "N.m": 1.0, "mN m": 1e-3, "N mm": 1e-3}
 
 
@@ -117,10 +119,11 @@ def schema_text(schema_name: str) -> str:
 
 
 def reading_topic(reading: Reading) -> tuple[str, str]:
-    """(topic leaf, message type) of a chip's reading: ``field`` MagneticField, ``force`` WrenchStamped."""
-    if reading.quantity not in READING_TOPICS:
-        raise RecordingError(f"reading {reading.quantity!r}: not recordable (known: {', '.join(READING_TOPICS)})")
-    return READING_TOPICS[reading.quantity]
+    """(topic leaf, message type) of a chip's reading, e.g. ``field`` MagneticField, ``force`` WrenchStamped."""
+    if reading.message not in READING_MESSAGES or READING_MESSAGES[reading.message] not in (None, *reading.units):
+        raise RecordingError(f"reading {reading.quantity!r}: not recordable as {reading.message} (known: "
+                             f"{', '.join(f'{m} in {u}' for m, u in READING_MESSAGES.items())})")
+    return reading.topic, reading.message
 
 
 def reading_fields(reading: Reading, values: np.ndarray, vector: Callable[[np.ndarray], dict],
@@ -128,9 +131,18 @@ def reading_fields(reading: Reading, values: np.ndarray, vector: Callable[[np.nd
     """The fields of a chip's reading message after its header: ``values`` (3, in the reading's
     unit) in SI, each vector encoded by ``vector``; a MagneticField carries ``covariance``
     (9 values, T², default unknown: zeros), a force chip's WrenchStamped a NaN torque."""
-    if reading.quantity == MAGNETIC.quantity:
-        return {"magnetic_field": vector(values / UT_PER_T), "magnetic_field_covariance": covariance or [0.0] * 9}
-    return {"wrench": {"force": vector(values), "torque": vector(_NO_TORQUE)}}
+    carried = values / per_message_unit(reading)
+    if reading.message == MAGNETIC_FIELD:
+        return {"magnetic_field": vector(carried), "magnetic_field_covariance": covariance or [0.0] * 9}
+    if reading.message == VECTOR3_STAMPED:
+        return {"vector": vector(carried)}
+    return {"wrench": {"force": vector(carried), "torque": vector(_NO_TORQUE)}}
+
+
+def per_message_unit(reading: Reading) -> float:
+    """How many of the reading's unit one unit of its message is (1 T = 1e6 µT)."""
+    unit = READING_MESSAGES[reading.message]
+    return 1.0 if unit is None else reading.units[unit]
 
 
 def frame_id(prefix: str, chip: int | None = None) -> str:
@@ -148,7 +160,7 @@ def wrench_mapping(target_names: Sequence[str], target_units: Sequence[str]) -> 
         component = WRENCH_COMPONENTS.get(name.lower().removesuffix(f"_{unit}".lower()))
         if component is None:
             continue
-        units = FORCE_UNITS_IN_N if component < 3 else TORQUE_UNITS_IN_NM
+        units = FORCE_UNITS if component < 3 else TORQUE_UNITS_IN_NM
         if unit not in units:
             raise RecordingError(f"target {name}: unit {unit!r} is not a {'force' if component < 3 else 'torque'} "
                                  f"unit ({', '.join(units)})")

@@ -25,7 +25,6 @@ from softtip._core.config import PositiveInteger, checked, integer
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
-    MAGNETIC_FIELD,
     MESSAGE_ENCODING,
     METADATA_NAME,
     RECORDING_FORMAT,
@@ -127,7 +126,7 @@ class McapRecorder:
             "softtip_version": __version__,
         })
         schemas = {name: self._writer.register_msgdef(name, schema_text(name))
-                   for name in (MAGNETIC_FIELD, WRENCH_STAMPED, STRING, FLOAT64_MULTI_ARRAY)}
+                   for name in dict.fromkeys((reading_schema, WRENCH_STAMPED, STRING, FLOAT64_MULTI_ARRAY))}
 
         def channel(topic: str, schema: str, metadata: dict | None = None) -> tuple[str, Schema]:
             self._writer.register_channel(topic, schemas[schema], metadata or {})

@@ -25,6 +25,7 @@ from softtip.realtime.recording.format import (
     FLOAT64_MULTI_ARRAY,
     MAGNETIC_FIELD,
     STRING,
+    VECTOR3_STAMPED,
     WRENCH_STAMPED,
     frame_id,
     reading_fields,
@@ -55,7 +56,8 @@ ESTIMATES_SCHEMA = _schema({
 STATE_SCHEMA = _schema({"data": {"type": "string"}})
 CHANGE_SCHEMA = _schema({"stamp": _schema({"sec": {"type": "integer"}, "nanosec": {"type": "integer"}}),
                          "chips": {"type": "array", "items": _VECTOR3}})
-READING_SCHEMAS = {MAGNETIC_FIELD: MAGNETIC_FIELD_SCHEMA, WRENCH_STAMPED: WRENCH_SCHEMA}
+READING_SCHEMAS = {MAGNETIC_FIELD: MAGNETIC_FIELD_SCHEMA, WRENCH_STAMPED: WRENCH_SCHEMA,
+                   VECTOR3_STAMPED: _schema({"header": _HEADER, "vector": _VECTOR3})}
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -23,13 +23,14 @@ import threading
 
 import numpy as np
 
-from softtip._core.channels import MAGNETIC
-from softtip._core.units import UT_PER_T
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
+    MAGNETIC_FIELD,
+    VECTOR3_STAMPED,
     frame_id,
     magnetic_covariance_T2,
+    per_message_unit,
     reading_topic,
     wrench_mapping,
     wrench_values,
@@ -83,9 +84,11 @@ class ROS2Sink(Sink):
         self._covariance = magnetic_covariance_T2(stream.settings).tolist()
         node = self._node = rclpy.create_node(self.node_name)
         depth, prefix = self.qos_depth, self.prefix
-        self._magnetic = stream.reading == MAGNETIC
+        self._magnetic = stream.reading.message == MAGNETIC_FIELD
+        self._per_message = per_message_unit(stream.reading)
         leaf, _ = reading_topic(stream.reading)
-        kind = msg_sensor.MagneticField if self._magnetic else msg_geometry.WrenchStamped
+        kind = {MAGNETIC_FIELD: msg_sensor.MagneticField, VECTOR3_STAMPED: msg_geometry.Vector3Stamped}.get(
+            stream.reading.message, msg_geometry.WrenchStamped)
         self._reading_publishers = [node.create_publisher(kind, f"{prefix}/chip{k}/{leaf}", depth)
                                     for k in range(stream.chips)]
         self._baseline_publishers = [node.create_publisher(kind, f"{prefix}/chip{k}/baseline", depth)
@@ -133,10 +136,13 @@ class ROS2Sink(Sink):
 
     def _reading(self, frame: FrameResult, chip: int, reading: np.ndarray):
         """Chip ``chip``'s reading: a MagneticField (T), or a force chip's WrenchStamped (N, torque NaN)."""
-        if not self._magnetic:
-            return self._wrench_stamped(frame, frame_id(self.prefix, chip), np.r_[reading, np.full(3, np.nan)])
         msg_sensor, msg_geometry = self._ros["sensor_msgs.msg"], self._ros["geometry_msgs.msg"]
-        x, y, z = (float(v) / UT_PER_T for v in reading)
+        x, y, z = (float(v) / self._per_message for v in reading)
+        if self._stream.reading.message == VECTOR3_STAMPED:
+            return msg_geometry.Vector3Stamped(header=self._header(frame, frame_id(self.prefix, chip)),
+                                               vector=msg_geometry.Vector3(x=x, y=y, z=z))
+        if not self._magnetic:
+            return self._wrench_stamped(frame, frame_id(self.prefix, chip), np.r_[x, y, z, np.full(3, np.nan)])
         return msg_sensor.MagneticField(header=self._header(frame, frame_id(self.prefix, chip)),
                                         magnetic_field=msg_geometry.Vector3(x=x, y=y, z=z),
                                         magnetic_field_covariance=self._covariance)

@@ -2,7 +2,7 @@
 
 Every trial starts in the air (its first sample is the baseline that is subtracted, as on the
 bench), then follows the protocol's motion; readings come from a fabricated unit of the design
-(:mod:`softtip.lab.realism`), forces from the contact mechanics (:mod:`softtip.lab.engine`) made
+(:mod:`softtip.systems.hall_fingertip.realism`), forces from the contact mechanics (:mod:`softtip.systems.hall_fingertip.engine`) made
 viscoelastic by the material's Prony series where a force sensor would measure them.
 
 Forces in labels are what a reference sensor under the fingertip measures: ``fz_N`` the normal
@@ -18,10 +18,12 @@ from typing import Any, Callable
 import numpy as np
 
 from softtip.data import Dataset, DatasetMetadata, TrialWriter, channel_columns
+from softtip.data.splits import CALIBRATION, VALIDATION
+from softtip.lab.bench import SeededBench
 from softtip._core.units import MM
 from softtip.design.model import Design
-from softtip.lab.engine import HeldPart, interpolate_path, path_table
-from softtip.lab.realism import FabricatedUnit, Realism
+from softtip.systems.hall_fingertip.engine import HeldPart, interpolate_path, path_table
+from softtip.systems.hall_fingertip.realism import FabricatedUnit, Realism
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board, CornerPlate, TiltedPlate
 from softtip.mechanics.poses import MagnetPoses
@@ -29,22 +31,8 @@ from softtip.mechanics.viscoelastic import PronySeries, prony_for_hysteresis, ql
 from softtip.twin import Readout
 from softtip.twin.influence import InfluenceEngine
 
-CALIBRATION, VALIDATION = "calibration", "validation"
+Parameters = Any  # a protocol's [parameters]: its schema's object (softtip.systems.hall_fingertip.protocols)
 
-
-@dataclass
-class SeededBench:
-    """What every bench gives its protocols: the relaxation of what is pressed, the realism settings, a
-    seeded random stream and the sample rate."""
-
-    prony: PronySeries
-    realism: Any
-    rng: np.random.Generator
-    rate_hz: float
-
-    def scatter(self, sd: float, size=None):
-        """A normal scatter of standard deviation ``sd`` (zeros when ``sd`` is 0, drawing nothing)."""
-        return self.rng.normal(0.0, sd, size) if sd > 0 else np.zeros(size) if size else 0.0
 
 
 @dataclass
@@ -81,9 +69,9 @@ def material_prony(fingertip: InfluenceEngine, hysteresis_percent: float, depth:
     return prony_for_hysteresis(hysteresis_percent, times, z, force[:, 2])
 
 
-def _metadata(bench: Bench, protocol: dict, seed: int, description: str, designs: dict | None = None) -> DatasetMetadata:
+def _metadata(bench: Bench, record: dict, seed: int, description: str, designs: dict | None = None) -> DatasetMetadata:
     return DatasetMetadata(description=description, design=designs or {"name": bench.design.name, **bench.design.spec},
-                           sensor_settings=bench.design.sensor_readout, protocol=protocol, seed=seed)
+                           sensor_settings=bench.design.sensor_settings.to_dict(), protocol=record, seed=seed)
 
 
 def _roles(calibration: int, validation: int) -> list[str]:
@@ -110,23 +98,23 @@ def _force_labels(force: np.ndarray, times: np.ndarray, prony: PronySeries) -> d
 
 # ---------------------------------------------------------------------------------------------- generation 1
 
-def pushing(bench: Bench, p: dict, seed: int) -> Dataset:
+def pushing(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1 pushing test: a board at each angle pushed ``depth_mm`` at ``speed_mm_s``."""
     writer = TrialWriter(1, labels={"angle_deg": "deg", "depth_mm": "mm", "fx_N": "N", "fy_N": "N", "fz_N": "N"},
                          conditions={"board_angle_deg": "deg", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "pushing test"))
+                         metadata=_metadata(bench, record, seed, "pushing test"))
     unit, realism = bench.unit(), bench.realism
-    depth, speed = p["depth_mm"] * MM, p["speed_mm_s"] * MM
-    for angle in p["angles_deg"]:
-        for role in _roles(int(p["calibration_trials"]), int(p["validation_trials"])):
+    depth, speed = p.depth_mm * MM, p.speed_mm_s * MM
+    for angle in p.angles_deg:
+        for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
             true_angle = angle + bench.scatter(realism.angle_sd_deg)
             position = tuple(bench.scatter(realism.position_sd_mm * MM, 2))
             trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
             table = path_table(bench.fingertip.press(
-                LoadCase(Board(thickness=p["board_thickness_mm"] * MM, angle=math.radians(true_angle)), depth,
+                LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=math.radians(true_angle)), depth,
                          position=position, friction="stick"), normal_steps=6))
-            times = bench.times(p["pre_contact_s"] + depth / trial_speed)
-            profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
+            times = bench.times(p.pre_contact_s + depth / trial_speed)
+            profile = _push_profile(times, p.pre_contact_s, depth, trial_speed)
             poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
             readings = unit.record(poses, times, bench.rng)
             writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),
@@ -135,26 +123,26 @@ def pushing(bench: Bench, p: dict, seed: int) -> Dataset:
     return writer.to_dataset()
 
 
-def force3(bench: Bench, p: dict, seed: int) -> Dataset:
+def force3(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1 three-axis force calibration: normal push; normal then shear along x; along y."""
     writer = TrialWriter(1, labels={"fx_N": "N", "fy_N": "N", "fz_N": "N"},
                          conditions={"motion": "1", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "3-axis force calibration"))
+                         metadata=_metadata(bench, record, seed, "3-axis force calibration"))
     unit, realism = bench.unit(), bench.realism
-    motions = {"normal": (p["normal_depth_mm"], (0.0, 0.0)),
-               "shear-x": (p["shear_depth_mm"], (p["shear_mm"], 0.0)),
-               "shear-y": (p["shear_depth_mm"], (0.0, p["shear_mm"]))}
+    motions = {"normal": (p.normal_depth_mm, (0.0, 0.0)),
+               "shear-x": (p.shear_depth_mm, (p.shear_mm, 0.0)),
+               "shear-y": (p.shear_depth_mm, (0.0, p.shear_mm))}
     for name, (depth_mm, shear_mm) in motions.items():
-        for role in _roles(int(p["calibration_trials"]), int(p["validation_trials"])):
+        for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
             depth = depth_mm * MM
             shear = np.array(shear_mm) * MM
-            trial_speed = p["speed_mm_s"] * MM * (1 + bench.scatter(realism.speed_sd))
-            load = LoadCase(Board(thickness=p["board_thickness_mm"] * MM,
+            trial_speed = p.speed_mm_s * MM * (1 + bench.scatter(realism.speed_sd))
+            load = LoadCase(Board(thickness=p.board_thickness_mm * MM,
                                   angle=math.radians(bench.scatter(realism.angle_sd_deg))), depth,
                             tangential=tuple(shear), position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)),
                             friction="stick")
             table = path_table(bench.fingertip.press(load, normal_steps=4, tangential_steps=8))
-            start = p["pre_contact_s"]
+            start = p.pre_contact_s
             shear_time = np.linalg.norm(shear) / trial_speed
             times = bench.times(start + depth / trial_speed + shear_time)
             profile = _push_profile(times, start, depth, trial_speed)
@@ -167,23 +155,23 @@ def force3(bench: Bench, p: dict, seed: int) -> Dataset:
     return writer.to_dataset()
 
 
-def hysteresis(bench: Bench, p: dict, seed: int) -> Dataset:
+def hysteresis(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1-2 load/unload cycles at each speed, with a rest at the bottom."""
     writer = TrialWriter(len(bench.design.sensor_positions), labels={"depth_mm": "mm", "fz_N": "N"},
                          conditions={"speed_mm_s": "mm/s", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "load/unload hysteresis"))
+                         metadata=_metadata(bench, record, seed, "load/unload hysteresis"))
     unit, realism = bench.unit(), bench.realism
-    depth = p["depth_mm"] * MM
-    for speed_mm_s in p["speeds_mm_s"]:
-        for _ in range(int(p["trials"])):
+    depth = p.depth_mm * MM
+    for speed_mm_s in p.speeds_mm_s:
+        for _ in range(int(p.trials)):
             speed = speed_mm_s * MM * (1 + bench.scatter(realism.speed_sd))
             table = path_table(bench.fingertip.press(
-                LoadCase(Board(thickness=p["board_thickness_mm"] * MM), depth,
+                LoadCase(Board(thickness=p.board_thickness_mm * MM), depth,
                          position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)), friction="stick"),
                 normal_steps=8))
-            start = p["pre_contact_s"]
-            times = bench.times(start + 2 * depth / speed + p["rest_s"] + p["pre_contact_s"])
-            profile = _push_profile(times, start, depth, speed, p["rest_s"], speed)
+            start = p.pre_contact_s
+            times = bench.times(start + 2 * depth / speed + p.rest_s + p.pre_contact_s)
+            profile = _push_profile(times, start, depth, speed, p.rest_s, speed)
             poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
             readings = unit.record(poses, times, bench.rng)
             labels = _force_labels(force, times, bench.prony)
@@ -192,24 +180,24 @@ def hysteresis(bench: Bench, p: dict, seed: int) -> Dataset:
     return writer.to_dataset()
 
 
-def grasp_two(bench: Bench, p: dict, seed: int) -> Dataset:
+def grasp_two(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1 two-fingertip grasp of a tilted board: each pad meets a face tilted by the board's
     orientation; the second pad faces the first, so it sees the tilt mirrored."""
     writer = TrialWriter(2, labels={"angle_deg": "deg", "grip_force_N": "N"},
                          conditions={"board_angle_deg": "deg", "trained": "1", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "two-fingertip grasp"))
+                         metadata=_metadata(bench, record, seed, "two-fingertip grasp"))
     units = (bench.unit(), bench.unit())
     realism = bench.realism
-    depth = p["grasp_displacement_mm"] / 2 * MM  # each pad takes half of the gripper's travel
-    speed = p["grasp_speed_mm_s"] / 2 * MM
-    plan = [(a, True, role) for a in p["trained_angles_deg"]
-            for role in _roles(int(p["calibration_trials"]), int(p["validation_trials"]))]
-    plan += [(a, False, VALIDATION) for a in p["untrained_angles_deg"] for _ in range(int(p["untrained_trials"]))]
+    depth = p.grasp_displacement_mm / 2 * MM  # each pad takes half of the gripper's travel
+    speed = p.grasp_speed_mm_s / 2 * MM
+    plan = [(a, True, role) for a in p.trained_angles_deg
+            for role in _roles(int(p.calibration_trials), int(p.validation_trials))]
+    plan += [(a, False, VALIDATION) for a in p.untrained_angles_deg for _ in range(int(p.untrained_trials))]
     for angle, trained, role in plan:
         true_angle = angle + bench.scatter(realism.angle_sd_deg)
         trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
-        times = bench.times(p["pre_contact_s"] + depth / trial_speed + p["hold_s"])
-        profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
+        times = bench.times(p.pre_contact_s + depth / trial_speed + p.hold_s)
+        profile = _push_profile(times, p.pre_contact_s, depth, trial_speed)
         readings, normal = [], []
         for pad, mirror in enumerate((0.0, 180.0)):
             load = LoadCase(TiltedPlate(tilt=math.radians(true_angle), angle=math.radians(mirror)), depth,
@@ -227,7 +215,7 @@ def grasp_two(bench: Bench, p: dict, seed: int) -> Dataset:
 
 # ---------------------------------------------------------------------------------------------- generation 2
 
-def grasp_positions(bench: Bench, p: dict, seed: int) -> Dataset:
+def grasp_positions(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §2 orientation and grip force: a board held face-on whose corner lies at each of a grid
     of contact positions on the pad, at each orientation; grip force from the opposite pad's load
     cell (equal and opposite). Validation sets: trained positions and orientations, untrained
@@ -235,20 +223,20 @@ def grasp_positions(bench: Bench, p: dict, seed: int) -> Dataset:
     writer = TrialWriter(len(bench.design.sensor_positions), labels={"angle_deg": "deg", "grip_force_N": "N"},
                          conditions={"board_angle_deg": "deg", "position_x_mm": "mm", "position_y_mm": "mm",
                                      "thickness_mm": "mm", "set": "1", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "orientation and grip force over contact positions"))
+                         metadata=_metadata(bench, record, seed, "orientation and grip force over contact positions"))
     unit, realism = bench.unit(), bench.realism
-    grid = np.array(p["positions_mm"])
+    grid = np.array(p.positions_mm)
     middle = (grid[:-1] + grid[1:]) / 2
-    plan = [("trained", x, y, a, p["board_thickness_mm"], role) for x in grid for y in grid for a in p["angles_deg"]
-            for role in _roles(int(p["calibration_trials"]), int(p["validation_trials"]))]
-    plan += [("untrained-position", x, y, a, p["board_thickness_mm"], VALIDATION)
-             for x in middle[::2] for y in middle[::2] for a in p["angles_deg"]]
-    plan += [("untrained-position-orientation", x, y, a, p["board_thickness_mm"], VALIDATION)
-             for x in middle[::2] for y in middle[::2] for a in p["untrained_angles_deg"]]
-    plan += [("thickness", x, y, a, t, VALIDATION) for t in p["other_thicknesses_mm"]
-             for x in grid[1::2] for y in grid[1::2] for a in p["angles_deg"]]
-    depth = p["grasp_displacement_mm"] / 2 * MM
-    speed = p["grasp_speed_mm_s"] / 2 * MM
+    plan = [("trained", x, y, a, p.board_thickness_mm, role) for x in grid for y in grid for a in p.angles_deg
+            for role in _roles(int(p.calibration_trials), int(p.validation_trials))]
+    plan += [("untrained-position", x, y, a, p.board_thickness_mm, VALIDATION)
+             for x in middle[::2] for y in middle[::2] for a in p.angles_deg]
+    plan += [("untrained-position-orientation", x, y, a, p.board_thickness_mm, VALIDATION)
+             for x in middle[::2] for y in middle[::2] for a in p.untrained_angles_deg]
+    plan += [("thickness", x, y, a, t, VALIDATION) for t in p.other_thicknesses_mm
+             for x in grid[1::2] for y in grid[1::2] for a in p.angles_deg]
+    depth = p.grasp_displacement_mm / 2 * MM
+    speed = p.grasp_speed_mm_s / 2 * MM
     for name, x, y, angle, thickness, role in plan:
         # the corner points into the pad: the board covers the quadrant beyond it
         true_angle = angle + bench.scatter(realism.angle_sd_deg)
@@ -256,8 +244,8 @@ def grasp_positions(bench: Bench, p: dict, seed: int) -> Dataset:
         load = LoadCase(CornerPlate(angle=math.radians(true_angle)), depth, position=position, friction="stick")
         solution = bench.fingertip.press(load, normal_steps=1)
         trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
-        times = bench.times(p["pre_contact_s"] + depth / trial_speed + p["hold_s"])
-        profile = _push_profile(times, p["pre_contact_s"], depth, trial_speed)
+        times = bench.times(p.pre_contact_s + depth / trial_speed + p.hold_s)
+        profile = _push_profile(times, p.pre_contact_s, depth, trial_speed)
         # a flat face on a flat pad keeps its contact patch: the response grows in proportion to depth
         scale = (profile / depth)[:, None, None]
         poses = MagnetPoses.from_rigid(scale * solution.magnet_poses.rigid[None])
@@ -277,7 +265,7 @@ def _plane_normal(phi: float, psi: float) -> np.ndarray:
     return n / np.linalg.norm(n)
 
 
-def _collision_trials(bench: Bench, parts: dict, plan: list, points_for: Callable, p: dict,
+def _collision_trials(bench: Bench, parts: dict, plan: list, points_for: Callable, p: Parameters,
                       writer: TrialWriter, labels_for: Callable) -> None:
     """Trials of a held part driven into a plane; ``plan`` rows are (conditions, offset, normal,
     approach, state); ``points_for(state)`` gives the touching points (or None) and the seat's
@@ -285,9 +273,9 @@ def _collision_trials(bench: Bench, parts: dict, plan: list, points_for: Callabl
     units = (bench.unit(), bench.unit())
     for conditions, offset, normal, approach, state in plan:
         part = parts[offset]
-        speed = p["speed_mm_s"] * MM * (1 + bench.scatter(bench.realism.speed_sd))
-        times = bench.times(p["pre_contact_s"] + p["travel_mm"] * MM / speed)
-        travel = np.clip((times - p["pre_contact_s"]) * speed, 0, None)
+        speed = p.speed_mm_s * MM * (1 + bench.scatter(bench.realism.speed_sd))
+        times = bench.times(p.pre_contact_s + p.travel_mm * MM / speed)
+        travel = np.clip((times - p.pre_contact_s) * speed, 0, None)
         shift = np.append(bench.scatter(bench.realism.position_sd_mm * MM, 2), 0.0)
         points, seat = points_for(state)
         if points is None:
@@ -301,18 +289,18 @@ def _collision_trials(bench: Bench, parts: dict, plan: list, points_for: Callabl
         writer.add({"time_s": times, **channel_columns(readings), **labels_for(state, contact, times)}, conditions)
 
 
-def contact_states(bench: Bench, p: dict, seed: int) -> Dataset:
+def contact_states(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §2 contact states of a grasped board pushed into a plane: Point A (right corner), Point B
     (left corner), Edge; both pads sensorised."""
     writer = TrialWriter(2 * len(bench.design.sensor_positions), labels={"state": "1", "normal_force_N": "N"},
                          conditions={"phi_deg": "deg", "psi_deg": "deg", "position_x_mm": "mm", "position_y_mm": "mm",
                                      "approach_deg": "deg", "set": "1", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "contact states of a grasped board"))
-    grip = p["grip_depth_mm"] * MM
-    offsets = [tuple(o) for o in p["positions_mm"]]
-    parts = {o: HeldPart.grasp(bench.fingertip, grip, p["board_thickness_mm"] * MM, (o[0] * MM, o[1] * MM))
+                         metadata=_metadata(bench, record, seed, "contact states of a grasped board"))
+    grip = p.grip_depth_mm * MM
+    offsets = [tuple(o) for o in p.positions_mm]
+    parts = {o: HeldPart.grasp(bench.fingertip, grip, p.board_thickness_mm * MM, (o[0] * MM, o[1] * MM))
              for o in offsets}
-    half, reach = p["board_width_mm"] / 2 * MM, p["stick_out_mm"] * MM
+    half, reach = p.board_width_mm / 2 * MM, p.stick_out_mm * MM
     corners = {"point-a": np.array([[half, -reach, 0.0]]), "point-b": np.array([[-half, -reach, 0.0]]),
                "edge": np.array([[half, -reach, 0.0], [-half, -reach, 0.0]])}
     sd = bench.realism.angle_sd_deg
@@ -335,16 +323,16 @@ def contact_states(bench: Bench, p: dict, seed: int) -> Dataset:
                                          "set": name, "role": role}, offset, normal, approach, state))
         return out
 
-    trained = lambda n: _roles(int(p["calibration_trials"]), int(p["validation_trials"]))  # noqa: E731
+    trained = lambda n: _roles(int(p.calibration_trials), int(p.validation_trials))  # noqa: E731
     untrained = lambda n: [VALIDATION] * n  # noqa: E731
-    plan = rows(p["phi_deg"], {"edge": [0.0], "point-a": p["psi_deg"], "point-b": p["psi_deg"]}, 90.0, "trained",
+    plan = rows(p.phi_deg, {"edge": [0.0], "point-a": p.psi_deg, "point-b": p.psi_deg}, 90.0, "trained",
                 None, trained)
-    plan += rows(p["untrained_phi_deg"], {"edge": [0.0], "point-a": p["untrained_psi_deg"],
-                                          "point-b": p["untrained_psi_deg"]}, 90.0, "untrained-angles",
-                 int(p["untrained_trials"]), untrained)
-    for incline in p["approach_inclines_deg"]:
-        plan += rows([p["approach_phi_deg"]], {"edge": [0.0], "point-a": p["psi_deg"], "point-b": p["psi_deg"]},
-                     incline, "untrained-approach", int(p["untrained_trials"]), untrained)
+    plan += rows(p.untrained_phi_deg, {"edge": [0.0], "point-a": p.untrained_psi_deg,
+                                          "point-b": p.untrained_psi_deg}, 90.0, "untrained-angles",
+                 int(p.untrained_trials), untrained)
+    for incline in p.approach_inclines_deg:
+        plan += rows([p.approach_phi_deg], {"edge": [0.0], "point-a": p.psi_deg, "point-b": p.psi_deg},
+                     incline, "untrained-approach", int(p.untrained_trials), untrained)
 
     def labels(state, contact, times):
         return {"state": np.full(len(times), state), "normal_force_N": contact}
@@ -353,12 +341,12 @@ def contact_states(bench: Bench, p: dict, seed: int) -> Dataset:
     return writer.to_dataset()
 
 
-def inverter_contacts(p: dict) -> dict[int, tuple[np.ndarray | None, float]]:
+def inverter_contacts(p: Parameters) -> dict[int, tuple[np.ndarray | None, float]]:
     """For each insertion state, where part A touches part B (points in the part's frame, m; None in
     the air) and the compliance (m/N) it meets: the clips flex as the lid seats through its centre,
     a clip on the rim meets hard plastic."""
-    clip_x, depth = p["clip_spacing_mm"] / 2 * MM, p["part_depth_mm"] * MM
-    seat, rim = p["seat_compliance_mm_per_N"] * MM, p["rim_compliance_mm_per_N"] * MM
+    clip_x, depth = p.clip_spacing_mm / 2 * MM, p.part_depth_mm * MM
+    seat, rim = p.seat_compliance_mm_per_N * MM, p.rim_compliance_mm_per_N * MM
     return {0: (None, 0.0), 1: (np.array([[0.0, -depth, 0.0]]), seat),
             2: (np.array([[-clip_x, -depth, 0.0]]), rim), 3: (np.array([[clip_x, -depth, 0.0]]), rim)}
 
@@ -370,17 +358,17 @@ def world_up(tilt_y_deg: float, tilt_x_deg: float) -> np.ndarray:
     return up / np.linalg.norm(up)
 
 
-def inverter(bench: Bench, p: dict, seed: int) -> Dataset:
+def inverter(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §2 insertion of an inverter lid (part A, held by its top edge) into its body (part B):
     state 0 in the air, 1 inserted (the lid seats through its centre), 2 left clip on part B's rim,
     3 right clip. The flange is tilted about y; part A moves down along the world vertical."""
     writer = TrialWriter(2 * len(bench.design.sensor_positions), labels={"state": "1", "normal_force_N": "N"},
                          conditions={"state_nominal": "1", "tilt_y_deg": "deg", "tilt_x_deg": "deg",
                                      "offset_mm": "mm", "set": "1", "role": "1"},
-                         metadata=_metadata(bench, p, seed, "inverter insertion states"))
-    grip = p["grip_depth_mm"] * MM
-    offsets = sorted({0.0, *p["untrained_offsets_mm"]})
-    parts = {o: HeldPart.grasp(bench.fingertip, grip, p["part_thickness_mm"] * MM, (o * MM, 0.0)) for o in offsets}
+                         metadata=_metadata(bench, record, seed, "inverter insertion states"))
+    grip = p.grip_depth_mm * MM
+    offsets = sorted({0.0, *p.untrained_offsets_mm})
+    parts = {o: HeldPart.grasp(bench.fingertip, grip, p.part_thickness_mm * MM, (o * MM, 0.0)) for o in offsets}
     contacts = inverter_contacts(p)
 
     def normal_for(tilt_y: float, tilt_x: float) -> np.ndarray:
@@ -389,19 +377,19 @@ def inverter(bench: Bench, p: dict, seed: int) -> Dataset:
 
     plan = []
     for state in (0, 1, 2, 3):
-        for role in _roles(int(p["calibration_trials"]), int(p["validation_trials"])):
-            plan.append(({"state_nominal": state, "tilt_y_deg": p["tilt_y_deg"], "tilt_x_deg": 0.0, "offset_mm": 0.0,
-                          "set": "trained", "role": role}, 0.0, p["tilt_y_deg"], 0.0, state))
-        tilt_x = p["untrained_tilt_x_deg"] if state in (2, 3) else 0.0
-        for _ in range(int(p["untrained_trials"])):
-            plan.append(({"state_nominal": state, "tilt_y_deg": p["untrained_tilt_y_deg"], "tilt_x_deg": tilt_x,
+        for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
+            plan.append(({"state_nominal": state, "tilt_y_deg": p.tilt_y_deg, "tilt_x_deg": 0.0, "offset_mm": 0.0,
+                          "set": "trained", "role": role}, 0.0, p.tilt_y_deg, 0.0, state))
+        tilt_x = p.untrained_tilt_x_deg if state in (2, 3) else 0.0
+        for _ in range(int(p.untrained_trials)):
+            plan.append(({"state_nominal": state, "tilt_y_deg": p.untrained_tilt_y_deg, "tilt_x_deg": tilt_x,
                           "offset_mm": 0.0, "set": "untrained-tilt", "role": VALIDATION}, 0.0,
-                         p["untrained_tilt_y_deg"], tilt_x, state))
-        for offset in p["untrained_offsets_mm"]:
-            for _ in range(int(p["untrained_trials"])):
-                plan.append(({"state_nominal": state, "tilt_y_deg": p["tilt_y_deg"], "tilt_x_deg": 0.0,
+                         p.untrained_tilt_y_deg, tilt_x, state))
+        for offset in p.untrained_offsets_mm:
+            for _ in range(int(p.untrained_trials)):
+                plan.append(({"state_nominal": state, "tilt_y_deg": p.tilt_y_deg, "tilt_x_deg": 0.0,
                               "offset_mm": float(offset), "set": "untrained-offset", "role": VALIDATION}, offset,
-                             p["tilt_y_deg"], 0.0, state))
+                             p.tilt_y_deg, 0.0, state))
     rows = []
     for conditions, offset, tilt_y, tilt_x, state in plan:
         normal = normal_for(tilt_y, tilt_x)

@@ -14,23 +14,20 @@ from __future__ import annotations
 import time
 import warnings
 
-import matplotlib
+from matplotlib.figure import Figure as PlotFigure
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from softtip._core.progress import Progress  # noqa: E402
-from softtip.metrics import r2  # noqa: E402
-from softtip.data import Dataset, LeakageWarning  # noqa: E402
-from softtip.lab import Protocol, run_protocol  # noqa: E402
-from softtip.published import published_table  # noqa: E402
-from softtip.report.document import Figure  # noqa: E402
-from softtip.report.tables import Table, paper_table  # noqa: E402
-from softtip.studies.outcome import Headline, StudyOutcome  # noqa: E402
-from softtip.sysid.models import StateSpaceModel, TransferFunctionModel  # noqa: E402
-from softtip.sysid.recording import Recording  # noqa: E402
-from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial  # noqa: E402
+from softtip._core.progress import Progress
+from softtip.metrics import r2
+from softtip.data import Dataset, LeakageWarning
+from softtip.lab import Protocol, run_protocol
+from softtip.published import published_table
+from softtip.report.document import Figure
+from softtip.report.tables import Table, paper_table
+from softtip.studies.outcome import Headline, StudyOutcome
+from softtip.sysid.models import StateSpaceModel, TransferFunctionModel
+from softtip.sysid.recording import Recording
+from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
 
 INPUTS = ("side_fx_N", "side_fy_N", "side_fz_N")
 OUTPUTS = ("fx_N", "fy_N", "fz_N")
@@ -262,7 +259,8 @@ def _series_figure(participant: int, model, validation: Recording) -> Figure:
     trial = validation.trials[0]
     estimate = model.simulate(trial.u)
     t = np.arange(len(trial.u)) * validation.ts
-    figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    figure = PlotFigure(figsize=(10, 7))
+    axes = figure.subplots(3, 1, sharex=True)
     for k, (ax, axis) in enumerate(zip(axes, AXES)):
         ax.plot(t, trial.y[:, k], "k", lw=1.2, label="table sensor (measured)")
         ax.plot(t, estimate[:, k], "tab:orange", lw=1.0, label="transfer function, order 6")

@@ -1,5 +1,5 @@
 """The wearable fingertip-force twin (S2), composed once: a person's finger pad
-(:mod:`softtip.mechanics.fingerpad`) pressed on an object on a table force sensor, the tactile chip
+(:mod:`softtip.systems.wearable.fingerpad`) pressed on an object on a table force sensor, the tactile chip
 the ring holds against the side of the nail, and both sensors (:mod:`softtip.sensors.force_sensor`)
 sampling the continuous response at their own instants.
 """
@@ -10,8 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.mechanics.fingerpad import ChipMount, FingerPad, PadResponse, chip_forces, pad_response
-from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, ForceSensorSpec, read_forces
+from softtip.systems.wearable.fingerpad import ChipMount, FingerPad, PadResponse, chip_forces, pad_response
+from softtip.sensors import Sensor
+from softtip.systems.wearable.chip import CHIP, TABLE_SENSOR
 
 
 @dataclass(frozen=True)
@@ -38,13 +39,13 @@ class WearableReadings:
 class WearableTwin:
     pad: FingerPad
     mount: ChipMount
-    chip: ForceSensorSpec = TACTILE_CHIP
-    table: ForceSensorSpec = NANO17
+    chip: Sensor = CHIP
+    table: Sensor = TABLE_SENSOR
 
     def respond(self, times: np.ndarray, intended: np.ndarray, object_radii=(np.inf, np.inf),
                 rest_centre=(0.0, 0.0), lean: float = 0.0) -> WearableResponse:
         """The finger pressed with the ``intended`` force (N, ..., 3, finger frame) at ``times`` (N,);
-        see :func:`softtip.mechanics.fingerpad.pad_response` for the other arguments."""
+        see :func:`softtip.systems.wearable.fingerpad.pad_response` for the other arguments."""
         pad = pad_response(times, intended, self.pad, self.mount, object_radii, rest_centre, lean)
         return WearableResponse(pad=pad, chip=chip_forces(times, pad.skin, self.pad, self.mount))
 
@@ -53,15 +54,15 @@ class WearableTwin:
         """Both sensors sampled at ``instants`` (S,) (the chip ``chip_delay`` s later), unfiltered;
         ``rng`` adds their noise and output steps (none: exact readings). The finger lies rotated by
         ``table_yaw`` (rad, ..., about z) in the table sensor's axes."""
-        chip, chip_saturated = read_forces(_at(times, response.chip, instants + chip_delay), self.chip, rng)
+        chip = self.chip.acquire(_at(times, response.chip, instants + chip_delay), rng)
         force = _at(times, response.pad.force, instants)
         cos, sin = np.cos(table_yaw), np.sin(table_yaw)
         turned = np.stack([cos * force[..., 0] - sin * force[..., 1], sin * force[..., 0] + cos * force[..., 1],
                            force[..., 2]], axis=-1)
-        table, table_saturated = read_forces(turned, self.table, rng)
+        table = self.table.acquire(turned, rng)
         nearest = np.clip(np.searchsorted(times, instants), 0, len(times) - 1)
-        return WearableReadings(chip=chip, chip_saturated=chip_saturated, table=table,
-                                table_saturated=table_saturated, centre=_at(times, response.pad.centre, instants),
+        return WearableReadings(chip=chip.values, chip_saturated=chip.saturated, table=table.values,
+                                table_saturated=table.saturated, centre=_at(times, response.pad.centre, instants),
                                 sliding=response.pad.sliding[nearest])
 
 

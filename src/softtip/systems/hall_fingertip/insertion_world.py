@@ -1,7 +1,7 @@
 """The inverter insertion as a live world: a simulated arm holding part A between two sensorised
 fingertips, part B below it, and the chips read one cycle at a time.
 
-Geometry and materials are the inverter protocol's (:func:`softtip.lab.experiments.inverter`),
+Geometry and materials are the inverter protocol's (:func:`softtip.systems.hall_fingertip.experiments.inverter`),
 so models trained on that protocol's dataset read this world the way they would read the bench.
 The arm's pose is the height (m) of part A's lowest feature above where it first touches part B,
 along the approach; the case decides what touches: the lid's seat (``good``), the left clip on
@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from softtip._core.units import MM, UT_PER_T
-from softtip.lab.engine import HeldPart
-from softtip.lab.experiments import inverter_contacts, world_up
-from softtip.lab.protocols import Protocol, fingertip_for
-from softtip.lab.realism import FabricatedUnit
+from softtip.systems.hall_fingertip.engine import HeldPart
+from softtip.systems.hall_fingertip.experiments import inverter_contacts, world_up
+from softtip.lab.protocols import Protocol
+from softtip.systems.hall_fingertip.protocols import fingertip_for
+from softtip.systems.hall_fingertip.realism import FabricatedUnit
 
 CASES = {"good": 1, "left-clip": 2, "right-clip": 3}
 
@@ -46,9 +47,9 @@ class InsertionWorld:
         p = protocol.parameters
         self.state = CASES[case]
         fingertip = fingertip_for(protocol.design, p)
-        self.part = HeldPart.grasp(fingertip, p["grip_depth_mm"] * MM, p["part_thickness_mm"] * MM)
+        self.part = HeldPart.grasp(fingertip, p.grip_depth_mm * MM, p.part_thickness_mm * MM)
         self.points, self.seat = inverter_contacts(p)[self.state]
-        self.normal = world_up(p["tilt_y_deg"], 0.0)
+        self.normal = world_up(p.tilt_y_deg, 0.0)
         self.units = (FabricatedUnit(protocol.design, protocol.realism, rng),
                       FabricatedUnit(protocol.design, protocol.realism, rng))
         self.rng = rng
@@ -62,7 +63,7 @@ class InsertionWorld:
         readings = []
         for k, unit in enumerate(self.units):
             field = unit.field(out[f"magnets_{k}"])
-            readings.append(unit.sensor.counts_to_uT(unit.sensor.to_counts(field, rng=self.rng))
+            readings.append(unit.sensor.acquire(field, self.rng).values
                             if self.noise else field * UT_PER_T)
         self.force = float(out["contact_forces"].sum())
         return np.concatenate(readings, axis=1).ravel()

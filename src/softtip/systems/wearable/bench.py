@@ -3,7 +3,7 @@ chip on the side of their nail and the table are recorded together, unfiltered.
 
 Per participant (a finger of their own: breadth, pad stiffness, friction), per run (the ring
 re-seated: its preload and the chip's place along the nail change), the seven trials of
-:mod:`softtip.lab.human_force` on every contact shape of the protocol. The history of each trial is
+:mod:`softtip.systems.wearable.human_force` on every contact shape of the protocol. The history of each trial is
 simulated on a fine grid from the finger's placement ``lead_in_s`` before the recording, so the
 pad's creep from placing it carries into the trial; both sensors then sample it at ``rate_hz``.
 Every trial's first sample is its tare: subtracted from its readings and kept as a condition. After
@@ -25,24 +25,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Annotated
+from pathlib import Path
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import Field
 
-from softtip._core.channels import AXES, FORCE
+from softtip._core.channels import AXES
+from softtip.systems.wearable.chip import FORCE
 from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
-                                  choice, expect, schema)
+                                  choice, expect, integer, schema)
+from softtip._core.progress import Progress
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
-from softtip.lab.experiments import SeededBench
-from softtip.lab.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
-from softtip.lab.realism import WearableRealism
-from softtip.mechanics.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
+from softtip.lab.bench import SeededBench
+from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.systems.wearable.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
+from softtip.systems.wearable.realism import REALISM_SOURCES, WearableRealism
+from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
                                          shape_radii)
 from softtip.mechanics.viscoelastic import PronySeries
-from softtip.sensors.force_sensor import NANO17, TACTILE_CHIP, read_forces
-from softtip.twin.wearable import WearableTwin
+from softtip.systems.wearable.chip import CHIP, TABLE_SENSOR
+from softtip.systems.wearable.twin import WearableTwin
 
 CHANNELS = dict.fromkeys(FORCE.channel_names(1), FORCE.unit)  # the side chip
 LABELS = {**{f"f{axis}_N": "N" for axis in AXES}, "cop_x_mm": "mm", "cop_y_mm": "mm", "sliding": "1"}
@@ -52,15 +56,15 @@ CONDITIONS = {"participant": "1", "run": "1", "motion": "1", "contact": "1", "si
 Motions = Annotated[list[choice(*MOTIONS)], Field(min_length=1), expect(f"a non-empty list of: {', '.join(MOTIONS)}")]
 Contacts = Annotated[list[choice(*CONTACT_SHAPES)], Field(min_length=1),
                      expect(f"a non-empty list of: {', '.join(CONTACT_SHAPES)}")]
-# the finger's and the ring's defaults are the mechanics' (softtip.mechanics.fingerpad, SI units)
+# the finger's and the ring's defaults are the mechanics' (softtip.systems.wearable.fingerpad, SI units)
 _PAD, _MOUNT = FingerPad(), ChipMount()
 
 
 @schema(section="parameters")
 class WearableParameters:
     """The ``[parameters]`` table of the wearable protocol (S2; units in the names). The finger's and the
-    ring's defaults are those of :class:`~softtip.mechanics.fingerpad.FingerPad` and
-    :class:`~softtip.mechanics.fingerpad.ChipMount`."""
+    ring's defaults are those of :class:`~softtip.systems.wearable.fingerpad.FingerPad` and
+    :class:`~softtip.systems.wearable.fingerpad.ChipMount`."""
 
     rate_hz: PositiveNumber = 10.0  # both sensors, unfiltered
     simulation_rate_hz: PositiveNumber = 100.0  # the grid the continuous history is simulated on
@@ -105,7 +109,7 @@ class WearableParameters:
 @schema(section="viscoelastic")
 class PadViscoelastic:
     """The finger tissue's reduced relaxation function: Prony weights ``g`` and times ``tau_s``; default
-    :data:`~softtip.mechanics.fingerpad.PAD_RELAXATION` (Pawluk & Howe 1999's time constants, assumed weights)."""
+    :data:`~softtip.systems.wearable.fingerpad.PAD_RELAXATION` (Pawluk & Howe 1999's time constants, assumed weights)."""
 
     g: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.g))
     tau_s: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.tau))
@@ -130,9 +134,9 @@ class WearableDevice:
     preload_N: float
 
     @classmethod
-    def from_parameters(cls, p: dict) -> "WearableDevice":
-        return cls(name=f"nail-ring-{p['sensor_side']}", side=p["sensor_side"], offset_mm=p["sensor_offset_mm"],
-                   preload_N=p["ring_preload_N"])
+    def from_parameters(cls, p: WearableParameters) -> "WearableDevice":
+        return cls(name=f"nail-ring-{p.sensor_side}", side=p.sensor_side, offset_mm=p.sensor_offset_mm,
+                   preload_N=p.ring_preload_N)
 
     @property
     def spec(self) -> dict:
@@ -147,43 +151,43 @@ class WearableBench(SeededBench):
     realism: WearableRealism
 
 
-def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
+def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dict) -> Dataset:
     """S2's calibration protocol: participants x runs x (contacts x motions) trials, one dataset."""
     realism, rng = bench.realism, bench.rng
     device = WearableDevice.from_parameters(p)
     writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
         description="wearable fingertip force: side-of-nail chip and table force sensor", design=device.spec,
-        sensor_settings={"chip": TACTILE_CHIP.to_dict(), "table": NANO17.to_dict()}, protocol=p, seed=seed))
-    times = np.arange(-p["lead_in_s"] * p["simulation_rate_hz"], p["trial_s"] * p["simulation_rate_hz"] + 1) \
-        / p["simulation_rate_hz"]
-    instants = np.arange(round(p["trial_s"] * p["rate_hz"])) / p["rate_hz"]
-    trials = [(motion, contact) for contact in p["contacts"] for motion in p["motions"]]
-    radii = np.array([shape_radii(contact, p["curved_radius_mm"] * MM, p["edge_radius_mm"] * MM,
-                                   p["point_radius_mm"] * MM) for _, contact in trials])
-    nominal = FingerPad(width=p["finger_width_mm"] * MM, stiffness=p["pad_stiffness_N_per_mm"] / MM,
-                        stiffening=p["pad_stiffening_per_mm"] / MM, friction=p["friction"],
-                        transmission=p["nail_fold_transmission"], prony=bench.prony)
-    effort = Effort(press_peak=p["press_peak_N"], rest=p["rest_N"], dorsal_hold=p["dorsal_hold_N"],
-                    tilt_normal=p["tilt_normal_N"], tangential_effort=p["tangential_effort"],
-                    friction_sense=p["friction"], normal_coupling=p["normal_coupling"],
+        sensor_settings={"chip": CHIP.to_dict(), "table": TABLE_SENSOR.to_dict()}, protocol=record, seed=seed))
+    times = np.arange(-p.lead_in_s * p.simulation_rate_hz, p.trial_s * p.simulation_rate_hz + 1) \
+        / p.simulation_rate_hz
+    instants = np.arange(round(p.trial_s * p.rate_hz)) / p.rate_hz
+    trials = [(motion, contact) for contact in p.contacts for motion in p.motions]
+    radii = np.array([shape_radii(contact, p.curved_radius_mm * MM, p.edge_radius_mm * MM,
+                                   p.point_radius_mm * MM) for _, contact in trials])
+    nominal = FingerPad(width=p.finger_width_mm * MM, stiffness=p.pad_stiffness_N_per_mm / MM,
+                        stiffening=p.pad_stiffening_per_mm / MM, friction=p.friction,
+                        transmission=p.nail_fold_transmission, prony=bench.prony)
+    effort = Effort(press_peak=p.press_peak_N, rest=p.rest_N, dorsal_hold=p.dorsal_hold_N,
+                    tilt_normal=p.tilt_normal_N, tangential_effort=p.tangential_effort,
+                    friction_sense=p.friction, normal_coupling=p.normal_coupling,
                     cross_talk=realism.cross_talk, tremor=realism.force_tremor)
-    for participant in range(p["participants"]):
-        finger = scaled(nominal, (p["finger_width_mm"] + bench.scatter(realism.finger_width_sd_mm)) * MM,
+    for participant in range(p.participants):
+        finger = scaled(nominal, (p.finger_width_mm + bench.scatter(realism.finger_width_sd_mm)) * MM,
                         math.exp(bench.scatter(realism.pad_stiffness_sd)),
-                        max(p["friction"] + bench.scatter(realism.friction_sd), 0.3))
-        for run in range(p["runs"]):
-            mount = ChipMount(side=p["sensor_side"],
-                              position_y=(p["sensor_offset_mm"] + bench.scatter(realism.sensor_position_sd_mm)) * MM,
-                              preload=max(p["ring_preload_N"] * (1 + bench.scatter(realism.ring_preload_sd)), 0.0))
+                        max(p.friction + bench.scatter(realism.friction_sd), 0.3))
+        for run in range(p.runs):
+            mount = ChipMount(side=p.sensor_side,
+                              position_y=(p.sensor_offset_mm + bench.scatter(realism.sensor_position_sd_mm)) * MM,
+                              preload=max(p.ring_preload_N * (1 + bench.scatter(realism.ring_preload_sd)), 0.0))
             noise = rng if realism.noise else None
-            air = read_forces(np.array([0.0, 0.0, mount.preload]), TACTILE_CHIP, noise)[0][2]
+            air = CHIP.acquire(np.array([0.0, 0.0, mount.preload]), noise).values[2]
             skew = rng.uniform(-1, 1) * realism.stream_skew_ms / 1000  # s
-            intended = np.stack([intended_force(motion, times, p["trial_s"], rng, effort) for motion, _ in trials],
+            intended = np.stack([intended_force(motion, times, p.trial_s, rng, effort) for motion, _ in trials],
                                 axis=1)
             rest = bench.scatter(realism.placement_sd_mm * MM, (len(trials), 2))
             yaw = np.radians(bench.scatter(realism.finger_yaw_sd_deg, len(trials)))
             twin = WearableTwin(finger, mount)
-            response = twin.respond(times, intended, radii, rest, p["lean_share"])
+            response = twin.respond(times, intended, radii, rest, p.lean_share)
             read = twin.read(times, response, instants, noise, skew, yaw)
             for k, (motion, contact) in enumerate(trials):
                 chip, table = read.chip[:, k], read.table[:, k]
@@ -198,3 +202,31 @@ def wearable(bench: WearableBench, p: dict, seed: int) -> Dataset:
                             **{f"table_tare_f{axis}_N": table[0, a] for a, axis in enumerate(AXES)}})
     return writer.to_dataset()
 
+
+@schema
+class _WearableProtocolFile:
+    protocol: ProtocolName
+    seed: integer() = 0
+    parameters: dict[str, Any] = field(default_factory=dict)  # checked against WearableParameters
+    realism: WearableRealism = WearableRealism()
+    viscoelastic: PadViscoelastic = PadViscoelastic()
+
+
+def _device(file: _WearableProtocolFile, parameters: WearableParameters, source: str,
+            base: Path | None) -> WearableDevice:
+    return WearableDevice.from_parameters(parameters)
+
+
+def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[WearableBench, dict, str]:
+    """The finger tissue's relaxation, given by the ``[viscoelastic]`` table."""
+    p = protocol.parameters
+    bench = WearableBench(prony=protocol.viscoelastic.prony(), realism=protocol.realism,
+                          rng=np.random.default_rng(protocol.seed), rate_hz=p.rate_hz)
+    return bench, {}, f"{protocol.name}: {p.participants} participants x {p.runs} runs on {protocol.design.name}"
+
+
+BENCH = BenchKind(
+    protocol_file=_WearableProtocolFile, parameters={"wearable": WearableParameters}, runners={"wearable": wearable},
+    device=_device, setup=_bench, realism_sources=REALISM_SOURCES, viscoelastic=PadViscoelastic,
+    viscoelastic_sources={"g": "assumed weights (softtip.systems.wearable.fingerpad)",
+                          "tau_s": "time constants of Pawluk & Howe 1999 (softtip.systems.wearable.fingerpad)"})

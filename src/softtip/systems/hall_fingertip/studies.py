@@ -11,33 +11,31 @@ untrained conditions are left out of calibration entirely.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
-import matplotlib
+from matplotlib.figure import Figure as PlotFigure
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from softtip._core.progress import Progress  # noqa: E402
-from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier  # noqa: E402
-from softtip import metrics  # noqa: E402
-from softtip.data import Dataset  # noqa: E402
-from softtip.design.model import load_design  # noqa: E402
-from softtip.lab import Protocol, run_protocol  # noqa: E402
-from softtip.lab.experiments import CALIBRATION, VALIDATION  # noqa: E402
-from softtip.published import OUTSIDE, published_table  # noqa: E402
-from softtip.report.document import Figure  # noqa: E402
-from softtip.report.tables import Table, paper_table  # noqa: E402
-from softtip.studies.outcome import Headline, StudyOutcome  # noqa: E402
+from softtip._core.progress import Progress
+from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier
+from softtip import metrics
+from softtip.data import Dataset
+from softtip.design.model import load_design
+from softtip.lab import Protocol, run_protocol
+from softtip.data.splits import CALIBRATION, VALIDATION, by_role
+from softtip.published import OUTSIDE, published_table
+from softtip.report.document import Figure
+from softtip.report.tables import Table, paper_table
+from softtip.studies.outcome import Headline, StudyOutcome
 
 METHODS = {"polynomial": "polynomial (PFM)", "network": "network (FNN)"}  # softtip's name -> the article's
 
 
 def _rows(dataset: Dataset, mask_rows: np.ndarray, role: str | None) -> np.ndarray:
-    keep = mask_rows.copy()
-    if role is not None:
-        keep &= dataset.column("role") == role
-    return keep
+    if role is None:
+        return mask_rows.copy()
+    calibration, validation = by_role(dataset)
+    return mask_rows & (calibration if role == CALIBRATION else validation)
 
 
 def _degrees(value: float) -> str:
@@ -119,11 +117,11 @@ def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     """Designs A-D, polynomial vs network, board angle from one sensor's three readings."""
     results = {}
     errors = published_table("pushing-orientation-error")
-    figure, axes = plt.subplots(2, 4, figsize=(14, 6.8))
+    figure = PlotFigure(figsize=(14, 6.8))
+    axes = figure.subplots(2, 4)
     cells, per_angle, timing = {}, {}, {method: [] for method in METHODS}
     for column, name in enumerate(("cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D")):
-        protocol.design = load_design(name)
-        dataset, timings = run_protocol(protocol, progress)
+        dataset, timings = run_protocol(replace(protocol, design=load_design(name)), progress)
         # orientation is only defined once the board presses: samples 1 mm deep or more
         pressed = dataset.column("depth_mm") >= 1.0
         train = _rows(dataset, pressed, CALIBRATION)
@@ -192,7 +190,8 @@ def force3(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     train, test = _rows(dataset, contact, CALIBRATION), _rows(dataset, contact, VALIDATION)
     full_scale = np.abs(y).max(axis=0)
     results = {"timings_s": timings, "full_scale_N": full_scale.tolist()}
-    figure, axes = plt.subplots(2, 3, figsize=(12, 7))
+    figure = PlotFigure(figsize=(12, 7))
+    axes = figure.subplots(2, 3)
     cells = {}
     for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
                                            ("network", LMNetwork((10,), random_state=seed)))):
@@ -214,7 +213,8 @@ def force3(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                   cells, digits=3, caption=(
                       "The article reports 3-axis force only as curves (no table): there is no published figure "
                       "to put beside these. Full scale is the largest |force| of each axis in the data."))
-    series, ax = plt.subplots(figsize=(9, 3.5))
+    series = PlotFigure(figsize=(9, 3.5))
+    ax = series.subplots()
     for trial in dataset.trials[:: max(1, len(dataset.trials) // 6)][:6]:
         rows_of_trial = dataset.groups == trial
         ax.plot(dataset.column("time_s")[rows_of_trial], y[rows_of_trial, 2], lw=0.8)
@@ -232,7 +232,8 @@ def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcom
     dataset, timings = run_protocol(protocol, progress)
     speeds = dataset.column("speed_mm_s")
     results = {"timings_s": timings, "per_speed": {}}
-    figure, ax = plt.subplots(figsize=(6, 4.5))
+    figure = PlotFigure(figsize=(6, 4.5))
+    ax = figure.subplots()
     z = dataset.column("s0_bz_uT")
     force = dataset.column("fz_N")
     cells = {}
@@ -254,11 +255,11 @@ def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcom
         ax.plot(force[rows], z[rows] / 1000, lw=1, label=label)
     _label_axes(ax, "normal force (N)", "sensor z MFD change (mT)", legend={})
     v = protocol.viscoelastic
-    calibration = results["per_speed"].get(f"{v['speed_mm_s']:g}")
+    calibration = results["per_speed"].get(f"{v.speed_mm_s:g}")
     published = paper_table(published_table("hysteresis"), {} if calibration is None else {
         ("hysteresis", "calibration cycle"): calibration["hysteresis_percent_mean"]}, caption=(
-        f"The twin's material relaxation is set from this one figure on a cycle at {v['speed_mm_s']:g} mm/s with a "
-        f"{v['rest_s']:g} s rest, so it agrees by construction (up to noise and trial scatter)."))
+        f"The twin's material relaxation is set from this one figure on a cycle at {v.speed_mm_s:g} mm/s with a "
+        f"{v.rest_s:g} s rest, so it agrees by construction (up to noise and trial scatter)."))
     speeds_table = Table("Hysteresis and sensitivity per loading speed", "speed", sorted(
         {row for row, _ in cells}, key=lambda r: float(r.split()[0])),
         ["hysteresis (%)", "sd (%)", "dBx/dF (mT/N)", "dBy/dF (mT/N)", "dBz/dF (mT/N)"], cells, digits=2, caption=(
@@ -280,10 +281,11 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
     results = {"timings_s": timings}
     published = published_table("grasp-two-orientation-error")
     letter = _design_letter(protocol.design.name)
-    figure, ax = plt.subplots(figsize=(6, 4.5))
+    figure = PlotFigure(figsize=(6, 4.5))
+    ax = figure.subplots()
     model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     cells = {}
-    for name, mask in (("trained", gripped & trained & (dataset.column("role") == VALIDATION)),
+    for name, mask in (("trained", gripped & trained & by_role(dataset)[1]),
                        ("untrained", gripped & ~trained)):
         estimate = model.predict(X[mask])
         by_angle = metrics.per_condition(metrics.mean_abs_error, y[mask], estimate, y[mask])
@@ -324,9 +326,10 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyO
     model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     results = {"timings_s": timings}
     tables = []
-    figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    figure = PlotFigure(figsize=(11, 4.5))
+    axes = figure.subplots(1, 2)
     for name in ("trained", "untrained-position", "untrained-position-orientation", "thickness"):
-        mask = gripped & (sets == name) & (dataset.column("role") == VALIDATION)
+        mask = gripped & (sets == name) & by_role(dataset)[1]
         if not mask.any():
             continue
         estimate = model.predict(X[mask])
@@ -395,9 +398,10 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
     dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     touching = dataset.column("normal_force_N") > 0.05
-    sets, roles, phi = dataset.column("set"), dataset.column("role"), dataset.column("phi_deg")
+    sets, phi = dataset.column("set"), dataset.column("phi_deg")
+    calibration, validation = by_role(dataset)
     classes = np.array(["point-a", "point-b", "edge"])
-    train = touching & (sets == "trained") & (roles == CALIBRATION)
+    train = touching & (sets == "trained") & calibration
     model = SoftmaxClassifier((10,), random_state=seed).fit(X[train], dataset.column("state")[train],
                                                             groups=dataset.groups[train])
     results = {"timings_s": timings}
@@ -411,7 +415,7 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
             cells[(row, "average")] = float(np.mean(list(values.values())))
 
     for name in ("trained", "untrained-angles", "untrained-approach"):
-        mask = touching & (sets == name) & (roles == VALIDATION)
+        mask = touching & (sets == name) & validation
         results[name] = _classifier_report(dataset, model, mask, classes)
         per_phi[name] = {f"{p:g}": _classifier_report(dataset, model, mask & (phi == p), classes)
                          for p in np.unique(phi[mask])}
@@ -441,7 +445,8 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
                      + f" (over {samples}). The edge contact lies between the two point contacts in the chips' "
                        "readings (figure)."
                      for row, (report, samples) in sources.items() if row in published.rows})
-    figure, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    figure = PlotFigure(figsize=(11, 4.5))
+    axes = figure.subplots(1, 2)
     state = dataset.column("state")
     for k, ax in enumerate(axes):
         for c in classes:
@@ -464,7 +469,7 @@ def inverter_models(dataset: Dataset, seed: int):
     0.6-0.8 N, state 0 in the air - and the normal force from every calibration sample."""
     X = dataset.X()
     force, state, nominal = dataset.column("normal_force_N"), dataset.column("state"), dataset.column("state_nominal")
-    calibration = (dataset.column("set") == "trained") & (dataset.column("role") == CALIBRATION)
+    calibration = (dataset.column("set") == "trained") & by_role(dataset)[0]
     window = ((nominal == 0) | ((nominal == 1) & (force >= 0.3) & (force <= 0.5))
               | ((nominal >= 2) & (force >= 0.6) & (force <= 0.8)))
     train = calibration & window
@@ -482,12 +487,13 @@ def inverter(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     force = dataset.column("normal_force_N")
-    nominal, sets, roles = dataset.column("state_nominal"), dataset.column("set"), dataset.column("role")
+    nominal, sets = dataset.column("state_nominal"), dataset.column("set")
+    validation = by_role(dataset)[1]
     classifier, regressor = inverter_models(dataset, seed)
     results = {"timings_s": timings}
     confusions = []
     for name in ("trained", "untrained-tilt", "untrained-offset"):
-        mask = (sets == name) & (roles == VALIDATION)
+        mask = (sets == name) & validation
         detections = {}
         for trial in np.unique(dataset.groups[mask]):
             rows = dataset.groups == trial
@@ -527,7 +533,8 @@ def inverter(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "state missed in some trial)."))
     shifted = results["untrained-offset"]["states"]
     _explain(offset, {row: f"Grasped off-centre: {_confused(shifted, key, {})}." for key, row in INVERTER_STATES.items()})
-    figure, (ax, strip) = plt.subplots(1, 2, figsize=(12, 4))
+    figure = PlotFigure(figsize=(12, 4))
+    (ax, strip) = figure.subplots(1, 2)
     for s in (1, 2, 3):
         rows = dataset.groups == np.unique(dataset.groups[(nominal == s) & (sets == "trained")])[0]
         ax.plot(dataset.column("time_s")[rows], force[rows], label=f"state {s}")

@@ -1,4 +1,4 @@
-"""``softtip demo``: the main job and the insertion demonstration on the simulated sensor."""
+"""The Hall fingertip's commands: ``softtip demo`` (the main job) and ``softtip demo insertion``."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def demo(
     pipeline, whose estimates are scored against the twin's true force."""
     if context.invoked_subcommand is not None:
         return
-    from softtip.studies.live_demo import run_main_demo
+    from softtip.systems.hall_fingertip.demo import run_main_demo
 
     report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
                            progress=progress_for(json_output))
@@ -44,39 +44,6 @@ def demo(
                   f"lost frames: {pipeline.get('lost_in_transit', 0)}")
 
 
-def demo_wearable(
-    seed: int = typer.Option(1, "--seed", help="Seed of the wearable protocol (participant, seatings, noise)."),
-    duration: float = typer.Option(None, "--duration", help="Seconds of live streaming (default: the whole "
-                                                            "streamed seating, 105 s)."),
-    record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
-    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
-) -> None:
-    """The wearable sensor (S2) end to end: the twin's calibration seatings, a 6th-order transfer function
-    identified on them, and the emulated side chip streaming a further seating through the live pipeline,
-    scored against the table force and against the offline simulation of the same frames."""
-    from softtip.studies.live_demo import run_wearable_demo
-
-    report = run_wearable_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
-                               progress=progress_for(json_output))
-    if json_output:
-        print(json.dumps(report, indent=2, default=float))
-        return
-    if "live" not in report:
-        fail("no frame was estimated: stream for longer (--duration)")
-    table = Table(title="fingertip force from the side chip on the seating after the calibration: offline (the "
-                        "whole seating) and live (the frames streamed), both tared per trial")
-    for column in ("axis", "offline R²", "offline RMSE (% FS)", "live R²", "live RMSE (% FS)",
-                   "|live − offline| (FS)"):
-        table.add_column(column, justify="right")
-    offline, live = report["offline_next_seating"]["outputs"], report["live"]["outputs"]
-    for axis, gap in zip(offline, report["live_minus_offline_over_full_scale"], strict=True):
-        table.add_row(axis, f"{offline[axis]['r2']:.2f}", f"{offline[axis]['rmse_fs_percent']:.1f}",
-                      f"{live[axis]['r2']:.2f}", f"{live[axis]['rmse_fs_percent']:.1f}", f"{gap:.1e}")
-    console.print(table)
-    console.print(f"{report['estimated_frames']} frames estimated live; model saved at {report['model']}; "
-                  f"full scale: {report['live']['full_scale']['description']}")
-
-
 def demo_insertion(
     case: str = typer.Option("good", "--case", help="good, left-clip or right-clip."),
     seed: int = typer.Option(1, "--seed", help="Seed of the training data and the sensors' noise."),
@@ -85,8 +52,8 @@ def demo_insertion(
 ) -> None:
     """Feedback-controlled insertion of the inverter lid on the simulated arm: stop and retract when the
     fingertips see a clip on part B's rim (state 2 or 3), done when the target pose is reached."""
-    from softtip.lab.insertion import CASES
-    from softtip.studies.insertion import run_insertion
+    from softtip.systems.hall_fingertip.insertion_world import CASES
+    from softtip.systems.hall_fingertip.insertion import run_insertion
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from softtip._core.units import MM, UT_PER_T
-from softtip.lab.engine import interpolate_path, path_table
-from softtip.lab.experiments import material_prony
-from softtip.lab.protocols import Protocol, fingertip_for
-from softtip.lab.realism import FabricatedUnit
+from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
+from softtip.systems.hall_fingertip.experiments import material_prony
+from softtip.lab.protocols import Protocol
+from softtip.systems.hall_fingertip.protocols import fingertip_for
+from softtip.systems.hall_fingertip.realism import FabricatedUnit
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board
 from softtip.mechanics.poses import MagnetPoses
@@ -65,13 +66,13 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     fingertip = fingertip_for(protocol.design, p)
     rng = np.random.default_rng(seed)
     unit = FabricatedUnit(protocol.design, protocol.realism, rng)  # its exact field: the emulator adds the noise
-    speed = (p["speed_mm_s"] if speed_mm_s is None else speed_mm_s) * MM
+    speed = (p.speed_mm_s if speed_mm_s is None else speed_mm_s) * MM
     segments_t, segments_rigid, segments_force = [], [], []
     clock = 0.0
-    for depth_mm, shear_mm in ((p["normal_depth_mm"], (0.0, 0.0)), (p["shear_depth_mm"], (p["shear_mm"], 0.0)),
-                               (p["shear_depth_mm"], (0.0, p["shear_mm"]))):
+    for depth_mm, shear_mm in ((p.normal_depth_mm, (0.0, 0.0)), (p.shear_depth_mm, (p.shear_mm, 0.0)),
+                               (p.shear_depth_mm, (0.0, p.shear_mm))):
         depth, shear = depth_mm * MM, np.array(shear_mm) * MM
-        load = LoadCase(Board(thickness=p["board_thickness_mm"] * MM, angle=0.0), depth, tangential=tuple(shear),
+        load = LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=0.0), depth, tangential=tuple(shear),
                         friction="stick")
         table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
         reach = float(np.linalg.norm(shear))
@@ -88,7 +89,7 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
         clock += times[-1] + 1 / rate_hz
     poses, times = MagnetPoses.from_rigid(np.concatenate(segments_rigid)), np.concatenate(segments_t)
     v = protocol.viscoelastic
-    prony = material_prony(fingertip, v["hysteresis_percent"], v["depth_mm"] * MM, v["speed_mm_s"] * MM, v["rest_s"])
+    prony = material_prony(fingertip, v.hysteresis_percent, v.depth_mm * MM, v.speed_mm_s * MM, v.rest_s)
     force = qlv_response(times, np.concatenate(segments_force), prony)
     force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
     return TwinScenario(times_s=times, field_uT=unit.field(poses) * UT_PER_T, force_N=force)
@@ -101,7 +102,7 @@ def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, sp
     world). ``force_N`` holds the contact force on part B along its normal in the z column."""
     from dataclasses import replace
 
-    from softtip.lab.insertion import CASES, InsertionWorld
+    from softtip.systems.hall_fingertip.insertion_world import CASES, InsertionWorld
 
     quiet = replace(protocol, realism=replace(protocol.realism, noise=False))
     speed, top, bottom = speed_mm_s * MM, 2.0 * MM, -0.6 * MM

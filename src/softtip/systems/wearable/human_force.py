@@ -1,6 +1,6 @@
 """The force a person means to put on the table sensor in each of S2's seven calibration trials.
 
-Finger frame (:mod:`softtip.mechanics.fingerpad`): x radial, y distal, z palmar; the force is the
+Finger frame (:mod:`softtip.systems.wearable.fingerpad`): x radial, y distal, z palmar; the force is the
 one the finger applies (Fz > 0 pressing). What the table receives is this force after the pad's
 friction limit (the finger slides beyond it); what is drawn here is the intent.
 
@@ -52,7 +52,7 @@ MINIMUM_TRIAL_S = 5.0  # between the quiet start (up to 1.5 s) and end (1 s), ro
 @dataclass(frozen=True)
 class Effort:
     """How a person presses in the seven trials (forces in N; see the module notes). The values are the
-    protocol's (:class:`softtip.lab.wearable.WearableParameters`, the realism's cross-talk and tremor)."""
+    protocol's (:class:`softtip.systems.wearable.bench.WearableParameters`, the realism's cross-talk and tremor)."""
 
     press_peak: float
     rest: float

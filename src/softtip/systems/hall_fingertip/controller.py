@@ -7,7 +7,7 @@ to the initial insertion pose; the task is done when the target pose is reached.
 
 The controller only needs a :class:`Robot` (move toward a pose, stop, current pose) and a
 ``read()`` returning the chips' readings with the baseline subtracted; it works the same on the
-simulated robot of :mod:`softtip.lab.insertion` and on a real arm behind the same three calls.
+simulated robot of :mod:`softtip.systems.hall_fingertip.insertion_world` and on a real arm behind the same three calls.
 """
 
 from __future__ import annotations

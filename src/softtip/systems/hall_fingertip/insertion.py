@@ -7,25 +7,17 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.calibration import load_model, save_model
 from softtip.lab import Protocol, load_protocol, run_protocol
-from softtip.lab.insertion import InsertionWorld, SimulatedArm
-from softtip.control.insertion import InsertionController
-from softtip.studies.hall_fingertip import inverter_models
+from softtip.lab.protocols import trained_model_path
+from softtip.systems.hall_fingertip.insertion_world import InsertionWorld, SimulatedArm
+from softtip.systems.hall_fingertip.controller import InsertionController
+from softtip.systems.hall_fingertip.studies import inverter_models
 
 INITIAL_HEIGHT = 3.0 * MM  # the initial insertion pose, above where part A first touches part B
 TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by this much
-
-
-def trained_model_path(protocol: Protocol, name: str) -> Path:
-    """Where a model trained on ``protocol``'s trials is cached: keyed by the protocol, its design and
-    the source of the whole package (the trials run through nearly every subpackage)."""
-    key = artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec}, code_hash("softtip"),
-                       length=16)
-    return cache_dir() / "models" / f"{name}-{key}.npz"
 
 
 def trained_model_files(protocol: Protocol, progress: Progress = SILENT) -> tuple[Path, Path]:
@@ -55,8 +47,7 @@ def trained_models(protocol: Protocol, progress: Progress = SILENT):
 def run_insertion(case: str, seed: int = 1, protocol: Protocol | None = None, progress: Progress = SILENT) -> dict:
     """One insertion; ``protocol`` defaults to the shipped inverter protocol with ``seed``."""
     if protocol is None:
-        protocol = load_protocol("inverter")
-        protocol.seed = seed
+        protocol = load_protocol("inverter").changed(seed=seed)
     protocol, classifier, regressor = trained_models(protocol, progress)
     world = InsertionWorld(protocol, case, np.random.default_rng(seed + 100))
     arm = SimulatedArm(INITIAL_HEIGHT)

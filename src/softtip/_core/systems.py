@@ -1,0 +1,177 @@
+"""The systems built on softtip's toolkit, each described once by a :class:`System` record.
+
+A system - a sensor or a device with the publications it follows - lives in one package and
+registers one record. softtip finds the records through the Python entry-point group
+``softtip.systems`` (a lab's own system is a separate package declaring one entry point, as pytest
+and Gymnasium take plug-ins), or through :func:`register` at run time. The command line, the lab,
+the studies, the live path and the reports loop over :func:`systems`; no toolkit module names a
+system.
+
+What is heavy to import is named as ``"module:attribute"`` and imported only when used
+(:func:`load`), so listing the systems loads none of their models. A system's files sit in its
+package: shipped designs in ``designs/``, protocol files in ``protocols/`` and the publications'
+figures in ``published.toml``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import metadata, resources
+from importlib.resources.abc import Traversable
+from typing import Any
+
+from softtip._core.channels import Reading
+
+ENTRY_POINT_GROUP = "softtip.systems"
+
+
+class NotRegistered(LookupError, ValueError):
+    """A name no registered system has."""
+
+
+@dataclass(frozen=True)
+class Study:
+    """A published study a system reproduces: the lab protocol it runs, the analysis that turns its
+    dataset into the publication's figures (``"module:function"``), and what it follows."""
+
+    name: str
+    protocol: str
+    analysis: str
+    follows: str
+    # protocol parameters the study sets over the protocol file's, and why (printed in the report)
+    sets: Mapping[str, object] = field(default_factory=dict)
+    because: str = ""
+
+
+@dataclass(frozen=True)
+class System:
+    """One system's registration: everything of it the toolkit's commands loop over.
+
+    ``benches``: bench kind -> ``"module:attribute"`` of its :class:`softtip.lab.protocols.BenchKind`;
+    ``protocols``: protocol name -> the bench kind it runs on (its file is ``protocols/NAME.toml``);
+    ``scenarios``: ``softtip live --emulate --scenario NAME`` -> ``"module:function"`` returning a
+    :class:`softtip.realtime.scenario.LiveScenario`; ``demos``: ``softtip demo NAME`` -> a command
+    function (``main_demo``: the one plain ``softtip demo`` runs, if the system has it);
+    ``bench_commands``: ``softtip bench NAME``; ``commands``: command groups of its own (a Typer app).
+    """
+
+    name: str
+    title: str
+    label: str  # how the specification and the published tables name it (S1 ...)
+    package: str  # the package its files are read from
+    publications: tuple[str, ...] = ()
+    readings: tuple[Reading, ...] = ()
+    benches: Mapping[str, str] = field(default_factory=dict)
+    protocols: Mapping[str, str] = field(default_factory=dict)
+    studies: tuple[Study, ...] = ()
+    scenarios: Mapping[str, str] = field(default_factory=dict)
+    demos: Mapping[str, str] = field(default_factory=dict)
+    main_demo: str | None = None
+    # the shipped designs the toolkit's commands default to, by use: "simulate", "bench"
+    reference_designs: Mapping[str, str] = field(default_factory=dict)
+    bench_commands: Mapping[str, str] = field(default_factory=dict)
+    commands: Mapping[str, str] = field(default_factory=dict)
+
+    def files(self) -> Traversable:
+        return resources.files(self.package)
+
+    def protocol_file(self, name: str) -> Traversable:
+        return self.files() / "protocols" / f"{name}.toml"
+
+    def designs(self) -> dict[str, Traversable]:
+        """Its shipped designs by name."""
+        folder = self.files() / "designs"
+        if not folder.is_dir():
+            return {}
+        return {entry.name.removesuffix(".toml"): entry for entry in sorted(folder.iterdir(), key=lambda e: e.name)
+                if entry.name.endswith(".toml")}
+
+    def published(self) -> Traversable | None:
+        """Its publications' figures (``published.toml``), if it has them."""
+        path = self.files() / "published.toml"
+        return path if path.is_file() else None
+
+
+_REGISTERED: dict[str, System] = {}
+_entry_points_read = False
+
+# the names that must be unique over all systems, and how to list them from a record
+_UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for study in s.studies],
+           "scenario": lambda s: s.scenarios, "demo": lambda s: s.demos, "bench": lambda s: s.bench_commands,
+           "command": lambda s: s.commands, "reading": lambda s: [r.quantity for r in s.readings]}
+
+
+def register(system: System) -> System:
+    """Adds ``system`` to the registry; a name it shares with a registered system is refused."""
+    if not isinstance(system, System):
+        raise TypeError(f"a softtip system must be a System record, got {type(system).__name__}")
+    _read_entry_points()
+    if system.name in _REGISTERED and _REGISTERED[system.name] is not system:
+        raise ValueError(f"system {system.name!r} is registered twice")
+    for what, names in _UNIQUE.items():
+        for other in _REGISTERED.values():
+            if other.name != system.name and (clash := set(names(system)) & set(names(other))):
+                raise ValueError(f"system {system.name!r}: {what} {sorted(clash)[0]!r} is also system "
+                                 f"{other.name!r}'s")
+    _REGISTERED[system.name] = system
+    return system
+
+
+def unregister(name: str) -> None:
+    """Removes a system registered at run time (a test's own)."""
+    _REGISTERED.pop(name, None)
+
+
+def _read_entry_points() -> None:
+    global _entry_points_read
+    if _entry_points_read:
+        return
+    _entry_points_read = True
+    for entry in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        try:
+            system = entry.load()
+        except Exception as error:  # a broken plug-in must not take the toolkit down with it
+            raise RuntimeError(f"softtip system {entry.name!r} ({entry.value}) failed to load: {error}") from error
+        register(system)
+
+
+def systems() -> dict[str, System]:
+    """Every registered system, by name, in the order they registered."""
+    _read_entry_points()
+    return dict(_REGISTERED)
+
+
+def load(reference: str) -> Any:
+    """The object a ``"module:attribute"`` reference names (imported now)."""
+    module, _, attribute = reference.partition(":")
+    target: Any = importlib.import_module(module)
+    for part in attribute.split("."):
+        target = getattr(target, part)
+    return target
+
+
+def owner(kind: str, name: str) -> System:
+    """The system that registered ``name`` as a ``kind`` (protocol, study, scenario, demo, bench,
+    command); a name no system registered is refused with the registered ones."""
+    for system in systems().values():
+        if name in _UNIQUE[kind](system):
+            return system
+    known = [n for system in systems().values() for n in _UNIQUE[kind](system)]
+    raise NotRegistered(f"{kind} {name!r}: expected one of {', '.join(known) or '(none registered)'}")
+
+
+def names(kind: str) -> list[str]:
+    """Every registered name of a kind, system by system."""
+    return [n for system in systems().values() for n in _UNIQUE[kind](system)]
+
+
+def studies() -> dict[str, Study]:
+    """Every registered study, by name."""
+    return {study.name: study for system in systems().values() for study in system.studies}
+
+
+def readings() -> tuple[Reading, ...]:
+    """The readings the registered systems stream, beyond the toolkit's own."""
+    return tuple(reading for system in systems().values() for reading in system.readings)

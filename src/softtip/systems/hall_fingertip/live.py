@@ -1,0 +1,59 @@
+"""The emulated Hall fingertip live: the force-calibration pushes on one fingertip, and the inverter lid
+on two, each with the models trained on its protocol - computed once and kept in the cache."""
+
+from __future__ import annotations
+
+from softtip._core.archive import ModelFileError, read_archive, write_archive
+from softtip._core.progress import SILENT, Progress
+from softtip.lab import Protocol, load_protocol
+from softtip.lab.protocols import trained_model_path
+from softtip.realtime.scenario import LiveScenario
+from softtip.systems.hall_fingertip.scenarios import TwinScenario, insertion_scenario as compute_insertion
+from softtip.systems.hall_fingertip.scenarios import pushing_scenario
+
+SCENARIO_FORMAT, SCENARIO_VERSION = "softtip-twin-scenario", 1
+
+
+def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
+    """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed)``)
+    and cached."""
+    path = trained_model_path(protocol, f"scenario-{name}")
+    try:
+        _, arrays = read_archive(path, SCENARIO_FORMAT, SCENARIO_VERSION, "scenario", ModelFileError)
+        return TwinScenario(times_s=arrays["times_s"], field_uT=arrays["field_uT"], force_N=arrays["force_N"])
+    except ModelFileError:  # absent, or unreadable: computed again
+        pass
+    with progress.task(f"computing the twin's {name} scenario (kept in the cache)"):
+        scenario = compute(protocol, protocol.seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_archive(path, {"format": SCENARIO_FORMAT, "schema_version": SCENARIO_VERSION},
+                  {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
+    return scenario
+
+
+def push_scenario(progress: Progress = SILENT) -> LiveScenario:
+    """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop, with the
+    3-axis force network trained on the force-calibration protocol."""
+    from softtip.systems.hall_fingertip.demo import calibrate_force_model
+
+    protocol = load_protocol("force3")
+    scenario = cached_scenario(protocol, "push", pushing_scenario, progress)
+    with progress.task("the force network trained on the twin (kept in the cache)"):
+        model = calibrate_force_model(protocol.seed, progress, reuse=True)[0]
+    return LiveScenario("the twin's pushes and shears on one fingertip", "emulator", (model,),
+                        chips=scenario.field_uT.shape[1], emulator_source=scenario,
+                        settings=protocol.design.sensor_settings)
+
+
+def insertion_scenario(progress: Progress = SILENT) -> LiveScenario:
+    """Two fingertips holding the inverter lid, lowered into its body once per case, with the
+    contact-state and force networks trained on the inverter protocol."""
+    from softtip.systems.hall_fingertip.insertion import trained_model_files
+
+    protocol = load_protocol("inverter")
+    scenario = cached_scenario(protocol, "insertion", compute_insertion, progress)
+    with progress.task("the contact-state and force networks trained on the twin (kept in the cache)"):
+        models = tuple(trained_model_files(protocol, progress))
+    return LiveScenario("the inverter lid between two fingertips, seated and on either clip", "emulator", models,
+                        chips=scenario.field_uT.shape[1], emulator_source=scenario,
+                        settings=protocol.design.sensor_settings)

@@ -1,0 +1,216 @@
+"""A system of a lab's own, in a package of its own: registered through an entry point, without any
+edit to softtip, it appears in every command that loops over the registered systems.
+
+The package (written here, "installed" on the path with its dist-info) is a linear spring pressed by
+a rigid plate, read by a linear 1-axis displacement sensor (a 3-axis reading whose x and y stay 0);
+its study fits the stiffness by least squares and prints it beside its "published" figure.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from softtip._core.systems import System, names, register, systems, unregister
+
+STIFFNESS_N_PER_MM = 2.5  # the spring's; the "publication" printed 2.4
+
+PACKAGE = {
+    "__init__.py": '''
+        from softtip._core.channels import Reading
+        from softtip._core.systems import Study, System
+
+        DISPLACEMENT = Reading("displacement", "mm", "x", "mm", prefix="d", infix="x", units={"mm": 1.0, "m": 1e3},
+                               drift_threshold=0.01, baseline_step=1e-4, decimals=3, topic="displacement",
+                               message="geometry_msgs/msg/Vector3Stamped")
+        SYSTEM = System(
+            name="springtip", title="A spring under a plate, read by a 1-axis displacement sensor", label="T1",
+            package=__name__, readings=(DISPLACEMENT,), benches={"spring": "springtip.bench:BENCH"},
+            protocols={"spring-push": "spring"},
+            studies=(Study("spring-push", "spring-push", "springtip.bench:analyse", "T1: the spring's stiffness"),),
+            scenarios={"spring": "springtip.bench:scenario"})
+    ''',
+    "bench.py": '''
+        import dataclasses
+        from dataclasses import asdict
+        from typing import Any
+
+        import numpy as np
+
+        from softtip._core.config import NonNegativeNumber, PositiveNumber, Text, integer, schema
+        from softtip.data import DatasetMetadata, TrialWriter
+        from softtip.hardware import PacedSource
+        from softtip.lab import BenchKind
+        from softtip.lab.bench import SeededBench
+        from softtip.mechanics.viscoelastic import PronySeries
+        from softtip.published import published_table
+        from softtip.realtime.scenario import LiveScenario
+        from softtip.report.tables import Table
+        from softtip.studies.outcome import Headline, StudyOutcome
+        from springtip import DISPLACEMENT
+
+        @schema(section="parameters")
+        class Parameters:
+            stiffness_N_per_mm: PositiveNumber = 2.5
+            depth_mm: PositiveNumber = 2.0
+            trials: integer(1) = 3
+            rate_hz: PositiveNumber = 20.0
+
+        @schema(section="realism")
+        class Realism:
+            noise_mm: NonNegativeNumber = 0.0
+            def to_dict(self):
+                return asdict(self)
+
+        @schema(section="viscoelastic")
+        class Relaxation:
+            pass
+
+        @schema
+        class ProtocolFile:
+            protocol: Text
+            seed: integer() = 0
+            parameters: dict[str, Any] = dataclasses.field(default_factory=dict)
+            realism: Realism = Realism()
+            viscoelastic: Relaxation = Relaxation()
+
+        @dataclasses.dataclass(frozen=True)
+        class Spring:
+            name: str = "spring"
+            spec: dict = dataclasses.field(default_factory=dict)
+
+        def push(bench, p, seed, record):
+            writer = TrialWriter(dict.fromkeys(DISPLACEMENT.channel_names(1), "mm"), {"fz_N": "N"}, {"role": "1"},
+                                 DatasetMetadata(description="spring pushes", design={}, sensor_settings={},
+                                                 protocol=record, seed=seed))
+            for trial in range(p.trials):
+                depth = np.linspace(0, p.depth_mm, 1 + round(p.rate_hz))
+                read = np.zeros((len(depth), 1, 3))
+                read[:, 0, 2] = depth + bench.scatter(bench.realism.noise_mm, len(depth))
+                writer.add({"time_s": np.arange(len(depth)) / p.rate_hz, **DISPLACEMENT.columns(read),
+                            "fz_N": p.stiffness_N_per_mm * depth},
+                           {"role": "calibration" if trial else "validation"})
+            return writer.to_dataset()
+
+        def setup(protocol, progress, timings):
+            bench = SeededBench(prony=PronySeries((), ()), realism=protocol.realism,
+                                rng=np.random.default_rng(protocol.seed), rate_hz=protocol.parameters.rate_hz)
+            return bench, {}, "spring pushes"
+
+        BENCH = BenchKind(protocol_file=ProtocolFile, parameters={"spring-push": Parameters},
+                          runners={"spring-push": push}, device=lambda *_: Spring(), setup=setup,
+                          realism_sources={"noise_mm": "none"}, viscoelastic=Relaxation, viscoelastic_sources={})
+
+        def analyse(protocol, seed, progress):
+            from softtip.lab import run_protocol
+            dataset, _ = run_protocol(protocol, progress)
+            x, f = dataset.column("d0_xz_mm"), dataset.column("fz_N")
+            stiffness = float(np.linalg.lstsq(x[:, None], f, rcond=None)[0][0])
+            published = published_table("spring-stiffness")
+            table = Table("Stiffness", "item", ["spring"], ["stiffness"], {("spring", "stiffness"): stiffness},
+                          unit="N/mm", published=published)
+            return StudyOutcome({"stiffness_N_per_mm": stiffness}, [table], [],
+                                Headline.of(table, "spring", "stiffness", "stiffness"))
+
+        def scenario(progress):
+            readings = np.zeros((20, 1, 3))
+            readings[:, 0, 2] = np.linspace(0, 1, 20)
+            return LiveScenario("a spring pressed once", PacedSource(readings, 20.0, reading=DISPLACEMENT),
+                                (), chips=1, rate_hz=20.0, baseline_frames=1)
+    ''',
+    "protocols/spring-push.toml": '''
+        protocol = "spring-push"
+        seed = 3
+
+        [parameters]
+        trials = 3
+    ''',
+    "published.toml": '''
+        [spring-stiffness]
+        study = "spring-push"
+        title = "The spring's stiffness"
+        source = "a made-up note"
+        unit = "N/mm"
+        digits = 2
+        row_label = "item"
+        rows = ["spring"]
+        columns = ["stiffness"]
+        values = [[2.4]]
+        close = { ratio = 1.1, why = "a spring's rating" }
+    ''',
+}
+
+
+@pytest.fixture(scope="module")
+def springtip(tmp_path_factory) -> dict:
+    """The package and its dist-info on a folder; the environment a command needs to find it."""
+    root = tmp_path_factory.mktemp("site")
+    for name, text in PACKAGE.items():
+        path = root / "springtip" / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(text).lstrip())
+    info = root / "springtip-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: springtip\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[softtip.systems]\nspringtip = springtip:SYSTEM\n")
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+
+
+def softtip(env: dict, cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "softtip", *args], env=env, cwd=cwd, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_systems(springtip, tmp_path):
+    help_text = softtip(springtip, tmp_path, "--help").stdout
+    assert "springtip" in help_text and "hall-fingertip" in help_text
+    assert "spring-push" in softtip(springtip, tmp_path, "lab", "run", "--help").stdout
+
+    ran = softtip(springtip, tmp_path, "lab", "run", "spring-push", "-o", "spring.parquet", "--json")
+    assert ran.returncode == 0, ran.stderr
+    summary = json.loads(ran.stdout)
+    assert summary["trials"] == 3 and summary["channels"] == ["d0_xx_mm", "d0_xy_mm", "d0_xz_mm"]
+
+    reproduced = softtip(springtip, tmp_path, "reproduce", "spring-push", "-o", "reports", "--json")
+    assert reproduced.returncode == 0, reproduced.stderr
+    study = json.loads(reproduced.stdout)["studies"]["spring-push"]
+    assert study["results"]["stiffness_N_per_mm"] == pytest.approx(STIFFNESS_N_PER_MM, rel=1e-9)
+    assert study["comparisons"][0]["published"] == "2.40"  # beside its publication's figure
+    assert "spring-push.html" in (tmp_path / "reports" / "index.html").read_text()
+
+    streamed = softtip(springtip, tmp_path, "live", "--emulate", "--scenario", "spring", "--duration", "1.5",
+                       "--record", "spring.mcap", "--json")
+    assert streamed.returncode == 0, streamed.stderr
+    with open(tmp_path / "spring.mcap", "rb") as handle:
+        topics = {channel.topic for channel in make_reader(handle).get_summary().channels.values()}
+    assert "/fingertip/chip0/displacement" in topics
+    converted = softtip(springtip, tmp_path, "convert", "spring.mcap", "spring-live.parquet", "--json")
+    assert converted.returncode == 0, converted.stderr
+    assert json.loads(converted.stdout)["channels"] == ["d0_xx_mm", "d0_xy_mm", "d0_xz_mm"]
+
+
+def test_a_name_two_systems_claim_is_refused_and_the_toolkit_systems_are_registered():
+    assert {"hall-fingertip", "wearable"} <= set(systems())
+    clash = System(name="copycat", title="", label="X", package="softtip", protocols={"pushing": "fingertip"})
+    with pytest.raises(ValueError, match="protocol 'pushing' is also system 'hall-fingertip'"):
+        register(clash)
+    assert "copycat" not in systems() and names("protocol").count("pushing") == 1
+    unregister("copycat")
+
+
+def test_the_toolkit_names_no_system():
+    """Only a system's own folder (and the list of entry points) names it."""
+    root = Path(__file__).parents[1] / "src" / "softtip"
+    own = {"wearable": ("wearable",), "hall_fingertip": ("hall_fingertip", "force3", "cylindrical-", "inverter")}
+    for folder, words in own.items():
+        for path in root.rglob("*"):
+            if path.is_file() and path.suffix in (".py", ".toml") and "systems" not in path.relative_to(root).parts:
+                text = path.read_text(encoding="utf-8").lower()
+                assert not [w for w in words if w in text], (path, words)
