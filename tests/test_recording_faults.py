@@ -117,6 +117,8 @@ def test_a_killed_recording_is_repaired_with_every_complete_message(tmp_path):
     assert force_sequences(messages) == list(range(len(complete) - 1))  # frames 0.. with none missing
     assert summary.statistics.message_count == salvage.messages == len(complete)
     assert salvage.truncated and salvage.bytes_lost == path.stat().st_size - salvage.bytes_read
+    # and it converts to the same dataset as the killed file
+    np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(path).dataset.X())
     # the command line does the same, beside the recording by default, and names what it did
     result = CliRunner().invoke(app, ["recording", "repair", str(path)])
     assert result.exit_code == 0, result.output

@@ -21,7 +21,7 @@ from typing import BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Chunk, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
@@ -39,11 +39,13 @@ _CONTENT = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channe
 class Salvage:
     """What a read of a recording got and what it lost.
 
-    ``messages``: complete messages read; ``bytes_read`` of the file's ``file_bytes`` held them (the
-    rest: ``bytes_lost``); ``truncated``: the file ends before its footer (the writer was killed, or
-    the file was cut), ``reason`` says how its tail ends; ``damaged_records``: records skipped because
-    they do not parse (a chunk: its CRC, its compression); ``lost_from_ns``, ``lost_to_ns``: the log times the lost chunks'
-    headers state (None when no lost chunk's header could be read).
+    ``messages``: complete messages read, the first at log time ``first_ns``; ``bytes_read`` of the
+    file's ``file_bytes`` held them (the rest: ``bytes_lost``); ``truncated``: the file ends before
+    its footer (the writer was killed, or the file was cut), ``reason`` says how its tail ends;
+    ``damaged_records``: records skipped because they do not parse (a chunk: its CRC, its
+    compression); ``lost_from_ns``, ``lost_to_ns``: the log times the lost chunks' headers state
+    (None when no lost chunk's header could be read). Messages still in the writer's memory when it
+    was killed were never in the file: no file says how many.
     """
 
     file_bytes: int
@@ -54,17 +56,12 @@ class Salvage:
     damaged_records: int = 0
     lost_from_ns: int | None = None
     lost_to_ns: int | None = None
-    first_ns: int | None = None  # the first and last complete message's log time
-    last_ns: int | None = None
+    first_ns: int | None = None
     _damaged_bytes: int = 0
 
     @property
     def bytes_lost(self) -> int:
         return self.file_bytes - self.bytes_read
-
-    @property
-    def complete(self) -> bool:
-        return not self.truncated and not self.damaged_records and not self.bytes_lost
 
     def _lose(self, opcode: int, body: bytes) -> None:
         """A damaged record, skipped."""
@@ -82,7 +79,6 @@ class Salvage:
     def _count(self, message: Message) -> None:
         self.messages += 1
         self.first_ns = message.log_time if self.first_ns is None else min(message.log_time, self.first_ns)
-        self.last_ns = message.log_time if self.last_ns is None else max(message.log_time, self.last_ns)
 
     def report(self) -> dict:
         """The salvage as JSON values; times in s from the first complete message."""
