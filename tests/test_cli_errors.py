@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 import typer
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from softtip.cli.common import OutputPathError, check_output, fail, user_errors
@@ -158,3 +160,16 @@ def test_a_read_only_folder_is_refused(tmp_path):
             locked.chmod(0o755)
         else:
             subprocess.run(lock[1], check=True)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(alphabet=st.characters(codec=None, exclude_categories=())))
+def test_any_message_is_one_line_without_control_characters(message):
+    result = runner.invoke(_wrapped(raise_(ValueError(message))), [])
+    assert result.exit_code == 2
+    line = result.stderr.removesuffix("\n")
+    assert "\n" not in line and all(character.isprintable() for character in line)
+    # and nothing printable is lost or reordered: no markup, emoji code or highlighting took any
+    assert line.startswith("error: ")
+    shown = iter(line.removeprefix("error: "))
+    assert all(character in shown for character in message if character.isprintable())
