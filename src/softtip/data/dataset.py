@@ -21,9 +21,9 @@ as zeros (the document is written with zeros, hashed, then the digits put in pla
 length, so nothing moves). Every data page also carries its CRC (Parquet's page checksum). Both are
 verified on reading, so a byte changed anywhere in the file, data, document or Parquet's own
 structure, is refused in one line naming the file. Statistics and the serialised Arrow schema,
-which readers take on trust, are not written: the columns' types are Parquet's logical types. A file written before
-datasets carried a checksum still reads, with a :class:`UnverifiedDatasetWarning`: its content
-cannot be verified, and writing it again adds the checksum. Nothing is pickled.
+which readers take on trust, are not written: the columns' types are Parquet's logical types. A
+file written before datasets carried a checksum still reads, with a :class:`UnverifiedDatasetWarning`:
+its content cannot be verified, and writing it again adds the checksum. Nothing is pickled.
 
 Channels of other sensors need no new schema version: the document has always listed every
 channel with its unit; a version-1 file of magnetic channels reads as before.
@@ -479,22 +479,22 @@ class Dataset:
         path = Path(path)
         if not path.is_file():
             raise DatasetError(f"dataset file {path} does not exist")
+        content = path.read_bytes()  # read once: what is verified is what is parsed
         try:
-            schema = pq.read_schema(path)
+            schema = pq.read_schema(pa.BufferReader(content))
         except (pa.ArrowException, OSError, UnicodeDecodeError) as problem:  # names of a damaged file may not decode
             raise DatasetError(f"{path}: not a Parquet file ({first_line(problem)})") from None
         try:
-            return cls._from_file(path, schema)
+            return cls._from_file(path, content, schema)
         except DatasetError as problem:
             raise DatasetError(f"{path}: {problem}") from None
 
     @classmethod
-    def _from_file(cls, path: Path, schema: pa.Schema) -> Dataset:
+    def _from_file(cls, path: Path, content: bytes, schema: pa.Schema) -> Dataset:
         raw = (schema.metadata or {}).get(METADATA_KEY)
         if raw is None:
             raise DatasetError(f"not a softtip dataset (no '{METADATA_KEY.decode()}' entry in the Parquet metadata)")
         document = _parse_document(raw)
-        checksum = document["document"].get(CHECKSUM_KEY)
         declared = [TRIAL, TIME, *document["channels"], *document["labels"], *document["conditions"]]
         for name in declared:
             if name not in schema.names:
@@ -505,16 +505,16 @@ class Dataset:
         if len(set(schema.names)) != len(schema.names):
             raise DatasetError("duplicate column names")
         try:
-            table = pq.read_table(path, page_checksum_verification=True)
+            table = pq.read_table(pa.BufferReader(content), page_checksum_verification=True)
         except (pa.ArrowException, OSError, UnicodeDecodeError) as problem:  # names of a damaged file may not decode
             raise DatasetError(f"unreadable Parquet data ({first_line(problem)})") from None
         columns = {name: column_to_numpy(name, table.column(name)) for name in declared}
         dataset = cls(columns, document["labels"], document["conditions"], document["metadata"], document["channels"])
-        if checksum is None:
+        if document["checksum"] is None:
             warnings.warn(f"{path}: no checksum (written by softtip {dataset.metadata.softtip_version}, before "
                           "datasets carried one): its content cannot be verified; write it again to add one",
                           UnverifiedDatasetWarning, stacklevel=3)
-        elif not _sealed(path.read_bytes(), checksum):
+        elif not _sealed(content, document["checksum"]):
             raise DatasetError("checksum mismatch: the file was altered or damaged after it was written")
         return dataset
 
@@ -562,7 +562,7 @@ def unknown_and_missing(keys: Iterable[str], expected: Sequence[str]) -> tuple[l
 
 
 def _parse_document(raw: bytes) -> dict:
-    """The metadata document: declarations with units and a DatasetMetadata."""
+    """The metadata document: declarations with units, a DatasetMetadata and the checksum (or None)."""
     try:
         document = json.loads(raw)
     except (UnicodeDecodeError, ValueError):
@@ -586,9 +586,10 @@ def _parse_document(raw: bytes) -> dict:
     metadata = DatasetMetadata(**{key: document[key] for key in ("description", "design", "sensor_settings",
                                                                  "protocol", "seed", "softtip_version",
                                                                  "created_utc")})
-    if not isinstance(document.get(CHECKSUM_KEY, ""), str):
-        raise DatasetError(f"metadata {CHECKSUM_KEY}: expected a hex digest, got {document[CHECKSUM_KEY]!r}")
-    return {**declared, "metadata": metadata, "document": document}
+    checksum = document.get(CHECKSUM_KEY)
+    if checksum is not None and not isinstance(checksum, str):
+        raise DatasetError(f"metadata {CHECKSUM_KEY}: expected a hex digest, got {checksum!r}")
+    return {**declared, "metadata": metadata, "checksum": checksum}
 
 
 def _named_units(entries: Any, key: str) -> dict[str, str]:
