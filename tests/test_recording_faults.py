@@ -187,3 +187,20 @@ def test_convert_skips_a_damaged_chunk_and_says_so(tmp_path):
     assert salvage.messages == len(every) - len(in_damaged) and conversion.frames == 600 - len(in_damaged)
     assert salvage.bytes_lost == damaged.chunk_length
     assert (salvage.lost_from_ns, salvage.lost_to_ns) == (damaged.message_start_time, damaged.message_end_time)
+
+
+def test_a_repaired_recording_carries_a_crc_of_its_data_section(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    assert convert(whole).salvage.data_crc_ok is None  # the live recorder's chunks carry CRCs; the section none
+    repaired = tmp_path / "repaired.mcap"
+    assert repair_recording(whole, repaired).messages == len(indexed_messages(whole)[1])
+    assert convert(repaired).salvage.data_crc_ok is True
+    # the softtip metadata record lies outside the chunks: only the data section's CRC covers it
+    content = bytearray(repaired.read_bytes())
+    with repaired.open("rb") as stream:
+        index = make_reader(stream).get_summary().metadata_indexes[0]
+    content[index.offset + index.length - 3] ^= 0x04
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = convert(damaged).salvage
+    assert salvage.data_crc_ok is False and salvage.damaged_records == 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import struct
+import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -44,7 +45,9 @@ class Salvage:
     its footer (the writer was killed, or the file was cut), ``reason`` says how its tail ends;
     ``damaged_records``: records skipped because they do not parse (a chunk: its CRC, its
     compression); ``lost_from_ns``, ``lost_to_ns``: the log times the lost chunks' headers state
-    (None when no lost chunk's header could be read). Messages still in the writer's memory when it
+    (None when no lost chunk's header could be read); ``data_crc_ok``: whether the data section
+    matches the CRC its DataEnd record states (None: no DataEnd, or one that states none, as the live
+    recorder's; its chunks carry CRCs of their own), which also covers the records outside chunks. Messages still in the writer's memory when it
     was killed were never in the file: no file says how many.
     """
 
@@ -57,6 +60,7 @@ class Salvage:
     lost_from_ns: int | None = None
     lost_to_ns: int | None = None
     first_ns: int | None = None
+    data_crc_ok: bool | None = None
     _damaged_bytes: int = 0
 
     @property
@@ -86,7 +90,7 @@ class Salvage:
         lost = (None if self.lost_from_ns is None else
                 [round((self.lost_from_ns - origin) * 1e-9, 6), round((self.lost_to_ns - origin) * 1e-9, 6)])
         return {"messages_read": self.messages, "truncated": self.truncated, "bytes_lost": self.bytes_lost,
-                "damaged_records": self.damaged_records, "time_lost_s": lost,
+                "damaged_records": self.damaged_records, "time_lost_s": lost, "data_crc_ok": self.data_crc_ok,
                 **({"tail": self.reason} if self.reason else {})}
 
 
@@ -108,6 +112,7 @@ def scan_recording(stream: BinaryIO, salvage: Salvage, source: str | os.PathLike
         raise RecordingError(f"{source} is not an MCAP file")
     salvage.bytes_read = len(MAGIC)
     in_summary = False
+    data_crc = zlib.crc32(MAGIC)  # of the data section, up to its DataEnd record
     while True:
         head = stream.read(_RECORD_HEAD.size)
         if len(head) < _RECORD_HEAD.size:
@@ -127,9 +132,13 @@ def scan_recording(stream: BinaryIO, salvage: Salvage, source: str | os.PathLike
             salvage.truncated = False
             salvage.bytes_read = salvage.file_bytes - salvage._damaged_bytes  # the summary: indexes of the data
             return
-        if opcode == Opcode.DATA_END:
+        if opcode == Opcode.DATA_END and not in_summary:
+            stated = int.from_bytes(body[:4], "little")
+            salvage.data_crc_ok = None if stated == 0 else stated == data_crc
             in_summary = True  # the summary repeats schemas and channels and indexes the data: nothing new
-        elif not in_summary and (opcode in (Opcode.CHUNK, Opcode.MESSAGE) or opcode in _CONTENT):
+        elif not in_summary:
+            data_crc = zlib.crc32(body, zlib.crc32(head, data_crc))
+        if not in_summary and (opcode in (Opcode.CHUNK, Opcode.MESSAGE) or opcode in _CONTENT):
             try:
                 records = _parsed(opcode, body)
             except Exception:  # a CRC mismatch, a compressed stream or a record that does not parse

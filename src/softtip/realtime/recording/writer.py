@@ -206,15 +206,15 @@ class McapRecorder:
 def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salvage:
     """Writes to ``output`` every complete message, schema, channel, metadata record and attachment of
     the recording ``path`` (:func:`~softtip.realtime.recording.reader.scan_recording`: up to a torn
-    tail, past a damaged chunk), in chunks with the summary and index an indexed reader needs, and
-    returns what was salvaged. ``output`` is replaced only once it is complete."""
+    tail, past a damaged chunk), in chunks with the summary and index an indexed reader needs and a
+    CRC of the whole data section, and returns what was salvaged. ``output`` is replaced only once it is complete."""
     path, output = Path(path), Path(output)
     if not path.is_file():
         raise RecordingError(f"recording {path} does not exist")
     salvage = Salvage(path.stat().st_size)
 
     def rewrite(handle) -> None:
-        writer = McapWriter(handle, compression=CompressionType.ZSTD)
+        writer = McapWriter(handle, compression=CompressionType.ZSTD, enable_data_crcs=True)
         schema_ids, channel_ids = {0: 0}, {}
         started = False
         with path.open("rb") as stream:
