@@ -21,8 +21,6 @@ def recording_repair(
     write, and say what was salvaged and what was lost."""
     from softtip.realtime.recording.writer import repair_recording
 
-    if not recording.is_file():
-        raise FileNotFoundError(2, "no such file", str(recording))
     output = check_output(recording.with_suffix(".repaired.mcap") if output is None else output, "--output",
                           [recording], force=force)
     salvage = repair_recording(recording, output)
