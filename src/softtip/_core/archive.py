@@ -5,11 +5,18 @@ their names and one text entry, ``metadata``: a JSON object whose ``format`` nam
 and whose ``sha256`` is the hex digest of the metadata without this field (canonical JSON: sorted
 keys, no spaces) followed, for each array in sorted name order, by name NUL dtype NUL shape NUL and
 the C-order bytes. Writing is atomic; every refusal is one line naming the file.
+
+The file as a whole is sealed too: the zip archive's comment (which no zip CRC covers) is
+``softtip-sha256:`` and the SHA-256 of the whole file with those 64 hex digits written as zeros, and
+the metadata says so (``sealed``), so a byte changed anywhere, in the arrays, in the metadata, or in
+the zip structure around them that readers otherwise ignore (local headers, the central directory),
+is refused. Files written before the seal (no ``sealed``) are verified by their content checksum.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import zipfile
 import zlib
@@ -20,6 +27,13 @@ import numpy as np
 from softtip._core.files import atomic_write
 
 ZIP_MAGIC = b"PK\x03\x04"
+SEAL_PREFIX = b"softtip-sha256:"
+_UNSEALED = b"0" * 64
+SEALED_KEY = "sealed"
+# What numpy's and zipfile's readers raise for a damaged archive (a flipped flag bit reads as an
+# encrypted entry, RuntimeError; a flipped method as an unknown compression, NotImplementedError).
+_UNREADABLE = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError, RuntimeError,
+               NotImplementedError)
 
 
 class ModelFileError(ValueError):
@@ -48,11 +62,25 @@ def archive_digest(metadata: dict, arrays: dict[str, np.ndarray]) -> str:
 
 
 def write_archive(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> Path:
-    """Writes ``arrays`` and ``metadata`` (with its checksum added) atomically: a crash leaves either
-    the old file or the new one, never half of it."""
-    metadata = metadata | {"sha256": archive_digest(metadata, arrays)}
-    return atomic_write(path, lambda handle: np.savez(handle, metadata=np.array(canonical_json(metadata).decode()),
-                                                      **arrays))
+    """Writes ``arrays`` and ``metadata`` (with its checksum added), sealed, atomically: a crash leaves
+    either the old file or the new one, never half of it."""
+    metadata = metadata | {SEALED_KEY: True}
+    metadata |= {"sha256": archive_digest(metadata, arrays)}
+    buffer = io.BytesIO()
+    np.savez(buffer, metadata=np.array(canonical_json(metadata).decode()), **arrays)
+    with zipfile.ZipFile(buffer, "a") as archive:
+        archive.comment = SEAL_PREFIX + _UNSEALED
+    content = bytearray(buffer.getvalue())
+    content[-len(_UNSEALED):] = hashlib.sha256(content).hexdigest().encode()
+    return atomic_write(path, bytes(content))
+
+
+def _seal(content: bytes) -> bool | None:
+    """Whether the sealed file ``content`` is intact; None if it carries no seal."""
+    tail = content[-len(SEAL_PREFIX) - len(_UNSEALED):]
+    if not tail.startswith(SEAL_PREFIX):
+        return None
+    return hashlib.sha256(content[:-len(_UNSEALED)] + _UNSEALED).hexdigest().encode() == tail[len(SEAL_PREFIX):]
 
 
 def archive_format(path: Path) -> str | None:
@@ -61,7 +89,7 @@ def archive_format(path: Path) -> str | None:
     try:
         with np.load(path, allow_pickle=False) as archive:
             metadata = json.loads(str(archive["metadata"]))
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError):
+    except _UNREADABLE:
         return None
     return metadata.get("format") if isinstance(metadata, dict) else None
 
@@ -76,13 +104,16 @@ def read_archive(path: Path, format_name: str, schema_version: int, what: str,
     """
     if not path.is_file():
         raise error(f"{what} file {path} does not exist")
-    with path.open("rb") as handle:
-        if handle.read(len(ZIP_MAGIC)) != ZIP_MAGIC:
-            raise error(f"{path} is not a softtip {what} file (not an npz archive)")
+    content = path.read_bytes()
+    if not content.startswith(ZIP_MAGIC):
+        raise error(f"{path} is not a softtip {what} file (not an npz archive)")
+    sealed = _seal(content)
+    if sealed is False:
+        raise error(f"{path}: checksum mismatch: the file was altered or damaged after it was written")
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as problem:
+    except _UNREADABLE as problem:
         raise error(f"{path} is truncated or unreadable ({type(problem).__name__}: {problem})") from None
     text = arrays.pop("metadata", None)
     if text is None or text.dtype.kind != "U" or text.ndim != 0:
@@ -96,6 +127,6 @@ def read_archive(path: Path, format_name: str, schema_version: int, what: str,
     if metadata.get("schema_version") != schema_version:
         raise error(f"{path}: unsupported schema version {metadata.get('schema_version')!r} "
                     f"(this softtip reads version {schema_version})")
-    if metadata.get("sha256") != archive_digest(metadata, arrays):
+    if metadata.get("sha256") != archive_digest(metadata, arrays) or (metadata.get(SEALED_KEY) and not sealed):
         raise error(f"{path}: checksum mismatch: the file was altered or damaged after it was written")
     return metadata, arrays

@@ -134,14 +134,48 @@ def _restore_step(description: dict, arrays: dict[str, np.ndarray]):
         except TypeError as problem:
             raise ValueError(f"{name}: {problem}") from None
         n_features = checks.stored_int(state, "n_features_in", 1)
+        held = _fitted_arrays(scaler)
         for attribute in names:
+            if (attribute in arrays) != (attribute in held):
+                raise ValueError(f"{name}: array {attribute!r} is {'missing' if attribute in held else 'not used'} "
+                                 f"(a {name} of these parameters holds {', '.join(held)})")
             setattr(scaler, attribute, checks.stored_array(arrays, attribute, (n_features,))
                     if attribute in arrays else None)
+        _check_scaler(scaler)
         scaler.n_features_in_ = n_features
         scaler.n_samples_seen_ = (checks.stored_array(arrays, "n_samples_seen", (n_features,), kinds="i")
                                   if "n_samples_seen" in arrays else checks.stored_int(state, "n_samples_seen", 1))
         return scaler
     raise ModelFileError(f"unknown model class {name!r}")
+
+
+def _fitted_arrays(scaler) -> tuple[str, ...]:
+    """The arrays scikit-learn's fit sets on a scaler of these parameters (the others it leaves None)."""
+    if isinstance(scaler, MinMaxScaler):
+        return SCALERS["MinMaxScaler"][1]
+    return ("mean_",) * (scaler.with_mean or scaler.with_std) + ("var_", "scale_") * bool(scaler.with_std)
+
+
+def _check_scaler(scaler) -> None:
+    """A scaler's arrays agree with each other and with its parameters, as scikit-learn's fit sets them:
+    a MinMaxScaler's scale and offset follow from its data range and feature range; a StandardScaler's
+    scale is the square root of its variance (1 for a constant feature)."""
+    name = type(scaler).__name__
+    if isinstance(scaler, MinMaxScaler):
+        low, high = scaler.feature_range
+        data_range = scaler.data_max_ - scaler.data_min_
+        scale = (high - low) / np.where(data_range == 0, 1.0, data_range)
+        consistent = (np.array_equal(scaler.data_range_, data_range) and np.allclose(scaler.scale_, scale, rtol=1e-12)
+                      and np.allclose(scaler.min_, low - scaler.data_min_ * scale, rtol=1e-12, atol=1e-300))
+    elif scaler.with_std:
+        deviation = np.sqrt(scaler.var_)
+        constant = (scaler.scale_ == 1.0) & (deviation <= 1e-6 * np.maximum(1.0, np.abs(scaler.mean_)))
+        consistent = bool(np.all(np.isclose(scaler.scale_, deviation, rtol=1e-12, atol=0) | constant))
+    else:
+        consistent = True
+    if not consistent:
+        raise ValueError(f"{name}: its arrays do not agree with each other and its parameters "
+                         f"({', '.join(_fitted_arrays(scaler))})")
 
 
 def _scaling(step) -> dict:
@@ -170,14 +204,9 @@ def _output_count(model) -> int:
     return 1 if isinstance(model, SoftmaxClassifier) else int(model.n_outputs_)
 
 
-def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str], input_units: str | Sequence[str],
-               target_names: Sequence[str], target_units: str | Sequence[str], baseline: str = "initial-value",
-               extra: dict | None = None) -> Path:
-    """Save a fitted model (or scaler Pipeline ending in one) to ``path``, exactly as named
-    (use the ``.npz`` suffix). Units may be one string for every channel/output. For a
-    classifier ``target_names`` is one name (the predicted label), e.g. ``["contact_state"]``.
-    """
-    path = Path(path)
+def _serialised(model) -> tuple[dict, dict[str, np.ndarray], dict]:
+    """(model description, arrays by file name, scaling) of a fitted model or scaler Pipeline ending in one,
+    as a model file holds them."""
     steps = list(model.named_steps.items()) if isinstance(model, Pipeline) else [(None, model)]
     final = steps[-1][1]
     if isinstance(model, Pipeline) and not all(type(s).__name__ in SCALERS for _, s in steps[:-1]):
@@ -187,21 +216,51 @@ def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str],
     if not hasattr(final, "n_features_in_"):
         raise ModelFileError(f"the {type(final).__name__} is not fitted")
     exported = [_export_step(step) for _, step in steps]
+    if not isinstance(model, Pipeline):
+        return exported[0][0], {f"model/{k}": np.asarray(v) for k, v in exported[0][1].items()}, _scaling(final)
+    named = [d | {"name": name} for (name, _), (d, _) in zip(steps, exported, strict=True)]
+    arrays = {f"steps/{i}/{k}": np.asarray(v) for i, (_, a) in enumerate(exported) for k, v in a.items()}
+    return {"class": "Pipeline", "steps": named}, arrays, {name: _scaling(step) for name, step in steps}
+
+
+def _same_arrays(first: np.ndarray, second: np.ndarray) -> bool:
+    return (first.dtype == second.dtype and first.shape == second.shape
+            and np.ascontiguousarray(first).tobytes() == np.ascontiguousarray(second).tobytes())
+
+
+def _check_agreement(model, metadata: dict, arrays: dict[str, np.ndarray]) -> None:
+    """Refuses a file whose metadata does not describe its arrays exactly: the restored model, written
+    out again, must give back the same description (class, parameters, fitted state: sizes, counts),
+    the same scaling and the same arrays, bit for bit, no more and no fewer."""
+    description, written, scaling = _serialised(model)
+    if canonical_json(description) != canonical_json(metadata["model"]):
+        raise ValueError("the model description does not match what its arrays hold")
+    if canonical_json(scaling) != canonical_json(metadata.get("scaling")):
+        raise ValueError("the metadata's scaling does not describe the model's steps")
+    extra = sorted(set(arrays) - set(written))
+    if extra:
+        raise ValueError(f"array {extra[0]!r} is not part of the model")
+    differing = [name for name in written if name not in arrays or not _same_arrays(written[name], arrays[name])]
+    if differing:
+        raise ValueError(f"array {differing[0]!r} does not match the model restored from it")
+
+
+def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str], input_units: str | Sequence[str],
+               target_names: Sequence[str], target_units: str | Sequence[str], baseline: str = "initial-value",
+               extra: dict | None = None) -> Path:
+    """Save a fitted model (or scaler Pipeline ending in one) to ``path``, exactly as named
+    (use the ``.npz`` suffix). Units may be one string for every channel/output. For a
+    classifier ``target_names`` is one name (the predicted label), e.g. ``["contact_state"]``.
+    """
+    path = Path(path)
+    description, arrays, scaling = _serialised(model)
+    steps = list(model.named_steps.items()) if isinstance(model, Pipeline) else [(None, model)]
     n_inputs = int(steps[0][1].n_features_in_)
-    n_outputs = _output_count(final)
+    n_outputs = _output_count(steps[-1][1])
     if not isinstance(baseline, str) or not baseline:
         raise ModelFileError(f"baseline must be a non-empty string, got {baseline!r}")
     if extra is not None and not isinstance(extra, dict):
         raise ModelFileError(f"extra must be a dict of JSON values or None, got {type(extra).__name__}")
-    if isinstance(model, Pipeline):
-        named = [d | {"name": name} for (name, _), (d, _) in zip(steps, exported, strict=True)]
-        description = {"class": "Pipeline", "steps": named}
-        arrays = {f"steps/{i}/{k}": v for i, (_, a) in enumerate(exported) for k, v in a.items()}
-        scaling = {name: _scaling(step) for name, step in steps}
-    else:
-        description = exported[0][0]
-        arrays = {f"model/{k}": v for k, v in exported[0][1].items()}
-        scaling = _scaling(final)
     metadata = {
         "format": FORMAT,
         "schema_version": SCHEMA_VERSION,
@@ -219,7 +278,7 @@ def save_model(path: str | os.PathLike, model, *, input_channels: Sequence[str],
         canonical_json(metadata)
     except (TypeError, ValueError) as problem:
         raise ModelFileError(f"extra must hold JSON values only ({problem})") from None
-    write_archive(path, metadata, {k: np.asarray(v) for k, v in arrays.items()})
+    write_archive(path, metadata, arrays)
     return path
 
 
@@ -262,6 +321,7 @@ def load_model(path: str | os.PathLike):
             schema_version=SCHEMA_VERSION,
             extra=metadata.get("extra") or {},
         )
+        _check_agreement(model, metadata, arrays)
     except ModelFileError as problem:
         raise ModelFileError(f"{path}: {problem}") from None
     except ValueError as problem:

@@ -82,7 +82,7 @@ def convert(
     result = convert_recording(recording, output, gap_s=gap)
     dataset = result.dataset
     summary = {"dataset": str(output), "trials": len(dataset.trials), "samples": int(len(dataset.groups)),
-               "channels": list(dataset.channels), "labels": list(dataset.labels)}
+               "channels": list(dataset.channels), "labels": list(dataset.labels), **result.salvage.report()}
     if json_output:
         print(json.dumps(summary, indent=2))
     else:

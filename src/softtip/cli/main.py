@@ -13,7 +13,7 @@ import typer
 
 from softtip import __version__
 from softtip._core.systems import load, systems
-from softtip.cli import bench, lab, live, optimize, sysid, twin
+from softtip.cli import bench, lab, live, optimize, recording, sysid, twin
 from softtip.cli.common import console, user_errors
 
 app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
@@ -49,6 +49,7 @@ _group("demo", "Demonstrations on the built-in simulated sensors."
        callback=_main_demo)
 _group("sysid", "System identification: transfer-function and state-space models from recordings.",
        {"fit": sysid.sysid_fit, "orders": sysid.sysid_orders, "predict": sysid.sysid_predict})
+_group("recording", "MCAP recordings of the live stream.", {"repair": recording.recording_repair})
 _group("bench", "Benchmarks measured on this machine (ratios against baselines of the same run).",
        {"twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live,
         "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration, "sysid": bench.bench_sysid,

@@ -15,8 +15,15 @@ Columns, in this order:
 Labels and conditions are declared with their units; ``"1"`` for dimensionless numbers and
 for categories (string columns). The Parquet schema metadata holds one JSON document under the key
 ``softtip``: format name, schema version, the channel, label and condition lists with units,
-and the provenance (description, design, sensor settings, protocol, seed, softtip version,
-creation time). Nothing is pickled.
+the provenance (description, design, sensor settings, protocol, seed, softtip version,
+creation time) and ``sha256``: the SHA-256 of the whole file as written with these 64 hex digits
+as zeros (the document is written with zeros, hashed, then the digits put in place: they are of one
+length, so nothing moves). Every data page also carries its CRC (Parquet's page checksum). Both are
+verified on reading, so a byte changed anywhere in the file, data, document or Parquet's own
+structure, is refused in one line naming the file. Statistics and the serialised Arrow schema,
+which readers take on trust, are not written: the columns' types are Parquet's logical types. A
+file written before datasets carried a checksum still reads, with a :class:`UnverifiedDatasetWarning`:
+its content cannot be verified, and writing it again adds the checksum. Nothing is pickled.
 
 Channels of other sensors need no new schema version: the document has always listed every
 channel with its unit; a version-1 file of magnetic channels reads as before.
@@ -24,10 +31,13 @@ channel with its unit; a version-1 file of magnetic channels reads as before.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 import numbers
 import os
 import re
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -55,11 +65,18 @@ DIMENSIONLESS = "1"  # the unit of counts, ratios and categories
 _NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DOCUMENT_KEYS = ("format", "schema_version", "description", "channels", "labels", "conditions", "design",
                   "sensor_settings", "protocol", "seed", "softtip_version", "created_utc")
+CHECKSUM_KEY = "sha256"  # absent from files written before datasets carried a checksum
+_UNSEALED = "0" * 64  # the checksum's place while the file is hashed
+PARQUET_OPTIONS = {"write_page_checksum": True, "write_statistics": False, "store_schema": False}
 
 
 class DatasetError(ConfigError):
     """A dataset, dataset file or recording (or the mapping that reads it) that does not hold valid
     softtip trials."""
+
+
+class UnverifiedDatasetWarning(UserWarning):
+    """A dataset file without a checksum (written before datasets carried one): read unverified."""
 
 
 # --------------------------------------------------------------------------
@@ -445,10 +462,16 @@ class Dataset:
         path = Path(path)
         if not path.parent.is_dir():
             raise DatasetError(f"dataset file {path}: directory {path.parent} does not exist")
-        table = pa.Table.from_arrays(
-            [pa.array(values) for values in self.columns.values()], names=list(self.columns),
-            metadata={METADATA_KEY: json.dumps(self._document(), allow_nan=False).encode()})
-        return atomic_write(path, lambda handle: pq.write_table(table, handle))
+        document = json.dumps(self._document() | {CHECKSUM_KEY: _UNSEALED}, allow_nan=False).encode()
+        table = pa.Table.from_arrays([pa.array(values) for values in self.columns.values()], names=list(self.columns))
+        buffer = io.BytesIO()
+        with pq.ParquetWriter(buffer, table.schema, **PARQUET_OPTIONS) as writer:
+            writer.write_table(table)
+            writer.add_key_value_metadata({METADATA_KEY: document})
+        content = bytearray(buffer.getvalue())
+        place = _checksum_place(content, _UNSEALED)
+        content[place] = hashlib.sha256(content).hexdigest().encode()
+        return atomic_write(path, bytes(content))
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> Dataset:
@@ -456,17 +479,18 @@ class Dataset:
         path = Path(path)
         if not path.is_file():
             raise DatasetError(f"dataset file {path} does not exist")
+        content = path.read_bytes()  # read once: what is verified is what is parsed
         try:
-            schema = pq.read_schema(path)
-        except (pa.ArrowException, OSError) as problem:
+            schema = pq.read_schema(pa.BufferReader(content))
+        except (pa.ArrowException, OSError, UnicodeDecodeError) as problem:  # names of a damaged file may not decode
             raise DatasetError(f"{path}: not a Parquet file ({first_line(problem)})") from None
         try:
-            return cls._from_file(path, schema)
+            return cls._from_file(path, content, schema)
         except DatasetError as problem:
             raise DatasetError(f"{path}: {problem}") from None
 
     @classmethod
-    def _from_file(cls, path: Path, schema: pa.Schema) -> Dataset:
+    def _from_file(cls, path: Path, content: bytes, schema: pa.Schema) -> Dataset:
         raw = (schema.metadata or {}).get(METADATA_KEY)
         if raw is None:
             raise DatasetError(f"not a softtip dataset (no '{METADATA_KEY.decode()}' entry in the Parquet metadata)")
@@ -481,11 +505,39 @@ class Dataset:
         if len(set(schema.names)) != len(schema.names):
             raise DatasetError("duplicate column names")
         try:
-            table = pq.read_table(path)
-        except (pa.ArrowException, OSError) as problem:
+            table = pq.read_table(pa.BufferReader(content), page_checksum_verification=True)
+        except (pa.ArrowException, OSError, UnicodeDecodeError) as problem:  # names of a damaged file may not decode
             raise DatasetError(f"unreadable Parquet data ({first_line(problem)})") from None
         columns = {name: column_to_numpy(name, table.column(name)) for name in declared}
-        return cls(columns, document["labels"], document["conditions"], document["metadata"], document["channels"])
+        dataset = cls(columns, document["labels"], document["conditions"], document["metadata"], document["channels"])
+        if document["checksum"] is None:
+            warnings.warn(f"{path}: no checksum (written by softtip {dataset.metadata.softtip_version}, before "
+                          "datasets carried one): its content cannot be verified; write it again to add one",
+                          UnverifiedDatasetWarning, stacklevel=3)
+        elif not _sealed(content, document["checksum"]):
+            raise DatasetError("checksum mismatch: the file was altered or damaged after it was written")
+        return dataset
+
+
+def _checksum_place(content: bytes | bytearray, digest: str) -> slice | None:
+    """Where the document's checksum ``digest`` is written in the file ``content`` (its last
+    occurrence: the document is in the footer), or None."""
+    entry = json.dumps({CHECKSUM_KEY: digest})[1:-1].encode()  # as json.dumps wrote it in the document
+    found = content.rfind(entry)
+    if found < 0:
+        return None
+    stop = found + len(entry) - 1  # the closing quote
+    return slice(stop - len(digest), stop)
+
+
+def _sealed(content: bytes, digest: str) -> bool:
+    """Whether ``content`` hashes to ``digest`` with ``digest`` written as zeros (see the module notes)."""
+    place = _checksum_place(content, digest)
+    if place is None or len(digest) != len(_UNSEALED):
+        return False
+    unsealed = bytearray(content)
+    unsealed[place] = _UNSEALED.encode()
+    return hashlib.sha256(unsealed).hexdigest() == digest
 
 
 def first_line(problem: Exception) -> str:
@@ -510,7 +562,7 @@ def unknown_and_missing(keys: Iterable[str], expected: Sequence[str]) -> tuple[l
 
 
 def _parse_document(raw: bytes) -> dict:
-    """The metadata document: declarations with units and a DatasetMetadata."""
+    """The metadata document: declarations with units, a DatasetMetadata and the checksum (or None)."""
     try:
         document = json.loads(raw)
     except (UnicodeDecodeError, ValueError):
@@ -521,7 +573,7 @@ def _parse_document(raw: bytes) -> dict:
     if document.get("schema_version") != SCHEMA_VERSION:
         raise DatasetError(f"schema version {document.get('schema_version')!r} is not supported "
                            f"(this softtip reads version {SCHEMA_VERSION})")
-    unknown, missing = unknown_and_missing(document, _DOCUMENT_KEYS)
+    unknown, missing = unknown_and_missing([key for key in document if key != CHECKSUM_KEY], _DOCUMENT_KEYS)
     if missing:
         raise DatasetError(f"metadata field {missing[0]!r} is missing")
     if unknown:
@@ -534,7 +586,10 @@ def _parse_document(raw: bytes) -> dict:
     metadata = DatasetMetadata(**{key: document[key] for key in ("description", "design", "sensor_settings",
                                                                  "protocol", "seed", "softtip_version",
                                                                  "created_utc")})
-    return {**declared, "metadata": metadata}
+    checksum = document.get(CHECKSUM_KEY)
+    if checksum is not None and not isinstance(checksum, str):
+        raise DatasetError(f"metadata {CHECKSUM_KEY}: expected a hex digest, got {checksum!r}")
+    return {**declared, "metadata": metadata, "checksum": checksum}
 
 
 def _named_units(entries: Any, key: str) -> dict[str, str]:

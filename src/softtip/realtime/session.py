@@ -27,6 +27,9 @@ from softtip.realtime.sinks.base import Sink
 from softtip.sensors.mlx90393 import MLX90393Settings
 
 EMULATOR = "emulator"
+# Signals that end a live session as Ctrl-C does, closing its sinks (a recording gets its summary):
+# SIGTERM (kill, a service manager stopping it) and SIGHUP (its terminal closed).
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class LiveSession:
@@ -182,9 +185,10 @@ def run_live(source_spec: str | PacedSource, model_paths: Sequence[str | Path] =
              stop: threading.Event | None = None, emulator_source: Callable[[float], np.ndarray] | None = None) -> dict:
     """Stream from a fingertip (or ``"emulator"``, or a :class:`~softtip.hardware.PacedSource`) through
     the saved models (calibration models or identified systems) in
-    ``model_paths`` to ``sinks`` for ``duration_s`` seconds (None: until Ctrl-C or
+    ``model_paths`` to ``sinks`` for ``duration_s`` seconds (None: until Ctrl-C, SIGTERM, SIGHUP or
     ``stop``), and return :meth:`LiveSession.summary`. In the main thread, SIGUSR1
-    takes a new baseline (``kill -USR1 <pid>``). ``emulator_source``: what the emulated
+    takes a new baseline (``kill -USR1 <pid>``), and SIGTERM and SIGHUP end the session as Ctrl-C
+    does: the sinks are closed, a recording gets its summary. ``emulator_source``: what the emulated
     fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT). ``drift_threshold``:
     in the reading's unit (default: the reading's)."""
     estimators = [Estimator.from_file(path) for path in model_paths]
@@ -195,13 +199,24 @@ def run_live(source_spec: str | PacedSource, model_paths: Sequence[str | Path] =
                           baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)
     in_main_thread = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGUSR1")
-    previous = None
-    with session:
-        if in_main_thread:
-            previous = signal.signal(signal.SIGUSR1, lambda *_: session.pipeline.take_baseline())
-        try:
-            session.wait(duration_s, stop)
-        finally:
+    stopping = {number: signal.signal(number, _interrupt) for number in STOP_SIGNALS} if in_main_thread else {}
+    try:
+        with session:
             if in_main_thread:
-                signal.signal(signal.SIGUSR1, previous)
+                previous = signal.signal(signal.SIGUSR1, lambda *_: session.pipeline.take_baseline())
+            try:
+                session.wait(duration_s, stop)
+            finally:
+                if in_main_thread:
+                    signal.signal(signal.SIGUSR1, previous)
+                    for number in stopping:  # a second stop signal must not cut the closing of the sinks short
+                        signal.signal(number, signal.SIG_IGN)
+    finally:
+        for number, handler in stopping.items():
+            signal.signal(number, handler)
     return session.summary()
+
+
+def _interrupt(number: int, _frame) -> None:
+    """A stop signal ends the session as Ctrl-C does."""
+    raise KeyboardInterrupt(signal.Signals(number).name)

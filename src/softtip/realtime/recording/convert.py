@@ -15,7 +15,9 @@ Labels, when their topics are present: ``Fx, Fy, Fz`` (N) and ``Tx, Ty, Tz`` (N 
 ``{prefix}/estimates`` under its own name and unit (unless a wrench label has it already),
 and ``contact_state`` from ``{prefix}/contact_state``. Stamped labels are matched to frames
 by header stamp, the others by log time; a frame without a label value gets NaN (or an
-empty state). A recording cut short by a killed process converts up to its last chunk.
+empty state). A recording cut short by a killed process converts up to its last chunk, one with
+a damaged chunk without that chunk's messages; the conversion's ``salvage`` says what was read and
+what was lost.
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ from softtip.realtime.recording.format import (
     per_message_unit,
     reading_topic,
 )
-from softtip.realtime.recording.reader import Recording, TopicMessages, read_recording
+from softtip.realtime.recording.reader import Recording, Salvage, TopicMessages, read_recording
 
 CONTACT_STATE = "contact_state"
 _READING_TOPIC = re.compile(r"(?P<prefix>.*)/chip(?P<chip>0|[1-9][0-9]*)/(?P<leaf>[A-Za-z0-9_]+)")
@@ -67,6 +69,7 @@ class Conversion:
     incomplete_frames: int  # stamps at which some chip's message is missing
     fault_frames: int  # frames with a faulty chip (NaN)
     truncated: bool  # the recording ended before its footer
+    salvage: Salvage  # messages read, bytes and time range lost
 
 
 def _topic(recording: Recording, name: str, schema: str) -> TopicMessages | None:
@@ -246,4 +249,5 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
     dataset = Dataset(columns, units, {}, metadata, dict.fromkeys(channels, reading.unit))
     if parquet_path is not None:
         dataset.write(parquet_path)
-    return Conversion(dataset, len(stamps), incomplete, int(np.count_nonzero(~sound)), recording.truncated)
+    return Conversion(dataset, len(stamps), incomplete, int(np.count_nonzero(~sound)), recording.truncated,
+                      recording.salvage)

@@ -1,9 +1,13 @@
-"""Writing the live stream to an MCAP file in ROS 2 message types (:mod:`~softtip.realtime.recording.format`).
+"""Writing the live stream to an MCAP file in ROS 2 message types (:mod:`~softtip.realtime.recording.format`),
+and repairing a recording whose writer was killed.
 
 Messages are serialised by ``mcap-ros2-support`` from the embedded message definitions. The
 file is written in chunks that are closed and flushed to the operating system every
 :meth:`McapRecorder.flush`, so a process that is killed leaves a file readable up to its
 last flush (:func:`~softtip.realtime.recording.reader.read_recording` reads such a file).
+Such a file has no summary, so indexed readers (``mcap``'s seeking reader, Foxglove, ``ros2 bag``)
+refuse it or read it slowly; :func:`repair_recording` rewrites it with every complete message and
+the summary and index the writer did not live to write.
 """
 
 from __future__ import annotations
@@ -15,13 +19,15 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Schema
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from mcap_ros2.writer import Writer
 
 from softtip import __version__
 from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import PositiveInteger, checked, integer
+from softtip._core.files import atomic_write
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
@@ -38,6 +44,7 @@ from softtip.realtime.recording.format import (
     wrench_mapping,
     wrench_values,
 )
+from softtip.realtime.recording.reader import Salvage, scan_recording
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -193,3 +200,47 @@ class McapRecorder:
             return
         self._writer.finish()
         self._stream.close()
+
+
+def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salvage:
+    """Writes to ``output`` every complete message, schema, channel, metadata record and attachment of
+    the recording ``path`` (:func:`~softtip.realtime.recording.reader.scan_recording`: up to a torn
+    tail, past a damaged chunk), in chunks with the summary and index an indexed reader needs and a
+    CRC of the whole data section, and returns what was salvaged. ``output`` is replaced only once it is complete."""
+    path, output = Path(path), Path(output)
+    if not path.is_file():
+        raise RecordingError(f"recording {path} does not exist")
+    salvage = Salvage(path.stat().st_size)
+
+    def rewrite(handle) -> None:
+        writer = McapWriter(handle, compression=CompressionType.ZSTD, enable_data_crcs=True)
+        schema_ids, channel_ids = {0: 0}, {}
+        started = False
+        with path.open("rb") as stream:
+            for record in scan_recording(stream, salvage, path):
+                if not started:
+                    header = record if isinstance(record, Header) else Header(profile="", library="")
+                    writer.start(header.profile, header.library)
+                    started = True
+                if isinstance(record, Message):
+                    if record.channel_id not in channel_ids:
+                        raise RecordingError(f"{path}: a message on channel {record.channel_id}, whose record "
+                                             "was lost")
+                    writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
+                                       record.publish_time, record.sequence)
+                elif isinstance(record, Schema):
+                    schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                elif isinstance(record, Channel):
+                    channel_ids[record.id] = writer.register_channel(
+                        record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0), record.metadata)
+                elif isinstance(record, Metadata):
+                    writer.add_metadata(record.name, record.metadata)
+                elif isinstance(record, Attachment):
+                    writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type,
+                                          record.data)
+        if not started:
+            raise RecordingError(f"{path}: nothing to salvage ({salvage.reason})")
+        writer.finish()
+
+    atomic_write(output, rewrite)
+    return salvage

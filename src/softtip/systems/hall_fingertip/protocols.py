@@ -24,7 +24,7 @@ import copy
 import dataclasses
 import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Annotated, Any
 

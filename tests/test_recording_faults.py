@@ -1,0 +1,205 @@
+"""Recordings that survive faults: a live session stopped by SIGTERM or SIGHUP finishes its file as on
+Ctrl-C; a file whose writer was killed (SIGKILL) is repaired into one that ``mcap``'s indexed reader
+opens with every complete message; a torn or damaged file converts with a report of what was lost."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from mcap.reader import NonSeekingReader, make_reader
+from typer.testing import CliRunner
+
+from softtip.cli.main import app
+from softtip.realtime.recording import convert
+from softtip.realtime.recording.writer import McapRecorder, repair_recording
+
+HANG_GUARD_S = 60.0
+
+# A live session of a paced Hall chip (200 frames/s) recorded with a flush every 50 ms in chunks of
+# 1 kB, run by ``run_live`` as ``softtip live`` runs it; it prints the frames it wrote when it ends.
+LIVE_RECORDING = """
+import json, sys
+import numpy as np
+from softtip._core.channels import MAGNETIC
+from softtip.hardware import PacedSource
+from softtip.realtime.session import run_live
+from softtip.realtime.sinks.recorder import RecorderSink
+
+t = np.arange(400) / 200.0
+source = PacedSource(np.stack([np.sin(t), np.cos(t), t], axis=1)[:, None, :], 200.0, reading=MAGNETIC, name="paced")
+sink = RecorderSink(sys.argv[1], flush_interval_s=0.05, chunk_size=1024)
+run_live(source, [], [sink], None, baseline_frames=1)
+print(json.dumps({"frames": sink.recorder.frames_written}), flush=True)
+"""
+
+
+def record_until(path: Path, signal_number: int) -> subprocess.CompletedProcess:
+    """Runs the live recording until its file holds a few flushed chunks, then sends ``signal_number``."""
+    child = subprocess.Popen([sys.executable, "-c", LIVE_RECORDING, str(path)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + HANG_GUARD_S
+        while (not path.exists() or path.stat().st_size < 8000) and time.monotonic() < deadline:
+            assert child.poll() is None, child.stderr.read()
+            time.sleep(0.05)
+        assert path.stat().st_size >= 8000, "the recording did not grow in time"
+        child.send_signal(signal_number)
+        stdout, stderr = child.communicate(timeout=HANG_GUARD_S)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    return subprocess.CompletedProcess(child.args, child.returncode, stdout, stderr)
+
+
+def indexed_messages(path: Path) -> tuple[object, list[tuple]]:
+    """The summary and the messages of ``path`` as mcap's seeking reader gives them through the index."""
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.chunk_indexes, f"{path} has no summary or index"
+        messages = [(channel.topic, message.log_time, message.sequence, message.data)
+                    for _, channel, message in reader.iter_messages(log_time_order=False)]
+    return summary, messages
+
+
+def streamed_messages(path: Path) -> tuple[list[tuple], Exception | None]:
+    """The messages mcap's stream reader reads front to back, and the error it ends on (a torn tail)."""
+    messages, tail = [], None
+    with path.open("rb") as stream:
+        try:
+            for _, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
+                messages.append((channel.topic, message.log_time, message.sequence, message.data))
+        except Exception as error:
+            tail = error
+    return messages, tail
+
+
+def chip_sequences(messages: list[tuple]) -> list[int]:
+    return [sequence for topic, _, sequence, _ in messages if topic == "/fingertip/chip0/field"]
+
+
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_live_recording_stopped_by_a_signal_is_finished_as_on_ctrl_c(tmp_path, stop):
+    path = tmp_path / "stopped.mcap"
+    ended = record_until(path, stop)
+    assert ended.returncode == 0, ended.stderr
+    frames = json.loads(ended.stdout.strip().splitlines()[-1])["frames"]
+    summary, messages = indexed_messages(path)
+    # every frame the session took is in the file, in order, and the summary counts each message once
+    assert chip_sequences(messages) == list(range(frames))
+    assert summary.statistics.message_count == len(messages) == frames + 1  # and the one baseline
+    assert streamed_messages(path) == (messages, None)
+
+
+def test_a_killed_recording_is_repaired_with_every_complete_message(tmp_path):
+    path = tmp_path / "killed.mcap"
+    ended = record_until(path, signal.SIGKILL)
+    assert ended.returncode == -signal.SIGKILL
+    with path.open("rb") as stream, pytest.raises(Exception):
+        make_reader(stream).get_summary()  # the writer never wrote its summary
+    # the reference: what mcap's own stream reader reads of the killed file before its tail
+    complete, tail = streamed_messages(path)
+    assert tail is not None and len(complete) > 20
+    repaired = tmp_path / "repaired.mcap"
+    salvage = repair_recording(path, repaired)
+    summary, messages = indexed_messages(repaired)
+    assert messages == complete
+    assert chip_sequences(messages) == list(range(len(complete) - 1))  # frames 0.. with none missing
+    assert summary.statistics.message_count == salvage.messages == len(complete)
+    assert salvage.truncated and salvage.bytes_lost == path.stat().st_size - salvage.bytes_read
+    # and it converts to the same dataset as the killed file
+    np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(path).dataset.X())
+    # the command line does the same, beside the recording by default, and names what it did
+    result = CliRunner().invoke(app, ["recording", "repair", str(path)])
+    assert result.exit_code == 0, result.output
+    assert indexed_messages(tmp_path / "killed.repaired.mcap")[1] == complete
+    assert f"messages_read: {len(complete)}" in result.output and "truncated: True" in result.output
+    refused = CliRunner().invoke(app, ["recording", "repair", str(path), "-o", str(path)])
+    assert refused.exit_code == 2 and "is the input" in refused.output
+
+
+# --------------------------------------------------------------------------
+# Torn and damaged files: what convert says it lost
+# --------------------------------------------------------------------------
+
+
+def recorded(path: Path, frames: int = 600, per_flush: int = 25) -> Path:
+    """A complete recording of one Hall chip, a chunk closed every ``per_flush`` frames."""
+    recorder = McapRecorder(path, 1, chunk_size=1024)
+    stamps = 1_700_000_000_000_000_000 + np.arange(frames) * 10_000_000  # 100 frames/s
+    for start in range(0, frames, per_flush):
+        recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=int(stamps[k]), reading=np.full((1, 3), 1e-6 * k),
+                                               baseline=np.zeros((1, 3)), baseline_version=0, estimates=None,
+                                               state=None) for k in range(start, min(start + per_flush, frames))])
+        recorder.flush()
+    recorder.close()
+    return path
+
+
+def chunks_of(path: Path) -> list:
+    with path.open("rb") as stream:
+        return sorted(make_reader(stream).get_summary().chunk_indexes, key=lambda index: index.chunk_start_offset)
+
+
+def test_convert_reports_the_tail_it_lost_when_a_file_is_cut(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    chunks = chunks_of(whole)
+    cut_chunk = chunks[len(chunks) // 2]
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole.read_bytes()[:cut_chunk.chunk_start_offset + cut_chunk.chunk_length // 2])
+    conversion = convert(cut)
+    salvage = conversion.salvage
+    assert conversion.truncated and salvage.truncated
+    assert salvage.bytes_lost == cut.stat().st_size - cut_chunk.chunk_start_offset
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == (cut_chunk.message_start_time, cut_chunk.message_end_time)
+    # the frames read are those of the whole chunks, each one message (plus the baseline)
+    streamed, _ = streamed_messages(cut)
+    assert salvage.messages == len(streamed) and conversion.frames == len(streamed) - 1
+    report = salvage.report()
+    first = chunks[0].message_start_time
+    assert report["time_lost_s"] == [round((cut_chunk.message_start_time - first) * 1e-9, 6),
+                                     round((cut_chunk.message_end_time - first) * 1e-9, 6)]
+
+
+def test_convert_skips_a_damaged_chunk_and_says_so(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    chunks = chunks_of(whole)
+    damaged = chunks[3]
+    content = bytearray(whole.read_bytes())
+    content[damaged.chunk_start_offset + damaged.chunk_length - 5] ^= 0x20  # inside its compressed records
+    broken = tmp_path / "damaged.mcap"
+    broken.write_bytes(bytes(content))
+    conversion = convert(broken)
+    salvage = conversion.salvage
+    _, every = indexed_messages(whole)
+    in_damaged = [m for m in every if damaged.message_start_time <= m[1] <= damaged.message_end_time]
+    assert not salvage.truncated and salvage.damaged_records == 1
+    assert salvage.messages == len(every) - len(in_damaged) and conversion.frames == 600 - len(in_damaged)
+    assert salvage.bytes_lost == damaged.chunk_length
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == (damaged.message_start_time, damaged.message_end_time)
+
+
+def test_a_repaired_recording_carries_a_crc_of_its_data_section(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    assert convert(whole).salvage.data_crc_ok is None  # the live recorder's chunks carry CRCs; the section none
+    repaired = tmp_path / "repaired.mcap"
+    assert repair_recording(whole, repaired).messages == len(indexed_messages(whole)[1])
+    assert convert(repaired).salvage.data_crc_ok is True
+    # the softtip metadata record lies outside the chunks: only the data section's CRC covers it
+    content = bytearray(repaired.read_bytes())
+    with repaired.open("rb") as stream:
+        index = make_reader(stream).get_summary().metadata_indexes[0]
+    content[index.offset + index.length - 3] ^= 0x04
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = convert(damaged).salvage
+    assert salvage.data_crc_ok is False and salvage.damaged_records == 0
