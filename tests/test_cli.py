@@ -55,7 +55,6 @@ def test_printed_poses_reproduce_the_printed_field_in_magpylib(board_push):
         return magpylib.getB(magnets, sensor, sumup=True)
 
     loaded = field([(m["position_mm"], m["rotvec"]) for m in board_push["magnets"]])
-    from softtip.design.model import load_design, shipped_design_path
 
     rest = field([(np.array(m.center) * 1e3, [0, 0, 0]) for m in load_design("cylindrical-D").magnets])
     np.testing.assert_allclose(board_push["sensors"][0]["dB_exact_uT"], (loaded - rest) * 1e6, atol=0.01)
