@@ -18,6 +18,12 @@ class Kind(str, Enum):
     ss = "ss"
 
 
+class Detrend(str, Enum):
+    none = "none"
+    mean = "mean"
+    linear = "linear"
+
+
 class Method(str, Enum):
     n4sid = "n4sid"
     moesp = "moesp"
@@ -34,6 +40,12 @@ VALIDATE = typer.Option(None, "--validate", help="Recording to validate on (same
 FULL_SCALE = typer.Option(None, "--full-scale", help="Rated full-scale range of each output, in its unit "
                                                      "(repeat; default: the measured range max - min).")
 JSON = typer.Option(False, "--json", help="Print JSON.")
+DETREND = typer.Option(Detrend.none, "--detrend",
+                       help="Levels to take out before identifying: mean or linear trend of the estimation data, "
+                            "saved with the model and taken out of validation and live data the same way.")
+DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all inputs, one per input (2,0,5), "
+                                          "or 'estimate' (searched up to --max-delay).")
+MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")
 
 
 def _names(values: list[str]) -> list[str]:
@@ -64,17 +76,32 @@ def _order(kind: Kind, order: str) -> int | str:
     return value
 
 
-def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool):
+def _delay(text: str) -> int | list[int] | str:
+    text = text.strip()
+    if text in ("estimate", "auto"):
+        return "estimate"
+    try:
+        values = [int(part) for part in text.split(",")]
+    except ValueError:
+        values = [-1]
+    if min(values) < 0:
+        fail(f"--delay = {text!r}: expected 'estimate', a number of samples >= 0, or one per input (like 2,0,5)")
+    return values[0] if len(values) == 1 else values
+
+
+def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool,
+           detrend: Detrend = Detrend.none, delay: str = "0", max_delay: int = 40):
     from softtip.sysid import StateSpaceModel, TransferFunctionModel
 
+    common = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    common |= {} if refine is None else {"refine": refine}
     if kind is Kind.tf:
         if continuous:
             fail("--continuous: a transfer function is continuous already (it runs discretised)")
-        return TransferFunctionModel(order, zeros, **({} if refine is None else {"refine": refine}))
+        return TransferFunctionModel(order, zeros, **common)
     if zeros is not None:
         fail("--zeros: only for --kind tf")
-    return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete",
-                           **({} if refine is None else {"refine": refine}))
+    return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete", **common)
 
 
 def _scores_table(title: str, scores: dict) -> Table:
@@ -87,7 +114,8 @@ def _scores_table(title: str, scores: dict) -> Table:
                       *(f"{row[key]:.2f}" for key in ("rmse_fs_percent", "mae_fs_percent")),
                       f"{row['fit_percent']:.1f}" if row["fit_percent"] is not None else "—",
                       f"{row['full_scale']:.4g} {row['unit']}".strip())
-    table.caption = f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples"
+    table.caption = (f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples; "
+                     f"initial state: {scores['initial_state']}")
     return table
 
 
@@ -96,8 +124,16 @@ def _print_summary(summary: dict) -> None:
                   f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
                   f"fitted in {summary['fit_seconds']:.2f} s on {summary['data']['trials']} trials "
                   f"({summary['data']['samples']} samples)")
-    console.print("fit % on the estimation data (simulated): " +
+    console.print("fit % on the estimation data (simulated from rest): " +
                   ", ".join(f"{name} {value:.1f}" for name, value in summary["fit_percent"].items()))
+    trend = summary["trend"]
+    if trend["kind"] != "none":
+        console.print(f"trend taken out ({trend['kind']}): input offsets {trend['input_offset']}, output offsets "
+                      f"{trend['output_offset']}" + (f", slopes per s {trend['input_slope']} and {trend['output_slope']}"
+                                                     if trend["kind"] == "linear" else ""))
+    if any(delay["samples"] for delay in summary["delays"].values()):
+        console.print("input delays: " + ", ".join(f"{name} {delay['samples']} samples ({delay['seconds']:g} s)"
+                                                   for name, delay in summary["delays"].items()))
     report = summary.get("report") or summary.get("refinement")
     if report is not None:
         console.print(f"estimation: {'converged' if report.get('converged') else '[red]not converged[/]'}: "
@@ -115,6 +151,9 @@ def sysid_fit(
     refine: bool = typer.Option(None, "--refine/--no-refine",
                                 help="Prediction-error refinement (default: tf yes, ss no)."),
     continuous: bool = typer.Option(False, "--continuous", help="A continuous state-space model (ss)."),
+    detrend: Detrend = DETREND,
+    delay: str = DELAY,
+    max_delay: int = MAX_DELAY,
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
@@ -124,17 +163,21 @@ def sysid_fit(
     json_output: bool = JSON,
 ) -> None:
     """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
-    R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated, from rest)."""
+    R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated from rest, and from each trial's
+    estimated initial state)."""
     from softtip.sysid import save_model
 
     inputs, outputs = _names(input), _names(output)
-    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous)
+    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
+    validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
     result = {"model": estimator.summary()}
-    if validate is not None:
-        validation = _read(validate, inputs, outputs, ts, time_column, trial_column)
-        result["validation"] = estimator.evaluate(validation, full_scale=_full_scale(full_scale)).to_dict()
+    if validation is not None:
+        scale = _full_scale(full_scale)
+        result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
+        result["validation_estimated_initial_state"] = estimator.evaluate(validation, full_scale=scale,
+                                                                          initial_state="estimate").to_dict()
     if model_file is not None:
         result["saved"] = str(save_model(model_file, estimator))
     if json_output:
@@ -142,7 +185,9 @@ def sysid_fit(
         return
     _print_summary(result["model"])
     if validate is not None:
-        console.print(_scores_table(f"validation on {validate} (simulated)", result["validation"]))
+        console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
+        console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",
+                                    result["validation_estimated_initial_state"]))
     if model_file is not None:
         console.print(f"saved -> {result['saved']}")
 
@@ -168,6 +213,9 @@ def sysid_orders(
     kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
     orders: str = typer.Option(None, "--orders", help="Orders, e.g. 2-8 or 2,4,6 (default: tf 2-8, ss 2-12)."),
     method: Method = typer.Option(Method.n4sid, "--method", help="Subspace method (ss)."),
+    detrend: Detrend = DETREND,
+    delay: str = DELAY,
+    max_delay: int = MAX_DELAY,
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
@@ -181,7 +229,8 @@ def sysid_orders(
     inputs, outputs = _names(input), _names(output)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
-    params = {"method": method.value} if kind is Kind.ss else {}
+    params = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    params |= {"method": method.value} if kind is Kind.ss else {}
     rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation, **params)
     if json_output:
         print(json.dumps(rows, indent=2))

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
+from dataclasses import replace
 from typing import Annotated, Any, Optional, Self, Union
 
 import numpy as np
@@ -26,21 +27,51 @@ from sklearn.base import BaseEstimator
 from softtip._core.config import Flag, OpenFraction, PositiveInteger, checked, choice, expect, integer
 from softtip._core.threads import single_threaded_blas
 from softtip.sysid import transfer
+from softtip.sysid.delays import (
+    ESTIMATE,
+    estimate_delays,
+    resolve,
+    shift_inputs,
+    with_input_delays,
+    without_input_delays,
+)
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, refine
-from softtip.sysid.simulation import StreamingSimulator, predict, simulate
+from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
+from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
 
 DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
+INITIAL_STATES = ("zero", "estimate")
+# a simulation whose outputs' spread exceeds the measured outputs' by this factor has run away,
+# whatever the moduli of its poles say (a nearly unstable or badly conditioned realisation)
+_DIVERGENCE = 1e3
+_LEVEL_RATIO = 1e4
+_DELAY_NEIGHBOURS = 2  # delays either side of the ARX choice that the model's own fit decides between
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
 
 
 def _poles(values: np.ndarray) -> list[list[float]]:
     return [[float(p.real), float(p.imag)] for p in sorted(values, key=lambda p: (-abs(p), p.imag))]
+
+
+def _require_levels_within_reach(recording: Recording) -> None:
+    """Refuses a recording whose level dwarfs its variation (|mean| > ``_LEVEL_RATIO`` x std in a channel)
+    when no trend is taken out: a model of deviations from zero would spend its digits on the level
+    (the estimators' squared quantities keep about eps x ratio² of the variation)."""
+    for role, names, signals in (("input", recording.inputs, [trial.u for trial in recording.trials]),
+                                 ("output", recording.outputs, [trial.y for trial in recording.trials])):
+        values = np.vstack(signals)
+        level, variation = np.abs(values.mean(axis=0)), values.std(axis=0)
+        for name, a, b in zip(names, level, variation, strict=True):
+            if a > _LEVEL_RATIO * b:
+                raise IdentificationError(f"{recording.source}: {role} {name!r} sits at {a:.6g}, {a / b:.3g} times "
+                                          f"its variation ({b:.3g}): take the level out (detrend 'mean' or "
+                                          "'linear'; --detrend on the command line)")
 
 
 class IdentifiedModel(BaseEstimator):
@@ -61,14 +92,95 @@ class IdentifiedModel(BaseEstimator):
         self._identify(recording)
         return self
 
+    def _check_common_params(self) -> None:
+        if self.detrend not in TREND_KINDS:
+            raise IdentificationError(f"detrend: expected one of {', '.join(TREND_KINDS)}, got {self.detrend!r}")
+        if self.delay != ESTIMATE:
+            resolve(self.delay, np.size(self.delay))
+        checked(PositiveInteger, "max_delay", self.max_delay, IdentificationError)
+
+    def _identify(self, recording: Recording) -> list[np.ndarray]:
+        """Identifies on ``recording``; returns the model's simulation of it (what ``fit_percent_`` scores)."""
+        started = time.perf_counter()
+        segments, delays = self._prepared(recording)
+        if delays is None:
+            delays = self._searched_delays(segments, recording.ts)
+        self.delays_ = delays
+        try:
+            with single_threaded_blas():
+                core = self._fit_delay_free([(shift_inputs(u, delays), y) for u, y in segments], recording.ts)
+        except np.linalg.LinAlgError as problem:
+            raise IdentificationError(f"{recording.source}: the identification failed numerically ({problem}): "
+                                      "try a lower order or detrend") from None
+        self.system_ = with_input_delays(core, delays)
+        return self._remember(recording, started)
+
+    def _prepared(self, recording: Recording) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[int, ...] | None]:
+        """Checks the recording (before any long work) and takes out its trend (kept as ``trend_``): the
+        trials to identify on, and the declared input delays (None: to be estimated)."""
+        self._check_params()
+        self._check_common_params()
+        recording.require_excitation()
+        delays = None if self.delay == ESTIMATE else resolve(self.delay, recording.n_inputs)
+        needed = 2 * self._parameters_per_output(recording.n_inputs, recording.n_outputs) + max(delays or (0,))
+        if recording.n_samples < needed:
+            raise IdentificationError(f"{recording.source}: {recording.n_samples} samples, too few samples for order "
+                                      f"{self._order_text()}: it needs at least {needed} (twice the parameters of one "
+                                      "output's model, plus the longest delay)")
+        self.trend_ = estimate_trend(recording, self.detrend)
+        working = self.trend_.remove(recording)
+        if self.detrend == "none":
+            _require_levels_within_reach(working)
+        return working.segments, delays
+
+    def _searched_delays(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> tuple[int, ...]:
+        """Input delays by ARX loss over 0..max_delay (:func:`~softtip.sysid.delays.estimate_delays`), then
+        settled by this model's own simulation fit: each input's delay within ±``_DELAY_NEIGHBOURS`` of the
+        ARX choice, the others held, scored by the summed variance-normalised simulation error.
+        ``delay_search_`` keeps every (delays, cost) tried."""
+        delays = list(estimate_delays(segments, self.max_delay, strictly_proper=self._strictly_proper()))
+        spread = np.var(np.vstack([y for _, y in segments]), axis=0)
+        tried: dict[tuple[int, ...], float] = {}
+
+        def cost(candidate: tuple[int, ...]) -> float:
+            if candidate not in tried:
+                shifted = [(shift_inputs(u, candidate), y) for u, y in segments]
+                try:
+                    with single_threaded_blas(), np.errstate(over="ignore", invalid="ignore"):
+                        core = self._fit_delay_free(shifted, ts)
+                        errors = np.vstack([y - simulate(core, u) for u, y in shifted])
+                    tried[candidate] = float(np.sum(np.mean(errors**2, axis=0) / spread))
+                except IdentificationError:
+                    tried[candidate] = np.inf
+                if not np.isfinite(tried[candidate]):
+                    tried[candidate] = np.inf
+            return tried[candidate]
+
+        for j in range(len(delays)):
+            around = range(max(delays[j] - _DELAY_NEIGHBOURS, 0), min(delays[j] + _DELAY_NEIGHBOURS, self.max_delay) + 1)
+            delays[j] = min(around, key=lambda c: cost(tuple(delays[:j] + [c] + delays[j + 1:])))
+        self.delay_search_ = [{"delays": list(key), "cost": value} for key, value in sorted(tried.items())]
+        return tuple(delays)
+
+    def _strictly_proper(self) -> bool:
+        return False
+
+    def _order_text(self) -> str:
+        return str(self.order)
+
     def _remember(self, recording: Recording, started: float) -> list[np.ndarray]:
         """Keeps what the fit was made on and how well it simulates it; returns that simulation."""
         self.ts_ = recording.ts
         self.inputs_, self.outputs_ = recording.inputs, recording.outputs
         self.input_units_, self.output_units_ = recording.input_units, recording.output_units
-        self.data_ = recording.describe()
-        simulated = self.simulate(recording)
-        self.fit_percent_ = fit_percent(np.vstack([trial.y for trial in recording.trials]), np.vstack(simulated))
+        self.data_ = recording.describe() | {"trend": self.trend_.kind}
+        with np.errstate(over="ignore", invalid="ignore"):
+            simulated = self.simulate(recording)
+            measured = np.vstack([trial.y for trial in recording.trials])
+            spread = np.std(np.vstack(simulated), axis=0)
+        self.simulation_diverges_ = bool(not np.all(np.isfinite(spread))
+                                         or np.any(spread > _DIVERGENCE * np.std(measured, axis=0)))
+        self.fit_percent_ = fit_percent(measured, np.vstack(simulated))
         self.fit_seconds_ = time.perf_counter() - started
         return simulated
 
@@ -93,27 +205,53 @@ class IdentifiedModel(BaseEstimator):
             raise IdentificationError(f"{recording.source}: outputs {list(recording.outputs)}, the model gives "
                                       f"{list(self.outputs_)}")
 
-    def simulate(self, data: Recording | np.ndarray) -> list[np.ndarray] | np.ndarray:
-        """The simulated outputs from the zero state: of every trial of a recording (a list of (N, ny)),
-        or of an input array u (N, nu)."""
+    def simulate(self, data: Recording | np.ndarray, initial_state: str = "zero") -> list[np.ndarray] | np.ndarray:
+        """The simulated outputs, in the recording's units: of every trial of a recording (a list of (N, ny)),
+        or of an input array u (N, nu) whose first sample is at time 0 of the trend. ``initial_state``:
+        "zero" (from rest) or "estimate" (each trial's best initial state, from its outputs)."""
         self._check_fitted()
         if isinstance(data, Recording):
-            self._check_recording(data)
-            return [simulate(self.system_, trial.u) for trial in data.trials]
-        return simulate(self.system_, data)
+            return self.predict(data, None, initial_state) if initial_state != "zero" else \
+                self._run(data, lambda trial: simulate(self.system_, trial.u))
+        u = np.asarray(data, dtype=np.float64)
+        t = np.arange(len(u)) * self.ts_
+        return simulate(self.system_, u - self.trend_.inputs_at(t)) + self.trend_.outputs_at(t)
 
-    def predict(self, recording: Recording, k: int | None = 1) -> list[np.ndarray]:
-        """k-step-ahead predictions of every trial (``k`` None: simulation); see
-        :func:`softtip.sysid.simulation.predict`."""
+    def _run(self, recording: Recording, run) -> list[np.ndarray]:
+        """``run(trial)`` on every trial of ``recording`` taken about the model's trend, back in its units."""
+        self._check_recording(recording)
+        deviations = self.trend_.remove(recording)
+        return self.trend_.restore(recording, [run(trial) for trial in deviations.trials])
+
+    def initial_states(self, recording: Recording) -> list[np.ndarray]:
+        """Each trial's estimated initial state of ``system_`` (least squares on its simulation error)."""
         self._check_outputs(recording)
-        if k is None:
-            return self.simulate(recording)
-        return [predict(self.system_, trial.u, trial.y, k) for trial in recording.trials]
+        return [estimate_initial_state(self.system_, trial.u, trial.y)
+                for trial in self.trend_.remove(recording).trials]
 
-    def evaluate(self, recording: Recording, k: int | None = None, full_scale: FullScale = MEASURED) -> Scores:
+    def predict(self, recording: Recording, k: int | None = 1, initial_state: str = "zero") -> list[np.ndarray]:
+        """k-step-ahead predictions of every trial (``k`` None: simulation), from the zero or the estimated
+        initial state; see :func:`softtip.sysid.simulation.predict`."""
+        self._check_outputs(recording)
+        if initial_state not in INITIAL_STATES:
+            raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, "
+                                      f"got {initial_state!r}")
+        estimated = initial_state == "estimate"
+
+        def run(trial):
+            x0 = estimate_initial_state(self.system_, trial.u, trial.y) if estimated else None
+            if k is None:
+                return simulate(self.system_, trial.u, x0)
+            return predict(self.system_, trial.u, trial.y, k, x0)
+
+        return self._run(recording, run)
+
+    def evaluate(self, recording: Recording, k: int | None = None, full_scale: FullScale = MEASURED,
+                 initial_state: str = "zero") -> Scores:
         """Every metric per output on the scored samples of ``recording``, simulated (``k`` None) or
-        predicted ``k`` steps ahead."""
-        return self.evaluate_predictions(recording, self.predict(recording, k), full_scale)
+        predicted ``k`` steps ahead, from the zero or the estimated initial state (the scores say which)."""
+        scores = self.evaluate_predictions(recording, self.predict(recording, k, initial_state), full_scale)
+        return replace(scores, initial_state="estimated" if initial_state == "estimate" else "zero")
 
     def evaluate_predictions(self, recording: Recording, predicted: list[np.ndarray],
                              full_scale: FullScale = MEASURED) -> Scores:
@@ -130,9 +268,10 @@ class IdentifiedModel(BaseEstimator):
         return self.evaluate(recording, k).mean("r2")
 
     def streaming(self) -> StreamingSimulator:
-        """The model as a frame-by-frame simulator from the zero state."""
+        """The model as a frame-by-frame simulator from the zero state, in the recording's units (its trend's
+        clock starting at the first frame)."""
         self._check_fitted()
-        return StreamingSimulator(self.system_)
+        return StreamingSimulator(self.system_, trend=self.trend_)
 
     def residuals(self, recording: Recording) -> np.ndarray:
         """One-step prediction errors of every trial, stacked (N, ny)."""
@@ -151,7 +290,8 @@ class IdentifiedModel(BaseEstimator):
         state = {"ts": self.ts_, "inputs": list(self.inputs_), "outputs": list(self.outputs_),
                  "input_units": list(self.input_units_), "output_units": list(self.output_units_),
                  "data": self.data_, "fit_percent": [float(v) for v in self.fit_percent_],
-                 "fit_seconds": self.fit_seconds_}
+                 "fit_seconds": self.fit_seconds_, "trend": self.trend_.to_dict(), "delays": list(self.delays_),
+                 "simulation_diverges": self.simulation_diverges_}
         return state, arrays
 
     def _restore_common(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -161,6 +301,7 @@ class IdentifiedModel(BaseEstimator):
         self.data_ = state["data"]
         self.fit_percent_ = np.asarray(state["fit_percent"], dtype=np.float64)
         self.fit_seconds_ = float(state["fit_seconds"])
+        self.simulation_diverges_ = bool(state.get("simulation_diverges", False))
         self.system_ = StateSpace(arrays["system/A"], arrays["system/B"], arrays["system/C"], arrays["system/D"],
                                   self.ts_, arrays.get("system/K"), arrays.get("system/noise_covariance"))
         sizes = (self.system_.n_inputs, self.system_.n_outputs, len(self.fit_percent_))
@@ -168,6 +309,12 @@ class IdentifiedModel(BaseEstimator):
                 len(self.input_units_) != len(self.inputs_) or len(self.output_units_) != len(self.outputs_):
             raise IdentificationError(f"{len(self.inputs_)} inputs and {len(self.outputs_)} outputs named, the "
                                       f"system has {sizes[0]} and {sizes[1]}")
+        self.trend_ = Trend.from_dict(state["trend"]) if "trend" in state else \
+            Trend.zero(len(self.inputs_), len(self.outputs_))
+        self.delays_ = resolve(state.get("delays", 0), len(self.inputs_))
+        if self.trend_.input_offset.shape != (len(self.inputs_),) or \
+                self.trend_.output_offset.shape != (len(self.outputs_),):
+            raise IdentificationError("the trend has not one level per input and output")
 
     def _summary(self, kind: str) -> dict:
         self._check_fitted()
@@ -175,8 +322,15 @@ class IdentifiedModel(BaseEstimator):
                 "outputs": list(self.outputs_), "input_units": list(self.input_units_),
                 "output_units": list(self.output_units_), "states": self.system_.n_states,
                 "parameters": self.n_parameters, "discrete_poles": _poles(self.system_.poles()),
-                "stable": self.system_.is_stable(),
+                # a model whose simulation runs away is not stable, whatever the moduli of its poles
+                "stable": self.system_.is_stable() and not self.simulation_diverges_,
+                "simulation_diverges": self.simulation_diverges_,
+                "trend": self.trend_.to_dict(),
+                "delays": {name: {"samples": d, "seconds": d * self.ts_}
+                           for name, d in zip(self.inputs_, self.delays_, strict=True)},
                 "fit_percent": {name: float(v) for name, v in zip(self.outputs_, self.fit_percent_, strict=True)},
+                "delay_search": getattr(self, "delay_search_", None),
+                "fit_percent_initial_state": "zero",
                 "fit_seconds": self.fit_seconds_, "data": self.data_}
 
 
@@ -189,6 +343,9 @@ class StateSpaceModel(IdentifiedModel):
     ``"cva"``; ``horizon``: past/future block rows (default from the order); ``domain``:
     ``"continuous"`` also gives ``continuous_``, the system whose zero-order hold is ``system_``;
     ``max_iterations`` and ``tolerance``: the refinement's stopping rules (:mod:`softtip.sysid.refine`).
+    ``detrend``: "none", "mean" or "linear", the levels taken out before identification and kept
+    (:mod:`softtip.sysid.trends`); ``delay``: input delays in samples, one for all inputs or one per
+    input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`).
     """
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
@@ -197,7 +354,8 @@ class StateSpaceModel(IdentifiedModel):
 
     def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
-                 enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4):
+                 enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4,
+                 detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40):
         self.order = order
         self.method = method
         self.refine = refine
@@ -207,32 +365,31 @@ class StateSpaceModel(IdentifiedModel):
         self.enforce_stability = enforce_stability
         self.max_iterations = max_iterations
         self.tolerance = tolerance
+        self.detrend = detrend
+        self.delay = delay
+        self.max_delay = max_delay
 
-    def _identify(self, recording: Recording) -> list[np.ndarray]:
-        started = time.perf_counter()
-        self._check_params()
-        recording.require_excitation()
-        with single_threaded_blas():
-            found = subspace_identify(recording.segments, recording.ts, self.order, self.method,
-                                      horizon=self.horizon, max_order=self.max_order,
-                                      enforce_stability=self.enforce_stability)
-            system, report = found.system, None
-            if self.refine:
-                system, report = refine(system, recording.segments, max_iterations=self.max_iterations,
-                                        tolerance=self.tolerance)
+    def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
+        n = 1 if self.order == AUTO else self.order
+        return n * (n_inputs + 2 * n_outputs) // n_outputs + n_inputs
+
+    def _fit_delay_free(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> StateSpace:
+        found = subspace_identify(segments, ts, self.order, self.method, horizon=self.horizon,
+                                  max_order=self.max_order, enforce_stability=self.enforce_stability)
+        system, report = found.system, None
+        if self.refine:
+            system, report = refine(system, segments, max_iterations=self.max_iterations, tolerance=self.tolerance)
         self.continuous_ = system.to_continuous() if self.domain == "continuous" else None
-        self.system_ = system
         self.order_, self.horizon_ = found.order, found.horizon
         self.singular_values_ = found.singular_values
         self.reflected_poles_, self.kalman_ = found.reflected_poles, found.kalman
         self.refinement_: RefinementReport | None = report
-        return self._remember(recording, started)
+        return system
 
     @property
     def n_parameters(self) -> int:
         """Free parameters of (A, B, C, D, K) up to a change of state basis: n (nu + 2 ny) + ny nu."""
-        system = self.system_
-        n, nu, ny = system.n_states, system.n_inputs, system.n_outputs
+        n, nu, ny = self.order_, self.system_.n_inputs, self.system_.n_outputs
         return n * (nu + 2 * ny) + ny * nu
 
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
@@ -250,9 +407,11 @@ class StateSpaceModel(IdentifiedModel):
         self.singular_values_ = np.asarray(arrays["singular_values"], dtype=np.float64)
         self.reflected_poles_, self.kalman_ = int(state["reflected_poles"]), str(state["kalman"])
         self.refinement_ = None if state["refinement"] is None else RefinementReport(**state["refinement"])
-        self.continuous_ = self.system_.to_continuous() if self.domain == "continuous" else None
-        if self.order_ != self.system_.n_states:
-            raise IdentificationError(f"order {self.order_}, but A has {self.system_.n_states} states")
+        if self.order_ + sum(self.delays_) != self.system_.n_states:
+            raise IdentificationError(f"order {self.order_} and {sum(self.delays_)} delay states, but A has "
+                                      f"{self.system_.n_states} states")
+        self.continuous_ = without_input_delays(self.system_, self.delays_).to_continuous() \
+            if self.domain == "continuous" else None
 
     def summary(self) -> dict:
         summary = self._summary("state space") | {
@@ -270,19 +429,35 @@ class TransferFunctionModel(IdentifiedModel):
     ``n_poles`` poles and ``n_zeros`` zeros (default ``n_poles - 1``); MATLAB's ``tfest``.
 
     ``tf_`` is G; ``system_`` its block-diagonal canonical realisation discretised by zero-order
-    hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it.
+    hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it, behind
+    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend`` as for
+    :class:`StateSpaceModel`.
     """
 
     _PARAMETERS = {"n_poles": PositiveInteger, "refine": Flag, "enforce_stability": Flag,
                    "max_iterations": PositiveInteger}
 
     def __init__(self, n_poles: int = 6, n_zeros: int | None = None, *, refine: bool = True,
-                 enforce_stability: bool = True, max_iterations: int = 100):
+                 enforce_stability: bool = True, max_iterations: int = 100, detrend: str = "none",
+                 delay: int | list[int] | str = 0, max_delay: int = 40):
         self.n_poles = n_poles
         self.n_zeros = n_zeros
         self.refine = refine
         self.enforce_stability = enforce_stability
         self.max_iterations = max_iterations
+        self.detrend = detrend
+        self.delay = delay
+        self.max_delay = max_delay
+
+    def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
+        zeros = self.n_poles - 1 if self.n_zeros is None else self.n_zeros
+        return n_inputs * (self.n_poles + zeros + 1)
+
+    def _strictly_proper(self) -> bool:
+        return self.n_zeros is None or self.n_zeros < self.n_poles
+
+    def _order_text(self) -> str:
+        return f"{self.n_poles} (poles per entry)"
 
     def _check_params(self) -> None:
         super()._check_params()
@@ -290,20 +465,17 @@ class TransferFunctionModel(IdentifiedModel):
             checked(integer(0, self.n_poles, f"an integer 0..n_poles ({self.n_poles})"), "n_zeros", self.n_zeros,
                     IdentificationError)
 
-    def _identify(self, recording: Recording) -> list[np.ndarray]:
-        started = time.perf_counter()
-        self._check_params()
-        recording.require_excitation()
-        tf, report = transfer.fit(recording.segments, recording.ts, self.n_poles, self.n_zeros, refine=self.refine,
+    def _fit_delay_free(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> StateSpace:
+        tf, report = transfer.fit(segments, ts, self.n_poles, self.n_zeros, refine=self.refine,
                                   max_iterations=self.max_iterations, enforce_stability=self.enforce_stability)
-        self._set_transfer_function(tf, recording.ts)
-        self.report_ = report
-        return self._remember(recording, started)
+        self.tf_, self.report_ = tf, report
+        self.continuous_ = realise(tf.numerators, tf.denominators)
+        return self.continuous_.to_discrete(ts)
 
     def _set_transfer_function(self, tf: transfer.TransferFunctionMatrix, ts: float) -> None:
         self.tf_ = tf
         self.continuous_ = realise(tf.numerators, tf.denominators)
-        self.system_ = self.continuous_.to_discrete(ts)
+        self.system_ = with_input_delays(self.continuous_.to_discrete(ts), self.delays_)
 
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
         state, arrays = super()._export()

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from softtip.sysid.simulation import free_response
 from softtip.sysid.statespace import IdentificationError, StateSpace
 
 METHODS = ("n4sid", "moesp", "cva")
@@ -156,12 +157,7 @@ def input_matrices(A: np.ndarray, C: np.ndarray, segments: list[tuple[np.ndarray
         rows = np.zeros((N, ny, shared + n * len(segments)))
         rows[:, :, :nu * n] = filtered_inputs(A, C, u)
         rows[:, :, nu * n:shared] = np.einsum("ac,tb->tacb", np.eye(ny), u).reshape(N, ny, ny * nu)
-        free = np.empty((N, ny, n))
-        power = C
-        for t in range(N):
-            free[t] = power
-            power = power @ A
-        rows[:, :, shared + k * n:shared + (k + 1) * n] = free
+        rows[:, :, shared + k * n:shared + (k + 1) * n] = free_response(A, C, N)
         blocks.append((rows / scale[None, :, None]).reshape(N * ny, -1))
         targets.append((y / scale).ravel())
     theta = np.linalg.lstsq(np.vstack(blocks), np.concatenate(targets), rcond=None)[0]
