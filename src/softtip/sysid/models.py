@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 from dataclasses import replace
-from typing import Annotated, Any, Optional, Self, Union
+from typing import TYPE_CHECKING, Annotated, Any, Optional, Self, Union
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -39,10 +39,15 @@ from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, scor
 from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, refine
+from softtip.sysid.residuals import ResidualTests, residual_tests
 from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
+from softtip.sysid.uncertainty import bode_figure, empirical_transfer_function, intervals
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
@@ -106,9 +111,11 @@ class IdentifiedModel(BaseEstimator):
         if delays is None:
             delays = self._searched_delays(segments, recording.ts)
         self.delays_ = delays
+        shifted = [(shift_inputs(u, delays), y) for u, y in segments]
         try:
             with single_threaded_blas():
-                core = self._fit_delay_free([(shift_inputs(u, delays), y) for u, y in segments], recording.ts)
+                core = self._fit_delay_free(shifted, recording.ts)
+                self._estimate_uncertainty(shifted, recording.ts)
         except np.linalg.LinAlgError as problem:
             raise IdentificationError(f"{recording.source}: the identification failed numerically ({problem}): "
                                       "try a lower order or detrend") from None
@@ -164,6 +171,9 @@ class IdentifiedModel(BaseEstimator):
 
     def _strictly_proper(self) -> bool:
         return False
+
+    def _estimate_uncertainty(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> None:
+        """Kinds with a parameter covariance estimate it here, on the trials the model was identified on."""
 
     def _order_text(self) -> str:
         return str(self.order)
@@ -277,6 +287,15 @@ class IdentifiedModel(BaseEstimator):
         """One-step prediction errors of every trial, stacked (N, ny)."""
         return _errors(recording, self.predict(recording, 1))
 
+    def residual_tests(self, recording: Recording, *, lags: int = 25, confidence: float = 0.99,
+                       initial_state: str = "zero") -> ResidualTests:
+        """Whiteness of the one-step prediction errors and their independence of the inputs on ``recording``
+        (:mod:`softtip.sysid.residuals`), from the zero or the estimated initial state."""
+        predicted = self.predict(recording, 1, initial_state)
+        return residual_tests([trial.y - values for trial, values in zip(recording.trials, predicted, strict=True)],
+                              [trial.u for trial in recording.trials], lags=lags, confidence=confidence,
+                              output_names=self.outputs_, input_names=self.inputs_)
+
     # -- model files (softtip.sysid.files) ----------------------------------------
 
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
@@ -352,7 +371,7 @@ class StateSpaceModel(IdentifiedModel):
                    "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
                    "max_iterations": PositiveInteger, "tolerance": OpenFraction}
 
-    def __init__(self, order: int | str = AUTO, method: str = "n4sid", *, refine: bool = False,
+    def __init__(self, order: int | str = AUTO, method: str = "moesp", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4,
                  detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40):
@@ -472,6 +491,32 @@ class TransferFunctionModel(IdentifiedModel):
         self.continuous_ = realise(tf.numerators, tf.denominators)
         return self.continuous_.to_discrete(ts)
 
+    def _estimate_uncertainty(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> None:
+        self.covariance_ = transfer.parameter_covariance(self.tf_, segments, ts)
+
+    def uncertainty(self, confidence: float = 0.95) -> dict:
+        """Every coefficient, pole and zero with its standard deviation and ``confidence`` interval
+        (:func:`softtip.sysid.uncertainty.intervals`)."""
+        self._check_fitted()
+        return intervals(self.tf_, self.covariance_, confidence)
+
+    def bode(self, omega: np.ndarray | None = None, *, confidence: float = 0.95,
+             recording: Recording | None = None) -> Figure:
+        """The Bode plot of every entry with its ``confidence`` band (delays in the phase); with ``recording``,
+        the empirical transfer-function estimate of its first trial (about the model's trend) beside it."""
+        self._check_fitted()
+        if omega is None:
+            nyquist = np.pi / self.ts_
+            omega = np.logspace(np.log10(nyquist) - 3, np.log10(nyquist), 400)
+        measured = None
+        if recording is not None:
+            self._check_outputs(recording)
+            trial = self.trend_.remove(recording).trials[0]
+            measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
+        return bode_figure(self.tf_, self.covariance_, np.asarray(omega, dtype=np.float64), confidence=confidence,
+                           delays_s=np.array(self.delays_) * self.ts_, measured=measured,
+                           names=(list(self.inputs_), list(self.outputs_)))
+
     def _set_transfer_function(self, tf: transfer.TransferFunctionMatrix, ts: float) -> None:
         self.tf_ = tf
         self.continuous_ = realise(tf.numerators, tf.denominators)
@@ -483,6 +528,8 @@ class TransferFunctionModel(IdentifiedModel):
             for i, row in enumerate(getattr(self.tf_, role)):
                 for j, coefficients in enumerate(row):
                     arrays[f"tf/{role}/{i}/{j}"] = coefficients
+        for i, covariance in enumerate(self.covariance_):
+            arrays[f"tf/covariance/{i}"] = covariance
         state["report"] = self.report_.to_dict()
         return state, arrays
 
@@ -501,6 +548,8 @@ class TransferFunctionModel(IdentifiedModel):
                 for name in ("A", "B", "C", "D")):
             raise IdentificationError("the saved discrete system is not the realisation of the saved transfer function")
         self.report_ = transfer.FitReport.from_dict(state["report"])
+        self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
+        intervals(self.tf_, self.covariance_)  # checks their shapes
 
     @property
     def n_parameters(self) -> int:
@@ -513,6 +562,7 @@ class TransferFunctionModel(IdentifiedModel):
             "continuous_stable": self.tf_.is_stable(),
             "numerators": [[b.tolist() for b in row] for row in self.tf_.numerators],
             "denominators": [[a.tolist() for a in row] for row in self.tf_.denominators],
+            "uncertainty": self.uncertainty(),
             # the summary's fit % per output is by name, above
             "report": {key: value for key, value in self.report_.to_dict().items() if key != "per_output_fit_percent"}}
 
@@ -567,5 +617,6 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
         fits = scores.values["fit_percent"]
         rows.append({"order": order, "parameters": model.n_parameters, "fit_percent": float(np.mean(fits)),
                      "fit_percent_per_output": {name: float(v) for name, v in zip(model.outputs_, fits, strict=True)},
-                     "aic": aic, "bic": bic, "stable": model.system_.is_stable(), "seconds": seconds})
+                     "aic": aic, "bic": bic, "stable": model.system_.is_stable() and not model.simulation_diverges_,
+                     "seconds": seconds})
     return rows
