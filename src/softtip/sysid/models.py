@@ -40,7 +40,7 @@ from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
-from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
+from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, runs_away, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
@@ -52,9 +52,6 @@ if TYPE_CHECKING:
 DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 INITIAL_STATES = ("zero", "estimate")
-# a simulation whose outputs' spread exceeds the measured outputs' by this factor has run away,
-# whatever the moduli of its poles say (a nearly unstable or badly conditioned realisation)
-_DIVERGENCE = 1e3
 _LEVEL_RATIO = 1e4
 _DELAY_NEIGHBOURS = 2  # delays either side of the ARX choice that the model's own fit decides between
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
@@ -186,10 +183,8 @@ class IdentifiedModel(BaseEstimator):
         self.data_ = recording.describe() | {"trend": self.trend_.kind}
         with np.errstate(over="ignore", invalid="ignore"):
             simulated = self.simulate(recording)
-            measured = np.vstack([trial.y for trial in recording.trials])
-            spread = np.std(np.vstack(simulated), axis=0)
-        self.simulation_diverges_ = bool(not np.all(np.isfinite(spread))
-                                         or np.any(spread > _DIVERGENCE * np.std(measured, axis=0)))
+        measured = np.vstack([trial.y for trial in recording.trials])
+        self.simulation_diverges_ = runs_away(np.vstack(simulated), measured)
         self.fit_percent_ = fit_percent(measured, np.vstack(simulated))
         self.fit_seconds_ = time.perf_counter() - started
         return simulated

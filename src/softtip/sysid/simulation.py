@@ -35,6 +35,19 @@ def _initial(system: StateSpace, x0: np.ndarray | None) -> np.ndarray:
     return x0
 
 
+# a simulation whose outputs spread this many times wider than the measured ones has run away
+RUNAWAY = 1e3
+
+
+def runs_away(simulated: np.ndarray, measured: np.ndarray) -> bool:
+    """Whether a simulation (N, ny) has run away from the measured outputs (N, ny): not finite, or an output
+    spread more than :data:`RUNAWAY` times as wide, whatever the moduli of the system's poles say (a pole a
+    hair inside the unit circle, or a badly conditioned realisation, grows for longer than any record)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        spread = np.std(simulated, axis=0)
+    return bool(not np.all(np.isfinite(spread)) or np.any(spread > RUNAWAY * np.std(measured, axis=0)))
+
+
 def state_sequence(A: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """x[0] = x0, x[t+1] = A x[t] + drive[t]: the states (N, n) for t = 0 .. N-1."""
     states = np.empty_like(drive)
