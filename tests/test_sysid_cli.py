@@ -144,6 +144,80 @@ def test_fit_mistakes_give_one_line_and_exit_code_2(files, args, message):
     assert message in result.output and len(result.output.strip().splitlines()) == 1
 
 
+def _laboratory(path, seed: int, level: float = 5.0, delay: int = 0, scale: float = 1.0, rows: int = 600):
+    """One trial of the CLI's system with a delay on both inputs, levels on every channel and noise
+    coloured by 1 / (1 - 0.8 q⁻¹), written with its time column."""
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(rows, 2))
+    y = simulate(SYSTEM, np.vstack([np.zeros((delay, 2)), u[:rows - delay]]))
+    noise = np.column_stack([np.convolve(0.02 * rng.normal(size=rows), 0.8 ** np.arange(40))[:rows] for _ in range(2)])
+    values = np.column_stack([np.arange(rows) * TS, u + level, y + noise + 2 * level]) * [1, scale, scale, scale, scale]
+    np.savetxt(path, values, delimiter=",", header="time_s,Fx_side,Fz_side,Fx,Fz", comments="", fmt="%.17g")
+    return path
+
+
+def test_fit_with_detrending_and_an_estimated_delay_validates_from_both_initial_states(tmp_path):
+    estimation = _laboratory(tmp_path / "estimation.csv", 0, delay=6)
+    validation = _laboratory(tmp_path / "validation.csv", 1, delay=6)
+    common = ("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "--validate",
+              validation, "--json")
+    result = run(*common, "--detrend", "mean", "--delay", "estimate", "--bode", tmp_path / "bode.png",
+                 "--residuals", tmp_path / "residuals.svg", "-o", tmp_path / "model.npz")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    # the state-space model counts a delay to its first responding sample: 6 or 7
+    assert all(delay["samples"] in (6, 7) for delay in report["model"]["delays"].values())
+    assert report["model"]["trend"]["kind"] == "mean"
+    assert report["model"]["trend"]["input_offset"] == pytest.approx([5.0, 5.0], abs=0.1)
+    zero, estimated = report["validation"], report["validation_estimated_initial_state"]
+    assert zero["initial_state"] == "zero" and estimated["initial_state"] == "estimated"
+    for name, floor in (("Fx", 85), ("Fz", 90)):  # measured: 86.2 % and 91.6 % (86.4, 91.7 from the estimated state)
+        assert zero["outputs"][name]["fit_percent"] > floor and estimated["outputs"][name]["fit_percent"] > floor
+    assert report["residual_tests"]["outputs"]["Fx"]["input_independence"]["Fx_side"]["passed"]
+    assert (tmp_path / "bode.png").stat().st_size > 10_000 and (tmp_path / "residuals.svg").stat().st_size > 10_000
+    # the saved model runs in the recording's units: predict gives the same validation figures
+    again = json.loads(run("sysid", "predict", tmp_path / "model.npz", "--data", validation, "--initial-state",
+                           "estimate", "--json").output)["scores"]
+    assert again["outputs"]["Fx"]["rmse"] == pytest.approx(estimated["outputs"]["Fx"]["rmse"], rel=1e-9)
+    without = json.loads(run(*common, "--detrend", "none", "--delay", "0").output)
+    # levels and delay left in: measured -369 % from rest, 35 % from the estimated initial state
+    assert without["validation"]["outputs"]["Fx"]["fit_percent"] < 0
+    assert without["validation_estimated_initial_state"]["outputs"]["Fx"]["fit_percent"] < 50
+
+
+def test_a_transfer_function_fit_prints_its_intervals_and_residual_tests(tmp_path):
+    estimation = _laboratory(tmp_path / "estimation.csv", 0)
+    result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "tf", "--order", "2", "--detrend", "mean")
+    assert result.exit_code == 0, result.output
+    assert "± 95 % intervals" in result.output and "residual tests on" in result.output
+    report = json.loads(run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "tf", "--order", "2",
+                            "--detrend", "mean", "--confidence", "0.9", "--json").output)
+    assert report["model"]["uncertainty"]["confidence"] == 0.9
+    assert len(report["model"]["uncertainty"]["entries"]) == 4
+
+
+@pytest.mark.parametrize("kind", ["ss", "tf"])
+@pytest.mark.parametrize("level, scale, rows, message", [
+    (1e6, 1.0, 600, "sits at 1e+06"),
+    (5.0, 1e-200, 600, "outside [1e-150, 1e+150]"),
+    (5.0, 1e300 / 6, 600, "outside [1e-150, 1e+150]"),
+    (5.0, 1.0, 2, "2 samples, too few samples for order 2"),
+])
+def test_recordings_that_cannot_be_identified_are_refused_at_once(tmp_path, kind, level, scale, rows, message):
+    recording = _laboratory(tmp_path / "recording.csv", 0, level=level, scale=scale, rows=rows)
+    result = run("sysid", "fit", "--data", recording, *COLUMNS, "--kind", kind, "--order", "2")
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_a_constant_output_is_refused(tmp_path):
+    lines = ["time_s,Fx_side,Fx"] + [f"{k * TS},{np.sin(k)},2.0" for k in range(100)]
+    (tmp_path / "flat.csv").write_text("\n".join(lines) + "\n")
+    result = run("sysid", "fit", "--data", tmp_path / "flat.csv", "-u", "Fx_side", "-y", "Fx", "--kind", "ss",
+                 "--order", "2")
+    assert result.exit_code == 2 and "output 'Fx' is constant (2)" in result.output
+
+
 def test_a_damaged_model_file_gives_one_line(files, tmp_path):
     broken = tmp_path / "broken.npz"
     broken.write_bytes(b"PK\x03\x04 not really")

@@ -4,6 +4,7 @@ recordings (CSV, Parquet or softtip datasets)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 
@@ -22,6 +23,11 @@ class Detrend(str, Enum):
     none = "none"
     mean = "mean"
     linear = "linear"
+
+
+class InitialState(str, Enum):
+    zero = "zero"
+    estimate = "estimate"
 
 
 class Method(str, Enum):
@@ -119,6 +125,42 @@ def _scores_table(title: str, scores: dict) -> Table:
     return table
 
 
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _print_residual_tests(tests: dict) -> None:
+    table = Table(title=f"residual tests on {tests['data']} ({tests['lags']} lags, {100 * tests['confidence']:g} %)")
+    for heading in ("output", "white", "N Σρ²", "limit", "input", "independent", "Σ(ρ/σ)²", "limit "):
+        table.add_column(heading, justify="left" if heading in ("output", "input") else "right")
+    for name, row in tests["outputs"].items():
+        white = row["whiteness"]
+        for k, (source, test) in enumerate(row["input_independence"].items()):
+            table.add_row(*((name, "yes" if white["passed"] else "[red]no[/]", f"{white['statistic']:.1f}",
+                             f"{white['limit']:.1f}") if k == 0 else ("", "", "", "")),
+                          source, "yes" if test["passed"] else "[red]no[/]", f"{test['statistic']:.1f}",
+                          f"{test['limit']:.1f}")
+    table.caption = (f"{tests['test']}; residuals: one-step prediction errors (an output-error model's are its "
+                     "simulation errors, which need not be white)")
+    console.print(table)
+
+
+def _print_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str]) -> None:
+    z, level = uncertainty["z"], f"± {100 * uncertainty['confidence']:g} %"
+    table = Table(title=f"coefficients (descending powers of s) and poles, {level} intervals")
+    for heading in ("entry", "denominator", "numerator", "poles (rad/s)"):
+        table.add_column(heading)
+
+    def ranges(values):
+        return ", ".join(f"{v['value']:.4g} ± {z * v['std']:.2g}" for v in values)
+
+    for entry in uncertainty["entries"]:
+        poles = ", ".join(f"{p['real']:.4g}{p['imag']:+.4g}j (± {z * p['real_std']:.2g}, {z * p['imag_std']:.2g}j)"
+                          for p in entry["poles"])
+        table.add_row(f"{inputs[entry['input']]} → {outputs[entry['output']]}", "1, " + ranges(entry["denominator"]),
+                      ranges(entry["numerator"]), poles)
+    console.print(table)
+
+
 def _print_summary(summary: dict) -> None:
     console.print(f"[bold]{summary['kind']}[/] model, {summary['states']} states, {summary['parameters']} parameters, "
                   f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
@@ -160,19 +202,38 @@ def sysid_fit(
     validate: Path = VALIDATE,
     full_scale: list[float] = FULL_SCALE,
     model_file: Path = typer.Option(None, "--model", "-o", help="Save the model here (.npz)."),
+    bode: Path = typer.Option(None, "--bode", help="Save the Bode plot here (.png, .pdf, .svg): a transfer "
+                                                   "function's with its confidence band, beside the recording's "
+                                                   "empirical transfer function."),
+    residuals: Path = typer.Option(None, "--residuals", help="Save the residual tests' plot here (.png, .pdf, "
+                                                             ".svg): on --validate, else on the estimation data."),
+    confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
+    lags: int = typer.Option(25, "--lags", help="Lags of the residual tests."),
     json_output: bool = JSON,
 ) -> None:
     """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
     R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated from rest, and from each trial's
-    estimated initial state)."""
+    estimated initial state), and the residual tests (whiteness, independence of the inputs)."""
     from softtip.sysid import save_model
 
+    if not 0 < confidence < 1:
+        fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
+    if lags < 1:
+        fail(f"--lags = {lags}: expected a positive integer")
+    for option, path in (("--bode", bode), ("--residuals", residuals)):
+        if path is not None and (path.suffix.lower() not in FIGURE_SUFFIXES or not path.parent.is_dir()):
+            fail(f"{option} {path}: expected a .png, .pdf or .svg file in an existing directory")
     inputs, outputs = _names(input), _names(output)
     estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
     result = {"model": estimator.summary()}
+    if kind is Kind.tf:
+        result["model"]["uncertainty"] = estimator.uncertainty(confidence)
+    checked = recording if validation is None else validation
+    tests = estimator.residual_tests(checked, lags=lags)
+    result["residual_tests"] = tests.to_dict() | {"data": str(validate if validation is not None else data)}
     if validation is not None:
         scale = _full_scale(full_scale)
         result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
@@ -180,16 +241,26 @@ def sysid_fit(
                                                                           initial_state="estimate").to_dict()
     if model_file is not None:
         result["saved"] = str(save_model(model_file, estimator))
+    if bode is not None:
+        estimator.bode(confidence=confidence, recording=checked).savefig(bode)
+        result["bode"] = str(bode)
+    if residuals is not None:
+        tests.figure().savefig(residuals)
+        result["residuals"] = str(residuals)
     if json_output:
         print(json.dumps(result, indent=2))
         return
     _print_summary(result["model"])
+    if kind is Kind.tf:
+        _print_uncertainty(result["model"]["uncertainty"], inputs, outputs)
     if validate is not None:
         console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
         console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",
                                     result["validation_estimated_initial_state"]))
-    if model_file is not None:
-        console.print(f"saved -> {result['saved']}")
+    _print_residual_tests(result["residual_tests"])
+    for name in ("saved", "bode", "residuals"):
+        if name in result:
+            console.print(f"{name} -> {result[name]}")
 
 
 def _order_range(text: str) -> list[int]:
@@ -260,6 +331,9 @@ def sysid_predict(
     trial_column: str = TRIAL_COLUMN,
     full_scale: list[float] = FULL_SCALE,
     out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
+    initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
+                                               help="zero: from rest; estimate: each trial's initial state from "
+                                                    "its measured outputs."),
     json_output: bool = JSON,
 ) -> None:
     """Run a saved model on a recording; score it where the recording has the model's outputs."""
@@ -273,10 +347,15 @@ def sysid_predict(
     measured = all(name in present for name in model.outputs_)
     if horizon is not None and not measured:
         fail(f"{data}: --horizon needs the measured outputs {', '.join(model.outputs_)}")
+    if initial_state is InitialState.estimate and not measured:
+        fail(f"{data}: --initial-state estimate needs the measured outputs {', '.join(model.outputs_)}")
     recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], ts, time_column,
                       trial_column)
-    predicted = model.predict(recording, horizon) if measured else model.simulate(recording)
-    scores = model.evaluate_predictions(recording, predicted, _full_scale(full_scale)) if measured else None
+    predicted = model.predict(recording, horizon, initial_state.value) if measured else model.simulate(recording)
+    scores = None
+    if measured:
+        scores = replace(model.evaluate_predictions(recording, predicted, _full_scale(full_scale)),
+                         initial_state="estimated" if initial_state is InitialState.estimate else "zero")
     result = {"model": str(model_file), "horizon": horizon, "trials": len(recording.trials),
               "samples": recording.n_samples, "scores": None if scores is None else scores.to_dict()}
     if out is not None:

@@ -44,7 +44,7 @@ from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state,
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
-from softtip.sysid.uncertainty import bode_figure, empirical_transfer_function, intervals
+from softtip.sysid.uncertainty import bode_figure, empirical_transfer_function, frequency_band, intervals
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -291,6 +291,30 @@ class IdentifiedModel(BaseEstimator):
                               [trial.u for trial in recording.trials], lags=lags, confidence=confidence,
                               output_names=self.outputs_, input_names=self.inputs_)
 
+    def bode(self, omega: np.ndarray | None = None, *, confidence: float = 0.95,
+             recording: Recording | None = None) -> Figure:
+        """The Bode plot of every entry (a transfer function's with its ``confidence`` band; input delays in the
+        phase) on ``omega`` (rad/s; default three decades below Nyquist); with ``recording``, the empirical
+        transfer-function estimate of its first trial (about the model's trend) beside it."""
+        self._check_fitted()
+        if omega is None:
+            nyquist = np.pi / self.ts_
+            omega = np.logspace(np.log10(nyquist) - 3, np.log10(nyquist), 400)
+        omega = np.asarray(omega, dtype=np.float64)
+        measured = None
+        if recording is not None:
+            self._check_outputs(recording)
+            trial = self.trend_.remove(recording).trials[0]
+            measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
+        response, delays_s, band = self._bode_curves(omega, confidence)
+        return bode_figure(response, omega, band=band, confidence=confidence, delays_s=delays_s, measured=measured,
+                           names=(list(self.inputs_), list(self.outputs_)))
+
+    def _bode_curves(self, omega: np.ndarray, confidence: float):
+        """(response (len(ω), ny, nu), delays not in it (s), band per entry or None) for :meth:`bode`: the
+        discrete system's response, its delays included, without a band (no parameter covariance)."""
+        return self.system_.frequency_response(omega), np.zeros(len(self.inputs_)), None
+
     # -- model files (softtip.sysid.files) ----------------------------------------
 
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
@@ -495,22 +519,9 @@ class TransferFunctionModel(IdentifiedModel):
         self._check_fitted()
         return intervals(self.tf_, self.covariance_, confidence)
 
-    def bode(self, omega: np.ndarray | None = None, *, confidence: float = 0.95,
-             recording: Recording | None = None) -> Figure:
-        """The Bode plot of every entry with its ``confidence`` band (delays in the phase); with ``recording``,
-        the empirical transfer-function estimate of its first trial (about the model's trend) beside it."""
-        self._check_fitted()
-        if omega is None:
-            nyquist = np.pi / self.ts_
-            omega = np.logspace(np.log10(nyquist) - 3, np.log10(nyquist), 400)
-        measured = None
-        if recording is not None:
-            self._check_outputs(recording)
-            trial = self.trend_.remove(recording).trials[0]
-            measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
-        return bode_figure(self.tf_, self.covariance_, np.asarray(omega, dtype=np.float64), confidence=confidence,
-                           delays_s=np.array(self.delays_) * self.ts_, measured=measured,
-                           names=(list(self.inputs_), list(self.outputs_)))
+    def _bode_curves(self, omega: np.ndarray, confidence: float):
+        return self.tf_.frequency_response(omega), np.array(self.delays_) * self.ts_, \
+            lambda i, j: frequency_band(self.tf_, self.covariance_, omega, i, j, confidence)
 
     def _set_transfer_function(self, tf: transfer.TransferFunctionMatrix, ts: float) -> None:
         self.tf_ = tf

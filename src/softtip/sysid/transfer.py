@@ -679,7 +679,9 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
     One matrix per output over the coefficients of its entries in order, entry j: the denominator's
     coefficients after the leading 1, then the numerator's, both in descending powers of s (as
     ``tf`` stores them). (JᵀJ is computed in each entry's own time unit, where it is well
-    conditioned, and carried to seconds by the diagonal scaling between the two.)"""
+    conditioned, and carried to seconds by the diagonal scaling between the two.) It holds for white
+    output errors: with coloured ones (the residual whiteness test fails) it understates the spread,
+    as MATLAB's for an output-error model does."""
     ts = _sample_time(ts)
     inputs, outputs, mask = _segments(segments)
     ny, nu = tf.shape

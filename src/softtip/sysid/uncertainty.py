@@ -163,16 +163,16 @@ def empirical_transfer_function(u: np.ndarray, y: np.ndarray, ts: float, segment
     return 2 * np.pi * frequency[keep], np.swapaxes(response, 1, 2)
 
 
-def bode_figure(tf: TransferFunctionMatrix, covariances: list[np.ndarray] | None, omega: np.ndarray, *,
-                confidence: float = 0.95, delays_s: np.ndarray | None = None,
-                measured: tuple[np.ndarray, np.ndarray] | None = None, names: tuple[list[str], list[str]] | None = None
-                ) -> Figure:
-    """Magnitude (dB) and phase (degrees) of every entry against ω (rad/s), with the ``confidence`` band when
-    ``covariances`` are given, an input delay per input (s) in the phase, and ``measured`` (ω, G) points of
+def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidence: float = 0.95,
+                delays_s: np.ndarray | None = None, measured: tuple[np.ndarray, np.ndarray] | None = None,
+                names: tuple[list[str], list[str]] | None = None) -> Figure:
+    """Magnitude (dB) and phase (degrees) of every entry of ``response`` (len(ω), ny, nu) against ω (rad/s),
+    with the ``confidence`` band of ``band(i, j)`` (a :class:`Band`, see :func:`frequency_band`) when given,
+    input delays ``delays_s`` (s) not in the response added to the phase, and ``measured`` (ω, G) points of
     :func:`empirical_transfer_function` beside it."""
     from matplotlib.figure import Figure
 
-    ny, nu = tf.shape
+    _, ny, nu = response.shape
     delays_s = np.zeros(nu) if delays_s is None else np.asarray(delays_s, dtype=np.float64)
     inputs, outputs = names if names is not None else ([f"u{j}" for j in range(nu)], [f"y{i}" for i in range(ny)])
     figure = Figure(figsize=(4.5 * nu, 4.0 * ny), constrained_layout=True)
@@ -180,25 +180,24 @@ def bode_figure(tf: TransferFunctionMatrix, covariances: list[np.ndarray] | None
     for i in range(ny):
         for j in range(nu):
             magnitude_axis, phase_axis = axes[2 * i, j], axes[2 * i + 1, j]
-            lag = omega * delays_s[j]
-            if covariances is not None:
-                band = frequency_band(tf, covariances, omega, i, j, confidence)
-                G, spread, phase_spread = band.response, band.z * band.magnitude_std, band.z * band.phase_std
-                low = np.maximum(np.abs(G) - spread, np.abs(G) * 1e-6)
-                magnitude_axis.fill_between(omega, 20 * np.log10(low), 20 * np.log10(np.abs(G) + spread), alpha=0.3,
-                                            label=f"{100 * confidence:g} % band")
-                phase = np.unwrap(np.angle(G)) - lag
-                phase_axis.fill_between(omega, np.degrees(phase - phase_spread), np.degrees(phase + phase_spread),
-                                        alpha=0.3)
-            else:
-                G = tf.frequency_response(omega)[:, i, j]
-                phase = np.unwrap(np.angle(G)) - lag
+            G = response[:, i, j]
+            phase = np.unwrap(np.angle(G)) - omega * delays_s[j]
+            if band is not None:
+                spread = band(i, j)
+                magnitude, angle = spread.z * spread.magnitude_std, spread.z * spread.phase_std
+                low = np.maximum(np.abs(G) - magnitude, np.abs(G) * 1e-6)
+                magnitude_axis.fill_between(omega, 20 * np.log10(low), 20 * np.log10(np.abs(G) + magnitude),
+                                            alpha=0.3, label=f"{100 * confidence:g} % band")
+                phase_axis.fill_between(omega, np.degrees(phase - angle), np.degrees(phase + angle), alpha=0.3)
             magnitude_axis.semilogx(omega, 20 * np.log10(np.abs(G)), label="model")
             phase_axis.semilogx(omega, np.degrees(phase))
             if measured is not None:
                 w, H = measured
                 magnitude_axis.semilogx(w, 20 * np.log10(np.abs(H[:, i, j])), ".", markersize=3, label="ETFE")
-                phase_axis.semilogx(w, np.degrees(np.unwrap(np.angle(H[:, i, j]))), ".", markersize=3)
+                # each measured phase on the model's branch (the nearest multiple of 360°)
+                model_phase = np.interp(w, omega, phase)
+                wrapped = model_phase + np.angle(H[:, i, j] * np.exp(-1j * model_phase))
+                phase_axis.semilogx(w, np.degrees(wrapped), ".", markersize=3)
             magnitude_axis.set_title(f"{inputs[j]} → {outputs[i]}")
             magnitude_axis.set_ylabel("magnitude (dB)")
             phase_axis.set_ylabel("phase (°)")
