@@ -1,11 +1,6 @@
 """Subspace identification that holds: a horizon from the data, MOESP by default, the continuous route,
-and runaway simulations, on cases of known truth beside nfoursid.
-
-The Rao–Garnier benchmark (Rao & Garnier 2002; Garnier & Wang 2008, ch. 5):
-G(s) = (-6400 s + 1600) / (s⁴ + 5 s³ + 408 s² + 416 s + 1600), poles -0.5 ± 1.94j... and
--2 ± 19.9j (a slow and a fast mode, non-minimum phase), sampled at 10 ms under a random binary
-input held 7 samples, output noise at 20 dB.
-"""
+and runaway simulations, on cases of known truth beside nfoursid (the Rao–Garnier benchmark:
+:func:`softtip.bench.sysid.rao_garnier`, 3,000 samples at 10 ms, 20 dB)."""
 
 from __future__ import annotations
 
@@ -14,21 +9,14 @@ import pandas as pd
 import pytest
 from nfoursid.nfoursid import NFourSID
 
-from softtip.sysid import Recording, StateSpaceModel, transfer
+from softtip.bench.sysid import RAO_GARNIER, rao_garnier
+from softtip.sysid import Recording, StateSpaceModel
 from softtip.sysid.simulation import runs_away, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import arx_lag
 
 TS = 0.01
-RAO_GARNIER = transfer.TransferFunctionMatrix([[[-6400.0, 1600.0]]], [[[1.0, 5.0, 408.0, 416.0, 1600.0]]])
-POLES = np.sort_complex(np.roots([1.0, 5.0, 408.0, 416.0, 1600.0]))
-
-
-def _rao_garnier(seed: int, n: int = 3000) -> Recording:
-    rng = np.random.default_rng(seed)
-    u = np.repeat(rng.choice([-1.0, 1.0], size=n // 7 + 1), 7)[:n, None]
-    y = transfer.simulate(RAO_GARNIER, u, TS)
-    return Recording.from_arrays(u, y + 0.1 * np.std(y) * rng.normal(size=y.shape), TS)
+POLES = np.sort_complex(np.roots(RAO_GARNIER.denominators[0][0]))
 
 
 def _nfoursid_poles(recording: Recording, order: int, block_rows: int) -> np.ndarray:
@@ -44,13 +32,13 @@ def _nfoursid_poles(recording: Recording, order: int, block_rows: int) -> np.nda
 def test_the_continuous_route_recovers_the_rao_garnier_poles_beside_nfoursid():
     errors = []
     for seed in range(6):
-        model = StateSpaceModel(4, domain="continuous").fit(_rao_garnier(seed))
+        model = StateSpaceModel(4, domain="continuous").fit(rao_garnier(seed))
         errors.append(np.max(np.abs(np.sort_complex(model.continuous_.poles()) - POLES) / np.abs(POLES)))
         assert model.summary()["stable"]
     # measured: at most 0.6 % over these 6 runs, 0.7 % over 20
     assert max(errors) < 0.01
     # nfoursid (PO-MOESP) on the last record with the same horizon (measured: 0.8 %; it takes 2-6 s)
-    nfoursid = _nfoursid_poles(_rao_garnier(5), 4, model.horizon_)
+    nfoursid = _nfoursid_poles(rao_garnier(5), 4, model.horizon_)
     assert np.max(np.abs(nfoursid - POLES) / np.abs(POLES)) < 0.01
     # the continuous model's frequency response at the resonances and at DC
     omega = np.array([0.0, 2.0, 20.0])
@@ -60,7 +48,7 @@ def test_the_continuous_route_recovers_the_rao_garnier_poles_beside_nfoursid():
 
 
 def test_a_data_chosen_horizon_sees_the_slow_mode_a_fixed_one_of_ten_samples_misses():
-    estimation, validation = _rao_garnier(0), _rao_garnier(1)
+    estimation, validation = rao_garnier(0), rao_garnier(1)
     chosen = StateSpaceModel(4).fit(estimation)
     fixed = StateSpaceModel(4, horizon=10).fit(estimation)
     assert chosen.horizon_ > 40  # the slow mode's period is 3.2 s, 320 samples
