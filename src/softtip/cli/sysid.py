@@ -291,6 +291,9 @@ def sysid_orders(
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
     validate: Path = VALIDATE,
+    initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
+                                               help="Score each fit from rest (zero) or from each trial's "
+                                                    "estimated initial state (estimate)."),
     json_output: bool = JSON,
 ) -> None:
     """Fit every order and tabulate fit %, AIC, BIC and time (fit % on --validate if given; AIC and BIC on the
@@ -302,11 +305,13 @@ def sysid_orders(
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     params = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
     params |= {"method": method.value} if kind is Kind.ss else {}
-    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation, **params)
+    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation,
+                       initial_state.value, **params)
     if json_output:
         print(json.dumps(rows, indent=2))
         return
-    where = f"on {validate}" if validate is not None else "on the estimation data"
+    where = (f"on {validate}" if validate is not None else "on the estimation data") + \
+        (" from rest" if initial_state is InitialState.zero else " from the estimated initial states")
     table = Table(title=f"{'transfer functions (poles per entry)' if kind is Kind.tf else 'state space (states)'}: "
                         f"fit % {where}")
     for heading in ("order", "parameters", "fit %", *outputs, "AIC", "BIC", "stable", "seconds"):

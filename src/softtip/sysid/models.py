@@ -595,14 +595,16 @@ def information_criteria(errors: np.ndarray, n_parameters: int) -> tuple[float, 
 
 
 def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = None,
-                validation: Recording | None = None, **params) -> list[dict]:
+                validation: Recording | None = None, initial_state: str = "zero", **params) -> list[dict]:
     """One fit per order (``kind`` "tf": poles per entry, default 2-8; "ss": states, default 2-12),
     each row with the order, the parameter count, the fit % per output and its mean (on ``validation``
-    when given, else on the estimation data; simulated), AIC and BIC (one-step prediction errors on the
-    estimation data; the simulation errors of a transfer function, which has no noise model), whether
-    it is stable, and the seconds the fit took."""
+    when given, else on the estimation data; simulated from the zero or the estimated initial state, as
+    the row says), AIC and BIC (one-step prediction errors on the estimation data; the simulation errors
+    of a transfer function, which has no noise model), whether it is stable, and the seconds the fit took."""
     if kind not in KINDS:
         raise IdentificationError(f"kind: expected one of {', '.join(KINDS)}, got {kind!r}")
+    if initial_state not in INITIAL_STATES:
+        raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, got {initial_state!r}")
     orders = list(DEFAULT_ORDERS[kind] if orders is None else orders)
     if not orders:
         raise IdentificationError("orders: none given")
@@ -614,15 +616,15 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
         seconds = time.perf_counter() - started
         # the fit's simulation of the estimation data scores it there, and is the one-step prediction of a
         # model without a noise model
-        if validation is None:
+        if validation is None and initial_state == "zero":
             scores = model.evaluate_predictions(recording, simulated)
         else:
-            scores = model.evaluate(validation)
+            scores = model.evaluate(recording if validation is None else validation, initial_state=initial_state)
         one_step = simulated if model.system_.K is None else model.predict(recording, 1)
         aic, bic = information_criteria(_errors(recording, one_step), model.n_parameters)
         fits = scores.values["fit_percent"]
         rows.append({"order": order, "parameters": model.n_parameters, "fit_percent": float(np.mean(fits)),
                      "fit_percent_per_output": {name: float(v) for name, v in zip(model.outputs_, fits, strict=True)},
-                     "aic": aic, "bic": bic, "stable": model.system_.is_stable() and not model.simulation_diverges_,
-                     "seconds": seconds})
+                     "initial_state": scores.initial_state, "aic": aic, "bic": bic,
+                     "stable": model.system_.is_stable() and not model.simulation_diverges_, "seconds": seconds})
     return rows
