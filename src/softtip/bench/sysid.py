@@ -32,6 +32,7 @@ from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import latency, timed
 from softtip.realtime.estimator import Estimator
 from softtip.sysid import transfer
+from softtip.sysid.delays import shift_inputs
 from softtip.sysid.metrics import fit_percent
 from softtip.sysid.models import StateSpaceModel, TransferFunctionModel
 from softtip.sysid.recording import Recording
@@ -141,15 +142,16 @@ def rao_garnier(seed: int, samples: int = 3000, snr_db: float = 20.0) -> Recordi
     return Recording.from_arrays(u, y + noise, 0.01, source="Rao-Garnier")
 
 
-def laboratory_process(seed: int, samples: int = 1000) -> Recording:
-    """A laboratory process as a control engineer meets it: G(s) = 2.4 / (s² + 2.8 s + 4) at 0.08 s, a
-    random binary input held 4 samples about a level of 5, the output about 4.5 with noise coloured by
-    1 / (1 - 0.8 q⁻¹) (about 19 dB)."""
+def laboratory_process(seed: int, samples: int = 1000, delay: int = 0) -> Recording:
+    """A laboratory process as a control engineer meets it: G(s) = 2.4 / (s² + 2.8 s + 4) at 0.08 s behind
+    ``delay`` samples of dead time, a random binary input held 4 samples about a level of 5, the output
+    about 4.5 with noise coloured by 1 / (1 - 0.8 q⁻¹) (about 19 dB)."""
     rng = np.random.default_rng(seed)
     u = np.repeat(rng.choice([-1.0, 1.0], size=samples // 4 + 1), 4)[:samples, None]
-    y = transfer.simulate(PROCESS, u, 0.08)
+    y = transfer.simulate(PROCESS, shift_inputs(u, [delay]), 0.08)
     noise = scipy.signal.lfilter([1.0], [1.0, -0.8], 0.03 * rng.normal(size=samples))[:, None]
-    return Recording.from_arrays(u + 5.0, y + noise + 4.5, 0.08, source="laboratory process")
+    return Recording.from_arrays(u + 5.0, y + noise + 4.5, 0.08, inputs=["heater_V"], outputs=["temperature_V"],
+                                 input_units="V", output_units="V", source="laboratory process")
 
 
 def _pole_error(found: np.ndarray, truth: np.ndarray) -> float:

@@ -170,9 +170,13 @@ def _print_summary(summary: dict) -> None:
                   ", ".join(f"{name} {value:.1f}" for name, value in summary["fit_percent"].items()))
     trend = summary["trend"]
     if trend["kind"] != "none":
-        console.print(f"trend taken out ({trend['kind']}): input offsets {trend['input_offset']}, output offsets "
-                      f"{trend['output_offset']}" + (f", slopes per s {trend['input_slope']} and {trend['output_slope']}"
-                                                     if trend["kind"] == "linear" else ""))
+        def values(key):
+            return ", ".join(f"{v:.5g}" for v in trend[key])
+
+        console.print(f"trend taken out ({trend['kind']}, saved with the model): input levels {values('input_offset')}, "
+                      f"output levels {values('output_offset')}" +
+                      (f"; slopes per s {values('input_slope')} and {values('output_slope')}"
+                       if trend["kind"] == "linear" else ""))
     if any(delay["samples"] for delay in summary["delays"].values()):
         console.print("input delays: " + ", ".join(f"{name} {delay['samples']} samples ({delay['seconds']:g} s)"
                                                    for name, delay in summary["delays"].items()))
