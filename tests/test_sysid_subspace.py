@@ -13,7 +13,7 @@ from softtip.bench.sysid import RAO_GARNIER, rao_garnier
 from softtip.sysid import Recording, StateSpaceModel
 from softtip.sysid.simulation import runs_away, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
-from softtip.sysid.subspace import arx_lag
+from softtip.sysid.subspace import arx_lag, subspace_identify
 
 TS = 0.01
 POLES = np.sort_complex(np.roots(RAO_GARNIER.denominators[0][0]))
@@ -97,3 +97,10 @@ def test_a_simulation_that_runs_away_is_told_from_one_that_does_not():
     u = np.ones((3000, 1))
     assert system.is_stable() and runs_away(simulate(system, u), u)
     assert not runs_away(simulate(system, u), simulate(system, u) + 0.1)
+
+
+def test_values_near_1e300_are_refused_before_any_factorisation():
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(1000, 1)) * 1e300
+    with pytest.raises(IdentificationError, match=r"values up to .*e\+300, beyond 1e\+150: rescale"):
+        subspace_identify([(u, 0.5 * u)], 0.1, 2)

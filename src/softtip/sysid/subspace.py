@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from softtip.sysid.recording import MAGNITUDE_RANGE
 from softtip.sysid.simulation import free_response
 from softtip.sysid.statespace import IdentificationError, StateSpace
 
@@ -134,7 +135,12 @@ class _Geometry:
         data = np.vstack([np.hstack([_hankel_rows(u, 2 * i), _hankel_rows(y, 2 * i)])
                           for u, y in segments if len(u) >= 2 * i])
         self.columns = len(data)
-        self.L = np.linalg.qr(data, mode="r").T
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.L = np.linalg.qr(data, mode="r").T
+        if not np.all(np.isfinite(self.L)):
+            # a least-squares solve on a matrix of NaN may never return: refuse before it
+            raise IdentificationError("subspace identification: the data's triangular factor is not finite "
+                                      "(magnitudes too large for double precision: rescale the signals)")
         self.nu, self.ny = nu, ny
         self._first_y = 2 * i * nu
 
@@ -232,6 +238,11 @@ def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, 
     """A discrete innovations-form model of the trials ``segments`` ((u, y) each) at sample time ``ts``."""
     if method not in METHODS:
         raise IdentificationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    largest_value = max(float(np.max(np.abs(signal), initial=0.0)) for pair in segments for signal in pair)
+    if not largest_value <= MAGNITUDE_RANGE[1]:
+        # beyond it the Hankel matrices' squares overflow, and LAPACK's least squares on them may never return
+        raise IdentificationError(f"subspace identification: values up to {largest_value:.3g}, beyond "
+                                  f"{MAGNITUDE_RANGE[1]:g}: rescale the signals")
     nu, ny = segments[0][0].shape[1], segments[0][1].shape[1]
     largest = max_order if order == AUTO else order
     i = data_horizon(segments, largest) if horizon is None else horizon
