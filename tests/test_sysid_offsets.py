@@ -80,8 +80,12 @@ def test_the_trend_is_saved_and_a_loaded_model_runs_in_the_recordings_units(tmp_
                                      u - model.trend_.input_offset)
     expected = expected + model.trend_.output_offset
     np.testing.assert_allclose(loaded.simulate(validation)[0], expected, atol=1e-10)
-    stream = loaded.streaming()
+    stream = loaded.streaming(levels=True)
     np.testing.assert_allclose(np.array([stream.step(row) for row in u]), expected, atol=1e-10)
+    # by default deviations in, deviations out: the live pipeline feeds changes since its baseline
+    deviations = loaded.streaming()
+    np.testing.assert_allclose(np.array([deviations.step(row) for row in u - model.trend_.input_offset]),
+                               expected - model.trend_.output_offset, atol=1e-10)
     fit_from_rest = loaded.evaluate(validation).values["fit_percent"][0]
     assert fit_from_rest > 75  # measured 79
 

@@ -272,11 +272,13 @@ class IdentifiedModel(BaseEstimator):
         """The mean over outputs of R² (scikit-learn's ``score``), simulated unless ``k`` is given."""
         return self.evaluate(recording, k).mean("r2")
 
-    def streaming(self) -> StreamingSimulator:
-        """The model as a frame-by-frame simulator from the zero state, in the recording's units (its trend's
-        clock starting at the first frame)."""
+    def streaming(self, levels: bool = False) -> StreamingSimulator:
+        """The model as a frame-by-frame simulator from the zero state. By default it takes and gives deviations
+        from the trend's levels: what the live pipeline feeds it (each frame's change since the baseline it
+        tares) and expects back. ``levels``: it takes and gives values in the recording's own units, the
+        trend's levels taken out and put back (its clock starting at the first frame)."""
         self._check_fitted()
-        return StreamingSimulator(self.system_, trend=self.trend_)
+        return StreamingSimulator(self.system_, trend=self.trend_ if levels else None)
 
     def residuals(self, recording: Recording) -> np.ndarray:
         """One-step prediction errors of every trial, stacked (N, ny)."""
