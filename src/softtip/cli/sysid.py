@@ -161,6 +161,17 @@ def _print_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str])
     console.print(table)
 
 
+def _print_state_space_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str]) -> None:
+    z, level = uncertainty["z"], f"± {100 * uncertainty['confidence']:g} %"
+    unit = " (rad/s)" if uncertainty["poles_domain"] == "continuous" else ""
+    console.print(f"{uncertainty['poles_domain']} poles{unit}, {level} intervals: " + ", ".join(
+        f"{p['real']:.4g}{p['imag']:+.4g}j (± {z * p['real_std']:.2g}, {z * p['imag_std']:.2g}j)"
+        for p in uncertainty["poles"]))
+    console.print(f"DC gains, {level} intervals: " + ", ".join(
+        f"{inputs[g['input']]} → {outputs[g['output']]} {g['value']:.4g} ± {z * g['std']:.2g}"
+        for g in uncertainty["dc_gains"]))
+
+
 def _print_summary(summary: dict) -> None:
     console.print(f"[bold]{summary['kind']}[/] model, {summary['states']} states, {summary['parameters']} parameters, "
                   f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
@@ -206,9 +217,9 @@ def sysid_fit(
     validate: Path = VALIDATE,
     full_scale: list[float] = FULL_SCALE,
     model_file: Path = typer.Option(None, "--model", "-o", help="Save the model here (.npz)."),
-    bode: Path = typer.Option(None, "--bode", help="Save the Bode plot here (.png, .pdf, .svg): a transfer "
-                                                   "function's with its confidence band, beside the recording's "
-                                                   "empirical transfer function."),
+    bode: Path = typer.Option(None, "--bode", help="Save the Bode plot here (.png, .pdf, .svg), with its "
+                                                   "confidence band, beside the recording's empirical transfer "
+                                                   "function."),
     residuals: Path = typer.Option(None, "--residuals", help="Save the residual tests' plot here (.png, .pdf, "
                                                              ".svg): on --validate, else on the estimation data."),
     confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
@@ -233,8 +244,7 @@ def sysid_fit(
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
     result = {"model": estimator.summary()}
-    if kind is Kind.tf:
-        result["model"]["uncertainty"] = estimator.uncertainty(confidence)
+    result["model"]["uncertainty"] = estimator.uncertainty(confidence)
     checked = recording if validation is None else validation
     tests = estimator.residual_tests(checked, lags=lags)
     result["residual_tests"] = tests.to_dict() | {"data": str(validate if validation is not None else data)}
@@ -257,6 +267,8 @@ def sysid_fit(
     _print_summary(result["model"])
     if kind is Kind.tf:
         _print_uncertainty(result["model"]["uncertainty"], inputs, outputs)
+    else:
+        _print_state_space_uncertainty(result["model"]["uncertainty"], inputs, outputs)
     if validate is not None:
         console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
         console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",

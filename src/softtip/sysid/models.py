@@ -38,13 +38,20 @@ from softtip.sysid.delays import (
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, score_outputs
 from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
-from softtip.sysid.refine import RefinementReport, refine
+from softtip.sysid.refine import RefinementReport, StateSpaceCovariance, parameter_covariance, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
 from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, runs_away, simulate
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
-from softtip.sysid.uncertainty import bode_figure, empirical_transfer_function, frequency_band, intervals
+from softtip.sysid.uncertainty import (
+    bode_figure,
+    empirical_transfer_function,
+    frequency_band,
+    intervals,
+    state_space_band,
+    state_space_intervals,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -112,7 +119,7 @@ class IdentifiedModel(BaseEstimator):
         try:
             with single_threaded_blas():
                 core = self._fit_delay_free(shifted, recording.ts)
-                self._estimate_uncertainty(shifted, recording.ts)
+                self._estimate_uncertainty(core, shifted, recording.ts)
         except np.linalg.LinAlgError as problem:
             raise IdentificationError(f"{recording.source}: the identification failed numerically ({problem}): "
                                       "try a lower order or detrend") from None
@@ -169,8 +176,9 @@ class IdentifiedModel(BaseEstimator):
     def _strictly_proper(self) -> bool:
         return False
 
-    def _estimate_uncertainty(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> None:
-        """Kinds with a parameter covariance estimate it here, on the trials the model was identified on."""
+    def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                              ts: float) -> None:
+        """The parameter covariance of the delay-free model ``core``, on the trials it was identified on."""
 
     def _order_text(self) -> str:
         return str(self.order)
@@ -426,6 +434,22 @@ class StateSpaceModel(IdentifiedModel):
         self.refinement_: RefinementReport | None = report
         return system
 
+    def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                              ts: float) -> None:
+        self.covariance_ = parameter_covariance(core, segments)
+
+    def uncertainty(self, confidence: float = 0.95) -> dict:
+        """Every pole (continuous with ``domain="continuous"``) and DC gain with its standard deviation and
+        ``confidence`` interval (:func:`softtip.sysid.uncertainty.state_space_intervals`)."""
+        self._check_fitted()
+        return state_space_intervals(without_input_delays(self.system_, self.delays_), self.covariance_,
+                                     confidence, continuous=self.domain == "continuous")
+
+    def _bode_curves(self, omega: np.ndarray, confidence: float):
+        core = without_input_delays(self.system_, self.delays_)
+        return core.frequency_response(omega), np.array(self.delays_) * self.ts_, \
+            lambda i, j: state_space_band(core, self.covariance_, omega, i, j, confidence)
+
     @property
     def n_parameters(self) -> int:
         """Free parameters of (A, B, C, D, K) up to a change of state basis: n (nu + 2 ny) + ny nu."""
@@ -435,6 +459,9 @@ class StateSpaceModel(IdentifiedModel):
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
         state, arrays = super()._export()
         arrays["singular_values"] = self.singular_values_
+        arrays["ss/covariance"] = self.covariance_.covariance
+        for name, derivative in zip("ABCD", self.covariance_.derivatives, strict=True):
+            arrays[f"ss/derivatives/{name}"] = derivative
         state |= {"order": self.order_, "horizon": self.horizon_, "reflected_poles": self.reflected_poles_,
                   "kalman": self.kalman_, "refinement": None if self.refinement_ is None else self.refinement_.to_dict()}
         return state, arrays
@@ -445,6 +472,13 @@ class StateSpaceModel(IdentifiedModel):
             raise IdentificationError("a state-space model needs its Kalman gain K")
         self.order_, self.horizon_ = int(state["order"]), int(state["horizon"])
         self.singular_values_ = np.asarray(arrays["singular_values"], dtype=np.float64)
+        self.covariance_ = StateSpaceCovariance(arrays["ss/covariance"],
+                                                tuple(arrays[f"ss/derivatives/{name}"] for name in "ABCD"))
+        core = without_input_delays(self.system_, self.delays_)
+        shapes = tuple(np.shape(d)[1:] for d in self.covariance_.derivatives)
+        if shapes != tuple(np.shape(getattr(core, name)) for name in "ABCD") or \
+                {len(d) for d in self.covariance_.derivatives} != {len(self.covariance_.covariance)}:
+            raise IdentificationError("the saved parameter covariance does not fit the system")
         self.reflected_poles_, self.kalman_ = int(state["reflected_poles"]), str(state["kalman"])
         self.refinement_ = None if state["refinement"] is None else RefinementReport(**state["refinement"])
         if self.order_ + sum(self.delays_) != self.system_.n_states:
@@ -458,7 +492,8 @@ class StateSpaceModel(IdentifiedModel):
             "method": self.method, "order": self.order_, "horizon": self.horizon_, "domain": self.domain,
             "singular_values": [float(v) for v in self.singular_values_[:2 * MAX_ORDER]],
             "reflected_poles": self.reflected_poles_, "kalman": self.kalman_,
-            "refinement": None if self.refinement_ is None else self.refinement_.to_dict()}
+            "refinement": None if self.refinement_ is None else self.refinement_.to_dict(),
+            "uncertainty": self.uncertainty()}
         if self.continuous_ is not None:
             summary["continuous_poles"] = _poles(self.continuous_.poles())
         return summary
@@ -512,7 +547,8 @@ class TransferFunctionModel(IdentifiedModel):
         self.continuous_ = realise(tf.numerators, tf.denominators)
         return self.continuous_.to_discrete(ts)
 
-    def _estimate_uncertainty(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> None:
+    def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                              ts: float) -> None:
         self.covariance_ = transfer.parameter_covariance(self.tf_, segments, ts)
 
     def uncertainty(self, confidence: float = 0.95) -> dict:

@@ -26,7 +26,8 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from softtip.sysid.statespace import IdentificationError
+from softtip.sysid.refine import StateSpaceCovariance
+from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.transfer import TransferFunctionMatrix
 
 if TYPE_CHECKING:
@@ -206,3 +207,68 @@ def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidenc
             phase_axis.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize="small")
     return figure
+
+
+# ------------------------------------------------------------------------------- state-space models
+
+
+def _state_space_gradient(system: StateSpace, covariance: StateSpaceCovariance, omega: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """G(e^{jω ts}) (W, ny, nu) of the discrete ``system`` and its derivatives along the parameters
+    (p, W, ny, nu): dG = dC R B + C R dA R B + C R dB + dD, R = (zI - A)⁻¹."""
+    dA, dB, dC, dD = covariance.derivatives
+    z = np.exp(1j * np.asarray(omega, dtype=np.float64) * system.ts)
+    n = system.n_states
+    resolvent = np.linalg.inv(z[:, None, None] * np.eye(n) - system.A)
+    right, left = resolvent @ system.B, system.C @ resolvent  # R B (W, n, nu), C R (W, ny, n)
+    response = system.C @ right + system.D
+    gradient = (np.einsum("pyn,wnu->pwyu", dC, right) + np.einsum("wyn,pnm,wmu->pwyu", left, dA, right)
+                + np.einsum("wyn,pnu->pwyu", left, dB) + dD[:, None])
+    return response, gradient
+
+
+def _spread(gradient: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """Standard deviations (W,) of W real quantities with gradients (p, W)."""
+    return np.sqrt(np.maximum(np.einsum("pw,pq,qw->w", gradient, covariance, gradient), 0.0))
+
+
+def state_space_band(system: StateSpace, covariance: StateSpaceCovariance, omega: np.ndarray, i: int, j: int,
+                     confidence: float = 0.95) -> Band:
+    """Entry (i, j)'s discrete response on ``omega`` (rad/s) with its magnitude and phase spread."""
+    z = _quantile(confidence)
+    response, gradient = _state_space_gradient(system, covariance, omega)
+    G, dG = response[:, i, j], gradient[:, :, i, j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        magnitude = np.real(np.conj(G) * dG) / np.abs(G)
+        phase = np.imag(dG / G)
+    return Band(np.asarray(omega, dtype=np.float64), G, _spread(magnitude, covariance.covariance),
+                _spread(phase, covariance.covariance), z)
+
+
+def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, confidence: float = 0.95,
+                          continuous: bool = False) -> dict:
+    """JSON-able: every pole (discrete, or continuous s = ln z / ts) with the standard deviations of its real
+    and imaginary parts (dλ = (V⁻¹ dA V)_ii, V the eigenvectors of A) and every entry's DC gain with its
+    standard deviation and interval."""
+    z = _quantile(confidence)
+    values, vectors = np.linalg.eig(system.A)
+    derivatives = np.einsum("in,pnm,mi->pi", np.linalg.inv(vectors), covariance.derivatives[0], vectors)
+    if continuous:
+        derivatives = derivatives / (values * system.ts)
+        values = np.log(values.astype(complex)) / system.ts
+    order = np.argsort(-np.abs(values), kind="stable")
+    poles = [{"real": float(values[k].real), "imag": float(values[k].imag),
+              "real_std": float(_spread(derivatives.real[:, [k]], covariance.covariance)[0]),
+              "imag_std": float(_spread(derivatives.imag[:, [k]], covariance.covariance)[0])} for k in order]
+    response, gradient = _state_space_gradient(system, covariance, np.zeros(1))
+    gains = []
+    for i in range(system.n_outputs):
+        for j in range(system.n_inputs):
+            value = float(response[0, i, j].real)
+            std = float(_spread(gradient[:, :, i, j].real, covariance.covariance)[0])
+            gains.append({"output": i, "input": j, "value": value, "std": std, "low": value - z * std,
+                          "high": value + z * std})
+    return {"confidence": confidence, "z": z, "poles": poles, "poles_domain": "continuous" if continuous else
+            "discrete", "dc_gains": gains,
+            "method": "prediction-error covariance H⁻¹ (Σ Jᵀ W Λ W J) H⁻¹ in local coordinates; poles and "
+                      "responses to first order"}
