@@ -104,7 +104,8 @@ def estimate_delays(segments: list[tuple[np.ndarray, np.ndarray]], max_delay: in
     first = max_delay + lead + nb + na
     if sum(max(len(u) - first, 0) for u, _ in segments) < 4 * (na + nu * nb):
         raise IdentificationError(f"delay = {ESTIMATE!r}: a search up to {max_delay} samples needs trials longer "
-                                  f"than {first} samples with at least {4 * (na + nu * nb)} samples after that")
+                                  f"than {first} samples with at least {4 * (na + nu * nb)} samples after that "
+                                  "(lower max_delay, or declare the delay)")
     delays = [0] * nu
     for _ in range(_SWEEPS):
         before = list(delays)

@@ -160,11 +160,10 @@ class IdentifiedModel(BaseEstimator):
                     with single_threaded_blas(), np.errstate(over="ignore", invalid="ignore"):
                         core = self._fit_delay_free(shifted, ts)
                         errors = np.vstack([y - simulate(core, u) for u, y in shifted])
-                    tried[candidate] = float(np.sum(np.mean(errors**2, axis=0) / spread))
-                except IdentificationError:
-                    tried[candidate] = np.inf
-                if not np.isfinite(tried[candidate]):
-                    tried[candidate] = np.inf
+                    value = float(np.sum(np.mean(errors**2, axis=0) / spread))
+                except IdentificationError:  # a candidate that cannot be fitted is no candidate
+                    value = np.inf
+                tried[candidate] = value if np.isfinite(value) else np.inf
             return tried[candidate]
 
         for j in range(len(delays)):
@@ -172,16 +171,6 @@ class IdentifiedModel(BaseEstimator):
             delays[j] = min(around, key=lambda c: cost(tuple(delays[:j] + [c] + delays[j + 1:])))
         self.delay_search_ = [{"delays": list(key), "cost": value} for key, value in sorted(tried.items())]
         return tuple(delays)
-
-    def _strictly_proper(self) -> bool:
-        return False
-
-    def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
-                              ts: float) -> None:
-        """The parameter covariance of the delay-free model ``core``, on the trials it was identified on."""
-
-    def _order_text(self) -> str:
-        return str(self.order)
 
     def _remember(self, recording: Recording, started: float) -> list[np.ndarray]:
         """Keeps what the fit was made on and how well it simulates it; returns that simulation."""
@@ -420,6 +409,12 @@ class StateSpaceModel(IdentifiedModel):
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         n = 1 if self.order == AUTO else self.order
         return n * (n_inputs + 2 * n_outputs) // n_outputs + n_inputs
+
+    def _strictly_proper(self) -> bool:
+        return False  # its D takes a delayed input's first sample
+
+    def _order_text(self) -> str:
+        return str(self.order)
 
     def _fit_delay_free(self, segments: list[tuple[np.ndarray, np.ndarray]], ts: float) -> StateSpace:
         found = subspace_identify(segments, ts, self.order, self.method, horizon=self.horizon,
