@@ -169,6 +169,12 @@ def test_delays_per_channel_of_a_mimo_system_and_their_registers():
     model = StateSpaceModel(2, delay="estimate", max_delay=20).fit(recording)
     # its direct term may take the first responding sample: d or d + 1 per input
     assert all(found in (true, true + 1) for found, true in zip(model.delays_, delays))
+    # the true discrete poles, beside SIPPY's N4SID given the true delays
+    poles = np.sort(np.linalg.eigvals(without_input_delays(model.system_, model.delays_).A).real)
+    np.testing.assert_allclose(poles, [0.7, 0.9], atol=0.005)  # measured 0.0017 (SIPPY below: 0.0014)
+    shifted = shift_inputs(u, delays)
+    sippy = system_identification(y.T, shifted.T, "N4SID", SS_fixed_order=2, tsample=TS)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(sippy.A).real), [0.7, 0.9], atol=0.005)
 
 
 @pytest.mark.parametrize("values, message", [
