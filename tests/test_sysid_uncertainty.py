@@ -14,6 +14,7 @@ import scipy.signal
 from matplotlib.figure import Figure
 
 from softtip.sysid import Recording, StateSpaceModel, TransferFunctionModel, load_model, save_model, transfer
+from softtip.sysid.statespace import IdentificationError
 from softtip.sysid.residuals import residual_tests
 from softtip.sysid.uncertainty import empirical_transfer_function, frequency_band
 
@@ -168,3 +169,16 @@ def test_a_state_space_models_pole_and_gain_spreads_match_monte_carlo_and_surviv
     assert loaded.uncertainty() == found
     figure = loaded.bode()
     assert isinstance(figure, Figure) and len(figure.axes) == 2
+
+
+def test_a_covariance_too_large_to_hold_is_not_computed_and_says_why(tmp_path, monkeypatch):
+    from softtip.sysid import models
+
+    monkeypatch.setattr(models, "_COVARIANCE_BUDGET", 5e3)  # 1,001 samples x 1 output x 2 states x 4 = 8,008
+    u, y = _record(0, n=1001)
+    model = StateSpaceModel(2).fit(Recording.from_arrays(u, y, TS))
+    assert model.covariance_ is None and model.summary()["uncertainty"] is None
+    with pytest.raises(IdentificationError, match=r"not computed: its Jacobian would hold 8\.01e\+03 numbers"):
+        model.uncertainty()
+    loaded = load_model(save_model(tmp_path / "model.npz", model))
+    assert loaded.covariance_ is None and isinstance(loaded.bode(), Figure)

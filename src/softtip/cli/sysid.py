@@ -244,7 +244,8 @@ def sysid_fit(
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
     result = {"model": estimator.summary()}
-    result["model"]["uncertainty"] = estimator.uncertainty(confidence)
+    if kind is Kind.tf or estimator.covariance_ is not None:
+        result["model"]["uncertainty"] = estimator.uncertainty(confidence)
     checked = recording if validation is None else validation
     tests = estimator.residual_tests(checked, lags=lags)
     result["residual_tests"] = tests.to_dict() | {"data": str(validate if validation is not None else data)}
@@ -267,8 +268,10 @@ def sysid_fit(
     _print_summary(result["model"])
     if kind is Kind.tf:
         _print_uncertainty(result["model"]["uncertainty"], inputs, outputs)
-    else:
+    elif result["model"]["uncertainty"] is not None:
         _print_state_space_uncertainty(result["model"]["uncertainty"], inputs, outputs)
+    else:
+        console.print(f"parameter covariance {result['model']['uncertainty_note']}")
     if validate is not None:
         console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
         console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",

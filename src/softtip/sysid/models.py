@@ -60,6 +60,7 @@ DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 INITIAL_STATES = ("zero", "estimate")
 _LEVEL_RATIO = 1e4
+_COVARIANCE_BUDGET = 3e7  # numbers (8 bytes each) a state-space covariance's Jacobian may hold
 _DELAY_NEIGHBOURS = 2  # delays either side of the ARX choice that the model's own fit decides between
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
 
@@ -431,19 +432,32 @@ class StateSpaceModel(IdentifiedModel):
 
     def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
                               ts: float) -> None:
-        self.covariance_ = parameter_covariance(core, segments)
+        n, nu, ny = core.n_states, core.n_inputs, core.n_outputs
+        # the predictor's sensitivities, held for every sample at once: N ny n (n + nu + ny) numbers
+        size = sum(len(u) for u, _ in segments) * ny * n * (n + nu + ny)
+        self.covariance_note_ = None
+        if size > _COVARIANCE_BUDGET:
+            self.covariance_ = None
+            self.covariance_note_ = (f"not computed: its Jacobian would hold {size:.3g} numbers "
+                                     f"({8 * size / 1e9:.2g} GB; the limit is {_COVARIANCE_BUDGET:.0e}); "
+                                     "identify on fewer samples for intervals")
+        else:
+            self.covariance_ = parameter_covariance(core, segments)
 
     def uncertainty(self, confidence: float = 0.95) -> dict:
         """Every pole (continuous with ``domain="continuous"``) and DC gain with its standard deviation and
         ``confidence`` interval (:func:`softtip.sysid.uncertainty.state_space_intervals`)."""
         self._check_fitted()
+        if self.covariance_ is None:
+            raise IdentificationError(f"this model's parameter covariance was {self.covariance_note_ or 'not saved'}")
         return state_space_intervals(without_input_delays(self.system_, self.delays_), self.covariance_,
                                      confidence, continuous=self.domain == "continuous")
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         core = without_input_delays(self.system_, self.delays_)
-        return core.frequency_response(omega), np.array(self.delays_) * self.ts_, \
-            lambda i, j: state_space_band(core, self.covariance_, omega, i, j, confidence)
+        band = None if self.covariance_ is None else \
+            (lambda i, j: state_space_band(core, self.covariance_, omega, i, j, confidence))
+        return core.frequency_response(omega), np.array(self.delays_) * self.ts_, band
 
     @property
     def n_parameters(self) -> int:
@@ -454,9 +468,11 @@ class StateSpaceModel(IdentifiedModel):
     def _export(self) -> tuple[dict, dict[str, np.ndarray]]:
         state, arrays = super()._export()
         arrays["singular_values"] = self.singular_values_
-        arrays["ss/covariance"] = self.covariance_.covariance
-        for name, derivative in zip("ABCD", self.covariance_.derivatives, strict=True):
-            arrays[f"ss/derivatives/{name}"] = derivative
+        if self.covariance_ is not None:
+            arrays["ss/covariance"] = self.covariance_.covariance
+            for name, derivative in zip("ABCD", self.covariance_.derivatives, strict=True):
+                arrays[f"ss/derivatives/{name}"] = derivative
+        state["covariance_note"] = self.covariance_note_
         state |= {"order": self.order_, "horizon": self.horizon_, "reflected_poles": self.reflected_poles_,
                   "kalman": self.kalman_, "refinement": None if self.refinement_ is None else self.refinement_.to_dict()}
         return state, arrays
@@ -467,13 +483,16 @@ class StateSpaceModel(IdentifiedModel):
             raise IdentificationError("a state-space model needs its Kalman gain K")
         self.order_, self.horizon_ = int(state["order"]), int(state["horizon"])
         self.singular_values_ = np.asarray(arrays["singular_values"], dtype=np.float64)
-        self.covariance_ = StateSpaceCovariance(arrays["ss/covariance"],
-                                                tuple(arrays[f"ss/derivatives/{name}"] for name in "ABCD"))
-        core = without_input_delays(self.system_, self.delays_)
-        shapes = tuple(np.shape(d)[1:] for d in self.covariance_.derivatives)
-        if shapes != tuple(np.shape(getattr(core, name)) for name in "ABCD") or \
-                {len(d) for d in self.covariance_.derivatives} != {len(self.covariance_.covariance)}:
-            raise IdentificationError("the saved parameter covariance does not fit the system")
+        self.covariance_note_ = state.get("covariance_note")
+        self.covariance_ = None
+        if "ss/covariance" in arrays:
+            self.covariance_ = StateSpaceCovariance(arrays["ss/covariance"],
+                                                    tuple(arrays[f"ss/derivatives/{name}"] for name in "ABCD"))
+            core = without_input_delays(self.system_, self.delays_)
+            shapes = tuple(np.shape(d)[1:] for d in self.covariance_.derivatives)
+            if shapes != tuple(np.shape(getattr(core, name)) for name in "ABCD") or \
+                    {len(d) for d in self.covariance_.derivatives} != {len(self.covariance_.covariance)}:
+                raise IdentificationError("the saved parameter covariance does not fit the system")
         self.reflected_poles_, self.kalman_ = int(state["reflected_poles"]), str(state["kalman"])
         self.refinement_ = None if state["refinement"] is None else RefinementReport(**state["refinement"])
         if self.order_ + sum(self.delays_) != self.system_.n_states:
@@ -488,7 +507,8 @@ class StateSpaceModel(IdentifiedModel):
             "singular_values": [float(v) for v in self.singular_values_[:2 * MAX_ORDER]],
             "reflected_poles": self.reflected_poles_, "kalman": self.kalman_,
             "refinement": None if self.refinement_ is None else self.refinement_.to_dict(),
-            "uncertainty": self.uncertainty()}
+            "uncertainty": None if self.covariance_ is None else self.uncertainty(),
+            "uncertainty_note": self.covariance_note_}
         if self.continuous_ is not None:
             summary["continuous_poles"] = _poles(self.continuous_.poles())
         return summary
