@@ -247,8 +247,11 @@ def sysid_fit(
     if kind is Kind.tf or estimator.covariance_ is not None:
         result["model"]["uncertainty"] = estimator.uncertainty(confidence)
     checked = recording if validation is None else validation
-    tests = estimator.residual_tests(checked, lags=lags)
-    result["residual_tests"] = tests.to_dict() | {"data": str(validate if validation is not None else data)}
+    # a short record takes fewer lags: four samples a lag at least
+    usable = min(lags, checked.n_samples // 4)
+    tests = estimator.residual_tests(checked, lags=usable) if usable >= 1 else None
+    result["residual_tests"] = None if tests is None else \
+        tests.to_dict() | {"data": str(validate if validation is not None else data)}
     if validation is not None:
         scale = _full_scale(full_scale)
         result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
@@ -260,6 +263,8 @@ def sysid_fit(
         estimator.bode(confidence=confidence, recording=checked).savefig(bode)
         result["bode"] = str(bode)
     if residuals is not None:
+        if tests is None:
+            fail(f"--residuals: {checked.n_samples} samples are too few for residual tests")
         tests.figure().savefig(residuals)
         result["residuals"] = str(residuals)
     if json_output:
@@ -276,7 +281,8 @@ def sysid_fit(
         console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
         console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",
                                     result["validation_estimated_initial_state"]))
-    _print_residual_tests(result["residual_tests"])
+    if result["residual_tests"] is not None:
+        _print_residual_tests(result["residual_tests"])
     for name in ("saved", "bode", "residuals"):
         if name in result:
             console.print(f"{name} -> {result[name]}")

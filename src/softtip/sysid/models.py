@@ -60,6 +60,7 @@ DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 INITIAL_STATES = ("zero", "estimate")
 _LEVEL_RATIO = 1e4
+_ETFE_SAMPLES = 128  # a trial shorter gives too few averaged windows for an empirical transfer function
 _COVARIANCE_BUDGET = 3e7  # numbers (8 bytes each) a state-space covariance's Jacobian may hold
 _DELAY_NEIGHBOURS = 2  # delays either side of the ARX choice that the model's own fit decides between
 _TS_TOLERANCE = 1e-6  # relative: a recording at another sample time needs another discretisation
@@ -293,9 +294,9 @@ class IdentifiedModel(BaseEstimator):
 
     def bode(self, omega: np.ndarray | None = None, *, confidence: float = 0.95,
              recording: Recording | None = None) -> Figure:
-        """The Bode plot of every entry (a transfer function's with its ``confidence`` band; input delays in the
-        phase) on ``omega`` (rad/s; default three decades below Nyquist); with ``recording``, the empirical
-        transfer-function estimate of its first trial (about the model's trend) beside it."""
+        """The Bode plot of every entry with its ``confidence`` band (input delays in the phase) on ``omega``
+        (rad/s; default three decades below Nyquist); with ``recording``, the empirical transfer-function
+        estimate of its longest trial (about the model's trend; one of 128 samples at least) beside it."""
         self._check_fitted()
         if omega is None:
             nyquist = np.pi / self.ts_
@@ -304,8 +305,9 @@ class IdentifiedModel(BaseEstimator):
         measured = None
         if recording is not None:
             self._check_outputs(recording)
-            trial = self.trend_.remove(recording).trials[0]
-            measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
+            trial = max(self.trend_.remove(recording).trials, key=len)
+            if len(trial) >= _ETFE_SAMPLES:
+                measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
         response, delays_s, band = self._bode_curves(omega, confidence)
         return bode_figure(response, omega, band=band, confidence=confidence, delays_s=delays_s, measured=measured,
                            names=(list(self.inputs_), list(self.outputs_)))
