@@ -182,6 +182,8 @@ def test_fit_with_detrending_and_an_estimated_delay_validates_from_both_initial_
     without = json.loads(run(*common, "--detrend", "none", "--delay", "0").output)
     # levels and delay left in: measured -369 % from rest, 35 % from the estimated initial state
     assert without["validation"]["outputs"]["Fx"]["fit_percent"] < 0
+    assert "Fx_side 4.931 (± 0.979)" in without["note"] and without["note"].endswith("try --detrend mean")
+    assert report["note"] is None
     assert without["validation_estimated_initial_state"]["outputs"]["Fx"]["fit_percent"] < 50
 
 

@@ -70,6 +70,23 @@ def _full_scale(values: list[float] | None):
     return rated(values) if values else MEASURED
 
 
+def _level_note(recording, detrend: Detrend) -> str | None:
+    """A hint when no trend is taken out of a recording whose levels exceed its variation: a model of
+    deviations from zero spends itself on the levels."""
+    import numpy as np
+
+    if detrend is not Detrend.none:
+        return None
+    signals = np.vstack([np.hstack([trial.u, trial.y]) for trial in recording.trials])
+    names = (*recording.inputs, *recording.outputs)
+    high = [f"{name} {level:.4g} (± {spread:.3g})" for name, level, spread in
+            zip(names, signals.mean(axis=0), signals.std(axis=0)) if abs(level) > spread]
+    if not high:
+        return None
+    return ("levels larger than their variation and not taken out: " + ", ".join(high) +
+            "; a model from rest cannot follow them: try --detrend mean")
+
+
 def _order(kind: Kind, order: str) -> int | str:
     if kind is Kind.ss and order == "auto":
         return order
@@ -243,7 +260,7 @@ def sysid_fit(
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
-    result = {"model": estimator.summary()}
+    result = {"model": estimator.summary(), "note": _level_note(recording, detrend)}
     if kind is Kind.tf or estimator.covariance_ is not None:
         result["model"]["uncertainty"] = estimator.uncertainty(confidence)
     checked = recording if validation is None else validation
@@ -271,6 +288,8 @@ def sysid_fit(
         print(json.dumps(result, indent=2))
         return
     _print_summary(result["model"])
+    if result["note"]:
+        console.print(f"[yellow]note:[/] {result['note']}")
     if kind is Kind.tf:
         _print_uncertainty(result["model"]["uncertainty"], inputs, outputs)
     elif result["model"]["uncertainty"] is not None:
@@ -332,6 +351,7 @@ def sysid_orders(
     params |= {"method": method.value} if kind is Kind.ss else {}
     rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation,
                        initial_state.value, **params)
+    note = _level_note(recording, detrend)
     if json_output:
         print(json.dumps(rows, indent=2))
         return
@@ -349,6 +369,8 @@ def sysid_orders(
                       f"{row['seconds']:.2f}")
     table.caption = "* lowest BIC"
     console.print(table)
+    if note:
+        console.print(f"[yellow]note:[/] {note}")
 
 
 def sysid_predict(
