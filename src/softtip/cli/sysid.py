@@ -23,6 +23,7 @@ class Detrend(str, Enum):
     none = "none"
     mean = "mean"
     linear = "linear"
+    estimate = "estimate"
 
 
 class InitialState(str, Enum):
@@ -48,7 +49,8 @@ FULL_SCALE = typer.Option(None, "--full-scale", help="Rated full-scale range of 
 JSON = typer.Option(False, "--json", help="Print JSON.")
 DETREND = typer.Option(Detrend.none, "--detrend",
                        help="Levels to take out before identifying: mean or linear trend of the estimation data, "
-                            "saved with the model and taken out of validation and live data the same way.")
+                            "or estimate (input means, output levels estimated with the model); saved with the "
+                            "model and taken out of validation and live data the same way.")
 DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all inputs, one per input (2,0,5), "
                                           "or 'estimate' (searched up to --max-delay).")
 MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")

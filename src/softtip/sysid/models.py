@@ -40,7 +40,14 @@ from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, StateSpaceCovariance, parameter_covariance, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
-from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, runs_away, simulate
+from softtip.sysid.simulation import (
+    StreamingSimulator,
+    estimate_initial_state,
+    free_response,
+    predict,
+    runs_away,
+    simulate,
+)
 from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import AUTO, MAX_ORDER, METHODS, subspace_identify
 from softtip.sysid.trends import TREND_KINDS, Trend, estimate_trend
@@ -60,6 +67,7 @@ DOMAINS = ("discrete", "continuous")
 ORDER = Annotated[Union[choice(AUTO), PositiveInteger], expect(f'"{AUTO}" or a positive integer')]
 INITIAL_STATES = ("zero", "estimate")
 _LEVEL_RATIO = 1e4
+_LEVEL_ROUNDS = 20  # rounds of output-level estimation at most
 _ETFE_SAMPLES = 128  # a trial shorter gives too few averaged windows for an empirical transfer function
 _COVARIANCE_BUDGET = 3e7  # numbers (8 bytes each) a state-space covariance's Jacobian may hold
 _DELAY_NEIGHBOURS = 2  # delays either side of the ARX choice that the model's own fit decides between
@@ -121,12 +129,54 @@ class IdentifiedModel(BaseEstimator):
         try:
             with single_threaded_blas():
                 core = self._fit_delay_free(shifted, recording.ts)
+                if self.detrend == "estimate":
+                    core, shifted = self._with_estimated_output_levels(core, shifted, recording.ts)
                 self._estimate_uncertainty(core, shifted, recording.ts)
         except np.linalg.LinAlgError as problem:
             raise IdentificationError(f"{recording.source}: the identification failed numerically ({problem}): "
                                       "try a lower order or detrend") from None
         self.system_ = with_input_delays(core, delays)
         return self._remember(recording, started)
+
+    def _with_estimated_output_levels(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                                      ts: float) -> tuple[StateSpace, list[tuple[np.ndarray, np.ndarray]]]:
+        """The output levels and each trial's initial state as parameters, with the model: the simulation
+        error is minimised over the model and over (levels, initial states) in turn, each round from the
+        last. Given the model, the levels and states are one linear least-squares problem (a constant and
+        the free responses C Aᵗ); given them, the model is identified on the outputs less the levels and
+        the free responses. (The level alone would be confounded with the transient of a record that does
+        not start at rest.) It stops when the simulation error falls by less than 1e-6 of itself, or after
+        ``_LEVEL_ROUNDS`` rounds; ``level_rounds_`` counts them. For an output-error model every round
+        lowers the same criterion."""
+        deviations = [y for _, y in segments]
+        ny = deviations[0].shape[1]
+        previous = np.inf
+        level = np.zeros(ny)
+        for rounds in range(1, _LEVEL_ROUNDS + 1):
+            simulated = [simulate(core, u) for u, _ in segments]
+            n = core.n_states
+            rows, targets = [], []
+            for k, ((u, y), sim) in enumerate(zip(segments, simulated, strict=True)):
+                N = len(u)
+                block = np.zeros((N, ny, ny + n * len(segments)))
+                block[:, :, :ny] = np.eye(ny)
+                block[:, :, ny + k * n:ny + (k + 1) * n] = free_response(core.A, core.C, N)
+                rows.append(block.reshape(N * ny, -1))
+                targets.append((deviations[k] - sim).ravel())
+            solution = np.linalg.lstsq(np.vstack(rows), np.concatenate(targets), rcond=None)[0]
+            level = solution[:ny]
+            states = solution[ny:].reshape(len(segments), n)
+            corrected = [y - level - free_response(core.A, core.C, len(y)) @ x0
+                         for y, x0 in zip(deviations, states, strict=True)]
+            cost = sum(float(np.sum((c - sim) ** 2)) for c, sim in zip(corrected, simulated, strict=True))
+            segments = [(u, c) for (u, _), c in zip(segments, corrected, strict=True)]
+            if previous - cost <= 1e-6 * cost:
+                break
+            previous = cost
+            core = self._fit_delay_free(segments, ts)
+        self.trend_ = replace(self.trend_, output_offset=self.trend_.output_offset + level)
+        self.level_rounds_ = rounds
+        return core, segments
 
     def _prepared(self, recording: Recording) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[int, ...] | None]:
         """Checks the recording (before any long work) and takes out its trend (kept as ``trend_``): the
@@ -365,7 +415,7 @@ class IdentifiedModel(BaseEstimator):
                 # a model whose simulation runs away is not stable, whatever the moduli of its poles
                 "stable": self.system_.is_stable() and not self.simulation_diverges_,
                 "simulation_diverges": self.simulation_diverges_,
-                "trend": self.trend_.to_dict(),
+                "trend": self.trend_.to_dict() | {"estimation_rounds": getattr(self, "level_rounds_", None)},
                 "delays": {name: {"samples": d, "seconds": d * self.ts_}
                            for name, d in zip(self.inputs_, self.delays_, strict=True)},
                 "fit_percent": {name: float(v) for name, v in zip(self.outputs_, self.fit_percent_, strict=True)},

@@ -6,8 +6,11 @@ channel (u0, y0), ``"linear"`` a line per channel, offset + slope t, t the time 
 the sample's source trial (what :meth:`Recording.time` gives; a validation piece cut from a trial
 keeps its place on that line). The same :class:`Trend` is then removed from validation and live
 data and added back to the model's outputs, so a saved model predicts in the recording's own units.
-(:meth:`Recording.detrend`, by contrast, removes each trial's own mean or line: it needs the
-outputs, so a model cannot run that way on live data.)
+``"estimate"`` starts from the means and leaves the output levels to the model's identification,
+which estimates them as parameters (:class:`~softtip.sysid.models.IdentifiedModel`): the input
+levels stay the means, since only y0 - G(0) u0 can be told from data. (:meth:`Recording.detrend`,
+by contrast, removes each trial's own mean or line: it needs the outputs, so a model cannot run
+that way on live data.)
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import numpy as np
 from softtip.sysid.recording import Recording
 from softtip.sysid.statespace import IdentificationError
 
-TREND_KINDS = ("none", "mean", "linear")
+TREND_KINDS = ("none", "mean", "linear", "estimate")
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,14 +87,15 @@ class Trend:
 
 def estimate_trend(recording: Recording, kind: str) -> Trend:
     """The levels of ``recording`` (every trial pooled): ``"none"`` zero, ``"mean"`` the channels' means,
-    ``"linear"`` each channel's least-squares line in the time since its source trial's start."""
+    ``"linear"`` each channel's least-squares line in the time since its source trial's start,
+    ``"estimate"`` the means as the start of the output levels' estimation."""
     if kind not in TREND_KINDS:
         raise IdentificationError(f"detrend: expected one of {', '.join(TREND_KINDS)}, got {kind!r}")
     nu, ny = recording.n_inputs, recording.n_outputs
     if kind == "none":
         return Trend.zero(nu, ny)
     signals = np.vstack([np.hstack([trial.u, trial.y]) for trial in recording.trials])
-    if kind == "mean":
+    if kind in ("mean", "estimate"):
         offset, slope = signals.mean(axis=0), np.zeros(nu + ny)
     else:
         t = np.concatenate([recording.time(k) for k in range(len(recording.trials))])
