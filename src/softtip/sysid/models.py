@@ -10,8 +10,11 @@ over outputs, simulated), ``evaluate`` (every metric per output), ``streaming()`
   refinement, :func:`softtip.sysid.transfer.fit`), realised as state space and discretised by
   zero-order hold so that it too runs frame by frame.
 
-Both run as a discrete system ``system_`` at the recording's sample time, from the zero state
-(a recording starts at rest, or is detrended). :func:`order_table` fits a range of orders.
+Both run as a discrete system ``system_`` at the recording's sample time, from the zero state or
+from each trial's estimated initial state (``initial_state="estimate"``), about the levels
+``trend_`` (``detrend``) and behind the input delays ``delays_`` (``delay``); both carry the
+covariance of their parameters (``covariance_``, ``uncertainty()``, ``bode()``) and test their
+residuals (``residual_tests``). :func:`order_table` fits a range of orders.
 """
 
 from __future__ import annotations
@@ -434,7 +437,8 @@ class StateSpaceModel(IdentifiedModel):
     ``"continuous"`` also gives ``continuous_``, the system whose zero-order hold is ``system_``;
     ``max_iterations`` and ``tolerance``: the refinement's stopping rules (:mod:`softtip.sysid.refine`).
     ``detrend``: "none", "mean" or "linear", the levels taken out before identification and kept
-    (:mod:`softtip.sysid.trends`); ``delay``: input delays in samples, one for all inputs or one per
+    (:mod:`softtip.sysid.trends`), or "estimate" (the output levels and each trial's initial state
+    estimated with the model); ``delay``: input delays in samples, one for all inputs or one per
     input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`).
     """
 
