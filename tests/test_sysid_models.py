@@ -195,9 +195,14 @@ def test_bad_settings_are_refused_in_one_line(split, model, message):
 def test_too_few_samples_for_the_order_are_refused_with_the_numbers():
     rng = np.random.default_rng(5)
     short = Recording.from_arrays([rng.normal(size=(30, 3))], [rng.normal(size=(30, 3))], TS)
+    with pytest.raises(IdentificationError, match=r"30 samples, too few samples for order 8: it needs at least 54"):
+        StateSpaceModel(8).fit(short)  # 8 (3 + 2 x 3) / 3 + 3 = 27 parameters per output
+    # one input and output: 25 parameters, 55 samples; but the shortest horizon for 8 states, 10 block
+    # rows, needs 2 x 10 x 2 = 40 windows of 20 samples
+    longer = Recording.from_arrays(rng.normal(size=55), rng.normal(size=55), TS)
     with pytest.raises(IdentificationError, match=r"too few samples for order 8: a horizon of 10 needs trials longer "
-                                                   r"than 20 samples .* the recording gives 11"):
-        StateSpaceModel(8).fit(short)
+                                                   r"than 20 samples .* the recording gives 36"):
+        StateSpaceModel(8).fit(longer)
 
 
 def test_a_model_refuses_data_of_other_channels_or_sample_time(split):

@@ -1,4 +1,4 @@
-"""Speed and quality of system identification on force-sensor-like data, beside baselines of the same run.
+"""Speed and quality of system identification, beside baselines of the same run.
 
 Data: a 3 x 3 system of second-order entries with one zero each (side-sensor forces in, table
 forces out), 10 Hz, smooth random presses, 3 % output noise; 1,500 estimation samples (ten 15 s
@@ -8,13 +8,19 @@ refinement), and one streaming step of an order-10 3 x 3 state-space model and o
 transfer function's realisation, alone and as the live pipeline's estimator (its channel selection
 and checks included; target <= 50 µs at p99). Baselines: nfoursid (PO-MOESP) at order 8
 on the same data (time, and fit % on the validation trials simulated from rest by the same code),
-SIPPY when it is installed, and a plain numpy step (x = Ax + Bu, y = Cx + Du) for streaming. Every
-fit runs with BLAS on one thread.
+SIPPY's MOESP likewise, and a plain numpy step (x = Ax + Bu, y = Cx + Du) for streaming.
+
+Two single-input cases of known truth, the Rao–Garnier benchmark (:func:`rao_garnier`) and a
+laboratory process with levels and coloured noise (:func:`laboratory_process`): our transfer
+function and continuous state-space model beside nfoursid and SIPPY's output-error model (time,
+validation fit, the largest relative error of a continuous pole). And N4SID, MOESP and CVA on all
+three cases: the evidence for the default subspace method. Every fit runs with BLAS on one thread.
 """
 
 from __future__ import annotations
 
-import importlib.util
+import contextlib
+import io
 import os
 import platform
 
@@ -26,11 +32,13 @@ from softtip._core.threads import single_threaded_blas
 from softtip.bench.timing import latency, timed
 from softtip.realtime.estimator import Estimator
 from softtip.sysid import transfer
+from softtip.sysid.delays import shift_inputs
 from softtip.sysid.metrics import fit_percent
 from softtip.sysid.models import StateSpaceModel, TransferFunctionModel
 from softtip.sysid.recording import Recording
 from softtip.sysid.simulation import StreamingSimulator, simulate
 from softtip.sysid.statespace import StateSpace
+from softtip.sysid.subspace import METHODS
 
 TS = 0.1
 TARGETS = {"transfer_function_s": 1.5, "state_space_s": 1.0, "streaming_p99_us": 50.0}
@@ -74,39 +82,138 @@ def _model_figures(model, seconds: float, validation: Recording) -> dict:
 
 
 def _nfoursid(estimation: Recording, validation: Recording, order: int, block_rows: int) -> dict:
+    """nfoursid (PO-MOESP) on the same data: its figures, and its ``system`` (popped by callers that use it)."""
     import pandas as pd
     from nfoursid.nfoursid import NFourSID
 
     # nfoursid takes one record: the trials laid end to end
     u = np.vstack([trial.u for trial in estimation.trials])
     y = np.vstack([trial.y for trial in estimation.trials])
-    frame = pd.DataFrame(np.hstack([u, y]), columns=[*INPUTS, *OUTPUTS])
+    inputs, outputs = list(estimation.inputs), list(estimation.outputs)
+    frame = pd.DataFrame(np.hstack([u, y]), columns=[*inputs, *outputs])
 
     def identify():
         with single_threaded_blas():
-            found = NFourSID(frame, output_columns=list(OUTPUTS), input_columns=list(INPUTS),
-                             num_block_rows=block_rows)
+            found = NFourSID(frame, output_columns=outputs, input_columns=inputs, num_block_rows=block_rows)
             found.subspace_identification()
             return found.system_identification(rank=order)[0]
 
     system, seconds = timed(identify)
-    system = StateSpace(system.a, system.b, system.c, system.d, TS)
+    system = StateSpace(system.a, system.b, system.c, system.d, estimation.ts)
     return {"seconds": seconds, "states": order, "num_block_rows": block_rows, "stable": system.is_stable(),
-            "validation_fit_percent": _validation_fit(system, validation)}
+            "validation_fit_percent": _validation_fit(system, validation), "system": system}
 
 
-def _sippy() -> dict:
-    """SIPPY (system identification in Python, University of Pisa) when installed: its module is ``sippy``
-    with ``system_identification``. The PyPI name ``sippy`` is an unrelated SIP telephony stack."""
-    if importlib.util.find_spec("sippy") is None:
-        return {"available": False, "note": "SIPPY is not installed; it is not published on PyPI (the name "
-                                             "'sippy' there is an unrelated SIP telephony stack)"}
-    import sippy
+def _sippy_state_space(estimation: Recording, validation: Recording, order: int, horizon: int) -> dict:
+    """SIPPY's MOESP (its ``system_identification``, module ``sippy_unipi``, PyPI ``sippy-unipi``) on the same
+    record as nfoursid, with our horizon as its past and future windows."""
+    from sippy_unipi import system_identification
 
-    if not hasattr(sippy, "system_identification"):
-        return {"available": False, "note": "the installed 'sippy' is not SIPPY (no system_identification): "
-                                            "the PyPI package of that name is a SIP telephony stack"}
-    return {"available": True, "note": "installed, not compared by this bench"}
+    u = np.vstack([trial.u for trial in estimation.trials])
+    y = np.vstack([trial.y for trial in estimation.trials])
+
+    def identify():
+        with single_threaded_blas(), contextlib.redirect_stdout(printed):
+            return system_identification(y.T, u.T, "MOESP", SS_fixed_order=order, SS_f=horizon, SS_p=horizon,
+                                         tsample=estimation.ts)
+
+    printed = io.StringIO()  # SIPPY prints its warnings; the report keeps them (and the JSON on stdout clean)
+    found, seconds = timed(identify)
+    system = StateSpace(found.A, found.B, found.C, found.D, estimation.ts)
+    return {"seconds": seconds, "states": order, "horizon": horizon, "stable": system.is_stable(),
+            "validation_fit_percent": _validation_fit(system, validation), "printed": printed.getvalue().strip()}
+
+
+# ------------------------------------------------------------------------ single-input benchmark cases
+
+RAO_GARNIER = transfer.TransferFunctionMatrix([[[-6400.0, 1600.0]]], [[[1.0, 5.0, 408.0, 416.0, 1600.0]]])
+PROCESS = transfer.TransferFunctionMatrix([[[2.4]]], [[[1.0, 2.8, 4.0]]])
+
+
+def rao_garnier(seed: int, samples: int = 3000, snr_db: float = 20.0) -> Recording:
+    """The Rao–Garnier fourth-order benchmark (Rao & Garnier 2002; Garnier & Wang 2008, ch. 5):
+    G(s) = (-6400 s + 1600) / (s⁴ + 5 s³ + 408 s² + 416 s + 1600), a slow (-0.5 ± 1.9j) and a fast
+    (-2 ± 19.9j) mode, non-minimum phase; 10 ms samples of a random binary input held 7 samples,
+    white output noise at ``snr_db``."""
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=samples // 7 + 1), 7)[:samples, None]
+    y = transfer.simulate(RAO_GARNIER, u, 0.01)
+    noise = np.std(y) * 10 ** (-snr_db / 20) * rng.normal(size=y.shape)
+    return Recording.from_arrays(u, y + noise, 0.01, source="Rao-Garnier")
+
+
+def laboratory_process(seed: int, samples: int = 1000, delay: int = 0) -> Recording:
+    """A laboratory process as a control engineer meets it: G(s) = 2.4 / (s² + 2.8 s + 4) at 0.08 s behind
+    ``delay`` samples of dead time, a random binary input held 4 samples about a level of 5, the output
+    about 4.5 with noise coloured by 1 / (1 - 0.8 q⁻¹) (about 19 dB)."""
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=samples // 4 + 1), 4)[:samples, None]
+    y = transfer.simulate(PROCESS, shift_inputs(u, [delay]), 0.08)
+    noise = scipy.signal.lfilter([1.0], [1.0, -0.8], 0.03 * rng.normal(size=samples))[:, None]
+    return Recording.from_arrays(u + 5.0, y + noise + 4.5, 0.08, inputs=["heater_V"], outputs=["temperature_V"],
+                                 input_units="V", output_units="V", source="laboratory process")
+
+
+def _pole_error(found: np.ndarray, truth: np.ndarray) -> float:
+    """The largest relative distance from a true pole to the nearest found one (continuous, rad/s)."""
+    if not found.size or not np.all(np.isfinite(found)):
+        return float("inf")
+    return float(max(np.min(np.abs(found - pole)) / abs(pole) for pole in truth))
+
+
+def _siso_case(name: str, estimation: Recording, validation: Recording, truth: transfer.TransferFunctionMatrix,
+               n_zeros: int) -> dict:
+    """One single-input case: our transfer function and continuous state space, nfoursid and SIPPY's
+    output-error model on the same detrended record: seconds, validation fit % (from rest) and the
+    largest relative error of a continuous pole."""
+    from sippy_unipi import system_identification
+
+    poles = np.roots(truth.denominators[0][0])
+    order = len(poles)
+    ts = estimation.ts
+    figures = {"truth": {"numerator": truth.numerators[0][0].tolist(), "denominator": truth.denominators[0][0].tolist()}}
+    tf_model, seconds = timed(TransferFunctionModel(order, n_zeros, detrend="mean").fit, estimation)
+    figures["softtip_transfer_function"] = {
+        "seconds": seconds, "validation_fit_percent": float(tf_model.evaluate(validation).values["fit_percent"][0]),
+        "pole_error": _pole_error(np.roots(tf_model.tf_.denominators[0][0]), poles), "stable": tf_model.tf_.is_stable()}
+    ss_model, seconds = timed(StateSpaceModel(order, domain="continuous", detrend="mean").fit, estimation)
+    figures["softtip_state_space"] = {
+        "seconds": seconds, "validation_fit_percent": float(ss_model.evaluate(validation).values["fit_percent"][0]),
+        "pole_error": _pole_error(ss_model.continuous_.poles(), poles), "stable": ss_model.summary()["stable"],
+        "horizon": ss_model.horizon_}
+    level = ss_model.trend_
+    centred_estimation, centred_validation = level.remove(estimation), level.remove(validation)
+    nfoursid = _nfoursid(centred_estimation, centred_validation, order, ss_model.horizon_)
+    system = nfoursid.pop("system")
+    figures["nfoursid"] = nfoursid | {"pole_error": _pole_error(np.log(system.poles().astype(complex)) / ts, poles)}
+    u, y = centred_estimation.trials[0].u[:, 0], centred_estimation.trials[0].y[:, 0]
+
+    def output_error():
+        with single_threaded_blas(), contextlib.redirect_stdout(printed):
+            return system_identification(y, u, "OE", OE_orders=[n_zeros + 1, order, 1], tsample=ts)
+
+    printed = io.StringIO()
+    found, seconds = timed(output_error)
+    numerator, denominator = (np.asarray(part[0][0], dtype=np.float64) for part in (found.NUMERATOR, found.DENOMINATOR))
+    discrete = np.roots(denominator)
+    discrete = discrete[np.abs(discrete) > 1e-12]  # its delay's poles at the origin aside
+    with np.errstate(over="ignore", invalid="ignore"):
+        simulated = scipy.signal.dlsim((np.trim_zeros(numerator, "f"), denominator, ts),
+                                       centred_validation.trials[0].u[:, 0])[1]
+        fit = float(fit_percent(centred_validation.trials[0].y, simulated)[0])
+    figures["sippy_output_error"] = {"seconds": seconds, "validation_fit_percent": fit if np.isfinite(fit) else None,
+                                     "pole_error": _pole_error(np.log(discrete.astype(complex)) / ts, poles),
+                                     "stable": bool(np.all(np.abs(discrete) < 1)),
+                                     "printed": printed.getvalue().strip()}
+    return figures
+
+
+def subspace_methods(cases: dict[str, tuple[Recording, Recording, int]]) -> dict:
+    """Validation fit % (mean over outputs, from rest) of N4SID, MOESP and CVA on each case at its order:
+    the evidence for the default method."""
+    return {name: {method: float(StateSpaceModel(order, method, detrend="mean").fit(estimation)
+                                 .evaluate(validation).mean("fit_percent")) for method in METHODS}
+            for name, (estimation, validation, order) in cases.items()}
 
 
 def _naive_step(system: StateSpace):
@@ -131,6 +238,15 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     refined, refined_seconds = timed(StateSpaceModel(8, refine=True).fit, estimation)
     order_10 = StateSpaceModel(10).fit(estimation)
     nfoursid = _nfoursid(estimation, validation, 8, state_space.horizon_)
+    nfoursid.pop("system")
+    sippy = _sippy_state_space(estimation, validation, 8, state_space.horizon_)
+    cases = {"rao_garnier": (rao_garnier(seed), rao_garnier(seed + 1)),
+             "laboratory_process": (laboratory_process(seed), laboratory_process(seed + 1))}
+    siso = {"rao_garnier": _siso_case("rao_garnier", *cases["rao_garnier"], RAO_GARNIER, 1),
+            "laboratory_process": _siso_case("laboratory_process", *cases["laboratory_process"], PROCESS, 0)}
+    methods = subspace_methods({"force_3x3": (estimation, validation, 8),
+                                "rao_garnier": (*cases["rao_garnier"], 4),
+                                "laboratory_process": (*cases["laboratory_process"], 2)})
 
     frame = estimation.trials[0].u[0].copy()
     streaming = {
@@ -153,7 +269,13 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
         "state_space_order_8_refined": _model_figures(refined, refined_seconds, validation) | {
             "refinement": refined.refinement_.to_dict()},
         "nfoursid_order_8": nfoursid,
-        "sippy": _sippy(),
+        "sippy": {"note": "SIPPY (PyPI sippy-unipi, module sippy_unipi): MOESP on the same record and horizon; "
+                          "its output-error model in the single-input cases", "moesp_order_8": sippy},
+        "single_input_cases": siso,
+        "subspace_methods": {"validation_fit_percent": methods, "default": StateSpaceModel().method,
+                             "default_points_below_the_best": {
+                                 name: max(fits.values()) - fits[StateSpaceModel().method]
+                                 for name, fits in methods.items()}},
         "streaming_step_us": streaming,
         "targets": TARGETS,
     }
@@ -167,6 +289,7 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     }
     results["ratios"] = {
         "nfoursid_time_over_state_space": nfoursid["seconds"] / ss_seconds,
+        "sippy_time_over_state_space": sippy["seconds"] / ss_seconds,
         "state_space_mean_fit_minus_nfoursid": float(np.mean(results["state_space_order_8"]["validation_fit_percent"])
                                                      - np.mean(nfoursid["validation_fit_percent"])),
         "transfer_function_time_over_nfoursid": tf_seconds / nfoursid["seconds"],

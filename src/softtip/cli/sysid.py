@@ -4,6 +4,7 @@ recordings (CSV, Parquet or softtip datasets)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 
@@ -16,6 +17,18 @@ from softtip.cli.common import console, fail
 class Kind(str, Enum):
     tf = "tf"
     ss = "ss"
+
+
+class Detrend(str, Enum):
+    none = "none"
+    mean = "mean"
+    linear = "linear"
+    estimate = "estimate"
+
+
+class InitialState(str, Enum):
+    zero = "zero"
+    estimate = "estimate"
 
 
 class Method(str, Enum):
@@ -34,6 +47,13 @@ VALIDATE = typer.Option(None, "--validate", help="Recording to validate on (same
 FULL_SCALE = typer.Option(None, "--full-scale", help="Rated full-scale range of each output, in its unit "
                                                      "(repeat; default: the measured range max - min).")
 JSON = typer.Option(False, "--json", help="Print JSON.")
+DETREND = typer.Option(Detrend.none, "--detrend",
+                       help="Levels to take out before identifying: mean or linear trend of the estimation data, "
+                            "or estimate (input means, output levels estimated with the model); saved with the "
+                            "model and taken out of validation and live data the same way.")
+DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all inputs, one per input (2,0,5), "
+                                          "or 'estimate' (searched up to --max-delay).")
+MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")
 
 
 def _names(values: list[str]) -> list[str]:
@@ -52,6 +72,23 @@ def _full_scale(values: list[float] | None):
     return rated(values) if values else MEASURED
 
 
+def _level_note(recording, detrend: Detrend) -> str | None:
+    """A hint when no trend is taken out of a recording whose levels exceed its variation: a model of
+    deviations from zero spends itself on the levels."""
+    import numpy as np
+
+    if detrend is not Detrend.none:
+        return None
+    signals = np.vstack([np.hstack([trial.u, trial.y]) for trial in recording.trials])
+    names = (*recording.inputs, *recording.outputs)
+    high = [f"{name} {level:.4g} (± {spread:.3g})" for name, level, spread in
+            zip(names, signals.mean(axis=0), signals.std(axis=0)) if abs(level) > spread]
+    if not high:
+        return None
+    return ("levels larger than their variation and not taken out: " + ", ".join(high) +
+            "; a model from rest cannot follow them: try --detrend mean")
+
+
 def _order(kind: Kind, order: str) -> int | str:
     if kind is Kind.ss and order == "auto":
         return order
@@ -64,17 +101,32 @@ def _order(kind: Kind, order: str) -> int | str:
     return value
 
 
-def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool):
+def _delay(text: str) -> int | list[int] | str:
+    text = text.strip()
+    if text in ("estimate", "auto"):
+        return "estimate"
+    try:
+        values = [int(part) for part in text.split(",")]
+    except ValueError:
+        values = [-1]
+    if min(values) < 0:
+        fail(f"--delay = {text!r}: expected 'estimate', a number of samples >= 0, or one per input (like 2,0,5)")
+    return values[0] if len(values) == 1 else values
+
+
+def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool,
+           detrend: Detrend = Detrend.none, delay: str = "0", max_delay: int = 40):
     from softtip.sysid import StateSpaceModel, TransferFunctionModel
 
+    common = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    common |= {} if refine is None else {"refine": refine}
     if kind is Kind.tf:
         if continuous:
             fail("--continuous: a transfer function is continuous already (it runs discretised)")
-        return TransferFunctionModel(order, zeros, **({} if refine is None else {"refine": refine}))
+        return TransferFunctionModel(order, zeros, **common)
     if zeros is not None:
         fail("--zeros: only for --kind tf")
-    return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete",
-                           **({} if refine is None else {"refine": refine}))
+    return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete", **common)
 
 
 def _scores_table(title: str, scores: dict) -> Table:
@@ -87,8 +139,56 @@ def _scores_table(title: str, scores: dict) -> Table:
                       *(f"{row[key]:.2f}" for key in ("rmse_fs_percent", "mae_fs_percent")),
                       f"{row['fit_percent']:.1f}" if row["fit_percent"] is not None else "—",
                       f"{row['full_scale']:.4g} {row['unit']}".strip())
-    table.caption = f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples"
+    table.caption = (f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples; "
+                     f"initial state: {scores['initial_state']}")
     return table
+
+
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _print_residual_tests(tests: dict) -> None:
+    table = Table(title=f"residual tests on {tests['data']} ({tests['lags']} lags, {100 * tests['confidence']:g} %)")
+    for heading in ("output", "white", "N Σρ²", "limit", "input", "independent", "Σ(ρ/σ)²", "limit "):
+        table.add_column(heading, justify="left" if heading in ("output", "input") else "right")
+    for name, row in tests["outputs"].items():
+        white = row["whiteness"]
+        for k, (source, test) in enumerate(row["input_independence"].items()):
+            table.add_row(*((name, "yes" if white["passed"] else "[red]no[/]", f"{white['statistic']:.1f}",
+                             f"{white['limit']:.1f}") if k == 0 else ("", "", "", "")),
+                          source, "yes" if test["passed"] else "[red]no[/]", f"{test['statistic']:.1f}",
+                          f"{test['limit']:.1f}")
+    table.caption = (f"{tests['test']}; residuals: one-step prediction errors (an output-error model's are its "
+                     "simulation errors, which need not be white)")
+    console.print(table)
+
+
+def _print_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str]) -> None:
+    z, level = uncertainty["z"], f"± {100 * uncertainty['confidence']:g} %"
+    table = Table(title=f"coefficients (descending powers of s) and poles, {level} intervals")
+    for heading in ("entry", "denominator", "numerator", "poles (rad/s)"):
+        table.add_column(heading)
+
+    def ranges(values):
+        return ", ".join(f"{v['value']:.4g} ± {z * v['std']:.2g}" for v in values)
+
+    for entry in uncertainty["entries"]:
+        poles = ", ".join(f"{p['real']:.4g}{p['imag']:+.4g}j (± {z * p['real_std']:.2g}, {z * p['imag_std']:.2g}j)"
+                          for p in entry["poles"])
+        table.add_row(f"{inputs[entry['input']]} → {outputs[entry['output']]}", "1, " + ranges(entry["denominator"]),
+                      ranges(entry["numerator"]), poles)
+    console.print(table)
+
+
+def _print_state_space_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str]) -> None:
+    z, level = uncertainty["z"], f"± {100 * uncertainty['confidence']:g} %"
+    unit = " (rad/s)" if uncertainty["poles_domain"] == "continuous" else ""
+    console.print(f"{uncertainty['poles_domain']} poles{unit}, {level} intervals: " + ", ".join(
+        f"{p['real']:.4g}{p['imag']:+.4g}j (± {z * p['real_std']:.2g}, {z * p['imag_std']:.2g}j)"
+        for p in uncertainty["poles"]))
+    console.print(f"DC gains, {level} intervals: " + ", ".join(
+        f"{inputs[g['input']]} → {outputs[g['output']]} {g['value']:.4g} ± {z * g['std']:.2g}"
+        for g in uncertainty["dc_gains"]))
 
 
 def _print_summary(summary: dict) -> None:
@@ -96,8 +196,20 @@ def _print_summary(summary: dict) -> None:
                   f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
                   f"fitted in {summary['fit_seconds']:.2f} s on {summary['data']['trials']} trials "
                   f"({summary['data']['samples']} samples)")
-    console.print("fit % on the estimation data (simulated): " +
+    console.print("fit % on the estimation data (simulated from rest): " +
                   ", ".join(f"{name} {value:.1f}" for name, value in summary["fit_percent"].items()))
+    trend = summary["trend"]
+    if trend["kind"] != "none":
+        def values(key):
+            return ", ".join(f"{v:.5g}" for v in trend[key])
+
+        console.print(f"trend taken out ({trend['kind']}, saved with the model): input levels {values('input_offset')}, "
+                      f"output levels {values('output_offset')}" +
+                      (f"; slopes per s {values('input_slope')} and {values('output_slope')}"
+                       if trend["kind"] == "linear" else ""))
+    if any(delay["samples"] for delay in summary["delays"].values()):
+        console.print("input delays: " + ", ".join(f"{name} {delay['samples']} samples ({delay['seconds']:g} s)"
+                                                   for name, delay in summary["delays"].items()))
     report = summary.get("report") or summary.get("refinement")
     if report is not None:
         console.print(f"estimation: {'converged' if report.get('converged') else '[red]not converged[/]'}: "
@@ -111,40 +223,90 @@ def sysid_fit(
     kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
     order: str = typer.Option(..., "--order", help="Poles per entry (tf) or states (ss; or auto)."),
     zeros: int = typer.Option(None, "--zeros", help="Zeros per entry (tf; default order - 1)."),
-    method: Method = typer.Option(Method.n4sid, "--method", help="Subspace method (ss)."),
+    method: Method = typer.Option(Method.moesp, "--method", help="Subspace method (ss; MOESP validates best on the benchmark cases)."),
     refine: bool = typer.Option(None, "--refine/--no-refine",
                                 help="Prediction-error refinement (default: tf yes, ss no)."),
     continuous: bool = typer.Option(False, "--continuous", help="A continuous state-space model (ss)."),
+    detrend: Detrend = DETREND,
+    delay: str = DELAY,
+    max_delay: int = MAX_DELAY,
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
     validate: Path = VALIDATE,
     full_scale: list[float] = FULL_SCALE,
     model_file: Path = typer.Option(None, "--model", "-o", help="Save the model here (.npz)."),
+    bode: Path = typer.Option(None, "--bode", help="Save the Bode plot here (.png, .pdf, .svg), with its "
+                                                   "confidence band, beside the recording's empirical transfer "
+                                                   "function."),
+    residuals: Path = typer.Option(None, "--residuals", help="Save the residual tests' plot here (.png, .pdf, "
+                                                             ".svg): on --validate, else on the estimation data."),
+    confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
+    lags: int = typer.Option(25, "--lags", help="Lags of the residual tests."),
     json_output: bool = JSON,
 ) -> None:
     """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
-    R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated, from rest)."""
+    R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated from rest, and from each trial's
+    estimated initial state), and the residual tests (whiteness, independence of the inputs)."""
     from softtip.sysid import save_model
 
+    if not 0 < confidence < 1:
+        fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
+    if lags < 1:
+        fail(f"--lags = {lags}: expected a positive integer")
+    for option, path in (("--bode", bode), ("--residuals", residuals)):
+        if path is not None and (path.suffix.lower() not in FIGURE_SUFFIXES or not path.parent.is_dir()):
+            fail(f"{option} {path}: expected a .png, .pdf or .svg file in an existing directory")
     inputs, outputs = _names(input), _names(output)
-    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous)
+    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
+    validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
-    result = {"model": estimator.summary()}
-    if validate is not None:
-        validation = _read(validate, inputs, outputs, ts, time_column, trial_column)
-        result["validation"] = estimator.evaluate(validation, full_scale=_full_scale(full_scale)).to_dict()
+    result = {"model": estimator.summary(), "note": _level_note(recording, detrend)}
+    if kind is Kind.tf or estimator.covariance_ is not None:
+        result["model"]["uncertainty"] = estimator.uncertainty(confidence)
+    checked = recording if validation is None else validation
+    # a short record takes fewer lags: four samples a lag at least
+    usable = min(lags, checked.n_samples // 4)
+    tests = estimator.residual_tests(checked, lags=usable) if usable >= 1 else None
+    result["residual_tests"] = None if tests is None else \
+        tests.to_dict() | {"data": str(validate if validation is not None else data)}
+    if validation is not None:
+        scale = _full_scale(full_scale)
+        result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
+        result["validation_estimated_initial_state"] = estimator.evaluate(validation, full_scale=scale,
+                                                                          initial_state="estimate").to_dict()
     if model_file is not None:
         result["saved"] = str(save_model(model_file, estimator))
+    if bode is not None:
+        estimator.bode(confidence=confidence, recording=checked).savefig(bode)
+        result["bode"] = str(bode)
+    if residuals is not None:
+        if tests is None:
+            fail(f"--residuals: {checked.n_samples} samples are too few for residual tests")
+        tests.figure().savefig(residuals)
+        result["residuals"] = str(residuals)
     if json_output:
         print(json.dumps(result, indent=2))
         return
     _print_summary(result["model"])
+    if result["note"]:
+        console.print(f"[yellow]note:[/] {result['note']}")
+    if kind is Kind.tf:
+        _print_uncertainty(result["model"]["uncertainty"], inputs, outputs)
+    elif result["model"]["uncertainty"] is not None:
+        _print_state_space_uncertainty(result["model"]["uncertainty"], inputs, outputs)
+    else:
+        console.print(f"parameter covariance {result['model']['uncertainty_note']}")
     if validate is not None:
-        console.print(_scores_table(f"validation on {validate} (simulated)", result["validation"]))
-    if model_file is not None:
-        console.print(f"saved -> {result['saved']}")
+        console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
+        console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",
+                                    result["validation_estimated_initial_state"]))
+    if result["residual_tests"] is not None:
+        _print_residual_tests(result["residual_tests"])
+    for name in ("saved", "bode", "residuals"):
+        if name in result:
+            console.print(f"{name} -> {result[name]}")
 
 
 def _order_range(text: str) -> list[int]:
@@ -167,11 +329,17 @@ def sysid_orders(
     output: list[str] = OUTPUTS,
     kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
     orders: str = typer.Option(None, "--orders", help="Orders, e.g. 2-8 or 2,4,6 (default: tf 2-8, ss 2-12)."),
-    method: Method = typer.Option(Method.n4sid, "--method", help="Subspace method (ss)."),
+    method: Method = typer.Option(Method.moesp, "--method", help="Subspace method (ss; MOESP validates best on the benchmark cases)."),
+    detrend: Detrend = DETREND,
+    delay: str = DELAY,
+    max_delay: int = MAX_DELAY,
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
     validate: Path = VALIDATE,
+    initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
+                                               help="Score each fit from rest (zero) or from each trial's "
+                                                    "estimated initial state (estimate)."),
     json_output: bool = JSON,
 ) -> None:
     """Fit every order and tabulate fit %, AIC, BIC and time (fit % on --validate if given; AIC and BIC on the
@@ -181,12 +349,16 @@ def sysid_orders(
     inputs, outputs = _names(input), _names(output)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
-    params = {"method": method.value} if kind is Kind.ss else {}
-    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation, **params)
+    params = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    params |= {"method": method.value} if kind is Kind.ss else {}
+    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation,
+                       initial_state.value, **params)
+    note = _level_note(recording, detrend)
     if json_output:
         print(json.dumps(rows, indent=2))
         return
-    where = f"on {validate}" if validate is not None else "on the estimation data"
+    where = (f"on {validate}" if validate is not None else "on the estimation data") + \
+        (" from rest" if initial_state is InitialState.zero else " from the estimated initial states")
     table = Table(title=f"{'transfer functions (poles per entry)' if kind is Kind.tf else 'state space (states)'}: "
                         f"fit % {where}")
     for heading in ("order", "parameters", "fit %", *outputs, "AIC", "BIC", "stable", "seconds"):
@@ -199,6 +371,8 @@ def sysid_orders(
                       f"{row['seconds']:.2f}")
     table.caption = "* lowest BIC"
     console.print(table)
+    if note:
+        console.print(f"[yellow]note:[/] {note}")
 
 
 def sysid_predict(
@@ -211,6 +385,9 @@ def sysid_predict(
     trial_column: str = TRIAL_COLUMN,
     full_scale: list[float] = FULL_SCALE,
     out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
+    initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
+                                               help="zero: from rest; estimate: each trial's initial state from "
+                                                    "its measured outputs."),
     json_output: bool = JSON,
 ) -> None:
     """Run a saved model on a recording; score it where the recording has the model's outputs."""
@@ -224,10 +401,15 @@ def sysid_predict(
     measured = all(name in present for name in model.outputs_)
     if horizon is not None and not measured:
         fail(f"{data}: --horizon needs the measured outputs {', '.join(model.outputs_)}")
+    if initial_state is InitialState.estimate and not measured:
+        fail(f"{data}: --initial-state estimate needs the measured outputs {', '.join(model.outputs_)}")
     recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], ts, time_column,
                       trial_column)
-    predicted = model.predict(recording, horizon) if measured else model.simulate(recording)
-    scores = model.evaluate_predictions(recording, predicted, _full_scale(full_scale)) if measured else None
+    predicted = model.predict(recording, horizon, initial_state.value) if measured else model.simulate(recording)
+    scores = None
+    if measured:
+        scores = replace(model.evaluate_predictions(recording, predicted, _full_scale(full_scale)),
+                         initial_state="estimated" if initial_state is InitialState.estimate else "zero")
     result = {"model": str(model_file), "horizon": horizon, "trials": len(recording.trials),
               "samples": recording.n_samples, "scores": None if scores is None else scores.to_dict()}
     if out is not None:

@@ -76,7 +76,8 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Scores:
-    """Per-output scores and the full scale they were normalised by."""
+    """Per-output scores, the full scale they were normalised by, and the initial state the model ran from
+    ("zero": from rest; "estimated": each trial's best initial state)."""
 
     outputs: tuple[str, ...]
     units: tuple[str, ...]
@@ -84,6 +85,7 @@ class Scores:
     full_scale: FullScale
     full_scale_values: np.ndarray
     samples: int
+    initial_state: str = "zero"
 
     METRICS = ("r2", "r", "rmse", "mae", "rmse_fs_percent", "mae_fs_percent", "fit_percent")
 
@@ -95,7 +97,7 @@ class Scores:
             per_output[name] = row | {"unit": self.units[k], "full_scale": float(self.full_scale_values[k])}
         return {"outputs": per_output, "full_scale": {"definition": self.full_scale.definition,
                                                        "description": self.full_scale.description},
-                "samples": self.samples}
+                "samples": self.samples, "initial_state": self.initial_state}
 
     def mean(self, metric: str) -> float:
         return float(np.mean(self.values[metric]))

@@ -45,6 +45,9 @@ from softtip.data.dataset import (
 )
 
 DETRENDS = ("none", "mean", "linear")
+# the magnitudes whose squares and sums of squares stay normal doubles; the smallest relative
+# variation that is more than rounding
+MAGNITUDE_RANGE, ROUNDING = (1e-150, 1e150), 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,15 +260,28 @@ class Recording:
     # -- checks before identification ---------------------------------------
 
     def require_excitation(self) -> None:
-        """Refuses a recording without outputs, or in which an input never changes: its effect cannot be
-        identified."""
+        """Refuses, in one line naming the channel, a recording without outputs, or with a channel that
+        cannot be identified in double precision: constant, varying only at the level of its rounding
+        (less than 1e-12 of its magnitude), or of magnitude beyond [1e-150, 1e150] (its squares, which
+        every estimator sums, would underflow or overflow: rescale it, i.e. change its unit)."""
         if not self.outputs:
             raise DatasetError(f"{self.source}: no outputs: nothing to identify")
         u = np.concatenate([trial.u for trial in self.trials])
-        flat = np.flatnonzero(np.ptp(u, axis=0) == 0)
-        if flat.size:
-            raise DatasetError(f"{self.source}: input {self.inputs[flat[0]]!r} is constant "
-                               f"({u[0, flat[0]]:g}) over the whole recording: its effect cannot be identified")
+        y = np.concatenate([trial.y for trial in self.trials])
+        for role, values, names in (("input", u, self.inputs), ("output", y, self.outputs)):
+            magnitudes, spreads = np.max(np.abs(values), axis=0), np.ptp(values, axis=0)
+            for name, magnitude, spread, first in zip(names, magnitudes, spreads, values[0], strict=True):
+                where = f"{self.source}: {role} {name!r}"
+                if spread == 0:
+                    raise DatasetError(f"{where} is constant ({first:g}) over the whole recording: "
+                                       f"{'its effect' if role == 'input' else 'it'} cannot be identified")
+                if magnitude > MAGNITUDE_RANGE[1] or magnitude < MAGNITUDE_RANGE[0]:
+                    raise DatasetError(f"{where} reaches {magnitude:.3g}: outside [{MAGNITUDE_RANGE[0]:g}, "
+                                       f"{MAGNITUDE_RANGE[1]:g}], where sums of squares stay finite and non-zero "
+                                       "in double precision; rescale it (change its unit)")
+                if spread <= ROUNDING * magnitude:
+                    raise DatasetError(f"{where} varies by {spread:.3g} about {magnitude:.3g}: at the level of "
+                                       "its rounding, not a signal that excites or responds")
 
     def require_samples(self, minimum: int, purpose: str) -> None:
         """Refuses a recording of fewer than ``minimum`` samples in all, naming ``purpose``."""

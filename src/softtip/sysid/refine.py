@@ -16,6 +16,12 @@ It stops when a step lowers the cost by less than ``tolerance`` of it (default 1
 Stability: a refined model whose A (simulation) or Ā (predictor) is unstable, or whose cost is
 not lower, is not used: the starting model is kept and the report says why. A run that stops at
 its evaluation limit reports ``converged = False``.
+
+:func:`parameter_covariance` gives the asymptotic covariance of the predictor's parameters in those
+local coordinates (Ljung 1999, §9.3, for a weighted criterion: H⁻¹ (Σ_t J_tᵀ W Λ W J_t) H⁻¹, H =
+JᵀJ, Λ the innovations' covariance), and the derivatives of (A, B, C, D) along each coordinate
+(central differences, exact: the matrices are at most quadratic in the parameters), from which
+:mod:`softtip.sysid.uncertainty` carries it to poles and frequency responses.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ import numpy as np
 import scipy.optimize
 
 from softtip.sysid.simulation import state_sequence
-from softtip.sysid.statespace import StateSpace
+from softtip.sysid.statespace import IdentificationError, StateSpace
 from softtip.sysid.subspace import filtered_inputs
 
 
@@ -160,3 +166,50 @@ def refine(system: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]], *,
         return refined, RefinementReport(converged, result.nfev, cost_before, float(2 * result.cost), True,
                                          "; ".join(notes))
     return start, RefinementReport(converged, result.nfev, cost_before, cost_before, False, "; ".join(notes))
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpaceCovariance:
+    """The covariance (p, p) of a discrete innovations-form model's parameters in local coordinates η and
+    the derivatives of its matrices along them: ``derivatives`` = (dA (p, n, n), dB (p, n, nu),
+    dC (p, ny, n), dD (p, ny, nu))."""
+
+    covariance: np.ndarray
+    derivatives: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def parameter_covariance(system: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]]) -> StateSpaceCovariance:
+    """The parameter covariance of ``system`` (discrete, with K) from its one-step prediction errors on
+    ``segments``; see the module notes. At a model that the refinement did not reach (a subspace
+    estimate) it is the Gauss–Newton approximation at that point."""
+    K = np.zeros((system.n_states, system.n_outputs)) if system.K is None else system.K
+    start = StateSpace(system.A, system.B, system.C, system.D, system.ts, K, system.noise_covariance)
+    scale = np.std(np.vstack([y for _, y in segments]), axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    problem = _Predictor(segments, system.n_states, scale)
+    theta0 = problem.pack(start)
+    basis = problem.local_coordinates(theta0)
+    jacobian = problem.jacobian(theta0) @ basis  # rows: sample-major, output-minor, as errors.ravel()
+    errors = problem.errors(theta0)
+    samples, ny = errors.shape
+    parameters = basis.shape[1]
+    if samples * ny <= parameters:
+        raise IdentificationError(f"{samples} samples for {parameters} parameters: no covariance")
+    innovations = errors.T @ errors / (samples - parameters / ny)
+    weight = innovations / np.outer(scale, scale) / samples
+    by_sample = jacobian.reshape(samples, ny, parameters)
+    inverse = np.linalg.pinv(jacobian.T @ jacobian)
+    middle = np.einsum("tip,ij,tjq->pq", by_sample, weight, by_sample)
+    covariance = inverse @ middle @ inverse
+
+    def matrices(theta):
+        A_bar, B_bar, K, C, D = problem.unpack(theta)
+        return A_bar + K @ C, B_bar + K @ D, C, D
+
+    steps = 1e-6 * np.maximum(1.0, np.abs(basis.T @ theta0))
+    derivatives = [[] for _ in range(4)]
+    for k in range(parameters):
+        ahead, behind = matrices(theta0 + steps[k] * basis[:, k]), matrices(theta0 - steps[k] * basis[:, k])
+        for slot, (a, b) in enumerate(zip(ahead, behind)):
+            derivatives[slot].append((a - b) / (2 * steps[k]))
+    return StateSpaceCovariance((covariance + covariance.T) / 2, tuple(np.array(d) for d in derivatives))

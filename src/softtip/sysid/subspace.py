@@ -42,16 +42,61 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from softtip.sysid.recording import MAGNITUDE_RANGE
+from softtip.sysid.simulation import free_response
 from softtip.sysid.statespace import IdentificationError, StateSpace
 
 METHODS = ("n4sid", "moesp", "cva")
 AUTO = "auto"  # the order from the singular values
 MAX_ORDER = 12
+_LONGEST_HORIZON = 60  # block rows a data-chosen horizon may take at most
 
 
-def default_horizon(max_order: int, n_outputs: int) -> int:
-    """Past and future block rows: at least 10, and enough that Γ_up has more rows than states."""
-    return max(10, math.ceil((max_order + 1) / n_outputs) + 1)
+def minimum_horizon(max_order: int, n_outputs: int) -> int:
+    """The fewest block rows for ``max_order`` states: (horizon - 1) outputs > order (Γ_up has more rows than states)."""
+    return max(2, math.ceil((max_order + 1) / n_outputs) + 1)
+
+
+def arx_lag(segments: list[tuple[np.ndarray, np.ndarray]], longest: int) -> tuple[int, np.ndarray]:
+    """The number of past samples an ARX model y[t] = Σ_k (A_k y[t-k] + B_k u[t-k]) + e needs, by AIC
+    over 1..``longest`` (as MATLAB's n4sid chooses its horizon from the data): every lag's residual
+    covariance from one QR factor of [Φ_longest | Y] (the regressors ordered by lag, so each smaller
+    model's are a prefix). Returns (lag, AIC per lag)."""
+    nu, ny = segments[0][0].shape[1], segments[0][1].shape[1]
+    blocks = []
+    for u, y in segments:
+        if len(u) <= longest:
+            continue
+        t = np.arange(longest, len(u))
+        lagged = [np.hstack([y[t - k], u[t - k]]) for k in range(1, longest + 1)]
+        blocks.append(np.hstack([*lagged, y[t]]))
+    data = np.vstack(blocks)
+    N, width = len(data), longest * (nu + ny)
+    scale = np.std(data, axis=0)
+    R = np.linalg.qr(data / np.where(scale > 0, scale, 1.0), mode="r")
+    criteria = np.full(longest, np.inf)
+    for lag in range(1, longest + 1):
+        k = lag * (nu + ny)
+        tail = R[k:, width:]
+        _, log_det = np.linalg.slogdet(tail.T @ tail / N)
+        criteria[lag - 1] = N * log_det + 2 * k * ny
+    return int(np.argmin(criteria)) + 1, criteria
+
+
+def data_horizon(segments: list[tuple[np.ndarray, np.ndarray]], max_order: int) -> int:
+    """Block rows from the data: the ARX lag by AIC (:func:`arx_lag`, up to the longest lag that leaves ten
+    samples per regressor and a window of the trial), at least :func:`minimum_horizon`, at most what the
+    data can fill (2 horizon (nu + ny) Hankel columns)."""
+    nu, ny = segments[0][0].shape[1], segments[0][1].shape[1]
+    samples = sum(len(u) for u, _ in segments)
+    fewest = minimum_horizon(max_order, ny)
+    most = min(max(len(u) for u, _ in segments) // 4, samples // (10 * (nu + ny)), _LONGEST_HORIZON)
+    if most <= fewest:
+        return fewest
+    lag, _ = arx_lag(segments, most)
+    # the columns 2 i (nu + ny) <= N - 2 i + 1 must fill the Hankel matrices
+    fillable = max(fewest, (samples + 1) // (2 * (nu + ny) + 2))
+    return int(min(max(lag, fewest), fillable))
 
 
 def order_from_singular_values(singular_values: np.ndarray, max_order: int) -> int:
@@ -90,7 +135,12 @@ class _Geometry:
         data = np.vstack([np.hstack([_hankel_rows(u, 2 * i), _hankel_rows(y, 2 * i)])
                           for u, y in segments if len(u) >= 2 * i])
         self.columns = len(data)
-        self.L = np.linalg.qr(data, mode="r").T
+        with np.errstate(over="ignore", invalid="ignore"):
+            self.L = np.linalg.qr(data, mode="r").T
+        if not np.all(np.isfinite(self.L)):
+            # a least-squares solve on a matrix of NaN may never return: refuse before it
+            raise IdentificationError("subspace identification: the data's triangular factor is not finite "
+                                      "(magnitudes too large for double precision: rescale the signals)")
         self.nu, self.ny = nu, ny
         self._first_y = 2 * i * nu
 
@@ -156,12 +206,7 @@ def input_matrices(A: np.ndarray, C: np.ndarray, segments: list[tuple[np.ndarray
         rows = np.zeros((N, ny, shared + n * len(segments)))
         rows[:, :, :nu * n] = filtered_inputs(A, C, u)
         rows[:, :, nu * n:shared] = np.einsum("ac,tb->tacb", np.eye(ny), u).reshape(N, ny, ny * nu)
-        free = np.empty((N, ny, n))
-        power = C
-        for t in range(N):
-            free[t] = power
-            power = power @ A
-        rows[:, :, shared + k * n:shared + (k + 1) * n] = free
+        rows[:, :, shared + k * n:shared + (k + 1) * n] = free_response(A, C, N)
         blocks.append((rows / scale[None, :, None]).reshape(N * ny, -1))
         targets.append((y / scale).ravel())
     theta = np.linalg.lstsq(np.vstack(blocks), np.concatenate(targets), rcond=None)[0]
@@ -188,14 +233,19 @@ def _kalman_gain(A: np.ndarray, C: np.ndarray, covariance: np.ndarray, output_sc
 
 
 def subspace_identify(segments: list[tuple[np.ndarray, np.ndarray]], ts: float, order: int | str = AUTO,
-                      method: str = "n4sid", *, horizon: int | None = None, max_order: int = MAX_ORDER,
+                      method: str = "moesp", *, horizon: int | None = None, max_order: int = MAX_ORDER,
                       enforce_stability: bool = True) -> SubspaceResult:
     """A discrete innovations-form model of the trials ``segments`` ((u, y) each) at sample time ``ts``."""
     if method not in METHODS:
         raise IdentificationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    largest_value = max(float(np.max(np.abs(signal), initial=0.0)) for pair in segments for signal in pair)
+    if not largest_value <= MAGNITUDE_RANGE[1]:
+        # beyond it the Hankel matrices' squares overflow, and LAPACK's least squares on them may never return
+        raise IdentificationError(f"subspace identification: values up to {largest_value:.3g}, beyond "
+                                  f"{MAGNITUDE_RANGE[1]:g}: rescale the signals")
     nu, ny = segments[0][0].shape[1], segments[0][1].shape[1]
     largest = max_order if order == AUTO else order
-    i = default_horizon(largest, ny) if horizon is None else horizon
+    i = data_horizon(segments, largest) if horizon is None else horizon
     if i * ny <= largest or (i - 1) * ny < largest:
         raise IdentificationError(f"horizon = {i}: too short for order {largest} with {ny} output(s) "
                                   f"(needs (horizon - 1) x outputs >= order)")

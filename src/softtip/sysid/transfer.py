@@ -658,27 +658,78 @@ def _run(progress: list[_Progress], max_iterations: int, tolerance: float, sweep
     return number
 
 
+def _simulation_and_sensitivities(row: _Row, inputs, mask, ts) -> tuple[np.ndarray, np.ndarray]:
+    """One output's simulated response at the real samples and its derivatives with respect to the row's
+    parameters, (samples,) and (samples, parameters): d y/d a_k = -s^k B/A^2 u, d y/d b_k = s^k/A u."""
+    states = _sensitivity_states(row.a, row.b, ts * row.omega, inputs)
+    prediction, columns = 0.0, []
+    for a, b, x, v in zip(row.a, row.b, states, inputs):
+        n = len(a)
+        prediction = prediction + _response(a, b, x[:n], v)
+        columns += [-x[n:], _derivatives(a, len(b), x[:n], v)]
+    return prediction[mask], np.concatenate(columns)[:, mask].T
+
+
+def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np.ndarray, np.ndarray]],
+                         ts: float) -> list[np.ndarray]:
+    """The covariance of each output's coefficients, as the output-error estimate's asymptotic covariance
+    (Ljung 1999, §9.3): σ² (JᵀJ)⁻¹, J the Jacobian of the simulated output with respect to the
+    coefficients at ``tf`` on ``segments`` and σ² the residual variance, sum of squares / (N - p).
+
+    One matrix per output over the coefficients of its entries in order, entry j: the denominator's
+    coefficients after the leading 1, then the numerator's, both in descending powers of s (as
+    ``tf`` stores them). (JᵀJ is computed in each entry's own time unit, where it is well
+    conditioned, and carried to seconds by the diagonal scaling between the two.) It holds for white
+    output errors: with coloured ones (the residual whiteness test fails) it understates the spread,
+    as MATLAB's for an output-error model does."""
+    ts = _sample_time(ts)
+    inputs, outputs, mask = _segments(segments)
+    ny, nu = tf.shape
+    if (len(outputs), len(inputs)) != (ny, nu):
+        raise ValueError(f"segments: {len(inputs)} inputs and {len(outputs)} outputs, the model has {nu} and {ny}")
+    covariances = []
+    for i in range(ny):
+        omega = np.array([max(float(np.exp(np.mean(np.log(np.maximum(np.abs(np.roots(a)), 1e-300))))), 1e-300)
+                          if len(a) > 1 else 1.0 for a in tf.denominators[i]])
+        scaled = [_rescaled(a[:0:-1], [b[::-1]], 1.0 / w) for a, b, w in
+                  zip(tf.denominators[i], tf.numerators[i], omega)]
+        row = _Row([a for a, _ in scaled], [b for _, (b,) in scaled], omega)
+        with single_threaded_blas():
+            prediction, jacobian = _simulation_and_sensitivities(row, inputs, mask, ts)
+        residual = outputs[i][mask] - prediction
+        count, parameters = jacobian.shape
+        if count <= parameters:
+            raise IdentificationError(f"output {i}: {count} samples for {parameters} coefficients: no covariance")
+        variance = float(residual @ residual) / (count - parameters)
+        covariance = variance * np.linalg.pinv(jacobian.T @ jacobian)
+        # the row's ascending coefficients in 1/omega units -> descending in seconds: a_k omega^(n-k)
+        factors, order, first = [], [], 0
+        for a, b, w in zip(row.a, row.b, omega):
+            n = len(a)
+            factors += [w ** (n - np.arange(n)), w ** (n - np.arange(len(b)))]
+            order += [first + np.arange(n)[::-1], first + n + np.arange(len(b))[::-1]]
+            first += n + len(b)
+        factor, order = np.concatenate(factors), np.concatenate(order)
+        covariance = covariance * np.outer(factor, factor)
+        covariances.append(covariance[np.ix_(order, order)])
+    return covariances
+
+
 def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, stable_only: bool):
     """Output-error refinement of one output's row by least squares on the simulation error with the
     analytic Jacobian (an unstable trial model is refused when ``stable_only``): (row, result)."""
-    steps = ts * row.omega
     last = {}
 
     def evaluate(theta):
         if last.get("theta") is None or not np.array_equal(last["theta"], theta):
             trial = row.with_parameters(theta)
             with np.errstate(over="ignore", invalid="ignore"):
-                states = _sensitivity_states(trial.a, trial.b, steps, inputs)
-                prediction, columns = 0.0, []
-                for a, b, x, v in zip(trial.a, trial.b, states, inputs):
-                    n = len(a)
-                    prediction = prediction + _response(a, b, x[:n], v)
-                    columns += [-x[n:], _derivatives(a, len(b), x[:n], v)]
-                residual = target - prediction[mask]
+                prediction, sensitivities = _simulation_and_sensitivities(trial, inputs, mask, ts)
+                residual = target - prediction
             # a trial model that blew up (or left the stable ones) is refused: the trust region shrinks
             if not np.all(np.abs(residual) < 1e150) or (stable_only and not trial.is_stable()):
                 residual = np.full_like(residual, np.nan)
-            last.update(theta=theta.copy(), residual=residual, jacobian=-np.concatenate(columns)[:, mask].T)
+            last.update(theta=theta.copy(), residual=residual, jacobian=-sensitivities)
         return last
 
     result = optimize.least_squares(lambda theta: evaluate(theta)["residual"], row.parameters(),
