@@ -142,6 +142,8 @@ class NearestNeighbourRenderer:
         """Motor inputs for wanted wrenches (..., 6 or 3), with the out-of-range flag."""
         wanted = self._wanted(wrenches)
         distances, nearest = self.tree_.query(wanted, k=self.n_neighbours)
+        if self.n_neighbours == 1:  # scipy drops the neighbours' axis for k = 1
+            distances, nearest = distances[..., None], nearest[..., None]
         return Rendering(self._average(distances, nearest), self._outside(wanted, distances[..., 0]))
 
     def predict(self, wrenches) -> np.ndarray:

@@ -149,8 +149,9 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
         for fingertip in fingertips:
             user = sensed_contact(device, fingertip, user_grid, collection, rng)
             user_duration = user.duration_s
-            data_driven = personalise_data_driven(fs.platform_wrenches, user.platform_wrenches, user.motor_inputs,
-                                                  settings.n_neighbours, settings.contact_threshold)
+            data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
+                                                  user.platform_wrenches, settings.n_neighbours,
+                                                  settings.contact_threshold)
             geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
             renderers = (fs_renderer,
                          NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven.motor_inputs),
