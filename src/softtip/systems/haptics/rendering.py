@@ -146,6 +146,22 @@ class NearestNeighbourRenderer:
             distances, nearest = distances[..., None], nearest[..., None]
         return Rendering(self._average(distances, nearest), self._outside(wanted, distances[..., 0]))
 
+    def render_one(self, wrench) -> tuple[np.ndarray, bool]:
+        """Motor inputs (3,) for one wanted wrench (6,) or force (3,), and whether it lies outside the
+        table: :meth:`render` for the real-time loop, without its array bookkeeping."""
+        force = np.asarray(wrench, dtype=float)[FORCE]
+        if force.shape != (3,) or not np.isfinite(force).all():
+            raise ValueError(f"wanted wrench {wrench!r}: expected 6 (or 3) finite numbers")
+        distances, nearest = self.tree_.query(force, k=max(self.n_neighbours, 2))  # k >= 2 keeps the axis
+        distances, nearest = distances[: self.n_neighbours], nearest[: self.n_neighbours]
+        if distances[0] == 0.0:
+            motor = self.motor_inputs_[nearest[distances == 0.0]].mean(axis=0)
+        else:
+            weights = 1.0 / distances
+            motor = weights @ self.motor_inputs_[nearest] / weights.sum()
+        outside = distances[0] > self.widest_gap_ or (force < self.lowest_).any() or (force > self.highest_).any()
+        return motor, bool(outside)
+
     def predict(self, wrenches) -> np.ndarray:
         """Motor inputs (..., 3) for wanted wrenches; see :meth:`render` for the out-of-range flag."""
         return self.render(wrenches).motor_inputs
