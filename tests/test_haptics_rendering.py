@@ -164,3 +164,36 @@ def test_collection_reads_each_held_configuration_and_times_the_procedure():
     assert np.allclose(normal_force, np.linalg.norm(exact.finger_wrenches[:, :3], axis=1), atol=0.01)
     with pytest.raises(ValueError, match="collection.window_s = 2"):
         CollectionSettings(hold_s=1.0, window_s=2.0)
+
+
+def test_presses_recover_the_users_modulus_and_the_force_model_renders_the_fs_force():
+    from softtip.mechanics.plate_contact import PlateContactLaw
+    from softtip.systems.haptics.personalisation import fit_presses, personalise_force_model, press_configurations
+
+    softer = Fingertip(name="soft 9 mm", radius=9e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=0.5e6))
+    presses = press_configurations(DEVICE)
+    assert len(presses) == 5 and np.all(presses[:, 0] > 0)
+    read = sensed_contact(DEVICE, softer, presses, CollectionSettings(), None)
+    fit = fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, saturated=read.saturated)
+    assert fit.youngs_modulus == pytest.approx(0.5e6, rel=1e-9)  # exact readings: the modulus itself
+    grid = motor_grid(DEVICE, 7)
+    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None)
+    personal = personalise_force_model(DEVICE, grid, fs.finger_wrenches, FINGERTIP_SENSOR.radius, softer.radius, fit)
+    fs_force = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1)
+    wrench, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, personal.motor_inputs))
+    ok = ~personal.outside & (fs_force > 0.1) & ~fs.saturated
+    assert ok.sum() > 50
+    # the user feels the FS's force (the servos' dead band aside), where the plain geometric method does not
+    assert np.allclose(np.linalg.norm(wrench[ok, :3], axis=1), fs_force[ok], rtol=1e-9)
+    geometric = personalise_geometric(DEVICE, grid, FINGERTIP_SENSOR.radius, softer.radius)
+    plain, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, geometric.motor_inputs))
+    assert np.median(np.abs(np.linalg.norm(plain[ok, :3], axis=1) / fs_force[ok] - 1)) > 0.2
+
+
+def test_presses_that_never_touch_are_refused():
+    from softtip.systems.haptics.personalisation import fit_presses
+
+    with pytest.raises(ValueError, match="none of the 2 presses touched"):
+        fit_presses(DEVICE, np.zeros((2, 3)), np.zeros((2, 6)), 7.5e-3)
+    with pytest.raises(ValueError, match="presses: 6 given"):
+        fit_presses(DEVICE, np.zeros((6, 3)), np.zeros((6, 6)), 7.5e-3)

@@ -56,7 +56,7 @@ def test_study_renders_every_target_for_each_fingertip_and_method(small_study):
     assert small_study.target_wrenches.shape == (30, 6)
     assert np.all(small_study.target_magnitudes >= 5 / 320)
     for outcome in small_study.fingertips:
-        assert outcome.errors.shape == (3, 30) and np.all(np.isfinite(outcome.errors))
+        assert outcome.errors.shape == (len(METHODS), 30) and np.all(np.isfinite(outcome.errors))
         assert outcome.friedman.methods == 3 and len(outcome.post_hoc) == 3
         assert all(test.tests == 3 * 6 + 1 for test in outcome.post_hoc)
     assert len(small_study.summary_rows()) == 6 * len(METHODS)

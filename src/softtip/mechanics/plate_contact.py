@@ -63,6 +63,26 @@ def hertz_force(depth, radius, youngs_modulus, poisson_ratio):
     return 4.0 / 3.0 * reduced * np.sqrt(radius) * depth**1.5
 
 
+def hertz_depth(force, radius, youngs_modulus, poisson_ratio):
+    """The depth δ (m) at which :func:`hertz_force` reaches ``force`` (N >= 0): its exact inverse."""
+    force = np.maximum(np.asarray(force, dtype=float), 0.0)
+    reduced = youngs_modulus / (1 - poisson_ratio**2)
+    return (force / (4.0 / 3.0 * reduced * np.sqrt(radius))) ** (2.0 / 3.0)
+
+
+def fit_hertz_modulus(depth, force, radius, poisson_ratio=0.5) -> float:
+    """Young's modulus (Pa) whose Hertz law best fits presses of ``depth`` (m) and ``force`` (N) on a
+    cap of ``radius`` (m), by least squares in force (the law is linear in the modulus)."""
+    depth, force = np.asarray(depth, dtype=float), np.asarray(force, dtype=float)
+    shape = hertz_force(depth, radius, 1.0, 0.0)  # F per unit reduced modulus
+    if depth.shape != force.shape or not np.any(shape > 0):
+        raise ValueError("presses: expected matching depths and forces with at least one press in contact")
+    reduced = float(np.sum(shape * force) / np.sum(shape**2))
+    if not reduced > 0:
+        raise ValueError("presses: the forces do not grow with depth; no modulus fits them")
+    return reduced * (1 - poisson_ratio**2)
+
+
 def layer_force(depth, radius, shear_modulus, thickness):
     """F = 2πG R² δ³ / t³ (N): a thin incompressible layer on a rigid core under a frictionless flat."""
     depth = np.maximum(np.asarray(depth, dtype=float), 0.0)

@@ -40,7 +40,8 @@ from softtip.systems.haptics.device import DeviceSpec, PlatformPose
 
 FS_RADIUS = 7.5e-3  # m: the fingertip sensor's quarter-sphere tip (the publication)
 SHAPE_AXES = {"sphere": (1.0, 1.0, 1.0), "ellipsoid": (1.0, 1.6, 1.0), "pad": (1.0, 1.0, 0.6)}
-VYTAFLEX_30 = PlateContactLaw(law="hertz", youngs_modulus=1.14e6, poisson_ratio=0.5)
+# 3 mm of rubber over the core under the pad: softtip's choice for a cast over a rigid core (not published)
+VYTAFLEX_30 = PlateContactLaw(law="hertz", youngs_modulus=1.14e6, poisson_ratio=0.5, layer_thickness=3e-3)
 
 Offset3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 coordinates (m)")]
 

@@ -15,15 +15,34 @@ For each FS entry the forward kinematics give the platform's pose (centroid p_c,
 point facing the platform is p_o = p − r_F z1 and the imposed deformation d_F = p_c − p_o; the user's
 platform goes to p̃_c = p − r_U z1 + d_F = p_c + (r_F − r_U) z1 with the same orientation, and the
 inverse kinematics give m̃*. A pose the servos cannot reach is held at the servos' range and flagged.
+
+**B with a force–deformation model** (beyond the publication; the authors' future work). Equal
+indentation of a larger or stiffer sphere takes more force, so the geometric method is not exact
+for force. Here the user presses the platform at most five times (level presses, read by the DS);
+the geometric indentation of each press under the sphere model and the DS's force fit the user's
+Hertz modulus (:func:`~softtip.mechanics.plate_contact.fit_hertz_modulus`). Each FS entry's
+measured force |f*| is then rendered as the indentation that gives that force on the user's sphere,
+δ_U = Hertz⁻¹(|f*|), with the platform at p̃_c = p − (r_U − δ_U) z1 in the same orientation. An entry
+without contact keeps the geometric method's placement.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from softtip.mechanics.plate_contact import fit_hertz_modulus, hertz_depth
 from softtip.sensors.wrench import wrench_in_frame
-from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, inverse_kinematics_unchecked, quantised, reachable
-from softtip.systems.haptics.rendering import NearestNeighbourRenderer, Rendering
+from softtip.systems.haptics.device import (
+    DeviceSpec,
+    PlatformPose,
+    forward_kinematics,
+    inverse_kinematics_unchecked,
+    quantised,
+    reachable,
+)
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, Rendering
 
 
 def in_device_axes(device: DeviceSpec, motor_inputs, platform_wrenches) -> np.ndarray:
@@ -42,6 +61,65 @@ def personalise_data_driven(device: DeviceSpec, fs_motor_inputs, fs_platform_wre
     user = NearestNeighbourRenderer(n_neighbours, **options).fit(
         in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs)
     return user.render(in_device_axes(device, fs_motor_inputs, fs_platform_wrenches))
+
+
+@dataclass(frozen=True)
+class PressFit:
+    """The user's fingertip as the presses found it: its Hertz modulus (Pa), the presses' geometric
+    indentations (m) and DS forces (N), and how many touched."""
+
+    youngs_modulus: float
+    depths: np.ndarray
+    forces: np.ndarray
+    touching: int
+
+
+MAX_PRESSES = 5
+
+
+def press_configurations(device: DeviceSpec, presses: int = MAX_PRESSES) -> np.ndarray:
+    """Level presses (presses, 3): all three servos at once, evenly over their range beyond the released end."""
+    if not 1 <= presses <= MAX_PRESSES:
+        raise ValueError(f"presses = {presses!r}: expected 1 to {MAX_PRESSES}")
+    return np.repeat(np.linspace(0.0, device.angle_max, presses + 1)[1:, None], 3, axis=1)
+
+
+def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius: float,
+                contact_threshold: float = CONTACT_THRESHOLD, poisson_ratio: float = 0.5,
+                saturated=None) -> PressFit:
+    """Fit the user's Hertz modulus from at most five presses (``motor_inputs`` and the DS's readings);
+    presses where the DS ``saturated`` (presses,) are left out: their force is the range's end."""
+    motor_inputs = np.asarray(motor_inputs, dtype=float)
+    if not 1 <= len(motor_inputs) <= MAX_PRESSES:
+        raise ValueError(f"presses: {len(motor_inputs)} given, expected 1 to {MAX_PRESSES}")
+    pose = forward_kinematics(device, quantised(device, motor_inputs))
+    depths = user_radius - np.sum(pose.normal * (device.centre - pose.centroid), axis=-1)
+    forces = np.linalg.norm(np.asarray(platform_wrenches, dtype=float)[:, :3], axis=1)
+    usable = np.ones(len(forces), bool) if saturated is None else ~np.asarray(saturated, dtype=bool)
+    touching = (forces >= contact_threshold) & (depths > 0) & usable
+    if not touching.any():
+        raise ValueError(f"presses: none of the {len(motor_inputs)} presses touched the fingertip within the "
+                         f"sensor's range (forces from {contact_threshold:g} N, unsaturated): no stiffness can be fitted")
+    modulus = fit_hertz_modulus(depths[touching], forces[touching], user_radius, poisson_ratio)
+    return PressFit(modulus, depths, forces, int(touching.sum()))
+
+
+def personalise_force_model(device: DeviceSpec, fs_motor_inputs, fs_wrenches, fs_radius: float,
+                            user_radius: float, user: PressFit, contact_threshold: float = CONTACT_THRESHOLD,
+                            poisson_ratio: float = 0.5) -> Rendering:
+    """Personalised motor inputs (entries, 3) by the geometric method with the user's fitted Hertz law;
+    flagged (and held at the servos' range) where the pose is out of reach."""
+    geometric = personalise_geometric(device, fs_motor_inputs, fs_radius, user_radius)
+    pose = forward_kinematics(device, fs_motor_inputs)
+    force = np.linalg.norm(np.asarray(fs_wrenches, dtype=float)[:, :3], axis=1)
+    depth = hertz_depth(force, user_radius, user.youngs_modulus, poisson_ratio)
+    # p̃_c = p − (r_U − δ_U) z1: the plane at distance r_U − δ_U from the centre, towards the platform
+    point = device.centre - (user_radius - depth)[:, None] * pose.normal
+    angles = inverse_kinematics_unchecked(device, PlatformPose(point, pose.normal))
+    contact = force >= contact_threshold
+    angles = np.where(contact[:, None], angles, geometric.motor_inputs)
+    out = np.where(contact, ~reachable(device, angles, pose.tilt), geometric.outside)
+    return Rendering(np.clip(angles, 0.0, device.angle_max), out)
 
 
 def personalise_geometric(device: DeviceSpec, fs_motor_inputs, fs_radius: float, user_radius: float) -> Rendering:

@@ -29,11 +29,19 @@ from softtip.mechanics.plate_contact import contact_radius
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
-from softtip.systems.haptics.personalisation import personalise_data_driven, personalise_geometric
+from softtip.systems.haptics.personalisation import (
+    fit_presses,
+    personalise_data_driven,
+    personalise_force_model,
+    personalise_geometric,
+    press_configurations,
+)
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
-METHODS = ("standard", "data-driven (A)", "geometric (B)")
+# the publication's three methods, then softtip's addition: B with the user's stiffness from five presses
+METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)")
+PUBLISHED_METHODS = 3  # the statistics compare these, as published
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
@@ -56,7 +64,7 @@ class StudySettings:
 class FingertipOutcome:
     """One test fingertip: per method (rows in :data:`METHODS` order) and target, the error (N), the
     rendered force's magnitude (N), and whether the result is flagged (a target outside the table,
-    a pose out of reach, a sensor saturated)."""
+    a pose out of reach, a sensor saturated); Friedman and the post hoc tests over the published three."""
 
     fingertip: Fingertip
     errors: np.ndarray
@@ -64,6 +72,7 @@ class FingertipOutcome:
     flagged: np.ndarray
     user_table_flagged: int  # FS entries whose personalisation was flagged, method A
     geometric_flagged: int  # FS entries whose geometric personalisation was out of reach
+    fitted_modulus: float  # Pa: the user's Hertz modulus from the presses (method B+)
     friedman: FriedmanResult
     post_hoc: tuple[WilcoxonResult, WilcoxonResult, WilcoxonResult]  # in PAIRS order
 
@@ -100,13 +109,43 @@ class HapticsStudy:
     def figures(self) -> list[Figure]:
         return [error_box_plots(self)]
 
+    def to_dict(self) -> dict:
+        """The results as JSON-ready values (forces in N, moduli in Pa, times in s)."""
+        magnitudes = self.target_magnitudes
+
+        def test(result: WilcoxonResult) -> dict:
+            return {"W_scipy_min": result.w_scipy, "W_signed_rank_sum": result.signed_rank_sum,
+                    "W_plus": result.w_plus, "W_minus": result.w_minus, "p": result.p_value,
+                    "p_bonferroni": result.p_bonferroni, "pairs": result.pairs, "tests": result.tests}
+
+        return {
+            "seed": self.seed, "methods": list(METHODS), "targets": len(magnitudes),
+            "target_force_N": {"mean": float(magnitudes.mean()), "median": float(np.median(magnitudes))},
+            "fs_collection_s": self.fs_collection_s, "user_collection_s": self.user_collection_s,
+            "max_contact_radius_over_layer": self.max_contact_to_layer,
+            "fingertips": [{
+                "name": o.fingertip.name, "radius_m": o.fingertip.radius,
+                "median_error_N": np.median(o.errors, axis=1).tolist(), "mean_error_N": o.errors.mean(axis=1).tolist(),
+                "median_rendered_N": np.median(o.rendered, axis=1).tolist(), "flagged": o.flagged.sum(axis=1).tolist(),
+                "light_targets": int(np.sum(magnitudes < self.settings.light_force)),
+                "light_targets_without_contact_standard": o.light_failures(
+                    magnitudes, self.settings.light_force, self.settings.contact_threshold),
+                "fs_entries_flagged_A": o.user_table_flagged, "fs_entries_out_of_reach_B": o.geometric_flagged,
+                "fitted_modulus_Pa": o.fitted_modulus,
+                "friedman": {"chi_square": o.friedman.chi_square, "p": o.friedman.p_value},
+                "post_hoc": {f"{METHODS[a]} vs {METHODS[b]}": test(t) for (a, b), t in zip(PAIRS, o.post_hoc, strict=True)},
+            } for o in self.fingertips],
+            "pooled_A_vs_B": test(self.pooled),
+            "notes": list(self.notes),
+        }
+
 
 def error_box_plots(study: HapticsStudy) -> Figure:
     """Box plots of the rendering error (N) per fingertip and method."""
     figure = Figure(figsize=(12, 6.5), layout="constrained")
     axes = figure.subplots(2, 3, sharey=True).ravel()
     for axis, outcome in zip(axes, study.fingertips, strict=False):
-        axis.boxplot(list(outcome.errors), tick_labels=["standard", "A", "B"])
+        axis.boxplot(list(outcome.errors), tick_labels=["standard", "A", "B", "B+"])
         axis.set_title(outcome.fingertip.name)
         axis.grid(axis="y", alpha=0.3)
     for axis in axes[::3]:
@@ -153,9 +192,15 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
                                                   user.platform_wrenches, settings.n_neighbours,
                                                   settings.contact_threshold)
             geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
+            presses = sensed_contact(device, fingertip, press_configurations(device), collection, rng)
+            pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
+                                  settings.contact_threshold, saturated=presses.saturated)
+            force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
+                                                  fingertip.radius, pressed, settings.contact_threshold)
             renderers = (fs_renderer,
                          NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven.motor_inputs),
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, geometric.motor_inputs))
+                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, geometric.motor_inputs),
+                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, force_model.motor_inputs))
             errors, rendered, flagged = [], [], []
             for method in renderers:
                 rendering = method.render(targets)
@@ -166,7 +211,7 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
             errors = np.array(errors)
             outcomes.append(FingertipOutcome(
                 fingertip, errors, np.array(rendered), np.array(flagged), int(data_driven.outside.sum()),
-                int(geometric.outside.sum()), friedman(errors),
+                int(geometric.outside.sum()), pressed.youngs_modulus, friedman(errors[:PUBLISHED_METHODS]),
                 tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS)))
             task.advance(note=fingertip.name)
     pooled = wilcoxon(np.concatenate([o.errors[1] for o in outcomes]),
