@@ -12,7 +12,8 @@ The settings and their values (softtip's, beyond the publication except where sa
   and 8.5 mm (large), and three human fingertips approximated as spheres of 6.5, 8 and 10 mm.
 - ``shape``: ``sphere``; ``ellipsoid``, longer along the finger (y) by 1.6, the ratio of the finger
   pad's radii in :mod:`softtip.mechanics.fingerpad` (Serina et al. 1998's ellipsoidal pulp);
-  ``pad``, a sphere flattened to 0.6 of its radius under the pad (z), a broad flat pulp.
+  ``pad``, broader than deep (1.3 r across and along, r deep), so flatter under the pad: its radius
+  of curvature there is 1.69 r. Every shape keeps its lowest point r below its centre.
 - ``contact``: the normal law and material (:class:`~softtip.mechanics.plate_contact.PlateContactLaw`).
   The publication casts every fingertip in one rubber, VytaFlex 30 (Smooth-On: Shore 30A); E = 1.14
   MPa from Gent's Shore-A relation (E = 0.0981(56 + 7.62 S)/(0.1375(254 − 2.54 S)) MPa at S = 30),
@@ -39,7 +40,7 @@ from softtip.sensors.wrench import shift_wrench, wrench_in_frame
 from softtip.systems.haptics.device import DeviceSpec, PlatformPose
 
 FS_RADIUS = 7.5e-3  # m: the fingertip sensor's quarter-sphere tip (the publication)
-SHAPE_AXES = {"sphere": (1.0, 1.0, 1.0), "ellipsoid": (1.0, 1.6, 1.0), "pad": (1.0, 1.0, 0.6)}
+SHAPE_AXES = {"sphere": (1.0, 1.0, 1.0), "ellipsoid": (1.0, 1.6, 1.0), "pad": (1.3, 1.3, 1.0)}
 # 3 mm of rubber over the core under the pad: softtip's choice for a cast over a rigid core (not published)
 VYTAFLEX_30 = PlateContactLaw(law="hertz", youngs_modulus=1.14e6, poisson_ratio=0.5, layer_thickness=3e-3)
 
@@ -78,6 +79,9 @@ TEST_FINGERTIPS = (
     Fingertip(name="human 2 (8 mm)", radius=8.0e-3),
     Fingertip(name="human 3 (10 mm)", radius=10.0e-3),
 )
+
+
+CASTS, HUMAN_FINGERTIPS = TEST_FINGERTIPS[:3], TEST_FINGERTIPS[3:]
 
 
 def finger_wrench(fingertip: Fingertip, device: DeviceSpec, pose: PlatformPose) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,7 @@ from softtip.systems.haptics.personalisation import (
     personalise_geometric,
     press_configurations,
 )
-from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, TableError
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
 # the publication's three methods, then softtip's addition: B with the user's stiffness from five presses
@@ -188,9 +188,13 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
         for fingertip in fingertips:
             user = sensed_contact(device, fingertip, user_grid, collection, rng)
             user_duration = user.duration_s
-            data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
-                                                  user.platform_wrenches, settings.n_neighbours,
-                                                  settings.contact_threshold)
+            try:
+                data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
+                                                      user.platform_wrenches, settings.n_neighbours,
+                                                      settings.contact_threshold)
+            except TableError as problem:
+                raise ValueError(f"fingertip {fingertip.name!r}: its user table cannot personalise ({problem}); "
+                                 "the device barely reaches this fingertip") from None
             geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
             presses = sensed_contact(device, fingertip, press_configurations(device), collection, rng)
             pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
