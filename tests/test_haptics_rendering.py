@@ -99,7 +99,8 @@ def test_bad_tables_are_refused_in_one_line(change, message):
 
 def test_renderer_parameters_follow_scikit_learn_and_are_checked():
     renderer = NearestNeighbourRenderer(n_neighbours=4)
-    assert renderer.get_params() == {"n_neighbours": 4, "contact_threshold": pytest.approx(5 / 320)}
+    assert renderer.get_params() == {"n_neighbours": 4, "contact_threshold": pytest.approx(5 / 320),
+                                     "weighting_power": 1.0}
     assert renderer.set_params(n_neighbours=2).n_neighbours == 2
     with pytest.raises(TableError, match="n_neighbours = 0"):
         NearestNeighbourRenderer(n_neighbours=0)

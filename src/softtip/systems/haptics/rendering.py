@@ -11,6 +11,8 @@ to f (an entry that f matches exactly is returned as it is). The choices, each t
   depend on where each finger's sensor sits and would pull the neighbours towards the FS's geometry.
   Standardising each component would weight a newton of shear above a newton of pressure.
 - **Search**: scipy's k-d tree (``cKDTree``), exact Euclidean n nearest.
+- **Weighting**: 1/d^p with p = ``weighting_power`` (1, the published distance weighting, by
+  default; 0 a plain average of the n; 2 inverse-square).
 - **Entries without contact**: many configurations do not touch the fingertip and read only noise
   near zero force; left as they are they would form a cloud of near-ties whose motor inputs are
   arbitrary. Every entry whose force is below ``contact_threshold`` is merged into one entry at zero
@@ -28,12 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from softtip._core.config import PositiveInteger, PositiveNumber, checked
+from softtip._core.config import PositiveInteger, PositiveNumber, checked, number
 
 FORCE = slice(0, 3)  # the wrench components the renderer uses
 # 5 steps of the Nano17's force resolution (1/320 N): above the window-averaged noise of a held
 # configuration (one step / √200), below any force a person notices
 CONTACT_THRESHOLD = 5 / 320
+WeightingPower = number("a number from 0 to 4", ge=0, le=4)
 
 
 class TableError(ValueError):
@@ -95,12 +98,15 @@ class NearestNeighbourRenderer:
     """The k-nearest-neighbour, inverse-distance-weighted inverse of a lookup table (scikit-learn
     conventions: ``fit(wrenches, motor_inputs)``, ``predict(wrenches)``, ``get_params``)."""
 
-    def __init__(self, n_neighbours: int = 8, contact_threshold: float = CONTACT_THRESHOLD):
+    def __init__(self, n_neighbours: int = 8, contact_threshold: float = CONTACT_THRESHOLD,
+                 weighting_power: float = 1.0):
         self.n_neighbours = checked(PositiveInteger, "n_neighbours", n_neighbours, TableError)
         self.contact_threshold = checked(PositiveNumber, "contact_threshold", contact_threshold, TableError)
+        self.weighting_power = checked(WeightingPower, "weighting_power", weighting_power, TableError)
 
     def get_params(self, deep: bool = True) -> dict:
-        return {"n_neighbours": self.n_neighbours, "contact_threshold": self.contact_threshold}
+        return {"n_neighbours": self.n_neighbours, "contact_threshold": self.contact_threshold,
+                "weighting_power": self.weighting_power}
 
     def set_params(self, **params) -> NearestNeighbourRenderer:
         self.__init__(**(self.get_params() | params))
@@ -154,10 +160,12 @@ class NearestNeighbourRenderer:
             raise ValueError(f"wanted wrench {wrench!r}: expected 6 (or 3) finite numbers")
         distances, nearest = self.tree_.query(force, k=max(self.n_neighbours, 2))  # k >= 2 keeps the axis
         distances, nearest = distances[: self.n_neighbours], nearest[: self.n_neighbours]
-        if distances[0] == 0.0:
+        if self.weighting_power == 0.0:
+            motor = self.motor_inputs_[nearest].mean(axis=0)
+        elif distances[0] == 0.0:
             motor = self.motor_inputs_[nearest[distances == 0.0]].mean(axis=0)
         else:
-            weights = 1.0 / distances
+            weights = distances**-self.weighting_power
             motor = weights @ self.motor_inputs_[nearest] / weights.sum()
         outside = distances[0] > self.widest_gap_ or (force < self.lowest_).any() or (force > self.highest_).any()
         return motor, bool(outside)
@@ -167,8 +175,11 @@ class NearestNeighbourRenderer:
         return self.render(wrenches).motor_inputs
 
     def _average(self, distances: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+        if self.weighting_power == 0.0:
+            return self.motor_inputs_[nearest].mean(axis=-2)
         exact = distances[..., :1] == 0.0
-        weights = np.where(exact, (distances == 0.0).astype(float), 1.0 / np.where(distances == 0.0, 1.0, distances))
+        inverse = np.where(distances == 0.0, 1.0, distances) ** -self.weighting_power
+        weights = np.where(exact, (distances == 0.0).astype(float), inverse)
         weights /= weights.sum(axis=-1, keepdims=True)
         return np.einsum("...k,...kj->...j", weights, self.motor_inputs_[nearest])
 

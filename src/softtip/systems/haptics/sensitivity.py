@@ -1,9 +1,13 @@
-"""How the ranking of the rendering methods depends on what makes real fingers differ.
+"""How the methods' errors depend on what makes real fingers differ, and on the renderer's choices.
 
 The publication casts every test fingertip in one rubber, mounted like the FS. Real fingers differ
 in stiffness, shape and how the device sits on them; each :class:`FingerVariation` changes one of
 those on the three human fingertips (the casts stay as published) and :func:`sensitivity_study`
 reruns the study under each, reporting every method's pooled median error and their order.
+
+:func:`error_curves` reruns the study over the number of neighbours n, the weighting's power and
+the FS and user tables' sizes (the effects the authors named as future work), one at a time from
+the published settings, and :func:`curves_figure` draws them.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from softtip._core.config import PositiveNumber, Text, choice, schema
 from softtip._core.progress import SILENT, Progress
@@ -85,3 +90,51 @@ def sensitivity_study(settings: StudySettings = StudySettings(), seed: int = 0, 
                                              study.pooled))
             task.advance(note=variation.name)
     return tuple(outcomes)
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """The study at one value of one setting: each method's median error (N) over every fingertip and target."""
+
+    setting: str  # a field of StudySettings
+    value: float
+    median_error: np.ndarray
+
+
+CURVES = (("n_neighbours", (1, 2, 4, 8, 16)), ("weighting_power", (0.0, 1.0, 2.0)),
+          ("fs_levels", (7, 9, 11, 13)), ("user_levels", (4, 5, 7)))
+
+
+def error_curves(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
+                 curves: tuple[tuple[str, tuple], ...] = CURVES) -> tuple[CurvePoint, ...]:
+    """The study rerun with each setting of ``curves`` varied alone (the others as ``settings``)."""
+    runs = [(name, value) for name, values in curves for value in values]
+    if not runs:
+        raise ValueError("curves: expected at least one setting with values")
+    points = []
+    with progress.task("error curves", total=len(runs)) as task:
+        for name, value in runs:
+            if name not in StudySettings.__dataclass_fields__:
+                raise ValueError(f"curves: {name!r} is not a study setting")
+            study = run_study(replace(settings, **{name: value}), seed)
+            errors = np.hstack([outcome.errors for outcome in study.fingertips])
+            points.append(CurvePoint(name, float(value), np.median(errors, axis=1)))
+            task.advance(note=f"{name} = {value}")
+    return tuple(points)
+
+
+def curves_figure(points: tuple[CurvePoint, ...]) -> Figure:
+    """Median error (N) against each varied setting, one line per method."""
+    settings = list(dict.fromkeys(point.setting for point in points))
+    figure = Figure(figsize=(4 * len(settings), 3.6), layout="constrained")
+    axes = np.atleast_1d(figure.subplots(1, len(settings), sharey=True))
+    for axis, setting in zip(axes, settings, strict=True):
+        mine = [point for point in points if point.setting == setting]
+        values = [point.value for point in mine]
+        for m, method in enumerate(METHODS):
+            axis.plot(values, [point.median_error[m] for point in mine], marker="o", label=method)
+        axis.set_xlabel(setting)
+        axis.grid(alpha=0.3)
+    axes[0].set_ylabel("median rendering error (N)")
+    axes[0].legend(fontsize="small")
+    return figure

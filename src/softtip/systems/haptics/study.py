@@ -36,7 +36,7 @@ from softtip.systems.haptics.personalisation import (
     personalise_geometric,
     press_configurations,
 )
-from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, TableError
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, TableError, WeightingPower
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
 # the publication's three methods, then softtip's addition: B with the user's stiffness from five presses
@@ -47,13 +47,14 @@ PAIRS = ((0, 1), (0, 2), (1, 2))
 
 @schema(section="study")
 class StudySettings:
-    """The study's sizes: targets, FS and user table levels per servo (13 → 13³), neighbours, the
-    light-target bound (N) and the force below which a reading is no contact (N)."""
+    """The study's sizes: targets, FS and user table levels per servo (13 → 13³), neighbours and
+    their weighting, the light-target bound (N) and the force below which a reading is no contact (N)."""
 
     targets: integer(3) = 100
     fs_levels: integer(2) = 13
     user_levels: integer(2) = 7
     n_neighbours: integer(1) = 8
+    weighting_power: WeightingPower = 1.0  # 1/d^p: 1 the published distance weighting
     light_force: PositiveNumber = 1.0
     contact_threshold: PositiveNumber = CONTACT_THRESHOLD
     target_draws: integer(1) = 20_000  # random configurations tried to find targets that touch the FS
@@ -178,7 +179,7 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
         task.advance()
         targets = _targets(device, settings, collection, rng)
         task.advance()
-    renderer = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold)
+    renderer = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
     standard = renderer.get_params()
     fs_renderer = NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, fs.motor_inputs)
     user_grid = motor_grid(device, settings.user_levels)
@@ -191,7 +192,7 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
             try:
                 data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
                                                       user.platform_wrenches, settings.n_neighbours,
-                                                      settings.contact_threshold)
+                                                      settings.contact_threshold, settings.weighting_power)
             except TableError as problem:
                 raise ValueError(f"fingertip {fingertip.name!r}: its user table cannot personalise ({problem}); "
                                  "the device barely reaches this fingertip") from None
