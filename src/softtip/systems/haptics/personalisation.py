@@ -52,14 +52,21 @@ def in_device_axes(device: DeviceSpec, motor_inputs, platform_wrenches) -> np.nd
     return wrench_in_frame(platform_wrenches, np.swapaxes(turn, -1, -2))
 
 
+def user_table_renderer(device: DeviceSpec, user_motor_inputs, user_platform_wrenches, n_neighbours: int = 8,
+                        contact_threshold: float | None = None, weighting_power: float = 1.0) -> NearestNeighbourRenderer:
+    """The inverse of the user's table α_U: DS readings (turned into the device's axes) to motor inputs."""
+    options = {} if contact_threshold is None else {"contact_threshold": contact_threshold}
+    return NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, **options).fit(
+        in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs)
+
+
 def personalise_data_driven(device: DeviceSpec, fs_motor_inputs, fs_platform_wrenches, user_motor_inputs,
                             user_platform_wrenches, n_neighbours: int = 8,
                             contact_threshold: float | None = None, weighting_power: float = 1.0) -> Rendering:
     """Personalised motor inputs m̃* (entries, 3) for the FS table (m*, its DS readings d*), from the
     user's table (m*,U, d*,U); flagged where a d* lies outside the user's table."""
-    options = {} if contact_threshold is None else {"contact_threshold": contact_threshold}
-    user = NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, **options).fit(
-        in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs)
+    user = user_table_renderer(device, user_motor_inputs, user_platform_wrenches, n_neighbours, contact_threshold,
+                               weighting_power)
     return user.render(in_device_axes(device, fs_motor_inputs, fs_platform_wrenches))
 
 

@@ -26,6 +26,7 @@ from matplotlib.figure import Figure
 from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
+from softtip.systems.haptics.adaptive import adaptive_user_table
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
@@ -39,8 +40,9 @@ from softtip.systems.haptics.personalisation import (
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, TableError, WeightingPower
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
-# the publication's three methods, then softtip's addition: B with the user's stiffness from five presses
-METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)")
+# the publication's three methods, then softtip's additions: B with the user's stiffness from five
+# presses, and A from an adaptive user table of at most ``adaptive_budget`` configurations
+METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)", "data-driven, adaptive (A+)")
 PUBLISHED_METHODS = 3  # the statistics compare these, as published
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -53,6 +55,7 @@ class StudySettings:
     targets: integer(3) = 100
     fs_levels: integer(2) = 13
     user_levels: integer(2) = 7
+    adaptive_budget: integer(27) = 64
     n_neighbours: integer(1) = 8
     weighting_power: WeightingPower = 1.0  # 1/d^p: 1 the published distance weighting
     light_force: PositiveNumber = 1.0
@@ -74,6 +77,7 @@ class FingertipOutcome:
     user_table_flagged: int  # FS entries whose personalisation was flagged, method A
     geometric_flagged: int  # FS entries whose geometric personalisation was out of reach
     fitted_modulus: float  # Pa: the user's Hertz modulus from the presses (method B+)
+    adaptive_collection_s: float  # s: the adaptive user table's real collection time (method A+)
     friedman: FriedmanResult
     post_hoc: tuple[WilcoxonResult, WilcoxonResult, WilcoxonResult]  # in PAIRS order
 
@@ -132,7 +136,7 @@ class HapticsStudy:
                 "light_targets_without_contact_standard": o.light_failures(
                     magnitudes, self.settings.light_force, self.settings.contact_threshold),
                 "fs_entries_flagged_A": o.user_table_flagged, "fs_entries_out_of_reach_B": o.geometric_flagged,
-                "fitted_modulus_Pa": o.fitted_modulus,
+                "fitted_modulus_Pa": o.fitted_modulus, "adaptive_collection_s": o.adaptive_collection_s,
                 "friedman": {"chi_square": o.friedman.chi_square, "p": o.friedman.p_value},
                 "post_hoc": {f"{METHODS[a]} vs {METHODS[b]}": test(t) for (a, b), t in zip(PAIRS, o.post_hoc, strict=True)},
             } for o in self.fingertips],
@@ -146,7 +150,7 @@ def error_box_plots(study: HapticsStudy) -> Figure:
     figure = Figure(figsize=(12, 6.5), layout="constrained")
     axes = figure.subplots(2, 3, sharey=True).ravel()
     for axis, outcome in zip(axes, study.fingertips, strict=False):
-        axis.boxplot(list(outcome.errors), tick_labels=["standard", "A", "B", "B+"])
+        axis.boxplot(list(outcome.errors), tick_labels=["standard", "A", "B", "B+", "A+"])
         axis.set_title(outcome.fingertip.name)
         axis.grid(axis="y", alpha=0.3)
     for axis in axes[::3]:
@@ -202,10 +206,17 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
                                   settings.contact_threshold, saturated=presses.saturated)
             force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
                                                   fingertip.radius, pressed, settings.contact_threshold)
+            adaptive = adaptive_user_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches, collection, rng,
+                                           settings.adaptive_budget, n_neighbours=settings.n_neighbours,
+                                           contact_threshold=settings.contact_threshold).collection
+            data_driven_adaptive = personalise_data_driven(
+                device, fs.motor_inputs, fs.platform_wrenches, adaptive.motor_inputs, adaptive.platform_wrenches,
+                settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
             renderers = (fs_renderer,
                          NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven.motor_inputs),
                          NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, geometric.motor_inputs),
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, force_model.motor_inputs))
+                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, force_model.motor_inputs),
+                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven_adaptive.motor_inputs))
             errors, rendered, flagged = [], [], []
             for method in renderers:
                 rendering = method.render(targets)
@@ -216,7 +227,8 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
             errors = np.array(errors)
             outcomes.append(FingertipOutcome(
                 fingertip, errors, np.array(rendered), np.array(flagged), int(data_driven.outside.sum()),
-                int(geometric.outside.sum()), pressed.youngs_modulus, friedman(errors[:PUBLISHED_METHODS]),
+                int(geometric.outside.sum()), pressed.youngs_modulus, adaptive.duration_s,
+                friedman(errors[:PUBLISHED_METHODS]),
                 tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS)))
             task.advance(note=fingertip.name)
     pooled = wilcoxon(np.concatenate([o.errors[1] for o in outcomes]),
