@@ -19,7 +19,7 @@ SETTINGS = CollectionSettings()
 @pytest.fixture(scope="module")
 def fs_and_targets():
     rng = np.random.default_rng(7)
-    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, motor_grid(DEVICE, 13), SETTINGS, rng)
+    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, motor_grid(DEVICE, 13), SETTINGS, rng).unsaturated()
     draws = sensed_contact(DEVICE, FINGERTIP_SENSOR, rng.uniform(0, DEVICE.angle_max, (3000, 3)), SETTINGS, rng)
     touching = (np.linalg.norm(draws.finger_wrenches[:, :3], axis=1) > 5 / 320) & ~draws.saturated
     return fs, draws.finger_wrenches[touching][:100]
@@ -42,7 +42,7 @@ def test_adaptive_table_beats_a_grid_of_its_size(fs_and_targets, fingertip):
     assert len(table.motor_inputs) == 64 == sum(adaptive.batches) and adaptive.batches[0] == 27
     assert len(np.unique(table.motor_inputs, axis=0)) == 64  # no configuration driven twice
     grid = sensed_contact(DEVICE, fingertip, motor_grid(DEVICE, 4), SETTINGS, rng)  # 4³ = 64 as well
-    assert median_error(fs, targets, fingertip, table) < 0.6 * median_error(fs, targets, fingertip, grid)
+    assert median_error(fs, targets, fingertip, table) < 0.8 * median_error(fs, targets, fingertip, grid)
     assert table.duration_s < 0.3 * sensed_contact(DEVICE, fingertip, motor_grid(DEVICE, 7), SETTINGS, None).duration_s
 
 

@@ -91,7 +91,7 @@ def test_thin_layer_law_solves_the_layer_equation():
 
 
 def test_unknown_law_and_bad_poisson_ratio_are_refused():
-    with pytest.raises(ValueError, match="contact.law = 'hooke': expected one of hertz, exponential, layer"):
+    with pytest.raises(ValueError, match="contact.law = .hooke.: expected one of hertz, bonded-layer, exponential, layer"):
         PlateContactLaw(law="hooke")
     with pytest.raises(ValueError, match="contact.poisson_ratio = 0.6"):
         PlateContactLaw(law="hertz", poisson_ratio=0.6)
@@ -128,3 +128,16 @@ def test_wrench_moves_and_turns_as_forces_and_torques_do():
     assert np.allclose(shift_wrench(about_origin, np.zeros(3), other)[3:], np.cross(point - other, force))
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # axes turned 90 degrees about z
     assert np.allclose(wrench_in_frame(about_origin, turn)[:3], [force[1], -force[0], force[2]])
+
+
+def test_bonded_layer_law_tends_to_hertz_for_a_thick_layer_and_stiffens_on_a_thin_one():
+    from softtip.mechanics.plate_contact import bonded_layer_force, hertz_force
+
+    thick = bonded_layer_force(1e-4, 7.5e-3, 1e6, 1.0)  # a 1 m layer: Hertz's half space
+    assert thick == pytest.approx(hertz_force(1e-4, 7.5e-3, 1e6, 0.5), rel=1e-3)
+    # χ = √(Rδ)/t = 1: the printed series sums to 1 + 1.133 + 1.283 + 0.769 + 0.0975
+    law = PlateContactLaw(law="bonded-layer", youngs_modulus=1e6, layer_thickness=math.sqrt(7.5e-3 * 1e-3))
+    hertz = normal_force(PlateContactLaw(law="hertz", youngs_modulus=1e6), 1e-3, 7.5e-3)
+    assert normal_force(law, 1e-3, 7.5e-3) == pytest.approx(4.2825 * hertz)
+    with pytest.raises(ValueError, match="contact.poisson_ratio = 0.45: expected 0.5"):
+        PlateContactLaw(law="bonded-layer", poisson_ratio=0.45)

@@ -78,7 +78,7 @@ def test_unreachable_pose_is_refused_in_one_line():
      "device.attachment_angles_deg"),
     ("released_length = 0.0195 ", "released_length = 0.005  ", "device.released_length"),
     ("free_length = 0.025 ", "free_length = 0.010 ", "springs.free_length"),
-    ("centre = [0.0, 0.0, -0.008]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
+    ("centre = [0.0, 0.0, -0.0085]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
     ("stall_torque = 0.078", "stall_torque = -1", "servo.stall_torque"),
     ("[springs]", "[springs]\ndamping = 3", "springs.damping: unknown key"),
 ])

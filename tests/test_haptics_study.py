@@ -49,7 +49,7 @@ def test_statistics_refuse_what_they_cannot_rank():
 
 @pytest.fixture(scope="module")
 def small_study():
-    return run_study(StudySettings(targets=30, fs_levels=9, user_levels=5), seed=4)
+    return run_study(StudySettings(targets=30, fs_levels=9, user_levels=7), seed=4)
 
 
 def test_study_renders_every_target_for_each_fingertip_and_method(small_study):

@@ -18,7 +18,13 @@ radius at the contact point, R = abc / h(n)², the equivalent-sphere approximati
 - **Exponential**, as measured on human finger pads (Pawluk & Howe, J. Biomech. Eng. 121:178,
   1999): F = (R/R_ref)(b/m)(e^{mδ} − 1), the law of :mod:`softtip.mechanics.fingerpad` scaled by
   the radius as its Winkler layer scales it (contact area 2πRδ).
-- **Soft layer over a rigid core**, the thin-layer limit: an incompressible layer of shear modulus G
+- **Bonded layer over a rigid core** (``bonded-layer``): Hertz corrected for an incompressible layer
+  of thickness t bonded to a rigid substrate, F = F_Hertz (1 + 1.133χ + 1.283χ² + 0.769χ³ +
+  0.0975χ⁴), χ = √(Rδ)/t (Dimitriadis, Horkay, Maresca, Kachar & Chadwick, Biophys. J. 82:2798,
+  2002, their bonded case at ν = 0.5, derived for χ up to about 1; a flat on a cap has the same gap
+  as a sphere on a flat). It tends to Hertz for a thick layer. :mod:`softtip.mechanics.cap_fe`
+  calibrates its effective thickness by finite elements.
+- **Thin layer over a rigid core** (``layer``), the thin-layer limit: an incompressible layer of shear modulus G
   and thickness t bonded to the core and pressed by a frictionless plate. Thin-layer (lubrication)
   theory gives ∇²p = −3Gw/t³ for the local compression w = δ − r²/2R, and a smooth contact edge
   (p = p' = 0) puts the edge at a = 2√(Rδ), so F = 2πG R² δ³ / t³. Valid while the contact
@@ -29,19 +35,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from softtip._core.config import PositiveNumber, choice, number, schema
+from softtip._core.config import PositiveNumber, Refusal, choice, number, schema
 from softtip.mechanics.fingerpad import exponential_force
 
-CONTACT_LAWS = ("hertz", "exponential", "layer")
+CONTACT_LAWS = ("hertz", "bonded-layer", "exponential", "layer")
 
 
 @schema(section="contact")
 class PlateContactLaw:
     """The normal law of a cap under a flat plate, and its material figures (SI).
 
-    ``law``: hertz uses ``youngs_modulus`` and ``poisson_ratio``; exponential uses ``stiffness``
-    (b, N/m), ``stiffening`` (m, 1/m) and ``reference_radius`` (m); layer uses ``youngs_modulus``,
-    ``poisson_ratio`` (through G = E / 2(1 + ν)) and ``layer_thickness`` (m)."""
+    ``law``: hertz uses ``youngs_modulus`` and ``poisson_ratio``; bonded-layer ``youngs_modulus``
+    and ``layer_thickness`` (m), incompressible (``poisson_ratio`` must be 0.5); exponential uses ``stiffness`` (b, N/m), ``stiffening`` (m, 1/m) and
+    ``reference_radius`` (m); layer uses ``youngs_modulus``, ``poisson_ratio`` (through
+    G = E / 2(1 + ν)) and ``layer_thickness``."""
 
     law: choice(*CONTACT_LAWS)
     youngs_modulus: PositiveNumber = 1.0e6
@@ -50,6 +57,10 @@ class PlateContactLaw:
     stiffening: PositiveNumber = 1700.0
     reference_radius: PositiveNumber = 7.5e-3
     layer_thickness: PositiveNumber = 3.0e-3
+
+    def __post_init__(self) -> None:
+        if self.law == "bonded-layer" and self.poisson_ratio != 0.5:
+            raise Refusal("poisson_ratio", "expected 0.5: the bonded-layer law is the incompressible case")
 
     @property
     def shear_modulus(self) -> float:
@@ -83,6 +94,17 @@ def fit_hertz_modulus(depth, force, radius, poisson_ratio=0.5) -> float:
     return reduced * (1 - poisson_ratio**2)
 
 
+# Dimitriadis et al. (2002), bonded incompressible layer: the coefficients of χ⁰..χ⁴ as printed
+_BONDED_LAYER_SERIES = (1.0, 1.133, 1.283, 0.769, 0.0975)
+
+
+def bonded_layer_force(depth, radius, youngs_modulus, thickness):
+    """Hertz's force (N) on an incompressible layer of ``thickness`` (m) bonded to a rigid core."""
+    depth = np.maximum(np.asarray(depth, dtype=float), 0.0)
+    chi = np.sqrt(np.asarray(radius, dtype=float) * depth) / thickness
+    return hertz_force(depth, radius, youngs_modulus, 0.5) * np.polynomial.polynomial.polyval(chi, _BONDED_LAYER_SERIES)
+
+
 def layer_force(depth, radius, shear_modulus, thickness):
     """F = 2πG R² δ³ / t³ (N): a thin incompressible layer on a rigid core under a frictionless flat."""
     depth = np.maximum(np.asarray(depth, dtype=float), 0.0)
@@ -95,14 +117,16 @@ def normal_force(law: PlateContactLaw, depth, radius):
         return hertz_force(depth, radius, law.youngs_modulus, law.poisson_ratio)
     if law.law == "layer":
         return layer_force(depth, radius, law.shear_modulus, law.layer_thickness)
+    if law.law == "bonded-layer":
+        return bonded_layer_force(depth, radius, law.youngs_modulus, law.layer_thickness)
     depth = np.maximum(np.asarray(depth, dtype=float), 0.0)
     return np.asarray(radius) / law.reference_radius * exponential_force(depth, law.stiffness, law.stiffening)
 
 
 def contact_radius(law: PlateContactLaw, depth, radius):
-    """The contact's radius (m): √(Rδ) for Hertz, 2√(Rδ) for the thin layer, √(2Rδ) (the geometric
+    """The contact's radius (m): √(Rδ) for Hertz (and the bonded layer's Hertz term), 2√(Rδ) for the thin layer, √(2Rδ) (the geometric
     intersection) for the exponential law's Winkler layer."""
-    factor = {"hertz": 1.0, "layer": 4.0, "exponential": 2.0}[law.law]
+    factor = {"hertz": 1.0, "bonded-layer": 1.0, "layer": 4.0, "exponential": 2.0}[law.law]
     return np.sqrt(factor * np.asarray(radius) * np.maximum(np.asarray(depth, dtype=float), 0.0))
 
 

@@ -9,7 +9,7 @@ sum of the travels and holds, in the order the configurations are driven.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -56,6 +56,13 @@ class Collection:
     platform_wrenches: np.ndarray
     saturated: np.ndarray
     duration_s: float
+
+    def unsaturated(self) -> Collection:
+        """The entries no sensor saturated on: a saturated reading is the range's end, not the force,
+        so it has no place in a table. The collection's time is still the whole procedure's."""
+        keep = ~self.saturated
+        return replace(self, motor_inputs=self.motor_inputs[keep], finger_wrenches=self.finger_wrenches[keep],
+                       platform_wrenches=self.platform_wrenches[keep], saturated=self.saturated[keep])
 
 
 def collection_duration(device: DeviceSpec, motor_inputs, hold_s: float) -> float:

@@ -17,10 +17,14 @@ The settings and their values (softtip's, beyond the publication except where sa
 - ``contact``: the normal law and material (:class:`~softtip.mechanics.plate_contact.PlateContactLaw`).
   The publication casts every fingertip in one rubber, VytaFlex 30 (Smooth-On: Shore 30A); E = 1.14
   MPa from Gent's Shore-A relation (E = 0.0981(56 + 7.62 S)/(0.1375(254 − 2.54 S)) MPa at S = 30),
-  incompressible (ν = 0.5). The study uses Hertz: at its loads the contact radius √(Rδ) stays below
-  the elastomer's thickness over the core (the study reports the ratio), where Hertz holds and the
-  thin-layer limit does not; the exponential law describes living finger pulp, not these casts.
-  A different stiffness per finger is softtip's addition, declared as such.
+  incompressible. Every cast is taken over the FS's rigid core (radius 4.5 mm, softtip's choice), so
+  a larger cast has more rubber. The study uses the bonded-layer law with an effective thickness
+  calibrated per cast by softtip's finite elements (:mod:`softtip.mechanics.cap_fe`; the script
+  ``examples/haptics_contact_calibration.py`` prints the evidence): at the study's depths (0.1–1 mm)
+  Hertz gives 34–91 % of the FE force (the core stiffens the contact), the calibrated law 89–111 %
+  (95–105 % from 7.5 mm up). With one core, equal depth takes about the same force on every cast
+  (the √R of Hertz offset by the thicker rubber). The exponential law describes living finger pulp,
+  not these casts. A different stiffness per finger is softtip's addition, declared as such.
 - ``core_offset``: where the core's sensor origin sits from the cap's centre (m): it moves the
   torques, not the force.
 - ``mounting``: ``centre``, the fingertip's centre at the device's finger centre (the geometric
@@ -40,9 +44,12 @@ from softtip.sensors.wrench import shift_wrench, wrench_in_frame
 from softtip.systems.haptics.device import DeviceSpec, PlatformPose
 
 FS_RADIUS = 7.5e-3  # m: the fingertip sensor's quarter-sphere tip (the publication)
+CORE_RADIUS = 4.5e-3  # m: the rigid core inside every cast, 3 mm of rubber under the FS's pad (softtip's choice)
+VYTAFLEX_30_MODULUS = 1.14e6  # Pa: Gent's Shore-A relation at Shore 30A
 SHAPE_AXES = {"sphere": (1.0, 1.0, 1.0), "ellipsoid": (1.0, 1.6, 1.0), "pad": (1.3, 1.3, 1.0)}
 # 3 mm of rubber over the core under the pad: softtip's choice for a cast over a rigid core (not published)
-VYTAFLEX_30 = PlateContactLaw(law="hertz", youngs_modulus=1.14e6, poisson_ratio=0.5, layer_thickness=3e-3)
+VYTAFLEX_30 = PlateContactLaw(law="hertz", youngs_modulus=VYTAFLEX_30_MODULUS, poisson_ratio=0.5,
+                              layer_thickness=FS_RADIUS - CORE_RADIUS)
 
 Offset3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 coordinates (m)")]
 
@@ -69,15 +76,32 @@ class Fingertip:
         return device.centre + np.array([0.0, 0.0, FS_RADIUS - self.semi_axes[2]])
 
 
-FINGERTIP_SENSOR = Fingertip(name="FS (7.5 mm)", radius=FS_RADIUS)
+# The bonded-layer law's effective thickness (m) for a VytaFlex 30 cast of each radius over the FS's
+# core, fitted to softtip's FE over depths 0.1–1 mm (examples/haptics_contact_calibration.py; a slow
+# test repeats the FS's): (radius, effective thickness)
+CALIBRATED_LAYERS = ((6.5e-3, 3.09e-3), (7.5e-3, 4.75e-3), (8.0e-3, 5.68e-3), (8.5e-3, 6.69e-3), (10.0e-3, 9.95e-3))
+
+
+def cast(name: str, radius: float) -> Fingertip:
+    """A VytaFlex 30 cast over the FS's core, with its FE-calibrated contact law (a radius of
+    :data:`CALIBRATED_LAYERS`)."""
+    thickness = dict(CALIBRATED_LAYERS).get(radius)
+    if thickness is None:
+        raise ValueError(f"radius = {radius!r}: expected one of the calibrated casts' radii "
+                         f"{[r for r, _ in CALIBRATED_LAYERS]} m (calibrate others with softtip.mechanics.cap_fe)")
+    law = PlateContactLaw(law="bonded-layer", youngs_modulus=VYTAFLEX_30_MODULUS, layer_thickness=thickness)
+    return Fingertip(name=name, radius=radius, contact=law)
+
+
+FINGERTIP_SENSOR = cast("FS (7.5 mm)", FS_RADIUS)
 # the publication's six test fingertips, all cast in VytaFlex 30 over a rigid core
 TEST_FINGERTIPS = (
-    Fingertip(name="small cast (6.5 mm)", radius=6.5e-3),
-    Fingertip(name="FS cast (7.5 mm)", radius=7.5e-3),
-    Fingertip(name="large cast (8.5 mm)", radius=8.5e-3),
-    Fingertip(name="human 1 (6.5 mm)", radius=6.5e-3),
-    Fingertip(name="human 2 (8 mm)", radius=8.0e-3),
-    Fingertip(name="human 3 (10 mm)", radius=10.0e-3),
+    cast("small cast (6.5 mm)", 6.5e-3),
+    cast("FS cast (7.5 mm)", 7.5e-3),
+    cast("large cast (8.5 mm)", 8.5e-3),
+    cast("human 1 (6.5 mm)", 6.5e-3),
+    cast("human 2 (8 mm)", 8.0e-3),
+    cast("human 3 (10 mm)", 10.0e-3),
 )
 
 

@@ -18,7 +18,8 @@ inverse kinematics give m̃*. A pose the servos cannot reach is held at the serv
 
 **B with a force–deformation model** (beyond the publication; the authors' future work). Equal
 indentation of a larger or stiffer sphere takes more force, so the geometric method is not exact
-for force. Here the user presses the platform at most five times (level presses, read by the DS);
+for force. Here the platform presses the user at most five times (level presses 0.2–1 mm deep as
+the sphere model places the pad, read by the DS);
 the geometric indentation of each press under the sphere model and the DS's force fit the user's
 Hertz modulus (:func:`~softtip.mechanics.plate_contact.fit_hertz_modulus`). Each FS entry's
 measured force |f*| is then rendered as the indentation that gives that force on the user's sphere,
@@ -84,11 +85,21 @@ class PressFit:
 MAX_PRESSES = 5
 
 
-def press_configurations(device: DeviceSpec, presses: int = MAX_PRESSES) -> np.ndarray:
-    """Level presses (presses, 3): all three servos at once, evenly over their range beyond the released end."""
-    if not 1 <= presses <= MAX_PRESSES:
-        raise ValueError(f"presses = {presses!r}: expected 1 to {MAX_PRESSES}")
-    return np.repeat(np.linspace(0.0, device.angle_max, presses + 1)[1:, None], 3, axis=1)
+PRESS_DEPTHS = (0.2e-3, 0.4e-3, 0.6e-3, 0.8e-3, 1.0e-3)  # m: light presses, as the sphere model places them
+
+
+def press_configurations(device: DeviceSpec, user_radius: float, depths=PRESS_DEPTHS) -> np.ndarray:
+    """Level presses (presses, 3): the platform raised to ``depths`` into the user's pad as the
+    geometric model places it (a sphere of ``user_radius`` at the device's finger centre), within
+    the servos' range."""
+    depths = np.asarray(depths, dtype=float)
+    if not 1 <= len(depths) <= MAX_PRESSES or np.any(depths <= 0):
+        raise ValueError(f"depths = {depths.tolist()}: expected 1 to {MAX_PRESSES} positive depths (m)")
+    if not (np.isfinite(user_radius) and user_radius > 0):
+        raise ValueError(f"user_radius = {user_radius!r}: expected a positive radius (m)")
+    lengths = -(device.centre[2] - user_radius + depths)  # each cable to the level plane at that depth
+    angles = (device.device.released_length - lengths) / device.device.pulley_radius
+    return np.repeat(np.clip(angles, 0.0, device.angle_max)[:, None], 3, axis=1)
 
 
 def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius: float,

@@ -29,7 +29,7 @@ from softtip.mechanics.plate_contact import contact_radius
 from softtip.systems.haptics.adaptive import adaptive_user_table
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
-from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
+from softtip.systems.haptics.fingertips import CORE_RADIUS, FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
 from softtip.systems.haptics.personalisation import (
     fit_presses,
     personalise_data_driven,
@@ -37,7 +37,7 @@ from softtip.systems.haptics.personalisation import (
     personalise_geometric,
     press_configurations,
 )
-from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, TableError, WeightingPower
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, WeightingPower
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
 # the publication's three methods, then softtip's additions: B with the user's stiffness from five
@@ -179,7 +179,8 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
     device = load_device() if device is None else device
     rng = np.random.default_rng(seed)
     with progress.task("FS table and targets", total=2) as task:
-        fs = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, settings.fs_levels), collection, rng)
+        fs_collected = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, settings.fs_levels), collection, rng)
+        fs = fs_collected.unsaturated()
         task.advance()
         targets = _targets(device, settings, collection, rng)
         task.advance()
@@ -191,32 +192,13 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
     outcomes, user_duration = [], 0.0
     with progress.task("fingertips", total=len(fingertips)) as task:
         for fingertip in fingertips:
-            user = sensed_contact(device, fingertip, user_grid, collection, rng)
-            user_duration = user.duration_s
             try:
-                data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
-                                                      user.platform_wrenches, settings.n_neighbours,
-                                                      settings.contact_threshold, settings.weighting_power)
-            except TableError as problem:
-                raise ValueError(f"fingertip {fingertip.name!r}: its user table cannot personalise ({problem}); "
-                                 "the device barely reaches this fingertip") from None
-            geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
-            presses = sensed_contact(device, fingertip, press_configurations(device), collection, rng)
-            pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
-                                  settings.contact_threshold, saturated=presses.saturated)
-            force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
-                                                  fingertip.radius, pressed, settings.contact_threshold)
-            adaptive = adaptive_user_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches, collection, rng,
-                                           settings.adaptive_budget, n_neighbours=settings.n_neighbours,
-                                           contact_threshold=settings.contact_threshold).collection
-            data_driven_adaptive = personalise_data_driven(
-                device, fs.motor_inputs, fs.platform_wrenches, adaptive.motor_inputs, adaptive.platform_wrenches,
-                settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
-            renderers = (fs_renderer,
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven.motor_inputs),
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, geometric.motor_inputs),
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, force_model.motor_inputs),
-                         NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, data_driven_adaptive.motor_inputs))
+                personal = _personalise(device, fingertip, fs, user_grid, settings, collection, rng)
+            except ValueError as problem:
+                raise ValueError(f"fingertip {fingertip.name!r}: {problem}") from None
+            user_duration = personal.user_collection_s
+            renderers = (fs_renderer, *(NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, motor)
+                                        for motor in personal.motor_inputs))
             errors, rendered, flagged = [], [], []
             for method in renderers:
                 rendering = method.render(targets)
@@ -226,8 +208,8 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
                 flagged.append(rendering.outside | produced.saturated)
             errors = np.array(errors)
             outcomes.append(FingertipOutcome(
-                fingertip, errors, np.array(rendered), np.array(flagged), int(data_driven.outside.sum()),
-                int(geometric.outside.sum()), pressed.youngs_modulus, adaptive.duration_s,
+                fingertip, errors, np.array(rendered), np.array(flagged), personal.data_driven_flagged,
+                personal.geometric_flagged, personal.fitted_modulus, personal.adaptive_collection_s,
                 friedman(errors[:PUBLISHED_METHODS]),
                 tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS)))
             task.advance(note=fingertip.name)
@@ -237,19 +219,58 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
                         _contact_to_layer(device, fs, targets, fs_renderer), _NOTES)
 
 
+@dataclass(frozen=True)
+class _Personalised:
+    """A fingertip's personalised FS tables: motor inputs per method after the standard (METHODS[1:])."""
+
+    motor_inputs: tuple[np.ndarray, ...]
+    data_driven_flagged: int
+    geometric_flagged: int
+    fitted_modulus: float
+    user_collection_s: float
+    adaptive_collection_s: float
+
+
+def _personalise(device: DeviceSpec, fingertip: Fingertip, fs, user_grid: np.ndarray, settings: StudySettings,
+                 collection: CollectionSettings, rng: np.random.Generator) -> _Personalised:
+    user = sensed_contact(device, fingertip, user_grid, collection, rng)
+    usable = user.unsaturated()
+    data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, usable.motor_inputs,
+                                          usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
+                                          settings.weighting_power)
+    geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
+    presses = sensed_contact(device, fingertip, press_configurations(device, fingertip.radius), collection, rng)
+    pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
+                          settings.contact_threshold, saturated=presses.saturated)
+    force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
+                                          fingertip.radius, pressed, settings.contact_threshold)
+    adaptive = adaptive_user_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches, collection, rng,
+                                   settings.adaptive_budget, candidate_levels=settings.fs_levels,
+                                   n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
+    adaptive_usable = adaptive.collection.unsaturated()
+    data_driven_adaptive = personalise_data_driven(
+        device, fs.motor_inputs, fs.platform_wrenches, adaptive_usable.motor_inputs, adaptive_usable.platform_wrenches,
+        settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
+    return _Personalised((data_driven.motor_inputs, geometric.motor_inputs, force_model.motor_inputs,
+                          data_driven_adaptive.motor_inputs), int(data_driven.outside.sum()),
+                         int(geometric.outside.sum()), pressed.youngs_modulus, user.duration_s,
+                         adaptive.collection.duration_s)
+
+
 def _contact_to_layer(device: DeviceSpec, fs, targets: np.ndarray, fs_renderer: NearestNeighbourRenderer) -> float:
-    """The largest contact radius over the FS table's entries as strong as the targets, over the FS's elastomer thickness."""
+    """The largest contact radius over the FS table's entries as strong as the targets, over the FS's
+    rubber thickness over its core: χ = √(Rδ)/t, where the bonded-layer law stays near its derivation (χ <~ 1)."""
     strongest = np.linalg.norm(targets[:, :3], axis=1).max()
     pose = forward_kinematics(device, fs.motor_inputs)
     _, depth = finger_wrench(FINGERTIP_SENSOR, device, pose)
     within = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1) <= strongest
     radius = contact_radius(FINGERTIP_SENSOR.contact, depth[within], FINGERTIP_SENSOR.radius)
-    return float(radius.max() / FINGERTIP_SENSOR.contact.layer_thickness)
+    return float(radius.max() / (FINGERTIP_SENSOR.radius - CORE_RADIUS))
 
 
 _NOTES = (
-    "Device, fingertips and sensors are simulated: softtip's device dimensions (device.toml), Hertz contact of "
-    "VytaFlex 30 casts, Nano17-class sensors with one resolution step of noise at 1 kHz.",
+    "Device, fingertips and sensors are simulated: softtip's device dimensions (device.toml); VytaFlex 30 casts over "
+    "one rigid core, their contact law calibrated by softtip's FE; Nano17-class sensors, one step of noise at 1 kHz.",
     "The contact is frictionless: a tilted platform renders force along its normal, no independent shear.",
     "W is given both as scipy's min(W+, W−) and as the signed-rank sum W+ − W− that the publication prints.",
     "Bonferroni's correction counts every Wilcoxon test made: three pairs per fingertip and the pooled A-vs-B test.",
