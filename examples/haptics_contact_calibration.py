@@ -20,7 +20,8 @@ def main() -> None:
     for radius in (6.5e-3, 7.5e-3, 8.0e-3, 8.5e-3, 10.0e-3):
         curve = plate_on_cap_fe(radius, radius - CORE_RADIUS, VYTAFLEX_30_MODULUS, DEPTHS, tip_size=0.5e-3)
         print(f"R = {radius * 1e3:.1f} mm, rubber {curve.thickness * 1e3:.1f} mm: converged {curve.converged}; "
-              f"FE {np.round(curve.fe_forces, 3).tolist()} N; Hertz/FE {np.round(curve.hertz_forces / curve.fe_forces, 3).tolist()}; "
+              f"FE {np.round(curve.fe_forces, 3).tolist()} N; "
+              f"Hertz/FE {np.round(curve.hertz_forces / curve.fe_forces, 3).tolist()}; "
               f"effective thickness {curve.calibrated_thickness * 1e3:.2f} mm, law/FE "
               f"{np.round(curve.calibrated_forces / curve.fe_forces, 3).tolist()}")
 

@@ -30,7 +30,7 @@ def timed(call, repeats: int) -> np.ndarray:
 
 def main() -> None:
     device, rng = load_device(), np.random.default_rng(0)
-    fs = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, 13), CollectionSettings(), rng)
+    fs = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, 13), CollectionSettings(), rng).unsaturated()
     renderer = NearestNeighbourRenderer().fit(fs.finger_wrenches, fs.motor_inputs)
     touching = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1) > 0.1
     wanted = fs.finger_wrenches[touching][rng.integers(0, touching.sum(), 20_000)] + rng.normal(0, 0.05, (20_000, 6))
@@ -44,7 +44,7 @@ def main() -> None:
           f"p99 {np.percentile(baseline, 99) * 1e6:.1f} us)")
 
     user_finger = TEST_FINGERTIPS[5]
-    user = sensed_contact(device, user_finger, motor_grid(device, 7), CollectionSettings(), rng)
+    user = sensed_contact(device, user_finger, motor_grid(device, 7), CollectionSettings(), rng).unsaturated()
 
     def build_a():
         personal = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,

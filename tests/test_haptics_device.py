@@ -52,7 +52,8 @@ def test_forward_kinematics_undoes_inverse_from_any_point_of_the_plane(angles, d
 def test_moving_the_plane_along_its_normal_changes_each_cable_by_the_distance_over_cos_tilt():
     angles = np.array([[0.5, 3.0, 1.6], [1.0, 1.0, 1.0]])
     pose = forward_kinematics(DEVICE, angles)
-    moved = inverse_kinematics_unchecked(DEVICE, pose.moved_along_normal(np.full(2, -1e-3)))  # 1 mm down, away from the pad
+    down = pose.moved_along_normal(np.full(2, -1e-3))  # 1 mm down, away from the pad
+    moved = inverse_kinematics_unchecked(DEVICE, down)
     change = cable_lengths(DEVICE, moved) - cable_lengths(DEVICE, angles)
     assert np.allclose(change, 1e-3 / np.cos(pose.tilt)[:, None], rtol=1e-12)
     assert np.degrees(pose.tilt[0]) > 12  # the tilted case is really tilted

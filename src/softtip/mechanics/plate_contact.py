@@ -46,8 +46,8 @@ class PlateContactLaw:
     """The normal law of a cap under a flat plate, and its material figures (SI).
 
     ``law``: hertz uses ``youngs_modulus`` and ``poisson_ratio``; bonded-layer ``youngs_modulus``
-    and ``layer_thickness`` (m), incompressible (``poisson_ratio`` must be 0.5); exponential uses ``stiffness`` (b, N/m), ``stiffening`` (m, 1/m) and
-    ``reference_radius`` (m); layer uses ``youngs_modulus``, ``poisson_ratio`` (through
+    and ``layer_thickness`` (m), incompressible (``poisson_ratio`` must be 0.5); exponential uses
+    ``stiffness`` (b, N/m), ``stiffening`` (m, 1/m) and ``reference_radius`` (m); layer uses ``youngs_modulus``, ``poisson_ratio`` (through
     G = E / 2(1 + ν)) and ``layer_thickness``."""
 
     law: choice(*CONTACT_LAWS)
@@ -124,7 +124,8 @@ def normal_force(law: PlateContactLaw, depth, radius):
 
 
 def contact_radius(law: PlateContactLaw, depth, radius):
-    """The contact's radius (m): √(Rδ) for Hertz (and the bonded layer's Hertz term), 2√(Rδ) for the thin layer, √(2Rδ) (the geometric
+    """The contact's radius (m): √(Rδ) for Hertz (and the bonded layer's Hertz term), 2√(Rδ) for
+    the thin layer, √(2Rδ) (the geometric
     intersection) for the exponential law's Winkler layer."""
     factor = {"hertz": 1.0, "bonded-layer": 1.0, "layer": 4.0, "exponential": 2.0}[law.law]
     return np.sqrt(factor * np.asarray(radius) * np.maximum(np.asarray(depth, dtype=float), 0.0))

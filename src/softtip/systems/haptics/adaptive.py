@@ -12,8 +12,9 @@ are rendered with the current user table, and the configurations nearest (in mot
 inputs it gives are driven. Filling: configurations in the band as measured so far (a nearest
 driven one in contact, or the two nearest on both sides of it: one without contact and one
 saturated; else one of the four nearest in contact), farthest first from everything driven, so the
-band is covered evenly even where the current table aims poorly (a finger it barely touches). It stops at ``budget`` configurations. Each configuration is held and read as in the fixed collection, so its real
-collection time follows from the same procedure.
+band is covered evenly even where the current table aims poorly (a finger it barely touches).
+It stops at ``budget`` configurations. Each configuration is held and read as in the fixed
+collection, so its real collection time follows from the same procedure.
 """
 
 from __future__ import annotations
@@ -24,7 +25,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from softtip._core.config import checked, integer
-from softtip.systems.haptics.collection import Collection, CollectionSettings, collection_duration, motor_grid, sensed_contact
+from softtip.systems.haptics.collection import (
+    Collection,
+    CollectionSettings,
+    collection_duration,
+    motor_grid,
+    sensed_contact,
+)
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.fingertips import Fingertip
 from softtip.systems.haptics.personalisation import in_device_axes, user_table_renderer
@@ -80,7 +87,8 @@ def adaptive_user_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_input
         batches.append(len(chosen))
     motor = np.vstack([part.motor_inputs for part in parts])
     collection = Collection(motor, np.vstack([p.finger_wrenches for p in parts]),
-                            np.vstack([p.platform_wrenches for p in parts]), np.concatenate([p.saturated for p in parts]),
+                            np.vstack([p.platform_wrenches for p in parts]),
+                            np.concatenate([p.saturated for p in parts]),
                             collection_duration(device, motor, settings.hold_s))
     return AdaptiveTable(collection, tuple(batches))
 
@@ -122,7 +130,8 @@ def _next_batch(pool: np.ndarray, driven: np.ndarray, states: np.ndarray, count:
     undriven = distance[:, 0] > 1e-9
     around = states[nearest]
     closest_two = around[:, :2]
-    in_band = (around[:, 0] == CONTACT) | ((closest_two == NO_CONTACT).any(axis=1) & (closest_two == SATURATED).any(axis=1))
+    straddling = (closest_two == NO_CONTACT).any(axis=1) & (closest_two == SATURATED).any(axis=1)
+    in_band = (around[:, 0] == CONTACT) | straddling
     near_band = (around == CONTACT).any(axis=1)
     eligible = next((np.flatnonzero(undriven & where) for where in (in_band, near_band, undriven)
                      if np.any(undriven & where)), np.zeros(0, int))

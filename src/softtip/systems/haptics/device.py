@@ -75,7 +75,8 @@ class Geometry:
         first, second = points[1] - points[0], points[2] - points[0]
         twice_area = abs(first[0] * second[1] - first[1] * second[0])
         if twice_area < 0.1:  # the three cable ends must span a plane, well conditioned
-            raise Refusal("attachment_angles_deg", "expected three angles well apart (the cable ends must span a plane)")
+            raise Refusal("attachment_angles_deg",
+                          "expected three angles well apart (the cable ends must span a plane)")
 
 
 @schema(section="servo", error=DeviceError)

@@ -54,7 +54,8 @@ def in_device_axes(device: DeviceSpec, motor_inputs, platform_wrenches) -> np.nd
 
 
 def user_table_renderer(device: DeviceSpec, user_motor_inputs, user_platform_wrenches, n_neighbours: int = 8,
-                        contact_threshold: float | None = None, weighting_power: float = 1.0) -> NearestNeighbourRenderer:
+                        contact_threshold: float | None = None,
+                        weighting_power: float = 1.0) -> NearestNeighbourRenderer:
     """The inverse of the user's table α_U: DS readings (turned into the device's axes) to motor inputs."""
     options = {} if contact_threshold is None else {"contact_threshold": contact_threshold}
     return NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, **options).fit(
@@ -117,7 +118,8 @@ def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius
     touching = (forces >= contact_threshold) & (depths > 0) & usable
     if not touching.any():
         raise ValueError(f"presses: none of the {len(motor_inputs)} presses touched the fingertip within the "
-                         f"sensor's range (forces from {contact_threshold:g} N, unsaturated): no stiffness can be fitted")
+                         f"sensor's range (forces from {contact_threshold:g} N, unsaturated): "
+                         "no stiffness can be fitted")
     modulus = fit_hertz_modulus(depths[touching], forces[touching], user_radius, poisson_ratio)
     return PressFit(modulus, depths, forces, int(touching.sum()))
 

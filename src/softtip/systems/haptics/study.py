@@ -1,14 +1,17 @@
-"""The published evaluation on the simulated device: six test fingertips, three methods, 100 targets.
+"""The published evaluation on the simulated device: six test fingertips, three methods (and two of
+softtip's), 100 targets.
 
-:func:`run_study` collects the FS table (13³ configurations, FS and DS), records the target
-sensations (random configurations that touch the FS, read by the FS), builds each test fingertip's
-tables (the standard FS table; personalisation A from a 7³ user table read by the DS;
-personalisation B by geometry), renders every target with each and reads the force actually
-produced on the test fingertip by the sensor under it. The error of a target is |F_target −
+:func:`run_study` collects the FS table (13³ configurations, FS and DS; entries where a sensor
+saturated are left out), records the target sensations (random configurations that touch the FS,
+read by the FS), builds each test fingertip's tables (the standard FS table; personalisation A from
+a 7³ user table read by the DS; personalisation B by geometry; and beyond the publication, B with
+the user's stiffness from five presses, and A from an adaptive user table of 64 configurations),
+renders every target with each and reads the force actually produced on the test fingertip by the
+sensor under it. The error of a target is |F_target −
 F_rendered| over the three force components (N). The statistics are those of the publication:
-Friedman across the three methods per fingertip, Wilcoxon post hoc between each pair of methods per
-fingertip and between the two personalisations pooled over every fingertip and target, Bonferroni
-over all those Wilcoxon tests.
+Friedman across the three published methods per fingertip, Wilcoxon post hoc between each pair of
+them per fingertip and between the two personalisations pooled over every fingertip and target,
+Bonferroni over all those Wilcoxon tests.
 
 Departures from the published procedure, all of them stated in the result's ``notes``: the device,
 fingertips and sensors are simulated (:mod:`.device`, :mod:`.fingertips`); the contact is
@@ -138,7 +141,8 @@ class HapticsStudy:
                 "fs_entries_flagged_A": o.user_table_flagged, "fs_entries_out_of_reach_B": o.geometric_flagged,
                 "fitted_modulus_Pa": o.fitted_modulus, "adaptive_collection_s": o.adaptive_collection_s,
                 "friedman": {"chi_square": o.friedman.chi_square, "p": o.friedman.p_value},
-                "post_hoc": {f"{METHODS[a]} vs {METHODS[b]}": test(t) for (a, b), t in zip(PAIRS, o.post_hoc, strict=True)},
+                "post_hoc": {f"{METHODS[a]} vs {METHODS[b]}": test(t)
+                             for (a, b), t in zip(PAIRS, o.post_hoc, strict=True)},
             } for o in self.fingertips],
             "pooled_A_vs_B": test(self.pooled),
             "notes": list(self.notes),
