@@ -84,3 +84,5 @@ def test_study_refuses_targets_it_cannot_find():
         run_study(StudySettings(targets=10, fs_levels=3, user_levels=2, target_draws=3), seed=0)
     with pytest.raises(ValueError, match="study.fs_levels = 1"):
         StudySettings(fs_levels=1)
+    with pytest.raises(ValueError, match="seed = -1: expected an integer >= 0"):
+        run_study(StudySettings(), seed=-1)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from matplotlib.figure import Figure
 
-from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
+from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
 from softtip.systems.haptics.adaptive import adaptive_user_table
@@ -180,6 +180,7 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
               device: DeviceSpec | None = None, fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
               collection: CollectionSettings = CollectionSettings()) -> HapticsStudy:
     """The published study on the simulated device (see the module's notes)."""
+    seed = checked(integer(0), "seed", seed)
     device = load_device() if device is None else device
     rng = np.random.default_rng(seed)
     with progress.task("FS table and targets", total=2) as task:
