@@ -1,0 +1,188 @@
+"""Data-driven rendering: lookup tables of sensor wrenches and motor inputs, and the k-nearest-neighbour
+renderer that inverts them.
+
+A table holds, per configuration the device was driven to, the motor inputs m* (servo angles, rad)
+and the sensor's wrench f* (N, N·m). To render a wanted wrench f the renderer finds the n table
+entries whose f* are nearest to f and averages their m*, weighted by the inverse of their distance
+to f (an entry that f matches exactly is returned as it is). The choices, each tested:
+
+- **Features**: the three force components, in N, unscaled. Only the rendered force matters to the
+  study and its error is a force distance in N, so the search uses that same metric; the torques
+  depend on where each finger's sensor sits and would pull the neighbours towards the FS's geometry.
+  Standardising each component would weight a newton of shear above a newton of pressure.
+- **Search**: scipy's k-d tree (``cKDTree``), exact Euclidean n nearest.
+- **Weighting**: 1/d^p with p = ``weighting_power`` (1, the published distance weighting, by
+  default; 0 a plain average of the n; 2 inverse-square).
+- **Entries without contact**: many configurations do not touch the fingertip and read only noise
+  near zero force; left as they are they would form a cloud of near-ties whose motor inputs are
+  arbitrary. Every entry whose force is below ``contact_threshold`` is merged into one entry at zero
+  force whose motor input is the configuration farthest from contact, the least-wound one (the
+  smallest sum of angles; the first in table order on a tie): rendering no force releases.
+- **Out of range**: a wanted force outside the table's force range (per component), or farther
+  from its nearest entry than the table's widest gap between neighbouring entries, is flagged, never
+  silently extrapolated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from softtip._core.config import PositiveInteger, PositiveNumber, checked, number
+
+FORCE = slice(0, 3)  # the wrench components the renderer uses
+# 5 steps of the Nano17's force resolution (1/320 N): above the window-averaged noise of a held
+# configuration (one step / √200), below any force a person notices
+CONTACT_THRESHOLD = 5 / 320
+WeightingPower = number("a number from 0 to 4", ge=0, le=4)
+
+
+class TableError(ValueError):
+    """A lookup table that cannot be rendered from."""
+
+
+def _features(wrenches, name: str) -> np.ndarray:
+    wrenches = np.asarray(wrenches, dtype=float)
+    if wrenches.ndim != 2 or wrenches.shape[1] not in (3, 6):
+        raise TableError(f"{name} has shape {wrenches.shape}: expected (entries, 6) wrenches or (entries, 3) forces")
+    bad = ~np.all(np.isfinite(wrenches), axis=1)
+    if bad.any():
+        raise TableError(f"{name}: entry {int(np.flatnonzero(bad)[0])} is not finite (NaN or inf)")
+    return wrenches[:, FORCE]
+
+
+def _first_duplicate(rows: np.ndarray) -> tuple[int, int] | None:
+    _, first, inverse, counts = np.unique(rows, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    repeated = np.flatnonzero(counts[inverse.ravel()] > 1)
+    if not len(repeated):
+        return None
+    later = next(i for i in repeated if first[inverse.ravel()[i]] != i)
+    return int(first[inverse.ravel()[later]]), int(later)
+
+
+@dataclass(frozen=True)
+class LookupTable:
+    """Table entries: sensor wrenches (entries, 6) in N and N·m and motor inputs (entries, 3) in rad.
+    Refused: NaN or infinite values, mismatched lengths, and an entry listed twice. Two wrenches may
+    share motor inputs (a personalised table maps several FS entries to one user configuration)."""
+
+    wrenches: np.ndarray
+    motor_inputs: np.ndarray
+
+    def __post_init__(self) -> None:
+        _features(self.wrenches, "wrenches")
+        motor = np.asarray(self.motor_inputs, dtype=float)
+        if motor.ndim != 2 or motor.shape[1] != 3 or len(motor) != len(self.wrenches):
+            raise TableError(f"motor_inputs has shape {motor.shape}: expected ({len(self.wrenches)}, 3)")
+        if not np.all(np.isfinite(motor)):
+            raise TableError(f"motor_inputs: entry {int(np.flatnonzero(~np.isfinite(motor).all(1))[0])} is not finite")
+        duplicate = _first_duplicate(np.hstack([np.asarray(self.wrenches, dtype=float), motor]))
+        if duplicate is not None:
+            raise TableError(f"table: entries {duplicate[0]} and {duplicate[1]} are the same entry")
+
+    def __len__(self) -> int:
+        return len(self.motor_inputs)
+
+
+@dataclass(frozen=True)
+class Rendering:
+    """Motor inputs (..., 3) for wanted wrenches, and which wanted wrenches lay outside the table (...)."""
+
+    motor_inputs: np.ndarray
+    outside: np.ndarray
+
+
+class NearestNeighbourRenderer:
+    """The k-nearest-neighbour, inverse-distance-weighted inverse of a lookup table (scikit-learn
+    conventions: ``fit(wrenches, motor_inputs)``, ``predict(wrenches)``, ``get_params``)."""
+
+    def __init__(self, n_neighbours: int = 8, contact_threshold: float = CONTACT_THRESHOLD,
+                 weighting_power: float = 1.0):
+        self.n_neighbours = checked(PositiveInteger, "n_neighbours", n_neighbours, TableError)
+        self.contact_threshold = checked(PositiveNumber, "contact_threshold", contact_threshold, TableError)
+        self.weighting_power = checked(WeightingPower, "weighting_power", weighting_power, TableError)
+
+    def get_params(self, deep: bool = True) -> dict:
+        return {"n_neighbours": self.n_neighbours, "contact_threshold": self.contact_threshold,
+                "weighting_power": self.weighting_power}
+
+    def set_params(self, **params) -> NearestNeighbourRenderer:
+        self.__init__(**(self.get_params() | params))
+        return self
+
+    def fit(self, wrenches, motor_inputs) -> NearestNeighbourRenderer:
+        """Index the table (entries, 6 or 3) → (entries, 3), merging the entries without contact."""
+        table = LookupTable(np.asarray(wrenches, dtype=float), np.asarray(motor_inputs, dtype=float))
+        forces, motor = _features(table.wrenches, "wrenches"), np.asarray(table.motor_inputs, dtype=float)
+        touching = np.linalg.norm(forces, axis=1) >= self.contact_threshold
+        duplicate = _first_duplicate(forces[touching])
+        if duplicate is not None:
+            rows = np.flatnonzero(touching)
+            raise TableError(f"wrenches: entries {rows[duplicate[0]]} and {rows[duplicate[1]]} read the same force")
+        free = np.flatnonzero(~touching)
+        if len(free):
+            released = free[np.argmin(motor[free].sum(axis=1))]  # argmin: the first on a tie
+            forces = np.vstack([np.zeros((1, 3)), forces[touching]])
+            motor = np.vstack([motor[released], motor[touching]])
+        if len(forces) < self.n_neighbours:
+            raise TableError(f"n_neighbours = {self.n_neighbours}: the table has only {len(forces)} distinct entries")
+        self.features_, self.motor_inputs_ = forces, motor
+        self.tree_ = cKDTree(forces)
+        self.merged_ = len(free)
+        gaps, _ = self.tree_.query(forces, k=2)
+        self.widest_gap_ = float(gaps[:, 1].max())
+        self.lowest_, self.highest_ = forces.min(axis=0), forces.max(axis=0)
+        return self
+
+    def _wanted(self, wrenches) -> np.ndarray:
+        wanted = np.asarray(wrenches, dtype=float)
+        if wanted.shape[-1:] not in ((3,), (6,)):
+            raise ValueError(f"wanted wrenches have shape {wanted.shape}: expected (..., 6) or (..., 3)")
+        if not np.all(np.isfinite(wanted)):
+            raise ValueError("wanted wrenches: expected finite numbers")
+        return wanted[..., FORCE]
+
+    def render(self, wrenches) -> Rendering:
+        """Motor inputs for wanted wrenches (..., 6 or 3), with the out-of-range flag."""
+        wanted = self._wanted(wrenches)
+        distances, nearest = self.tree_.query(wanted, k=self.n_neighbours)
+        if self.n_neighbours == 1:  # scipy drops the neighbours' axis for k = 1
+            distances, nearest = distances[..., None], nearest[..., None]
+        return Rendering(self._average(distances, nearest), self._outside(wanted, distances[..., 0]))
+
+    def render_one(self, wrench) -> tuple[np.ndarray, bool]:
+        """Motor inputs (3,) for one wanted wrench (6,) or force (3,), and whether it lies outside the
+        table: :meth:`render` for the real-time loop, without its array bookkeeping."""
+        force = np.asarray(wrench, dtype=float)[FORCE]
+        if force.shape != (3,) or not np.isfinite(force).all():
+            raise ValueError(f"wanted wrench {wrench!r}: expected 6 (or 3) finite numbers")
+        distances, nearest = self.tree_.query(force, k=max(self.n_neighbours, 2))  # k >= 2 keeps the axis
+        distances, nearest = distances[: self.n_neighbours], nearest[: self.n_neighbours]
+        if self.weighting_power == 0.0:
+            motor = self.motor_inputs_[nearest].mean(axis=0)
+        elif distances[0] == 0.0:
+            motor = self.motor_inputs_[nearest[distances == 0.0]].mean(axis=0)
+        else:
+            weights = distances**-self.weighting_power
+            motor = weights @ self.motor_inputs_[nearest] / weights.sum()
+        outside = distances[0] > self.widest_gap_ or (force < self.lowest_).any() or (force > self.highest_).any()
+        return motor, bool(outside)
+
+    def predict(self, wrenches) -> np.ndarray:
+        """Motor inputs (..., 3) for wanted wrenches; see :meth:`render` for the out-of-range flag."""
+        return self.render(wrenches).motor_inputs
+
+    def _average(self, distances: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+        if self.weighting_power == 0.0:
+            return self.motor_inputs_[nearest].mean(axis=-2)
+        exact = distances[..., :1] == 0.0
+        inverse = np.where(distances == 0.0, 1.0, distances) ** -self.weighting_power
+        weights = np.where(exact, (distances == 0.0).astype(float), inverse)
+        weights /= weights.sum(axis=-1, keepdims=True)
+        return np.einsum("...k,...kj->...j", weights, self.motor_inputs_[nearest])
+
+    def _outside(self, wanted: np.ndarray, nearest_distance: np.ndarray) -> np.ndarray:
+        beyond = np.any((wanted < self.lowest_) | (wanted > self.highest_), axis=-1)
+        return beyond | (nearest_distance > self.widest_gap_)

@@ -1,0 +1,212 @@
+"""The lookup-table renderer against brute force and scikit-learn, its stated choices and refusals,
+both personalisations, and the simulated collection."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sklearn.neighbors import KNeighborsRegressor
+
+from softtip.mechanics.plate_contact import hertz_force
+from softtip.sensors.wrench import NANO17_WRENCH
+from softtip.systems.haptics.collection import CollectionSettings, collection_duration, motor_grid, sensed_contact
+from softtip.systems.haptics.device import forward_kinematics, load_device, move_time
+from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, Fingertip, finger_wrench
+from softtip.systems.haptics.personalisation import in_device_axes, personalise_data_driven, personalise_geometric
+from softtip.systems.haptics.rendering import LookupTable, NearestNeighbourRenderer, TableError
+
+DEVICE = load_device()
+RNG = np.random.default_rng(3)
+WRENCHES = RNG.normal(size=(700, 6))
+MOTOR = RNG.uniform(0, 3, size=(700, 3))
+
+
+def brute_force(wanted, forces, motor, k):
+    distances = np.linalg.norm(forces - wanted, axis=1)
+    nearest = np.argsort(distances)[:k]
+    weights = 1 / distances[nearest]
+    return weights @ motor[nearest] / weights.sum()
+
+
+def test_renderer_is_the_brute_force_weighted_average_of_the_nearest_eight():
+    renderer = NearestNeighbourRenderer().fit(WRENCHES, MOTOR)
+    wanted = RNG.normal(size=(40, 6))
+    expected = np.array([brute_force(w[:3], WRENCHES[:, :3], MOTOR, 8) for w in wanted])
+    assert np.allclose(renderer.predict(wanted), expected, rtol=1e-12)
+    reference = KNeighborsRegressor(n_neighbors=8, weights="distance", algorithm="brute").fit(WRENCHES[:, :3], MOTOR)
+    assert np.allclose(renderer.predict(wanted), reference.predict(wanted[:, :3]), rtol=1e-12)
+    # the torques play no part: only the force components are features
+    shuffled = wanted.copy()
+    shuffled[:, 3:] = RNG.normal(size=(40, 3))
+    assert np.array_equal(renderer.predict(shuffled), renderer.predict(wanted))
+
+
+@pytest.mark.parametrize("n_neighbours", [1, 8])
+def test_one_rendering_for_the_loop_is_the_batch_rendering(n_neighbours):
+    renderer = NearestNeighbourRenderer(n_neighbours).fit(WRENCHES, MOTOR)
+    wanted = np.vstack([RNG.normal(size=(20, 6)), WRENCHES[3], [40.0, 0, 0, 0, 0, 0]])
+    batch = renderer.render(wanted)
+    for row, expected, outside in zip(wanted, batch.motor_inputs, batch.outside, strict=True):
+        motor, flagged = renderer.render_one(row)
+        assert np.allclose(motor, expected, rtol=1e-12) and flagged == outside
+    with pytest.raises(ValueError, match="finite"):
+        renderer.render_one([np.nan, 0.0, 0.0])
+
+
+def test_an_exact_match_renders_its_own_entry():
+    renderer = NearestNeighbourRenderer().fit(WRENCHES, MOTOR)
+    assert np.allclose(renderer.predict(WRENCHES[17]), MOTOR[17])
+
+
+def test_entries_without_contact_merge_into_the_least_wound_one():
+    noise = RNG.normal(scale=1e-3, size=(30, 3))  # readings of configurations that do not touch
+    forces = np.vstack([noise, RNG.uniform(0.5, 3, size=(40, 3))])
+    motor = RNG.uniform(0.5, 3, size=(70, 3))
+    motor[[4, 9]] = [0.1, 0.1, 0.1]  # two least-wound configurations, a tie: the first wins
+    motor[9, 0] = 0.2
+    motor[9, 1] = 0.0
+    renderer = NearestNeighbourRenderer().fit(forces, motor)
+    assert renderer.merged_ == 30 and len(renderer.features_) == 41
+    assert np.array_equal(renderer.predict(np.zeros(3)), motor[4])
+    # without the merge, a zero force would average eight arbitrary non-contact configurations
+    unmerged = KNeighborsRegressor(n_neighbors=8, weights="distance").fit(forces, motor).predict(np.zeros((1, 3)))[0]
+    assert not np.allclose(unmerged, motor[4])
+
+
+def test_targets_beyond_the_table_are_flagged_not_extrapolated():
+    renderer = NearestNeighbourRenderer().fit(WRENCHES, MOTOR)
+    inside, beyond = np.zeros(6), np.array([50.0, 0, 0, 0, 0, 0])
+    result = renderer.render(np.stack([inside, beyond]))
+    assert result.outside.tolist() == [False, True]
+    assert np.all(result.motor_inputs[1] <= MOTOR.max(axis=0))  # a weighted average: never beyond the entries
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda w, m: (np.where(np.arange(len(w))[:, None] == 3, np.nan, w), m), "wrenches: entry 3 is not finite"),
+    (lambda w, m: (np.vstack([w, w[5]]), np.vstack([m, m[5]])), "entries 5 and 700 are the same entry"),
+    (lambda w, m: (np.vstack([w, w[5]]), np.vstack([m, m[5] + 0.1])), "entries 5 and 700 read the same force"),
+    (lambda w, m: (w, m[:-1]), "motor_inputs has shape"),
+    (lambda w, m: (w[:5], m[:5]), "n_neighbours = 8: the table has only 5"),
+])
+def test_bad_tables_are_refused_in_one_line(change, message):
+    wrenches, motor = change(WRENCHES, MOTOR)
+    with pytest.raises(TableError, match=message) as refused:
+        NearestNeighbourRenderer().fit(wrenches, motor)
+    assert "\n" not in str(refused.value)
+
+
+def test_renderer_parameters_follow_scikit_learn_and_are_checked():
+    renderer = NearestNeighbourRenderer(n_neighbours=4)
+    assert renderer.get_params() == {"n_neighbours": 4, "contact_threshold": pytest.approx(5 / 320),
+                                     "weighting_power": 1.0}
+    assert renderer.set_params(n_neighbours=2).n_neighbours == 2
+    with pytest.raises(TableError, match="n_neighbours = 0"):
+        NearestNeighbourRenderer(n_neighbours=0)
+    with pytest.raises(ValueError, match="finite"):
+        NearestNeighbourRenderer().fit(WRENCHES, MOTOR).predict([np.nan, 0, 0])
+    LookupTable(WRENCHES, MOTOR)  # a sound table is accepted
+
+
+def test_geometric_method_is_the_identity_on_the_fs_and_keeps_indentation_on_a_larger_sphere():
+    grid = motor_grid(DEVICE, 7)
+    same = personalise_geometric(DEVICE, grid, FINGERTIP_SENSOR.radius, FINGERTIP_SENSOR.radius)
+    assert np.allclose(same.motor_inputs, grid, atol=1e-12) and not same.outside.any()
+    # two homogeneous rubber spheres (Hertz), only their radii different
+    sensor, large = Fingertip(name="FS", radius=7.5e-3), Fingertip(name="large", radius=8.5e-3)
+    moved = personalise_geometric(DEVICE, grid, sensor.radius, large.radius)
+    ok = ~moved.outside
+    _, fs_depth = finger_wrench(sensor, DEVICE, forward_kinematics(DEVICE, grid[ok]))
+    wrench, large_depth = finger_wrench(large, DEVICE, forward_kinematics(DEVICE, moved.motor_inputs[ok]))
+    assert np.allclose(large_depth, fs_depth, atol=1e-12)  # the same deformation ...
+    touching = fs_depth > 1e-4
+    fs_force = hertz_force(fs_depth[touching], 7.5e-3, 1.14e6, 0.5)
+    # ... takes more force on the larger sphere: Hertz scales with √R at equal depth, so B is not exact
+    ratio = np.linalg.norm(wrench[touching, :3], axis=1) / fs_force
+    assert np.allclose(ratio, math.sqrt(8.5 / 7.5), rtol=1e-9) and touching.sum() > 50
+
+
+def test_geometric_method_flags_poses_out_of_reach():
+    wound = np.full((1, 3), DEVICE.angle_max)  # the platform at its highest: a smaller finger needs more
+    result = personalise_geometric(DEVICE, wound, FINGERTIP_SENSOR.radius, 6.5e-3)
+    assert result.outside.tolist() == [True] and np.all(result.motor_inputs <= DEVICE.angle_max)
+    with pytest.raises(ValueError, match="user_radius"):
+        personalise_geometric(DEVICE, wound, FINGERTIP_SENSOR.radius, float("nan"))
+
+
+def test_data_driven_method_with_the_fs_as_user_returns_the_fs_table():
+    grid = motor_grid(DEVICE, 7)
+    exact = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None).unsaturated()
+    grid = exact.motor_inputs
+    result = personalise_data_driven(DEVICE, grid, exact.platform_wrenches, grid, exact.platform_wrenches,
+                                     n_neighbours=1)
+    touching = np.linalg.norm(exact.platform_wrenches[:, :3], axis=1) >= 5 / 320
+    # turned into the device's axes, the DS's force is the opposite of the fingertip's
+    turned = in_device_axes(DEVICE, grid, exact.platform_wrenches)[:, :3]
+    assert np.allclose(turned, -exact.finger_wrenches[:, :3], atol=1e-12)
+    assert np.allclose(result.motor_inputs[touching], grid[touching], atol=1e-12)
+    assert not result.outside.any()
+
+
+def test_collection_reads_each_held_configuration_and_times_the_procedure():
+    grid = motor_grid(DEVICE, 2)
+    assert len(grid) == 8 and len(np.unique(grid, axis=0)) == 8
+    # boustrophedon: one servo moves per step, over its range as its dead band resolves it (333 steps
+    # of 0.54 degree) at 600 degrees/s, from half a 50 Hz frame on; the first move is from rest to
+    # rest, and each configuration held 1 s
+    assert np.all((np.diff(grid, axis=0) != 0).sum(axis=1) == 1)
+    expected = 8 * 0.01 + 7 * 333 * 0.54 / 600.0 + 8 * 1.0
+    assert collection_duration(DEVICE, grid, 1.0) == pytest.approx(expected)
+    assert np.allclose(move_time(DEVICE, np.zeros(3), np.array([math.pi, 0, 0])), 0.01 + 0.3)
+    settings = CollectionSettings(hold_s=1.0, window_s=0.2, sensor=NANO17_WRENCH)
+    noisy = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, settings, np.random.default_rng(0))
+    exact = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, settings, None)
+    # the window's mean of 200 readings, one step of noise and rounding each: within 5.5 of its spreads
+    spread = math.sqrt((1 / 320) ** 2 * (1 + 1 / 12) / 200)
+    assert np.max(np.abs(noisy.finger_wrenches[:, :3] - exact.finger_wrenches[:, :3])) < 5.5 * spread
+    # the DS reads the opposite of the fingertip's force: along the platform's normal
+    normal_force = -noisy.platform_wrenches[:, 2]
+    assert np.allclose(normal_force, np.linalg.norm(exact.finger_wrenches[:, :3], axis=1), atol=0.01)
+    with pytest.raises(ValueError, match="collection.window_s = 2"):
+        CollectionSettings(hold_s=1.0, window_s=2.0)
+
+
+def test_presses_recover_the_users_modulus_and_the_force_model_renders_the_fs_force():
+    from softtip.mechanics.plate_contact import PlateContactLaw
+    from softtip.systems.haptics.personalisation import (
+        PRESS_DEPTHS,
+        fit_presses,
+        personalise_force_model,
+        press_configurations,
+    )
+
+    softer = Fingertip(name="soft 9 mm", radius=9e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=0.5e6))
+    presses = press_configurations(DEVICE, softer.radius)
+    assert len(presses) == 5 and np.all(presses[:, 0] > 0)
+    read = sensed_contact(DEVICE, softer, presses, CollectionSettings(), None)
+    fit = fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, saturated=read.saturated)
+    assert fit.youngs_modulus == pytest.approx(0.5e6, rel=1e-9)  # exact readings: the modulus itself
+    # the presses reach the planned depths, but for the servos' dead band (0.54 degree of a 2 mm pulley)
+    assert np.allclose(fit.depths, PRESS_DEPTHS, rtol=0, atol=0.5 * np.radians(0.54) * 2e-3)
+    grid = motor_grid(DEVICE, 7)
+    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None)
+    personal = personalise_force_model(DEVICE, grid, fs.finger_wrenches, FINGERTIP_SENSOR.radius, softer.radius, fit)
+    fs_force = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1)
+    wrench, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, personal.motor_inputs))
+    ok = ~personal.outside & (fs_force > 0.1) & ~fs.saturated
+    assert ok.sum() > 30
+    # the user feels the FS's force (the servos' dead band aside), where the plain geometric method does not
+    assert np.allclose(np.linalg.norm(wrench[ok, :3], axis=1), fs_force[ok], rtol=1e-9)
+    geometric = personalise_geometric(DEVICE, grid, FINGERTIP_SENSOR.radius, softer.radius)
+    plain, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, geometric.motor_inputs))
+    assert np.median(np.abs(np.linalg.norm(plain[ok, :3], axis=1) / fs_force[ok] - 1)) > 0.2
+
+
+def test_presses_that_never_touch_are_refused():
+    from softtip.systems.haptics.personalisation import fit_presses
+
+    with pytest.raises(ValueError, match="none of the 2 presses touched"):
+        fit_presses(DEVICE, np.zeros((2, 3)), np.zeros((2, 6)), 7.5e-3)
+    with pytest.raises(ValueError, match="presses: 6 given"):
+        fit_presses(DEVICE, np.zeros((6, 3)), np.zeros((6, 6)), 7.5e-3)
