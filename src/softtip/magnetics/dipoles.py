@@ -79,9 +79,9 @@ class Dipoles:
         """(..., P, 3) flux density at ``points`` (P, 3), T."""
         return dipole_field(points, self.positions, self.moments)
 
-    def in_plane_average(self, rectangles: Rectangles) -> NDArray[np.float64]:
-        """(..., R, 2) mean (B_x, B_y) over each rectangle, T (exact)."""
-        return rectangle_average_in_plane(rectangles, self.positions, self.moments)
+    def in_plane_average(self, rectangles: Rectangles, axes: tuple[int, ...] = (0, 1)) -> NDArray[np.float64]:
+        """(..., R, len(axes)) mean in-plane field along ``axes`` over each rectangle, T (exact)."""
+        return rectangle_average_in_plane(rectangles, self.positions, self.moments, axes)
 
     @staticmethod
     def concatenate(groups: list[Dipoles]) -> Dipoles:
@@ -163,34 +163,36 @@ def _edge_integral(across: NDArray, along_low: NDArray, along_high: NDArray, hei
     return primitive(along_high) - primitive(along_low)
 
 
-def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, moments: ArrayLike) -> NDArray[np.float64]:
-    """Mean (B_x, B_y) (T) over each rectangle (R) of the dipoles at ``positions`` with ``moments``
-    (..., D, 3), summed over the dipoles: shape (..., R, 2). Exact (closed form, module notes); a dipole
-    in the rectangles' plane is refused (its field is not integrable there)."""
+def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, moments: ArrayLike,
+                               axes: tuple[int, ...] = (0, 1)) -> NDArray[np.float64]:
+    """Mean in-plane field (T) along ``axes`` (0: B_x, 1: B_y) over each rectangle (R) of the dipoles at
+    ``positions`` with ``moments`` (..., D, 3), summed over the dipoles: shape (..., R, len(axes)). Exact
+    (closed form, module notes); a dipole in the rectangles' plane is refused (its field is not
+    integrable there)."""
     positions = _array(positions, "positions")
     moments = _array(moments, "moments")
     if positions.shape != moments.shape or positions.ndim < 2:
         raise DipoleError(f"moments: expected the shape of positions {positions.shape} (..., D, 3), got {moments.shape}")
+    if not axes or any(axis not in (0, 1) for axis in axes):
+        raise DipoleError(f"axes = {axes!r}: expected in-plane axes among 0 (x) and 1 (y)")
     if np.any(positions[..., 2] == rectangles.z):
         raise DipoleError("positions: a dipole lies in the rectangles' plane")
     flat_positions = positions.reshape(-1, 3)
     flat_moments = moments.reshape(-1, 3)
     count = len(rectangles)
-    out = np.zeros((flat_positions.shape[0], count, 2))
+    out = np.zeros((flat_positions.shape[0], count, len(axes)))
     chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
-    x, y = rectangles.x, rectangles.y
+    edges = (rectangles.x, rectangles.y)
     for start in range(0, flat_positions.shape[0], chunk):
         p = flat_positions[start:start + chunk, None, :]
         m = flat_moments[start:start + chunk, None, :]
-        dx = x[None, :, :] - p[..., 0:1]  # (d, R, 2): offsets of the two x edges
-        dy = y[None, :, :] - p[..., 1:2]
-        dz = rectangles.z - p[..., 2:3]
-        mx, my, mz = m[..., 0:1], m[..., 1:2], m[..., 2:3]
-        # B_x: potential along the two edges x = x1, x2 (integrated over y)
-        along_x = _edge_integral(dx, dy[..., 0:1], dy[..., 1:2], dz, mx, my, mz)
-        # B_y: potential along the two edges y = y1, y2 (integrated over x)
-        along_y = _edge_integral(dy, dx[..., 0:1], dx[..., 1:2], dz, my, mx, mz)
-        out[start:start + chunk, :, 0] = along_x[..., 1] - along_x[..., 0]
-        out[start:start + chunk, :, 1] = along_y[..., 1] - along_y[..., 0]
+        offsets = [edges[axis][None, :, :] - p[..., axis:axis + 1] for axis in (0, 1)]  # (d, R, 2) each
+        height = rectangles.z - p[..., 2:3]
+        for column, axis in enumerate(axes):
+            # B_axis: the potential along the two edges across ``axis``, integrated along the other
+            other = 1 - axis
+            along = _edge_integral(offsets[axis], offsets[other][..., 0:1], offsets[other][..., 1:2], height,
+                                   m[..., axis:axis + 1], m[..., other:other + 1], m[..., 2:3])
+            out[start:start + chunk, :, column] = along[..., 1] - along[..., 0]
     out *= -_MU0_OVER_4PI / rectangles.area[None, :, None]
-    return out.reshape(*positions.shape[:-1], count, 2).sum(axis=-3)
+    return out.reshape(*positions.shape[:-1], count, len(axes)).sum(axis=-3)

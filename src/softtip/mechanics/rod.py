@@ -415,8 +415,10 @@ def solve_follower_force(rod: Rod, size: ArrayLike) -> RodShapes:
 @dataclass(frozen=True)
 class PlateContact:
     """How the rod's tip meets a plate lowered onto it: sliding friction ``friction`` (Coulomb, static =
-    kinetic) and an initial stress-free tilt ``imperfection`` (rad, towards +x) that makes a straight
-    column choose a side when it buckles."""
+    kinetic) and an initial stress-free bow that makes a straight column choose a side when it buckles:
+    a half sine bulging towards +x with its tip above its base, θ(s) = ``imperfection`` cos(π s/L) (its
+    slope at the base, rad; the bulge is imperfection × L/π). Both the free column's mode (a lean) and the
+    stuck one's (a bulge) then start towards +x."""
 
     friction: float = 0.5
     imperfection: float = 0.01
@@ -425,7 +427,7 @@ class PlateContact:
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise RodError(f"friction = {self.friction!r}: expected a number >= 0")
         if not (math.isfinite(self.imperfection) and 0 < abs(self.imperfection) < math.pi / 4):
-            raise RodError(f"imperfection = {self.imperfection!r}: expected a tilt in rad, 0 < |tilt| < pi/4")
+            raise RodError(f"imperfection = {self.imperfection!r}: expected a slope in rad, 0 < |slope| < pi/4")
 
 
 @dataclass(frozen=True)
@@ -456,10 +458,10 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
         raise RodError("rod.shear_and_stretch = False: a plate needs an extensible rod (an inextensible straight "
                        "column cannot shorten to meet it)")
     d = _discretise(rod)
-    rest = np.full((1, rod.segments), contact.imperfection)
+    rest = (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
     standing = _shapes(rod, d, rest, np.zeros((1, 2)), np.zeros(1, dtype=bool), 0, 0.0)
     start = standing.tip[0]
-    if np.any(np.diff(gaps) > 0) or gaps[0] > start[1] or gaps[-1] <= 0:
+    if np.any(np.diff(gaps) > 0) or gaps[0] > start[1] * (1 + 1e-12) or gaps[-1] <= 0:
         raise RodError(f"gaps: expected plate heights decreasing from at most {start[1]:.6g} m to above 0")
     state = _PlateState(rest.copy(), np.zeros((1, 2)), sliding=False, friction=0.0)
     states: list[_PlateState] = []
