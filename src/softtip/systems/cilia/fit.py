@@ -256,7 +256,11 @@ def identifiability(model: CiliaModel, curve: MeasuredCurve, linear_fraction: fl
     if not 0 < linear_fraction < 1:
         raise CurveError(f"linear_fraction = {linear_fraction!r}: expected a number strictly between 0 and 1")
     limit = linear_fraction * float(curve.force.max())
-    part = curve.part(curve.force <= limit)
+    keep = curve.force <= limit
+    if keep.sum() < 5:
+        raise CurveError(f"linear_fraction = {linear_fraction!r}: {keep.sum()} points up to {limit:.4g} N, "
+                         "expected at least 5 for the linear part")
+    part = curve.part(keep)
     whole = fit_curve(model, curve, cache=cache)
     linear = fit_curve(model, part, start=(whole.moment, whole.diameter))
     return Identifiability(limit, linear, whole)
