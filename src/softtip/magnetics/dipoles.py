@@ -83,12 +83,6 @@ class Dipoles:
         """(..., R, len(axes)) mean in-plane field along ``axes`` over each rectangle, T (exact)."""
         return rectangle_average_in_plane(rectangles, self.positions, self.moments, axes)
 
-    @staticmethod
-    def concatenate(groups: list[Dipoles]) -> Dipoles:
-        """One set holding every group's dipoles (along the dipole axis)."""
-        return Dipoles(np.concatenate([g.positions for g in groups], axis=-2),
-                       np.concatenate([g.moments for g in groups], axis=-2))
-
 
 def dipole_chain(points: ArrayLike, tangents: ArrayLike, moment: float,
                  shares: ArrayLike | None = None) -> Dipoles:

@@ -14,11 +14,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
-from matplotlib.figure import Figure
 from matplotlib.colors import SymLogNorm
+from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Rectangle
+from pydantic import Field
 
 from softtip._core.config import (
     Fraction,
@@ -27,14 +29,17 @@ from softtip._core.config import (
     PositiveNumber,
     Text,
     choice,
+    expect,
     integer,
     number,
     schema,
 )
+from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
 from softtip.magnetics.dipoles import dipole_field
 from softtip.mechanics.rod import PlateContact
 from softtip.systems.cilia.fit import (
+    CurveError,
     CurveFit,
     CurveModel,
     Identifiability,
@@ -44,7 +49,7 @@ from softtip.systems.cilia.fit import (
     identifiability,
     profiles,
 )
-from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, Die, DieError, read_die
+from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
 from softtip.systems.cilia.resolution import Resolution, resolution
 
@@ -67,7 +72,8 @@ class CiliaSettings:
     chain_count: PositiveInteger = 10
     friction: number("a number >= 0", ge=0.0) = 0.5
     imperfection_deg: number("a tilt in degrees, 0 < tilt < 45", gt=0.0, lt=45.0) = 0.5
-    depths_um: tuple[PositiveNumber, ...] = (5.0, 10.0, 20.0)
+    depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
+                         expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
 
 
 @dataclass(frozen=True)
@@ -202,7 +208,7 @@ def _balance(model: CiliaModel, settings: CiliaSettings, rng: np.random.Generato
     try:
         fit = fit_curve(model, measured)
         refusal = ""
-    except Exception as problem:  # noqa: BLE001 - the report says why the paper model cannot fit this curve
+    except (NotConverged, CurveError) as problem:  # the report says why the paper model cannot fit this curve
         fit, refusal = None, f"{type(problem).__name__}: {problem}"
     return BalanceOutcome(curve, buckling, fit, refusal)
 
@@ -253,7 +259,7 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
         axes = figure.add_subplot(1, 2, index + 1)
         image = axes.pcolormesh(xs / 1e-3, ys / 1e-3, field[index].reshape(grid_x.shape), cmap="RdBu_r", norm=norm,
                                 shading="auto")
-        for (x0, x1), (y0, y1) in _bank_outlines(meander.elements.x, meander.elements.y):
+        for (x0, x1), (y0, y1) in _bank_outlines(meander.elements.x, meander.elements.y, meander.axis):
             axes.add_patch(Rectangle((x0 / 1e-3, y0 / 1e-3), (x1 - x0) / 1e-3, (y1 - y0) / 1e-3, fill=False, lw=0.8))
         for x, y in die.pillars.positions:
             axes.add_patch(Circle((x / 1e-3, y / 1e-3), die.pillars.rod.base_diameter / 2 / 1e-3, fill=False,
@@ -266,9 +272,10 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
     return figure
 
 
-def _bank_outlines(x: np.ndarray, y: np.ndarray) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The bounding boxes of runs of strips that share their extent along the strips (the banks)."""
-    keys = np.round(np.column_stack([y if np.allclose(y[:, 1] - y[:, 0], y[0, 1] - y[0, 0]) else x]), 12)
+def _bank_outlines(x: np.ndarray, y: np.ndarray, axis: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The bounding boxes of the strips that share their extent along the strips (the banks): strips
+    sensing x run along y, and the other way round."""
+    keys = np.round(y if axis == 0 else x, 12)
     outlines = []
     for key in np.unique(keys, axis=0):
         members = np.all(keys == key, axis=1)
