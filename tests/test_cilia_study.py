@@ -21,7 +21,7 @@ class Recorder(Progress):
 
 @pytest.mark.slow
 def test_the_study_fits_the_twins_curve_and_reports_every_figure():
-    settings = CiliaSettings(points=16, recovery_trials=2, depths_um=(10.0, 20.0))
+    settings = CiliaSettings(points=16, recovery_trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,))
     progress = Recorder()
     study = run_study(settings, seed=4, progress=progress)
     assert progress.stages == ["twin curve and fit", "recovery of synthetic truths", "resolution, balance, layout"]
@@ -38,7 +38,10 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure():
     assert study.resolution.minimum_force_at_rest < study.resolution.smallest_step_at_rest
     # the balance test: the pillars buckle (5 × the one-pillar load) before the plate bends them
     assert 0 < study.balance.buckling_force < study.balance.curve.force.max() * 1.01
-    assert study.layout.moments.shape == (2,) and np.all(study.layout.moments > 0)
+    layout = study.layout
+    assert layout.moments_by_depth.shape == (2,) and layout.moments_by_scale.shape == (1,)
+    # the declared layout (10 µm) gives back the study's own fit
+    assert layout.moments_by_depth[0] == pytest.approx(fit.moment, rel=1e-6)
     for figure in (study.figures.curve, study.figures.field_map, study.figures.pillars, study.figures.profiles):
         assert isinstance(figure, Figure) and figure.axes
 

@@ -150,12 +150,16 @@ class PillarFE:
                 step = -spla.spsolve(tangent.tocsc(), residual)
             total = energy - load @ unknowns
             slope = residual @ step
+            if slope >= 0:  # not a descent direction (an indefinite tangent): go down the gradient instead
+                step = -residual * (np.linalg.norm(step) / max(np.linalg.norm(residual), 1e-300))
+                slope = residual @ step
             length = 1.0
-            while length > 1e-6:  # backtracking (Armijo) on the total energy; inverted elements give inf
-                trial = unknowns + length * step
-                if self.body.hyperelastic_energy(trial) - load @ trial <= total + 1e-4 * length * slope:
-                    break
+            while self.body.hyperelastic_energy(unknowns + length * step) - load @ (unknowns + length * step) \
+                    > total + 1e-4 * length * slope:  # backtracking (Armijo); inverted elements give inf
                 length /= 2
+                if length < 1e-8:
+                    raise NotConverged("pillar FE: the line search found no lower energy "
+                                       f"(relative residual {size:.2e})")
             unknowns = unknowns + length * step
         raise NotConverged(f"pillar FE: Newton did not converge in {max_iterations} iterations "
                            f"(relative residual {size:.2e})")

@@ -189,9 +189,19 @@ class Die:
         return Die(self.size, self.active_area, self.depth, pillars, self.meanders, self.source)
 
     def with_depth(self, depth: float) -> Die:
-        plane = -depth
-        meanders = tuple(Meander(m.name, m.axis, Rectangles(m.elements.x, m.elements.y, plane), m.readout)
-                         for m in self.meanders)
+        """The same die with its sensing plane ``depth`` (m) below the pillar bases."""
+        return self._with_elements(depth, 1.0)
+
+    def with_meanders_scaled(self, scale: float) -> Die:
+        """The same die with every strip's edges moved ``scale`` times as far from the die's centre (the
+        meanders grown or shrunk under the pillars, which stay)."""
+        return self._with_elements(self.depth, scale)
+
+    def _with_elements(self, depth: float, scale: float) -> Die:
+        if not (math.isfinite(depth) and depth > 0 and math.isfinite(scale) and scale > 0):
+            raise DieError(f"{self.source}: expected a depth and a scale > 0, got {depth!r} and {scale!r}")
+        meanders = tuple(Meander(m.name, m.axis, Rectangles(scale * m.elements.x, scale * m.elements.y, -depth),
+                                 m.readout) for m in self.meanders)
         return Die(self.size, self.active_area, depth, self.pillars, meanders, self.source)
 
 

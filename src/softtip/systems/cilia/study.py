@@ -74,6 +74,8 @@ class CiliaSettings:
     imperfection_deg: number("a tilt in degrees, 0 < tilt < 45", gt=0.0, lt=45.0) = 0.5
     depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
+    meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
+                              expect("a non-empty list of positive scales")] = (0.9, 1.1)
 
 
 @dataclass(frozen=True)
@@ -99,11 +101,15 @@ class Recovery:
 
 @dataclass(frozen=True)
 class LayoutWeight:
-    """The moment fitted to the same curve with the sensing plane at other depths (the layout's weight)."""
+    """The moment and diameter fitted to the same curve by dies of other layouts (the layout's weight):
+    the sensing plane at other ``depths`` (m), and the meanders scaled by ``scales`` about the centre."""
 
     depths: np.ndarray
-    moments: np.ndarray
-    diameters: np.ndarray
+    moments_by_depth: np.ndarray
+    diameters_by_depth: np.ndarray
+    scales: np.ndarray
+    moments_by_scale: np.ndarray
+    diameters_by_scale: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -214,13 +220,15 @@ def _balance(model: CiliaModel, settings: CiliaSettings, rng: np.random.Generato
 
 
 def _layout_weight(model: CiliaModel, measured: MeasuredCurve, fitted: CurveFit, settings: CiliaSettings) -> LayoutWeight:
-    moments, diameters = [], []
-    for depth in settings.depths_um:
-        moved = replace(model, die=model.die.with_depth(depth * UM))
-        refit = fit_curve(moved, measured, start=(fitted.moment, fitted.diameter))
-        moments.append(refit.moment)
-        diameters.append(refit.diameter)
-    return LayoutWeight(np.array(settings.depths_um) * UM, np.array(moments), np.array(diameters))
+    def refits(dies: list) -> tuple[np.ndarray, np.ndarray]:
+        found = [fit_curve(replace(model, die=die), measured, start=(fitted.moment, fitted.diameter)) for die in dies]
+        return np.array([f.moment for f in found]), np.array([f.diameter for f in found])
+
+    depths = np.array(settings.depths_um) * UM
+    scales = np.array(settings.meander_scales)
+    by_depth = refits([model.die.with_depth(depth) for depth in depths])
+    by_scale = refits([model.die.with_meanders_scaled(scale) for scale in scales])
+    return LayoutWeight(depths, *by_depth, scales, *by_scale)
 
 
 # ---------------------------------------------------------------------------------------------- figures
