@@ -30,10 +30,11 @@ from softtip.mechanics.mesh import TetMesh, tet_mesh_from_gmsh
 from softtip.mechanics.rod import Rod, RodError
 
 
-def mesh_frustum(rod: Rod, size: float, slices: int = 10) -> TetMesh:
+def mesh_frustum(rod: Rod, size: float, slices: int = 10, substrate: float | None = None) -> TetMesh:
     """Tetrahedra of the rod's cone frustum (elements of at most ``size`` m) cut into ``slices`` equal
     slices along its axis that the mesh conforms to (no element straddles two), boundaries "base" and
-    "top"."""
+    "top". With ``substrate`` (m), the pillar stands on a cylinder of that radius and depth of its own
+    material, meshed coarser away from the root, whose bottom is the "base"."""
     import gmsh
 
     if not (np.isfinite(size) and 0 < size <= rod.length):
@@ -49,20 +50,38 @@ def mesh_frustum(rod: Rod, size: float, slices: int = 10) -> TetMesh:
         occ = gmsh.model.occ
         pieces = [(3, occ.addCone(0, 0, heights[k], 0, 0, heights[k + 1] - heights[k], radii[k], radii[k + 1]))
                   for k in range(slices)]
-        if slices > 1:
+        bottom = 0.0
+        if substrate is not None:
+            if not (np.isfinite(substrate) and substrate > rod.base_diameter):
+                raise RodError(f"substrate = {substrate!r}: expected a radius in m wider than the pillar's base")
+            bottom = -substrate
+            pieces.append((3, occ.addCylinder(0, 0, bottom, 0, 0, substrate, substrate)))
+        if len(pieces) > 1:
             occ.fragment(pieces[:1], pieces[1:])
         occ.synchronize()
         groups: dict[str, list[int]] = {"base": [], "top": []}
         for _, tag in gmsh.model.getEntities(2):
             z = occ.getCenterOfMass(2, tag)[2]  # only the end discs sit at the ends (the walls lie between)
-            if abs(z) < 1e-6 * rod.length:
+            if abs(z - bottom) < 1e-6 * rod.length:
                 groups["base"].append(tag)
             elif abs(z - rod.length) < 1e-6 * rod.length:
                 groups["top"].append(tag)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        if substrate is not None:  # fine in and around the pillar, four times coarser far in the substrate
+            near = gmsh.model.mesh.field.add("Box")
+            reach = 1.5 * rod.base_diameter
+            for key, value in (("VIn", size), ("VOut", 4 * size), ("XMin", -reach), ("XMax", reach),
+                               ("YMin", -reach), ("YMax", reach), ("ZMin", -reach), ("ZMax", rod.length),
+                               ("Thickness", reach)):
+                gmsh.model.mesh.field.setNumber(near, key, value)
+            gmsh.model.mesh.field.setAsBackgroundMesh(near)
+            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size if substrate is None else 4 * size)
         gmsh.option.setNumber("Mesh.MeshSizeMin", size / 4)
         gmsh.model.mesh.generate(3)
-        return tet_mesh_from_gmsh(groups, key=f"frustum-{rod.length}-{rod.base_diameter}-{rod.tip_diameter}-{size}-{slices}")
+        return tet_mesh_from_gmsh(groups, key=f"frustum-{rod.length}-{rod.base_diameter}-{rod.tip_diameter}-{size}-"
+                                              f"{slices}-{substrate}")
     finally:
         gmsh.finalize()
 
@@ -81,11 +100,12 @@ class PillarSolution:
 
 class PillarFE:
     """The meshed pillar: ``rod`` gives shape and material (its shear and base options do not apply: the
-    solid has its own shear, and its base is bonded)."""
+    solid has its own shear, and its base is bonded, or it stands on a ``substrate`` of its own material
+    whose bottom is bonded — the solid counterpart of the rod's compliant base)."""
 
-    def __init__(self, rod: Rod, size: float, slices: int = 10):
+    def __init__(self, rod: Rod, size: float, slices: int = 10, substrate: float | None = None):
         self.rod, self.slices = rod, slices
-        self.mesh = mesh_frustum(rod, size, slices)
+        self.mesh = mesh_frustum(rod, size, slices, substrate)
         material = Material(youngs_modulus=rod.youngs_modulus, poisson_ratio=rod.poisson_ratio, density=1.0)
         self.body = BodyModel(self.mesh, material, np.zeros((0, 3)), {"base": (0, 1, 2)})
         space = self.body.space
@@ -98,8 +118,9 @@ class PillarFE:
         self._top_nodes = np.unique(facets)
         # each element's slice (elements do not straddle slices) and its share of its slice's volume
         centres = space.nodes[space.cell_nodes[:, :4]].mean(axis=1)
-        self._slice_of = np.minimum((centres[:, 2] / rod.length * slices).astype(int), slices - 1)
-        volume = space.weights.sum(axis=1)
+        in_pillar = centres[:, 2] > 0  # the substrate's elements belong to no slice
+        self._slice_of = np.where(in_pillar, np.minimum((centres[:, 2] / rod.length * slices).astype(int), slices - 1), 0)
+        volume = np.where(in_pillar, space.weights.sum(axis=1), 0.0)
         self._slice_weight = volume / np.bincount(self._slice_of, weights=volume, minlength=slices)[self._slice_of]
 
     @property
