@@ -82,9 +82,10 @@ def test_the_follower_reading_lays_the_pillars_on_their_side():
 
 def test_the_balance_test_buckles_the_pillars_before_bending_them():
     rod = DIE.pillars.rod
-    gaps = np.linspace(0.9999 * rod.length, 0.5 * rod.length, 12)
-    curve = MODEL.balance_curve(gaps, PlateContact(friction=0.5, imperfection=0.01), "X")
-    assert curve.force[0] < 1e-4 and np.all(np.diff(curve.force[:3]) > 0)  # the first step: a slight squeeze
+    descent = np.linspace(0.0, 0.5 * rod.length, 12)
+    curve = MODEL.balance_curve(descent, PlateContact(friction=0.5, imperfection=0.01), "X")
+    assert curve.force[0] == 0.0 and curve.change[0] == 0.0  # touching: no push yet, the tare itself
+    assert np.all(np.diff(curve.force[:3]) > 0)
     # straight compression hardly changes the field: the first micro-newtons change it by < 1 µV per µN
     noise = DIE.meander("X").readout.noise(18.7).total
     assert abs(curve.change[1]) < 0.05 * abs(curve.change[-1]) + noise
@@ -102,5 +103,7 @@ def test_bad_input_is_refused_in_one_line():
         CiliaModel(DIE, mode="tilted")
     with pytest.raises(DieError, match="chain_count = 0"):
         CiliaModel(DIE, chain_count=0)
-    with pytest.raises(DieError, match="balance: gaps: expected plate heights decreasing"):
-        MODEL.balance_curve(np.array([0.5e-3, 0.9e-3]))
+    with pytest.raises(DieError, match="descent: expected a non-empty 1-D array of increasing distances"):
+        MODEL.balance_curve(np.array([0.5e-3, 0.1e-3]))
+    with pytest.raises(DieError, match="descent: expected"):
+        MODEL.balance_curve(np.array([0.0, 2e-3]))

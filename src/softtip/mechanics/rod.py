@@ -435,20 +435,33 @@ class PlatePath:
     """The rod's states as the plate comes down: ``gaps`` (G,) plate height above the base (m),
     ``shapes`` (a batch of G), ``vertical_force`` (G,) the plate's push on the rod (N, > 0), ``sliding``
     (G,) the tip slides on the plate, ``lying`` (G,) the rod lies on its side (its tip face has turned
-    parallel to the plate: the side wall takes any further load, the shape stays)."""
+    parallel to the plate: the side wall takes any further load, the shape stays); ``standing`` the
+    unloaded rod with its imperfection, before the plate touches it."""
 
     gaps: NDArray[np.float64]
     shapes: RodShapes
+    standing: RodShapes
     vertical_force: NDArray[np.float64]
     sliding: NDArray[np.bool_]
     lying: NDArray[np.bool_]
 
 
+def _bow(rod: Rod, contact: PlateContact) -> NDArray[np.float64]:
+    """(1, N) the stress-free angles of the bowed rod (:class:`PlateContact`)."""
+    return (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
+
+
+def touching_height(rod: Rod, contact: PlateContact = PlateContact()) -> float:
+    """The plate's height (m) when it first touches the unloaded, bowed rod's tip."""
+    return float(_shapes(rod, _discretise(rod), _bow(rod, contact), np.zeros((1, 2)), np.zeros(1, dtype=bool),
+                         0, 0.0).tip[0, 1])
+
+
 def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact()) -> PlatePath:
     """The balance test of one pillar: a flat plate lowered step by step to the heights ``gaps`` (m,
-    decreasing from at most the tilted rod's height), pressing on the tip.
+    decreasing from at most the bowed rod's height), pressing on the tip.
 
-    The tip touches the plate where the tilted rod ends; it sticks there (pinned: x and z imposed, zero
+    The tip touches the plate where the bowed rod ends; it sticks there (pinned: x and z imposed, zero
     moment at a point contact) while the friction needed stays within ``friction`` × the push, then
     slides against the friction force. Friction makes the path history-dependent, so the gaps are stepped
     in order (each from the previous state). Once the tip face turns parallel to the plate the pillar
@@ -458,7 +471,7 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
         raise RodError("rod.shear_and_stretch = False: a plate needs an extensible rod (an inextensible straight "
                        "column cannot shorten to meet it)")
     d = _discretise(rod)
-    rest = (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
+    rest = _bow(rod, contact)
     standing = _shapes(rod, d, rest, np.zeros((1, 2)), np.zeros(1, dtype=bool), 0, 0.0)
     start = standing.tip[0]
     if np.any(np.diff(gaps) > 0) or gaps[0] > start[1] * (1 + 1e-12) or gaps[-1] <= 0:
@@ -495,7 +508,7 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
     force_all = np.concatenate([row.force for row in states])
     lying_all = np.array(lying)
     shapes = _shapes(rod, d, theta_all, force_all, lying_all, iterations, residual)
-    return PlatePath(gaps=gaps, shapes=shapes, vertical_force=-force_all[:, 1],
+    return PlatePath(gaps=gaps, shapes=shapes, standing=standing, vertical_force=-force_all[:, 1],
                      sliding=np.array([row.sliding for row in states]), lying=lying_all)
 
 

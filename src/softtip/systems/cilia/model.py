@@ -27,7 +27,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from softtip.magnetics.dipoles import Dipoles, dipole_chain, rectangle_average_in_plane
-from softtip.mechanics.rod import PlateContact, RodError, RodShapes, lower_plate, solve_follower_force, solve_tip_force
+from softtip.mechanics.rod import (
+    PlateContact,
+    RodError,
+    RodShapes,
+    lower_plate,
+    solve_follower_force,
+    solve_tip_force,
+    touching_height,
+)
 from softtip.systems.cilia.layout import Die, DieError, Meander, Pillars
 
 LoadMode = Literal["paper", "paper-follower"]
@@ -123,15 +131,22 @@ class CiliaModel:
         return ForceCurve(sensor, forces, volts[start:], volts[start:] - volts[0], shapes.saturated[start:],
                           _take(shapes, slice(start, None)))
 
-    def balance_curve(self, gaps: ArrayLike, contact: PlateContact = PlateContact(), sensor: str = "X") -> ForceCurve:
-        """The balance test: the die lowered until the plate is ``gaps`` (G,) m above the pillar bases
-        (decreasing from the pillars' height); the force is the balance's reading, all pillars together."""
+    def balance_curve(self, descent: ArrayLike, contact: PlateContact = PlateContact(),
+                      sensor: str = "X") -> ForceCurve:
+        """The balance test: the die lowered by ``descent`` (G,) m (increasing, from 0) past the height where
+        the plate first touches the pillars; the force is the balance's reading, all pillars together."""
+        descent = np.asarray(descent, dtype=np.float64)
+        rod = self.die.pillars.rod
+        start = touching_height(rod, contact)
+        if (descent.ndim != 1 or descent.size == 0 or not np.all(np.isfinite(descent)) or np.any(descent < 0)
+                or np.any(np.diff(descent) < 0) or descent[-1] >= start):
+            raise DieError(f"descent: expected a non-empty 1-D array of increasing distances from 0 to below "
+                           f"{start:.6g} m (the plate then touches the bases)")
         try:
-            path = lower_plate(self.die.pillars.rod, gaps, contact)
+            path = lower_plate(rod, start - descent, contact)
         except RodError as problem:
             raise DieError(f"balance: {problem}") from None
-        rest = lower_plate(self.die.pillars.rod, [path.gaps[0]], contact).shapes  # the pillars before contact
-        both = _concatenate(rest, path.shapes)
+        both = _concatenate(path.standing, path.shapes)  # the tare: the pillars before the plate touches them
         volts = self.volts(abs(self.die.pillars.moment) * self.unit_fields(both, sensor), sensor)
         return ForceCurve(sensor, path.vertical_force * self.pillar_count, volts[1:], volts[1:] - volts[0],
                           path.lying, path.shapes)

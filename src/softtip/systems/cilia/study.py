@@ -71,7 +71,7 @@ class CiliaSettings:
     recovery_trials: integer(0, 200) = 6
     chain_count: PositiveInteger = 10
     friction: number("a number >= 0", ge=0.0) = 0.5
-    imperfection_deg: number("a tilt in degrees, 0 < tilt < 45", gt=0.0, lt=45.0) = 0.5
+    imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
     depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
     meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
@@ -205,8 +205,8 @@ def _measure(model: CiliaModel, truth: ForceCurve, settings: CiliaSettings, rng:
 def _balance(model: CiliaModel, settings: CiliaSettings, rng: np.random.Generator) -> BalanceOutcome:
     rod = model.die.pillars.rod
     tilt = math.radians(settings.imperfection_deg)
-    gaps = np.linspace(rod.length * math.cos(tilt), 0.3 * rod.length, settings.points)
-    curve = model.balance_curve(gaps, PlateContact(settings.friction, tilt), settings.sensor)
+    descent = np.linspace(0.0, 0.7 * rod.length, settings.points)
+    curve = model.balance_curve(descent, PlateContact(settings.friction, tilt), settings.sensor)
     buckled = np.flatnonzero(np.abs(curve.shapes.tip_angle) > 2 * tilt + 0.05)
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
     pressed = curve.force > 0
