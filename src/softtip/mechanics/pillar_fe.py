@@ -4,7 +4,7 @@
 The pillar (a cone frustum standing on z = 0 along +z, the shape and material of a
 :class:`~softtip.mechanics.rod.Rod`) is meshed with gmsh into tetrahedra and solved with softtip's P2
 elements and compressible neo-Hookean energy (:class:`~softtip.mechanics.fe.BodyModel`): its base bonded
-(clamped), a dead force along +x spread uniformly over its top face (the consistent nodal loads of a P2
+(clamped), or standing on a substrate of its own material bonded beneath (the root free to tilt), a dead force along +x spread uniformly over its top face (the consistent nodal loads of a P2
 triangle under uniform traction: a third of its area on each mid-side node, none on the corners). Newton's
 method on the total energy with a backtracking line search follows the forces in order, each from the
 last, in load steps; a step that does not converge raises :class:`~softtip._core.errors.NotConverged`.
