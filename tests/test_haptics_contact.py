@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from softtip.mechanics.fingerpad import exponential_force
+from softtip.mechanics.plate_contact import exponential_force
 from softtip.mechanics.plate_contact import (
     PlateContactLaw,
     cap_indentation,

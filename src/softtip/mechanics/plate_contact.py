@@ -16,7 +16,7 @@ radius at the contact point, R = abc / h(n)², the equivalent-sphere approximati
   contact radius √(Rδ) (Johnson, §4.2). Valid while the contact radius is small beside the
   elastomer's thickness over any rigid core.
 - **Exponential**, as measured on human finger pads (Pawluk & Howe, J. Biomech. Eng. 121:178,
-  1999): F = (R/R_ref)(b/m)(e^{mδ} − 1), the law of :mod:`softtip.mechanics.fingerpad` scaled by
+  1999): F = (R/R_ref)(b/m)(e^{mδ} − 1), the finger pad's law (:func:`exponential_force`) scaled by
   the radius as its Winkler layer scales it (contact area 2πRδ).
 - **Bonded layer over a rigid core** (``bonded-layer``): Hertz corrected for an incompressible layer
   of thickness t bonded to a rigid substrate, F = F_Hertz (1 + 1.133χ + 1.283χ² + 0.769χ³ +
@@ -36,7 +36,18 @@ from __future__ import annotations
 import numpy as np
 
 from softtip._core.config import PositiveNumber, Refusal, choice, number, schema
-from softtip.mechanics.fingerpad import exponential_force
+
+
+# the human finger pad's law against a flat plate (Pawluk & Howe 1999), for any model of a finger pad
+def exponential_force(depth, stiffness, stiffening):
+    """F = (b/m)(e^{mδ} − 1): the pulp's force (N) at a depth δ (m) against a flat plate."""
+    return stiffness / stiffening * np.expm1(stiffening * np.asarray(depth, dtype=float))
+
+
+def exponential_depth(force, stiffness, stiffening):
+    """The depth (m) at which :func:`exponential_force` reaches ``force`` (N >= 0)."""
+    return np.log1p(stiffening * np.asarray(force, dtype=float) / stiffness) / stiffening
+
 
 CONTACT_LAWS = ("hertz", "bonded-layer", "exponential", "layer")
 

@@ -1,4 +1,4 @@
-"""The 3-cable wearable fingertip device: kinematics, workspace, servos and cable springs.
+"""The 3-cable fingertip-mounted device: kinematics, workspace, servos and cable springs.
 
 Frame {0} is the static platform's: origin at its centre, z0 its normal pointing from the mobile
 platform up to the static one (on the nail). Cable i leaves the static platform at

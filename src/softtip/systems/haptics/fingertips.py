@@ -11,7 +11,7 @@ The settings and their values (softtip's, beyond the publication except where sa
 - ``radius``: the cap's radius. The publication's six casts: spheres of 6.5 (small), 7.5 (the FS)
   and 8.5 mm (large), and three human fingertips approximated as spheres of 6.5, 8 and 10 mm.
 - ``shape``: ``sphere``; ``ellipsoid``, longer along the finger (y) by 1.6, the ratio of the finger
-  pad's radii in :mod:`softtip.mechanics.fingerpad` (Serina et al. 1998's ellipsoidal pulp);
+  pad's radii (Serina et al. 1998's ellipsoidal pulp);
   ``pad``, broader than deep (1.3 r across and along, r deep), so flatter under the pad: its radius
   of curvature there is 1.69 r. Every shape keeps its lowest point r below its centre.
 - ``contact``: the normal law and material (:class:`~softtip.mechanics.plate_contact.PlateContactLaw`).

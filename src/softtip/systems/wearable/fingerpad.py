@@ -88,6 +88,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from softtip._core.config import Fraction, NonNegativeNumber, PositiveNumber, Real, choice, instance, schema
+from softtip.mechanics.plate_contact import exponential_depth, exponential_force
 from softtip.mechanics.viscoelastic import PronySeries, qlv_elastic_history, qlv_response
 
 MINDLIN_TANGENTIAL_RATIO = 2.0 / 3.0  # 2(1 − ν)/(2 − ν) at ν = 0.5: incompressible tissue
@@ -104,16 +105,6 @@ _EDGE_MARGIN = 0.05  # share of the breadth kept between a contact point and a f
 
 
 # ---------------------------------------------------------------------------------------------- kernels
-
-
-def exponential_force(depth, stiffness, stiffening):
-    """F = (b/m)(e^{mδ} − 1): the pulp's force (N) at a depth δ (m) against a flat plate."""
-    return stiffness / stiffening * np.expm1(stiffening * np.asarray(depth, dtype=float))
-
-
-def exponential_depth(force, stiffness, stiffening):
-    """The depth (m) at which :func:`exponential_force` reaches ``force`` (N >= 0)."""
-    return np.log1p(stiffening * np.asarray(force, dtype=float) / stiffness) / stiffening
 
 
 def relative_radius(pad_radius, object_radius):

@@ -1,0 +1,571 @@
+"""Static large deflection of a slender tapered rod in a plane: bending, shear, stretch, base compliance.
+
+A planar geometrically exact (Reissner–Cosserat) rod stands on a base at the origin along +z and bends in
+the x–z plane. Its centre line is cut into ``segments`` pieces of equal reference length h, each with one
+rotation θ_j (the angle of its cross-section's normal d3 = (sin θ, cos θ) from +z, positive towards +x).
+Under a force F at the tip (no loads along the length) the internal force is F everywhere, so each
+segment's axial strain ε = F·d3/EA and shear strain γ = F·d1/(κGA) follow from its own θ
+(d1 = (cos θ, −sin θ)), and its chord is a = h[(1 + ε) d3 + γ d1] (Reissner, ZAMP 23, 1972). The
+bending moment at a joint is EI κ with κ the change of θ over the distance between segment centres; at
+the base a rotational spring (the substrate's compliance) sits in series with the first half segment.
+Moment balance of segment j,
+
+    M_j − M_{j+1} = F × a_j          (F × a = F_x a_z − F_z a_x),
+
+with M_N = 0 at the free tip, is solved by Newton's method for all load cases at once (a batch of dense
+(N + 2) systems: the N angles and the tip force's two components, which two closing conditions fix).
+The closing conditions give the load modes:
+
+* a dead force (fixed direction) — :func:`solve_tip_force`;
+* a force of given size parallel to the tip's top face (a follower, perpendicular to the deformed axis
+  at the tip) — :func:`solve_follower_force`;
+* an imposed tip position in x and z (the tip stuck on a plate), or an imposed tip height with a
+  sliding friction force — the steps of :func:`lower_plate`, the die lowered onto a flat plate.
+
+The discretisation is second order in h (midpoint angles, central curvatures). A uniform, unshearable,
+inextensible rod under a dead tip force is Euler's elastica, whose tip position is known exactly through
+elliptic integrals; the tests hold the solver to it. Every solve either meets its tolerance or raises
+:class:`~softtip._core.errors.NotConverged`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import brentq
+
+from softtip._core.config import Flag, PositiveNumber, Refusal, integer, number, schema
+from softtip._core.errors import NotConverged
+from softtip._core.threads import single_threaded_blas
+
+
+class RodError(ValueError):
+    """A rod or a load that cannot describe a physical case."""
+
+
+@schema(section="rod", error=RodError)
+class Rod:
+    """A straight conical rod on a compliant base (SI units).
+
+    ``base_stiffness`` is the base's rotational stiffness in N·m/rad; None clamps the base rigidly
+    (:func:`half_space_rotational_stiffness` gives the one of a rod rooted in an elastic substrate).
+    ``shear_coefficient`` is Timoshenko's κ of the cross-section; the default is Cowper's value for a
+    solid circle, 6(1 + ν)/(7 + 6ν), used when it is None. ``shear_and_stretch`` False makes the rod
+    Kirchhoff's (unshearable, inextensible): Euler's elastica for a uniform rod.
+    """
+
+    length: PositiveNumber
+    base_diameter: PositiveNumber
+    tip_diameter: PositiveNumber
+    youngs_modulus: PositiveNumber
+    poisson_ratio: number("a number from 0 to 0.5", ge=0.0, le=0.5) = 0.5
+    base_stiffness: PositiveNumber | None = None
+    shear_coefficient: number("a number from 0 (excluded) to 1", gt=0.0, le=1.0) | None = None
+    segments: integer(4, 2000) = 60
+    shear_and_stretch: Flag = True
+
+    def __post_init__(self) -> None:
+        if max(self.base_diameter, self.tip_diameter) > self.length:
+            raise Refusal("base_diameter", f"the rod is wider than long ({self.length} m): not a rod")
+
+    @property
+    def shear_modulus(self) -> float:
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def kappa(self) -> float:
+        nu = self.poisson_ratio
+        return self.shear_coefficient or 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
+
+    def diameter(self, s: ArrayLike) -> NDArray[np.float64]:
+        """Diameter at reference arc length ``s`` (linear taper from base to tip)."""
+        fraction = np.asarray(s, dtype=np.float64) / self.length
+        return self.base_diameter + (self.tip_diameter - self.base_diameter) * fraction
+
+    @property
+    def volume(self) -> float:
+        a, b = self.base_diameter, self.tip_diameter
+        return math.pi * self.length * (a * a + a * b + b * b) / 12.0
+
+
+def half_space_rotational_stiffness(youngs_modulus: float, poisson_ratio: float, diameter: float) -> float:
+    """Rocking stiffness (N·m/rad) of a rigid circular footing of ``diameter`` on an elastic half-space:
+    K = 8 G a³ / (3 (1 − ν)) with a the radius (Gazetas, J. Geotech. Eng. 117, 1991, Table 1; the same as
+    the tilted flat punch of K. L. Johnson, *Contact Mechanics*, §5.2). A pillar moulded on a layer of its
+    own material tilts at its root this way."""
+    shear = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+    return 8.0 * shear * (diameter / 2.0) ** 3 / (3.0 * (1.0 - poisson_ratio))
+
+
+@dataclass(frozen=True)
+class RodShapes:
+    """Deformed shapes of one rod under a batch of B loads.
+
+    ``x``, ``z`` (B, N + 1): node positions (base first); ``angles`` (B, N): each segment's rotation;
+    ``force`` (B, 2): the tip force (F_x, F_z) in N; ``saturated`` (B,): the rod lies on its side (its
+    shape is the one at the onset, the rest of the load goes into the side wall); ``iterations``,
+    ``residual``: Newton's work and the largest final moment residual relative to EI/L.
+    """
+
+    rod: Rod
+    x: NDArray[np.float64]
+    z: NDArray[np.float64]
+    angles: NDArray[np.float64]
+    force: NDArray[np.float64]
+    saturated: NDArray[np.bool_]
+    iterations: int
+    residual: float
+
+    @property
+    def tip(self) -> NDArray[np.float64]:
+        """(B, 2) tip position (x, z)."""
+        return np.stack([self.x[:, -1], self.z[:, -1]], axis=-1)
+
+    @property
+    def tip_angle(self) -> NDArray[np.float64]:
+        """(B,) rotation of the last segment (second-order accurate at a free tip, where κ = 0)."""
+        return self.angles[:, -1]
+
+    def centreline(self, fractions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Points on the deformed centre line at reference arc-length ``fractions`` of the length (K,),
+        and the unit tangents there: ((B, K, 2), (B, K, 2)) in the x–z plane.
+
+        Positions are interpolated linearly between nodes; the tangent is the chord direction of the
+        segment holding the point (the material line along the axis, shear included)."""
+        fractions = np.asarray(fractions, dtype=np.float64)
+        if fractions.ndim != 1 or np.any((fractions < 0) | (fractions > 1)):
+            raise RodError(f"fractions: expected a 1-D array of numbers in [0, 1], got {fractions!r}")
+        n = self.angles.shape[1]
+        position = fractions * n
+        index = np.minimum(position.astype(int), n - 1)
+        weight = position - index
+        x = self.x[:, index] * (1 - weight) + self.x[:, index + 1] * weight
+        z = self.z[:, index] * (1 - weight) + self.z[:, index + 1] * weight
+        chord = np.stack([np.diff(self.x, axis=1), np.diff(self.z, axis=1)], axis=-1)[:, index]
+        tangent = chord / np.linalg.norm(chord, axis=-1, keepdims=True)
+        return np.stack([x, z], axis=-1), tangent
+
+
+# ---------------------------------------------------------------------------------------------- kernel
+
+
+@dataclass(frozen=True)
+class _Discrete:
+    """Per-segment and per-joint stiffnesses of a rod."""
+
+    h: float
+    bending: NDArray[np.float64]  # (N,) joint stiffness EI/Δs; joint 0 is the base in series with a half segment
+    axial: NDArray[np.float64]  # (N,) EA of each segment
+    shear: NDArray[np.float64]  # (N,) κGA of each segment
+    scale: float  # EI/L at the base: the moment scale of the residual
+
+
+def _discretise(rod: Rod) -> _Discrete:
+    n = rod.segments
+    h = rod.length / n
+    nodes = np.arange(n) * h  # joint j sits at the start of segment j
+    centres = (np.arange(n) + 0.5) * h
+    inertia = np.pi * rod.diameter(nodes) ** 4 / 64.0
+    area = np.pi * rod.diameter(centres) ** 2 / 4.0
+    bending = rod.youngs_modulus * inertia / h
+    base_flexibility = (h / 2.0) / (rod.youngs_modulus * inertia[0])
+    if rod.base_stiffness is not None:
+        base_flexibility += 1.0 / rod.base_stiffness
+    bending[0] = 1.0 / base_flexibility
+    rigid = 1.0 if rod.shear_and_stretch else np.inf
+    return _Discrete(h=h, bending=bending, axial=rigid * rod.youngs_modulus * area,
+                     shear=rigid * rod.kappa * rod.shear_modulus * area, scale=rod.youngs_modulus * inertia[0] / rod.length)
+
+
+Closure = Literal["force", "follower", "pinned", "sliding"]
+
+
+def _chords(d: _Discrete, theta: NDArray, force: NDArray) -> tuple[NDArray, ...]:
+    """Segment chords a (B, N, 2) and their derivatives in θ (B, N, 2) and in F (B, N, 2, 2)."""
+    s, c = np.sin(theta), np.cos(theta)
+    d3 = np.stack([s, c], axis=-1)
+    d1 = np.stack([c, -s], axis=-1)
+    fx, fz = force[:, None, 0], force[:, None, 1]
+    axial_force = fx * s + fz * c  # F·d3
+    shear_force = fx * c - fz * s  # F·d1
+    ea, ga = d.axial[None, :, None], d.shear[None, :, None]
+    chord = d.h * (d3 * (1 + axial_force[..., None] / ea) + d1 * (shear_force[..., None] / ga))
+    compliance = 1.0 / ea - 1.0 / ga
+    d_theta = d.h * (d1 + compliance * (shear_force[..., None] * d3 + axial_force[..., None] * d1))
+    d_force = d.h * (d3[..., :, None] * d3[..., None, :] / ea[..., None] + d1[..., :, None] * d1[..., None, :] / ga[..., None])
+    return chord, d_theta, d_force
+
+
+def _system(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure,
+            target: NDArray) -> tuple[NDArray, NDArray]:
+    """Residual (B, N + 2) and Jacobian (B, N + 2, N + 2) of moment balance and the closing conditions.
+
+    ``target`` (B, 2) holds the closure's data: the force (force), the force size and unused (follower),
+    the tip position (pinned), or the friction coefficient times the sliding direction and the tip height
+    (sliding: F_x = target_0 · F_z, z_tip = target_1; F_z < 0 presses the tip down)."""
+    batch, n = theta.shape
+    rows = np.arange(n)
+    chord, d_theta, d_force = _chords(d, theta, force)
+    fx, fz = force[:, 0:1], force[:, 1:2]
+    lever = fx * chord[..., 1] - fz * chord[..., 0]
+    bend = theta - rest
+    moments = np.zeros((batch, n + 1))  # M_N = 0 at the free tip
+    moments[:, 0] = d.bending[0] * bend[:, 0]
+    moments[:, 1:n] = d.bending[1:] * np.diff(bend, axis=1)
+    residual = np.empty((batch, n + 2))
+    residual[:, :n] = moments[:, :n] - moments[:, 1:] - lever
+    tip = chord.sum(axis=1)
+    jacobian = np.zeros((batch, n + 2, n + 2))
+    # M_j − M_{j+1}: M_j = k_j (b_j − b_{j−1}) (b_{−1} = 0), M_{j+1} = k_{j+1} (b_{j+1} − b_j)
+    k = d.bending
+    jacobian[:, rows, rows] = k + np.append(k[1:], 0.0) - (fx * d_theta[..., 1] - fz * d_theta[..., 0])
+    jacobian[:, rows[1:], rows[:-1]] = -k[1:]
+    jacobian[:, rows[:-1], rows[1:]] = -k[1:]
+    jacobian[:, :n, n] = -(chord[..., 1] + fx * d_force[..., 1, 0] - fz * d_force[..., 0, 0])
+    jacobian[:, :n, n + 1] = -(-chord[..., 0] + fx * d_force[..., 1, 1] - fz * d_force[..., 0, 1])
+    if closure == "force":
+        residual[:, n:] = force - target
+        jacobian[:, n, n] = jacobian[:, n + 1, n + 1] = 1.0
+    elif closure == "follower":  # F = f d1(θ_tip): parallel to the tip's face
+        size, last = target[:, 0], theta[:, -1]
+        residual[:, n] = force[:, 0] - size * np.cos(last)
+        residual[:, n + 1] = force[:, 1] + size * np.sin(last)
+        jacobian[:, n, n] = jacobian[:, n + 1, n + 1] = 1.0
+        jacobian[:, n, n - 1] = size * np.sin(last)
+        jacobian[:, n + 1, n - 1] = size * np.cos(last)
+    elif closure == "pinned":
+        residual[:, n:] = tip - target
+        jacobian[:, n, :n] = d_theta[..., 0]
+        jacobian[:, n + 1, :n] = d_theta[..., 1]
+        jacobian[:, n:, n:] = d_force.sum(axis=1)
+    else:  # sliding
+        residual[:, n] = force[:, 0] - target[:, 0] * force[:, 1]
+        residual[:, n + 1] = tip[:, 1] - target[:, 1]
+        jacobian[:, n, n] = 1.0
+        jacobian[:, n, n + 1] = -target[:, 0]
+        jacobian[:, n + 1, :n] = d_theta[..., 1]
+        jacobian[:, n + 1, n:] = d_force.sum(axis=1)[:, 1, :]
+    return residual, jacobian
+
+
+def _newton(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure, target: NDArray,
+            tolerance: float = 1e-10, max_iterations: int = 40) -> tuple[NDArray, NDArray, int, float]:
+    """Newton's method on :func:`_system` for a batch; returns (θ, F, iterations, residual size)."""
+    n = theta.shape[1]
+    theta, force = theta.copy(), force.copy()
+    force_scale, length = d.scale / (d.h * n), d.h * n
+    scales = {"force": (force_scale, force_scale), "follower": (force_scale, force_scale),
+              "pinned": (length, length), "sliding": (force_scale, length)}[closure]
+    for iteration in range(1, max_iterations + 1):
+        residual, jacobian = _system(d, theta, force, rest, closure, target)
+        size = _residual_size(d, residual, scales)
+        if size <= tolerance:
+            return theta, force, iteration, size
+        try:
+            with single_threaded_blas():  # many small systems: a second BLAS thread only slows them down
+                step = np.linalg.solve(jacobian, -residual[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise NotConverged("rod: singular Newton system (a load exactly at a bifurcation)") from None
+        # at most 0.3 rad per angle and step: Newton's full step can jump branches far from the solution
+        damping = np.minimum(1.0, 0.3 / np.maximum(np.abs(step[:, :n]).max(axis=1, keepdims=True), 1e-300))
+        theta += damping * step[:, :n]
+        force += damping * step[:, n:]
+    raise NotConverged(f"rod: Newton did not converge in {max_iterations} iterations (residual {size:.2e} of EI/L)")
+
+
+def _unstable_mode(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure,
+                   target: NDArray) -> NDArray | None:
+    """The direction (N,) in which one equilibrium under a tip constraint is unstable, or None.
+
+    The tip force follows the angles through the closing conditions (dF = −D⁻¹ C dθ for the Jacobian's
+    blocks [[K, B], [C, D]]; D is invertible for an extensible rod), so the stiffness of the angles is
+    K − B D⁻¹ C; it must be positive definite. Its symmetric part is tested: friction makes it slightly
+    non-symmetric, and the energy test is the symmetric one."""
+    _, jacobian = _system(d, theta, force, rest, closure, target)
+    n = theta.shape[1]
+    k, b, c, dd = jacobian[0, :n, :n], jacobian[0, :n, n:], jacobian[0, n:, :n], jacobian[0, n:, n:]
+    stiffness = k - b @ np.linalg.solve(dd, c)
+    values, vectors = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
+    if values[0] >= -1e-9 * abs(values).max():
+        return None
+    return vectors[:, 0]
+
+
+def _residual_size(d: _Discrete, residual: NDArray, closing_scale: tuple[float, float]) -> float:
+    """Largest residual: moments relative to EI/L, each closing condition relative to its own scale."""
+    n = d.axial.size
+    moments = np.abs(residual[:, :n]).max() / d.scale
+    closing = np.abs(residual[:, n:]) / np.asarray(closing_scale)
+    return float(max(moments, closing.max()))
+
+
+def _shapes(rod: Rod, d: _Discrete, theta: NDArray, force: NDArray, saturated: NDArray, iterations: int,
+            residual: float) -> RodShapes:
+    chord, _, _ = _chords(d, theta, force)
+    zero = np.zeros((theta.shape[0], 1))
+    x = np.concatenate([zero, np.cumsum(chord[..., 0], axis=1)], axis=1)
+    z = np.concatenate([zero, np.cumsum(chord[..., 1], axis=1)], axis=1)
+    return RodShapes(rod=rod, x=x, z=z, angles=theta, force=force, saturated=saturated, iterations=iterations,
+                     residual=residual)
+
+
+def _load_array(values: ArrayLike, name: str, width: int | None = None) -> NDArray[np.float64]:
+    array = np.asarray(values, dtype=np.float64)
+    if width is not None:
+        if array.ndim != 2 or array.shape[1] != width:
+            raise RodError(f"{name}: expected an array of shape (B, {width}), got shape {array.shape}")
+    elif array.ndim != 1:
+        raise RodError(f"{name}: expected a 1-D array, got shape {array.shape}")
+    if array.size == 0 or not np.all(np.isfinite(array)):
+        raise RodError(f"{name}: expected a non-empty array of finite numbers")
+    return array
+
+
+def _ramp(d: _Discrete, rest: NDArray, closure: Closure, target: NDArray, largest: float) -> tuple[NDArray, NDArray, int, float]:
+    """Continuation from the unloaded rod to ``target`` through load fractions whose steps in the
+    dimensionless load q = F L²/EI are at most max(0.5, q/4): even at first, proportional later (the shape
+    changes ever less as the rod aligns with its load). ``largest`` is the largest force in the batch."""
+    batch = target.shape[0]
+    theta = np.broadcast_to(rest, (batch, rest.shape[-1])).copy()
+    force = np.zeros((batch, 2))
+    iterations, residual = 0, 0.0
+    total = largest * d.h * rest.shape[-1] / d.scale
+    load = 0.0
+    while load < total:
+        load = min(total, load + max(0.5, 0.25 * load))
+        theta, force, used, residual = _newton(d, theta, force, rest, closure, target * (load / total))
+        iterations += used
+    if total == 0.0:
+        theta, force, iterations, residual = _newton(d, theta, force, rest, closure, target)
+    return theta, force, iterations, residual
+
+
+def solve_tip_force(rod: Rod, force: ArrayLike) -> RodShapes:
+    """The rod under dead tip forces ``force`` (B, 2) = (F_x, F_z) in N, all at once.
+
+    The paper's load "at the tip, perpendicular to the axis" in its fixed-direction reading is
+    ``force = [[F, 0]]``: such a rod bends towards the horizontal without reaching it, so it never lies on
+    its side (``saturated`` is all False)."""
+    force = _load_array(force, "force", 2)
+    d = _discretise(rod)
+    rest = np.zeros((1, rod.segments))
+    theta, solved, iterations, residual = _ramp(d, rest, "force", force, float(np.abs(force).max()))
+    return _shapes(rod, d, theta, solved, np.zeros(len(force), dtype=bool), iterations, residual)
+
+
+def side_clearance(shapes: RodShapes) -> NDArray[np.float64]:
+    """(B,) height above the base plane of the lowest side-wall point of the rod's outer half (m).
+
+    The rod lies on its side when this reaches zero: the outer half's cross-sections extend d/2 along d1,
+    so their lowest point is z − (d/2)|sin θ|. The root half is left out: its lowest edge dips below the
+    base plane as soon as the base tilts, which is the root's own deformation, not lying down."""
+    rod = shapes.rod
+    n = rod.segments
+    centres = (np.arange(n) + 0.5) / n
+    outer = centres >= 0.5
+    z_centres = 0.5 * (shapes.z[:, :-1] + shapes.z[:, 1:])
+    lowest = z_centres - 0.5 * rod.diameter(centres * rod.length) * np.abs(np.sin(shapes.angles))
+    return lowest[:, outer].min(axis=1)
+
+
+def solve_follower_force(rod: Rod, size: ArrayLike) -> RodShapes:
+    """The rod under tip forces of ``size`` (B,) N parallel to its tip face (perpendicular to the deformed
+    axis at the tip), all at once: the paper's load in its follower reading.
+
+    Such a force curls the rod over until its side touches the base plane: from that load on (found to
+    1e-6 relative) the rod lies on its side, its shape stays the one at the onset and the rest of the
+    force goes into the side wall (``saturated``)."""
+    size = _load_array(size, "size")
+    if np.any(size < 0):
+        raise RodError("size: expected forces >= 0 (the direction is set by the tip face)")
+    d = _discretise(rod)
+    rest = np.zeros((1, rod.segments))
+    target = np.stack([size, np.zeros_like(size)], axis=-1)
+
+    def solve(target: NDArray) -> tuple[NDArray, NDArray, int, float]:
+        return _ramp(d, rest, "follower", target, float(target[:, 0].max()))
+
+    theta, force, iterations, residual = solve(target)
+    shapes = _shapes(rod, d, theta, force, np.zeros(len(size), dtype=bool), iterations, residual)
+    lying = side_clearance(shapes) <= 0.0
+    if not lying.any():
+        return shapes
+
+    def clearance(value: float) -> float:
+        nonlocal iterations
+        t, f, used, _ = solve(np.array([[value, 0.0]]))
+        iterations += used
+        return float(side_clearance(_shapes(rod, d, t, f, np.zeros(1, dtype=bool), 0, 0.0))[0])
+
+    standing = size[~lying]
+    low = float(standing.max()) if standing.size else 0.0
+    onset = brentq(clearance, low, float(size[lying].min()), xtol=1e-12, rtol=1e-6)
+    t, f, used, final = solve(np.array([[onset, 0.0]]))
+    theta[lying], force[lying] = t[0], f[0]
+    return _shapes(rod, d, theta, force, lying, iterations + used, max(residual, final))
+
+
+# ---------------------------------------------------------------------------------------------- the plate
+
+
+@dataclass(frozen=True)
+class PlateContact:
+    """How the rod's tip meets a plate lowered onto it: sliding friction ``friction`` (Coulomb, static =
+    kinetic) and an initial stress-free bow that makes a straight column choose a side when it buckles:
+    a half sine bulging towards +x with its tip above its base, θ(s) = ``imperfection`` cos(π s/L) (its
+    slope at the base, rad; the bulge is imperfection × L/π). Both the free column's mode (a lean) and the
+    stuck one's (a bulge) then start towards +x."""
+
+    friction: float = 0.5
+    imperfection: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise RodError(f"friction = {self.friction!r}: expected a number >= 0")
+        if not (math.isfinite(self.imperfection) and 0 < abs(self.imperfection) < math.pi / 4):
+            raise RodError(f"imperfection = {self.imperfection!r}: expected a slope in rad, 0 < |slope| < pi/4")
+
+
+@dataclass(frozen=True)
+class PlatePath:
+    """The rod's states as the plate comes down: ``gaps`` (G,) plate height above the base (m),
+    ``shapes`` (a batch of G), ``vertical_force`` (G,) the plate's push on the rod (N, > 0), ``sliding``
+    (G,) the tip slides on the plate, ``lying`` (G,) the rod lies on its side (its tip face has turned
+    parallel to the plate: the side wall takes any further load, the shape stays); ``standing`` the
+    unloaded rod with its imperfection, before the plate touches it."""
+
+    gaps: NDArray[np.float64]
+    shapes: RodShapes
+    standing: RodShapes
+    vertical_force: NDArray[np.float64]
+    sliding: NDArray[np.bool_]
+    lying: NDArray[np.bool_]
+
+
+def _bow(rod: Rod, contact: PlateContact) -> NDArray[np.float64]:
+    """(1, N) the stress-free angles of the bowed rod (:class:`PlateContact`)."""
+    return (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
+
+
+def touching_height(rod: Rod, contact: PlateContact = PlateContact()) -> float:
+    """The plate's height (m) when it first touches the unloaded, bowed rod's tip."""
+    return float(_shapes(rod, _discretise(rod), _bow(rod, contact), np.zeros((1, 2)), np.zeros(1, dtype=bool),
+                         0, 0.0).tip[0, 1])
+
+
+def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact()) -> PlatePath:
+    """The balance test of one pillar: a flat plate lowered step by step to the heights ``gaps`` (m,
+    decreasing from at most the bowed rod's height), pressing on the tip.
+
+    The tip touches the plate where the bowed rod ends; it sticks there (pinned: x and z imposed, zero
+    moment at a point contact) while the friction needed stays within ``friction`` × the push, then
+    slides against the friction force. Friction makes the path history-dependent, so the gaps are stepped
+    in order (each from the previous state). Once the tip face turns parallel to the plate the pillar
+    lies on its side: the shape is held at that onset and the rest of the load goes into the side wall."""
+    gaps = _load_array(gaps, "gaps")
+    if not rod.shear_and_stretch:
+        raise RodError("rod.shear_and_stretch = False: a plate needs an extensible rod (an inextensible straight "
+                       "column cannot shorten to meet it)")
+    d = _discretise(rod)
+    rest = _bow(rod, contact)
+    standing = _shapes(rod, d, rest, np.zeros((1, 2)), np.zeros(1, dtype=bool), 0, 0.0)
+    start = standing.tip[0]
+    if np.any(np.diff(gaps) > 0) or gaps[0] > start[1] * (1 + 1e-12) or gaps[-1] <= 0:
+        raise RodError(f"gaps: expected plate heights decreasing from at most {start[1]:.6g} m to above 0")
+    state = _PlateState(rest.copy(), np.zeros((1, 2)), sliding=False, friction=0.0)
+    states: list[_PlateState] = []
+    lying: list[bool] = []
+    iterations, residual, height = 0, 0.0, float(start[1])
+    largest_step, smallest_step = 0.01 * rod.length, 1e-9 * rod.length
+    for gap in gaps:
+        if lying and lying[-1]:
+            states.append(states[-1])
+            lying.append(True)
+            continue
+        before, step = state, largest_step
+        while height > gap:
+            # plate steps of at most 1 % of the length, halved where Newton fails (the buckled branch turns fast)
+            next_height = max(gap, height - step)
+            try:
+                state, used, final = _plate_step(d, rest, contact, start, state, next_height)
+            except NotConverged:
+                step /= 2
+                if step < smallest_step:
+                    raise
+                continue
+            height, step = next_height, min(2 * step, largest_step)
+            iterations, residual = iterations + used, max(residual, final)
+        on_side = bool(abs(state.theta[0, -1]) >= math.pi / 2)
+        if on_side:
+            state = _lying_onset(d, rest, before, state, start)
+        states.append(state)
+        lying.append(on_side)
+    theta_all = np.concatenate([row.theta for row in states])
+    force_all = np.concatenate([row.force for row in states])
+    lying_all = np.array(lying)
+    shapes = _shapes(rod, d, theta_all, force_all, lying_all, iterations, residual)
+    return PlatePath(gaps=gaps, shapes=shapes, standing=standing, vertical_force=-force_all[:, 1],
+                     sliding=np.array([row.sliding for row in states]), lying=lying_all)
+
+
+@dataclass(frozen=True)
+class _PlateState:
+    theta: NDArray[np.float64]  # (1, N)
+    force: NDArray[np.float64]  # (1, 2)
+    sliding: bool
+    friction: float  # F_x = friction × F_z while sliding (signed by the sliding direction)
+
+    def closure(self, start: NDArray, height: float) -> tuple[Closure, NDArray]:
+        if self.sliding:
+            return "sliding", np.array([[self.friction, height]])
+        return "pinned", np.array([[start[0], height]])
+
+
+def _plate_step(d: _Discrete, rest: NDArray, contact: PlateContact, start: NDArray, state: _PlateState,
+                height: float) -> tuple[_PlateState, int, float]:
+    """The next state with the plate at ``height``: stuck if friction can hold the tip, else sliding."""
+    closure, target = state.closure(start, height)
+    theta, force, used, final = _stable(d, state.theta, state.force, rest, closure, target)
+    if state.sliding:
+        return _PlateState(theta, force, True, state.friction), used, final
+    needed, push = force[0, 0], -force[0, 1]
+    if abs(needed) <= contact.friction * max(push, 0.0):
+        return _PlateState(theta, force, False, 0.0), used, final
+    direction = -np.sign(needed)  # the tip moves against the force that held it
+    sliding = _PlateState(state.theta, state.force, True, float(direction * contact.friction))
+    closure, target = sliding.closure(start, height)
+    theta, force, more, final = _stable(d, state.theta, state.force, rest, closure, target)
+    return _PlateState(theta, force, True, sliding.friction), used + more, final
+
+
+def _stable(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure,
+            target: NDArray) -> tuple[NDArray, NDArray, int, float]:
+    """A stable equilibrium of one rod near the given state. An unstable one (the plate stepped past the
+    turn of an imperfect column's path, and Newton found the straight column's continuation) raises
+    :class:`NotConverged`, so that the caller takes a shorter step."""
+    theta, force, used, final = _newton(d, theta, force, rest, closure, target)
+    if _unstable_mode(d, theta, force, rest, closure, target) is not None:
+        raise NotConverged("rod: the equilibrium found under the plate is unstable")
+    return theta, force, used, final
+
+
+def _lying_onset(d: _Discrete, rest: NDArray, before: _PlateState, after: _PlateState,
+                 start: NDArray) -> _PlateState:
+    """The state between ``before`` and ``after`` (one plate step) whose tip face is parallel to the plate."""
+
+    def state(height: float) -> _PlateState:
+        closure, target = after.closure(start, height)
+        theta, force, _, _ = _newton(d, 0.5 * (before.theta + after.theta), 0.5 * (before.force + after.force),
+                                     rest, closure, target)
+        return _PlateState(theta, force, after.sliding, after.friction)
+
+    def height(row: _PlateState) -> float:
+        return float(_chords(d, row.theta, row.force)[0][..., 1].sum())
+
+    onset = brentq(lambda h: abs(state(h).theta[0, -1]) - math.pi / 2, height(after), height(before),
+                   xtol=1e-12, rtol=1e-8)
+    return state(onset)

@@ -1,0 +1,222 @@
+"""Spin-valve (giant magnetoresistance) sensors read at constant current by a voltmeter.
+
+A sensor is a meander of ``elements`` spin valves in series. Each element's free layer turns with the
+in-plane field along the sensing axis, averaged over its own area; pinned across its easy axis, it answers
+as a Stoner–Wohlfarth particle along its hard axis: linearly between two saturation fields and flat beyond
+(E. C. Stoner, E. P. Wohlfarth, Phil. Trans. R. Soc. A 240, 1948). Its linear range is set by anisotropy
+and interlayer (Néel) coupling, which shifts it off zero:
+
+    R_e(B) = (R_min / n) [1 + MR · clip((B − B_low) / (B_high − B_low), 0, 1)],
+
+so a sensor whose elements all see B has the sensitivity S = R_min MR / (B_high − B_low) (Ω/T) and
+R_min = S (B_high − B_low) / MR. The published figures (S4: MR 5 % and 4.4 %, 146.6 and 118.8 Ω/Oe,
+−25 .. +37.5 Oe) give R_min ≈ 183 kΩ and 169 kΩ. In air B = μ₀H, so 1 Oe of H is 1e-4 T of B
+(:data:`TESLA_PER_OERSTED`); the library works in tesla.
+
+Driven at a constant current I, the sensor dissipates I²R and warms by ΔT = I²R R_th; its resistance
+follows R(T) = R(T₀)(1 + TCR ΔT) and its magnetoresistance MR(T) = MR(T₀)(1 + TC_MR ΔT) (Infineon GMR S6
+data sheet, 1999: TCR₀ +0.09..+0.12 %/K, TC of ΔR −0.12..−0.09 %/K, thermal conductance > 2.2 mW/K).
+
+Noise at the voltmeter, over the bandwidth of one reading (a reading integrates for T_int: an equivalent
+noise bandwidth of 1/(2 T_int)):
+* Johnson noise of the sensor, 4 k_B T R per Hz at the warmed temperature;
+* 1/f noise after Hooge, S_V(f) = α_H V² / (N_c f), N_c the free carriers in the meander's metal, integrated
+  from 1/(record length) to the bandwidth;
+* the voltmeter's own noise (ppm of its range) and its resolution (ppm of its range; the reading is
+  quantised to it: LSB²/12). A 6½-digit meter on the range holding ~18 V (the 100 V range) resolves 100 µV
+  at 10 power-line cycles (Keysight Truevolt 34461A: 1 ppm of range); an offset voltage subtracted before
+  the meter (a bridge with a matched reference resistor) lets it read the change on a low range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.constants import Boltzmann
+
+from softtip._core.config import (
+    NonNegativeNumber,
+    Number,
+    Numbers,
+    PositiveInteger,
+    PositiveNumber,
+    Refusal,
+    Text,
+    number,
+    schema,
+)
+from softtip._core.errors import NotConverged
+
+TESLA_PER_OERSTED = 1e-4  # B = μ₀H in air: 1 Oe of H ↔ 1 G = 1e-4 T of B
+
+
+class SensorError(ValueError):
+    """Settings or inputs a sensor model cannot take."""
+
+
+@schema(section="spin_valve", error=SensorError)
+class SpinValveSensor:
+    """A meander of spin valves in series (SI; the published Ω/Oe and Oe are converted where they enter).
+
+    ``sensitivity``: Ω/T of the whole sensor; ``field_low``/``field_high``: the linear range, T;
+    ``element_length``/``element_width``/``thickness``: one element's strip and its metal stack (m), for
+    the carriers of 1/f noise; ``hooge``: the Hooge parameter; ``carrier_density``: free carriers per m³.
+    """
+
+    name: Text
+    elements: PositiveInteger
+    magnetoresistance: number("a fraction between 0 and 1 (exclusive)", gt=0.0, lt=1.0)
+    sensitivity: PositiveNumber
+    field_low: Number
+    field_high: Number
+    temperature_coefficient: Number = 1.0e-3  # 1/K, Infineon GMR S6: +0.09 .. +0.12 %/K
+    magnetoresistance_temperature_coefficient: Number = -1.0e-3  # 1/K, GMR S6: −0.12 .. −0.09 %/K
+    element_length: PositiveNumber = 1.0e-3
+    element_width: PositiveNumber = 2.0e-6
+    thickness: PositiveNumber = 40e-9
+    hooge: NonNegativeNumber = 2e-3
+    carrier_density: PositiveNumber = 8.5e28  # copper's, the spin valve's spacer and most of its metal
+
+    def __post_init__(self) -> None:
+        if self.field_high <= self.field_low:
+            raise Refusal("field_high", f"expected a field above field_low ({self.field_low} T)")
+
+    @property
+    def minimum_resistance(self) -> float:
+        """R_min (Ω) at the reference temperature: S (B_high − B_low) / MR."""
+        return self.sensitivity * (self.field_high - self.field_low) / self.magnetoresistance
+
+    @property
+    def carriers(self) -> float:
+        return self.carrier_density * self.elements * self.element_length * self.element_width * self.thickness
+
+    def resistance(self, field: ArrayLike, warming: ArrayLike = 0.0) -> NDArray[np.float64]:
+        """(...) resistance (Ω) of the meander whose elements see the in-plane fields ``field`` (..., n)
+        along the sensing axis (T, each averaged over its element), ``warming`` K above the reference."""
+        field = np.asarray(field, dtype=np.float64)
+        if field.shape[-1:] != (self.elements,):
+            raise SensorError(f"field: expected the field of {self.elements} elements on the last axis, "
+                              f"got shape {field.shape}")
+        if not np.all(np.isfinite(field)):
+            raise SensorError("field: expected finite numbers")
+        warming = np.asarray(warming, dtype=np.float64)
+        turned = np.clip((field - self.field_low) / (self.field_high - self.field_low), 0.0, 1.0)
+        mr = self.magnetoresistance * (1.0 + self.magnetoresistance_temperature_coefficient * warming)
+        base = self.minimum_resistance * (1.0 + self.temperature_coefficient * warming)
+        return base * (1.0 + mr * turned.mean(axis=-1))
+
+
+def published_spin_valve(name: str, elements: int, magnetoresistance: float, ohm_per_oersted: float,
+                         low_oersted: float, high_oersted: float, **options: float) -> SpinValveSensor:
+    """A sensor from figures as published: sensitivity in Ω/Oe, linear range in Oe."""
+    return SpinValveSensor(name=name, elements=elements, magnetoresistance=magnetoresistance,
+                           sensitivity=ohm_per_oersted / TESLA_PER_OERSTED, field_low=low_oersted * TESLA_PER_OERSTED,
+                           field_high=high_oersted * TESLA_PER_OERSTED, **options)
+
+
+@schema(section="voltmeter", error=SensorError)
+class Voltmeter:
+    """A bench multimeter on DC volts: its ranges (V, ascending; each reads to ``overrange`` × itself),
+    the resolution and rms noise of a reading in ppm of the range, and its integration time (s).
+    Defaults: a 6½-digit meter at 10 power-line cycles of 50 Hz (Keysight Truevolt 34461A: resolution
+    1 ppm of range at 10 PLC; Keithley 2015: rms noise < 1.5 µV on its 10 V range at 10 PLC)."""
+
+    ranges: Numbers = (0.1, 1.0, 10.0, 100.0, 1000.0)
+    overrange: number("a number >= 1", ge=1.0) = 1.2
+    resolution_ppm: PositiveNumber = 1.0
+    noise_ppm: NonNegativeNumber = 0.15
+    integration_time: PositiveNumber = 0.2
+
+    def __post_init__(self) -> None:
+        if any(r <= 0 for r in self.ranges) or list(self.ranges) != sorted(self.ranges):
+            raise Refusal("ranges", "expected positive ranges in ascending order")
+
+    def range_for(self, volts: float) -> float:
+        """The smallest range that reads ``volts``; a voltage beyond the largest is refused."""
+        for candidate in self.ranges:
+            if abs(volts) <= self.overrange * candidate:
+                return float(candidate)
+        raise SensorError(f"voltage {volts:.6g} V: beyond the voltmeter's largest range ({self.ranges[-1]:g} V)")
+
+    @property
+    def bandwidth(self) -> float:
+        """Equivalent noise bandwidth (Hz) of one reading: 1/(2 T_int) for a boxcar integration."""
+        return 1.0 / (2.0 * self.integration_time)
+
+
+@dataclass(frozen=True)
+class NoiseBudget:
+    """rms noise (V) of one reading, by source, and their root sum of squares."""
+
+    johnson: float
+    flicker: float
+    meter: float
+    quantisation: float
+    range_volts: float
+    resolution: float
+
+    @property
+    def total(self) -> float:
+        return math.sqrt(self.johnson**2 + self.flicker**2 + self.meter**2 + self.quantisation**2)
+
+
+@schema(section="readout", error=SensorError)
+class ConstantCurrentReadout:
+    """A sensor driven at ``current`` (A) and read by ``voltmeter`` after subtracting ``offset`` (V);
+    ``thermal_resistance`` (K/W) from the die to ambient at ``temperature`` (K); readings over
+    ``record_length`` (s), the lowest frequency of 1/f noise."""
+
+    sensor: SpinValveSensor
+    voltmeter: Voltmeter = Voltmeter()
+    current: PositiveNumber = 100e-6
+    offset: Number = 0.0
+    thermal_resistance: NonNegativeNumber = 450.0  # Infineon GMR S6: conductance > 2.2 mW/K
+    temperature: PositiveNumber = 296.15
+    record_length: PositiveNumber = 60.0
+
+    def warming(self, field: ArrayLike) -> NDArray[np.float64]:
+        """(...) the self-heating (K): the fixed point of ΔT = I² R(ΔT) R_th, iterated to round-off (the
+        map contracts by I² R_th dR/dT, ~1e-3 here; a runaway, where it does not contract, is refused)."""
+        heat = self.current**2 * self.thermal_resistance
+        warming = np.zeros(np.shape(field)[:-1])
+        for _ in range(60):
+            updated = heat * self.sensor.resistance(field, warming)
+            if np.all(np.abs(updated - warming) <= 1e-13 * np.maximum(np.abs(updated), 1e-300)):
+                return updated
+            warming = updated
+        raise NotConverged(f"readout: the self-heating runs away at {self.current:g} A and {self.thermal_resistance:g} K/W")
+
+    def voltage(self, field: ArrayLike) -> NDArray[np.float64]:
+        """(...) the voltage (V) across the sensor at constant current, self-heating included, before
+        the offset is subtracted."""
+        return self.current * self.sensor.resistance(field, self.warming(field))
+
+    def noise(self, volts: float) -> NoiseBudget:
+        """The noise of one reading of the sensor at ``volts`` (across it; the meter sees volts − offset)."""
+        if not math.isfinite(volts) or volts <= 0:
+            raise SensorError(f"volts = {volts!r}: expected the positive voltage across the sensor")
+        resistance = volts / self.current
+        warmed = self.temperature + self.current**2 * resistance * self.thermal_resistance
+        band = self.voltmeter.bandwidth
+        johnson = math.sqrt(4.0 * Boltzmann * warmed * resistance * band)
+        lowest = 1.0 / self.record_length
+        flicker2 = self.sensor.hooge * volts**2 / self.sensor.carriers * math.log(max(band / lowest, 1.0))
+        meter_range = self.voltmeter.range_for(volts - self.offset)
+        resolution = self.voltmeter.resolution_ppm * 1e-6 * meter_range
+        return NoiseBudget(johnson=johnson, flicker=math.sqrt(flicker2),
+                           meter=self.voltmeter.noise_ppm * 1e-6 * meter_range,
+                           quantisation=resolution / math.sqrt(12.0), range_volts=meter_range, resolution=resolution)
+
+    def read(self, volts: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:
+        """Readings (V, after the offset) of the sensor at ``volts``: Johnson, 1/f (drawn white at its
+        rms over one reading: readings far apart in time) and meter noise, quantised to the resolution."""
+        volts = np.asarray(volts, dtype=np.float64)
+        if volts.size == 0 or not np.all(np.isfinite(volts)):
+            raise SensorError("volts: expected a non-empty array of finite voltages")
+        budget = self.noise(float(np.max(volts)))
+        analog = math.sqrt(budget.johnson**2 + budget.flicker**2 + budget.meter**2)
+        noisy = volts - self.offset + rng.normal(0.0, analog, volts.shape)
+        return np.round(noisy / budget.resolution) * budget.resolution

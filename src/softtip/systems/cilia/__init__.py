@@ -1,0 +1,50 @@
+"""S4: a millimetre force sensor of magnetised elastic pillars (cilia) over a GMR die.
+
+The chain, stage by stage (each in the shared toolkit where it is generic):
+
+* ``layout`` — the die in a validated TOML file (``die.toml``: the declared layout, each choice
+  commented; the published work shows it only in figures);
+* ``model`` — force → pillars bent (``softtip.mechanics.rod``) → a chain of 10 tangent dipoles per pillar
+  (``softtip.magnetics.dipoles``) → the in-plane field averaged exactly over every spin valve → the
+  meander's voltage at 100 µA (``softtip.sensors.gmr``), in paper mode (a tip load perpendicular to the
+  axis, as published) and balance mode (the die lowered onto a plate: friction, buckling, lying down);
+* ``fit`` — moment and diameter fitted to a force–voltage curve, with intervals, correlation, profile
+  likelihoods and what the linear part identifies (only moment / diameter⁴);
+* ``resolution`` — the smallest force resolved (3σ over the slope; the smallest distinguishable step)
+  and the measurement range;
+* ``study`` — :func:`run_study`, the whole force study as typed results and figures.
+
+Which sensor: the force experiments read X, whose strips sense the direction the pillars bend in and
+which has the larger magnetoresistance and sensitivity; Y is reported beside it.
+
+The readout at ~18 V: a 6½-digit meter reads it on its 100 V range, 100 µV per count at 10 power-line
+cycles, and its computed noise floor (≈ 33 µV rms, mostly the count) sets a minimum force of ≈ 17 µN on
+the declared die. Microvolt signals (the published roughness traces) need the constant part taken off
+before the meter — a bridge or a matched reference resistor (``offset_V`` in the die file) — which puts
+the meter on its 0.1 V range (0.1 µV per count); the floor is then the sensor's own Johnson and 1/f noise.
+"""
+
+from softtip.systems.cilia.fit import CurveFit, MeasuredCurve, fit_curve, identifiability, profiles
+from softtip.systems.cilia.layout import SHIPPED_DIE, Die, DieError, read_die
+from softtip.systems.cilia.model import CiliaModel, ForceCurve
+from softtip.systems.cilia.resolution import Resolution, resolution
+from softtip.systems.cilia.study import CiliaSettings, CiliaStudy, run_study
+
+__all__ = [
+    "SHIPPED_DIE",
+    "CiliaModel",
+    "CiliaSettings",
+    "CiliaStudy",
+    "CurveFit",
+    "Die",
+    "DieError",
+    "ForceCurve",
+    "MeasuredCurve",
+    "Resolution",
+    "fit_curve",
+    "identifiability",
+    "profiles",
+    "read_die",
+    "resolution",
+    "run_study",
+]

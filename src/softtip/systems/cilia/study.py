@@ -1,0 +1,326 @@
+"""The S4 force study: the twin's force–voltage curve, the published fit of moment and diameter, what the
+curve identifies, the smallest resolved force and the range, the balance test, and the layout's weight.
+
+:func:`run_study` is the entry point: pure analysis returning a typed :class:`CiliaStudy` with matplotlib
+``Figure`` objects (never pyplot). The "measured" curve is the twin's own: the declared die with a chosen
+truth (moment, diameter), read through the computed readout (noise and quantisation of the meter) plus a
+stated repeatability of the bench (drift and re-seating between load steps, a fraction of the full-scale
+change), at a seed. Which sensor: X, whose strips sense the direction the pillars bend in (the die's
+``bend_azimuth_deg``), with the larger magnetoresistance and sensitivity; Y is reported beside it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+from matplotlib.colors import SymLogNorm
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Rectangle
+from pydantic import Field
+
+from softtip._core.config import (
+    Fraction,
+    OpenFraction,
+    PositiveInteger,
+    PositiveNumber,
+    Text,
+    choice,
+    expect,
+    integer,
+    number,
+    schema,
+)
+from softtip._core.errors import NotConverged
+from softtip._core.progress import SILENT, Progress
+from softtip.magnetics.dipoles import dipole_field
+from softtip.mechanics.rod import PlateContact
+from softtip.systems.cilia.fit import (
+    CurveError,
+    CurveFit,
+    CurveModel,
+    Identifiability,
+    MeasuredCurve,
+    Profile,
+    fit_curve,
+    identifiability,
+    profiles,
+)
+from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, read_die
+from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
+from softtip.systems.cilia.resolution import Resolution, resolution
+
+MN = 1e-3  # newtons per millinewton
+
+
+@schema(section="cilia", error=DieError)
+class CiliaSettings:
+    """The study's settings (forces in mN, lengths in µm, moments in memu as the publication states them)."""
+
+    die: Text = str(SHIPPED_DIE)
+    sensor: choice("X", "Y") = "X"
+    force_max_mN: PositiveNumber = 26.0
+    points: integer(5, 400) = 40
+    truth_moment_memu: PositiveNumber = 2.8
+    truth_diameter_um: PositiveNumber = 200.0
+    repeatability: Fraction = 0.01  # of the full-scale voltage change, rms, per load step
+    linear_fraction: OpenFraction = 0.1  # raised to hold at least 5 points where the plan is short
+    recovery_trials: integer(0, 200) = 6
+    chain_count: PositiveInteger = 10
+    friction: number("a number >= 0", ge=0.0) = 0.5
+    imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
+    depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
+                         expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
+    meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
+                              expect("a non-empty list of positive scales")] = (0.9, 1.1)
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """Fits of synthetic curves with known truth: the recovered moments and diameters, one per trial."""
+
+    truth_moment: float
+    truth_diameter: float
+    moments: np.ndarray
+    diameters: np.ndarray
+
+    @property
+    def moment_error(self) -> tuple[float, float]:
+        """(bias, spread) of the recovered moment relative to the truth."""
+        relative = self.moments / self.truth_moment - 1
+        return float(relative.mean()), float(relative.std(ddof=1)) if relative.size > 1 else 0.0
+
+    @property
+    def diameter_error(self) -> tuple[float, float]:
+        relative = self.diameters / self.truth_diameter - 1
+        return float(relative.mean()), float(relative.std(ddof=1)) if relative.size > 1 else 0.0
+
+
+@dataclass(frozen=True)
+class LayoutWeight:
+    """The moment and diameter fitted to the same curve by dies of other layouts (the layout's weight):
+    the sensing plane at other ``depths`` (m), and the meanders scaled by ``scales`` about the centre."""
+
+    depths: np.ndarray
+    moments_by_depth: np.ndarray
+    diameters_by_depth: np.ndarray
+    scales: np.ndarray
+    moments_by_scale: np.ndarray
+    diameters_by_scale: np.ndarray
+
+
+@dataclass(frozen=True)
+class BalanceOutcome:
+    """The balance test (die lowered onto a plate) and the paper-mode fit of its curve, if one converges."""
+
+    curve: ForceCurve
+    buckling_force: float  # N, all pillars: the largest push before the first sliding or lying step
+    fit: CurveFit | None
+    refusal: str
+
+
+@dataclass(frozen=True)
+class CiliaFigures:
+    curve: Figure
+    field_map: Figure
+    pillars: Figure
+    profiles: Figure
+
+
+@dataclass(frozen=True)
+class CiliaStudy:
+    settings: CiliaSettings
+    seed: int
+    truth: ForceCurve
+    measured: MeasuredCurve
+    fit: CurveFit
+    profile_diameter: Profile
+    profile_moment: Profile
+    identifiability: Identifiability
+    recovery: Recovery
+    resolution: Resolution
+    other_sensor: Resolution
+    balance: BalanceOutcome
+    layout: LayoutWeight
+    figures: CiliaFigures
+
+
+def run_study(settings: CiliaSettings, seed: int, progress: Progress = SILENT) -> CiliaStudy:
+    """The whole force study of the die in ``settings`` at ``seed`` (see the module notes)."""
+    die = read_die(Path(settings.die))
+    truth_die = die.with_pillars(replace(die.pillars.with_diameter(settings.truth_diameter_um * UM),
+                                         moment=math.copysign(settings.truth_moment_memu * MEMU, die.pillars.moment)))
+    model = CiliaModel(truth_die, chain_count=settings.chain_count)
+    force = np.linspace(settings.force_max_mN * MN / settings.points, settings.force_max_mN * MN, settings.points)
+    rng = np.random.default_rng(seed)
+    with progress.task("twin curve and fit", total=3) as task:
+        truth = model.curve(force, settings.sensor)
+        measured = _measure(model, truth, settings, rng)
+        task.advance(note="curve")
+        predictor = CurveModel(model, force, settings.sensor)
+        fitted = fit_curve(model, measured, cache=predictor)
+        task.advance(note=f"moment {fitted.moment / MEMU:.3f} memu")
+        profile_d, profile_m = profiles(fitted, predictor, measured)
+        fraction = max(settings.linear_fraction, min(0.99, (5 + 1e-9) / settings.points))
+        identified = identifiability(model, measured, fraction, cache=predictor)
+        task.advance(note="profiles")
+    trials_m, trials_d = [], []
+    with progress.task("recovery of synthetic truths", total=settings.recovery_trials) as task:
+        for _ in range(settings.recovery_trials):
+            trial = fit_curve(model, _measure(model, truth, settings, rng), cache=predictor)
+            trials_m.append(trial.moment)
+            trials_d.append(trial.diameter)
+            task.advance()
+    recovery = Recovery(settings.truth_moment_memu * MEMU, settings.truth_diameter_um * UM, np.array(trials_m),
+                        np.array(trials_d))
+    with progress.task("resolution, balance, layout", total=3) as task:
+        resolved = resolution(model, settings.sensor, 1.5 * settings.force_max_mN * MN)
+        other = resolution(model, "Y" if settings.sensor == "X" else "X", 1.5 * settings.force_max_mN * MN)
+        task.advance()
+        balance = _balance(model, settings, rng)
+        task.advance()
+        layout = _layout_weight(model, measured, fitted, settings)
+        task.advance()
+    figures = CiliaFigures(curve=_curve_figure(truth, measured, fitted, balance),
+                           field_map=_field_map_figure(model, truth),
+                           pillars=_pillars_figure(truth, balance),
+                           profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
+    return CiliaStudy(settings, seed, truth, measured, fitted, profile_d, profile_m, identified, recovery, resolved,
+                      other, balance, layout, figures)
+
+
+def _measure(model: CiliaModel, truth: ForceCurve, settings: CiliaSettings, rng: np.random.Generator) -> MeasuredCurve:
+    """The twin's curve as a bench reads it: each reading through the meter (noise, quantisation), the
+    tare from a reading at zero force, and the bench's repeatability on top."""
+    readout = model.die.meander(settings.sensor).readout
+    rest = truth.volts[0] - truth.change[0]
+    readings = readout.read(truth.volts, rng) - readout.read(np.array([rest]), rng)[0]
+    scatter = settings.repeatability * float(np.abs(truth.change).max())
+    return MeasuredCurve(truth.force, readings + rng.normal(0.0, scatter, readings.shape), settings.sensor)
+
+
+def _balance(model: CiliaModel, settings: CiliaSettings, rng: np.random.Generator) -> BalanceOutcome:
+    rod = model.die.pillars.rod
+    tilt = math.radians(settings.imperfection_deg)
+    descent = np.linspace(0.0, 0.7 * rod.length, settings.points)
+    curve = model.balance_curve(descent, PlateContact(settings.friction, tilt), settings.sensor)
+    buckled = np.flatnonzero(np.abs(curve.shapes.tip_angle) > 2 * tilt + 0.05)
+    buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
+    pressed = curve.force > 0
+    measured = MeasuredCurve(curve.force[pressed], curve.change[pressed], settings.sensor)
+    try:
+        fit = fit_curve(model, measured)
+        refusal = ""
+    except (NotConverged, CurveError) as problem:  # the report says why the paper model cannot fit this curve
+        fit, refusal = None, f"{type(problem).__name__}: {problem}"
+    return BalanceOutcome(curve, buckling, fit, refusal)
+
+
+def _layout_weight(model: CiliaModel, measured: MeasuredCurve, fitted: CurveFit, settings: CiliaSettings) -> LayoutWeight:
+    def refits(dies: list) -> tuple[np.ndarray, np.ndarray]:
+        found = [fit_curve(replace(model, die=die), measured, start=(fitted.moment, fitted.diameter)) for die in dies]
+        return np.array([f.moment for f in found]), np.array([f.diameter for f in found])
+
+    depths = np.array(settings.depths_um) * UM
+    scales = np.array(settings.meander_scales)
+    by_depth = refits([model.die.with_depth(depth) for depth in depths])
+    by_scale = refits([model.die.with_meanders_scaled(scale) for scale in scales])
+    return LayoutWeight(depths, *by_depth, scales, *by_scale)
+
+
+# ---------------------------------------------------------------------------------------------- figures
+
+
+def _curve_figure(truth: ForceCurve, measured: MeasuredCurve, fit: CurveFit, balance: BalanceOutcome) -> Figure:
+    figure = Figure(figsize=(6.4, 4.2), layout="constrained")
+    axes = figure.add_subplot()
+    axes.plot(measured.force / MN, measured.change * 1e3, "o", ms=3, label="measured (twin + readout + bench)")
+    axes.plot(truth.force / MN, truth.change * 1e3, "-", lw=1, label="truth (paper mode)")
+    axes.plot(measured.force / MN, fit.prediction * 1e3, "--", lw=1.5,
+              label=f"fit: {fit.moment / MEMU:.3f} memu, {fit.diameter / UM:.1f} µm")
+    axes.plot(balance.curve.force / MN, balance.curve.change * 1e3, "-", lw=1, label="balance mode (plate)")
+    axes.set_xlabel("force on the die (mN)")
+    axes.set_ylabel(f"voltage change, sensor {measured.sensor} (mV)")
+    axes.legend(fontsize=8)
+    return figure
+
+
+def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
+    """The in-plane field along the sensor's axis in the sensing plane, at rest and at the largest force,
+    with the strips' banks and the pillars' bases."""
+    die = model.die
+    meander = die.meander(truth.sensor)
+    xs = np.linspace(-die.size[0] / 2, die.size[0] / 2, 121)
+    ys = np.linspace(-die.size[1] / 2, die.size[1] / 2, 121)
+    grid_x, grid_y = np.meshgrid(xs, ys, indexing="xy")
+    points = np.column_stack([grid_x.ravel(), grid_y.ravel(), np.full(grid_x.size, -die.depth)])
+    states = model.shapes(np.array([0.0, truth.force[-1]]))
+    dipoles = pillar_dipoles(die.pillars, states, model.chain_count)
+    field = dipole_field(points, dipoles.positions, dipoles.moments)[..., meander.axis] / 1e-4  # gauss (≙ Oe)
+    figure = Figure(figsize=(9.0, 4.2), layout="constrained")
+    low, high = meander.readout.sensor.field_low / 1e-4, meander.readout.sensor.field_high / 1e-4
+    norm = SymLogNorm(linthresh=max(abs(low), abs(high)), vmin=-3000, vmax=3000)
+    for index, title in enumerate(("at rest", f"at {truth.force[-1] / MN:.1f} mN")):
+        axes = figure.add_subplot(1, 2, index + 1)
+        image = axes.pcolormesh(xs / 1e-3, ys / 1e-3, field[index].reshape(grid_x.shape), cmap="RdBu_r", norm=norm,
+                                shading="auto")
+        for (x0, x1), (y0, y1) in _bank_outlines(meander.elements.x, meander.elements.y, meander.axis):
+            axes.add_patch(Rectangle((x0 / 1e-3, y0 / 1e-3), (x1 - x0) / 1e-3, (y1 - y0) / 1e-3, fill=False, lw=0.8))
+        for x, y in die.pillars.positions:
+            axes.add_patch(Circle((x / 1e-3, y / 1e-3), die.pillars.rod.base_diameter / 2 / 1e-3, fill=False,
+                                  ls="--", lw=0.8))
+        axes.set_aspect("equal")
+        axes.set_title(f"B_{'xy'[meander.axis]} at {die.depth / UM:.0f} µm below the bases, {title}", fontsize=9)
+        axes.set_xlabel("x (mm)")
+        axes.set_ylabel("y (mm)")
+    figure.colorbar(image, ax=figure.axes, label=f"field (Oe; linear range {low:g} .. {high:g})")
+    return figure
+
+
+def _bank_outlines(x: np.ndarray, y: np.ndarray, axis: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The bounding boxes of the strips that share their extent along the strips (the banks): strips
+    sensing x run along y, and the other way round."""
+    keys = np.round(y if axis == 0 else x, 12)
+    outlines = []
+    for key in np.unique(keys, axis=0):
+        members = np.all(keys == key, axis=1)
+        outlines.append(((float(x[members].min()), float(x[members].max())),
+                         (float(y[members].min()), float(y[members].max()))))
+    return outlines
+
+
+def _pillars_figure(truth: ForceCurve, balance: BalanceOutcome) -> Figure:
+    figure = Figure(figsize=(8.0, 3.8), layout="constrained")
+    for index, (curve, title) in enumerate(((truth, "paper mode (tip load perpendicular to the axis)"),
+                                            (balance.curve, "balance mode (plate, friction)"))):
+        axes = figure.add_subplot(1, 2, index + 1)
+        rows = np.unique(np.linspace(0, len(curve.force) - 1, 8).astype(int))
+        for row in rows:
+            axes.plot(curve.shapes.x[row] / 1e-3, curve.shapes.z[row] / 1e-3, lw=1,
+                      label=f"{curve.force[row] / MN:.1f} mN" + (" (lying)" if curve.lying[row] else ""))
+        axes.axhline(0, color="k", lw=0.8)
+        axes.set_xlim(-0.35, 1.1)
+        axes.set_aspect("equal")
+        axes.set_title(title, fontsize=9)
+        axes.set_xlabel("along the bend (mm)")
+        axes.set_ylabel("height (mm)")
+        axes.legend(fontsize=7)
+    return figure
+
+
+def _profiles_figure(profile_d: Profile, profile_m: Profile, fit: CurveFit, recovery: Recovery) -> Figure:
+    figure = Figure(figsize=(8.0, 3.6), layout="constrained")
+    for index, (profile, scale, unit, best) in enumerate(((profile_d, UM, "tip diameter (µm)", fit.diameter),
+                                                          (profile_m, MEMU, "moment per pillar (memu)", fit.moment))):
+        axes = figure.add_subplot(1, 2, index + 1)
+        rss_min = min(profile_d.rss.min(), profile_m.rss.min())
+        axes.plot(profile.values / scale, fit.points * np.log(profile.rss / rss_min), "o-", ms=3)
+        axes.axhline(3.841, color="k", ls=":", lw=0.8, label="95 % (χ²₁)")
+        axes.axvline(best / scale, color="C1", lw=0.8, label="fit")
+        axes.set_xlabel(unit)
+        axes.set_ylabel("n ln(RSS / RSS_min)")
+        axes.legend(fontsize=8)
+    return figure

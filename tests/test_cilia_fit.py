@@ -1,0 +1,127 @@
+"""Fitting moment and diameter to force–voltage curves of known truth; uncertainties, identifiability,
+the resolution figures and bad curves."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from softtip.systems.cilia.fit import (
+    CHI2_95,
+    CurveError,
+    CurveModel,
+    MeasuredCurve,
+    fit_curve,
+    identifiability,
+    profiles,
+)
+from softtip.systems.cilia.layout import read_die
+from softtip.systems.cilia.model import CiliaModel
+from softtip.systems.cilia.resolution import resolution
+
+DIE = read_die()
+TRUTH_MOMENT, TRUTH_DIAMETER = 2.5e-6, 215e-6
+TRUE_DIE = DIE.with_pillars(replace(DIE.pillars.with_diameter(TRUTH_DIAMETER), moment=TRUTH_MOMENT))
+MODEL = CiliaModel(DIE)
+FORCE = np.linspace(1e-3, 26e-3, 26)
+TRUTH = CiliaModel(TRUE_DIE).curve(FORCE, "X")
+
+
+@pytest.fixture(scope="module")
+def predictor() -> CurveModel:
+    return CurveModel(MODEL, FORCE, "X")
+
+
+def test_a_noise_free_curve_gives_back_its_truth(predictor):
+    fit = fit_curve(MODEL, MeasuredCurve(FORCE, TRUTH.change), cache=predictor)
+    # the model is the twin's own: only the solver's tolerance is left (measured 2e-13 for both)
+    assert fit.moment == pytest.approx(TRUTH_MOMENT, rel=1e-9)
+    assert fit.diameter == pytest.approx(TRUTH_DIAMETER, rel=1e-9)
+    assert not fit.at_bound
+
+
+@pytest.mark.slow
+def test_noisy_curves_recover_the_truth_within_their_intervals(predictor):
+    """1 % of full scale rms noise (the bench's repeatability): 6 curves."""
+    rng = np.random.default_rng(11)
+    scale = 0.01 * np.abs(TRUTH.change).max()
+    inside, errors = 0, []
+    for _ in range(6):
+        curve = MeasuredCurve(FORCE, TRUTH.change + rng.normal(0, scale, FORCE.size))
+        fit = fit_curve(MODEL, curve, cache=predictor)
+        errors.append((fit.moment / TRUTH_MOMENT - 1, fit.diameter / TRUTH_DIAMETER - 1))
+        inside += (fit.interval_moment[0] <= TRUTH_MOMENT <= fit.interval_moment[1]
+                   and fit.interval_diameter[0] <= TRUTH_DIAMETER <= fit.interval_diameter[1])
+        assert fit.noise == pytest.approx(scale, rel=0.5)
+    errors = np.abs(np.array(errors))
+    # measured: moment within 2.0 %, diameter within 1.2 %; the truth inside all 6 95 % intervals (5.7 expected)
+    assert errors[:, 0].max() < 0.04 and errors[:, 1].max() < 0.02
+    assert inside >= 4
+
+
+def test_profile_likelihood_agrees_with_the_covariance(predictor):
+    rng = np.random.default_rng(5)
+    curve = MeasuredCurve(FORCE, TRUTH.change + rng.normal(0, 0.01 * np.abs(TRUTH.change).max(), FORCE.size))
+    fit = fit_curve(MODEL, curve, cache=predictor)
+    diameter, moment = profiles(fit, predictor, curve)
+    for profile, wald, best in ((diameter, fit.interval_diameter, fit.diameter), (moment, fit.interval_moment, fit.moment)):
+        low, high = profile.interval
+        assert low is not None and high is not None and low < best < high
+        # nearly quadratic here: the likelihood-ratio interval is 6 % narrower than Wald's (measured, in log)
+        assert math.log(high / low) == pytest.approx(math.log(wald[1] / wald[0]), rel=0.1)
+        deviance = fit.points * np.log(profile.rss / profile.rss.min())
+        assert deviance.min() == pytest.approx(0.0, abs=0.05) and deviance.max() > CHI2_95
+
+
+def test_the_linear_part_identifies_only_the_ratio():
+    rng = np.random.default_rng(2)
+    force = np.concatenate([np.linspace(0.2e-3, 3e-3, 15), np.linspace(4e-3, 26e-3, 12)])
+    truth = CiliaModel(TRUE_DIE).curve(force, "X")
+    curve = MeasuredCurve(force, truth.change + rng.normal(0, 0.01 * np.abs(truth.change).max(), force.size))
+    found = identifiability(MODEL, curve, linear_fraction=0.12)
+    linear, whole = found.linear, found.whole
+
+    def width(interval):
+        return math.log(interval[1] / interval[0])
+
+    # measured: on the linear part (15 points up to 3 mN) the log parameters correlate at 0.998 and the
+    # moment's interval spans a factor 3.0, 4.2 times wider in log than that of moment / diameter⁴ (which
+    # lands 2 % from the truth); the whole curve pins the moment to ± 2.1 %
+    assert linear.correlation > 0.99
+    assert width(linear.interval_moment) > 3 * width(linear.interval_ratio)
+    assert width(linear.interval_moment) > 10 * width(whole.interval_moment)
+    assert linear.ratio == pytest.approx(TRUTH_MOMENT / TRUTH_DIAMETER**4, rel=0.15)
+
+
+def test_minimum_force_is_three_sigma_over_the_slope():
+    found = resolution(MODEL, "X", 26e-3, points=53)
+    sigma = found.noise.total
+    # the slope at rest by a small central difference of the model itself
+    step = 1e-5
+    around = MODEL.curve(np.array([step, 2 * step]), "X")
+    slope = (4 * around.change[0] - around.change[1]) / (2 * step)  # one-sided, second order, through zero
+    assert found.sensitivity == pytest.approx(slope, rel=0.01)
+    assert found.minimum_force_at_rest == pytest.approx(3 * sigma / abs(slope), rel=0.01)
+    assert found.smallest_step_at_rest == pytest.approx(max(found.noise.resolution, 3 * math.sqrt(2) * sigma) / abs(slope),
+                                                         rel=0.01)
+    assert 0 < found.range[1] <= 26e-3
+    at_end = np.searchsorted(found.force, found.range[1])
+    assert abs(found.slope[at_end]) < 0.1 * abs(found.slope[0]) <= abs(found.slope[at_end - 1])
+
+
+def test_bad_curves_are_refused_in_one_line():
+    with pytest.raises(CurveError, match="curve: expected finite forces and voltages"):
+        MeasuredCurve(np.array([1e-3, 2e-3, 3e-3]), np.array([0.0, np.nan, 1.0]))
+    with pytest.raises(CurveError, match="expected at least 3 points for 2 parameters, got 2"):
+        MeasuredCurve(np.array([1e-3, 2e-3]), np.array([0.0, 1.0]))
+    with pytest.raises(CurveError, match="expected forces >= 0 N"):
+        MeasuredCurve(np.array([-1e-3, 2e-3, 3e-3]), np.zeros(3))
+    with pytest.raises(CurveError, match="of one 1-D shape"):
+        MeasuredCurve(np.zeros(3), np.zeros(4))
+    with pytest.raises(CurveError, match=r"start = \(-1.0, 0.0002\)"):
+        fit_curve(MODEL, MeasuredCurve(FORCE, TRUTH.change), start=(-1.0, 2e-4))
+    with pytest.raises(CurveError, match="linear_fraction = 1.5"):
+        identifiability(MODEL, MeasuredCurve(FORCE, TRUTH.change), linear_fraction=1.5)

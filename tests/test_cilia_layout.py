@@ -1,0 +1,80 @@
+"""The S4 die file: the shipped, declared layout and the one-line refusals of impossible dies."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from softtip.systems.cilia.layout import SHIPPED_DIE, DieError, read_die
+
+SHIPPED = SHIPPED_DIE.read_text(encoding="utf-8")
+
+
+def test_the_shipped_die_matches_the_spec():
+    die = read_die()
+    assert np.allclose(die.size, [3e-3, 3e-3])
+    assert len(die.pillars.positions) == 5
+    # four corners of the active area and its centre
+    corners = {tuple(p) for p in np.round(die.pillars.positions / 1e-3, 9)}
+    half = die.active_area / 2 / 1e-3
+    assert corners == {(-half[0], -half[1]), (half[0], -half[1]), (-half[0], half[1]), (half[0], half[1]), (0.0, 0.0)}
+    rod = die.pillars.rod
+    assert (rod.length, rod.tip_diameter, rod.base_diameter, rod.youngs_modulus) == pytest.approx(
+        (1e-3, 200e-6, 320e-6, 1e6))
+    assert die.pillars.moment == pytest.approx(2.8e-6)  # 2.8 memu per pillar, 1 emu = 1e-3 A·m²
+    x, y = die.meander("X"), die.meander("Y")
+    assert (len(x.elements), len(y.elements)) == (444, 416)
+    assert (x.axis, y.axis) == (0, 1)
+    assert x.readout.sensor.minimum_resistance == pytest.approx(183.25e3)
+    assert y.readout.sensor.minimum_resistance == pytest.approx(168.75e3)
+    assert x.readout.current == pytest.approx(100e-6)
+    # strips inside the die, apart from each other, in the plane 10 µm below the bases
+    for meander in die.meanders:
+        assert meander.elements.z == pytest.approx(-10e-6)
+        x0, x1 = meander.elements.x.T
+        y0, y1 = meander.elements.y.T
+        overlap = ((x0[:, None] < x1[None]) & (x0[None] < x1[:, None]) & (y0[:, None] < y1[None])
+                   & (y0[None] < y1[:, None]))
+        assert overlap.sum() == len(meander.elements)  # each strip overlaps itself only
+        assert np.all(np.abs(meander.elements.x) <= 1.5e-3) and np.all(np.abs(meander.elements.y) <= 1.5e-3)
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "die.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ("positions_mm = [[-1.0, -1.0],", "positions_mm = [[-1.4, -1.0],",
+     r"pillars.positions_mm\[0\] = \[-1.4, -1.0\]: the pillar's base leaves the die"),
+    ("[1.0, 1.0], [0.0, 0.0]]", "[1.0, 1.0], [0.9, 0.9]]",
+     r"pillars.positions_mm\[3\] and \[4\]: the pillars' bases overlap"),
+    ("tip_diameter_um = 200.0", "tip_diameter_um = -200.0", r"pillars.tip_diameter_um = -200.0: expected a positive number"),
+    ("moment_memu = 2.8", "moment_memu = 0", r"pillars.moment_memu = 0: expected a positive number"),
+    ('magnetisation = "up"', 'magnetisation = "sideways"', r"pillars.magnetisation = 'sideways': expected one of up, down"),
+    ("elements = 444\n", "elements = 440\n", r"sensors.X.banks = .*: expected banks holding 440 elements in all"),
+    ("element_width_um = 2.0\n# Chosen: the X", "element_width_um = 5.0\n# Chosen: the X",
+     r"sensors.X.banks\[0\] = .*: 444 strips of 5.0 um do not fit"),
+    ("linear_range_Oe = [-25.0, 37.5]\naxis = \"x\"", "linear_range_Oe = [37.5, -25.0]\naxis = \"x\"",
+     r"sensors.X.linear_range_Oe = \[37.5, -25.0\]: expected \[low, high\] with low < high"),
+    ("active_area_mm = [2.0, 2.0]", "active_area_mm = [4.0, 2.0]", r"die.active_area_mm = \[4.0, 2.0\]: expected an area within the die"),
+    ("sensing_depth_um = 10.0", "sensing_depth_um = 10.0\ncolour = 1", r"die.colour: unknown key"),
+])
+def test_an_impossible_die_is_refused_in_one_line(tmp_path, old, new, message):
+    assert old in SHIPPED
+    path = write(tmp_path, SHIPPED.replace(old, new, 1))
+    with pytest.raises(DieError, match=message) as refused:
+        read_die(path)
+    assert "\n" not in str(refused.value)
+    assert str(path) in str(refused.value)
+
+
+def test_missing_or_broken_files_are_refused(tmp_path):
+    with pytest.raises(DieError, match=re.escape(f"die file {tmp_path / 'none.toml'} does not exist")):
+        read_die(tmp_path / "none.toml")
+    with pytest.raises(DieError, match="not valid TOML"):
+        read_die(write(tmp_path, "[die\n"))

@@ -1,0 +1,109 @@
+"""The composed S4 model: chains placed on the die, element fields against magpylib, the voltage curve's
+behaviour in both regimes and in the balance test, and bad input."""
+
+from __future__ import annotations
+
+import magpylib as magpy
+import numpy as np
+import pytest
+
+from softtip.mechanics.rod import PlateContact
+from softtip.systems.cilia.layout import DieError, read_die
+from softtip.systems.cilia.model import CiliaModel, element_fields, pillar_dipoles
+
+DIE = read_die()
+MODEL = CiliaModel(DIE)
+
+
+def test_chains_stand_on_the_pillar_bases_and_follow_the_bent_centre_line():
+    shapes = MODEL.shapes(np.array([0.0, 10e-3]))
+    dipoles = pillar_dipoles(DIE.pillars, shapes, 10)
+    assert dipoles.positions.shape == (2, 50, 3)
+    per_pillar = dipoles.positions.reshape(2, 5, 10, 3)
+    # at rest: straight up over each base at (k + 1/2) mm / 10, moment 2.8 memu / 10 each, along +z
+    assert np.allclose(per_pillar[0, :, :, :2], DIE.pillars.positions[:, None, :])
+    assert np.allclose(per_pillar[0, 0, :, 2], (np.arange(10) + 0.5) * 1e-4)
+    assert np.allclose(dipoles.moments[0], [0.0, 0.0, 2.8e-7])
+    # loaded: bent towards +x (the die's bend azimuth), every pillar alike, moments along the chords
+    bent = per_pillar[1] - per_pillar[1, :, :1] * [1, 1, 0]
+    assert np.allclose(bent, bent[0])
+    assert np.all(np.diff(per_pillar[1, 0, :, 0]) > 0) and np.allclose(per_pillar[1, :, :, 1], per_pillar[0, :, :, 1])
+    moments = dipoles.moments[1].reshape(5, 10, 3)
+    assert np.allclose(np.linalg.norm(moments, axis=-1), 2.8e-7)
+    assert moments[0, -1, 0] > moments[0, 0, 0] > 0  # the tip turns further than the root
+
+
+def test_element_fields_match_magpylib_dipoles_integrated_over_the_strips():
+    shapes = MODEL.shapes(np.array([8e-3]))
+    dipoles = pillar_dipoles(DIE.pillars, shapes, 10)
+    meander = DIE.meander("X")
+    ours = element_fields(meander, dipoles)[0]
+    sources = [magpy.misc.Dipole(moment=m, position=p) for p, m in zip(dipoles.positions[0], dipoles.moments[0])]
+    # strips under a corner pillar's root, beside the centre pillar, and mid-bank
+    chosen = [0, 10, 221, 222, 300, 443]
+    g, w = np.polynomial.legendre.leggauss(6)
+    for index in chosen:
+        (x0, x1), (y0, y1) = meander.elements.x[index], meander.elements.y[index]
+        # composite Gauss–Legendre: 400 panels along the strip (the field changes over tens of µm there)
+        edges = np.linspace(y0, y1, 401)
+        ys = ((edges[:-1, None] + edges[1:, None]) / 2 + (edges[1:, None] - edges[:-1, None]) / 2 * g).ravel()
+        wy = np.tile(w, 400) * np.repeat(np.diff(edges) / 2, 6)
+        xs = (x0 + x1) / 2 + (x1 - x0) / 2 * g
+        grid_x, grid_y = np.meshgrid(xs, ys, indexing="ij")
+        points = np.column_stack([grid_x.ravel(), grid_y.ravel(), np.full(grid_x.size, meander.elements.z)])
+        field = magpy.getB(sources, points, sumup=True)[:, 0].reshape(grid_x.shape)
+        average = (w[:, None] * wy[None, :] * field).sum() * (x1 - x0) / 2 / ((x1 - x0) * (y1 - y0))
+        # measured: 5e-13 relative at worst (the quadrature's own error)
+        assert ours[index] == pytest.approx(average, rel=1e-11)
+
+
+def test_the_curve_is_linear_at_small_forces_and_saturates_as_the_pillars_turn_over():
+    small = MODEL.curve(np.array([1e-5, 2e-5, 4e-5]), "X")
+    ratio = small.change / small.force
+    assert np.allclose(ratio, ratio[0], rtol=2e-3)  # measured 0.1 % across 10 .. 40 µN
+    curve = MODEL.curve(np.linspace(0.0, 40e-3, 41), "X")
+    slope = np.gradient(curve.change, curve.force)
+    # the voltage follows the force less and less: measured slope at 40 mN 4.6 % of the one at rest
+    assert abs(slope[-1]) < 0.06 * abs(slope[0])
+    assert np.all(np.diff(curve.change) < 0)  # monotonic for the declared die
+    assert not curve.lying.any()  # a fixed perpendicular load never lays a pillar flat
+    # the field the pillars make over a sensor is a few oersted, as published (≈ 3 Oe)
+    meander = DIE.meander("X")
+    oersted = abs(curve.change[-1]) / (meander.readout.current * 146.6)
+    assert 1.0 < oersted < 5.0
+
+
+def test_the_follower_reading_lays_the_pillars_on_their_side():
+    curve = CiliaModel(DIE, mode="paper-follower").curve(np.linspace(0.0, 60e-3, 13), "X")
+    assert curve.lying[-1] and not curve.lying[0]
+    lying = np.flatnonzero(curve.lying)
+    assert np.allclose(curve.change[lying], curve.change[lying[0]])  # the voltage stops with the shape
+
+
+def test_the_balance_test_buckles_the_pillars_before_bending_them():
+    rod = DIE.pillars.rod
+    descent = np.linspace(0.0, 0.5 * rod.length, 12)
+    curve = MODEL.balance_curve(descent, PlateContact(friction=0.5, imperfection=0.01), "X")
+    assert curve.force[0] == 0.0 and curve.change[0] == 0.0  # touching: no push yet, the tare itself
+    assert np.all(np.diff(curve.force[:3]) > 0)
+    # straight compression hardly changes the field: the first micro-newtons change it by < 1 µV per µN
+    noise = DIE.meander("X").readout.noise(18.7).total
+    assert abs(curve.change[1]) < 0.05 * abs(curve.change[-1]) + noise
+    assert np.any(np.abs(curve.shapes.tip_angle) > 0.3)
+
+
+def test_bad_input_is_refused_in_one_line():
+    with pytest.raises(DieError, match="forces: expected a non-empty 1-D array of finite forces >= 0 N"):
+        MODEL.curve(np.array([-1e-3]))
+    with pytest.raises(DieError, match="forces: expected"):
+        MODEL.curve(np.array([np.nan]))
+    with pytest.raises(DieError, match="no sensor 'Z'"):
+        MODEL.curve(np.array([1e-3]), "Z")
+    with pytest.raises(DieError, match="mode = 'tilted'"):
+        CiliaModel(DIE, mode="tilted")
+    with pytest.raises(DieError, match="chain_count = 0"):
+        CiliaModel(DIE, chain_count=0)
+    with pytest.raises(DieError, match="descent: expected a non-empty 1-D array of increasing distances"):
+        MODEL.balance_curve(np.array([0.5e-3, 0.1e-3]))
+    with pytest.raises(DieError, match="descent: expected"):
+        MODEL.balance_curve(np.array([0.0, 2e-3]))

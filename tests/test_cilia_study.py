@@ -1,0 +1,55 @@
+"""The S4 force study end to end on a short plan: typed results, figures, and figures that hang together."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from softtip._core.progress import Progress, Task
+from softtip.systems.cilia import CiliaSettings, DieError, run_study
+
+
+class Recorder(Progress):
+    def __init__(self) -> None:
+        self.stages: list[str] = []
+
+    def task(self, description: str, total: float | None = None) -> Task:
+        self.stages.append(description)
+        return Task()
+
+
+@pytest.mark.slow
+def test_the_study_fits_the_twins_curve_and_reports_every_figure():
+    settings = CiliaSettings(points=16, recovery_trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,))
+    progress = Recorder()
+    study = run_study(settings, seed=4, progress=progress)
+    assert progress.stages == ["twin curve and fit", "recovery of synthetic truths", "resolution, balance, layout"]
+    fit = study.fit
+    # the twin's truth (2.8 memu, 200 µm) is found within its 95 % intervals
+    assert fit.interval_moment[0] <= 2.8e-6 <= fit.interval_moment[1]
+    assert fit.interval_diameter[0] <= 200e-6 <= fit.interval_diameter[1]
+    assert not fit.at_bound
+    assert study.profile_diameter.interval[0] < fit.diameter < study.profile_diameter.interval[1]
+    assert study.identifiability.linear.correlation > study.identifiability.whole.correlation
+    assert study.recovery.moments.shape == (2,)
+    # the X sensor is the one that sees the bend; Y hardly does (measured: 5.7 V/N against 0.006 V/N)
+    assert abs(study.resolution.sensitivity) > 100 * abs(study.other_sensor.sensitivity)
+    assert study.resolution.minimum_force_at_rest < study.resolution.smallest_step_at_rest
+    # the balance test: the pillars buckle (5 × the one-pillar load) before the plate bends them
+    assert 0 < study.balance.buckling_force < study.balance.curve.force.max() * 1.01
+    layout = study.layout
+    assert layout.moments_by_depth.shape == (2,) and layout.moments_by_scale.shape == (1,)
+    # the declared layout (10 µm) gives back the study's own fit
+    assert layout.moments_by_depth[0] == pytest.approx(fit.moment, rel=1e-6)
+    for figure in (study.figures.curve, study.figures.field_map, study.figures.pillars, study.figures.profiles):
+        assert isinstance(figure, Figure) and figure.axes
+
+
+def test_settings_are_validated_before_any_work():
+    with pytest.raises(DieError, match=r"cilia.points = 2: expected an integer 5..400"):
+        CiliaSettings(points=2)
+    with pytest.raises(DieError, match=r"cilia.sensor = 'Z': expected one of X, Y"):
+        CiliaSettings(sensor="Z")
+    with pytest.raises(DieError, match="die file .*none.toml does not exist"):
+        run_study(CiliaSettings(die="none.toml"), seed=0)
