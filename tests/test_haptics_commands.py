@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 
 from softtip.cli.common import user_errors
 from softtip.realtime.recording.reader import read_recording
+from softtip.realtime.sinks.ros2 import ros2_available
 from softtip.systems.haptics.commands import app as haptics_app
 from softtip.systems.haptics.commands import bench_haptics
 from softtip.systems.haptics.device import DEVICE_FILE, load_device, servo_angles
@@ -70,8 +71,11 @@ def test_render_plays_a_recorded_sensation(tmp_path):
     (("--device", "missing.toml"), "missing.toml"),
     (("--sensation", "missing.csv"), "missing.csv"),
     (("--sensation", "bad.txt"), "expected a .csv or .parquet"),
+    (("--ros2",), "--ros2: ROS 2 is not available"),
 ])
 def test_render_refuses_bad_input_in_one_line(args, words, tmp_path, monkeypatch):
+    if args == ("--ros2",) and ros2_available():
+        pytest.skip("ROS 2 is installed here")
     monkeypatch.chdir(tmp_path)
     (tmp_path / "bad.txt").write_text("x")
     result = run("haptics", "render", *args)
@@ -109,3 +113,13 @@ def test_bench_reports_each_figure_beside_its_baseline():
                         (("--seed", "-1"), "--seed = -1")):
         result = run("bench", *args)
         assert result.exit_code == 2 and words in result.stderr, result.output
+
+
+def test_render_with_the_geometric_table_follows_a_large_finger():
+    common = ("haptics", "render", "--duration", "0.5", "--fs-levels", "9", "--fingertip", "human 3 (10 mm)", "--json")
+    standard = json.loads(run(*common).stdout)
+    geometric = json.loads(run(*common, "--method", "geometric").stdout)
+    # the standard table presses a 10 mm finger as if it were the 7.5 mm FS: far too hard
+    assert geometric["median_error_N"] < standard["median_error_N"] / 3
+    # a larger finger sits lower: the FS entries that lift the platform highest cannot be reproduced on it
+    assert geometric["table_entries_out_of_reach"] > 0 and standard["table_entries_out_of_reach"] == 0

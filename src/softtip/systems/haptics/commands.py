@@ -136,12 +136,14 @@ def render(
     seed: int = typer.Option(1, "--seed", help="Seed of the table collection, the synthetic sensation and the noise."),
     record: Path = typer.Option(None, "--record", help="Record the stream to this MCAP file."),
     foxglove_port: int = typer.Option(None, "--foxglove-port", help="Serve a Foxglove live view on this port."),
+    ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (needs rclpy, a sourced ROS 2)."),
     force: bool = typer.Option(False, "--force", help="Overwrite --record's file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Stream a sensation through the renderer and the device model: a 1 kHz loop, the servos' 50 Hz
     commands, the commanded motor inputs and the rendered wrench out on the live sinks (MCAP, Foxglove)."""
     from softtip.realtime.sinks.factory import live_sinks
+    from softtip.realtime.sinks.ros2 import ros2_available
     from softtip.systems.haptics.bench import FINGERTIP_NAMES, device_from_file
     from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS
     from softtip.systems.haptics.live import fs_renderer, recorded_sensation, render_stream, synthetic_sensation
@@ -159,30 +161,37 @@ def render(
         fail(f"--seed = {seed}: expected an integer >= 0")
     if foxglove_port is not None and not 0 < foxglove_port < 65536:
         fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
+    if ros2 and not ros2_available():
+        fail("--ros2: ROS 2 is not available (rclpy and the standard message packages do not import; source the "
+             "ROS 2 setup script first)")
     inputs = [p for p in (sensation, device_file) if p is not None]
     if record is not None:
         record = check_output(record, "--record", inputs, force=force)
     device = device_from_file(device_file or "shipped").device
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
+    sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
     rng = np.random.default_rng(seed)
     finger = next(f for f in TEST_FINGERTIPS if f.name == fingertip)
     with progress_for(json_output).task("haptics: FS table", total=1) as task:
         renderer = fs_renderer(device, fs_levels, rng)
         task.advance()
+    out_of_reach = 0
     if method == "geometric":
         personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
         renderer = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
+        out_of_reach = int(personal.outside.sum())
     if wanted is None:
         wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
-    sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port)
     summary = render_stream(device, renderer, finger, wanted, sinks, rng, metadata={
         "fingertip": fingertip, "method": method, "fs_levels": fs_levels, "seed": seed,
         "sensation": str(sensation) if sensation else "synthetic"}).to_dict()
-    summary |= {"fingertip": fingertip, "method": method, "record": str(record) if record else None}
+    summary |= {"fingertip": fingertip, "method": method, "table_entries_out_of_reach": out_of_reach,
+                "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
     console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}): rendering p99 "
                   f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| median {summary['median_error_N']:.3f} N, "
-                  f"p90 {summary['p90_error_N']:.3f} N; {summary['outside_table']} ticks outside the table"
+                  f"p90 {summary['p90_error_N']:.3f} N; {summary['outside_table']} ticks outside the table, "
+                  f"{out_of_reach} table entries out of reach"
                   + (f"; recorded to {record}" if record else ""))
