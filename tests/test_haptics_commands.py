@@ -35,6 +35,7 @@ def test_render_records_the_stream_and_reads_back(tmp_path):
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
     assert summary["ticks"] == 200 and summary["loop_rate_hz"] == LOOP_RATE_HZ
+    assert 0.2 <= summary["wall_s"] < 5  # paced on the wall clock: no faster than the ticks' time
     recording = read_recording(path)
     assert not recording.truncated
     estimates = recording.topics["/fingertip/estimates"]
@@ -63,6 +64,7 @@ def test_render_plays_a_recorded_sensation(tmp_path):
     (("--duration", "nan"), "--duration = nan"),
     (("--duration", "-1"), "--duration = -1"),
     (("--duration", "inf"), "--duration = inf"),
+    (("--duration", "1e9"), "expected at most 3600 s"),
     (("--fingertip", "thumb"), "--fingertip = 'thumb'"),
     (("--method", "magic"), "--method = 'magic'"),
     (("--fs-levels", "1"), "--fs-levels = 1"),
@@ -123,3 +125,12 @@ def test_render_with_the_geometric_table_follows_a_large_finger():
     assert geometric["median_error_N"] < standard["median_error_N"] / 3
     # a larger finger sits lower: the FS entries that lift the platform highest cannot be reproduced on it
     assert geometric["table_entries_out_of_reach"] > 0 and standard["table_entries_out_of_reach"] == 0
+
+
+def test_a_sensation_beyond_the_table_is_flagged_every_tick(tmp_path):
+    sensation = tmp_path / "hard.csv"
+    sensation.write_text("time_s,fx_N,fy_N,fz_N\n0,0,0,500\n0.05,0,0,500\n")
+    result = run("haptics", "render", "--sensation", str(sensation), "--fs-levels", "7", "--fast", "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["outside_table"] == summary["ticks"] == 50

@@ -16,6 +16,7 @@ from softtip.cli.common import check_output, console, fail, progress_for, user_e
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
 RENDER_P99_TARGET_S, TABLE_BUILD_TARGET_S, REPRODUCE_TARGET_S = 50e-6, 0.1, 30.0
+MAX_DURATION_S = 3600.0
 
 
 def _finite_positive(value: float | None, option: str) -> None:
@@ -137,6 +138,8 @@ def render(
     record: Path = typer.Option(None, "--record", help="Record the stream to this MCAP file."),
     foxglove_port: int = typer.Option(None, "--foxglove-port", help="Serve a Foxglove live view on this port."),
     ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (needs rclpy, a sourced ROS 2)."),
+    realtime: bool = typer.Option(True, "--realtime/--fast", help="Pace the loop to the wall clock at 1 kHz, or run "
+                                                                  "it as fast as the machine allows."),
     force: bool = typer.Option(False, "--force", help="Overwrite --record's file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
@@ -151,6 +154,8 @@ def render(
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 
     _finite_positive(duration, "--duration")
+    if duration is not None and duration > MAX_DURATION_S:
+        fail(f"--duration = {duration}: expected at most {MAX_DURATION_S:g} s (the sequence is built in memory)")
     if fingertip not in FINGERTIP_NAMES:
         fail(f"--fingertip = {fingertip!r}: expected one of {', '.join(FINGERTIP_NAMES)}")
     if method not in ("standard", "geometric"):
@@ -184,13 +189,13 @@ def render(
         wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
     summary = render_stream(device, renderer, finger, wanted, sinks, rng, metadata={
         "fingertip": fingertip, "method": method, "fs_levels": fs_levels, "seed": seed,
-        "sensation": str(sensation) if sensation else "synthetic"}).to_dict()
+        "sensation": str(sensation) if sensation else "synthetic"}, paced=realtime).to_dict()
     summary |= {"fingertip": fingertip, "method": method, "table_entries_out_of_reach": out_of_reach,
                 "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
-    console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}): rendering p99 "
+    console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}), {summary['late_ticks']} late: rendering p99 "
                   f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| median {summary['median_error_N']:.3f} N, "
                   f"p90 {summary['p90_error_N']:.3f} N; {summary['outside_table']} ticks outside the table, "
                   f"{out_of_reach} table entries out of reach"

@@ -11,7 +11,9 @@ live pipeline's :class:`~softtip.realtime.frames.FrameResult`: the reading is th
 angles and the rendered wrench (recorded on the ``wrench`` topic as ``geometry_msgs/WrenchStamped``).
 A real device is driven by sending the commands to its servos instead of :func:`servo_angles`.
 
-The loop runs in simulated time, as fast as the machine allows; its stamps are the 1 kHz ticks.
+Paced, each tick starts on the wall clock at its 1 kHz time (a tick that starts more than one period
+late is counted); unpaced, the loop runs as fast as the machine allows. Either way the frames' stamps
+are the 1 kHz ticks.
 """
 
 from __future__ import annotations
@@ -103,6 +105,7 @@ class RenderSummary:
     wanted and rendered, the targets flagged outside the table."""
 
     ticks: int
+    late_ticks: int  # paced ticks that started more than one period after their time
     latency_p50_s: float
     latency_p99_s: float
     median_error_N: float
@@ -111,20 +114,23 @@ class RenderSummary:
     wall_s: float
 
     def to_dict(self) -> dict:
-        return {"ticks": self.ticks, "loop_rate_hz": LOOP_RATE_HZ, "latency_p50_us": self.latency_p50_s * 1e6,
+        return {"ticks": self.ticks, "loop_rate_hz": LOOP_RATE_HZ, "late_ticks": self.late_ticks,
+                "latency_p50_us": self.latency_p50_s * 1e6,
                 "latency_p99_us": self.latency_p99_s * 1e6, "median_error_N": self.median_error_N,
                 "p90_error_N": self.p90_error_N, "outside_table": self.outside, "wall_s": self.wall_s}
 
 
 def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, fingertip: Fingertip,
                   sensation: np.ndarray, sinks: list[Sink], rng: np.random.Generator | None,
-                  collection: CollectionSettings = CollectionSettings(), metadata: dict | None = None) -> RenderSummary:
-    """Streams ``sensation`` (ticks, 6) through ``renderer`` and the device on ``fingertip``, to ``sinks``."""
+                  collection: CollectionSettings = CollectionSettings(), metadata: dict | None = None,
+                  paced: bool = True) -> RenderSummary:
+    """Streams ``sensation`` (ticks, 6) through ``renderer`` and the device on ``fingertip``, to ``sinks``;
+    ``paced``: each tick on the wall clock at 1 kHz."""
     frame_ticks = int(round(LOOP_RATE_HZ / device.servo.command_rate_hz))
     info = StreamInfo(chips=1, target_names=TARGET_NAMES, target_units=TARGET_UNITS, classes=None, settings=None,
                       rate_hz=LOOP_RATE_HZ, metadata=dict(metadata or {}), reading=WANTED)
     latencies, errors = np.empty(len(sensation)), np.empty(len(sensation))
-    angle, outside, started = np.zeros(3), 0, time.perf_counter()
+    angle, outside, late, started = np.zeros(3), 0, 0, time.perf_counter()
     stamp0 = time.time_ns()
     opened = []
     try:
@@ -135,6 +141,11 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, finger
             wanted = sensation[first:first + frame_ticks]
             commands = np.empty((len(wanted), 3))
             for k, wrench in enumerate(wanted):
+                if paced:
+                    ahead = started + (first + k) / LOOP_RATE_HZ - time.perf_counter()
+                    if ahead > 0:
+                        time.sleep(ahead)
+                    late += ahead < -1 / LOOP_RATE_HZ
                 tick = time.perf_counter()
                 commands[k], flagged = renderer.render_one(wrench)
                 latencies[first + k] = time.perf_counter() - tick
@@ -157,7 +168,7 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, finger
     finally:
         for sink in opened:
             sink.close()
-    return RenderSummary(len(sensation), float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)),
+    return RenderSummary(len(sensation), int(late), float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)),
                          float(np.median(errors)), float(np.percentile(errors, 90)), int(outside),
                          time.perf_counter() - started)
 
