@@ -106,3 +106,23 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
                                                                            "pulley_radius = 0.2"))
     with pytest.raises(ConfigError, match="released_length"):
         protocol_from_dict(base | {"device": "device.toml"}, "test", tmp_path)
+
+
+def test_reproduce_quick_renders_fewer_targets_and_writes_the_report(tmp_path):
+    from softtip.studies.reproduce import reproduce_study
+
+    shipped = (SYSTEM.files() / "protocols" / "haptics.toml").read_text()
+    coarse = shipped.replace("fs_levels = 13", "fs_levels = 7").replace(
+        'fingertips = ["small cast (6.5 mm)", "FS cast (7.5 mm)", "large cast (8.5 mm)", "human 1 (6.5 mm)",\n'
+        '              "human 2 (8 mm)", "human 3 (10 mm)"]', 'fingertips = ["FS cast (7.5 mm)", "large cast (8.5 mm)"]')
+    assert coarse.count("fs_levels = 7") == 1 and "human 3" not in coarse
+    path = tmp_path / "coarse.toml"
+    path.write_text(coarse)
+    report = reproduce_study("haptics", seed=2, quick=True, protocol_path=path)
+    assert report.outcome.results["targets"] == 2  # --quick cuts the targets (the protocol's trials) to two
+    where = report.protocol_table.cells[("parameters.trials", "where from")]
+    assert where.startswith("--quick")
+    written = report.write(tmp_path)
+    assert written.is_file() and (tmp_path / "haptics.json").is_file()
+    # no largest fingertip in this run: the headline is the pooled comparison of the two personalisations
+    assert report.outcome.headline.label.endswith("all fingertips (pooled)")
