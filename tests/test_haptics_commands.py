@@ -112,6 +112,7 @@ def test_bench_reports_each_figure_beside_its_baseline():
     assert rendering["baseline_cKDTree_query_p99_us"] > 0 and table["entries"] > 1000
     assert table["geometric_ms"] > 0 and table["data_driven_ms"] > 0
     for args, words in ((("--queries", "0"), "--queries = 0"), (("--repeats", "-1"), "--repeats = -1"),
+                        (("--queries", "10000000"), "from 1 to 1000000"),
                         (("--seed", "-1"), "--seed = -1")):
         result = run("bench", *args)
         assert result.exit_code == 2 and words in result.stderr, result.output

@@ -44,13 +44,12 @@ def bench_haptics(
     from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
     from softtip.systems.haptics.device import load_device
     from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS
-    from softtip.systems.haptics.live import fs_renderer
     from softtip.systems.haptics.personalisation import personalise_data_driven, personalise_geometric
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 
-    for option, value in (("--queries", queries), ("--repeats", repeats)):
-        if value < 1:
-            fail(f"{option} = {value}: expected an integer >= 1")
+    for option, value, most in (("--queries", queries, 1_000_000), ("--repeats", repeats, 100)):
+        if not 1 <= value <= most:
+            fail(f"{option} = {value}: expected an integer from 1 to {most}")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
     rng = np.random.default_rng(seed)
@@ -61,7 +60,7 @@ def bench_haptics(
         user_finger = TEST_FINGERTIPS[-1]
         user = sensed_contact(device, user_finger, motor_grid(device, 7), CollectionSettings(), rng).unsaturated()
         task.advance()
-    renderer = fs_renderer(device, 13, rng)
+    renderer = NearestNeighbourRenderer().fit(fs.finger_wrenches, fs.motor_inputs)
     wanted = fs.finger_wrenches[rng.integers(0, len(fs.motor_inputs), queries)] + rng.normal(0, 0.05, (queries, 6))
     render_s, query_s = np.empty(queries), np.empty(queries)
     tree = cKDTree(renderer.features_)

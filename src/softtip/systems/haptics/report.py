@@ -117,17 +117,13 @@ def _directions_table(found: RenderedTargets) -> Table:
     pooled = np.median(found.errors.transpose(1, 0, 2).reshape(len(METHODS), -1), axis=1)
     cells = {(name, column): float(median[a] - median[b])
              for name, median in (*medians.items(), (POOLED, pooled)) for column, (a, b) in DIRECTIONS.items()}
-    notes = {}
-    if cells.get((LARGEST, "B − A"), 1.0) <= 0 or cells[(POOLED, "B − A")] <= 0:
-        rows = [row for row in (LARGEST, POOLED) if cells.get((row, "B − A"), 1.0) <= 0]
-        for row in rows:
-            notes[row] = (
-                "B beats A here, against the publication. On the simulated device every cast is a sphere about "
-                "the same centre in one rubber, which is B's own model: B then errs only by the force a larger "
-                "sphere needs for the same indentation. A maps each FS entry through the DS onto a sparse user "
-                "table (7³, fewer entries in contact on small fingertips) and averages 8 of its motor inputs, "
-                "which blurs it. A real finger is no sphere and not the casts' rubber, which is where A's "
-                "measured data would pay off (the sensitivity study varies shape and stiffness).")
+    notes = {row: ("B beats A here, against the publication. On the simulated device every cast is a sphere about "
+                   "the same centre in one rubber, which is B's own model: B then errs only by the force a larger "
+                   "sphere needs for the same indentation. A maps each FS entry through the DS onto a sparse user "
+                   "table (7³, fewer entries in contact on small fingertips) and averages 8 of its motor inputs, "
+                   "which blurs it. A real finger is no sphere and not the casts' rubber, which is where A's "
+                   "measured data would pay off (the sensitivity study varies shape and stiffness).")
+             for row in (LARGEST, POOLED) if cells.get((row, "B − A"), 1.0) <= 0}
     if "FS cast (7.5 mm)" in medians:
         notes["FS cast (7.5 mm)"] = ("The FS itself: no direction stated. B equals the standard table here (r_U = "
                                      "r_F); A is rebuilt from the sparse user table and loses precision.")
