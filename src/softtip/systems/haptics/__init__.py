@@ -3,5 +3,35 @@
 A 3-cable fingertip-mounted device (:mod:`.device`), the fingertips it presses (:mod:`.fingertips`), lookup
 tables and the k-nearest-neighbour renderer (:mod:`.rendering`), the two personalisations
 (:mod:`.personalisation`), the simulated table collection (:mod:`.collection`) and the published
-study with its statistics (:mod:`.study`, :mod:`.statistics`).
+study with its statistics (:mod:`.study`, :mod:`.statistics`); the study as a lab protocol
+(:mod:`.bench`) and its report (:mod:`.report`); the commands (:mod:`.commands`) and the real-time
+rendering loop (:mod:`.live`).
+
+Importing this package loads only its registration record (:data:`SYSTEM`).
 """
+
+from softtip._core.channels import Reading
+from softtip._core.systems import Study, System
+from softtip._core.units import FORCE_UNITS
+
+# the force a sensation asks the device to render, streamed by `softtip haptics render` as the live
+# pipeline's reading (recorded as geometry_msgs/WrenchStamped, torque NaN)
+WANTED = Reading("wanted force", "N", "F", "N", prefix="wanted", infix="f", units=FORCE_UNITS, drift_threshold=0.05,
+                 baseline_step=1e-4, decimals=3, topic="wanted_force", message="geometry_msgs/msg/WrenchStamped",
+                 first_numbered=False)
+
+SYSTEM = System(
+    name="haptics",
+    title="Personalised data-driven haptic rendering with a 3-cable fingertip device",
+    label="S3",
+    package=__name__,
+    readings=(WANTED,),
+    benches={"haptics": "softtip.systems.haptics.bench:BENCH"},
+    protocols={"haptics": "haptics"},
+    studies=(
+        Study("haptics", "haptics", "softtip.systems.haptics.report:haptics",
+              "S3: standard and personalised (data-driven A, geometric B) rendering errors on six test fingertips"),
+    ),
+    bench_commands={"haptics": "softtip.systems.haptics.commands:bench_haptics"},
+    commands={"haptics": "softtip.systems.haptics.commands:app"},
+)

@@ -55,7 +55,7 @@ class StudySettings:
     """The study's sizes: targets, FS and user table levels per servo (13 → 13³), neighbours and
     their weighting, the light-target bound (N) and the force below which a reading is no contact (N)."""
 
-    targets: integer(3) = 100
+    targets: integer(2) = 100
     fs_levels: integer(2) = 13
     user_levels: integer(2) = 7
     adaptive_budget: integer(27) = 64
@@ -77,6 +77,8 @@ class FingertipOutcome:
     errors: np.ndarray
     rendered: np.ndarray
     flagged: np.ndarray
+    rendered_wrenches: np.ndarray  # (methods, targets, 6): the test fingertip's sensor, N and N·m
+    motor_inputs: np.ndarray  # (methods, targets, 3): what each method commanded, rad
     user_table_flagged: int  # FS entries whose personalisation was flagged, method A
     geometric_flagged: int  # FS entries whose geometric personalisation was out of reach
     fitted_modulus: float  # Pa: the user's Hertz modulus from the presses (method B+)
@@ -115,7 +117,8 @@ class HapticsStudy:
                 for outcome in self.fingertips for m, method in enumerate(METHODS)]
 
     def figures(self) -> list[Figure]:
-        return [error_box_plots(self)]
+        return [error_box_plots([o.fingertip.name for o in self.fingertips],
+                                np.array([o.errors for o in self.fingertips]))]
 
     def to_dict(self) -> dict:
         """The results as JSON-ready values (forces in N, moduli in Pa, times in s)."""
@@ -149,17 +152,21 @@ class HapticsStudy:
         }
 
 
-def error_box_plots(study: HapticsStudy) -> Figure:
-    """Box plots of the rendering error (N) per fingertip and method."""
-    figure = Figure(figsize=(12, 6.5), layout="constrained")
-    axes = figure.subplots(2, 3, sharey=True).ravel()
-    for axis, outcome in zip(axes, study.fingertips, strict=False):
-        axis.boxplot(list(outcome.errors), tick_labels=["standard", "A", "B", "B+", "A+"])
-        axis.set_title(outcome.fingertip.name)
+def error_box_plots(fingertips: list[str], errors: np.ndarray) -> Figure:
+    """Box plots of the rendering error (N), ``errors`` (fingertips, methods in :data:`METHODS` order,
+    targets), one panel per fingertip."""
+    columns = min(3, len(fingertips))
+    figure = Figure(figsize=(4 * columns, 3.25 * -(-len(fingertips) // columns)), layout="constrained")
+    axes = np.atleast_1d(figure.subplots(-(-len(fingertips) // columns), columns, sharey=True, squeeze=False)).ravel()
+    for axis, name, per_method in zip(axes, fingertips, errors, strict=False):
+        axis.boxplot(list(per_method), tick_labels=["standard", "A", "B", "B+", "A+"])
+        axis.set_title(name)
         axis.grid(axis="y", alpha=0.3)
-    for axis in axes[::3]:
+    for axis in axes[len(fingertips):]:
+        axis.set_visible(False)
+    for axis in axes[::columns]:
         axis.set_ylabel("rendering error |F_target − F_rendered| (N)")
-    figure.suptitle(f"Rendering error over {len(study.target_wrenches)} targets (softtip, simulated device)")
+    figure.suptitle(f"Rendering error over {errors.shape[-1]} targets (softtip, simulated device)")
     return figure
 
 
@@ -204,16 +211,18 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
             user_duration = personal.user_collection_s
             renderers = (fs_renderer, *(NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, motor)
                                         for motor in personal.motor_inputs))
-            errors, rendered, flagged = [], [], []
+            wrenches, commanded, flagged = [], [], []
             for method in renderers:
                 rendering = method.render(targets)
                 produced = sensed_contact(device, fingertip, rendering.motor_inputs, collection, rng)
-                errors.append(np.linalg.norm(targets[:, :3] - produced.finger_wrenches[:, :3], axis=1))
-                rendered.append(np.linalg.norm(produced.finger_wrenches[:, :3], axis=1))
+                wrenches.append(produced.finger_wrenches)
+                commanded.append(rendering.motor_inputs)
                 flagged.append(rendering.outside | produced.saturated)
-            errors = np.array(errors)
+            wrenches = np.array(wrenches)
+            errors = np.linalg.norm(targets[:, :3] - wrenches[..., :3], axis=-1)
             outcomes.append(FingertipOutcome(
-                fingertip, errors, np.array(rendered), np.array(flagged), personal.data_driven_flagged,
+                fingertip, errors, np.linalg.norm(wrenches[..., :3], axis=-1), np.array(flagged), wrenches,
+                np.array(commanded), personal.data_driven_flagged,
                 personal.geometric_flagged, personal.fitted_modulus, personal.adaptive_collection_s,
                 friedman(errors[:PUBLISHED_METHODS]),
                 tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS)))
@@ -221,7 +230,7 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
     pooled = wilcoxon(np.concatenate([o.errors[1] for o in outcomes]),
                       np.concatenate([o.errors[2] for o in outcomes]), tests)
     return HapticsStudy(settings, seed, targets, tuple(outcomes), pooled, fs.duration_s, user_duration,
-                        _contact_to_layer(device, fs, targets, fs_renderer), _NOTES)
+                        _contact_to_layer(device, fs, targets, fs_renderer), NOTES)
 
 
 @dataclass(frozen=True)
@@ -273,7 +282,7 @@ def _contact_to_layer(device: DeviceSpec, fs, targets: np.ndarray, fs_renderer: 
     return float(radius.max() / (FINGERTIP_SENSOR.radius - CORE_RADIUS))
 
 
-_NOTES = (
+NOTES = (
     "Device, fingertips and sensors are simulated: softtip's device dimensions (device.toml); VytaFlex 30 casts over "
     "one rigid core, their contact law calibrated by softtip's FE; Nano17-class sensors, one step of noise at 1 kHz.",
     "The contact is frictionless: a tilted platform renders force along its normal, no independent shear.",

@@ -1,0 +1,208 @@
+"""S3's study as a lab protocol: the simulated device, its FS table and user tables, the targets, and
+every target rendered on every test fingertip by every method, written as one dataset.
+
+One trial per target sensation (``trials`` of them: the publication's 100), in the order they were
+recorded; within a trial one row per rendering, fingertip by fingertip and method by method
+(:data:`~softtip.systems.haptics.study.METHODS`), at ``time_s`` = its place in that sequence times
+``hold_s`` (each rendering held as a table entry is). The target's wrench is a condition of its
+trial; each row holds what the method commanded and what the sensor under the test fingertip read.
+
+Channels: ``rendered_f{x|y|z}_N`` and ``rendered_t{x|y|z}_Nm`` (the test fingertip's 6-axis
+sensor). Labels: ``fingertip``, ``method``, ``motor{1|2|3}_rad`` (commanded), ``error_N``
+(|F_target − F_rendered| over the three force components), ``flagged`` (the target lay outside the
+table, or a sensor saturated). Conditions: ``target_f{x|y|z}_N``, ``target_t{x|y|z}_Nm`` (the FS's
+reading of the target). The collection times and each fingertip's personalisation figures are in
+the metadata's ``sensor_settings``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import Field
+
+from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer,
+                                  schema)
+from softtip._core.progress import Progress
+from softtip.data import Dataset, DatasetMetadata, TrialWriter
+from softtip.lab.bench import RealismTable, SeededBench
+from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.mechanics.viscoelastic import PronySeries
+from softtip.systems.haptics.collection import CollectionSettings
+from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
+from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
+from softtip.systems.haptics.study import METHODS, StudySettings, run_study
+
+WRENCH_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
+WRENCH_UNITS = ("N", "N", "N", "Nm", "Nm", "Nm")
+RENDERED = tuple(f"rendered_{axis}_{unit}" for axis, unit in zip(WRENCH_AXES, WRENCH_UNITS))
+TARGET = tuple(f"target_{axis}_{unit}" for axis, unit in zip(WRENCH_AXES, WRENCH_UNITS))
+MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
+CHANNELS = {name: unit.replace("Nm", "N m") for name, unit in zip(RENDERED, WRENCH_UNITS)}
+LABELS = {"fingertip": "1", "method": "1", **dict.fromkeys(MOTORS, "rad"), "error_N": "N", "flagged": "1"}
+CONDITIONS = {name: unit.replace("Nm", "N m") for name, unit in zip(TARGET, WRENCH_UNITS)}
+FINGERTIP_NAMES = tuple(f.name for f in TEST_FINGERTIPS)
+
+Fingertips = Annotated[list[choice(*FINGERTIP_NAMES)], Field(min_length=1),
+                       expect(f"a non-empty list of: {', '.join(FINGERTIP_NAMES)}")]
+_STUDY, _COLLECTION = StudySettings(), CollectionSettings()
+
+
+@schema(section="parameters")
+class HapticsParameters:
+    """The ``[parameters]`` table of the haptics protocol (S3; units in the names). ``trials``: the
+    target sensations (one trial each); the table sizes are levels per servo (13 → 13³)."""
+
+    trials: integer(2) = _STUDY.targets
+    fs_levels: integer(2) = _STUDY.fs_levels
+    user_levels: integer(2) = _STUDY.user_levels
+    adaptive_budget: integer(27) = _STUDY.adaptive_budget
+    n_neighbours: integer(1) = _STUDY.n_neighbours
+    weighting_power: WeightingPower = _STUDY.weighting_power
+    light_force_N: PositiveNumber = _STUDY.light_force
+    contact_threshold_N: PositiveNumber = CONTACT_THRESHOLD
+    target_draws: integer(1) = _STUDY.target_draws
+    hold_s: PositiveNumber = _COLLECTION.hold_s
+    window_s: PositiveNumber = _COLLECTION.window_s
+    fingertips: Fingertips = field(default_factory=lambda: list(FINGERTIP_NAMES))
+
+    def __post_init__(self) -> None:
+        if len(set(self.fingertips)) != len(self.fingertips):
+            raise Refusal("fingertips", "expected each fingertip once")
+        if self.target_draws < self.trials:
+            raise Refusal("target_draws", f"expected at least trials = {self.trials}: each target is a random "
+                                          "configuration that touches the FS")
+        self.study_settings()
+        self.collection_settings()
+
+    def study_settings(self) -> StudySettings:
+        return StudySettings(targets=self.trials, fs_levels=self.fs_levels, user_levels=self.user_levels,
+                             adaptive_budget=self.adaptive_budget, n_neighbours=self.n_neighbours,
+                             weighting_power=self.weighting_power, light_force=self.light_force_N,
+                             contact_threshold=self.contact_threshold_N, target_draws=self.target_draws,
+                             min_target_force=self.contact_threshold_N)
+
+    def collection_settings(self) -> CollectionSettings:
+        try:
+            return CollectionSettings(hold_s=self.hold_s, window_s=self.window_s)
+        except ValueError:
+            raise Refusal("window_s", f"expected at most hold_s = {self.hold_s} s") from None
+
+
+@schema(section="realism")
+class HapticsRealism(RealismTable):
+    """The haptics bench has no realism switch of its own: the 6-axis sensors' noise and steps at 1 kHz,
+    the servos' dead band and slew are part of the simulated procedure (softtip.sensors.wrench,
+    softtip.systems.haptics.device)."""
+
+
+@schema(section="viscoelastic")
+class HapticsViscoelastic:
+    """The casts are modelled elastic: a table entry is read at the end of a 1 s hold, after the rubber
+    has settled (no relaxation table)."""
+
+
+@schema
+class _HapticsProtocolFile:
+    protocol: ProtocolName
+    seed: integer() = 0
+    device: Text = "shipped"  # or a device TOML file (relative to the protocol file)
+    parameters: dict[str, Any] = field(default_factory=dict)  # checked against HapticsParameters
+    realism: HapticsRealism = HapticsRealism()
+    viscoelastic: HapticsViscoelastic = HapticsViscoelastic()
+
+
+@dataclass(frozen=True)
+class HapticsDevice:
+    """What the haptics protocol runs on: a device file, loaded and checked."""
+
+    name: str
+    source: str
+    device: DeviceSpec
+
+    @property
+    def spec(self) -> dict:
+        return {"name": self.name, "file": self.source, **asdict(self.device)}
+
+
+def device_from_file(path: str | Path) -> HapticsDevice:
+    """A device file (``"shipped"``: softtip's own), refused in one line if it is missing or breaks the
+    kinematics."""
+    path = DEVICE_FILE if str(path) == "shipped" else Path(path)
+    if not path.is_file():
+        raise DeviceError(f"device file {path}: no such file")
+    device = load_device(path)
+    return HapticsDevice(device.device.name, "shipped" if path == DEVICE_FILE else str(path), device)
+
+
+def _device(file: _HapticsProtocolFile, parameters: HapticsParameters, source: str, base: Path | None) -> HapticsDevice:
+    if file.device == "shipped":
+        return device_from_file("shipped")
+    path = Path(file.device)
+    return device_from_file(path if path.is_absolute() or base is None else base / path)
+
+
+@dataclass
+class HapticsBench(SeededBench):
+    """The device the protocol drives."""
+
+    device: HapticsDevice
+
+
+def haptics(bench: HapticsBench, p: HapticsParameters, seed: int, record: dict) -> Dataset:
+    """S3's study: collect the tables, record the targets and render each on each fingertip by each method."""
+    fingertips = tuple(f for f in TEST_FINGERTIPS if f.name in p.fingertips)
+    collection = p.collection_settings()
+    study = run_study(p.study_settings(), seed, device=bench.device.device, fingertips=fingertips,
+                      collection=collection)
+    settings = {"sensor": asdict(collection.sensor), "hold_s": p.hold_s, "window_s": p.window_s,
+                "fs_collection_s": study.fs_collection_s, "user_collection_s": study.user_collection_s,
+                "max_contact_radius_over_layer": study.max_contact_to_layer,
+                "fingertips": {o.fingertip.name: {
+                    "radius_m": o.fingertip.radius, "fs_entries_flagged_A": o.user_table_flagged,
+                    "fs_entries_out_of_reach_B": o.geometric_flagged, "fitted_modulus_Pa": o.fitted_modulus,
+                    "adaptive_collection_s": o.adaptive_collection_s} for o in study.fingertips}}
+    writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
+        description="haptic rendering: targets rendered on test fingertips by each method (simulated device)",
+        design=bench.device.spec, sensor_settings=json_ready(settings), protocol=record, seed=seed))
+    rows = [(o, m) for o in study.fingertips for m in range(len(METHODS))]
+    times = np.arange(len(rows)) * p.hold_s
+    for k, target in enumerate(study.target_wrenches):
+        writer.add({"time_s": times,
+                    **{name: np.array([o.rendered_wrenches[m, k, a] for o, m in rows]) for a, name in enumerate(RENDERED)},
+                    "fingertip": np.array([o.fingertip.name for o, _ in rows]),
+                    "method": np.array([METHODS[m] for _, m in rows]),
+                    **{name: np.array([o.motor_inputs[m, k, a] for o, m in rows]) for a, name in enumerate(MOTORS)},
+                    "error_N": np.array([o.errors[m, k] for o, m in rows]),
+                    "flagged": np.array([bool(o.flagged[m, k]) for o, m in rows])},
+                   dict(zip(TARGET, map(float, target), strict=True)))
+    return writer.to_dataset()
+
+
+def json_ready(value):
+    """Settings as JSON values (tuples as lists, numpy numbers as Python ones)."""
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[HapticsBench, dict, str]:
+    p = protocol.parameters
+    bench = HapticsBench(prony=PronySeries((), ()), realism=protocol.realism,
+                         rng=np.random.default_rng(protocol.seed), rate_hz=1.0 / p.hold_s, device=protocol.design)
+    return bench, {}, (f"{protocol.name}: {p.trials} targets x {len(p.fingertips)} fingertips x {len(METHODS)} "
+                       f"methods on {protocol.design.name}")
+
+
+BENCH = BenchKind(
+    protocol_file=_HapticsProtocolFile, parameters={"haptics": HapticsParameters}, runners={"haptics": haptics},
+    device=_device, setup=_bench, realism_sources={}, viscoelastic=HapticsViscoelastic, viscoelastic_sources={})
+

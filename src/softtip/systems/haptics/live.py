@@ -1,0 +1,180 @@
+"""Real-time rendering: a sensation sequence (recorded or synthetic) through the renderer and the device
+model, a 1 kHz loop whose commands the servos take at their 50 Hz frame rate, out on the live
+pipeline's sinks.
+
+Each tick the renderer turns the wanted wrench into motor inputs (:meth:`NearestNeighbourRenderer.render_one`,
+timed: its latency); the servos (:func:`~.device.servo_angles`) read the command held at the start of
+each of their frames and slew towards it; the wrench the platform then applies to the fingertip is
+read by the 6-axis sensor under it, one sample a tick with its noise. Frames go to the sinks as the
+live pipeline's :class:`~softtip.realtime.frames.FrameResult`: the reading is the wanted force
+(:data:`~softtip.systems.haptics.WANTED`), the estimates are the commanded motor inputs, the servos'
+angles and the rendered wrench (recorded on the ``wrench`` topic as ``geometry_msgs/WrenchStamped``).
+A real device is driven by sending the commands to its servos instead of :func:`servo_angles`.
+
+Paced, each tick starts on the wall clock at its 1 kHz time (a tick that starts more than one period
+late is counted); unpaced, the loop runs as fast as the machine allows. Either way the frames' stamps
+are the 1 kHz ticks.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from softtip.realtime.frames import FrameResult, StreamInfo
+from softtip.realtime.sinks.base import Sink
+from softtip.sensors.wrench import read_wrenches
+from softtip.systems.haptics import WANTED
+from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
+from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, servo_angles
+from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, Fingertip, finger_wrench
+from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+
+LOOP_RATE_HZ = 1000.0
+MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
+SERVOS = ("servo1_rad", "servo2_rad", "servo3_rad")
+WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm")
+TARGET_NAMES = MOTORS + SERVOS + WRENCH
+TARGET_UNITS = ("rad",) * 6 + ("N",) * 3 + ("Nm",) * 3
+SENSATION_COLUMNS = ("time_s", "fx_N", "fy_N", "fz_N")
+
+
+class SensationError(ValueError):
+    """A sensation file or sequence that cannot be rendered."""
+
+
+def synthetic_sensation(device: DeviceSpec, duration_s: float, rng: np.random.Generator,
+                        hold_s: float = 0.5, collection: CollectionSettings = CollectionSettings()) -> np.ndarray:
+    """Wanted wrenches (ticks, 6) at 1 kHz: sensations recorded by the FS at random configurations that
+    touch it (as the study's targets are), each held ``hold_s`` and joined by a raised-cosine blend."""
+    ticks = max(int(round(duration_s * LOOP_RATE_HZ)), 1)
+    per_hold = int(round(hold_s * LOOP_RATE_HZ))
+    count = ticks // per_hold + 2
+    read = sensed_contact(device, FINGERTIP_SENSOR, rng.uniform(0.0, device.angle_max, (8 * count, 3)), collection, rng)
+    touching = read.finger_wrenches[np.linalg.norm(read.finger_wrenches[:, :3], axis=1) > 0.1][:count]
+    if len(touching) < 2:
+        raise SensationError("synthetic sensation: too few random configurations touch the FS on this device")
+    phase = np.arange(ticks) / per_hold
+    index = np.minimum(phase.astype(int), len(touching) - 2)
+    blend = (1 - np.cos(np.pi * np.clip((phase - index) * 4, 0, 1))) / 2  # the first quarter of each hold moves
+    return touching[index] * (1 - blend[:, None]) + touching[index + 1] * blend[:, None]
+
+
+def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray:
+    """Wanted wrenches (ticks, 6) at 1 kHz from a CSV or Parquet file with columns ``time_s``, ``fx_N``,
+    ``fy_N``, ``fz_N`` (increasing times, finite forces), held between samples (zero-order, as a
+    stream is), cut to ``duration_s``."""
+    table = _columns(Path(path))
+    missing = [name for name in SENSATION_COLUMNS if name not in table]
+    if missing:
+        raise SensationError(f"sensation file {path}: missing column {missing[0]} (expected {', '.join(SENSATION_COLUMNS)})")
+    times = np.asarray(table["time_s"], dtype=float)
+    forces = np.column_stack([np.asarray(table[name], dtype=float) for name in SENSATION_COLUMNS[1:]])
+    if len(times) < 1 or not (np.all(np.isfinite(times)) and np.all(np.isfinite(forces))):
+        raise SensationError(f"sensation file {path}: expected finite times and forces, at least one row")
+    if np.any(np.diff(times) <= 0):
+        raise SensationError(f"sensation file {path}: time_s must increase from row to row")
+    end = times[-1] - times[0] if duration_s is None else duration_s
+    ticks = np.arange(max(int(round(end * LOOP_RATE_HZ)), 1)) / LOOP_RATE_HZ + times[0]
+    held = forces[np.searchsorted(times, ticks, side="right") - 1]
+    return np.hstack([held, np.zeros((len(held), 3))])
+
+
+def _columns(path: Path) -> dict[str, np.ndarray]:
+    import pyarrow as pa
+    from pyarrow import csv, parquet
+
+    readers = {".csv": csv.read_csv, ".parquet": parquet.read_table}
+    if path.suffix.lower() not in readers:
+        raise SensationError(f"sensation file {path}: expected a .csv or .parquet file")
+    if not path.is_file():
+        raise SensationError(f"sensation file {path}: no such file")
+    try:
+        table = readers[path.suffix.lower()](path)
+    except (pa.ArrowException, OSError) as problem:
+        raise SensationError(f"sensation file {path}: unreadable ({' '.join(str(problem).split())})") from None
+    return {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
+
+
+@dataclass(frozen=True)
+class RenderSummary:
+    """What a rendering run did: ticks, the renderer's latency (s), the force error (N) between
+    wanted and rendered, the targets flagged outside the table."""
+
+    ticks: int
+    late_ticks: int  # paced ticks that started more than one period after their time
+    latency_p50_s: float
+    latency_p99_s: float
+    median_error_N: float
+    p90_error_N: float
+    outside: int
+    wall_s: float
+
+    def to_dict(self) -> dict:
+        return {"ticks": self.ticks, "loop_rate_hz": LOOP_RATE_HZ, "late_ticks": self.late_ticks,
+                "latency_p50_us": self.latency_p50_s * 1e6,
+                "latency_p99_us": self.latency_p99_s * 1e6, "median_error_N": self.median_error_N,
+                "p90_error_N": self.p90_error_N, "outside_table": self.outside, "wall_s": self.wall_s}
+
+
+def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, fingertip: Fingertip,
+                  sensation: np.ndarray, sinks: list[Sink], rng: np.random.Generator | None,
+                  collection: CollectionSettings = CollectionSettings(), metadata: dict | None = None,
+                  paced: bool = True) -> RenderSummary:
+    """Streams ``sensation`` (ticks, 6) through ``renderer`` and the device on ``fingertip``, to ``sinks``;
+    ``paced``: each tick on the wall clock at 1 kHz."""
+    frame_ticks = int(round(LOOP_RATE_HZ / device.servo.command_rate_hz))
+    info = StreamInfo(chips=1, target_names=TARGET_NAMES, target_units=TARGET_UNITS, classes=None, settings=None,
+                      rate_hz=LOOP_RATE_HZ, metadata=dict(metadata or {}), reading=WANTED)
+    latencies, errors = np.empty(len(sensation)), np.empty(len(sensation))
+    angle, outside, late, started = np.zeros(3), 0, 0, time.perf_counter()
+    stamp0 = time.time_ns()
+    opened = []
+    try:
+        for sink in sinks:
+            sink.open(info)
+            opened.append(sink)
+        for first in range(0, len(sensation), frame_ticks):
+            wanted = sensation[first:first + frame_ticks]
+            commands = np.empty((len(wanted), 3))
+            for k, wrench in enumerate(wanted):
+                if paced:
+                    ahead = started + (first + k) / LOOP_RATE_HZ - time.perf_counter()
+                    if ahead > 0:
+                        time.sleep(ahead)
+                    late += ahead < -1 / LOOP_RATE_HZ
+                tick = time.perf_counter()
+                commands[k], flagged = renderer.render_one(wrench)
+                latencies[first + k] = time.perf_counter() - tick
+                outside += flagged
+            angles = servo_angles(device, angle, commands, LOOP_RATE_HZ)
+            angle = angles[-1]
+            on_finger, _ = finger_wrench(fingertip, device, forward_kinematics(device, angles))
+            rendered, saturated = read_wrenches(on_finger, collection.sensor, rng)
+            errors[first:first + len(wanted)] = np.linalg.norm(rendered[:, :3] - wanted[:, :3], axis=1)
+            for k in range(len(wanted)):
+                seq = first + k
+                frame = FrameResult(
+                    seq=seq, stamp_ns=stamp0 + int(seq * 1e9 / LOOP_RATE_HZ), host_time_s=time.perf_counter(),
+                    device_time_s=seq / LOOP_RATE_HZ, reading=wanted[k, None, :3], chip_ok=np.ones(1, bool),
+                    saturated=saturated[k, None, :3], baseline=None, baseline_version=0, change=None,
+                    estimates=np.concatenate([commands[k], angles[k], rendered[k]]), state=None,
+                    latency_s=latencies[seq])
+                for sink in opened:
+                    sink.write(frame)
+    finally:
+        for sink in opened:
+            sink.close()
+    return RenderSummary(len(sensation), int(late), float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)),
+                         float(np.median(errors)), float(np.percentile(errors, 90)), int(outside),
+                         time.perf_counter() - started)
+
+
+def fs_renderer(device: DeviceSpec, fs_levels: int, rng: np.random.Generator,
+                collection: CollectionSettings = CollectionSettings(), **renderer) -> NearestNeighbourRenderer:
+    """The standard renderer on an FS table of ``fs_levels``³ configurations collected on ``device``."""
+    table = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, fs_levels), collection, rng).unsaturated()
+    return NearestNeighbourRenderer(**renderer).fit(table.finger_wrenches, table.motor_inputs)

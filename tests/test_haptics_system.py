@@ -1,0 +1,131 @@
+"""S3 as a registered system: its record, its protocol (the study as a dataset) and its report beside
+the published figures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softtip._core.config import ConfigError
+from softtip._core.progress import SILENT
+from softtip._core.systems import owner, register, systems
+from softtip.data import Dataset
+from softtip.lab import load_protocol, run_protocol
+from softtip.lab.protocols import protocol_from_dict
+from softtip.published import tables_of
+from softtip.systems.haptics import SYSTEM
+from softtip.systems.haptics.bench import RENDERED, TARGET
+from softtip.systems.haptics.report import RenderedTargets, haptics
+from softtip.systems.haptics.statistics import wilcoxon
+from softtip.systems.haptics.study import METHODS
+
+COARSE = {"trials": 6, "fs_levels": 7, "user_levels": 7, "fingertips": ["FS cast (7.5 mm)", "human 3 (10 mm)"]}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered():
+    if "haptics" not in systems():  # the entry point is installed with the package
+        register(SYSTEM)
+
+
+@pytest.fixture(scope="module")
+def coarse_protocol():
+    return load_protocol("haptics").changed(seed=3, **COARSE)
+
+
+@pytest.fixture(scope="module")
+def coarse_dataset(coarse_protocol):
+    return run_protocol(coarse_protocol)[0]
+
+
+def test_the_record_names_what_it_registers():
+    assert owner("protocol", "haptics") is SYSTEM and owner("study", "haptics") is SYSTEM
+    assert owner("bench", "haptics") is SYSTEM and owner("command", "haptics") is SYSTEM
+    assert SYSTEM.label == "S3" and SYSTEM.published() is not None
+    assert {table.key for table in tables_of("haptics")} == {"haptics-targets", "haptics-collection",
+                                                             "haptics-directions"}
+
+
+def test_the_shipped_protocol_is_the_published_procedure():
+    p = load_protocol("haptics").parameters
+    assert (p.trials, p.fs_levels, p.user_levels, p.n_neighbours, p.hold_s, p.window_s) == (100, 13, 7, 8, 1.0, 0.2)
+    assert len(p.fingertips) == 6
+
+
+def test_the_dataset_holds_every_rendering_and_its_error(coarse_dataset):
+    dataset = coarse_dataset
+    assert isinstance(dataset, Dataset) and len(dataset.trials) == 6
+    assert len(dataset.groups) == 6 * 2 * len(METHODS)
+    found = RenderedTargets.of(dataset)
+    assert found.errors.shape == (2, len(METHODS), 6)
+    # the error is recomputed by hand from the rendered wrench and the target (a condition of the trial)
+    rendered = np.column_stack([dataset.column(name) for name in RENDERED[:3]])
+    target = np.column_stack([dataset.column(name) for name in TARGET[:3]])
+    assert np.allclose(dataset.column("error_N"), np.linalg.norm(target - rendered, axis=1))
+    # on the FS cast, the geometric table is the FS table itself: the same motor commands as the standard
+    fs = dataset.column("fingertip") == "FS cast (7.5 mm)"
+    method = dataset.column("method")
+    standard, geometric = (np.column_stack([dataset.column(f"motor{k}_rad")[fs & (method == m)] for k in (1, 2, 3)])
+                           for m in (METHODS[0], METHODS[2]))
+    assert np.allclose(standard, geometric, atol=1e-12)
+
+
+def test_the_report_compares_with_the_published_directions(coarse_protocol, coarse_dataset):
+    outcome = haptics(coarse_protocol, 3, SILENT)
+    directions = outcome.tables[0]
+    largest = outcome.results["fingertips"]["human 3 (10 mm)"]
+    medians = largest["median_error_N"]
+    assert directions.cells[("human 3 (10 mm)", "standard − A")] == pytest.approx(medians[0] - medians[1])
+    assert directions.cells[("human 3 (10 mm)", "B − A")] == pytest.approx(medians[2] - medians[1])
+    # a direction the publication states and softtip's device does not show carries its explanation
+    for row in ("human 3 (10 mm)", "all fingertips (pooled)"):
+        assert (row in directions.notes) == (directions.cells[(row, "B − A")] <= 0)
+    # the pooled A-vs-B test is scipy's on the pooled errors, Bonferroni over 3 x 2 + 1 tests
+    found = RenderedTargets.of(coarse_dataset)
+    reference = wilcoxon(found.errors[:, 1].ravel(), found.errors[:, 2].ravel(), 7)
+    assert outcome.results["pooled_A_vs_B"]["p_bonferroni"] == pytest.approx(reference.p_bonferroni)
+    assert any(c.verdict for c in directions.comparisons())
+    assert len(outcome.figures) == 1 and outcome.figures[0].png.startswith(b"\x89PNG")
+    collection = {c.row: c for table in outcome.tables for c in table.comparisons() if c.column == "entries"}
+    assert collection["FS table (13³)"].value == 2197 and collection["user table (7³)"].value == 343
+
+
+def test_bad_protocols_are_refused_in_one_line(tmp_path):
+    base = {"protocol": "haptics"}
+    cases = [({"parameters": {"trials": 1}}, "trials"),
+             ({"parameters": {"fingertips": ["thumb"]}}, "fingertips"),
+             ({"parameters": {"fingertips": ["FS cast (7.5 mm)"] * 2}}, "each fingertip once"),
+             ({"parameters": {"window_s": 2.0}}, "window_s"),
+             ({"parameters": {"hold_s": float("nan")}}, "hold_s"),
+             ({"parameters": {"weighting_power": -1.0}}, "weighting_power"),
+             ({"parameters": {"target_draws": 5}}, "target_draws"),
+             ({"device": "missing.toml"}, "missing.toml")]
+    for extra, word in cases:
+        with pytest.raises(ValueError, match=word) as raised:
+            protocol_from_dict(base | extra, "test", tmp_path)
+        assert "\n" not in str(raised.value)
+    broken = tmp_path / "device.toml"
+    broken.write_text((SYSTEM.files() / "device.toml").read_text().replace("pulley_radius = 0.002",
+                                                                           "pulley_radius = 0.2"))
+    with pytest.raises(ConfigError, match="released_length"):
+        protocol_from_dict(base | {"device": "device.toml"}, "test", tmp_path)
+
+
+def test_reproduce_quick_renders_fewer_targets_and_writes_the_report(tmp_path):
+    from softtip.studies.reproduce import reproduce_study
+
+    shipped = (SYSTEM.files() / "protocols" / "haptics.toml").read_text()
+    coarse = shipped.replace("fs_levels = 13", "fs_levels = 7").replace(
+        'fingertips = ["small cast (6.5 mm)", "FS cast (7.5 mm)", "large cast (8.5 mm)", "human 1 (6.5 mm)",\n'
+        '              "human 2 (8 mm)", "human 3 (10 mm)"]', 'fingertips = ["FS cast (7.5 mm)", "large cast (8.5 mm)"]')
+    assert coarse.count("fs_levels = 7") == 1 and "human 3" not in coarse
+    path = tmp_path / "coarse.toml"
+    path.write_text(coarse)
+    report = reproduce_study("haptics", seed=2, quick=True, protocol_path=path)
+    assert report.outcome.results["targets"] == 2  # --quick cuts the targets (the protocol's trials) to two
+    where = report.protocol_table.cells[("parameters.trials", "where from")]
+    assert where.startswith("--quick")
+    written = report.write(tmp_path)
+    assert written.is_file() and (tmp_path / "haptics.json").is_file()
+    # no largest fingertip in this run: the headline is the pooled comparison of the two personalisations
+    assert report.outcome.headline.label.endswith("all fingertips (pooled)")
