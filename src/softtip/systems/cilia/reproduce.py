@@ -78,7 +78,9 @@ def _published_parameters(study: CiliaStudy) -> Table:
 def _range(study: CiliaStudy) -> Table:
     return paper_table(published_table("cilia-range"), {("X", "upper end"): study.resolution.range[1] / MN},
                        caption="softtip's range ends where the local slope has fallen to a tenth of its value at "
-                               "zero force (the pillars have turned over).")
+                               "zero force (the pillars have turned over).",
+                       notes={"X": "The publication's 26 mN is where its balance test stopped, with no criterion; "
+                                   "softtip's end is a slope criterion on the paper-mode curve."})
 
 
 def _spin_valves(model) -> Table:
@@ -187,7 +189,10 @@ def _balance_table(study: CiliaStudy) -> Table:
         if fit is not None:
             cells.update({(row, columns[0]): fit.moment / MEMU, (row, columns[1]): fit.diameter / UM,
                           (row, columns[2]): "yes" if fit.at_bound else "no", (row, columns[3]): fit.noise * 1e6})
-    notes = {rows[1]: balance.refusal} if balance.fit is None else {}
+    notes = ({rows[1]: balance.refusal} if balance.fit is None
+             else {rows[1]: "On a bound: the paper model (pillars bending from the first newton) cannot take the "
+                            "shape of a curve whose pillars first compress and buckle; its figures mean little."}
+             if balance.fit.at_bound else {})
     return Table("What balance mode does to the paper-mode fit", "fitted curve", rows, columns, cells, digits=3,
                  caption=f"Balance mode: the die pushed onto a plate (friction {study.settings.friction:g}, "
                          f"a {study.settings.imperfection_deg:g}° bow); the pillars buckle at "
@@ -226,6 +231,7 @@ def _results(study: CiliaStudy, rest: dict[str, float], timings: dict) -> dict:
     return {"fit": fit_of(study.fit),
             "profile_interval_moment_memu": list(_interval(study.profile_moment.interval, MEMU)),
             "profile_interval_diameter_um": list(_interval(study.profile_diameter.interval, UM)),
+            "linear_part_limit_mN": study.identifiability.linear_part_limit / MN,
             "linear_part": fit_of(study.identifiability.linear), "whole_curve": fit_of(study.identifiability.whole),
             "recovery": {"moment_bias_spread": list(study.recovery.moment_error),
                          "diameter_bias_spread": list(study.recovery.diameter_error)},
