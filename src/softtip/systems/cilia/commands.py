@@ -16,7 +16,7 @@ def bench_cilia(
     force_max_mn: float = typer.Option(26.0, "--force-max-mn", help="Largest total force on the die (mN)."),
     repeats: int = typer.Option(3, "--repeats", help="Runs of each timing; the fastest counts."),
     die: Path = typer.Option(None, "--die", help="Die file (default: the shipped, declared layout)."),
-    fe: bool = typer.Option(False, "--fe", help="Also time the 3-D neo-Hookean FE reference curve (minutes)."),
+    fe: bool = typer.Option(False, "--fe", help="Also time the FE reference curve (3-D neo-Hookean pillar, field, readout; a minute or two)."),
     fe_loads: int = typer.Option(6, "--fe-loads", help="Load steps of the FE reference curve."),
     save: Path = typer.Option(None, "--save", help="Also write the report as JSON to this file."),
     force: bool = typer.Option(False, "--force", help="Overwrite --save's file."),
