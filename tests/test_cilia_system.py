@@ -32,6 +32,10 @@ COARSE = """
     trials = 2
     depths_um = [10.0, 20.0]
     meander_scales = [0.9]
+    brush_length_mm = 6.0
+    brush_strips = 2
+    brush_speeds_mm_s = [0.5, 2.0]
+    brush_rates_hz = [2.0, 50.0]
 """
 
 
@@ -135,7 +139,7 @@ def test_a_die_file_that_breaks_the_layout_is_refused_when_the_protocol_is_read(
 def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp_path):
     from softtip.studies.reproduce import reproduce_study
 
-    report = reproduce_study("cilia", seed=2, protocol_path=coarse(tmp_path, points=16))
+    report = reproduce_study("cilia", seed=2, protocol_path=coarse(tmp_path))
     outcome = report.outcome
     fit = outcome.results["fit"]
     # the twin's truth (2.8 memu, 200 µm) within the fit's 95 % intervals and the profiles'
@@ -150,12 +154,16 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     # the readout's resistance at rest against the spec's ≈ 183 and 169 kΩ (measured 187 and 172)
     assert verdicts[("X", "resistance")] == verdicts[("Y", "resistance")] == "within"
     assert ("X", "upper end") in verdicts
-    assert len(outcome.figures) == 4 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert len(outcome.figures) == 5 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     assert outcome.headline.value == pytest.approx(fit["moment_memu"])
     assert any("balance" in note for note in outcome.notes)
     # a minimum force of the X sensor of tens of µN (3σ of a 100 µV count over ≈ 5.7 V/N), Y beyond reach
     assert 5 < outcome.results["minimum_force_3sigma_uN"]["X"] < 50
     assert outcome.results["minimum_force_3sigma_uN"]["Y"] > 26e3
+    rough = outcome.results["roughness"]
+    assert np.all(np.diff(rough["ac_rms_uV"]) > 0) and rough["slope_uV_per_um"] > 0
+    assert rough["accuracy_by_strip"] > 0.5  # chance 0.25
+    assert any(table.title.startswith("Roughness missed") for table in outcome.tables)
 
 
 def bench_app() -> typer.Typer:

@@ -5,7 +5,8 @@ loadings). The study fits the first paper-mode curve of the protocol's sensor (m
 height and modulus held, as published), every repeat for the recovery of the twin's truth, and the first
 balance-mode curve with the same paper-mode model (what the published fit would have made of the real
 test); then the resolution, the measurement range and the layout's weight
-(:func:`softtip.systems.cilia.study.analyse_curves`). Paper-mode is the fit the report leads with.
+(:func:`softtip.systems.cilia.study.analyse_curves`). Paper-mode is the fit the report leads with. The
+roughness experiment (:mod:`softtip.systems.cilia.roughness`) brushes the twin within the study.
 """
 
 from __future__ import annotations
@@ -14,8 +15,10 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from matplotlib.figure import Figure as PlotFigure
 
 from softtip._core.progress import Progress
+from softtip._core.units import MM
 from softtip.lab import Protocol, run_protocol
 from softtip.published import published_table
 from softtip.report.document import Figure
@@ -25,8 +28,10 @@ from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.cilia.bench import SENSORS, curve_of
 from softtip.systems.cilia.fit import CurveFit
 from softtip.systems.cilia.layout import MEMU, UM
+from softtip.systems.cilia.roughness import RoughnessStudy, roughness_study
 from softtip.systems.cilia.study import (
     MN,
+    CiliaSettings,
     CiliaStudy,
     analyse_curves,
     balance_contact,
@@ -50,9 +55,14 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     study = analyse_curves(settings, seed, model, truth, measured, balance,
                            curve_of(dataset, "balance", repeats[0], settings.sensor), progress)
     rest = {sensor: float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS}
+    with progress.task("roughness: brushing the four surfaces, the classifier"):
+        rough = roughness_study(model, balance_contact(settings), settings.brush_engagement_um * UM,
+                                settings.brush_speed_mm_s * MM, settings.brush_rate_hz, settings.brush_length_mm * MM,
+                                tuple(v * MM for v in settings.brush_speeds_mm_s), tuple(settings.brush_rates_hz),
+                                settings.brush_strips, seed)
     tables = [_published_parameters(study), _range(study), _spin_valves(model), _readout(model, rest),
               _fit_table(study), _identifiability_table(study), _recovery_table(study), _resolution_table(study),
-              _balance_table(study), _layout_table(study, model.die.depth)]
+              _balance_table(study), _layout_table(study, model.die.depth), *_roughness_tables(rough, settings)]
     figures = [Figure.of("Voltage change against force", "The measured curve (the twin read through the meter and "
                          "the bench), its truth, the paper-mode fit, and the balance test's curve: the pillars "
                          "buckle before they bend, so the balance curve has its own shape.", study.figures.curve),
@@ -62,9 +72,13 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                Figure.of("Deformed pillars", "The pillars' centre lines in paper mode (bending towards the "
                          "horizontal) and in balance mode (compressed, buckled, lying).", study.figures.pillars),
                Figure.of("Profile likelihoods", "n ln(RSS/RSS_min) of each parameter with the other at its best; "
-                         "the 95 % interval is where it stays under 3.84.", study.figures.profiles)]
+                         "the 95 % interval is where it stays under 3.84.", study.figures.profiles),
+               Figure.of("Roughness", "The AC rms of the voltage against the surfaces' rms roughness, and against "
+                         "the sampling rate: a reading integrates over its interval, so a slow rate (or a fast "
+                         "stage) averages the grains away.", _roughness_figure(rough))]
     headline = Headline.of(tables[0], MOMENT, "value", "fitted moment per pillar", unit="memu")
-    return StudyOutcome(_results(study, rest, timings), tables, figures, headline, _notes(study))
+    results = _results(study, rest, timings) | {"roughness": _roughness_results(rough)}
+    return StudyOutcome(results, tables, figures, headline, _notes(study) + ROUGHNESS_NOTES)
 
 
 def _published_parameters(study: CiliaStudy) -> Table:
@@ -271,3 +285,81 @@ def _notes(study: CiliaStudy) -> list[str]:
     if study.fit.at_bound:
         notes.append("The paper-mode fit ended on a bound: the curve does not hold that parameter.")
     return notes
+
+
+ROUGHNESS_NOTES = [
+    "Roughness: the published 18.3, 46.2 and 162 µm equal the grits' (P1000, P320, P100) average grain sizes; "
+    "softtip makes each sandpaper a Gaussian random profile with that rms and that correlation length (a grain "
+    "wide). The brushing runs on the twin inside the study (not from the lab's dataset).",
+    "Roughness: the published trend is linear; on the twin the coarsest paper reads less than linear, because "
+    "its valleys are deeper than the engagement (the tips leave the surface) and its peaks reach where the "
+    "pillars lie down. The published work trains no classifier: softtip adds one.",
+]
+
+
+def _roughness_tables(rough: RoughnessStudy, settings: CiliaSettings) -> list[Table]:
+    rows = list(rough.surfaces)
+    cells = {}
+    for row, roughness, total, above in zip(rows, rough.roughness, rough.total_rms, rough.above_floor):
+        cells.update({(row, "rms roughness (µm)"): roughness / UM, (row, "AC rms (µV)"): total * 1e6,
+                      (row, "above the floor (µV)"): above * 1e6})
+    level = Table("Roughness: the AC voltage's rms against the surface's", "surface", rows,
+                  ["rms roughness (µm)", "AC rms (µV)", "above the floor (µV)"], cells, digits=2,
+                  caption=f"Brushing at {settings.brush_speed_mm_s:g} mm/s, {settings.brush_rate_hz:g} readings/s, "
+                          f"{settings.brush_engagement_um:g} µm past first contact, mean over "
+                          f"{settings.brush_strips} strips of {settings.brush_length_mm:g} mm; sensor X through a "
+                          f"bridge. Slope through the origin: {rough.slope * UM * 1e6:.3f} µV per µm; floor "
+                          f"(silicon): {rough.floor * 1e6:.3f} µV.",
+                  notes={"P100": "Below the line of the finer papers: valleys deeper than the engagement lift the "
+                                 "tips off, peaks push the pillars over."})
+    rate_columns = [f"{r:g}/s" for r in rough.rates]
+    by_rate = Table("Roughness missed: the AC rms (µV) against the sampling rate", "surface", rows, rate_columns,
+                    {(row, column): rough.rms_by_rate[i, j] * 1e6 for i, row in enumerate(rows)
+                     for j, column in enumerate(rate_columns)}, digits=2,
+                    caption=f"At {settings.brush_speed_mm_s:g} mm/s, one strip each; a reading integrates over "
+                            "its interval, so it averages the grains it crosses meanwhile.")
+    c = rough.classification
+    accuracy = Table("A classifier of the four surfaces (softtip's addition)", "validation",
+                     ["by strip (grouped folds)", f"trained without {c.held_speed / MM:g} mm/s, tested on it"],
+                     ["accuracy", "windows"],
+                     {("by strip (grouped folds)", "accuracy"): c.by_recording,
+                      ("by strip (grouped folds)", "windows"): c.windows,
+                      (f"trained without {c.held_speed / MM:g} mm/s, tested on it", "accuracy"): c.at_held_speed,
+                      (f"trained without {c.held_speed / MM:g} mm/s, tested on it", "windows"):
+                          int(c.confusion_at_held_speed.sum())}, digits=3,
+                     caption="A random forest (scikit-learn) on one-second windows: log AC rms, log rms of the "
+                             "reading-to-reading step, and three spectral band shares. No strip gives windows to "
+                             "both training and validation. Chance: 0.25.")
+    confusion = Table("Confusion by strip (rows: true surface, columns: predicted)", "true", list(c.surfaces),
+                      list(c.surfaces), {(t, p): int(c.confusion_by_recording[i, j])
+                                         for i, t in enumerate(c.surfaces) for j, p in enumerate(c.surfaces)},
+                      digits=0)
+    return [level, by_rate, accuracy, confusion]
+
+
+def _roughness_figure(rough: RoughnessStudy) -> PlotFigure:
+    figure = PlotFigure(figsize=(8.0, 3.6), layout="constrained")
+    left, right = figure.add_subplot(1, 2, 1), figure.add_subplot(1, 2, 2)
+    left.plot(rough.roughness / UM, rough.total_rms * 1e6, "o-", label="AC rms")
+    left.plot(rough.roughness / UM, rough.above_floor * 1e6, "s--", label="above the floor")
+    left.plot(rough.roughness / UM, rough.slope * rough.roughness * 1e6, ":", label="slope through the origin")
+    left.set_xlabel("rms roughness (µm)")
+    left.set_ylabel("AC rms of sensor X (µV)")
+    left.legend(fontsize=8)
+    for name, row in zip(rough.surfaces, rough.rms_by_rate):
+        right.loglog(rough.rates, row * 1e6, "o-", label=name)
+    right.axvline(20, color="k", ls=":", lw=0.8, label="20 readings/s")
+    right.set_xlabel("readings per second")
+    right.set_ylabel("AC rms (µV)")
+    right.legend(fontsize=8)
+    return figure
+
+
+def _roughness_results(rough: RoughnessStudy) -> dict:
+    c = rough.classification
+    return {"surfaces": list(rough.surfaces), "roughness_um": list(rough.roughness / UM),
+            "ac_rms_uV": list(rough.total_rms * 1e6), "above_floor_uV": list(rough.above_floor * 1e6),
+            "slope_uV_per_um": rough.slope * UM * 1e6, "floor_uV": rough.floor * 1e6,
+            "rates_hz": list(rough.rates), "ac_rms_by_rate_uV": (rough.rms_by_rate * 1e6).tolist(),
+            "accuracy_by_strip": c.by_recording, "accuracy_at_held_speed": c.at_held_speed,
+            "held_speed_mm_s": c.held_speed / MM, "confusion_by_strip": c.confusion_by_recording.tolist()}

@@ -179,7 +179,7 @@ def classify(recordings: list[Recording], window: int, rate: float, seed: int) -
     folds = min(3, len({r.realisation for r in recordings}))
     if folds < 2 or len(set(speeds)) < 2:
         raise DieError("recordings: expected at least two realisations and two speeds of each surface")
-    forest = RandomForestClassifier(n_estimators=200, random_state=seed)
+    forest = RandomForestClassifier(n_estimators=100, random_state=seed)
     realisation = np.array([recordings[g].realisation for g in groups])
     predicted = cross_val_predict(forest, x, y, groups=realisation, cv=GroupKFold(n_splits=folds))
     held = float(max(speeds))

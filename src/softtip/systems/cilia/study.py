@@ -81,6 +81,16 @@ class CiliaSettings:
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
     meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                               expect("a non-empty list of positive scales")] = (0.9, 1.1)
+    # brushing (softtip.systems.cilia.roughness): the die held past first contact, moved over each surface
+    brush_engagement_um: PositiveNumber = 150.0
+    brush_speed_mm_s: PositiveNumber = 1.0
+    brush_rate_hz: PositiveNumber = 50.0
+    brush_length_mm: PositiveNumber = 20.0
+    brush_strips: integer(2, 50) = 3  # realisations of each surface
+    brush_speeds_mm_s: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
+                                 expect("a list of at least two positive speeds")] = (0.5, 1.0, 2.0)
+    brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
+                              expect("a list of at least two positive rates")] = (2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
 
 @dataclass(frozen=True)
