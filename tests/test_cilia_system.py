@@ -115,6 +115,10 @@ def test_the_protocol_writes_the_twins_curves_within_their_stated_noise(tmp_path
     ("trials = 0", r"trials = 0"),
     ("repeatability = 2.0", r"repeatability = 2.0"),
     ("height_mm = 0.0", r"height_mm = 0.0"),
+    ("brush_rates_hz = [2.0, 1000.0]", r"brush_rates_hz = \[2.0, 1000.0\]: expected rates at most 250 /s at 0.5 mm/s"),
+    ("brush_length_mm = 1.5", r"brush_length_mm = 1.5: expected a stroke of at least one second at 2 mm/s"),
+    ("brush_engagement_um = 800.0", r"brush_engagement_um = 800: expected less than 70 % of the pillars' height"),
+    ("brush_length_mm = 2.001", r"brush_length_mm = 2.001: expected a stroke longer than the pillars' spread"),
 ])
 def test_bad_protocol_settings_are_refused_when_read(tmp_path, setting, message):
     path = coarse(tmp_path)

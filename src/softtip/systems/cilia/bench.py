@@ -23,12 +23,13 @@ import numpy as np
 
 from softtip._core.config import PositiveNumber, integer, schema
 from softtip._core.progress import Progress
+from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
-from softtip.systems.cilia.layout import DieError, read_die
+from softtip.systems.cilia.layout import UM, DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
 from softtip.systems.cilia.study import (
     CiliaSettings,
@@ -91,7 +92,15 @@ def _device(file: CiliaProtocolFile, parameters: CiliaSettings, source: str, bas
     path = die_path(parameters.die, base if parameters.die != "shipped" else None)
     if not path.is_file() and parameters.die != "shipped":
         path = Path(parameters.die)  # relative to the working folder, as a command-line path would be
-    read_die(path)
+    die = read_die(path)
+    height = die.pillars.rod.length if parameters.height_mm is None else parameters.height_mm * MM
+    if parameters.brush_engagement_um * UM >= 0.7 * height:  # the balance-mode response reaches 70 % of the height
+        raise DieError(f"{source}: parameters.brush_engagement_um = {parameters.brush_engagement_um:g}: expected "
+                       f"less than 70 % of the pillars' height ({0.7 * height / UM:g} um)")
+    spread = float(np.ptp(die.pillars.positions[:, 0]))
+    if parameters.brush_length_mm * MM <= spread + 4 * UM:
+        raise DieError(f"{source}: parameters.brush_length_mm = {parameters.brush_length_mm:g}: expected a stroke "
+                       f"longer than the pillars' spread along it ({spread / MM:g} mm)")
     return CiliaDie(name=f"gmr-cilia:{parameters.die}", path=path)
 
 

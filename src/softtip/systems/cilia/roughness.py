@@ -24,11 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from softtip._core.units import MM
 from softtip.mechanics.rod import PlateContact
-from softtip.systems.cilia.layout import DieError
+from softtip.systems.cilia.layout import UM, DieError
 from softtip.systems.cilia.model import CiliaModel
+from softtip.systems.cilia.study import BRUSH_SPACING_MM
 
-UM = 1e-6
 SURFACES = {"silicon": 0.0, "P1000": 18.3 * UM, "P320": 46.2 * UM, "P100": 162.0 * UM}  # rms = grain size, m
 
 
@@ -191,7 +192,7 @@ def classify(recordings: list[Recording], window: int, rate: float, seed: int) -
                           confusion_matrix(y[~train], at_held, labels=surfaces), int(len(y)))
 
 
-SPACING = 2e-6  # m: the profiles' sampling, a ninth of the finest grain
+SPACING = BRUSH_SPACING_MM * MM  # m: the profiles' sampling, a ninth of the finest grain
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ from softtip._core.config import (
     OpenFraction,
     PositiveInteger,
     PositiveNumber,
+    Refusal,
     Text,
     choice,
     expect,
@@ -56,6 +57,7 @@ from softtip.systems.cilia.resolution import Resolution, resolution
 
 MN = 1e-3  # newtons per millinewton
 SHIPPED = "shipped"  # the die setting that names the declared layout
+BRUSH_SPACING_MM = 2e-3  # the roughness profiles' sampling (softtip.systems.cilia.roughness.SPACING)
 
 
 @schema(section="cilia", error=DieError)
@@ -91,6 +93,14 @@ class CiliaSettings:
                                  expect("a list of at least two positive speeds")] = (0.5, 1.0, 2.0)
     brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
                               expect("a list of at least two positive rates")] = (2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+
+    def __post_init__(self) -> None:
+        speeds, rates = (self.brush_speed_mm_s, *self.brush_speeds_mm_s), (self.brush_rate_hz, *self.brush_rates_hz)
+        if min(speeds) / max(rates) < BRUSH_SPACING_MM:  # a reading must cross at least one profile sample
+            raise Refusal("brush_rates_hz", f"expected rates at most {min(speeds) / BRUSH_SPACING_MM:g} /s at "
+                                            f"{min(speeds):g} mm/s (the profile is sampled every {BRUSH_SPACING_MM * 1e3:g} µm)")
+        if self.brush_length_mm / max(speeds) < 1.0:  # the classifier's windows last one second
+            raise Refusal("brush_length_mm", f"expected a stroke of at least one second at {max(speeds):g} mm/s")
 
 
 @dataclass(frozen=True)
