@@ -107,3 +107,16 @@ def test_bad_input_is_refused_in_one_line():
         MODEL.balance_curve(np.array([0.5e-3, 0.1e-3]))
     with pytest.raises(DieError, match="descent: expected"):
         MODEL.balance_curve(np.array([0.0, 2e-3]))
+
+
+def test_a_chain_given_in_the_pillars_frame_is_turned_to_their_azimuth_and_set_on_each_base():
+    from dataclasses import replace
+
+    from softtip.systems.cilia.model import chain_dipoles
+
+    die = read_die()
+    pillars = replace(die.pillars, positions=np.array([[1e-3, -1e-3]]), bend_azimuth=np.pi / 2)
+    # one dipole 0.1 mm along the bend, 0.5 mm up, pointing along the bend: at 90° the bend is +y
+    dipoles = chain_dipoles(pillars, np.array([[[1e-4, 0.0, 5e-4]]]), np.array([[[1.0, 0.0, 0.0]]]))
+    assert np.allclose(dipoles.positions, [[[1e-3, -1e-3 + 1e-4, 5e-4]]], atol=1e-15)
+    assert np.allclose(dipoles.moments, [[[0.0, pillars.moment, 0.0]]], atol=1e-18)

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
 from softtip._core.progress import Progress, Task
-from softtip.systems.cilia import CiliaSettings, DieError, run_study
+from softtip.systems.cilia.layout import DieError
+from softtip.systems.cilia.study import CiliaSettings, run_study
 
 
 class Recorder(Progress):
@@ -21,10 +21,11 @@ class Recorder(Progress):
 
 @pytest.mark.slow
 def test_the_study_fits_the_twins_curve_and_reports_every_figure():
-    settings = CiliaSettings(points=16, recovery_trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,))
+    settings = CiliaSettings(points=16, trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,))
     progress = Recorder()
     study = run_study(settings, seed=4, progress=progress)
-    assert progress.stages == ["twin curve and fit", "recovery of synthetic truths", "resolution, balance, layout"]
+    assert progress.stages == ["fit, profiles and identifiability", "recovery of the twin's truth",
+                               "resolution, balance, layout"]
     fit = study.fit
     # the twin's truth (2.8 memu, 200 µm) is found within its 95 % intervals
     assert fit.interval_moment[0] <= 2.8e-6 <= fit.interval_moment[1]

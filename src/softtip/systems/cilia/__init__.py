@@ -12,7 +12,11 @@ The chain, stage by stage (each in the shared toolkit where it is generic):
   likelihoods and what the linear part identifies (only moment / diameter⁴);
 * ``resolution`` — the smallest force resolved (3σ over the slope; the smallest distinguishable step)
   and the measurement range;
-* ``study`` — :func:`run_study`, the whole force study as typed results and figures.
+* ``study`` — :func:`~softtip.systems.cilia.study.run_study`, the whole force study as typed results and
+  figures;
+* ``bench`` — the lab's protocol ``cilia``: the twin's force–voltage curves (paper and balance modes, X and
+  Y) as a dataset; ``reproduce`` — ``softtip reproduce cilia``, the study of that dataset beside the
+  published figures (``published.toml``); ``commands`` — ``softtip bench cilia``.
 
 Which sensor: the force experiments read X, whose strips sense the direction the pillars bend in and
 which has the larger magnetoresistance and sensitivity; Y is reported beside it.
@@ -22,29 +26,23 @@ cycles, and its computed noise floor (≈ 33 µV rms, mostly the count) sets a m
 the declared die. Microvolt signals (the published roughness traces) need the constant part taken off
 before the meter — a bridge or a matched reference resistor (``offset_V`` in the die file) — which puts
 the meter on its 0.1 V range (0.1 µV per count); the floor is then the sensor's own Johnson and 1/f noise.
+
+Importing this package loads only its registration record (:data:`SYSTEM`).
 """
 
-from softtip.systems.cilia.fit import CurveFit, MeasuredCurve, fit_curve, identifiability, profiles
-from softtip.systems.cilia.layout import SHIPPED_DIE, Die, DieError, read_die
-from softtip.systems.cilia.model import CiliaModel, ForceCurve
-from softtip.systems.cilia.resolution import Resolution, resolution
-from softtip.systems.cilia.study import CiliaSettings, CiliaStudy, run_study
+from softtip._core.systems import Study, System
 
-__all__ = [
-    "SHIPPED_DIE",
-    "CiliaModel",
-    "CiliaSettings",
-    "CiliaStudy",
-    "CurveFit",
-    "Die",
-    "DieError",
-    "ForceCurve",
-    "MeasuredCurve",
-    "Resolution",
-    "fit_curve",
-    "identifiability",
-    "profiles",
-    "read_die",
-    "resolution",
-    "run_study",
-]
+SYSTEM = System(
+    name="cilia",
+    title="Magnetised elastic pillars over a GMR die: a millimetre force sensor",
+    label="S4",
+    package=__name__,
+    benches={"cilia": "softtip.systems.cilia.bench:BENCH"},
+    protocols={"cilia": "cilia"},
+    studies=(
+        Study("cilia", "cilia", "softtip.systems.cilia.reproduce:cilia",
+              "S4: the pillars' moment and diameter fitted to the force-voltage curve, the minimum force and "
+              "the measurement range of a GMR cilia sensor"),
+    ),
+    bench_commands={"cilia": "softtip.systems.cilia.commands:bench_cilia"},
+)

@@ -59,14 +59,23 @@ def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int) -> Dipoles:
     K = ``count`` per pillar, along the local tangents, 1/K of the pillar's moment each."""
     fractions = (np.arange(count) + 0.5) / count
     points, tangents = shapes.centreline(fractions)  # (B, K, 2) in the bending plane (along, up)
-    direction = np.array([np.cos(pillars.bend_azimuth), np.sin(pillars.bend_azimuth)])
+    lift = np.zeros(points.shape[:-1] + (1,))
 
-    def to_3d(plane: NDArray) -> NDArray:
-        return np.concatenate([plane[..., :1] * direction, plane[..., 1:]], axis=-1)
+    def to_3d(plane: NDArray) -> NDArray:  # the bending plane is the pillar's x-z plane
+        return np.concatenate([plane[..., :1], lift, plane[..., 1:]], axis=-1)
 
+    return chain_dipoles(pillars, to_3d(points), to_3d(tangents))
+
+
+def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray) -> Dipoles:
+    """(B, P·K) dipoles of every pillar whose centre line is at ``points`` (B, K, 3) with unit ``tangents``
+    (B, K, 3), given in a pillar's own frame (base at the origin, bending towards +x), turned to the
+    pillars' bend azimuth and placed at each base."""
+    c, s = np.cos(pillars.bend_azimuth), np.sin(pillars.bend_azimuth)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     offsets = np.concatenate([pillars.positions, np.zeros((len(pillars.positions), 1))], axis=-1)  # (P, 3)
-    positions = to_3d(points)[:, None, :, :] + offsets[None, :, None, :]  # (B, P, K, 3)
-    axes = np.broadcast_to(to_3d(tangents)[:, None], positions.shape)
+    positions = (points @ turn.T)[:, None, :, :] + offsets[None, :, None, :]  # (B, P, K, 3)
+    axes = np.broadcast_to((tangents @ turn.T)[:, None], positions.shape)
     chain = dipole_chain(positions, axes, pillars.moment)
     batch = positions.shape[0]
     return Dipoles(chain.positions.reshape(batch, -1, 3), chain.moments.reshape(batch, -1, 3))

@@ -27,6 +27,7 @@ from softtip._core.config import (
     OpenFraction,
     PositiveInteger,
     PositiveNumber,
+    Refusal,
     Text,
     choice,
     expect,
@@ -36,6 +37,7 @@ from softtip._core.config import (
 )
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
+from softtip._core.units import MM
 from softtip.magnetics.dipoles import dipole_field
 from softtip.mechanics.rod import PlateContact
 from softtip.systems.cilia.fit import (
@@ -49,26 +51,31 @@ from softtip.systems.cilia.fit import (
     identifiability,
     profiles,
 )
-from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, read_die
+from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, pillar_rod, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
 from softtip.systems.cilia.resolution import Resolution, resolution
 
 MN = 1e-3  # newtons per millinewton
+SHIPPED = "shipped"  # the die setting that names the declared layout
+BRUSH_SPACING_MM = 2e-3  # the roughness profiles' sampling (softtip.systems.cilia.roughness.SPACING)
 
 
 @schema(section="cilia", error=DieError)
 class CiliaSettings:
     """The study's settings (forces in mN, lengths in µm, moments in memu as the publication states them)."""
 
-    die: Text = str(SHIPPED_DIE)
+    die: Text = SHIPPED  # the declared layout shipped beside the package, or a die file's path
     sensor: choice("X", "Y") = "X"
     force_max_mN: PositiveNumber = 26.0
     points: integer(5, 400) = 40
     truth_moment_memu: PositiveNumber = 2.8
     truth_diameter_um: PositiveNumber = 200.0
+    height_mm: PositiveNumber | None = None  # None: the die file's
+    youngs_modulus_MPa: PositiveNumber | None = None  # None: the die file's
     repeatability: Fraction = 0.01  # of the full-scale voltage change, rms, per load step
     linear_fraction: OpenFraction = 0.1  # raised to hold at least 5 points where the plan is short
-    recovery_trials: integer(0, 200) = 6
+    # repeated loadings of the twin: the first is the study's curve; every one is fitted for the recovery
+    trials: integer(1, 200) = 6
     chain_count: PositiveInteger = 10
     friction: number("a number >= 0", ge=0.0) = 0.5
     imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
@@ -76,6 +83,24 @@ class CiliaSettings:
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
     meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                               expect("a non-empty list of positive scales")] = (0.9, 1.1)
+    # brushing (softtip.systems.cilia.roughness): the die held past first contact, moved over each surface
+    brush_engagement_um: PositiveNumber = 150.0
+    brush_speed_mm_s: PositiveNumber = 1.0
+    brush_rate_hz: PositiveNumber = 50.0
+    brush_length_mm: PositiveNumber = 20.0
+    brush_strips: integer(2, 50) = 3  # realisations of each surface
+    brush_speeds_mm_s: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
+                                 expect("a list of at least two positive speeds")] = (0.5, 1.0, 2.0)
+    brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
+                              expect("a list of at least two positive rates")] = (2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+
+    def __post_init__(self) -> None:
+        speeds, rates = (self.brush_speed_mm_s, *self.brush_speeds_mm_s), (self.brush_rate_hz, *self.brush_rates_hz)
+        if min(speeds) / max(rates) < BRUSH_SPACING_MM:  # a reading must cross at least one profile sample
+            raise Refusal("brush_rates_hz", f"expected rates at most {min(speeds) / BRUSH_SPACING_MM:g} /s at "
+                                            f"{min(speeds):g} mm/s (the profile is sampled every {BRUSH_SPACING_MM * 1e3:g} µm)")
+        if self.brush_length_mm / max(speeds) < 1.0:  # the classifier's windows last one second
+            raise Refusal("brush_length_mm", f"expected a stroke of at least one second at {max(speeds):g} mm/s")
 
 
 @dataclass(frozen=True)
@@ -148,71 +173,116 @@ class CiliaStudy:
     figures: CiliaFigures
 
 
+def die_path(name: str, folder: Path | None = None) -> Path:
+    """The die file a setting names: ``shipped`` (the declared layout), or a path (relative ones from
+    ``folder``, the protocol file's, when given)."""
+    if name == SHIPPED:
+        return SHIPPED_DIE
+    path = Path(name)
+    return folder / path if folder is not None and not path.is_absolute() else path
+
+
+def twin_model(settings: CiliaSettings) -> CiliaModel:
+    """The twin's die: the die file's, with the settings' truth (moment, tip diameter) and, where given,
+    their pillar height and Young's modulus."""
+    die = read_die(die_path(settings.die))
+    pillars = die.pillars
+    rod = pillars.rod
+    template = replace(rod, length=rod.length if settings.height_mm is None else settings.height_mm * MM,
+                       youngs_modulus=(rod.youngs_modulus if settings.youngs_modulus_MPa is None
+                                       else settings.youngs_modulus_MPa * 1e6))
+    pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter, pillars.compliant_base))
+    truth = replace(pillars.with_diameter(settings.truth_diameter_um * UM),
+                    moment=math.copysign(settings.truth_moment_memu * MEMU, pillars.moment))
+    return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count)
+
+
+def paper_forces(settings: CiliaSettings) -> np.ndarray:
+    """The paper-mode load plan: ``points`` equal steps up to ``force_max_mN`` (N)."""
+    return np.linspace(settings.force_max_mN * MN / settings.points, settings.force_max_mN * MN, settings.points)
+
+
+def balance_descent(model: CiliaModel, settings: CiliaSettings) -> np.ndarray:
+    """The balance test's plan: ``points`` steps of the die's descent past first contact, to 70 % of the
+    pillars' height."""
+    return np.linspace(0.0, 0.7 * model.die.pillars.rod.length, settings.points)
+
+
+def balance_contact(settings: CiliaSettings) -> PlateContact:
+    return PlateContact(settings.friction, math.radians(settings.imperfection_deg))
+
+
 def run_study(settings: CiliaSettings, seed: int, progress: Progress = SILENT) -> CiliaStudy:
-    """The whole force study of the die in ``settings`` at ``seed`` (see the module notes)."""
-    die = read_die(Path(settings.die))
-    truth_die = die.with_pillars(replace(die.pillars.with_diameter(settings.truth_diameter_um * UM),
-                                         moment=math.copysign(settings.truth_moment_memu * MEMU, die.pillars.moment)))
-    model = CiliaModel(truth_die, chain_count=settings.chain_count)
-    force = np.linspace(settings.force_max_mN * MN / settings.points, settings.force_max_mN * MN, settings.points)
+    """The whole force study of the die in ``settings`` at ``seed`` (see the module notes): the twin's
+    curves read through the bench, then :func:`analyse_curves`."""
+    model = twin_model(settings)
     rng = np.random.default_rng(seed)
-    with progress.task("twin curve and fit", total=3) as task:
-        truth = model.curve(force, settings.sensor)
-        measured = _measure(model, truth, settings, rng)
-        task.advance(note="curve")
-        predictor = CurveModel(model, force, settings.sensor)
-        fitted = fit_curve(model, measured, cache=predictor)
+    truth = model.curve(paper_forces(settings), settings.sensor)
+    measured = [measure(model, truth, settings.repeatability, rng) for _ in range(settings.trials)]
+    balance = model.balance_curve(balance_descent(model, settings), balance_contact(settings), settings.sensor)
+    return analyse_curves(settings, seed, model, truth, measured, balance,
+                          measure(model, balance, settings.repeatability, rng), progress)
+
+
+def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth: ForceCurve,
+                   measured: list[MeasuredCurve], balance: ForceCurve, balance_measured: MeasuredCurve,
+                   progress: Progress = SILENT) -> CiliaStudy:
+    """The force study of measured curves of ``model``'s twin: the first paper-mode curve fitted in full
+    (profiles, identifiability, layout weight), every one fitted for the recovery of the twin's truth,
+    and the paper-mode fit of the balance test's curve."""
+    first = measured[0]
+    force = first.force
+    with progress.task("fit, profiles and identifiability", total=2) as task:
+        predictor = CurveModel(model, force, first.sensor)
+        fitted = fit_curve(model, first, cache=predictor)
         task.advance(note=f"moment {fitted.moment / MEMU:.3f} memu")
-        profile_d, profile_m = profiles(fitted, predictor, measured)
-        fraction = max(settings.linear_fraction, min(0.99, (5 + 1e-9) / settings.points))
-        identified = identifiability(model, measured, fraction, cache=predictor)
+        profile_d, profile_m = profiles(fitted, predictor, first)
+        fraction = max(settings.linear_fraction, min(0.99, (5 + 1e-9) / force.size))
+        identified = identifiability(model, first, fraction, cache=predictor)
         task.advance(note="profiles")
-    trials_m, trials_d = [], []
-    with progress.task("recovery of synthetic truths", total=settings.recovery_trials) as task:
-        for _ in range(settings.recovery_trials):
-            trial = fit_curve(model, _measure(model, truth, settings, rng), cache=predictor)
+    trials_m, trials_d = [fitted.moment], [fitted.diameter]
+    with progress.task("recovery of the twin's truth", total=len(measured) - 1) as task:
+        for curve in measured[1:]:
+            trial = fit_curve(model, curve, cache=predictor)
             trials_m.append(trial.moment)
             trials_d.append(trial.diameter)
             task.advance()
-    recovery = Recovery(settings.truth_moment_memu * MEMU, settings.truth_diameter_um * UM, np.array(trials_m),
+    recovery = Recovery(abs(model.die.pillars.moment), model.die.pillars.rod.tip_diameter, np.array(trials_m),
                         np.array(trials_d))
     with progress.task("resolution, balance, layout", total=3) as task:
-        resolved = resolution(model, settings.sensor, 1.5 * settings.force_max_mN * MN)
-        other = resolution(model, "Y" if settings.sensor == "X" else "X", 1.5 * settings.force_max_mN * MN)
+        resolved = resolution(model, first.sensor, 1.5 * settings.force_max_mN * MN)
+        other = resolution(model, "Y" if first.sensor == "X" else "X", 1.5 * settings.force_max_mN * MN)
         task.advance()
-        balance = _balance(model, settings, rng)
+        balanced = _balance(model, balance, balance_measured, settings)
         task.advance()
-        layout = _layout_weight(model, measured, fitted, settings)
+        layout = _layout_weight(model, first, fitted, settings)
         task.advance()
-    figures = CiliaFigures(curve=_curve_figure(truth, measured, fitted, balance),
+    figures = CiliaFigures(curve=_curve_figure(truth, first, fitted, balanced),
                            field_map=_field_map_figure(model, truth),
-                           pillars=_pillars_figure(truth, balance),
+                           pillars=_pillars_figure(truth, balanced),
                            profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
-    return CiliaStudy(settings, seed, truth, measured, fitted, profile_d, profile_m, identified, recovery, resolved,
-                      other, balance, layout, figures)
+    return CiliaStudy(settings, seed, truth, first, fitted, profile_d, profile_m, identified, recovery, resolved,
+                      other, balanced, layout, figures)
 
 
-def _measure(model: CiliaModel, truth: ForceCurve, settings: CiliaSettings, rng: np.random.Generator) -> MeasuredCurve:
+def measure(model: CiliaModel, truth: ForceCurve, repeatability: float, rng: np.random.Generator) -> MeasuredCurve:
     """The twin's curve as a bench reads it: each reading through the meter (noise, quantisation), the
-    tare from a reading at zero force, and the bench's repeatability on top."""
-    readout = model.die.meander(settings.sensor).readout
+    tare from a reading at zero force, and the bench's repeatability on top (``repeatability`` of the
+    full-scale change, rms, per load step)."""
+    readout = model.die.meander(truth.sensor).readout
     rest = truth.volts[0] - truth.change[0]
     readings = readout.read(truth.volts, rng) - readout.read(np.array([rest]), rng)[0]
-    scatter = settings.repeatability * float(np.abs(truth.change).max())
-    return MeasuredCurve(truth.force, readings + rng.normal(0.0, scatter, readings.shape), settings.sensor)
+    scatter = repeatability * float(np.abs(truth.change).max())
+    return MeasuredCurve(truth.force, readings + rng.normal(0.0, scatter, readings.shape), truth.sensor)
 
 
-def _balance(model: CiliaModel, settings: CiliaSettings, rng: np.random.Generator) -> BalanceOutcome:
-    rod = model.die.pillars.rod
+def _balance(model: CiliaModel, curve: ForceCurve, measured: MeasuredCurve, settings: CiliaSettings) -> BalanceOutcome:
     tilt = math.radians(settings.imperfection_deg)
-    descent = np.linspace(0.0, 0.7 * rod.length, settings.points)
-    curve = model.balance_curve(descent, PlateContact(settings.friction, tilt), settings.sensor)
     buckled = np.flatnonzero(np.abs(curve.shapes.tip_angle) > 2 * tilt + 0.05)
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
-    pressed = curve.force > 0
-    measured = MeasuredCurve(curve.force[pressed], curve.change[pressed], settings.sensor)
+    pressed = measured.force > 0
     try:
-        fit = fit_curve(model, measured)
+        fit = fit_curve(model, measured.part(pressed))
         refusal = ""
     except (NotConverged, CurveError) as problem:  # the report says why the paper model cannot fit this curve
         fit, refusal = None, f"{type(problem).__name__}: {problem}"

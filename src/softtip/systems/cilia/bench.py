@@ -1,0 +1,158 @@
+"""S4's force characterisation on the twin, as the lab's protocol ``cilia``: the die's force–voltage curves.
+
+Paper mode (as the published simulation loads the pillars: a tip force perpendicular to each axis) at
+``points`` equal steps up to ``force_max_mN``, and balance mode (as the measurement was made: the die
+lowered step by step onto a plate on a balance, to 70 % of the pillars' height past first contact), each
+repeated ``trials`` times. Every reading goes through the computed readout (Johnson, 1/f and meter noise,
+the meter's quantisation; :mod:`softtip.sensors.gmr`) and the bench's repeatability, both sensors read at
+each step, tared by a reading at zero force. The twin's truth is the die file with the protocol's moment,
+tip diameter and, where given, height and Young's modulus (:func:`softtip.systems.cilia.study.twin_model`).
+
+Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare). Label: ``force_N`` (the
+total force on the die: the load applied in paper mode, the balance's vertical reading in balance mode).
+Conditions: ``mode`` (paper, balance), ``repeat``, ``tare_x_V``, ``tare_y_V`` (the tare readings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from softtip._core.config import PositiveNumber, integer, schema
+from softtip._core.progress import Progress
+from softtip._core.units import MM
+from softtip.data import Dataset, DatasetMetadata, TrialWriter
+from softtip.lab.bench import RealismTable, SeededBench
+from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.mechanics.viscoelastic import PronySeries
+from softtip.systems.cilia.fit import MeasuredCurve
+from softtip.systems.cilia.layout import UM, DieError, read_die
+from softtip.systems.cilia.model import CiliaModel, ForceCurve
+from softtip.systems.cilia.study import (
+    CiliaSettings,
+    balance_contact,
+    balance_descent,
+    die_path,
+    measure,
+    paper_forces,
+    twin_model,
+)
+
+SENSORS = ("X", "Y")
+CHANNELS = {"gmr_x_V": "V", "gmr_y_V": "V"}
+LABELS = {"force_N": "N"}
+CONDITIONS = {"mode": "1", "repeat": "1", "tare_x_V": "V", "tare_y_V": "V"}
+MODES = ("paper", "balance")
+
+
+@schema(section="realism")
+class CiliaRealism(RealismTable):
+    """The bench beyond the readout's computed noise (the repeatability is the protocol's parameter)."""
+
+    dwell_s: PositiveNumber = 2.0  # per load step: the time axis of the dataset
+
+
+@schema(section="viscoelastic")
+class NoRelaxation:
+    """PDMS pillars at quasi-static load steps: the study models no relaxation."""
+
+
+@schema
+class CiliaProtocolFile:
+    protocol: ProtocolName
+    seed: integer() = 0
+    parameters: dict[str, Any] = field(default_factory=dict)  # checked against CiliaSettings
+    realism: CiliaRealism = CiliaRealism()
+    viscoelastic: NoRelaxation = NoRelaxation()
+
+
+@dataclass(frozen=True)
+class CiliaDie:
+    """The die a protocol runs on: its file, checked when the protocol is read."""
+
+    name: str
+    path: Path
+
+    @property
+    def spec(self) -> dict:
+        return {"name": self.name, "die_file": self.path.name}
+
+
+@dataclass
+class CiliaBench(SeededBench):
+    model: CiliaModel  # the twin's die with the protocol's truth
+
+
+def _device(file: CiliaProtocolFile, parameters: CiliaSettings, source: str, base: Path | None) -> CiliaDie:
+    """The die file, resolved from the protocol file's folder and read through (a bad one is refused here,
+    before any work)."""
+    path = die_path(parameters.die, base if parameters.die != "shipped" else None)
+    if not path.is_file() and parameters.die != "shipped":
+        path = Path(parameters.die)  # relative to the working folder, as a command-line path would be
+    die = read_die(path)
+    height = die.pillars.rod.length if parameters.height_mm is None else parameters.height_mm * MM
+    if parameters.brush_engagement_um * UM >= 0.7 * height:  # the balance-mode response reaches 70 % of the height
+        raise DieError(f"{source}: parameters.brush_engagement_um = {parameters.brush_engagement_um:g}: expected "
+                       f"less than 70 % of the pillars' height ({0.7 * height / UM:g} um)")
+    spread = float(np.ptp(die.pillars.positions[:, 0]))
+    if parameters.brush_length_mm * MM <= spread + 4 * UM:
+        raise DieError(f"{source}: parameters.brush_length_mm = {parameters.brush_length_mm:g}: expected a stroke "
+                       f"longer than the pillars' spread along it ({spread / MM:g} mm)")
+    return CiliaDie(name=f"gmr-cilia:{parameters.die}", path=path)
+
+
+def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[CiliaBench, dict, str]:
+    p = replace(protocol.parameters, die=str(protocol.design.path))
+    model = twin_model(p)
+    bench = CiliaBench(prony=PronySeries((), ()), realism=protocol.realism, rng=np.random.default_rng(protocol.seed),
+                       rate_hz=1.0 / protocol.realism.dwell_s, model=model)
+    return bench, {"die_file": str(protocol.design.path.name)}, (
+        f"{protocol.name}: {p.trials} x paper and balance curves of {p.points} steps on {protocol.design.name}")
+
+
+def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
+    """The twin's noise-free curves, per mode: (X, Y)."""
+    forces, descent, contact = paper_forces(p), balance_descent(model, p), balance_contact(p)
+    return {"paper": tuple(model.curve(forces, sensor) for sensor in SENSORS),
+            "balance": tuple(model.balance_curve(descent, contact, sensor) for sensor in SENSORS)}
+
+
+def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:
+    """``trials`` repeats of the paper-mode and the balance-mode curve, both sensors read at every step."""
+    model, rng = bench.model, bench.rng
+    writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
+        description="GMR cilia die: voltage change of both sensors against the force on the die",
+        design={"die_file": record.get("die_file", ""), "moment_memu": p.truth_moment_memu,
+                "tip_diameter_um": p.truth_diameter_um},
+        sensor_settings={"current_A": model.die.meander("X").readout.current}, protocol=record, seed=seed))
+    curves = _curves(model, p)
+    for repeat in range(p.trials):
+        for mode in MODES:
+            truth = curves[mode]
+            measured = [measure(model, curve, p.repeatability, rng) for curve in truth]
+            rests = [curve.volts[0] - curve.change[0] for curve in truth]
+            writer.add({"time_s": np.arange(truth[0].force.size) * bench.realism.dwell_s,
+                        "gmr_x_V": measured[0].change, "gmr_y_V": measured[1].change, "force_N": truth[0].force},
+                       {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1]})
+    return writer.to_dataset()
+
+
+BENCH = BenchKind(
+    protocol_file=CiliaProtocolFile, parameters={"cilia": CiliaSettings}, runners={"cilia": cilia},
+    device=_device, setup=_setup,
+    realism_sources={"dwell_s": "chosen: a load step every 2 s (the publication gives no rate)"},
+    viscoelastic=NoRelaxation, viscoelastic_sources={})
+
+
+def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredCurve:
+    """One measured curve of a ``cilia`` dataset."""
+    if mode not in MODES or sensor not in SENSORS:
+        raise DieError(f"curve: expected a mode of {MODES} and a sensor of {SENSORS}, got {mode!r}, {sensor!r}")
+    rows = (dataset.column("mode") == mode) & (dataset.column("repeat") == repeat)
+    if not rows.any():
+        raise DieError(f"dataset: no {mode} curve of repeat {repeat}")
+    part = dataset.select(rows=rows)
+    return MeasuredCurve(part.column("force_N"), part.column(f"gmr_{sensor.lower()}_V"), sensor)

@@ -1,0 +1,239 @@
+"""Brushing the die across a rough surface: the surfaces, the voltage trace, its AC rms, and a classifier.
+
+The surfaces (as the S4 spec states them): atomically flat silicon (0 µm) and sandpapers P1000, P320 and
+P100, published as 18.3, 46.2 and 162 µm rms roughness. Those three figures equal the grits' standard
+average grain sizes, so softtip reads each as both: a Gaussian random height profile along the brushing
+direction whose rms is the published figure and whose correlation length (Gaussian autocorrelation) is the
+same figure, the grain size — bumps one grain wide. Silicon is flat: its trace is the noise floor.
+
+The brush: the die is held ``engagement`` past first contact (balance mode: the plate is the surface) and
+moved at ``speed``; each pillar's tip rides the surface under it, so its engagement is the nominal one
+plus the local height (a tip over a valley deeper than the engagement leaves the surface). The voltage is
+the balance-mode curve's at each pillar's engagement, the pillars' changes added up (each pillar's field
+adds to the others'; the bend of one does not move another). The meter reads through a bridge (the rest
+voltage taken off, so it sits on its lowest range) and integrates each reading over the whole sample
+interval 1/rate: a fast stage or a slow rate averages grains away.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+from softtip._core.units import MM
+from softtip.mechanics.rod import PlateContact
+from softtip.systems.cilia.layout import UM, DieError
+from softtip.systems.cilia.model import CiliaModel
+from softtip.systems.cilia.study import BRUSH_SPACING_MM
+
+SURFACES = {"silicon": 0.0, "P1000": 18.3 * UM, "P320": 46.2 * UM, "P100": 162.0 * UM}  # rms = grain size, m
+
+
+def surface_profile(rms: float, correlation: float, length: float, spacing: float,
+                    rng: np.random.Generator) -> NDArray[np.float64]:
+    """Heights (m) every ``spacing`` over ``length`` of a Gaussian random profile with a Gaussian
+    autocorrelation of length ``correlation`` (its spectrum ∝ exp(−(k ℓ)²/4)), scaled to ``rms`` exactly;
+    all zero when ``rms`` is 0."""
+    for name, value in (("length", length), ("spacing", spacing)):
+        if not (math.isfinite(value) and value > 0):
+            raise DieError(f"{name} = {value!r}: expected a positive length in m")
+    if not (math.isfinite(rms) and rms >= 0):
+        raise DieError(f"rms = {rms!r}: expected a roughness >= 0 m")
+    count = int(math.ceil(length / spacing)) + 1
+    if rms == 0:
+        return np.zeros(count)
+    if not (math.isfinite(correlation) and correlation >= 2 * spacing):
+        raise DieError(f"correlation = {correlation!r}: expected at least two samples ({2 * spacing:g} m) per grain")
+    k = 2 * np.pi * np.fft.rfftfreq(count, spacing)
+    amplitude = np.exp(-(k * correlation) ** 2 / 8)  # the square root of the spectrum
+    heights = np.fft.irfft(np.fft.rfft(rng.standard_normal(count)) * amplitude, count)
+    heights -= heights.mean()
+    return heights * (rms / heights.std())
+
+
+@dataclass(frozen=True)
+class Brush:
+    """The die's response to its engagement: the balance-mode voltage change of one sensor against the
+    descent past first contact (``descent`` m ascending from 0, ``change`` V of all pillars together)."""
+
+    model: CiliaModel
+    sensor: str
+    descent: NDArray[np.float64]
+    change: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, model: CiliaModel, sensor: str = "X", contact: PlateContact = PlateContact(),
+           points: int = 60) -> Brush:
+        rod = model.die.pillars.rod
+        descent = np.linspace(0.0, 0.7 * rod.length, points)
+        curve = model.balance_curve(descent, contact, sensor)
+        return cls(model, sensor, descent, curve.change)
+
+    def trace(self, heights: NDArray, spacing: float, engagement: float) -> NDArray[np.float64]:
+        """The noise-free voltage change (V) at each position of the die along a profile of ``heights``
+        every ``spacing`` (m), each pillar over its own point of the surface."""
+        if not 0 < engagement < self.descent[-1]:
+            raise DieError(f"engagement = {engagement!r}: expected a descent past first contact within "
+                           f"(0, {self.descent[-1]:.4g}) m")
+        offsets = np.rint(self.model.die.pillars.positions[:, 0] / spacing).astype(int)
+        offsets -= offsets.min()
+        span = heights.size - offsets.max()
+        if span < 2:
+            raise DieError("heights: the profile is shorter than the pillars' spread along it")
+        under = np.stack([heights[o:o + span] for o in offsets])  # (P, positions)
+        local = np.clip(engagement + under, 0.0, self.descent[-1])  # off the surface: at rest
+        # one pillar's share of the die's change at its own engagement; the shares add
+        return (np.interp(local, self.descent, self.change) / len(offsets)).sum(axis=0)
+
+
+def read_brushing(brush: Brush, heights: NDArray, spacing: float, engagement: float, speed: float, rate: float,
+                  rng: np.random.Generator) -> NDArray[np.float64]:
+    """Readings (V) of a brushing at ``speed`` (m/s) sampled at ``rate`` (Hz): each the meter's average
+    over its interval 1/rate (the die moves ``speed/rate`` meanwhile), through the bridge (the rest voltage
+    off) with the readout's noise at that integration time, and quantised."""
+    for name, value in (("speed", speed), ("rate", rate)):
+        if not (math.isfinite(value) and value > 0):
+            raise DieError(f"{name} = {value!r}: expected a positive number")
+    change = brush.trace(heights, spacing, engagement)
+    per_reading = speed / rate / spacing  # profile samples the die crosses per reading
+    if per_reading < 1:
+        raise DieError(f"spacing = {spacing!r}: expected a profile finer than one reading's travel "
+                       f"({speed / rate:.3g} m)")
+    edges = np.arange(0.0, change.size, per_reading).astype(int)
+    if edges.size < 3:
+        raise DieError("the profile holds fewer than 3 readings at this speed and rate")
+    averaged = np.add.reduceat(change[:edges[-1]], edges[:-1]) / np.diff(edges)  # whole readings only
+    readout = brush.model.die.meander(brush.sensor).readout
+    rest = float(brush.model.curve(np.array([0.0]), brush.sensor).volts[0])
+    bridged = replace(readout, offset=rest, voltmeter=replace(readout.voltmeter, integration_time=1.0 / rate))
+    return bridged.read(rest + averaged, rng)
+
+
+def ac_rms(readings: NDArray) -> float:
+    """rms of the AC part: the readings less their linear trend."""
+    return float(np.std(signal.detrend(readings)))
+
+
+def window_features(readings: NDArray, window: int, rate: float) -> NDArray[np.float64]:
+    """(W, 5) features of consecutive windows of ``window`` readings: log AC rms, log rms of the
+    reading-to-reading difference, and the log shares of power in three bands (below 5 %, 5–20 %, above
+    20 % of the rate) of each window's periodogram."""
+    if window < 8 or readings.size < window:
+        raise DieError(f"window = {window!r}: expected at least 8 readings and no more than the {readings.size} held")
+    rows = readings[: readings.size // window * window].reshape(-1, window)
+    ac = signal.detrend(rows, axis=1)
+    frequency, power = signal.periodogram(ac, fs=rate, axis=1)
+    total = power.sum(axis=1) + 1e-300
+    bands = [(frequency < 0.05 * rate), (frequency >= 0.05 * rate) & (frequency < 0.2 * rate),
+             (frequency >= 0.2 * rate)]
+    shares = np.stack([power[:, band].sum(axis=1) / total for band in bands], axis=1)
+    tiny = 1e-12
+    return np.column_stack([np.log(ac.std(axis=1) + tiny), np.log(np.diff(rows, axis=1).std(axis=1) + tiny),
+                            np.log(shares + 1e-6)])
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One brushing: its surface, stage speed (m/s), realisation and readings (V)."""
+
+    surface: str
+    speed: float
+    realisation: int
+    readings: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Classification:
+    """Accuracy of telling the surfaces apart from windows: split by recording (whole recordings held out),
+    and trained on every speed but ``held_speed`` and tested on it; the confusion matrices (rows: true,
+    columns: predicted, in ``surfaces`` order)."""
+
+    surfaces: tuple[str, ...]
+    by_recording: float
+    confusion_by_recording: NDArray[np.int64]
+    held_speed: float
+    at_held_speed: float
+    confusion_at_held_speed: NDArray[np.int64]
+    windows: int
+
+
+def classify(recordings: list[Recording], window: int, rate: float, seed: int) -> Classification:
+    """A random forest (scikit-learn) on :func:`window_features`, validated by recording (grouped folds:
+    no recording gives windows to both sides) and on the fastest speed held out."""
+    from sklearn.ensemble import RandomForestClassifier
+    from sklearn.metrics import confusion_matrix
+    from sklearn.model_selection import GroupKFold, cross_val_predict
+
+    surfaces = tuple(dict.fromkeys(r.surface for r in recordings))
+    features, labels, groups, speeds = [], [], [], []
+    for index, recording in enumerate(recordings):
+        rows = window_features(recording.readings, window, rate)
+        features.append(rows)
+        labels += [recording.surface] * len(rows)
+        groups += [index] * len(rows)
+        speeds += [recording.speed] * len(rows)
+    x, y, groups, speeds = np.concatenate(features), np.array(labels), np.array(groups), np.array(speeds)
+    folds = min(3, len({r.realisation for r in recordings}))
+    if folds < 2 or len(set(speeds)) < 2:
+        raise DieError("recordings: expected at least two realisations and two speeds of each surface")
+    forest = RandomForestClassifier(n_estimators=100, random_state=seed)
+    realisation = np.array([recordings[g].realisation for g in groups])
+    predicted = cross_val_predict(forest, x, y, groups=realisation, cv=GroupKFold(n_splits=folds))
+    held = float(max(speeds))
+    train = speeds != held
+    forest.fit(x[train], y[train])
+    at_held = forest.predict(x[~train])
+    return Classification(surfaces, float(np.mean(predicted == y)), confusion_matrix(y, predicted, labels=surfaces),
+                          held, float(np.mean(at_held == y[~train])),
+                          confusion_matrix(y[~train], at_held, labels=surfaces), int(len(y)))
+
+
+SPACING = BRUSH_SPACING_MM * MM  # m: the profiles' sampling, a ninth of the finest grain
+
+
+@dataclass(frozen=True)
+class RoughnessStudy:
+    """The brushing experiment: per surface the AC rms (V) at the nominal speed and rate and with the
+    silicon floor removed, the slope (V per m of rms roughness, least squares through the origin of the
+    floor-removed rms) and the floor; the AC rms of every surface against the sampling rate; the
+    classifier."""
+
+    surfaces: tuple[str, ...]
+    roughness: NDArray[np.float64]
+    total_rms: NDArray[np.float64]
+    above_floor: NDArray[np.float64]
+    slope: float
+    floor: float
+    rates: NDArray[np.float64]
+    rms_by_rate: NDArray[np.float64]  # (surfaces, rates)
+    classification: Classification
+
+
+def roughness_study(model: CiliaModel, contact: PlateContact, engagement: float, speed: float, rate: float,
+                    length: float, speeds: tuple[float, ...], rates: tuple[float, ...], realisations: int,
+                    seed: int) -> RoughnessStudy:
+    """The four surfaces brushed at ``speed`` (m/s) and ``rate`` (Hz) over ``length`` (m) at ``engagement``
+    (m past first contact), ``realisations`` strips of each; the rate curve at ``speed``; the classifier on
+    every strip at every one of ``speeds``, in windows of one second."""
+    rng = np.random.default_rng(seed)
+    brush = Brush.of(model, "X", contact)
+    strips = {name: [surface_profile(rms, max(rms, 2 * SPACING), length, SPACING, rng) for _ in range(realisations)]
+              for name, rms in SURFACES.items()}
+    names = tuple(SURFACES)
+    total = np.array([np.mean([ac_rms(read_brushing(brush, heights, SPACING, engagement, speed, rate, rng))
+                               for heights in strips[name]]) for name in names])
+    floor = float(total[0])
+    above = np.sqrt(np.clip(total**2 - floor**2, 0.0, None))
+    roughness = np.array([SURFACES[name] for name in names])
+    slope = float(roughness @ above / (roughness @ roughness))
+    by_rate = np.array([[ac_rms(read_brushing(brush, strips[name][0], SPACING, engagement, speed, r, rng))
+                         for r in rates] for name in names])
+    recordings = [Recording(name, s, index, read_brushing(brush, heights, SPACING, engagement, s, rate, rng))
+                  for name in names for index, heights in enumerate(strips[name]) for s in speeds]
+    window = max(8, int(round(rate)))
+    return RoughnessStudy(names, roughness, total, above, slope, floor, np.array(rates), by_rate,
+                          classify(recordings, window, rate, seed))

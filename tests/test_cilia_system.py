@@ -1,0 +1,220 @@
+"""S4 registered: its record, the lab's ``cilia`` protocol and dataset, ``softtip reproduce cilia`` and
+``softtip bench cilia``, and the bad input each refuses in one line before any work."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from softtip._core.systems import register, systems, unregister
+from softtip.cli.common import user_errors
+from softtip.lab import load_protocol, run_protocol
+from softtip.systems.cilia import SYSTEM
+from softtip.systems.cilia.layout import SHIPPED_DIE, read_die
+
+SOURCE = Path(__file__).parents[1] / "src"
+COARSE = """
+    protocol = "cilia"
+    seed = 3
+
+    [parameters]
+    points = {points}
+    trials = 2
+    depths_um = [10.0, 20.0]
+    meander_scales = [0.9]
+    brush_length_mm = 6.0
+    brush_strips = 2
+    brush_speeds_mm_s = [0.5, 2.0]
+    brush_rates_hz = [2.0, 50.0]
+"""
+
+
+@pytest.fixture(autouse=True, scope="module")
+def registered():
+    """The record registered for this module (the installed entry points may predate it)."""
+    added = "cilia" not in systems()
+    if added:
+        register(SYSTEM)
+    yield
+    if added:
+        unregister("cilia")
+
+
+@pytest.fixture(scope="module")
+def environment(tmp_path_factory) -> dict:
+    """A dist-info declaring the entry point, for the command line in a subprocess."""
+    root = tmp_path_factory.mktemp("entry")
+    info = root / "softtip_cilia-0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: softtip-cilia\nVersion: 0\n")
+    (info / "entry_points.txt").write_text("[softtip.systems]\ncilia = softtip.systems.cilia:SYSTEM\n")
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(SOURCE), str(root)])}
+
+
+def coarse(tmp_path: Path, points: int = 12, **extra: str) -> Path:
+    path = tmp_path / "coarse.toml"
+    text = textwrap.dedent(COARSE.format(points=points)) + "".join(f"{k} = {v}\n" for k, v in extra.items())
+    path.write_text(text)
+    return path
+
+
+def broken_die(tmp_path: Path) -> Path:
+    path = tmp_path / "overlap.toml"
+    path.write_text(SHIPPED_DIE.read_text().replace("[0.0, 0.0]]", "[0.9, 0.9]]"))
+    return path
+
+
+def test_the_record_is_light_and_names_every_part():
+    loaded = subprocess.run([sys.executable, "-c", "import sys, softtip.systems.cilia as c; "
+                             "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'scipy', "
+                             "'softtip.systems.cilia.'))))"],
+                            env={**os.environ, "PYTHONPATH": str(SOURCE)}, capture_output=True, text=True, timeout=60)
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.strip() == "[]"
+    assert (SYSTEM.name, SYSTEM.label) == ("cilia", "S4")
+    assert SYSTEM.protocol_file("cilia").is_file() and SYSTEM.published() is not None
+    assert [study.name for study in SYSTEM.studies] == ["cilia"] and "cilia" in SYSTEM.bench_commands
+
+
+def test_the_protocol_writes_the_twins_curves_within_their_stated_noise(tmp_path):
+    protocol = load_protocol(coarse(tmp_path, points=8))
+    dataset, _ = run_protocol(protocol)
+    mode, repeat = dataset.column("mode"), dataset.column("repeat")
+    assert sorted(set(zip(mode, repeat))) == [("balance", 0), ("balance", 1), ("paper", 0), ("paper", 1)]
+    paper = dataset.select(rows=(mode == "paper") & (repeat == 1))
+    force = paper.column("force_N")
+    assert np.allclose(force, np.linspace(26e-3 / 8, 26e-3, 8))  # the plan: 8 equal steps to 26 mN
+    # the readings scatter about the noise-free twin by the bench's 1 % of full scale and the meter's noise
+    from softtip.systems.cilia.model import CiliaModel
+
+    truth = CiliaModel(read_die()).curve(force, "X")
+    readout = read_die().meander("X").readout
+    sigma = math.hypot(0.01 * np.abs(truth.change).max(), math.sqrt(2) * readout.noise(truth.volts[0]).total)
+    residual = paper.column("gmr_x_V") - truth.change
+    assert np.all(np.abs(residual) < 5 * sigma) and np.std(residual) > 0.2 * sigma
+    # the tare is the sensor at rest: 100 µA through the spec's ≈ 183 kΩ, within 3 %
+    assert paper.column("tare_x_V")[0] == pytest.approx(100e-6 * 183e3, rel=0.03)
+    balance = dataset.select(rows=(mode == "balance") & (repeat == 0)).column("force_N")
+    assert balance[0] == 0 and balance.max() > 0  # the balance reads nothing until the plate touches
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("points = 2", r"points = 2: expected an integer 5..400"),
+    ("force_max_mN = nan", r"force_max_mN"),
+    ("force_max_mN = -1.0", r"force_max_mN = -1.0"),
+    ("trials = 0", r"trials = 0"),
+    ("repeatability = 2.0", r"repeatability = 2.0"),
+    ("height_mm = 0.0", r"height_mm = 0.0"),
+    ("brush_rates_hz = [2.0, 1000.0]", r"brush_rates_hz = \[2.0, 1000.0\]: expected rates at most 250 /s at 0.5 mm/s"),
+    ("brush_length_mm = 1.5", r"brush_length_mm = 1.5: expected a stroke of at least one second at 2 mm/s"),
+    ("brush_engagement_um = 800.0", r"brush_engagement_um = 800: expected less than 70 % of the pillars' height"),
+    ("brush_length_mm = 2.001", r"brush_length_mm = 2.001: expected a stroke longer than the pillars' spread"),
+])
+def test_bad_protocol_settings_are_refused_when_read(tmp_path, setting, message):
+    path = coarse(tmp_path)
+    key = setting.split(" =")[0]
+    lines = [line for line in path.read_text().splitlines() if not line.strip().startswith(key + " ")]
+    path.write_text("\n".join(lines + [setting, ""]))
+    with pytest.raises(ValueError, match=message) as refused:
+        load_protocol(path)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_die_file_that_breaks_the_layout_is_refused_when_the_protocol_is_read(tmp_path):
+    die = broken_die(tmp_path)
+    path = coarse(tmp_path)
+    path.write_text(path.read_text() + f'die = "{die.name}"\n')  # relative to the protocol file
+    with pytest.raises(ValueError, match=r"overlap.toml: pillars.positions_mm\[3\] and \[4\]: the pillars' bases "
+                                         "overlap"):
+        load_protocol(path)
+
+
+@pytest.mark.slow
+def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp_path):
+    from softtip.studies.reproduce import reproduce_study
+
+    report = reproduce_study("cilia", seed=2, protocol_path=coarse(tmp_path))
+    outcome = report.outcome
+    fit = outcome.results["fit"]
+    # the twin's truth (2.8 memu, 200 µm) within the fit's 95 % intervals and the profiles'
+    assert fit["interval_moment_memu"][0] <= 2.8 <= fit["interval_moment_memu"][1]
+    assert fit["interval_diameter_um"][0] <= 200 <= fit["interval_diameter_um"][1]
+    low, high = outcome.results["profile_interval_moment_memu"]
+    assert low < fit["moment_memu"] < high
+    # the linear part holds the parameters far more loosely than the whole curve
+    assert outcome.results["linear_part"]["correlation"] > fit["correlation"]
+    verdicts = {(c["row"], c["column"]): c["verdict"] for c in report.comparisons()}
+    assert verdicts[("moment per pillar (memu)", "value")] == "fitted"
+    # the readout's resistance at rest against the spec's ≈ 183 and 169 kΩ (measured 187 and 172)
+    assert verdicts[("X", "resistance")] == verdicts[("Y", "resistance")] == "within"
+    assert ("X", "upper end") in verdicts
+    assert len(outcome.figures) == 5 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert outcome.headline.value == pytest.approx(fit["moment_memu"])
+    assert any("balance" in note for note in outcome.notes)
+    # a minimum force of the X sensor of tens of µN (3σ of a 100 µV count over ≈ 5.7 V/N), Y beyond reach
+    assert 5 < outcome.results["minimum_force_3sigma_uN"]["X"] < 50
+    assert outcome.results["minimum_force_3sigma_uN"]["Y"] > 26e3
+    rough = outcome.results["roughness"]
+    assert np.all(np.diff(rough["ac_rms_uV"]) > 0) and rough["slope_uV_per_um"] > 0
+    assert rough["accuracy_by_strip"] > 0.5  # chance 0.25
+    assert any(table.title.startswith("Roughness missed") for table in outcome.tables)
+
+
+def bench_app() -> typer.Typer:
+    from softtip.systems.cilia.commands import bench_cilia
+
+    app = typer.Typer()
+    app.command()(user_errors(bench_cilia))
+    return app
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--loads", "0"], "--loads = 0: expected 5 to 2000"),
+    (["--force-max-mn", "nan"], "--force-max-mn = nan: expected a positive, finite"),
+    (["--force-max-mn", "inf"], "--force-max-mn = inf"),
+    (["--force-max-mn", "-1"], "--force-max-mn = -1.0"),
+    (["--repeats", "0"], "--repeats = 0"),
+    (["--fe-loads", "1"], "--fe-loads = 1"),
+])
+def test_bench_refuses_bad_options_in_one_line(options, message):
+    result = CliRunner().invoke(bench_app(), options)
+    assert result.exit_code == 2 and message in result.output and result.output.count("\n") == 1
+
+
+def test_bench_refuses_a_broken_die_and_an_output_it_may_not_write(tmp_path):
+    runner = CliRunner()
+    result = runner.invoke(bench_app(), ["--die", str(broken_die(tmp_path))])
+    assert result.exit_code == 2 and "the pillars' bases overlap" in result.output
+    existing = tmp_path / "report.json"
+    existing.write_text("{}")
+    result = runner.invoke(bench_app(), ["--save", str(existing)])
+    assert result.exit_code == 2 and "the file exists (pass --force" in result.output
+    result = runner.invoke(bench_app(), ["--save", str(tmp_path / "missing" / "report.json")])
+    assert result.exit_code == 2 and "does not exist" in result.output
+    assert existing.read_text() == "{}"
+
+
+def test_the_command_line_finds_the_system_and_times_it(environment, tmp_path):
+    ran = subprocess.run([sys.executable, "-m", "softtip", "bench", "cilia", "--loads", "10", "--repeats", "1",
+                          "--save", "bench.json", "--json"], env=environment, cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120)
+    assert ran.returncode == 0, ran.stderr
+    report = json.loads(ran.stdout)
+    assert json.loads((tmp_path / "bench.json").read_text()) == report
+    curve, fit = report["timings"]["force-voltage curve, 10 loads"], report["timings"]["fit of moment and diameter, 10 points"]
+    assert curve["seconds"] > 0 and curve["baseline_seconds"] > 0 and fit["baseline_seconds"] > 0
+    # the fit's own result on the shipped die's curve: 2.8 memu and 200 µm, from a 1 % noisy curve
+    assert "moment 2.8" in report["notes"][0] or "moment 2.7" in report["notes"][0]
+    listed = subprocess.run([sys.executable, "-m", "softtip", "lab", "run", "--help"], env=environment, cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120)
+    assert "cilia" in listed.stdout
