@@ -197,7 +197,7 @@ def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_system
 
 
 def test_a_name_two_systems_claim_is_refused_and_the_toolkit_systems_are_registered():
-    assert {"hall-fingertip", "wearable"} <= set(systems())
+    assert {"hall-fingertip", "wearable", "haptics", "cilia"} <= set(systems())
     clash = System(name="copycat", title="", label="X", package="softtip", protocols={"pushing": "fingertip"})
     with pytest.raises(ValueError, match="protocol 'pushing' is also system 'hall-fingertip'"):
         register(clash)
@@ -208,7 +208,8 @@ def test_a_name_two_systems_claim_is_refused_and_the_toolkit_systems_are_registe
 def test_the_toolkit_names_no_system():
     """Only a system's own folder (and the list of entry points) names it."""
     root = Path(__file__).parents[1] / "src" / "softtip"
-    own = {"wearable": ("wearable",), "hall_fingertip": ("hall_fingertip", "force3", "cylindrical-", "inverter")}
+    own = {"wearable": ("wearable",), "hall_fingertip": ("hall_fingertip", "force3", "cylindrical-", "inverter"),
+           "haptics": ("haptic",), "cilia": ("cilia",)}
     for folder, words in own.items():
         for path in root.rglob("*"):
             if path.is_file() and path.suffix in (".py", ".toml") and "systems" not in path.relative_to(root).parts:

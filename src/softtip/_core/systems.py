@@ -129,11 +129,13 @@ def _read_entry_points() -> None:
     if _entry_points_read:
         return
     _entry_points_read = True
-    for entry in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+    loaded = []
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
-            system = entry.load()
+            loaded.append(entry.load())
         except Exception as error:  # a broken plug-in must not take the toolkit down with it
             raise RuntimeError(f"softtip system {entry.name!r} ({entry.value}) failed to load: {error}") from error
+    for system in sorted(loaded, key=lambda s: (s.label, s.name)):  # as the specification numbers them
         register(system)
 
 
