@@ -175,9 +175,17 @@ class PillarFE:
                 step = -residual * (np.linalg.norm(step) / max(np.linalg.norm(residual), 1e-300))
                 slope = residual @ step
             length = 1.0
-            while self.body.hyperelastic_energy(unknowns + length * step) - load @ (unknowns + length * step) \
-                    > total + 1e-4 * length * slope:  # backtracking (Armijo); inverted elements give inf
-                length /= 2
+            # near the solution the energy's change is below its round-off: the full step is taken, and
+            # the residual, not the energy, decides convergence (Newton's cap still raises)
+            round_off = 1e-12 * max(abs(total), 1e-300)
+
+            def energy_at(length: float) -> float:
+                trial = unknowns + length * step
+                return self.body.hyperelastic_energy(trial) - load @ trial
+
+            while (trial := energy_at(length)) > total + 1e-4 * length * slope \
+                    and not (length == 1.0 and abs(trial - total) <= round_off):
+                length /= 2  # backtracking (Armijo); inverted elements give inf
                 if length < 1e-8:
                     raise NotConverged("pillar FE: the line search found no lower energy "
                                        f"(relative residual {size:.2e})")
