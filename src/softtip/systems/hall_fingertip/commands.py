@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from softtip._core.units import MM
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
 
 
 def demo(
@@ -17,6 +17,7 @@ def demo(
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments, the fabricated unit and the training."),
     duration: float = typer.Option(20.0, "--duration", help="Seconds of live streaming."),
     record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """The main job on the built-in simulated sensor: the twin runs the 3-axis force calibration, a
@@ -25,6 +26,11 @@ def demo(
     if context.invoked_subcommand is not None:
         return
     from softtip.systems.hall_fingertip.demo import run_main_demo
+
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(seed, "--seed", minimum=0)
+    if record is not None:
+        check_output(record, "--record", force=force)
 
     report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
                            progress=progress_for(json_output))
@@ -57,6 +63,7 @@ def demo_insertion(
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
+    check_number(seed, "--seed", minimum=0)
     progress = progress_for(json_output)
     with progress.task(f"insertion, case {case}"):
         outcome = run_insertion(case, seed, progress=progress)
