@@ -20,9 +20,10 @@ def demo(
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The main job on the built-in simulated sensor: the twin runs the 3-axis force calibration, a
-    network is fitted to it, and an emulated fingertip streams the twin's pushes through the live
-    pipeline, whose estimates are scored against the twin's true force."""
+    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration
+    runs on the physics twin), calibration (a network is fitted to it and saved), live (an emulated
+    fingertip streams the twin's pushes through the live pipeline, whose estimates are scored against
+    the twin's true force). It ends by naming the model it saved and the command to run it next."""
     if context.invoked_subcommand is not None:
         return
     from softtip.systems.hall_fingertip.demo import run_main_demo
@@ -46,8 +47,14 @@ def demo(
                       f"{live.get('mean_abs_error_N', float('nan')):.3f}", f"{live.get('peak_true_N', float('nan')):.2f}")
     console.print(table)
     pipeline = report["pipeline"]
-    console.print(f"{report['estimated_frames']} frames estimated live; model saved at {report['model']}; "
-                  f"lost frames: {pipeline.get('lost_in_transit', 0)}")
+    console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "
+                  f"{pipeline.get('lost_in_transit', 0)}", highlight=False)
+    saved = [f"the force model: {report['model']}"] + ([f"the live recording: {record}"] if record else [])
+    console.print("saved " + "; ".join(saved), markup=False, highlight=False, soft_wrap=True)
+    console.print(f"next: softtip live --emulate --scenario push --model {report['model']}  (the model on the "
+                  "emulated fingertip, with its dashboard)"
+                  + (f"; softtip convert {record} pushes.parquet  (the recording as a dataset)" if record else ""),
+                  markup=False, highlight=False, soft_wrap=True)
 
 
 def demo_insertion(
