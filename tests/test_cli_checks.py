@@ -184,3 +184,18 @@ def test_help_reads_as_text():
     # a docstring's line break, where the source wrapped, is not the reader's line break
     demo = runner.invoke(app, ["demo", "wearable", "--help"], env={**os.environ, "COLUMNS": "400"}).output
     assert "identified on them, and the emulated side chip" in demo
+
+
+@pytest.mark.parametrize("unit", ["furlongs", "kN"])
+def test_a_label_declared_in_another_unit_than_its_name_says_is_refused(tmp_path, unit):
+    from softtip.data import DatasetMetadata, TrialWriter, channel_columns
+
+    writer = TrialWriter(1, labels={"fz_N": unit}, conditions={"role": "1"}, metadata=DatasetMetadata(seed=0))
+    force = np.linspace(0, 2, 30)
+    for role in ("calibration", "validation"):
+        writer.add({"time_s": np.arange(30) / 20, **channel_columns(np.stack([np.column_stack(
+            [3 * force, -2 * force, 50 * force])], axis=1)), "fz_N": force}, {"role": role})
+    path = tmp_path / "d.parquet"
+    writer.write(path)
+    refused(run("calibrate", path, "-t", "fz_N", "-o", tmp_path / "m.npz"), "fz_N", unit, "'N'")
+    assert not (tmp_path / "m.npz").exists()

@@ -255,7 +255,7 @@ def test_every_command_with_required_parameters_has_a_base(inputs):
     assert not lacking, f"add a base of valid arguments for: {', '.join(lacking)}"
 
 
-@settings(max_examples=len(CASES) // 4, derandomize=True, deadline=None, database=None,
+@settings(max_examples=len(CASES), derandomize=True, deadline=None, database=None,
           suppress_health_check=list(HealthCheck))
 @given(case=st.sampled_from(CASES))
 def test_a_bad_value_is_refused_in_one_line_before_any_work(inputs, case):

@@ -114,6 +114,7 @@ def calibrate(
     unknown = [t for t in target if t not in data.labels]
     if unknown:
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
+    _check_label_units(data, dataset, target)
     try:
         sizes = tuple(int(v) for v in hidden.split(","))
     except ValueError:
@@ -167,6 +168,7 @@ def evaluate(
     absent = [t for t in targets if t not in data.labels]
     if absent:
         fail(f"{dataset}: lacks the model's target {absent[0]!r}")
+    _check_label_units(data, dataset, targets)
     X = data.X(list(meta.input_channels))
     y = _targets(data, targets, kind)
     report = _score(estimator, kind, X, y, targets)
@@ -174,6 +176,20 @@ def evaluate(
         print(json.dumps(report, indent=2))
     else:
         console.print(json.dumps(report, indent=2))
+
+
+# The units softtip's label names end in (SI or the tables' mm, degrees, mN, mT, µT), by that ending.
+NAMED_UNITS = ("N", "mN", "m", "mm", "deg", "rad", "s", "Pa", "kPa", "T", "mT", "uT")
+
+
+def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
+    """A label whose name states its unit (``fz_N``) must be declared in that unit: a label of "furlongs",
+    or of kN, named in newtons would be scored in a unit it is not in."""
+    for name in targets:
+        named = name.rsplit("_", 1)[-1] if "_" in name else None
+        declared = data.labels[name]
+        if named in NAMED_UNITS and declared != named:
+            fail(f"{dataset}: label {name!r} is declared in {declared!r}, but its name says {named!r}")
 
 
 def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
