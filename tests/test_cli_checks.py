@@ -199,3 +199,20 @@ def test_a_label_declared_in_another_unit_than_its_name_says_is_refused(tmp_path
     writer.write(path)
     refused(run("calibrate", path, "-t", "fz_N", "-o", tmp_path / "m.npz"), "fz_N", unit, "'N'")
     assert not (tmp_path / "m.npz").exists()
+
+
+@pytest.mark.parametrize("tesla", [0.5, 3.3])
+def test_readings_beyond_what_the_chip_can_output_are_refused(tmp_path, tesla):
+    from softtip.data import DatasetMetadata, TrialWriter, channel_columns
+    from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
+
+    # the widest range of the chip, from its datasheet tables: the bound a reading of 0.5 T exceeds
+    assert 2 * full_scale_uT(MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3))).max() < 0.5e6
+    writer = TrialWriter(1, labels={"fz_N": "N"}, conditions={"role": "1"}, metadata=DatasetMetadata(seed=0))
+    force = np.linspace(0, 2, 30)
+    for role in ("calibration", "validation"):
+        field = np.stack([np.column_stack([3 * force, -2 * force, tesla * 1e6 * force / 2])], axis=1)
+        writer.add({"time_s": np.arange(30) / 20, **channel_columns(field), "fz_N": force}, {"role": role})
+    path = tmp_path / "d.parquet"
+    writer.write(path)
+    refused(run("calibrate", path, "-t", "fz_N", "-o", tmp_path / "m.npz"), "s0_bz_uT", "MLX90393")

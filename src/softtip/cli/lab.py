@@ -115,6 +115,7 @@ def calibrate(
     if unknown:
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
     _check_label_units(data, dataset, target)
+    _check_readings(data, dataset)
     try:
         sizes = tuple(int(v) for v in hidden.split(","))
     except ValueError:
@@ -169,6 +170,7 @@ def evaluate(
     if absent:
         fail(f"{dataset}: lacks the model's target {absent[0]!r}")
     _check_label_units(data, dataset, targets)
+    _check_readings(data, dataset)
     X = data.X(list(meta.input_channels))
     y = _targets(data, targets, kind)
     report = _score(estimator, kind, X, y, targets)
@@ -190,6 +192,29 @@ def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
         declared = data.labels[name]
         if named in NAMED_UNITS and declared != named:
             fail(f"{dataset}: label {name!r} is declared in {declared!r}, but its name says {named!r}")
+
+
+def _check_readings(data, dataset: Path) -> None:
+    """Magnetic readings (changes from a baseline, µT) within what an MLX90393 can output: a change between
+    two readings in range is at most twice the range, at the dataset's sensor settings or, without them,
+    at the chip's widest (GAIN_SEL 0, RES 3)."""
+    import re
+
+    from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
+
+    stated = data.metadata.sensor_settings
+    settings = MLX90393Settings.from_dict(stated) if stated else MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3))
+    where = "the dataset's sensor settings" if stated else "its widest setting"
+    limit = 2 * full_scale_uT(settings)
+    for column, channel in enumerate(data.channels):
+        axis = re.search(r"_b([xyz])_uT$", channel)
+        if axis is None:
+            continue
+        largest = float(np.nanmax(np.abs(data.X()[:, column]))) if len(data.groups) else 0.0
+        bound = limit["xyz".index(axis.group(1))]
+        if not largest <= bound:
+            fail(f"{dataset}: channel {channel} reaches {largest:.4g} µT, beyond twice the MLX90393's "
+                 f"{bound / 2:.4g} µT range at {where}")
 
 
 def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
