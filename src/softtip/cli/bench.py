@@ -8,8 +8,12 @@ from pathlib import Path
 
 import typer
 
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
 from softtip.design.model import reference_design
+
+
+MAX_BATCH = 10_000_000  # samples or poses in one batch: some 1 GB of float64 field per sensor and magnet
+MAX_CALLS = 10_000_000  # timed calls: minutes at the slowest single-sample latency measured
 
 
 class RomFriction(str, Enum):  # contact on footprint cells adds Coulomb's law
@@ -29,6 +33,12 @@ def bench_twin(
     """Time the twin: mesh, 1 mm board push with contact (vs one fixed-area linear solve),
     neo-Hookean 3 mm push, and magnetics + sensor readings per second (vs magpylib)."""
     from softtip.bench.twin import bench_twin as run
+    from softtip.cli.twin import check_mesh_work
+    from softtip.design.model import load_design
+
+    check_number(mesh_size, "--mesh-size", above=0, maximum=1000, unit="mm")
+    check_number(poses, "--poses", minimum=1, maximum=MAX_BATCH)
+    check_mesh_work(load_design(design), mesh_size, force=False)
 
     report = run(design, mesh_size, poses, include_neo_hookean=not skip_neo_hookean,
                  log=None if json_output else console.print)
@@ -41,6 +51,7 @@ def bench_rom(
     samples: int = typer.Option(None, help="Exact contact samples to fit the interpolator on (default: 8000)."),
     holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
     save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
+    force: bool = FORCE,
     contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
                                            help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
     friction: RomFriction = typer.Option(
@@ -50,8 +61,10 @@ def bench_rom(
     """Build a reduced-order twin and measure its held-out FE error, batch speed and speed-up over FE."""
     from softtip.bench.twin import bench_rom as run
 
-    if (samples is not None and samples < 50) or holdout < 2:
-        fail(f"--samples = {samples}, --holdout = {holdout}: expected at least 50 samples and 2 held-out loads")
+    check_number(samples, "--samples", minimum=50, maximum=1_000_000)
+    check_number(holdout, "--holdout", minimum=2, maximum=10_000)
+    if save is not None:
+        check_output(save, "--save", force=force)
     if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
         fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
     report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,
@@ -71,6 +84,11 @@ def bench_live(
     latency from arrival to estimate, CPU of the pipeline's process (emulator in another process)."""
     from softtip.hardware import FaultPlan
     from softtip.bench.live import soak
+    from softtip.cli.live import MAX_CHIPS, MAX_RATE_HZ
+
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(rate, "--rate", minimum=1, maximum=MAX_RATE_HZ, unit="Hz")
+    check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None
@@ -93,8 +111,10 @@ def bench_magnetics(
     """Readings per second of the exact field kernel, beside magpylib's on the same poses."""
     from softtip.bench.magnetics import bench_magnetics as run
 
-    if min(poses) < 1 or min(sensors) < 1 or magnets < 1 or repeats < 1:
-        fail("--poses, --sensors, --magnets and --repeats: expected positive integers")
+    for option, values, most in (("--poses", poses, MAX_BATCH), ("--sensors", sensors, 1000), ("--magnets", [magnets], 1000),
+                                 ("--repeats", [repeats], 1000)):
+        for value in values:
+            check_number(value, option, minimum=1, maximum=most)
     results = [run(n, magnets, s, repeats) for n in poses for s in sensors]
     if json_output:
         print(json.dumps(results, indent=2))
@@ -115,8 +135,9 @@ def bench_calibration(
     network, beside scikit-learn's MLPRegressor, the published polynomial and the published times."""
     from softtip.bench.calibration import bench_calibration as run
 
-    if min(calls, batch, train) < 100:
-        fail("--calls, --batch and --train: expected at least 100")
+    check_number(calls, "--calls", minimum=100, maximum=MAX_CALLS)
+    check_number(batch, "--batch", minimum=100, maximum=MAX_BATCH)
+    check_number(train, "--train", minimum=100, maximum=1_000_000)
     with progress_for(json_output).task("timing the calibration models"):
         report = run(calls, batch, train)
     if json_output:
@@ -143,8 +164,8 @@ def bench_sysid(
     on 1,500 samples beside nfoursid (and SIPPY if installed), and streaming-step latency beside a numpy step."""
     from softtip.bench.sysid import bench_sysid as run
 
-    if calls < 100:
-        fail("--calls: expected at least 100")
+    check_number(calls, "--calls", minimum=100, maximum=MAX_CALLS)
+    check_number(seed, "--seed", minimum=0)
     with progress_for(json_output).task("identifying and timing"):
         report = run(calls, seed)
     if json_output:

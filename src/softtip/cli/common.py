@@ -12,15 +12,21 @@ file can change what the line says.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
+import inspect
+import math
 import os
+import typing
 from collections.abc import Iterable
 from pathlib import Path
 
 import typer
 from rich.console import Console
 from rich.text import Text
+from typer._click.exceptions import NoArgsIsHelpError, UsageError
+from typer.core import TyperGroup
 
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress, RichProgress
@@ -120,4 +126,152 @@ def check_output(path: str | os.PathLike, option: str, inputs: Iterable[str | os
             raise OutputPathError(f"{named}: is the input {source}; the output must be another file")
     if path.exists() and not force:
         raise OutputPathError(f"{named}: the file exists (pass --force to replace it)")
+    return path
+
+
+def check_number(value: float | None, option: str, *, minimum: float | None = None, above: float | None = None,
+                 maximum: float | None = None, unit: str = "") -> float | None:
+    """``value`` (None: the option was not given) if it lies within the limits, else an error naming
+    ``option``: at least ``minimum``, more than ``above``, at most ``maximum``."""
+    if value is None:
+        return None
+    unit = f" {unit}" if unit else ""
+    bounds = [f">= {minimum:g}{unit}" if minimum is not None else "", f"> {above:g}{unit}" if above is not None else "",
+              f"<= {maximum:g}{unit}" if maximum is not None else ""]
+    if (not math.isfinite(value) or (minimum is not None and value < minimum) or (above is not None and value <= above)
+            or (maximum is not None and value > maximum)):
+        raise ValueError(f"{option} = {value}: expected a number {' and '.join(b for b in bounds if b)}")
+    return value
+
+
+def _numbers(value: object) -> list[float]:
+    if isinstance(value, float):
+        return [value]
+    if isinstance(value, (list, tuple)):
+        return [item for item in value if isinstance(item, float)]
+    return []
+
+
+def _checked(callback, command):
+    """``callback`` refusing, before it runs, a number that is not finite (NaN, ±inf): no option of
+    softtip means "forever" or "undefined" by one."""
+    options = {param.name: (param.opts[0] if param.opts[0].startswith("-") else param.name.upper())
+               for param in command.params}
+
+    @functools.wraps(callback)
+    def wrapper(**kwargs):
+        for name, value in kwargs.items():
+            if any(not math.isfinite(number) for number in _numbers(value)):
+                fail(f"{options.get(name, name)} = {printable(value)}: expected a finite number")
+        return callback(**kwargs)
+
+    return wrapper
+
+
+def _paragraphs(text: str | None) -> str | None:
+    """A help text as paragraphs: a docstring's line breaks are where the source wrapped, not the reader's
+    terminal."""
+    if not text:
+        return text
+    return "\n\n".join(" ".join(part.split()) for part in inspect.cleandoc(text).split("\n\n"))
+
+
+# What a value looks like in the help, by the option's type (a flag takes none).
+_METAVARS = {float: "NUMBER", int: "INTEGER", str: "TEXT", Path: "PATH"}
+
+
+def _metavar(param) -> str | None:
+    described = param.type_descriptor
+    if getattr(param, "is_flag", False) or described.annotation is bool:
+        return ""
+    if described.is_choice:
+        return "|".join(str(getattr(choice, "value", choice)) for choice in described.choices or ())
+    annotation = described.annotation
+    if described.is_tuple:
+        return " ".join(_METAVARS.get(item, "VALUE") for item in typing.get_args(annotation))
+    if described.is_list:
+        (item,) = typing.get_args(annotation)
+        return _METAVARS.get(item, "VALUE") + " (repeatable)"
+    return _METAVARS.get(annotation, "VALUE")
+
+
+def _flag_help(get_help_option):
+    """The --help option shown as the flag it is."""
+    @functools.wraps(get_help_option)
+    def wrapper(ctx):
+        option = get_help_option(ctx)
+        if option is not None:
+            option.metavar = ""
+        return option
+
+    return wrapper
+
+
+def commands_of(command, path: tuple[str, ...] = ()):
+    """Every command under ``command`` as (its words, the command), groups included, depth first."""
+    yield path, command
+    for name, sub in (getattr(command, "commands", None) or {}).items():
+        yield from commands_of(sub, (*path, name))
+
+
+class Toolkit(TyperGroup):
+    """The root command: every command below it, whichever system registered it, refuses non-finite
+    numbers and turns user errors into one line; a usage error (an unknown option, a value of the wrong
+    type) is one line too; help reads as text."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        for _, command in commands_of(self):
+            command.help = _paragraphs(command.help)
+            for param in command.params:
+                if param.metavar is None and hasattr(param, "type_descriptor"):
+                    param.metavar = _metavar(param)
+            command.get_help_option = _flag_help(command.get_help_option)
+            if command.callback is not None and command is not self:
+                command.callback = _checked(user_errors(command.callback), command)
+
+    def parse_args(self, ctx, args):
+        with _one_line_usage_errors():
+            return super().parse_args(ctx, args)
+
+    def invoke(self, ctx):
+        with _one_line_usage_errors():
+            return super().invoke(ctx)
+
+
+@contextlib.contextmanager
+def _one_line_usage_errors():
+    try:
+        yield
+    except NoArgsIsHelpError:
+        raise
+    except UsageError as error:
+        where = f" (see {error.ctx.command_path} --help)" if error.ctx is not None else ""
+        fail(error.format_message() + where)
+
+
+def check_output_folder(path: str | os.PathLike, option: str) -> Path:
+    """``path`` if a command may write its files into it (existing or to be made), checked before the work:
+    not a file, and its nearest existing folder writable."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"{option} = {path}: is a file, expected a folder for the outputs")
+    existing = next(folder for folder in (path, *path.parents) if folder.exists())
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{option} = {path}: {existing} is not a writable folder")
+    return path
+
+
+FORCE = typer.Option(False, "--force", help="Replace output files that exist.")
+LONGEST_S = 7 * 24 * 3600.0  # a week: the longest a duration option may ask for (no --duration: until Ctrl-C)
+
+
+def check_input(path: str | os.PathLike, option: str) -> Path:
+    """``path`` if it is a readable file, checked before the work that comes before reading it."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{option} = {path}: {'is a directory' if path.is_dir() else 'does not exist'}, "
+                         "expected a file")
+    if not os.access(path, os.R_OK):
+        raise ValueError(f"{option} = {path}: permission denied")
     return path

@@ -12,24 +12,30 @@ import numpy as np
 import typer
 
 from softtip._core.systems import names, studies
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, check_output, check_output_folder, console, errors, fail, printable, progress_for
 
 STUDY_NAMES = tuple(studies())
 MODEL_KINDS = ("polynomial", "network", "classifier")
+MAX_HIDDEN = 10_000  # neurons in a layer: beyond, the Levenberg-Marquardt Jacobian outgrows memory
 
 
 def lab_run(
     protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(names('protocol'))}."),
     output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
     seed: int = typer.Option(None, "--seed", help="Override the protocol's seed."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
     from softtip.lab import load_protocol, run_protocol
 
+    if seed is not None and seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
     loaded = load_protocol(protocol).changed(seed=seed)
+    target = check_output(output or Path(f"{loaded.name}.parquet"), "--output",
+                          [protocol] if Path(protocol).is_file() else [], force=force)
     dataset, timings = run_protocol(loaded, progress_for(json_output))
-    path = dataset.write(output or Path(f"{loaded.name}.parquet"))
+    path = dataset.write(target)
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
                "trials": len(dataset.trials), "samples": int(len(dataset.groups)), "channels": list(dataset.channels),
                "labels": dict(dataset.labels), "timings_s": {k: round(v, 2) for k, v in timings.items()}}
@@ -55,7 +61,10 @@ def reproduce(
     names = STUDY_NAMES if studies == ["all"] else tuple(dict.fromkeys(studies))
     unknown = [name for name in names if name not in STUDY_NAMES]
     if unknown:
-        fail(f"study = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+        fail(f"STUDIES = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    check_output_folder(output, "--output")
     command = "softtip " + " ".join(sys.argv[1:])
     everything = {}
     progress = progress_for(json_output)
@@ -85,6 +94,7 @@ def calibrate(
     min_force: float = typer.Option(None, "--min-label", help="Use only samples whose first target is above this."),
     output: Path = typer.Option(Path("model.npz"), "--output", "-o", help="Saved model (.npz)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the training."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Fit a model on the calibration trials of a dataset, score it on its validation trials, save it."""
@@ -94,14 +104,24 @@ def calibrate(
 
     if model not in MODEL_KINDS:
         fail(f"--model = {model!r}: expected one of {', '.join(MODEL_KINDS)}")
+    repeated = [t for k, t in enumerate(target) if t in target[:k]]
+    if repeated:
+        fail(f"--target {repeated[0]!r}: given twice; each label is estimated once")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    check_output(output, "--output", [dataset], force=force)
     data = Dataset.read(dataset)
     unknown = [t for t in target if t not in data.labels]
     if unknown:
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
+    _check_label_units(data, dataset, target)
+    _check_readings(data, dataset)
     try:
         sizes = tuple(int(v) for v in hidden.split(","))
     except ValueError:
-        fail(f"--hidden = {hidden!r}: expected sizes separated by commas, e.g. 10,10")
+        sizes = ()
+    if not sizes or min(sizes) < 1 or max(sizes) > MAX_HIDDEN:
+        fail(f"--hidden = {hidden!r}: expected sizes from 1 to {MAX_HIDDEN} separated by commas, e.g. 10,10")
     estimator = _make_model(model, sizes, seed)
     X, y = data.X(), _targets(data, target, model)
     keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
@@ -113,6 +133,9 @@ def calibrate(
     estimator.fit(X[train], y[train], groups=data.groups[train])
     seconds = time.perf_counter() - start
     report = _score(estimator, model, X[test], y[test], target) if test.any() else {}
+    if not test.any():
+        errors.print(printable(f"warning: {dataset} has no validation samples (role = validation): the model is "
+                               "saved unscored"), markup=False, highlight=False, soft_wrap=True)
     save_model(output, estimator, input_channels=list(data.channels),
                input_units=[data.channel_units[c] for c in data.channels],
                target_names=list(target) if model != "classifier" else [target[0]],
@@ -146,6 +169,8 @@ def evaluate(
     absent = [t for t in targets if t not in data.labels]
     if absent:
         fail(f"{dataset}: lacks the model's target {absent[0]!r}")
+    _check_label_units(data, dataset, targets)
+    _check_readings(data, dataset)
     X = data.X(list(meta.input_channels))
     y = _targets(data, targets, kind)
     report = _score(estimator, kind, X, y, targets)
@@ -153,6 +178,43 @@ def evaluate(
         print(json.dumps(report, indent=2))
     else:
         console.print(json.dumps(report, indent=2))
+
+
+# The units softtip's label names end in (SI or the tables' mm, degrees, mN, mT, µT), by that ending.
+NAMED_UNITS = ("N", "mN", "m", "mm", "deg", "rad", "s", "Pa", "kPa", "T", "mT", "uT")
+
+
+def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
+    """A label whose name states its unit (``fz_N``) must be declared in that unit: a label of "furlongs",
+    or of kN, named in newtons would be scored in a unit it is not in."""
+    for name in targets:
+        named = name.rsplit("_", 1)[-1] if "_" in name else None
+        declared = data.labels[name]
+        if named in NAMED_UNITS and declared != named:
+            fail(f"{dataset}: label {name!r} is declared in {declared!r}, but its name says {named!r}")
+
+
+def _check_readings(data, dataset: Path) -> None:
+    """Magnetic readings (changes from a baseline, µT) within what an MLX90393 can output: a change between
+    two readings in range is at most twice the range, at the dataset's sensor settings or, without them,
+    at the chip's widest (GAIN_SEL 0, RES 3)."""
+    import re
+
+    from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
+
+    stated = data.metadata.sensor_settings
+    settings = MLX90393Settings.from_dict(stated) if stated else MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3))
+    where = "the dataset's sensor settings" if stated else "its widest setting"
+    limit = 2 * full_scale_uT(settings)
+    for column, channel in enumerate(data.channels):
+        axis = re.search(r"_b([xyz])_uT$", channel)
+        if axis is None:
+            continue
+        largest = float(np.nanmax(np.abs(data.X()[:, column]))) if len(data.groups) else 0.0
+        bound = limit["xyz".index(axis.group(1))]
+        if not largest <= bound:
+            fail(f"{dataset}: channel {channel} reaches {largest:.4g} µT, beyond twice the MLX90393's "
+                 f"{bound / 2:.4g} µT range at {where}")
 
 
 def _make_model(kind: str, sizes: tuple[int, ...], seed: int):

@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import json
 import time
+import zipfile
+from enum import Enum
 from pathlib import Path
 
 import typer
 
 from softtip._core.systems import names, owner
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, LONGEST_S, check_input, check_number, check_output, console, fail, progress_for
 
 STARTED = time.perf_counter()  # when the command line was loaded: the start a user waits from
 SCENARIOS = tuple(names("scenario"))
 SCENARIO_HELP = "; ".join(f"{name} ({owner('scenario', name).name})" for name in SCENARIOS)
+Scenario = Enum("Scenario", {name: name for name in SCENARIOS}, type=str)  # the choices shown in the help
+MAX_RATE_HZ = 10_000  # frames per second the pipeline is specified for (a frame of 4 chips in 100 µs)
+MAX_CHIPS = 64  # chips on one board's bus
 
 
 def live(
@@ -22,7 +27,7 @@ def live(
                                                          "(with --emulate, default: the scenario's own)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated sensor replaying a registered system's "
                                                          "scenario instead of a port."),
-    scenario: str = typer.Option(SCENARIOS[0] if SCENARIOS else None, "--scenario",
+    scenario: Scenario = typer.Option(SCENARIOS[0] if SCENARIOS else None, "--scenario",
                                  help=f"With --emulate, one of: {SCENARIO_HELP}."),
     chips: int = typer.Option(None, "--chips", help="Chips on the board (default: as it reports)."),
     rate: int = typer.Option(None, "--rate", help="Frames per second (default 50; a paced sensor: its own)."),
@@ -34,6 +39,7 @@ def live(
                                                                        "(default 50, or the scenario's)."),
     drift_tau: float = typer.Option(None, "--drift-tau", help="Track slow baseline drift with this time "
                                                               "constant (s) while nothing touches."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print the session's summary as JSON."),
 ) -> None:
     """Stream a fingertip (or an emulated sensor) through baseline -> models -> dashboard, recording,
@@ -44,6 +50,18 @@ def live(
 
     if emulate == (port is not None):
         fail("give either --port PORT or --emulate")
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(drift_tau, "--drift-tau", above=0, maximum=LONGEST_S, unit="s")
+    for path in model:
+        if not zipfile.is_zipfile(check_input(path, "--model")):
+            fail(f"--model = {path}: not a saved softtip model (an .npz archive)")
+    check_number(rate, "--rate", minimum=1, maximum=MAX_RATE_HZ, unit="Hz")
+    check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
+    check_number(baseline_frames, "--baseline-frames", minimum=1, maximum=MAX_RATE_HZ * 60)
+    check_number(foxglove, "--foxglove", minimum=1, maximum=65535)
+    if record is not None:
+        check_output(record, "--record", model, force=force)
+    scenario = getattr(scenario, "value", scenario)
     source, settings, emulator_source, frames = port, None, None, baseline_frames or 50
     if emulate:
         if scenario not in SCENARIOS:
@@ -74,11 +92,15 @@ def convert(
     recording: Path = typer.Argument(..., help="MCAP recording from softtip live."),
     output: Path = typer.Argument(..., help="Dataset to write (.parquet)."),
     gap: float = typer.Option(1.0, "--gap", help="A gap longer than this (s) starts a new trial."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Turn a live recording into the calibration tools' trial dataset (changes in the chips' unit, labels)."""
     from softtip.realtime.recording.convert import convert as convert_recording
 
+    check_number(gap, "--gap", above=0, maximum=LONGEST_S, unit="s")
+    check_input(recording, "RECORDING")
+    check_output(output, "OUTPUT", [recording], force=force)
     result = convert_recording(recording, output, gap_s=gap)
     dataset = result.dataset
     summary = {"dataset": str(output), "trials": len(dataset.trials), "samples": int(len(dataset.groups)),

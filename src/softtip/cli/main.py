@@ -14,11 +14,11 @@ import typer
 from softtip import __version__
 from softtip._core.systems import load, systems
 from softtip.cli import bench, lab, live, optimize, recording, sysid, twin
-from softtip.cli.common import console, user_errors
+from softtip.cli.common import Toolkit, console
 
 app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
     f"{system.name} ({system.label}): {system.title}" for system in systems().values()),
-    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False, cls=Toolkit)
 
 
 @app.callback(invoke_without_command=True)
@@ -31,15 +31,15 @@ def main(version: bool = typer.Option(False, "--version", help="Print the versio
 def _group(name: str, help_text: str, commands: dict, callback=None) -> None:
     group = typer.Typer(help=help_text, no_args_is_help=callback is None)
     if callback is not None:
-        group.callback(invoke_without_command=True)(user_errors(callback))
+        group.callback(invoke_without_command=True)(callback)
     for command_name, function in commands.items():
-        group.command(command_name)(user_errors(function))
+        group.command(command_name)(function)
     app.add_typer(group, name=name)
 
 
 for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.optimize, lab.reproduce,
                 lab.calibrate, lab.evaluate):
-    app.command()(user_errors(command))
+    app.command()(command)
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
 _registered = systems().values()
 _main_demo = next((load(system.main_demo) for system in _registered if system.main_demo), None)

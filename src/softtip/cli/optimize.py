@@ -4,12 +4,13 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import typer
 from rich.table import Table
 
-from softtip.cli.common import console, progress_for
+from softtip.cli.common import check_input, check_number, check_output_folder, console, fail, progress_for
 
 
 def optimize(
@@ -29,8 +30,13 @@ def optimize(
     from softtip.optimize.report import write_outputs
     from softtip.optimize.study import run_study
 
-    study = load_study(config)
-    directory = output if output is not None else study.output
+    if scheduler is not None and not scheduler.strip():
+        fail("--scheduler = '': expected the address of a Dask scheduler, e.g. tcp://HOST:8786")
+    check_number(workers, "--workers", minimum=1, maximum=max(4 * (os.cpu_count() or 1), 8))
+    if output is not None:
+        check_output_folder(output, "--output")
+    study = load_study(check_input(config, "--config"))
+    directory = check_output_folder(output if output is not None else study.output, "--output")
     with make_executor(scheduler, workers) as executor:
         result = run_study(study, executor, progress=progress_for(json_output))
     files = write_outputs(result, directory)

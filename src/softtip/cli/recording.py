@@ -7,20 +7,21 @@ from pathlib import Path
 
 import typer
 
-from softtip.cli.common import check_output, console, printable
+from softtip.cli.common import FORCE, check_input, check_output, console, printable
 
 
 def recording_repair(
     recording: Path = typer.Argument(..., help="MCAP recording to repair (its writer killed, or a chunk damaged)."),
     output: Path = typer.Option(None, "--output", "-o", help="Repaired recording to write "
                                                              "(default: RECORDING with .repaired.mcap)."),
-    force: bool = typer.Option(False, "--force", help="Replace OUTPUT if it exists."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Rewrite a recording with every complete message and the summary and index a killed writer did not
     write, and say what was salvaged and what was lost."""
     from softtip.realtime.recording.writer import repair_recording
 
+    check_input(recording, "RECORDING")
     output = check_output(recording.with_suffix(".repaired.mcap") if output is None else output, "--output",
                           [recording], force=force)
     salvage = repair_recording(recording, output)

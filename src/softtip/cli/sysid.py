@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from softtip.cli.common import console, fail
+from softtip.cli.common import FORCE, check_number, check_output, console, fail
 
 
 class Kind(str, Enum):
@@ -56,6 +56,11 @@ DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all i
 MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")
 
 
+def _common_checks(ts, max_delay: int) -> None:
+    check_number(ts, "--ts", above=0, unit="s")
+    check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
+
+
 def _names(values: list[str]) -> list[str]:
     return [name.strip() for value in values for name in value.split(",") if name.strip()]
 
@@ -69,6 +74,8 @@ def _read(path: Path, inputs: list[str], outputs: list[str], ts, time_column, tr
 def _full_scale(values: list[float] | None):
     from softtip.sysid import MEASURED, rated
 
+    for value in values or ():
+        check_number(value, "--full-scale", above=0)
     return rated(values) if values else MEASURED
 
 
@@ -243,6 +250,7 @@ def sysid_fit(
                                                              ".svg): on --validate, else on the estimation data."),
     confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
     lags: int = typer.Option(25, "--lags", help="Lags of the residual tests."),
+    force: bool = FORCE,
     json_output: bool = JSON,
 ) -> None:
     """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
@@ -252,12 +260,19 @@ def sysid_fit(
 
     if not 0 < confidence < 1:
         fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
-    if lags < 1:
-        fail(f"--lags = {lags}: expected a positive integer")
+    check_number(lags, "--lags", minimum=1, maximum=100_000)
+    _common_checks(ts, max_delay)
+    _full_scale(full_scale)
     for option, path in (("--bode", bode), ("--residuals", residuals)):
-        if path is not None and (path.suffix.lower() not in FIGURE_SUFFIXES or not path.parent.is_dir()):
-            fail(f"{option} {path}: expected a .png, .pdf or .svg file in an existing directory")
+        if path is not None and path.suffix.lower() not in FIGURE_SUFFIXES:
+            fail(f"{option} {path}: expected a .png, .pdf or .svg file")
+    sources = [data] + ([validate] if validate is not None else [])
+    for option, path in (("--model", model_file), ("--bode", bode), ("--residuals", residuals)):
+        if path is not None:
+            check_output(path, option, sources, force=force)
     inputs, outputs = _names(input), _names(output)
+    _distinct(inputs, "--input")
+    _distinct(outputs, "--output")
     estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
@@ -309,6 +324,14 @@ def sysid_fit(
             console.print(f"{name} -> {result[name]}")
 
 
+def _distinct(names: list[str], option: str) -> None:
+    if not names:
+        fail(f"{option}: expected at least one column name")
+    repeated = [name for k, name in enumerate(names) if name in names[:k]]
+    if repeated:
+        fail(f"{option} {repeated[0]!r}: given twice")
+
+
 def _order_range(text: str) -> list[int]:
     try:
         if "-" in text:
@@ -318,8 +341,8 @@ def _order_range(text: str) -> list[int]:
             orders = [int(part) for part in text.split(",")]
     except ValueError:
         orders = []
-    if not orders or min(orders) < 1:
-        fail(f"--orders = {text!r}: expected a range like 2-8 or a list like 2,4,6 of positive integers")
+    if not orders or min(orders) < 1 or len(set(orders)) < len(orders):
+        fail(f"--orders = {text!r}: expected a range like 2-8 or a list like 2,4,6 of different positive integers")
     return orders
 
 
@@ -346,12 +369,16 @@ def sysid_orders(
     estimation data: N ln det Σ + 2p (AIC) or + p ln N (BIC), + N ny (ln 2π + 1), Σ the residual covariance)."""
     from softtip.sysid import order_table
 
+    _common_checks(ts, max_delay)
+    chosen = None if orders is None else _order_range(orders)
     inputs, outputs = _names(input), _names(output)
+    _distinct(inputs, "--input")
+    _distinct(outputs, "--output")
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     params = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
     params |= {"method": method.value} if kind is Kind.ss else {}
-    rows = order_table(recording, kind.value, None if orders is None else _order_range(orders), validation,
+    rows = order_table(recording, kind.value, chosen, validation,
                        initial_state.value, **params)
     note = _level_note(recording, detrend)
     if json_output:
@@ -385,6 +412,7 @@ def sysid_predict(
     trial_column: str = TRIAL_COLUMN,
     full_scale: list[float] = FULL_SCALE,
     out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
+    force: bool = FORCE,
     initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
                                                help="zero: from rest; estimate: each trial's initial state from "
                                                     "its measured outputs."),
@@ -394,8 +422,11 @@ def sysid_predict(
     from softtip.sysid import load_model
     from softtip.sysid.recording import file_columns
 
-    if horizon is not None and horizon < 1:
-        fail(f"--horizon = {horizon}: expected an integer >= 1")
+    check_number(horizon, "--horizon", minimum=1, maximum=10_000_000)
+    check_number(ts, "--ts", above=0, unit="s")
+    _full_scale(full_scale)
+    if out is not None:
+        check_output(out, "--out", [model_file, data], force=force)
     model = load_model(model_file)
     present = file_columns(data)
     measured = all(name in present for name in model.outputs_)
@@ -440,6 +471,4 @@ def _write_predictions(path: Path, recording, predicted, outputs, model_file: Pa
         columns[f"{name}_predicted"] = stacked[:, k]
     note = {"model": str(model_file), "horizon": horizon, "data": recording.source}
     table = pa.table(columns).replace_schema_metadata({b"softtip-sysid": json.dumps(note).encode()})
-    if not path.parent.is_dir():
-        fail(f"--out {path}: directory {path.parent} does not exist")
     return atomic_write(path, lambda handle: pq.write_table(table, handle))

@@ -13,7 +13,7 @@ from rich.table import Table
 from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import check_number, check_output, console, fail, progress_for
 from softtip.design.model import reference_design
 
 
@@ -37,6 +37,14 @@ class Switch(str, Enum):
     on = "on"
     off = "off"
 
+
+
+LARGEST_MM = 1000.0  # a metre: beyond any fingertip and indenter
+MAX_AMBIENT_UT = 1e5  # 0.1 T: far beyond any ambient field (the Earth's is about 50 µT)
+# Estimated tetrahedra the twin meshes without --force: five times the default 1 mm mesh of the simulate
+# command's reference design (estimated 37,500; gmsh makes 16,000, whose contact solve took 40 s on a
+# loaded 2-core machine).
+MAX_ELEMENTS = 200_000
 
 
 def designs(json_output: bool = typer.Option(False, "--json", help="Print JSON.")) -> None:
@@ -76,6 +84,8 @@ def simulate(
     plot: Path = typer.Option(None, help="Save a section of the deformed body to this PNG file."),
     deformed_mesh: Path = typer.Option(None, "--deformed-mesh",
                                        help="Save the mesh and its nodal displacements to this .npz file."),
+    force: bool = typer.Option(False, "--force", help="Replace output files that exist; mesh finer than "
+                                                      f"{MAX_ELEMENTS:,} estimated tetrahedra."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
@@ -87,11 +97,27 @@ def simulate(
     for name, value in (("depth", depth), ("thickness", thickness), ("radius", radius), ("mesh-size", mesh_size)):
         if not np.isfinite(value) or value < 0 or (value == 0 and name != "depth"):
             fail(f"--{name} = {value}: expected a positive length in mm")
+    check_number(seed, "--seed", minimum=0)
+    check_number(mesh_size, "--mesh-size", maximum=LARGEST_MM, unit="mm")
+    check_number(angle, "--angle", minimum=-360, maximum=360, unit="degrees")
+    for option, value in (("--x", x), ("--y", y), ("--shear-x", shear_x), ("--shear-y", shear_y)):
+        check_number(value, option, minimum=-LARGEST_MM, maximum=LARGEST_MM, unit="mm")
+    check_number(thickness, "--thickness", maximum=LARGEST_MM, unit="mm")
+    check_number(radius, "--radius", maximum=LARGEST_MM, unit="mm")
+    for component in ambient:
+        check_number(component, "--ambient", minimum=-MAX_AMBIENT_UT, maximum=MAX_AMBIENT_UT, unit="µT")
     if plot is not None and plot.suffix.lower() != ".png":
         fail(f"--plot {plot}: expected a file name ending in .png")
     if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
         fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
-    twin = Twin.finite_element(load_design(design), mesh_size=mesh_size * MM, model=model.value,
+    for option, path in (("--plot", plot), ("--deformed-mesh", deformed_mesh)):
+        if path is not None:
+            check_output(path, option, force=force)
+    fingertip = load_design(design)
+    if depth >= fingertip.height / MM:
+        fail(f"--depth = {depth} mm: deeper than the {fingertip.name} body is tall ({fingertip.height / MM:g} mm)")
+    check_mesh_work(fingertip, mesh_size, force)
+    twin = Twin.finite_element(fingertip, mesh_size=mesh_size * MM, model=model.value,
                                ambient_field=np.array(ambient) / UT_PER_T)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
@@ -116,6 +142,22 @@ def simulate(
         print(json.dumps(report, indent=2))
     else:
         print_result(report)
+
+
+def check_mesh_work(design, mesh_size_mm: float, force: bool) -> None:
+    """Refuse, before any mesh, a mesh too fine to solve here unless ``force``.
+
+    The element count is estimated as the body's volume (cavity included) over that of a regular
+    tetrahedron of edge ``mesh_size`` (a³ / (6 √2)): an upper bound, some 2.3 times gmsh's count."""
+    height_mm = design.height / MM
+    body = design.spec["body"]
+    footprint_mm2 = (np.pi * body["diameter_mm"] ** 2 / 4 if "diameter_mm" in body
+                     else body["width_mm"] * body["length_mm"])
+    volume_mm3 = footprint_mm2 * height_mm  # the cavity left in: an upper bound of the work
+    elements = volume_mm3 / (mesh_size_mm**3 / (6 * np.sqrt(2)))
+    if elements > MAX_ELEMENTS and not force:
+        fail(f"--mesh-size = {mesh_size_mm} mm: some {elements:.2g} tetrahedra for the {volume_mm3:.3g} mm³ body, "
+             f"over the {MAX_ELEMENTS:.0e} solved without --force")
 
 
 def _mm(vector) -> list[float]:

@@ -717,6 +717,11 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
     orders = list(DEFAULT_ORDERS[kind] if orders is None else orders)
     if not orders:
         raise IdentificationError("orders: none given")
+    if len(set(orders)) < len(orders):
+        raise IdentificationError(f"orders: {', '.join(map(str, orders))} repeats an order")
+    # the largest order's data check before any fit: a refusal at once, not after fitting every order below it
+    largest = max(orders)
+    (KINDS[kind](largest, **params) if kind == "ss" else KINDS[kind](n_poles=largest, **params))._prepared(recording)
     rows = []
     for order in orders:
         model = KINDS[kind](order, **params) if kind == "ss" else KINDS[kind](n_poles=order, **params)

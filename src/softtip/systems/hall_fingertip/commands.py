@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from softtip._core.units import MM
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
 
 
 def demo(
@@ -17,14 +17,21 @@ def demo(
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments, the fabricated unit and the training."),
     duration: float = typer.Option(20.0, "--duration", help="Seconds of live streaming."),
     record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The main job on the built-in simulated sensor: the twin runs the 3-axis force calibration, a
-    network is fitted to it, and an emulated fingertip streams the twin's pushes through the live
-    pipeline, whose estimates are scored against the twin's true force."""
+    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration
+    runs on the physics twin), calibration (a network is fitted to it and saved), live (an emulated
+    fingertip streams the twin's pushes through the live pipeline, whose estimates are scored against
+    the twin's true force). It ends by naming the model it saved and the command to run it next."""
     if context.invoked_subcommand is not None:
         return
     from softtip.systems.hall_fingertip.demo import run_main_demo
+
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(seed, "--seed", minimum=0)
+    if record is not None:
+        check_output(record, "--record", force=force)
 
     report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
                            progress=progress_for(json_output))
@@ -40,8 +47,14 @@ def demo(
                       f"{live.get('mean_abs_error_N', float('nan')):.3f}", f"{live.get('peak_true_N', float('nan')):.2f}")
     console.print(table)
     pipeline = report["pipeline"]
-    console.print(f"{report['estimated_frames']} frames estimated live; model saved at {report['model']}; "
-                  f"lost frames: {pipeline.get('lost_in_transit', 0)}")
+    console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "
+                  f"{pipeline.get('lost_in_transit', 0)}", highlight=False)
+    saved = [f"the force model: {report['model']}"] + ([f"the live recording: {record}"] if record else [])
+    console.print("saved " + "; ".join(saved), markup=False, highlight=False, soft_wrap=True)
+    console.print(f"next: softtip live --emulate --scenario push --model {report['model']}  (the model on the "
+                  "emulated fingertip, with its dashboard)"
+                  + (f"; softtip convert {record} pushes.parquet  (the recording as a dataset)" if record else ""),
+                  markup=False, highlight=False, soft_wrap=True)
 
 
 def demo_insertion(
@@ -57,6 +70,7 @@ def demo_insertion(
 
     if case not in CASES:
         fail(f"--case = {case!r}: expected one of {', '.join(CASES)}")
+    check_number(seed, "--seed", minimum=0)
     progress = progress_for(json_output)
     with progress.task(f"insertion, case {case}"):
         outcome = run_insertion(case, seed, progress=progress)

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from softtip.cli.common import console, fail, progress_for
+from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
 
 
 def demo_wearable(
@@ -16,12 +16,18 @@ def demo_wearable(
     duration: float = typer.Option(None, "--duration", help="Seconds of live streaming (default: the whole "
                                                             "streamed seating, 105 s)."),
     record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
+    force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """The wearable sensor (S2) end to end: the twin's calibration seatings, a 6th-order transfer function
     identified on them, and the emulated side chip streaming a further seating through the live pipeline,
     scored against the table force and against the offline simulation of the same frames."""
     from softtip.systems.wearable.live import run_wearable_demo
+
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(seed, "--seed", minimum=0)
+    if record is not None:
+        check_output(record, "--record", force=force)
 
     report = run_wearable_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
                                progress=progress_for(json_output))

@@ -1,0 +1,285 @@
+"""Every command and option of ``softtip``, found by walking the command tree (so a system's commands are
+swept the day they are registered), given bad values: NaN, ±inf, zero, negative, absurdly large, the
+wrong type, hostile text, and for paths a missing or read-only folder, a directory, an existing file and
+the command's own input.
+
+Each must be refused as a user error: exit code 2, one line naming the option (or the file), no
+traceback, within a few seconds, and no file that existed before changed. ``ACCEPTED`` lists, with the
+reason, the bad-looking values a command legitimately takes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import shutil
+import signal
+import stat
+import typing
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+import pytest
+import typer
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from softtip.cli.main import app
+
+DATA = Path(__file__).parent / "data"
+SECONDS = 5.0  # a refusal comes before any work: far less than this
+
+
+class TookTooLong(BaseException):
+    """Raised in the command by the watchdog: a BaseException, so no error handler turns it into a refusal."""
+
+
+def commands(command=None, words: tuple[str, ...] = ()):
+    """Every runnable command of the application as (its words, the command)."""
+    command = typer.main.get_command(app) if command is None else command
+    subcommands = getattr(command, "commands", None) or {}
+    if words and command.callback is not None and (not subcommands or getattr(command, "invoke_without_command", False)):
+        yield words, command
+    for name, sub in subcommands.items():
+        yield from commands(sub, (*words, name))
+
+
+@dataclass(frozen=True)
+class Bad:
+    kind: str  # the class of the value, for the counts
+    text: str  # as typed on the command line
+
+
+NUMBER = [Bad("non-finite", "nan"), Bad("non-finite", "inf"), Bad("non-finite", "-inf"), Bad("zero", "0"),
+          Bad("negative", "-1"), Bad("huge", "1e300"), Bad("wrong type", "abc")]
+INTEGER = [Bad("zero", "0"), Bad("negative", "-1"), Bad("huge", "1000000000000"), Bad("wrong type", "1.5"),
+           Bad("wrong type", "nan")]
+TEXT = [Bad("hostile text", "[bold]x[/bold]"), Bad("hostile text", "\x1b[2Jx"), Bad("hostile text", "")]
+PATH = [Bad("missing folder", "{tmp}/missing/out.dat"), Bad("directory", "{tmp}/folder"),
+        Bad("read-only folder", "{tmp}/read-only/out.dat"), Bad("existing file", "{tmp}/existing.dat"),
+        Bad("same as input", "{input}")]
+
+# Bad-looking values that are good ones, by option (every command), with the reason.
+ACCEPTED = {
+    "--seed": {"zero", "huge"},  # any non-negative integer is a seed
+    "--angle": {"zero", "negative"}, "--x": {"zero", "negative"}, "--y": {"zero", "negative"},
+    "--shear-x": {"zero", "negative"}, "--shear-y": {"zero", "negative"},  # signed coordinates
+    "--ambient": {"zero", "negative"},  # a signed field
+    "--depth": {"zero"},  # the unloaded body
+    "--min-label": {"zero", "negative"},  # a label threshold may be any finite number
+    "--max-delay": {"zero"},  # no delay searched
+    "--delay": {"zero"},  # "0": no delay
+    "--full-scale": {"huge"},  # a sensor's rated range is the user's to state; the % of it are then small, not wrong
+    "--validate": {"same as input"},  # validating on the estimation data is allowed (and optimistic)
+}
+if os.geteuid() == 0:  # the superuser writes into read-only folders: nothing to refuse
+    PATH = [bad for bad in PATH if bad.kind != "read-only folder"]
+# Options whose value is a folder of outputs: a directory is what they take, and a missing one is made.
+FOLDERS = {("reproduce", "--output"), ("optimize", "--output")}
+
+
+def option_name(param) -> str:
+    return param.opts[0] if param.opts[0].startswith("-") else param.name.upper()
+
+
+def bad_values(words: tuple[str, ...], param) -> list[Bad]:
+    described = param.type_descriptor
+    annotation = described.annotation
+    if described.is_list or described.is_tuple:
+        annotation = typing.get_args(annotation)[0]
+    if getattr(param, "is_flag", False) or annotation is bool:
+        return []
+    if described.is_choice or (isinstance(annotation, type) and issubclass(annotation, Enum)):
+        values = [Bad("wrong type", "abc")]
+    elif annotation is float:
+        values = NUMBER
+    elif annotation is int:
+        values = INTEGER
+    elif annotation is str:
+        values = TEXT + [Bad("zero", "0"), Bad("negative", "-1"), Bad("non-finite", "nan")]
+    elif annotation is Path:
+        folder = (" ".join(words), option_name(param)) in FOLDERS
+        values = [bad for bad in PATH if not (folder and bad.kind in ("directory", "missing folder"))]
+    else:
+        values = TEXT
+    accepted = ACCEPTED.get(option_name(param), set())
+    return [bad for bad in values if bad.kind not in accepted]
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    """A folder of small valid inputs for every command, and the base arguments that make each command
+    with required parameters complete."""
+    from softtip.data import DatasetMetadata, TrialWriter, channel_columns
+
+    tmp = tmp_path_factory.mktemp("sweep")
+    rng = np.random.default_rng(0)
+    writer = TrialWriter(1, labels={"fz_N": "N"}, conditions={"role": "1"}, metadata=DatasetMetadata(seed=0))
+    for trial in range(6):
+        force = np.linspace(0, rng.uniform(2, 4), 30)
+        field = np.stack([np.column_stack([3 * force, -2 * force, 50 * force])], axis=1)
+        writer.add({"time_s": np.arange(30) / 20, **channel_columns(field), "fz_N": force},
+                   {"role": "calibration" if trial < 4 else "validation"})
+    dataset = tmp / "dataset.parquet"
+    writer.write(dataset)
+    u = rng.normal(size=300)
+    y = np.convolve(u, [0.0, 0.5, 0.25], mode="full")[:300]
+    (tmp / "recording.csv").write_text("time_s,u,y\n" + "".join(f"{k * 0.01},{a},{b}\n" for k, (a, b) in
+                                                                enumerate(zip(u, y))))
+    shutil.copy(DATA / "recording-0.1.0.mcap", tmp / "recording.mcap")
+    (tmp / "study.toml").write_text(Path(__file__).parents[1].joinpath("examples", "estimation-grid.toml").read_text())
+    runner = CliRunner()
+    for args in (["calibrate", str(dataset), "-t", "fz_N", "--model", "polynomial", "-o", str(tmp / "model.npz")],
+                 ["sysid", "fit", "--data", str(tmp / "recording.csv"), "-u", "u", "-y", "y", "--kind", "ss",
+                  "--order", "2", "-o", str(tmp / "sysid.npz")]):
+        made = runner.invoke(app, args)
+        assert made.exit_code == 0, made.output
+    (tmp / "folder").mkdir()
+    (tmp / "read-only").mkdir()
+    (tmp / "read-only").chmod(stat.S_IRUSR | stat.S_IXUSR)
+    (tmp / "existing.dat").write_bytes(b"\x00\x1b[2J not a file of any kind \xff" * 8)
+    # command: (its arguments, its required options, the input file it reads, the parameter naming it)
+    csv = str(tmp / "recording.csv")
+    bases = {
+        "convert": ([str(tmp / "recording.mcap"), str(tmp / "new" / "converted.parquet")], [], "recording.mcap",
+                    "recording"),
+        "optimize": ([], ["--config", str(tmp / "study.toml")], "study.toml", "config"),
+        "reproduce": (["pushing"], [], None, None),
+        "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
+        "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
+        "lab run": (["pushing"], [], None, None),
+        "sysid fit": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss", "--order", "2"], "recording.csv", "data"),
+        "sysid orders": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss"], "recording.csv", "data"),
+        "sysid predict": ([str(tmp / "sysid.npz")], ["--data", csv], "recording.csv", "data"),
+        "recording repair": ([str(tmp / "recording.mcap")], [], "recording.mcap", "recording"),
+        "live": ([], ["--emulate"], None, None),
+    }
+    (tmp / "new").mkdir()
+    (tmp / "work").mkdir()  # the current folder of every run: default outputs land here
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(tmp / "work")
+        yield tmp, bases
+    (tmp / "read-only").chmod(stat.S_IRWXU)
+
+
+def fingerprint(folder: Path) -> dict[str, str]:
+    return {str(path): hashlib.sha256(path.read_bytes()).hexdigest()
+            for path in sorted(folder.rglob("*")) if path.is_file() and os.access(path, os.R_OK)}
+
+
+def _alarm(signum, frame):
+    raise TookTooLong
+
+
+def invoke(args: list[str], seconds: float = SECONDS):
+    """Run ``softtip ARGS`` in this process under a watchdog: (result, None) or (None, "hang")."""
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        return CliRunner().invoke(app, args), None
+    except TookTooLong:
+        return None, "hang"
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def judge(words: tuple[str, ...], param, bad: Bad, inputs) -> tuple[str, str]:
+    """What ``softtip WORDS`` did with ``bad`` for ``param``: ("refused", line) or (the failure class, output)."""
+    tmp, bases = inputs
+    arguments, options, source, reader = bases.get(" ".join(words), ([], [], None, None))
+    if bad.kind == "same as input" and (source is None or param.name == reader):
+        return "refused", "(no input to name)"
+    value = bad.text.format(tmp=tmp, input=tmp / (source or ""))
+    option = option_name(param)
+    arguments, options = list(arguments), list(options)
+    if param.param_type_name == "argument":
+        position = [p.name for p in command_of(words).params if p.param_type_name == "argument"].index(param.name)
+        arguments[position:position + 1] = [value]
+        given = []
+    else:
+        for decl in param.opts:  # a required option of the base is replaced, not repeated
+            if decl in options:
+                at = options.index(decl)
+                del options[at:at + 2]
+        given = [option, *[value] * max(param.nargs, 1)]
+    args = [*words, *arguments, *options, *given]
+    for scratch in ("new", "work"):  # what earlier runs wrote is not there before this one
+        for path in (tmp / scratch).iterdir():
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    before = fingerprint(tmp)
+    result, hung = invoke(args)
+    if hung:
+        return "hang", ""
+    after = fingerprint(tmp)
+    output = result.output
+    if any(before[path] != after.get(path) for path in before):
+        return "changed a file", output
+    if result.exit_code == 0:
+        return "accepted", output
+    if "Traceback" in output or result.exception is not None and not isinstance(result.exception, SystemExit):
+        return "traceback", f"{type(result.exception).__name__}: {result.exception}"
+    lines = output.strip().splitlines()
+    if result.exit_code != 2 or len(lines) != 1:
+        return "garbled", output
+    named = [option, *param.opts, option.lstrip("-").replace("-", " "), *(files for files in (value, Path(value).name)
+                                                                            if len(files) > 1)]
+    named += [repr(value)[1:-1]] if len(value) > 1 else []  # as an error shows it: escaped
+    named += [source] if source else []  # the file the value was looked for in
+    try:
+        named += [f"{float(value):g}", str(float(value))]
+    except ValueError:
+        pass
+    if not any(name in lines[0] for name in named):
+        return "unnamed", lines[0]
+    return "refused", lines[0]
+
+
+def command_of(words: tuple[str, ...]):
+    return dict(commands())[words]
+
+
+CASES = [(words, param.name, bad) for words, command in commands() for param in command.params
+         for bad in bad_values(words, param)]
+
+
+def test_every_command_with_required_parameters_has_a_base(inputs):
+    """A command whose required parameters the sweep cannot fill would be refused for those alone."""
+    _, bases = inputs
+    lacking = [" ".join(words) for words, command in commands()
+               if any(param.required for param in command.params) and " ".join(words) not in bases]
+    assert not lacking, f"add a base of valid arguments for: {', '.join(lacking)}"
+
+
+@settings(max_examples=len(CASES), derandomize=True, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(case=st.sampled_from(CASES))
+def test_a_bad_value_is_refused_in_one_line_before_any_work(inputs, case):
+    words, name, bad = case
+    param = next(p for p in command_of(words).params if p.name == name)
+    verdict, said = judge(words, param, bad, inputs)
+    assert verdict == "refused", f"softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {verdict}: {said}"
+
+
+def count(inputs) -> dict[str, dict[str, int]]:
+    """Every case judged: {value class: {verdict: count}}, and the failures listed."""
+    totals: dict[str, dict[str, int]] = {}
+    for words, name, bad in CASES:
+        param = next(p for p in command_of(words).params if p.name == name)
+        verdict, said = judge(words, param, bad, inputs)
+        totals.setdefault(bad.kind, {}).setdefault(verdict, 0)
+        totals[bad.kind][verdict] += 1
+        if verdict != "refused":
+            print(f"{verdict:15s} softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {said.strip()[:160]!r}")
+    return totals
+
+
+@pytest.mark.skipif(not os.environ.get("SOFTTIP_SWEEP_COUNT"), reason="the full count: SOFTTIP_SWEEP_COUNT=1")
+def test_count_every_case(inputs):
+    totals = count(inputs)
+    for kind, verdicts in sorted(totals.items()):
+        print(f"{kind:18s} " + ", ".join(f"{verdict} {n}" for verdict, n in sorted(verdicts.items())))
