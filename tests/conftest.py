@@ -51,9 +51,14 @@ def coarse_protocol(tmp_path_factory):
     numbers = itertools.count()
 
     def write(name: str, design: str, mesh: float = 3.0, extra: str = "", seed: int = 2, fewer: bool = False):
+        from dataclasses import fields
+
+        from softtip.lab.protocols import bench_of
+
         path = directory / f"{name}-{next(numbers)}.toml"
-        fixture = (f'design = "{design}"\n' f"[parameters]\nmesh_size_mm = {mesh}\n" if name != "wearable"
-                   else "[parameters]\n")  # the wearable bench has no design and no mesh
+        # a bench built from a design (the Hall fingertip's) takes it and a coarse mesh; others have neither
+        designed = "design" in {item.name for item in fields(bench_of(name).protocol_file)}
+        fixture = f'design = "{design}"\n[parameters]\nmesh_size_mm = {mesh}\n' if designed else "[parameters]\n"
         path.write_text(f'protocol = "{name}"\nseed = {seed}\n' + fixture + textwrap.dedent(extra)
                         + textwrap.dedent(FEWER_CONDITIONS.get(name, "") if fewer else ""))
         return path

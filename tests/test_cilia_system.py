@@ -180,7 +180,7 @@ def bench_app() -> typer.Typer:
 
 @pytest.mark.parametrize("options, message", [
     (["--loads", "0"], "--loads = 0: expected 5 to 2000"),
-    (["--force-max-mn", "nan"], "--force-max-mn = nan: expected a positive, finite"),
+    (["--force-max-mn", "nan"], "--force-max-mn = nan: expected a force above 0"),
     (["--force-max-mn", "inf"], "--force-max-mn = inf"),
     (["--force-max-mn", "-1"], "--force-max-mn = -1.0"),
     (["--repeats", "0"], "--repeats = 0"),

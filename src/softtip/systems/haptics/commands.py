@@ -17,6 +17,7 @@ app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable finge
 
 RENDER_P99_TARGET_S, TABLE_BUILD_TARGET_S, REPRODUCE_TARGET_S = 50e-6, 0.1, 30.0
 MAX_DURATION_S = 3600.0
+MAX_FS_LEVELS = 31  # 29,791 configurations: a real collection of about nine hours
 
 
 def _finite_positive(value: float | None, option: str) -> None:
@@ -39,6 +40,11 @@ def bench_haptics(
     weighting, p99; baseline: a bare scipy cKDTree query of the same 8 neighbours), a personalised 13³
     table built (geometric and data-driven, with the renderer's index; baseline: indexing the FS table
     alone) and the whole ``softtip reproduce haptics``."""
+    for option, value, most in (("--queries", queries, 1_000_000), ("--repeats", repeats, 100)):
+        if not 1 <= value <= most:
+            fail(f"{option} = {value}: expected an integer from 1 to {most}")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
     from scipy.spatial import cKDTree
 
     from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
@@ -47,11 +53,6 @@ def bench_haptics(
     from softtip.systems.haptics.personalisation import personalise_data_driven, personalise_geometric
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 
-    for option, value, most in (("--queries", queries, 1_000_000), ("--repeats", repeats, 100)):
-        if not 1 <= value <= most:
-            fail(f"{option} = {value}: expected an integer from 1 to {most}")
-    if seed < 0:
-        fail(f"--seed = {seed}: expected an integer >= 0")
     rng = np.random.default_rng(seed)
     device = load_device()
     progress = progress_for(json_output)
@@ -144,6 +145,19 @@ def render(
 ) -> None:
     """Stream a sensation through the renderer and the device model: a 1 kHz loop, the servos' 50 Hz
     commands, the commanded motor inputs and the rendered wrench out on the live sinks (MCAP, Foxglove)."""
+    # every option checked before the renderer's modules load (they take seconds on a busy machine)
+    _finite_positive(duration, "--duration")
+    if duration is not None and duration > MAX_DURATION_S:
+        fail(f"--duration = {duration}: expected at most {MAX_DURATION_S:g} s (the sequence is built in memory)")
+    if method not in ("standard", "geometric"):
+        fail(f"--method = {method!r}: expected standard or geometric")
+    if not 2 <= fs_levels <= MAX_FS_LEVELS:
+        fail(f"--fs-levels = {fs_levels}: expected an integer from 2 to {MAX_FS_LEVELS} (a table of levels³ "
+             "configurations)")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    if foxglove_port is not None and not 0 < foxglove_port < 65536:
+        fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
     from softtip.realtime.sinks.factory import live_sinks
     from softtip.realtime.sinks.ros2 import ros2_available
     from softtip.systems.haptics.bench import FINGERTIP_NAMES, device_from_file
@@ -152,19 +166,8 @@ def render(
     from softtip.systems.haptics.personalisation import personalise_geometric
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 
-    _finite_positive(duration, "--duration")
-    if duration is not None and duration > MAX_DURATION_S:
-        fail(f"--duration = {duration}: expected at most {MAX_DURATION_S:g} s (the sequence is built in memory)")
     if fingertip not in FINGERTIP_NAMES:
         fail(f"--fingertip = {fingertip!r}: expected one of {', '.join(FINGERTIP_NAMES)}")
-    if method not in ("standard", "geometric"):
-        fail(f"--method = {method!r}: expected standard or geometric")
-    if fs_levels < 2:
-        fail(f"--fs-levels = {fs_levels}: expected an integer >= 2")
-    if seed < 0:
-        fail(f"--seed = {seed}: expected an integer >= 0")
-    if foxglove_port is not None and not 0 < foxglove_port < 65536:
-        fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
     if ros2 and not ros2_available():
         fail("--ros2: ROS 2 is not available (rclpy and the standard message packages do not import; source the "
              "ROS 2 setup script first)")
