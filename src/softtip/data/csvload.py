@@ -31,7 +31,7 @@ given both ways is refused.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -189,15 +189,23 @@ def _layout(mapping: Any, arguments: dict[str, Any]) -> _Layout:
     return _Layout(source, columns, _magnetic_units(source, options.units, magnetic), options)
 
 
+def read_csv_table(path: Path, numeric: Sequence[str], *, delimiter: str = ",",
+                   only: Sequence[str] | None = None) -> pa.Table:
+    """softtip's one reader of CSV files: the file as an Arrow table (``only`` these columns, if given),
+    the ``numeric`` columns kept as text for :func:`parse_numbers`, which names the first bad cell; a
+    file that cannot be read is refused in one line."""
+    try:
+        return pacsv.read_csv(path, parse_options=pacsv.ParseOptions(delimiter=delimiter),
+                              convert_options=pacsv.ConvertOptions(include_columns=only,
+                                                                   column_types=dict.fromkeys(numeric, pa.string())))
+    except (pa.ArrowException, OSError) as problem:
+        raise DatasetError(f"{path}: cannot be read as CSV ({first_line(problem)})") from None
+
+
 def _read_table(path: Path, layout: _Layout) -> pa.Table:
     if not path.is_file():
         raise DatasetError(f"recording {path} does not exist")
-    try:
-        table = pacsv.read_csv(
-            path, parse_options=pacsv.ParseOptions(delimiter=layout.options.delimiter),
-            convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(layout.numeric, pa.string())))
-    except (pa.ArrowException, OSError) as problem:
-        raise DatasetError(f"{path}: cannot be read as CSV ({first_line(problem)})") from None
+    table = read_csv_table(path, layout.numeric, delimiter=layout.options.delimiter)
     require_columns(path, [*layout.columns, *layout.numeric], table.column_names)
     return table
 

@@ -31,7 +31,7 @@ import scipy.signal
 
 from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
-from softtip.data.csvload import parse_numbers
+from softtip.data.csvload import parse_numbers, read_csv_table
 from softtip.data.dataset import (
     METADATA_KEY,
     TIME,
@@ -342,11 +342,7 @@ def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: 
 
 
 def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
-    try:
-        table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(
-            include_columns=wanted, column_types=dict.fromkeys(wanted, pa.string())))
-    except (pa.ArrowException, OSError) as problem:
-        raise DatasetError(f"{path}: cannot be read as CSV ({first_line(problem)})") from None
+    table = read_csv_table(path, wanted, only=wanted)
     return {name: parse_numbers(path, name, table.column(name)) for name in wanted}
 
 
