@@ -417,9 +417,9 @@ def test_cli_json_contract_and_resume(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--config", "missing.toml"], "study file missing.toml does not exist"),
+    (["--config", "missing.toml"], "--config = missing.toml: does not exist, expected a file"),
     (["--scheduler", "localhost"], "--scheduler localhost: expected an address"),
-    (["--workers", "0"], "--workers 0: expected at least 1"),
+    (["--workers", "0"], "--workers = 0: expected a number >= 1 and <= 8"),
 ])
 def test_cli_mistakes_are_one_line_errors(tmp_path, args, message):
     config = write_study(tmp_path / "study.toml", small_study([9.0]))
