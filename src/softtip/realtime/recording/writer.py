@@ -13,6 +13,7 @@ the summary and index the writer did not live to write.
 from __future__ import annotations
 
 import json
+from dataclasses import astuple
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -219,8 +220,9 @@ def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salv
         with path.open("rb") as stream:
             for record in scan_recording(stream, salvage, path):
                 if not started:
-                    header = record if isinstance(record, Header) else Header(profile="", library="")
-                    writer.start(header.profile, header.library)
+                    # the killed file's own header (profile, writer's name), or an empty one if it lost it
+                    header = record if isinstance(record, Header) else Header("", "")
+                    writer.start(*astuple(header))
                     started = True
                 if isinstance(record, Message):
                     if record.channel_id not in channel_ids:
