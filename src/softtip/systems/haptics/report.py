@@ -15,7 +15,7 @@ import numpy as np
 from softtip._core.progress import Progress
 from softtip.data import Dataset
 from softtip.lab import Protocol, run_protocol
-from softtip.published import published_table
+from softtip.published import OUTSIDE, published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
@@ -176,10 +176,14 @@ def _targets_table(found: RenderedTargets) -> Table:
     published = published_table("haptics-targets")
     [row] = published.rows
     ours = f"{len(found.target_magnitudes)} random configurations that touch the FS"
-    return paper_table(published, {(ours, "mean |F| (N)"): float(found.target_magnitudes.mean())}, rows={ours: row},
-                       notes={ours: ("Stronger targets: softtip draws the targets' configurations uniformly over the "
-                                     "servos' whole range (the spec gives no distribution), and with softtip's device "
-                                     "dimensions most of them press the FS well past 1.7 N.")})
+    mean = float(found.target_magnitudes.mean())
+    column = "mean |F| (N)"
+    # the gap is explained only where there is one (a quick run's few targets may fall within)
+    outside = published.verdict(mean, published.value(row, column), column) == OUTSIDE
+    notes = {ours: ("Stronger targets: softtip draws the targets' configurations uniformly over the servos' whole "
+                    "range (the spec gives no distribution), and with softtip's device dimensions most of them press "
+                    "the FS well past 1.7 N.")} if outside else {}
+    return paper_table(published, {(ours, column): mean}, rows={ours: row}, notes=notes)
 
 
 def _collection_table(minutes: dict) -> Table:
