@@ -1,6 +1,7 @@
 """Recordings that survive faults: a live session stopped by SIGTERM or SIGHUP finishes its file as on
-Ctrl-C; a file whose writer was killed (SIGKILL) is repaired into one that ``mcap``'s indexed reader
-opens with every complete message; a torn or damaged file converts with a report of what was lost."""
+Ctrl-C; a file whose writer was killed (SIGKILL) opens in ``mcap``'s indexed reader as it is, with
+every message up to the last flush; a file torn during a write is repaired into one that opens with
+every complete message; a torn or damaged file converts with a report of what was lost."""
 
 from __future__ import annotations
 
@@ -100,31 +101,17 @@ def test_a_live_recording_stopped_by_a_signal_is_finished_as_on_ctrl_c(tmp_path,
     assert streamed_messages(path) == (messages, None)
 
 
-def test_a_killed_recording_is_repaired_with_every_complete_message(tmp_path):
+def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
     path = tmp_path / "killed.mcap"
     ended = record_until(path, signal.SIGKILL)
     assert ended.returncode == -signal.SIGKILL
-    with path.open("rb") as stream, pytest.raises(Exception):
-        make_reader(stream).get_summary()  # the writer never wrote its summary
-    # the reference: what mcap's own stream reader reads of the killed file before its tail
-    complete, tail = streamed_messages(path)
-    assert tail is not None and len(complete) > 20
-    repaired = tmp_path / "repaired.mcap"
-    salvage = repair_recording(path, repaired)
-    summary, messages = indexed_messages(repaired)
-    assert messages == complete
-    assert chip_sequences(messages) == list(range(len(complete) - 1))  # frames 0.. with none missing
-    assert summary.statistics.message_count == salvage.messages == len(complete)
-    assert salvage.truncated and salvage.bytes_lost == path.stat().st_size - salvage.bytes_read
-    # and it converts to the same dataset as the killed file
-    np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(path).dataset.X())
-    # the command line does the same, beside the recording by default, and names what it did
-    result = CliRunner().invoke(app, ["recording", "repair", str(path)])
-    assert result.exit_code == 0, result.output
-    assert indexed_messages(tmp_path / "killed.repaired.mcap")[1] == complete
-    assert f"messages_read: {len(complete)}" in result.output and "truncated: True" in result.output
-    refused = CliRunner().invoke(app, ["recording", "repair", str(path), "-o", str(path)])
-    assert refused.exit_code == 2 and "is the input" in refused.output
+    summary, messages = indexed_messages(path)
+    # the reference: mcap's own stream reader, front to back, reads the same and finds no torn tail
+    assert streamed_messages(path) == (messages, None)
+    assert len(messages) > 20 and summary.statistics.message_count == len(messages)
+    assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
+    salvage = convert(path).salvage
+    assert not salvage.truncated and salvage.data_crc_ok is True and salvage.bytes_lost == 0
 
 
 # --------------------------------------------------------------------------
@@ -188,9 +175,55 @@ def test_convert_skips_a_damaged_chunk_and_says_so(tmp_path):
     assert (salvage.lost_from_ns, salvage.lost_to_ns) == (damaged.message_start_time, damaged.message_end_time)
 
 
-def test_a_repaired_recording_carries_a_crc_of_its_data_section(tmp_path):
+def torn_between(before: bytes, after: bytes, cut: int) -> bytes:
+    """The file a write of ``after`` over ``before`` leaves when it stops ``cut`` bytes in (a kill
+    during the write: the kernel stops a write at a page boundary)."""
+    return after[:cut] + before[cut:]
+
+
+def test_a_recording_torn_during_a_flush_is_repaired_with_every_complete_message(tmp_path):
+    path = tmp_path / "torn.mcap"
+    recorder = McapRecorder(path, 1, chunk_size=100_000)
+    frame = lambda k: SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,  # noqa: E731
+                                      reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
+                                      baseline_version=0, estimates=None, state=None)
+    recorder.write_frames([frame(k) for k in range(300)])
+    recorder.flush()
+    before = path.read_bytes()
+    recorder.write_frames([frame(k) for k in range(300, 900)])
+    recorder.flush()
+    after = path.read_bytes()
+    recorder.close()
+    flushed, _ = streamed_messages(path)
+    first_flush = [m for m in flushed if m[2] < 300]
+    # the second flush's write began where the first's summary began, and was stopped one page in
+    start = next(k for k, (a, b) in enumerate(zip(before, after)) if a != b)
+    torn = tmp_path / "torn-write.mcap"
+    torn.write_bytes(torn_between(before, after, (start // 4096 + 1) * 4096))
+    with torn.open("rb") as stream, pytest.raises(Exception):
+        make_reader(stream).get_summary()
+    # the reference: what mcap's own stream reader reads of the torn file before its tail
+    complete, tail = streamed_messages(torn)
+    assert tail is not None and complete == first_flush
+    repaired = tmp_path / "repaired.mcap"
+    salvage = repair_recording(torn, repaired)
+    summary, messages = indexed_messages(repaired)
+    assert messages == complete
+    assert summary.statistics.message_count == salvage.messages == len(complete)
+    assert salvage.truncated and salvage.damaged_records + salvage.bytes_lost > 0
+    np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(torn).dataset.X())
+    # the command line does the same, beside the recording by default, and names what it did
+    result = CliRunner().invoke(app, ["recording", "repair", str(torn)])
+    assert result.exit_code == 0, result.output
+    assert indexed_messages(tmp_path / "torn-write.repaired.mcap")[1] == complete
+    assert f"messages_read: {len(complete)}" in result.output and "truncated: True" in result.output
+    refused = CliRunner().invoke(app, ["recording", "repair", str(torn), "-o", str(torn)])
+    assert refused.exit_code == 2 and "is the input" in refused.output
+
+
+def test_a_recording_carries_a_crc_of_its_data_section(tmp_path):
     whole = recorded(tmp_path / "whole.mcap")
-    assert convert(whole).salvage.data_crc_ok is None  # the live recorder's chunks carry CRCs; the section none
+    assert convert(whole).salvage.data_crc_ok is True
     repaired = tmp_path / "repaired.mcap"
     assert repair_recording(whole, repaired).messages == len(indexed_messages(whole)[1])
     assert convert(repaired).salvage.data_crc_ok is True

@@ -1,4 +1,4 @@
-"""``softtip recording repair``: a recording whose writer was killed, made whole for indexed readers."""
+"""``softtip recording repair``: a torn or damaged recording, made whole for indexed readers."""
 
 from __future__ import annotations
 
@@ -11,14 +11,15 @@ from softtip.cli.common import FORCE, check_input, check_output, console, printa
 
 
 def recording_repair(
-    recording: Path = typer.Argument(..., help="MCAP recording to repair (its writer killed, or a chunk damaged)."),
+    recording: Path = typer.Argument(..., help="MCAP recording to repair (torn by a kill mid-write, cut short, "
+                                               "or a chunk damaged)."),
     output: Path = typer.Option(None, "--output", "-o", help="Repaired recording to write "
                                                              "(default: RECORDING with .repaired.mcap)."),
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Rewrite a recording with every complete message and the summary and index a killed writer did not
-    write, and say what was salvaged and what was lost."""
+    """Rewrite a recording with every complete message and the summary and index it lacks, and say what
+    was salvaged and what was lost."""
     from softtip.realtime.recording.writer import repair_recording
 
     check_input(recording, "RECORDING")

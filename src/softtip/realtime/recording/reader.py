@@ -46,8 +46,8 @@ class Salvage:
     ``damaged_records``: records skipped because they do not parse (a chunk: its CRC, its
     compression); ``lost_from_ns``, ``lost_to_ns``: the log times the lost chunks' headers state
     (None when no lost chunk's header could be read); ``data_crc_ok``: whether the data section
-    matches the CRC its DataEnd record states (None: no DataEnd, or one that states none, as the live
-    recorder's; its chunks carry CRCs of their own), which also covers the records outside chunks. Messages still in the writer's memory when it
+    matches the CRC its DataEnd record states (None: no DataEnd, or one that states none, as some
+    writers' do; their chunks carry CRCs of their own), which also covers the records outside chunks. Messages still in the writer's memory when it
     was killed were never in the file: no file says how many.
     """
 

@@ -1,13 +1,14 @@
 """Writing the live stream to an MCAP file in ROS 2 message types (:mod:`~softtip.realtime.recording.format`),
 and repairing a recording whose writer was killed.
 
-Messages are serialised by ``mcap-ros2-support`` from the embedded message definitions. The
-file is written in chunks that are closed and flushed to the operating system every
-:meth:`McapRecorder.flush`, so a process that is killed leaves a file readable up to its
-last flush (:func:`~softtip.realtime.recording.reader.read_recording` reads such a file).
-Such a file has no summary, so indexed readers (``mcap``'s seeking reader, Foxglove, ``ros2 bag``)
-refuse it or read it slowly; :func:`repair_recording` rewrites it with every complete message and
-the summary and index the writer did not live to write.
+Messages are serialised by ``mcap-ros2-support`` from the embedded message definitions and
+written by :class:`~softtip.realtime.recording.sealed.SealedMcapWriter`, so the file is complete,
+summary and index included, after every :meth:`McapRecorder.flush`: a process that is killed
+leaves a file that indexed readers (``mcap``'s seeking reader, Foxglove, ``ros2 bag``) open as it
+is, with every message up to its last flush. A file whose tail was torn all the same (a kill
+during a flush's write, a copy cut short, another writer's killed file) is mended by
+:func:`repair_recording`, which rewrites it with every complete message and the summary and index
+it lacks.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.writer import Writer
+from mcap.well_known import Profile
 
 from softtip import __version__
 from softtip._core.channels import MAGNETIC, Reading
@@ -46,22 +48,26 @@ from softtip.realtime.recording.format import (
     wrench_values,
 )
 from softtip.realtime.recording.reader import Salvage, scan_recording
-
-COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+from softtip.realtime.recording.sealed import COMPRESSIONS, SealedMcapWriter
 
 CHUNK_SIZE = integer(1024, expected="an integer >= 1024 bytes")  # the smallest MCAP chunk the recorder accepts
 
 
 class _Ros2Writer(Writer):
-    """mcap-ros2-support's writer with the two things the recorder needs that it does not offer:
-    channel metadata, and closing the chunk in progress on demand. Both go to the MCAP writer
-    it wraps (``_writer``), channels under the topic map it keeps (``_channel_ids``)."""
+    """mcap-ros2-support's writer, serialising ROS 2 messages, over a
+    :class:`~softtip.realtime.recording.sealed.SealedMcapWriter` instead of ``mcap``'s writer, with
+    channel metadata, which it does not offer. Both go to the MCAP writer it wraps (``_writer``),
+    channels under the topic map it keeps (``_channel_ids``)."""
+
+    def __init__(self, writer: SealedMcapWriter) -> None:
+        self._writer = writer
+        self._encoders = {}
+        self._channel_ids = {}
+        self._finished = False
+        writer.start(profile=Profile.ROS2, library=f"softtip {__version__}")
 
     def register_channel(self, topic: str, schema: Schema, metadata: Mapping[str, str]) -> None:
         self._channel_ids[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, schema.id, dict(metadata))
-
-    def flush(self) -> None:
-        self._writer.flush()
 
 
 def _vector(values: np.ndarray) -> dict:
@@ -122,7 +128,8 @@ class McapRecorder:
         self.frames_written = 0
 
         self._stream = open(path, "wb")
-        self._writer = _Ros2Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+        self._sealed = SealedMcapWriter(self._stream, chunk_size=chunk_size, compression=compression)
+        self._writer = _Ros2Writer(self._sealed)
         self._writer.add_metadata(METADATA_NAME, {
             "format": RECORDING_FORMAT,
             "chips": str(chips),
@@ -190,10 +197,9 @@ class McapRecorder:
         self.frames_written += len(frames)
 
     def flush(self) -> None:
-        """Closes the chunk in progress and writes it out: a killed process keeps it."""
-        self._writer.flush()
-        if self._fsync:
-            os.fsync(self._stream.fileno())
+        """Closes the chunk in progress and writes it out with the summary: a killed process keeps a
+        complete file."""
+        self._sealed.flush(fsync=self._fsync)
 
     def close(self) -> None:
         """Writes the summary and footer and closes the file."""
