@@ -168,6 +168,50 @@ def test_study_outputs_given_as_a_file_are_refused_before_the_study(tmp_path):
     assert afile.read_text() == "mine"
 
 
+def shipped_with(name: str, old: str, new: str, folder: Path) -> Path:
+    """A copy of the shipped protocol ``name`` with one line changed."""
+    from softtip.lab.protocols import shipped_protocol_path
+
+    text = shipped_protocol_path(name).read_text()
+    assert old in text
+    path = folder / f"{name}-edited.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize("name, old, new, words", [
+    ("wearable", "participants = 3", "participants = 100000", ("4.2e+09 simulated samples", "participants x runs")),
+    ("wearable", "trial_s = 15.0", "trial_s = 1e6", ("6.3e+09 simulated samples",)),
+    ("pushing", "calibration_trials = 10", "calibration_trials = 1000000", ("4.9e+08 frames",)),
+])
+def test_protocols_asking_for_too_much_work_are_refused_before_the_bench(name, old, new, words, tmp_path):
+    # hand-computed estimates: wearable 1e5 participants x 3 runs x 7 motions x 1 contact x (5 + 15 s) x 100 Hz;
+    # 3 x 3 x 7 x (5 + 1e6 s) x 100 Hz; pushing 7 angles x (1e6 + 5 trials) x 3.5 s x 20 Hz
+    protocol = shipped_with(name, old, new, tmp_path)
+    line = refused(quick("lab", "run", protocol, "-o", tmp_path / "d.parquet"), f"protocol {name}", "--force", *words)
+    assert "above the limit" in line and not (tmp_path / "d.parquet").exists()
+
+
+def test_shipped_protocols_are_within_their_limits_and_estimated_as_their_datasets_are_counted():
+    from softtip._core.systems import names
+    from softtip.lab import load_protocol
+    from softtip.lab.protocols import check_size
+
+    for name in names("protocol"):
+        check_size(load_protocol(name))
+    pushing = load_protocol("pushing")
+    size = pushing.bench.size("pushing", pushing.parameters)
+    assert size.amount == pytest.approx(7 * 15 * (0.5 + 3.0 / 1.0) * 20)  # angles x trials x trial (s) x rate
+
+
+def test_a_study_grid_too_fine_is_refused_without_making_it(tmp_path):
+    config = Path(__file__).parents[1] / "examples" / "published-grid.toml"
+    text = config.read_text().replace("step = 0.1", "step = 1e-300")
+    study = tmp_path / "fine.toml"
+    study.write_text(text.replace('design = "cylindrical-A"', 'design = "cylindrical-A"'))
+    refused(quick("optimize", "--config", study), "1e+301 designs", "larger steps")
+
+
 def test_a_usage_error_is_one_line_naming_the_option():
     refused(run("simulate", "--depth", "abc"), "--depth")
     refused(run("simulate", "--bogus"), "--bogus")
@@ -176,7 +220,8 @@ def test_a_usage_error_is_one_line_naming_the_option():
 def test_help_reads_as_text():
     import os
 
-    for words in (["live"], ["sysid", "fit"], ["simulate"], ["bench", "magnetics"], ["recording", "repair"]):
+    for words in (["live"], ["sysid", "fit"], ["simulate"], ["bench", "magnetics"], ["recording", "repair"],
+                  ["reproduce"], ["convert"]):
         text = runner.invoke(app, [*words, "--help"], env={**os.environ, "COLUMNS": "200"}).output
         assert "<bool>" not in text and "list[" not in text and "<str>" not in text, text
     live = runner.invoke(app, ["live", "--help"], env={**os.environ, "COLUMNS": "200"}).output

@@ -26,7 +26,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 from typer._click.exceptions import NoArgsIsHelpError, UsageError
-from typer.core import TyperGroup
+from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress, RichProgress
@@ -224,7 +224,13 @@ class Toolkit(TyperGroup):
         for _, command in commands_of(self):
             command.help = _paragraphs(command.help)
             for param in command.params:
-                if param.metavar is None and hasattr(param, "type_descriptor"):
+                if param.metavar is not None or not hasattr(param, "type_descriptor"):
+                    continue
+                if isinstance(param, TyperArgument):
+                    # an argument keeps its name in the usage line; its type column reads as an option's does
+                    param.display_type_rich = functools.partial(lambda metavar, ctx: metavar, _metavar(param))
+                    param.metavar = param.name.upper()
+                else:
                     param.metavar = _metavar(param)
             command.get_help_option = _flag_help(command.get_help_option)
             if command.callback is not None and command is not self:

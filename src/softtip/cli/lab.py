@@ -23,7 +23,8 @@ def lab_run(
     protocol: str = typer.Argument(..., help=f"A protocol file, or a shipped one: {', '.join(names('protocol'))}."),
     output: Path = typer.Option(None, "--output", "-o", help="Dataset file (.parquet); default PROTOCOL.parquet."),
     seed: int = typer.Option(None, "--seed", help="Override the protocol's seed."),
-    force: bool = FORCE,
+    force: bool = typer.Option(False, "--force", help="Replace an output file that exists, and run a protocol "
+                                                      "whose estimated work is above its bench's limit."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one experiment protocol on the twin and write its dataset (Parquet + metadata)."""
@@ -34,7 +35,7 @@ def lab_run(
     loaded = load_protocol(protocol).changed(seed=seed)
     target = check_output(output or Path(f"{loaded.name}.parquet"), "--output",
                           [protocol] if Path(protocol).is_file() else [], force=force)
-    dataset, timings = run_protocol(loaded, progress_for(json_output))
+    dataset, timings = run_protocol(loaded, progress_for(json_output), large=force)
     path = dataset.write(target)
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
                "trials": len(dataset.trials), "samples": int(len(dataset.groups)), "channels": list(dataset.channels),

@@ -29,6 +29,21 @@ ProtocolName = Text  # the registry knows the names: protocol_from_dict refuses 
 
 
 @dataclass(frozen=True)
+class Size:
+    """An estimate of the work a protocol asks for, made from its parameters before any work: ``amount``
+    of ``what`` (``formula`` says how it was counted), refused above ``limit`` unless asked for."""
+
+    amount: float
+    limit: float
+    what: str
+    formula: str
+
+
+class ProtocolTooLarge(ValueError):
+    """A protocol whose estimated work is above its bench's limit."""
+
+
+@dataclass(frozen=True)
 class BenchKind:
     """A bench protocols run on.
 
@@ -40,7 +55,8 @@ class BenchKind:
     ``setup(protocol, progress, timings)``: the bench for one run, what the dataset records of it
     beyond the protocol's tables, and the description of the trials' stage (building what it needs is
     timed into ``timings``); ``realism_sources`` and ``viscoelastic_sources``: where each default of
-    those tables comes from (the reports print them).
+    those tables comes from (the reports print them); ``size(protocol, parameters)``: an estimate of
+    the work a protocol's trials ask for (:class:`Size`), checked before the bench is set up.
     """
 
     protocol_file: type
@@ -51,6 +67,7 @@ class BenchKind:
     realism_sources: Mapping[str, str]
     viscoelastic: type
     viscoelastic_sources: Mapping[str, str]
+    size: Callable[[str, Any], Size] | None = None
 
     def defaults(self, protocol: str) -> dict[str, Any]:
         """Protocol ``protocol``'s parameters as its schema gives them."""
@@ -114,8 +131,22 @@ def load_protocol(path: str | Path) -> Protocol:
     return protocol_from_dict(read_toml(path, "protocol"), str(path), path.parent)
 
 
-def run_protocol(protocol: Protocol, progress: Progress = SILENT) -> tuple[Dataset, dict]:
-    """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage."""
+def check_size(protocol: Protocol) -> None:
+    """Refuses a protocol whose estimated work (its bench's :class:`Size`) is above the bench's limit."""
+    if protocol.bench.size is None:
+        return
+    size = protocol.bench.size(protocol.name, protocol.parameters)
+    if not size.amount <= size.limit:
+        raise ProtocolTooLarge(f"protocol {protocol.name}: its [parameters] ask for some {size.amount:.3g} "
+                               f"{size.what} ({size.formula}), above the limit of {size.limit:.3g}; "
+                               "--force runs it all the same")
+
+
+def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool = False) -> tuple[Dataset, dict]:
+    """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage.
+    A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``."""
+    if not large:
+        check_size(protocol)
     timings = {}
     bench, recorded, stage = protocol.bench.setup(protocol, progress, timings)
     start = time.perf_counter()

@@ -29,6 +29,8 @@ results.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -101,10 +103,7 @@ class StudyConfig:
 
     @property
     def candidate_count(self) -> int:
-        count = 1
-        for parameter in self.parameters:
-            count *= len(parameter.values)
-        return count
+        return math.prod(parameter.count for parameter in self.parameters)
 
 
 def load_study(path: str | Path) -> StudyConfig:
@@ -126,7 +125,9 @@ def study_from_dict(data: dict[str, Any], source: str = "study", base_dir: Path 
                          constraints=constraints, objective=objective, objective_settings=dict(study.objective),
                          method=study.method, search=study.search, output=Path(study.output or f"optimize-{name}"))
     if config.candidate_count > MAX_CANDIDATES:
-        raise StudyError(f"{where(source, 'parameters')}: the grid has {config.candidate_count:,} designs "
+        count = config.candidate_count
+        shown = f"{count:,}" if count < 10 ** 12 else f"{float(count):.3g}"
+        raise StudyError(f"{where(source, 'parameters')}: the grid has {shown} designs "
                          f"(at most {MAX_CANDIDATES:,}; use larger steps)")
     return config
 

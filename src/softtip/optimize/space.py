@@ -32,9 +32,13 @@ class ParameterRange:
     integer: bool = False  # the design stores it as an integer (e.g. magnets.count)
 
     @property
+    def count(self) -> int:
+        """How many values the range holds, counted without making them."""
+        return round((self.maximum - self.minimum) / self.step) + 1 if self.maximum > self.minimum else 1
+
+    @property
     def values(self) -> tuple[float, ...]:
-        count = round((self.maximum - self.minimum) / self.step) + 1 if self.maximum > self.minimum else 1
-        values = (round(self.minimum + k * self.step, _DIGITS) for k in range(count))
+        values = (round(self.minimum + k * self.step, _DIGITS) for k in range(self.count))
         return tuple(int(v) for v in values) if self.integer else tuple(values)
 
     def normalise(self, values: np.ndarray) -> np.ndarray:

@@ -36,7 +36,7 @@ from softtip._core.config import (Flag, NonNegativeNumber, Numbers, PositiveNumb
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.design.model import Design, load_design
-from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.lab.protocols import BenchKind, Protocol, ProtocolName, Size
 from softtip.published import published_table
 from softtip.systems.hall_fingertip import experiments
 from softtip.systems.hall_fingertip.realism import REALISM_SOURCES, Realism
@@ -163,8 +163,29 @@ def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[exper
             f"{protocol.name}: trials on {protocol.design.name}")
 
 
+# a dataset of 20 million frames: some 2 GB in memory, and hours of the twin's readings
+FRAMES_LIMIT = 2e7
+_TRAVELS = ("depth_mm", "shear_mm", "travel_mm", "displacement_mm")  # the distances a trial moves at its speed
+
+
+def _size(protocol: str, p: Any) -> Size:
+    """An upper estimate of a fingertip protocol's frames, from its parameters alone: every list of
+    conditions crossed with every other, each condition run as often as all the trial counts together,
+    each trial as long as the protocol's pauses plus its travels at its slowest speed."""
+    table = dataclasses.asdict(p)
+    conditions = np.prod([len(value) for value in table.values() if isinstance(value, list)])
+    trials = sum(value for key, value in table.items() if key.endswith("trials"))
+    speeds = [min(np.atleast_1d(value)) for key, value in table.items() if "speed" in key]
+    travel = sum(value for key, value in table.items() if key.endswith(_TRAVELS))
+    pauses = sum(value for key, value in table.items() if key.endswith("_s") and "speed" not in key)
+    trial_s = pauses + (travel / min(speeds) if speeds and min(speeds) > 0 else 0.0)
+    return Size(float(conditions) * trials * trial_s * p.rate_hz, FRAMES_LIMIT, "frames",
+                "conditions x trials x (pauses + travels / slowest speed) x rate_hz")
+
+
 BENCH = BenchKind(
     protocol_file=_FingertipProtocolFile, parameters=PARAMETER_SCHEMAS, runners=RUNNERS, device=_design, setup=_bench,
     realism_sources=REALISM_SOURCES, viscoelastic=Viscoelastic, viscoelastic_sources={
         "hysteresis_percent": f"published: {_HYSTERESIS.source} ({_HYSTERESIS.system})",
-        **{key: "the calibration cycle: the article's hysteresis test" for key in ("depth_mm", "speed_mm_s", "rest_s")}})
+        **{key: "the calibration cycle: the article's hysteresis test" for key in ("depth_mm", "speed_mm_s", "rest_s")}},
+    size=_size)
