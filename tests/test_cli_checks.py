@@ -158,6 +158,23 @@ def test_live_record_refuses_an_existing_file_before_the_scenario(tmp_path):
     assert record.read_bytes() == b"an afternoon's recording"
 
 
+@pytest.mark.parametrize("args, words", [
+    (("--scenario", "push", "--chips", "3"), ("--chips = 3", "push scenario streams 1")),
+    (("--scenario", "insertion", "--chips", "1"), ("--chips = 1", "insertion scenario streams 4")),
+    (("--scenario", "wearable", "--rate", "50"), ("--rate = 50", "wearable scenario streams at 10 Hz")),
+])
+def test_options_a_scenario_contradicts_are_refused_before_it_is_computed(args, words, monkeypatch):
+    import softtip.systems.hall_fingertip.live as fingertip_live
+    import softtip.systems.wearable.live as wearable_live
+
+    def computed(*args, **kwargs):
+        raise AssertionError("the scenario was computed before its options were checked")
+
+    monkeypatch.setattr(fingertip_live, "cached_scenario", computed)
+    monkeypatch.setattr(wearable_live, "wearable_live_setup", computed)
+    refused(run("live", "--emulate", *args), *words)
+
+
 def test_study_outputs_given_as_a_file_are_refused_before_the_study(tmp_path):
     afile = tmp_path / "report.txt"
     afile.write_text("mine")

@@ -119,7 +119,8 @@ PACKAGE = {
             return StudyOutcome({"stiffness_N_per_mm": stiffness}, [table], [],
                                 Headline.of(table, "spring", "stiffness", "stiffness"))
 
-        def scenario(progress):
+        def scenario(progress, check):
+            check(1, 20.0)
             readings = np.zeros((20, 1, 3))
             readings[:, 0, 2] = np.linspace(0, 1, 20)
             return LiveScenario("a spring pressed once", PacedSource(readings, 20.0, reading=DISPLACEMENT),

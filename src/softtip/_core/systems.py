@@ -51,8 +51,9 @@ class System:
 
     ``benches``: bench kind -> ``"module:attribute"`` of its :class:`softtip.lab.protocols.BenchKind`;
     ``protocols``: protocol name -> the bench kind it runs on (its file is ``protocols/NAME.toml``);
-    ``scenarios``: ``softtip live --emulate --scenario NAME`` -> ``"module:function"`` returning a
-    :class:`softtip.realtime.scenario.LiveScenario`; ``demos``: ``softtip demo NAME`` -> a command
+    ``scenarios``: ``softtip live --emulate --scenario NAME`` -> ``"module:function"``,
+    ``function(progress, check)`` returning a :class:`softtip.realtime.scenario.LiveScenario` (see
+    that module for ``check``); ``demos``: ``softtip demo NAME`` -> a command
     function (``main_demo``: the one plain ``softtip demo`` runs, if the system has it);
     ``bench_commands``: ``softtip bench NAME``; ``commands``: command groups of its own (a Typer app).
     """

@@ -66,11 +66,15 @@ def live(
     if emulate:
         if scenario not in SCENARIOS:
             fail(f"--scenario = {scenario!r}: expected one of {', '.join(SCENARIOS)}")
-        stream = load(owner("scenario", scenario).scenarios[scenario])(progress_for(json_output))
-        if chips not in (None, stream.chips):
-            fail(f"--chips = {chips}: the {scenario} scenario streams {stream.chips}")
-        if stream.rate_hz is not None and rate not in (None, stream.rate_hz):
-            fail(f"--rate = {rate}: the {scenario} scenario streams at {stream.rate_hz:g} Hz")
+
+        def check_stream(scenario_chips: int, scenario_rate_hz: float | None) -> None:
+            if chips not in (None, scenario_chips):
+                fail(f"--chips = {chips}: the {scenario} scenario streams {scenario_chips}")
+            if scenario_rate_hz is not None and rate not in (None, scenario_rate_hz):
+                fail(f"--rate = {rate}: the {scenario} scenario streams at {scenario_rate_hz:g} Hz")
+
+        stream = load(owner("scenario", scenario).scenarios[scenario])(progress_for(json_output), check_stream)
+        check_stream(stream.chips, stream.rate_hz)  # what it streams, whether or not it said so first
         source, chips, settings, emulator_source = stream.source, stream.chips, stream.settings, stream.emulator_source
         model, frames = model or list(stream.models), baseline_frames or stream.baseline_frames
     first_frame = []

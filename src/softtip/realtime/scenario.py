@@ -1,10 +1,12 @@
 """Live scenarios: what ``softtip live --emulate --scenario NAME`` streams, as a registered system
 describes it - an emulated sensor and the models that come with it.
 
-A system's scenario function, ``scenario(progress) -> LiveScenario``, computes the readings from its
-twin and trains or identifies its models once, keeping both in the cache (keyed by the protocol, the
-design and the code: :func:`softtip.lab.protocols.trained_model_path`), so a warm start streams its
-first frame within seconds.
+A system's scenario function, ``scenario(progress, check) -> LiveScenario``, computes the readings
+from its twin and trains or identifies its models once, keeping both in the cache (keyed by the
+protocol, the design and the code: :func:`softtip.lab.protocols.trained_model_path`), so a warm start
+streams its first frame within seconds. It calls ``check(chips, rate_hz)`` (a :data:`StreamCheck`)
+with the stream's chips and own rate (None: the command's) as soon as it knows them, before any of
+that work, so a command whose options disagree with the scenario stops at once.
 """
 
 from __future__ import annotations
@@ -17,6 +19,12 @@ import numpy as np
 
 from softtip.hardware import PacedSource
 from softtip.sensors import MLX90393Settings
+
+StreamCheck = Callable[[int, float | None], None]
+
+
+def accept_any_stream(chips: int, rate_hz: float | None) -> None:
+    """The :data:`StreamCheck` of a caller that takes the scenario as it comes."""
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from softtip._core.archive import ModelFileError, read_archive, write_archive
 from softtip._core.progress import SILENT, Progress
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import trained_model_path
-from softtip.realtime.scenario import LiveScenario
+from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stream
 from softtip.systems.hall_fingertip.scenarios import TwinScenario, insertion_scenario as compute_insertion
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
@@ -31,12 +31,13 @@ def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress =
     return scenario
 
 
-def push_scenario(progress: Progress = SILENT) -> LiveScenario:
+def push_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
     """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop, with the
     3-axis force network trained on the force-calibration protocol."""
     from softtip.systems.hall_fingertip.demo import calibrate_force_model
 
     protocol = load_protocol("force3")
+    check(len(protocol.design.sensor_positions), None)
     scenario = cached_scenario(protocol, "push", pushing_scenario, progress)
     with progress.task("the force network trained on the twin (kept in the cache)"):
         model = calibrate_force_model(protocol.seed, progress, reuse=True)[0]
@@ -45,12 +46,13 @@ def push_scenario(progress: Progress = SILENT) -> LiveScenario:
                         settings=protocol.design.sensor_settings)
 
 
-def insertion_scenario(progress: Progress = SILENT) -> LiveScenario:
+def insertion_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
     """Two fingertips holding the inverter lid, lowered into its body once per case, with the
     contact-state and force networks trained on the inverter protocol."""
     from softtip.systems.hall_fingertip.insertion import trained_model_files
 
     protocol = load_protocol("inverter")
+    check(2 * len(protocol.design.sensor_positions), None)  # both fingertips' chips
     scenario = cached_scenario(protocol, "insertion", compute_insertion, progress)
     with progress.task("the contact-state and force networks trained on the twin (kept in the cache)"):
         models = tuple(trained_model_files(protocol, progress))

@@ -19,7 +19,7 @@ from softtip.realtime.session import run_live
 from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.sysid import Recording, TransferFunctionModel
-from softtip.realtime.scenario import LiveScenario
+from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stream
 from softtip.sysid import load_model as load_system
 from softtip.sysid import save_model as save_system
 from softtip.sysid.metrics import score_outputs
@@ -94,9 +94,10 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     return stream
 
 
-def wearable_scenario(progress: Progress = SILENT) -> LiveScenario:
+def wearable_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
     """The emulated side chip streaming the seating after the calibration at its 10 Hz, with the model
     identified on the calibration seatings; the baseline is the first frame, as the protocol tares."""
+    check(1, load_protocol("wearable").parameters.rate_hz)  # the one side chip, at the protocol's rate
     stream = wearable_live_setup(progress=progress)
     return LiveScenario("the side chip on the seating after the calibration", stream.source(), (stream.model,),
                         chips=1, rate_hz=stream.rate_hz, baseline_frames=1)
