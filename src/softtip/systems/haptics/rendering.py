@@ -54,12 +54,17 @@ def _features(wrenches, name: str) -> np.ndarray:
 
 
 def _first_duplicate(rows: np.ndarray) -> tuple[int, int] | None:
-    _, first, inverse, counts = np.unique(rows, axis=0, return_index=True, return_inverse=True, return_counts=True)
-    repeated = np.flatnonzero(counts[inverse.ravel()] > 1)
-    if not len(repeated):
+    """The earliest row that repeats an earlier one, as (the earlier one, it); None if every row differs."""
+    order = np.lexsort(rows.T[::-1])  # stable: equal rows stay in their order
+    ordered = rows[order]
+    same = np.all(ordered[1:] == ordered[:-1], axis=1)
+    if not same.any():
         return None
-    later = next(i for i in repeated if first[inverse.ravel()[i]] != i)
-    return int(first[inverse.ravel()[later]]), int(later)
+    starts = np.concatenate([[True], ~same])
+    group_start = np.flatnonzero(starts)[np.cumsum(starts) - 1]  # per sorted row, where its group begins
+    repeats = np.flatnonzero(~starts)
+    later = repeats[np.argmin(order[repeats])]
+    return int(order[group_start[later]]), int(order[later])
 
 
 @dataclass(frozen=True)
