@@ -41,8 +41,9 @@ def main() -> None:
         fe = curve(radius)
         interpolated = layer_thickness(radius)
         law = bonded_layer_force(DEPTHS, radius, modulus, interpolated)
+        gap = (interpolated / fe.calibrated_thickness - 1) * 100
         print(f"held out R = {radius * 1e3:.1f} mm: FE's own thickness {fe.calibrated_thickness * 1e3:.3f} mm, "
-              f"interpolated {interpolated * 1e3:.3f} mm ({(interpolated / fe.calibrated_thickness - 1) * 100:+.2f} %); "
+              f"interpolated {interpolated * 1e3:.3f} mm ({gap:+.2f} %); "
               f"law/FE with it {np.round(law / fe.fe_forces, 3).tolist()}")
     fe = curve(BELOW_RANGE)
     print(f"below the range, R = {BELOW_RANGE * 1e3:.1f} mm: the law at its best fit is "

@@ -20,7 +20,8 @@ from softtip.systems.haptics.statistics import wilcoxon
 from softtip.systems.haptics.study import METHODS
 
 COARSE = {"trials": 6, "fs_levels": 7, "user_levels": 7, "fingertips": ["FS cast (7.5 mm)", "human 3 (10 mm)"],
-          "curve_n_neighbours": [1, 8], "curve_weighting_powers": [], "curve_fs_levels": [5, 7], "curve_user_levels": [],
+          "curve_n_neighbours": [1, 8], "curve_weighting_powers": [], "curve_fs_levels": [5, 7],
+          "curve_user_levels": [],
           "variations": ["as published", "human pads half as stiff"]}
 
 

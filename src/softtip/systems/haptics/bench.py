@@ -10,9 +10,9 @@ trial; each row holds what the method commanded and what the sensor under the te
 Channels: ``rendered_f{x|y|z}_N`` and ``rendered_t{x|y|z}_Nm`` (the test fingertip's 6-axis
 sensor). Labels: ``fingertip``, ``method``, ``motor{1|2|3}_rad`` (commanded), ``error_N``
 (|F_target − F_rendered| over the three force components), ``flagged`` (the target lay outside the
-table, or a sensor saturated). Conditions: ``target_f{x|y|z}_N``, ``target_t{x|y|z}_Nm`` (the FS's
-reading of the target). The collection times and each fingertip's personalisation figures are in
-the metadata's ``sensor_settings``.
+table, or the sensor under the test fingertip saturated). Conditions: ``target_f{x|y|z}_N``,
+``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
+personalisation figures are in the metadata's ``sensor_settings``.
 
 The ``curve_*`` and ``variations`` parameters are not the dataset's: the report
 (:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).

@@ -111,7 +111,8 @@ def layer_thickness(radius: float) -> float:
 def cast(name: str, radius: float) -> Fingertip:
     """A VytaFlex 30 cast of ``radius`` (m) over the FS's core, with the FE-calibrated contact law
     (:func:`layer_thickness`)."""
-    law = PlateContactLaw(law="bonded-layer", youngs_modulus=VYTAFLEX_30_MODULUS, layer_thickness=layer_thickness(radius))
+    law = PlateContactLaw(law="bonded-layer", youngs_modulus=VYTAFLEX_30_MODULUS,
+                          layer_thickness=layer_thickness(radius))
     return Fingertip(name=name, radius=radius, contact=law)
 
 

@@ -158,7 +158,8 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
                     servos.send(frames, frame_command(device, commands[0]))
                     frames += 1
             response = servos.frame(len(wanted)) or unknown
-            errors[first:first + len(wanted)] = np.linalg.norm(response.wrench[:len(wanted), :3] - wanted[:, :3], axis=1)
+            rendered = response.wrench[:len(wanted), :3]
+            errors[first:first + len(wanted)] = np.linalg.norm(rendered - wanted[:, :3], axis=1)
             for k in range(len(wanted)):
                 seq = first + k
                 frame = FrameResult(

@@ -258,8 +258,8 @@ def _error_table(found: RenderedTargets) -> Table:
     return Table("Rendering error per fingertip and method", "fingertip · method", rows,
                  ["median error (N)", "mean error (N)", "median rendered |F| (N)", "flagged targets"], cells,
                  digits=2, caption=("The publication reports medians and means per fingertip with box plots. Flagged: "
-                                    "the target lay outside the table's range or a sensor saturated (rendered all the "
-                                    "same, never silently)."))
+                                    "the target lay outside the table's range or the sensor under the test fingertip "
+                                    "saturated (rendered all the same, never silently)."))
 
 
 def _statistics_table(statistics: dict, pooled) -> Table:

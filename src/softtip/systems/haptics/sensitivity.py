@@ -154,7 +154,8 @@ class VariationOutcome:
         if self.median_error is None:
             return found
         return found | {
-            "median_error_N": dict(zip(METHODS, self.median_error.tolist(), strict=True)), "ranking": list(self.ranking),
+            "median_error_N": dict(zip(METHODS, self.median_error.tolist(), strict=True)),
+            "ranking": list(self.ranking),
             "pooled_A_vs_B": {"W_signed_rank_sum": self.pooled.signed_rank_sum, "W_scipy_min": self.pooled.w_scipy,
                               "p_bonferroni": self.pooled.p_bonferroni}}
 

@@ -78,7 +78,8 @@ class StudySettings:
 class FingertipOutcome:
     """One test fingertip: per method (rows in :data:`METHODS` order) and target, the error (N), the
     rendered force's magnitude (N), and whether the result is flagged (a target outside the table,
-    a pose out of reach, a sensor saturated); Friedman and the post hoc tests over the published three."""
+    a pose out of reach, the sensor under the fingertip saturated); Friedman and the post hoc tests
+    over the published three."""
 
     fingertip: Fingertip
     errors: np.ndarray
@@ -204,7 +205,8 @@ def fs_table(device: DeviceSpec, levels: int, collection: CollectionSettings, se
     return collected.unsaturated()
 
 
-def record_targets(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings, seed: int) -> np.ndarray:
+def record_targets(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings,
+                   seed: int) -> np.ndarray:
     """The target sensations: random configurations over the servos' range, driven in batches until
     ``settings.targets`` of them touch the FS (at most ``settings.target_draws`` tried), as read by the FS."""
     rng = _stream(seed, _TARGET_STREAM)
