@@ -1,9 +1,13 @@
-"""S3's commands: ``softtip haptics render`` (recorded to MCAP and read back) and ``softtip bench haptics``,
-and their refusals of bad input."""
+"""S3's commands: ``softtip haptics render`` (recorded to MCAP and read back; driving a serial device,
+read on the other end of a pty pair) and ``softtip bench haptics``, and their refusals of bad input."""
 
 from __future__ import annotations
 
 import json
+import os
+import select
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -15,8 +19,10 @@ from softtip.realtime.recording.reader import read_recording
 from softtip.realtime.sinks.ros2 import ros2_available
 from softtip.systems.haptics.commands import app as haptics_app
 from softtip.systems.haptics.commands import bench_haptics
-from softtip.systems.haptics.device import DEVICE_FILE, load_device, servo_angles
-from softtip.systems.haptics.live import LOOP_RATE_HZ, TARGET_NAMES
+from softtip.systems.haptics.device import DEVICE_FILE, load_device, quantised, servo_angles
+from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
+from softtip.systems.haptics.live import LOOP_RATE_HZ, TARGET_NAMES, fs_renderer, render_stream, synthetic_sensation
+from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice
 
 # the CLI as softtip mounts them: the command group, and the bench command
 cli = typer.Typer()
@@ -135,3 +141,81 @@ def test_a_sensation_beyond_the_table_is_flagged_every_tick(tmp_path):
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
     assert summary["outside_table"] == summary["ticks"] == 50
+
+
+class LineReader:
+    """The device end of a pty pair: collects what the host writes, line by line, until the release."""
+
+    def __init__(self):
+        self.master, slave = os.openpty()
+        self.port = os.ttyname(slave)
+        self._slave = slave  # held open so the pty lives while the host opens and closes its end
+        self.text = ""
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self):
+        while "R\n" not in self.text.replace("\r", ""):
+            ready, _, _ = select.select([self.master], [], [], 10.0)
+            if not ready:
+                return
+            self.text += os.read(self.master, 4096).decode("ascii")
+
+    def lines(self) -> list[list[str]]:
+        self.thread.join(10.0)
+        os.close(self.master)
+        os.close(self._slave)
+        return [line.split() for line in self.text.replace("\r", "").splitlines()]
+
+
+def test_a_serial_device_takes_the_simulated_devices_commands():
+    device = load_device()
+    rng = np.random.default_rng(3)
+    renderer = fs_renderer(device, 7, rng)
+    wanted = synthetic_sensation(device, 0.41, rng)
+    simulated = SimulatedDevice(device, TEST_FINGERTIPS[1], LOOP_RATE_HZ, None)
+    modelled = render_stream(device, renderer, simulated, wanted, [], paced=False)
+    reader = LineReader()
+    real = render_stream(device, renderer, SerialDevice(reader.port, device), wanted, [], paced=False)
+    lines = reader.lines()
+    # the hello, one command per 50 Hz frame of the 410 ticks (21 frames, the last a short one), the release
+    assert lines[0] == ["H", "1", "50"] and lines[-1] == ["R"]
+    commands = lines[1:-1]
+    assert [c[0] for c in commands] == ["F"] * 21 and [int(c[1]) for c in commands] == list(range(21))
+    sent = np.radians(np.array([[float(a) for a in c[2:]] for c in commands]))
+    assert np.allclose(sent, np.array(simulated.sent), atol=np.radians(0.0005))  # three decimals of a degree
+    # each is the renderer's command at its frame's first tick, resolved to the servos' 0.54 degree dead band
+    first_ticks = np.array([renderer.render_one(w)[0] for w in wanted[::20]])
+    assert np.allclose(np.array(simulated.sent), quantised(device, first_ticks))
+    assert np.allclose(np.degrees(sent) / 0.54, np.round(np.degrees(sent) / 0.54), atol=1e-5)
+    assert (modelled.frames, real.frames) == (21, 21) and real.median_error_N is None
+    assert modelled.median_error_N is not None and modelled.outside == real.outside
+
+
+def test_render_drives_a_serial_device_from_the_command_line(tmp_path):
+    reader = LineReader()
+    path = tmp_path / "real.mcap"
+    result = run("haptics", "render", "--duration", "0.1", "--fs-levels", "7", "--port", reader.port, "--baud",
+                 "19200", "--record", str(path), "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    lines = reader.lines()
+    assert summary["servo_frames"] == 5 == len(lines) - 2 and summary["device"] == reader.port
+    assert summary["median_error_N"] is None  # nothing comes back from the device
+    values = np.array([m.data for m in read_recording(path).topics["/fingertip/estimates"].decoded()])
+    assert np.all(np.isfinite(values[:, :3])) and np.all(np.isnan(values[:, 3:]))  # commands; no angles, no wrench
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (("--port", "/dev/no-such-serial-port"), "--port = '/dev/no-such-serial-port': cannot open"),
+    (("--port", ""), "--port = '': expected a serial device path"),
+    (("--port", "loop://", "--baud", "9600"), "--baud = 9600: expected an integer baud rate from 17000"),
+    (("--baud", "0"), "--baud = 0"),
+])
+def test_render_refuses_a_port_it_cannot_drive_in_one_line(args, words, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    started = time.perf_counter()
+    result = run("haptics", "render", *args)
+    assert time.perf_counter() - started < 5  # before the FS table is collected
+    assert result.exit_code == 2, result.output
+    assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1

@@ -43,9 +43,10 @@ def test_renderer_is_the_brute_force_weighted_average_of_the_nearest_eight():
     assert np.array_equal(renderer.predict(shuffled), renderer.predict(wanted))
 
 
-@pytest.mark.parametrize("n_neighbours", [1, 8])
-def test_one_rendering_for_the_loop_is_the_batch_rendering(n_neighbours):
-    renderer = NearestNeighbourRenderer(n_neighbours).fit(WRENCHES, MOTOR)
+@pytest.mark.parametrize("n_neighbours", [1, 2, 8])
+@pytest.mark.parametrize("power", [0.0, 1.0, 2.0, 0.5])
+def test_one_rendering_for_the_loop_is_the_batch_rendering(n_neighbours, power):
+    renderer = NearestNeighbourRenderer(n_neighbours, weighting_power=power).fit(WRENCHES, MOTOR)
     wanted = np.vstack([RNG.normal(size=(20, 6)), WRENCHES[3], [40.0, 0, 0, 0, 0, 0]])
     batch = renderer.render(wanted)
     for row, expected, outside in zip(wanted, batch.motor_inputs, batch.outside, strict=True):
@@ -53,6 +54,10 @@ def test_one_rendering_for_the_loop_is_the_batch_rendering(n_neighbours):
         assert np.allclose(motor, expected, rtol=1e-12) and flagged == outside
     with pytest.raises(ValueError, match="finite"):
         renderer.render_one([np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match="finite"):
+        renderer.render_one([0.0, -np.inf, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        renderer.render_one([1.0, 2.0])
 
 
 def test_an_exact_match_renders_its_own_entry():

@@ -19,7 +19,10 @@ from softtip.systems.haptics.report import RenderedTargets, haptics
 from softtip.systems.haptics.statistics import wilcoxon
 from softtip.systems.haptics.study import METHODS
 
-COARSE = {"trials": 6, "fs_levels": 7, "user_levels": 7, "fingertips": ["FS cast (7.5 mm)", "human 3 (10 mm)"]}
+COARSE = {"trials": 6, "fs_levels": 7, "user_levels": 7, "fingertips": ["FS cast (7.5 mm)", "human 3 (10 mm)"],
+          "curve_n_neighbours": [1, 8], "curve_weighting_powers": [], "curve_fs_levels": [5, 7],
+          "curve_user_levels": [],
+          "variations": ["as published", "human pads half as stiff"]}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -85,9 +88,45 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     reference = wilcoxon(found.errors[:, 1].ravel(), found.errors[:, 2].ravel(), 7)
     assert outcome.results["pooled_A_vs_B"]["p_bonferroni"] == pytest.approx(reference.p_bonferroni)
     assert any(c.verdict for c in directions.comparisons())
-    assert len(outcome.figures) == 1 and outcome.figures[0].png.startswith(b"\x89PNG")
+    assert len(outcome.figures) == 3 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     collection = {c.row: c for table in outcome.tables for c in table.comparisons() if c.column == "entries"}
     assert collection["FS table (13³)"].value == 2197 and collection["user table (7³)"].value == 343
+    # counts print as counts, beside the published ones
+    tables = {table.title: table for table in outcome.tables}
+    assert "<td class='num within' title='published 2197; difference +0'>2197 " in tables[
+        "Table collection: entries and the time a real collection takes"].html()
+    errors_html = tables["Rendering error per fingertip and method"].html()
+    flagged = [int(outcome.results["fingertips"][name]["flagged"][m]) for name in found.fingertips
+               for m in range(len(METHODS))]
+    assert all(f"<td class='num'>{count}</td></tr>" in errors_html for count in flagged)
+
+
+def test_the_sweeps_rerun_the_datasets_study(coarse_protocol, coarse_dataset):
+    outcome = haptics(coarse_protocol, 3, SILENT)
+    found = RenderedTargets.of(coarse_dataset)
+    pooled = np.median(found.errors.transpose(1, 0, 2).reshape(len(METHODS), -1), axis=1)
+    curves = outcome.results["error_curves"]
+    assert list(curves) == ["n_neighbours", "fs_levels"] and curves["n_neighbours"]["values"] == [1, 8]
+    # at the protocol's own settings (n = 8, 7³ FS table) the curves are the dataset's errors: same noise draws
+    for setting, own in (("n_neighbours", 1), ("fs_levels", 1)):
+        assert [curves[setting]["median_error_N"][m][own] for m in METHODS] == pytest.approx(pooled)
+    as_published, softer = outcome.results["sensitivity"]
+    human_3 = np.median(found.errors[found.fingertips.index("human 3 (10 mm)")], axis=1)
+    assert [as_published["median_error_N"][m] for m in METHODS] == pytest.approx(human_3)
+    # a softer pad presses less for the same indentation: the geometric method, blind to stiffness, errs more
+    geometric = METHODS[2]
+    assert softer["median_error_N"][geometric] > as_published["median_error_N"][geometric]
+    titles = [table.title for table in outcome.tables]
+    assert any(title.startswith("Rendering error against n") for title in titles)
+    assert any(title.startswith("How the methods' ranking depends on the finger") for title in titles)
+
+
+def test_no_sweep_without_its_settings(coarse_protocol):
+    bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"])
+    outcome = haptics(bare, 3, SILENT)
+    assert "error_curves" not in outcome.results and "sensitivity" not in outcome.results
+    assert len(outcome.figures) == 1
+    assert any(note.startswith("No sensitivity study") for note in outcome.notes)
 
 
 def test_bad_protocols_are_refused_in_one_line(tmp_path):
@@ -99,6 +138,10 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"hold_s": float("nan")}}, "hold_s"),
              ({"parameters": {"weighting_power": -1.0}}, "weighting_power"),
              ({"parameters": {"target_draws": 5}}, "target_draws"),
+             ({"parameters": {"curve_n_neighbours": [0, 8]}}, "curve_n_neighbours"),
+             ({"parameters": {"curve_fs_levels": [7, 7]}}, "curve_fs_levels = .*each value once"),
+             ({"parameters": {"curve_weighting_powers": [5.0]}}, "curve_weighting_powers"),
+             ({"parameters": {"variations": ["thumb"]}}, "variations"),
              ({"device": "missing.toml"}, "missing.toml")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:
@@ -117,7 +160,7 @@ def test_reproduce_quick_renders_fewer_targets_and_writes_the_report(tmp_path):
     shipped = (SYSTEM.files() / "protocols" / "haptics.toml").read_text()
     coarse = shipped.replace("fs_levels = 13", "fs_levels = 7").replace(
         'fingertips = ["small cast (6.5 mm)", "FS cast (7.5 mm)", "large cast (8.5 mm)", "human 1 (6.5 mm)",\n'
-        '              "human 2 (8 mm)", "human 3 (10 mm)"]', 'fingertips = ["FS cast (7.5 mm)", "large cast (8.5 mm)"]')
+        '              "human 2 (8 mm)", "human 3 (10 mm)"]', 'fingertips = ["FS cast (7.5 mm)", "human 2 (8 mm)"]')
     assert coarse.count("fs_levels = 7") == 1 and "human 3" not in coarse
     path = tmp_path / "coarse.toml"
     path.write_text(coarse)
@@ -125,6 +168,10 @@ def test_reproduce_quick_renders_fewer_targets_and_writes_the_report(tmp_path):
     assert report.outcome.results["targets"] == 2  # --quick cuts the targets (the protocol's trials) to two
     where = report.protocol_table.cells[("parameters.trials", "where from")]
     assert where.startswith("--quick")
+    # and coarse sweeps: the study's quick settings
+    assert report.protocol_table.cells[("parameters.curve_fs_levels", "where from")].startswith("--quick")
+    assert report.outcome.results["error_curves"]["fs_levels"]["values"] == SYSTEM.studies[0].quick["curve_fs_levels"]
+    assert [v["variation"] for v in report.outcome.results["sensitivity"]] == SYSTEM.studies[0].quick["variations"]
     written = report.write(tmp_path)
     assert written.is_file() and (tmp_path / "haptics.json").is_file()
     # no largest fingertip in this run: the headline is the pooled comparison of the two personalisations

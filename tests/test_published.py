@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from softtip._core.config import ConfigError
@@ -15,6 +16,7 @@ from softtip._core.systems import studies
 
 def test_cells_read_as_printed_numbers_bounds_ranges_and_blanks():
     assert parse_value(1.584, 3, "t") .text == "1.584"
+    assert parse_value(2197, 1, "t").text == "2197" and parse_value(10.0, 1, "t").text == "10.0"  # a count as one
     bound = parse_value("< 0.5", 2, "t")
     assert (bound.low, bound.high, bound.centre) == (-math.inf, 0.5, None)
     at_least = parse_value(">= 0.9", 2, "t")
@@ -101,6 +103,9 @@ def test_numbers_keep_the_published_decimals_but_two_significant_figures():
     assert format_number(0.00123, 2) == "0.0012"
     assert format_number(82.4, 0) == "82" and format_number(0.05, 0) == "0.05"
     assert format_number(math.nan, 2) == "n/a"
+    # a count is printed as one, whatever the table's decimals
+    assert format_number(2197, 1) == "2197" and format_number(np.int64(3), 2) == "3"
+    assert format_number(3.0, 2) == "3.00"
 
 
 def test_a_table_without_a_publication_shows_only_softtips_figures():

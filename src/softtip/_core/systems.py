@@ -43,6 +43,9 @@ class Study:
     # protocol parameters the study sets over the protocol file's, and why (printed in the report)
     sets: Mapping[str, object] = field(default_factory=dict)
     because: str = ""
+    # protocol parameters ``--quick`` sets besides cutting the trial counts: a coarse smoke run of
+    # what the analysis computes beyond the protocol's trials (sweeps, reruns)
+    quick: Mapping[str, object] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -49,8 +49,10 @@ def parse_value(value: Any, digits: int, where: str) -> PublishedValue | None:
     """A cell of a published table: None for a blank."""
     if isinstance(value, bool):
         raise ConfigError(f"{where}: expected a number, a bound like '< 0.5', a range like '0.8..0.92' or ''")
-    if isinstance(value, (int, float)):
-        return PublishedValue(float(value), float(value), f"{value:.{digits}f}")
+    if isinstance(value, int):  # a count, printed as one
+        return PublishedValue(float(value), float(value), str(value))
+    if isinstance(value, float):
+        return PublishedValue(value, value, f"{value:.{digits}f}")
     if isinstance(value, str) and not value.strip():
         return None
     if isinstance(value, str) and (bound := _BOUND.fullmatch(value)):

@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal, Mapping
 
+import numpy as np
+
 from softtip.published import BETTER, FITTED, OUTSIDE, WITHIN, PublishedTable, PublishedValue
 
 MARKS = {WITHIN: "✓", OUTSIDE: "✗", BETTER: "▲", FITTED: "◆"}
@@ -22,7 +24,10 @@ MEANINGS = {WITHIN: "close to the published figure", OUTSIDE: "outside the toler
 
 
 def format_number(value: float, digits: int) -> str:
-    """``digits`` decimals as the publication prints them, but never fewer than two significant figures."""
+    """``digits`` decimals as the publication prints them, but never fewer than two significant figures;
+    an integer (a count) as it is."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return str(int(value))
     if not math.isfinite(value):
         return "n/a"
     if value != 0 and abs(value) < 10 ** (1 - digits):

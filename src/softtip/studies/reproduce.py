@@ -139,11 +139,12 @@ class StudyReport:
 def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path: str | Path | None = None,
                     progress: Progress = SILENT, command: str | None = None) -> StudyReport:
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
-    count to a minimum (a smoke run, not the study)."""
+    count to a minimum and sets what the study's ``quick`` names (a smoke run, not the study)."""
     study = studies().get(name) or owner("study", name)  # the second refuses an unknown name
     protocol = load_protocol(protocol_path or study.protocol).changed(seed=seed, **study.sets)
     parameters = asdict(protocol.parameters)
     cuts = {key: count for key, count in QUICK_TRIALS.items() if quick and parameters.get(key, 0) > count}
+    cuts |= {key: value for key, value in study.quick.items() if quick and parameters.get(key) != value}
     protocol, quick_keys = protocol.changed(**cuts), set(cuts)
     started = datetime.now(timezone.utc)
     start = time.perf_counter()

@@ -30,7 +30,9 @@ SYSTEM = System(
     protocols={"haptics": "haptics"},
     studies=(
         Study("haptics", "haptics", "softtip.systems.haptics.report:haptics",
-              "S3: standard and personalised (data-driven A, geometric B) rendering errors on six test fingertips"),
+              "S3: standard and personalised (data-driven A, geometric B) rendering errors on six test fingertips",
+              quick={"curve_n_neighbours": [1, 8], "curve_weighting_powers": [1.0], "curve_fs_levels": [7, 13],
+                     "curve_user_levels": [7], "variations": ["as published", "human pads half as stiff"]}),
     ),
     bench_commands={"haptics": "softtip.systems.haptics.commands:bench_haptics"},
     commands={"haptics": "softtip.systems.haptics.commands:app"},

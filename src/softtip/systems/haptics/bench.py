@@ -10,9 +10,12 @@ trial; each row holds what the method commanded and what the sensor under the te
 Channels: ``rendered_f{x|y|z}_N`` and ``rendered_t{x|y|z}_Nm`` (the test fingertip's 6-axis
 sensor). Labels: ``fingertip``, ``method``, ``motor{1|2|3}_rad`` (commanded), ``error_N``
 (|F_target − F_rendered| over the three force components), ``flagged`` (the target lay outside the
-table, or a sensor saturated). Conditions: ``target_f{x|y|z}_N``, ``target_t{x|y|z}_Nm`` (the FS's
-reading of the target). The collection times and each fingertip's personalisation figures are in
-the metadata's ``sensor_settings``.
+table, or the sensor under the test fingertip saturated). Conditions: ``target_f{x|y|z}_N``,
+``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
+personalisation figures are in the metadata's ``sensor_settings``.
+
+The ``curve_*`` and ``variations`` parameters are not the dataset's: the report
+(:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).
 """
 
 from __future__ import annotations
@@ -33,8 +36,9 @@ from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
-from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
+from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
+from softtip.systems.haptics.sensitivity import CURVES, DEFAULT_VARIATIONS, VARIATION_NAMES, FingerVariation
 from softtip.systems.haptics.study import METHODS, StudySettings, run_study
 
 WRENCH_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
@@ -50,6 +54,15 @@ FINGERTIP_NAMES = tuple(f.name for f in TEST_FINGERTIPS)
 Fingertips = Annotated[list[choice(*FINGERTIP_NAMES)], Field(min_length=1),
                        expect(f"a non-empty list of: {', '.join(FINGERTIP_NAMES)}")]
 _STUDY, _COLLECTION = StudySettings(), CollectionSettings()
+# the report's sweeps (softtip.systems.haptics.sensitivity); bounded so that no sweep runs for long
+CURVE_SETTINGS = {"curve_n_neighbours": "n_neighbours", "curve_weighting_powers": "weighting_power",
+                  "curve_fs_levels": "fs_levels", "curve_user_levels": "user_levels"}
+_CURVES = dict(CURVES)
+NeighbourCounts = Annotated[list[integer(1, 64)], expect("a list of integers 1..64")]
+WeightingPowers = Annotated[list[WeightingPower], expect("a list of numbers from 0 to 4")]
+FsLevels = Annotated[list[integer(2, 21)], expect("a list of integers 2..21")]
+UserLevels = Annotated[list[integer(2, 13)], expect("a list of integers 2..13")]
+Variations = Annotated[list[choice(*VARIATION_NAMES)], expect(f"a list of: {', '.join(VARIATION_NAMES)}")]
 
 
 @schema(section="parameters")
@@ -69,10 +82,17 @@ class HapticsParameters:
     hold_s: PositiveNumber = _COLLECTION.hold_s
     window_s: PositiveNumber = _COLLECTION.window_s
     fingertips: Fingertips = field(default_factory=lambda: list(FINGERTIP_NAMES))
+    curve_n_neighbours: NeighbourCounts = field(default_factory=lambda: list(_CURVES["n_neighbours"]))
+    curve_weighting_powers: WeightingPowers = field(default_factory=lambda: list(_CURVES["weighting_power"]))
+    curve_fs_levels: FsLevels = field(default_factory=lambda: list(_CURVES["fs_levels"]))
+    curve_user_levels: UserLevels = field(default_factory=lambda: list(_CURVES["user_levels"]))
+    variations: Variations = field(default_factory=lambda: list(VARIATION_NAMES))
 
     def __post_init__(self) -> None:
-        if len(set(self.fingertips)) != len(self.fingertips):
-            raise Refusal("fingertips", "expected each fingertip once")
+        for key in ("fingertips", *CURVE_SETTINGS, "variations"):
+            values = getattr(self, key)
+            if len(set(values)) != len(values):
+                raise Refusal(key, f"expected each {'fingertip' if key == 'fingertips' else 'value'} once")
         if self.target_draws < self.trials:
             raise Refusal("target_draws", f"expected at least trials = {self.trials}: each target is a random "
                                           "configuration that touches the FS")
@@ -85,6 +105,18 @@ class HapticsParameters:
                              weighting_power=self.weighting_power, light_force=self.light_force_N,
                              contact_threshold=self.contact_threshold_N, target_draws=self.target_draws,
                              min_target_force=self.contact_threshold_N)
+
+    def selected_fingertips(self) -> tuple[Fingertip, ...]:
+        """The test fingertips ``fingertips`` names, in the study's order."""
+        return tuple(f for f in TEST_FINGERTIPS if f.name in self.fingertips)
+
+    def curves(self) -> tuple[tuple[str, tuple], ...]:
+        """The report's sweeps: each study setting and the values it takes, those with any."""
+        return tuple((setting, tuple(getattr(self, key))) for key, setting in CURVE_SETTINGS.items()
+                     if getattr(self, key))
+
+    def selected_variations(self) -> tuple[FingerVariation, ...]:
+        return tuple(v for v in DEFAULT_VARIATIONS if v.name in self.variations)
 
     def collection_settings(self) -> CollectionSettings:
         try:
@@ -155,9 +187,8 @@ class HapticsBench(SeededBench):
 
 def haptics(bench: HapticsBench, p: HapticsParameters, seed: int, record: dict) -> Dataset:
     """S3's study: collect the tables, record the targets and render each on each fingertip by each method."""
-    fingertips = tuple(f for f in TEST_FINGERTIPS if f.name in p.fingertips)
     collection = p.collection_settings()
-    study = run_study(p.study_settings(), seed, device=bench.device.device, fingertips=fingertips,
+    study = run_study(p.study_settings(), seed, device=bench.device.device, fingertips=p.selected_fingertips(),
                       collection=collection)
     settings = {"sensor": asdict(collection.sensor), "hold_s": p.hold_s, "window_s": p.window_s,
                 "fs_collection_s": study.fs_collection_s, "user_collection_s": study.user_collection_s,

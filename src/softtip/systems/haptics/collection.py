@@ -72,16 +72,31 @@ def collection_duration(device: DeviceSpec, motor_inputs, hold_s: float) -> floa
     return float(move_time(device, path[:-1], path[1:]).sum() + hold_s * len(motor_inputs))
 
 
+def _driven(device: DeviceSpec, fingertip: Fingertip, motor_inputs: np.ndarray):
+    """The platform's pose with ``motor_inputs`` commanded (the servos reach their quantised angles)
+    and the wrench it applies to the fingertip."""
+    pose = forward_kinematics(device, quantised(device, motor_inputs))
+    return pose, finger_wrench(fingertip, device, pose)[0]
+
+
 def sensed_contact(device: DeviceSpec, fingertip: Fingertip, motor_inputs, settings: CollectionSettings,
                    rng: np.random.Generator | None) -> Collection:
     """Drive ``motor_inputs`` (entries, 3) on ``fingertip`` and read its sensor and the DS as the
     procedure does (``rng`` None: exact readings)."""
     motor_inputs = np.asarray(motor_inputs, dtype=float)
-    pose = forward_kinematics(device, quantised(device, motor_inputs))
-    on_finger, _ = finger_wrench(fingertip, device, pose)
+    pose, on_finger = _driven(device, fingertip, motor_inputs)
     on_platform = platform_wrench(fingertip, device, pose, on_finger)
     finger_reading, finger_saturated = held_wrench(on_finger, settings.sensor, settings.window_s, rng)
     platform_reading, platform_saturated = held_wrench(on_platform, settings.sensor, settings.window_s, rng)
     return Collection(motor_inputs, finger_reading, platform_reading,
                       finger_saturated.any(axis=-1) | platform_saturated.any(axis=-1),
                       collection_duration(device, motor_inputs, settings.hold_s))
+
+
+def sensed_by_fingertip(device: DeviceSpec, fingertip: Fingertip, motor_inputs, settings: CollectionSettings,
+                        rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
+    """What the sensor under ``fingertip`` alone reads (entries, 6) with ``motor_inputs`` held, and
+    where it saturated (entries,): a rendering's result, which no DS reads."""
+    _, on_finger = _driven(device, fingertip, np.asarray(motor_inputs, dtype=float))
+    reading, saturated = held_wrench(on_finger, settings.sensor, settings.window_s, rng)
+    return reading, saturated.any(axis=-1)

@@ -140,11 +140,16 @@ def render(
     ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (needs rclpy, a sourced ROS 2)."),
     realtime: bool = typer.Option(True, "--realtime/--fast", help="Pace the loop to the wall clock at 1 kHz, or run "
                                                                   "it as fast as the machine allows."),
+    port: str = typer.Option(None, "--port", help="Drive a real device: its controller's serial port (a device path "
+                                                  "or a pyserial URL), in the line protocol of "
+                                                  "softtip.systems.haptics.servos; default the device model."),
+    baud: int = typer.Option(115_200, "--baud", help="--port's baud rate (8N1)."),
     force: bool = typer.Option(False, "--force", help="Overwrite --record's file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Stream a sensation through the renderer and the device model: a 1 kHz loop, the servos' 50 Hz
-    commands, the commanded motor inputs and the rendered wrench out on the live sinks (MCAP, Foxglove)."""
+    """Stream a sensation through the renderer to the device model, or with --port to a real device: a
+    1 kHz loop, the servos' 50 Hz commands, the commanded motor inputs and the rendered wrench out on
+    the live sinks (MCAP, Foxglove)."""
     # every option checked before the renderer's modules load (they take seconds on a busy machine)
     _finite_positive(duration, "--duration")
     if duration is not None and duration > MAX_DURATION_S:
@@ -158,13 +163,17 @@ def render(
         fail(f"--seed = {seed}: expected an integer >= 0")
     if foxglove_port is not None and not 0 < foxglove_port < 65536:
         fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
+    if port is not None and not port.isprintable():
+        fail(f"--port = {port!r}: expected a serial device path or a pyserial URL")
     from softtip.realtime.sinks.factory import live_sinks
     from softtip.realtime.sinks.ros2 import ros2_available
     from softtip.systems.haptics.bench import FINGERTIP_NAMES, device_from_file
     from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS
-    from softtip.systems.haptics.live import fs_renderer, recorded_sensation, render_stream, synthetic_sensation
+    from softtip.systems.haptics.live import (LOOP_RATE_HZ, fs_renderer, recorded_sensation, render_stream,
+                                              synthetic_sensation)
     from softtip.systems.haptics.personalisation import personalise_geometric
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+    from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice, check_baud
 
     if fingertip not in FINGERTIP_NAMES:
         fail(f"--fingertip = {fingertip!r}: expected one of {', '.join(FINGERTIP_NAMES)}")
@@ -175,30 +184,41 @@ def render(
     if record is not None:
         record = check_output(record, "--record", inputs, force=force)
     device = device_from_file(device_file or "shipped").device
+    check_baud(baud, device.servo.command_rate_hz, "--baud")
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
-    sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
     rng = np.random.default_rng(seed)
     finger = next(f for f in TEST_FINGERTIPS if f.name == fingertip)
-    with progress_for(json_output).task("haptics: FS table", total=1) as task:
-        renderer = fs_renderer(device, fs_levels, rng)
-        task.advance()
-    out_of_reach = 0
-    if method == "geometric":
-        personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
-        renderer = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
-        out_of_reach = int(personal.outside.sum())
-    if wanted is None:
-        wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
-    summary = render_stream(device, renderer, finger, wanted, sinks, rng, metadata={
+    # the port is the last check: opened before any work, released whatever happens next
+    servos = (SimulatedDevice(device, finger, LOOP_RATE_HZ, rng) if port is None
+              else SerialDevice(port, device, baud, "--port", "--baud"))
+    try:
+        sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
+        with progress_for(json_output).task("haptics: FS table", total=1) as task:
+            renderer = fs_renderer(device, fs_levels, rng)
+            task.advance()
+        out_of_reach = 0
+        if method == "geometric":
+            personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
+            renderer = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
+            out_of_reach = int(personal.outside.sum())
+        if wanted is None:
+            wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
+    except BaseException:
+        servos.close()
+        raise
+    summary = render_stream(device, renderer, servos, wanted, sinks, metadata={
         "fingertip": fingertip, "method": method, "fs_levels": fs_levels, "seed": seed,
-        "sensation": str(sensation) if sensation else "synthetic"}, paced=realtime).to_dict()
+        "sensation": str(sensation) if sensation else "synthetic", "device": port or "simulated"},
+        paced=realtime).to_dict()
     summary |= {"fingertip": fingertip, "method": method, "table_entries_out_of_reach": out_of_reach,
-                "record": str(record) if record else None}
+                "device": port or "simulated", "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
-    console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}), {summary['late_ticks']} late: rendering p99 "
-                  f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| median {summary['median_error_N']:.3f} N, "
-                  f"p90 {summary['p90_error_N']:.3f} N; {summary['outside_table']} ticks outside the table, "
-                  f"{out_of_reach} table entries out of reach"
+    error = ("not measured (a serial device reports no wrench)" if summary["median_error_N"] is None else
+             f"median {summary['median_error_N']:.3f} N, p90 {summary['p90_error_N']:.3f} N")
+    console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}, {summary['device']} device), "
+                  f"{summary['servo_frames']} servo commands, {summary['late_ticks']} late: rendering p99 "
+                  f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| {error}; {summary['outside_table']} "
+                  f"ticks outside the table, {out_of_reach} table entries out of reach"
                   + (f"; recorded to {record}" if record else ""))

@@ -3,13 +3,14 @@ model, a 1 kHz loop whose commands the servos take at their 50 Hz frame rate, ou
 pipeline's sinks.
 
 Each tick the renderer turns the wanted wrench into motor inputs (:meth:`NearestNeighbourRenderer.render_one`,
-timed: its latency); the servos (:func:`~.device.servo_angles`) read the command held at the start of
-each of their frames and slew towards it; the wrench the platform then applies to the fingertip is
-read by the 6-axis sensor under it, one sample a tick with its noise. Frames go to the sinks as the
-live pipeline's :class:`~softtip.realtime.frames.FrameResult`: the reading is the wanted force
-(:data:`~softtip.systems.haptics.WANTED`), the estimates are the commanded motor inputs, the servos'
-angles and the rendered wrench (recorded on the ``wrench`` topic as ``geometry_msgs/WrenchStamped``).
-A real device is driven by sending the commands to its servos instead of :func:`servo_angles`.
+timed: its latency); at the first tick of each servo frame (50 Hz) that command, resolved to the
+servos' dead band, goes to the device (:mod:`.servos`): the simulated one slews its servos towards it
+and the sensor under the fingertip reads the wrench the platform applies, one sample a tick with its
+noise; a real one on a serial port (:class:`~.servos.SerialDevice`) takes it as a line of text.
+Frames go to the sinks as the live pipeline's :class:`~softtip.realtime.frames.FrameResult`: the
+reading is the wanted force (:data:`~softtip.systems.haptics.WANTED`), the estimates are the
+commanded motor inputs, the servos' angles and the rendered wrench (recorded on the ``wrench`` topic
+as ``geometry_msgs/WrenchStamped``), NaN where a real device reports none.
 
 Paced, each tick starts on the wall clock at its 1 kHz time (a tick that starts more than one period
 late is counted); unpaced, the loop runs as fast as the machine allows. Either way the frames' stamps
@@ -26,12 +27,12 @@ import numpy as np
 
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
-from softtip.sensors.wrench import read_wrenches
 from softtip.systems.haptics import WANTED
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
-from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, servo_angles
-from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, Fingertip, finger_wrench
+from softtip.systems.haptics.device import DeviceSpec
+from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+from softtip.systems.haptics.servos import FrameResponse, ServoDevice, frame_command
 
 LOOP_RATE_HZ = 1000.0
 MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
@@ -102,35 +103,38 @@ def _columns(path: Path) -> dict[str, np.ndarray]:
 @dataclass(frozen=True)
 class RenderSummary:
     """What a rendering run did: ticks, the renderer's latency (s), the force error (N) between
-    wanted and rendered, the targets flagged outside the table."""
+    wanted and rendered (None when the device reports no wrench), the targets flagged outside the table."""
 
     ticks: int
+    frames: int  # servo commands sent
     late_ticks: int  # paced ticks that started more than one period after their time
     latency_p50_s: float
     latency_p99_s: float
-    median_error_N: float
-    p90_error_N: float
+    median_error_N: float | None
+    p90_error_N: float | None
     outside: int
     wall_s: float
 
     def to_dict(self) -> dict:
-        return {"ticks": self.ticks, "loop_rate_hz": LOOP_RATE_HZ, "late_ticks": self.late_ticks,
-                "latency_p50_us": self.latency_p50_s * 1e6,
+        return {"ticks": self.ticks, "loop_rate_hz": LOOP_RATE_HZ, "servo_frames": self.frames,
+                "late_ticks": self.late_ticks, "latency_p50_us": self.latency_p50_s * 1e6,
                 "latency_p99_us": self.latency_p99_s * 1e6, "median_error_N": self.median_error_N,
                 "p90_error_N": self.p90_error_N, "outside_table": self.outside, "wall_s": self.wall_s}
 
 
-def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, fingertip: Fingertip,
-                  sensation: np.ndarray, sinks: list[Sink], rng: np.random.Generator | None,
-                  collection: CollectionSettings = CollectionSettings(), metadata: dict | None = None,
+def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos: ServoDevice,
+                  sensation: np.ndarray, sinks: list[Sink], metadata: dict | None = None,
                   paced: bool = True) -> RenderSummary:
-    """Streams ``sensation`` (ticks, 6) through ``renderer`` and the device on ``fingertip``, to ``sinks``;
-    ``paced``: each tick on the wall clock at 1 kHz."""
+    """Streams ``sensation`` (ticks, 6) through ``renderer`` to ``servos`` (the simulated device or a
+    real one), and the frames to ``sinks``; ``paced``: each tick on the wall clock at 1 kHz. The
+    servos are released (closed) when the stream ends, however it ends."""
     frame_ticks = int(round(LOOP_RATE_HZ / device.servo.command_rate_hz))
     info = StreamInfo(chips=1, target_names=TARGET_NAMES, target_units=TARGET_UNITS, classes=None, settings=None,
                       rate_hz=LOOP_RATE_HZ, metadata=dict(metadata or {}), reading=WANTED)
-    latencies, errors = np.empty(len(sensation)), np.empty(len(sensation))
-    angle, outside, late, started = np.zeros(3), 0, 0, time.perf_counter()
+    latencies, errors = np.empty(len(sensation)), np.full(len(sensation), np.nan)
+    unknown = FrameResponse(np.full((frame_ticks, 3), np.nan), np.full((frame_ticks, 6), np.nan),
+                            np.zeros((frame_ticks, 3), bool))
+    outside, late, frames, started = 0, 0, 0, time.perf_counter()
     stamp0 = time.time_ns()
     opened = []
     try:
@@ -150,26 +154,32 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, finger
                 commands[k], flagged = renderer.render_one(wrench)
                 latencies[first + k] = time.perf_counter() - tick
                 outside += flagged
-            angles = servo_angles(device, angle, commands, LOOP_RATE_HZ)
-            angle = angles[-1]
-            on_finger, _ = finger_wrench(fingertip, device, forward_kinematics(device, angles))
-            rendered, saturated = read_wrenches(on_finger, collection.sensor, rng)
-            errors[first:first + len(wanted)] = np.linalg.norm(rendered[:, :3] - wanted[:, :3], axis=1)
+                if k == 0:  # the servos read one command a frame: the frame's first
+                    servos.send(frames, frame_command(device, commands[0]))
+                    frames += 1
+            response = servos.frame(len(wanted)) or unknown
+            rendered = response.wrench[:len(wanted), :3]
+            errors[first:first + len(wanted)] = np.linalg.norm(rendered - wanted[:, :3], axis=1)
             for k in range(len(wanted)):
                 seq = first + k
                 frame = FrameResult(
                     seq=seq, stamp_ns=stamp0 + int(seq * 1e9 / LOOP_RATE_HZ), host_time_s=time.perf_counter(),
                     device_time_s=seq / LOOP_RATE_HZ, reading=wanted[k, None, :3], chip_ok=np.ones(1, bool),
-                    saturated=saturated[k, None, :3], baseline=None, baseline_version=0, change=None,
-                    estimates=np.concatenate([commands[k], angles[k], rendered[k]]), state=None,
+                    saturated=response.saturated[k, None], baseline=None, baseline_version=0, change=None,
+                    estimates=np.concatenate([commands[k], response.angles[k], response.wrench[k]]), state=None,
                     latency_s=latencies[seq])
                 for sink in opened:
                     sink.write(frame)
     finally:
-        for sink in opened:
-            sink.close()
-    return RenderSummary(len(sensation), int(late), float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)),
-                         float(np.median(errors)), float(np.percentile(errors, 90)), int(outside),
+        try:
+            servos.close()
+        finally:
+            for sink in opened:
+                sink.close()
+    measured = np.isfinite(errors).all()
+    return RenderSummary(len(sensation), frames, int(late), float(np.percentile(latencies, 50)),
+                         float(np.percentile(latencies, 99)), float(np.median(errors)) if measured else None,
+                         float(np.percentile(errors, 90)) if measured else None, int(outside),
                          time.perf_counter() - started)
 
 

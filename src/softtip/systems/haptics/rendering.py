@@ -26,6 +26,7 @@ to f (an entry that f matches exactly is returned as it is). The choices, each t
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import isfinite
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -54,12 +55,17 @@ def _features(wrenches, name: str) -> np.ndarray:
 
 
 def _first_duplicate(rows: np.ndarray) -> tuple[int, int] | None:
-    _, first, inverse, counts = np.unique(rows, axis=0, return_index=True, return_inverse=True, return_counts=True)
-    repeated = np.flatnonzero(counts[inverse.ravel()] > 1)
-    if not len(repeated):
+    """The earliest row that repeats an earlier one, as (the earlier one, it); None if every row differs."""
+    order = np.lexsort(rows.T[::-1])  # stable: equal rows stay in their order
+    ordered = rows[order]
+    same = np.all(ordered[1:] == ordered[:-1], axis=1)
+    if not same.any():
         return None
-    later = next(i for i in repeated if first[inverse.ravel()[i]] != i)
-    return int(first[inverse.ravel()[later]]), int(later)
+    starts = np.concatenate([[True], ~same])
+    group_start = np.flatnonzero(starts)[np.cumsum(starts) - 1]  # per sorted row, where its group begins
+    repeats = np.flatnonzero(~starts)
+    later = repeats[np.argmin(order[repeats])]
+    return int(order[group_start[later]]), int(order[later])
 
 
 @dataclass(frozen=True)
@@ -134,6 +140,11 @@ class NearestNeighbourRenderer:
         gaps, _ = self.tree_.query(forces, k=2)
         self.widest_gap_ = float(gaps[:, 1].max())
         self.lowest_, self.highest_ = forces.min(axis=0), forces.max(axis=0)
+        # what render_one reads each call, precomputed
+        self._query, self._k = self.tree_.query, max(self.n_neighbours, 2)
+        self._motor_and_ones = np.hstack([motor, np.ones((len(motor), 1))])
+        self._uniform = np.ones(self.n_neighbours)
+        self._bounds = (tuple(self.lowest_.tolist()), tuple(self.highest_.tolist()))
         return self
 
     def _wanted(self, wrenches) -> np.ndarray:
@@ -154,21 +165,34 @@ class NearestNeighbourRenderer:
 
     def render_one(self, wrench) -> tuple[np.ndarray, bool]:
         """Motor inputs (3,) for one wanted wrench (6,) or force (3,), and whether it lies outside the
-        table: :meth:`render` for the real-time loop, without its array bookkeeping."""
-        force = np.asarray(wrench, dtype=float)[FORCE]
-        if force.shape != (3,) or not np.isfinite(force).all():
+        table: :meth:`render` for the real-time loop. Its arithmetic is :meth:`render`'s on arrays
+        precomputed by :meth:`fit` (the motor inputs beside a column of ones, so one product gives
+        both the weighted sum and the weights' total) and its checks are on three Python floats: no
+        small temporaries besides the k-d tree's answer."""
+        force = np.asarray(wrench, dtype=float)
+        if force.shape != (6,) and force.shape != (3,):
+            raise ValueError(f"wanted wrench has shape {force.shape}: expected 6 (or 3) finite numbers")
+        force = force[:3]
+        fx, fy, fz = force.tolist()
+        if not (isfinite(fx) and isfinite(fy) and isfinite(fz)):
             raise ValueError(f"wanted wrench {wrench!r}: expected 6 (or 3) finite numbers")
-        distances, nearest = self.tree_.query(force, k=max(self.n_neighbours, 2))  # k >= 2 keeps the axis
-        distances, nearest = distances[: self.n_neighbours], nearest[: self.n_neighbours]
+        distances, nearest = self._query(force, self._k)
+        if self._k != self.n_neighbours:  # k = 1 asked as 2: scipy drops the neighbours' axis for k = 1
+            distances, nearest = distances[:1], nearest[:1]
+        nearest_distance = float(distances[0])
         if self.weighting_power == 0.0:
-            motor = self.motor_inputs_[nearest].mean(axis=0)
-        elif distances[0] == 0.0:
-            motor = self.motor_inputs_[nearest[distances == 0.0]].mean(axis=0)
+            weights = self._uniform
+        elif nearest_distance == 0.0:
+            weights = (distances == 0.0).astype(float)
+        elif self.weighting_power == 1.0:
+            weights = 1.0 / distances
         else:
-            weights = distances**-self.weighting_power
-            motor = weights @ self.motor_inputs_[nearest] / weights.sum()
-        outside = distances[0] > self.widest_gap_ or (force < self.lowest_).any() or (force > self.highest_).any()
-        return motor, bool(outside)
+            weights = distances ** -self.weighting_power
+        summed = np.dot(weights, self._motor_and_ones.take(nearest, 0))
+        (lx, ly, lz), (hx, hy, hz) = self._bounds
+        outside = (nearest_distance > self.widest_gap_ or fx < lx or fy < ly or fz < lz or fx > hx or fy > hy
+                   or fz > hz)
+        return summed[:3] / summed[3], outside
 
     def predict(self, wrenches) -> np.ndarray:
         """Motor inputs (..., 3) for wanted wrenches; see :meth:`render` for the out-of-range flag."""

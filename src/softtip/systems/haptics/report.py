@@ -2,8 +2,12 @@
 errors per fingertip, method and target, the publication's statistics on them, and the tables beside
 what the S3 spec says the published work found (``published.toml``).
 
-Everything here is computed from the dataset (:mod:`.bench`), so a dataset written by ``softtip lab
-run haptics`` gives the same tables as the study run in one go.
+The study's tables are computed from the dataset (:mod:`.bench`), so a dataset written by ``softtip
+lab run haptics`` gives the same tables as the study run in one go. The sweeps beyond the
+publication (error against n, weighting and table sizes; the methods' ranking as the human fingertips
+vary) rerun the simulated study over the protocol's ``curve_*`` and ``variations`` parameters
+(:mod:`.sensitivity`); their baseline draws the same noise as the dataset's run, so their errors at
+the protocol's own settings are the dataset's.
 """
 
 from __future__ import annotations
@@ -21,8 +25,19 @@ from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.haptics.bench import CONDITIONS, RENDERED
 from softtip.systems.haptics.collection import collection_duration, motor_grid
+from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS
+from softtip.systems.haptics.sensitivity import (
+    CURVE_LABELS,
+    Baseline,
+    CurvePoint,
+    VariationOutcome,
+    curves_figure,
+    error_curves,
+    sensitivity_figure,
+    sensitivity_study,
+)
 from softtip.systems.haptics.statistics import friedman, wilcoxon
-from softtip.systems.haptics.study import NOTES, METHODS, PAIRS, PUBLISHED_METHODS, error_box_plots
+from softtip.systems.haptics.study import NOTES, METHODS, PAIRS, PUBLISHED_METHODS, SHORT_NAMES, error_box_plots
 
 STANDARD, A, B = range(PUBLISHED_METHODS)
 DIRECTIONS = {"standard − A": (STANDARD, A), "standard − B": (STANDARD, B), "B − A": (B, A)}
@@ -94,16 +109,111 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                          for (a, b), t in zip(PAIRS, statistics[name][1], strict=True)}}
             for name, errors, flagged in zip(found.fingertips, found.errors, found.flagged, strict=True)},
         "pooled_A_vs_B": _test(pooled)}
+    sweeps = _sweeps(protocol, progress)
+    results |= sweeps.results
     headline_row = LARGEST if LARGEST in found.fingertips else POOLED
     headline = Headline.of(directions, headline_row, "B − A", f"median error B − A, {headline_row}", "N")
-    return StudyOutcome(results, tables, [figure], headline, [
+    return StudyOutcome(results, tables + sweeps.tables, [figure, *sweeps.figures], headline, [
         *NOTES,
         "The targets are the FS's readings of random configurations over the servos' whole range that touch it: "
         "on softtip's device (its dimensions are softtip's choice, device.toml) they press harder than the "
         "published targets (about 1.7 N), so every error here is on a larger force scale.",
         "Methods B+ (the geometric method with the user's stiffness from five presses) and A+ (the data-driven "
         "one from an adaptive user table) are softtip's, after the authors' future work; the statistics compare "
-        "the published three only."])
+        "the published three only.", *sweeps.notes])
+
+
+@dataclass(frozen=True)
+class Sweeps:
+    """The report's sweeps beyond the publication: tables, figures, JSON results and notes (none when
+    the protocol asks for none)."""
+
+    tables: list[Table]
+    figures: list[Figure]
+    results: dict
+    notes: list[str]
+
+
+def _sweeps(protocol: Protocol, progress: Progress) -> Sweeps:
+    p = protocol.parameters
+    fingertips, curves, variations = p.selected_fingertips(), p.curves(), p.selected_variations()
+    humans = [f.name for f in fingertips if f in HUMAN_FINGERTIPS]
+    notes = []
+    if variations and not humans:
+        notes.append("No sensitivity study: it varies the human fingertips, and this run renders none of them.")
+        variations = ()
+    if not curves and not variations:
+        return Sweeps([], [], {}, notes)
+    baseline = Baseline.run(p.study_settings(), protocol.seed, protocol.design.device, fingertips,
+                            p.collection_settings(), progress)
+    tables, figures, results = [], [], {}
+    if curves:
+        points = error_curves(baseline, progress, curves)
+        tables.append(_curves_table(points, p.study_settings()))
+        figures.append(Figure.of("Rendering error against n, weighting and table size", (
+            "Median |F_target − F_rendered| (N) over every fingertip and target, one setting changed at a time "
+            "from the study's own. Look for the data-driven personalisation (A) gaining from a larger user table "
+            "and losing from many neighbours, and for the FS table's size setting the floor of the geometric "
+            "methods."), curves_figure(points)))
+        results["error_curves"] = {setting: {
+            "values": [point.value for point in points if point.setting == setting],
+            "median_error_N": {method: [float(point.median_error[m]) for point in points if point.setting == setting]
+                               for m, method in enumerate(METHODS)}} for setting, _ in curves}
+    if variations:
+        outcomes = sensitivity_study(baseline, progress, variations)
+        tables.append(_sensitivity_table(outcomes, humans))
+        if any(outcome.median_error is not None for outcome in outcomes):
+            figures.append(Figure.of("The methods' errors as the human fingertips vary", (
+                f"Median error (N, log scale) over the targets of {', '.join(humans)}, under each variation of "
+                "those fingertips (the casts as published). Look for the geometric method (B) losing its lead "
+                "once stiffness or shape departs from its spheres of the casts' rubber."),
+                sensitivity_figure(outcomes)))
+        results["sensitivity"] = [outcome.to_dict() for outcome in outcomes]
+    return Sweeps(tables, figures, results, notes)
+
+
+def _curves_table(points: tuple[CurvePoint, ...], settings) -> Table:
+    rows, cells = [], {}
+    for point in points:
+        value = getattr(settings, point.setting)
+        shown = f"{point.value:g}" + ("³" if point.setting.endswith("levels") else "")
+        row = f"{CURVE_LABELS[point.setting].split(' (')[0]}: {shown}" + (" (the study's)" if point.value == value
+                                                                            else "")
+        rows.append(row)
+        cells.update({(row, method): float(point.median_error[m]) for m, method in enumerate(METHODS)})
+    return Table("Rendering error against n, weighting and table size (softtip, beyond the publication)", "setting",
+                 rows, list(METHODS), cells, unit="N", digits=2, caption=(
+                     "Median |F_target − F_rendered| (N) over every fingertip and target, each setting changed alone "
+                     "from the study's own (marked); the same targets and noise streams at every point. The "
+                     "weighting is 1/d^p over the n nearest entries (p = 0: uniform)."))
+
+
+def _sensitivity_table(outcomes: tuple[VariationOutcome, ...], humans: list[str]) -> Table:
+    columns = [*METHODS, "ranking (best first)", "A vs B pooled: W+ − W−", "A vs B pooled: p (Bonferroni)"]
+    cells, notes = {}, {}
+    for outcome in outcomes:
+        row = outcome.variation.name
+        if outcome.left_out:
+            notes[row] = (f"Left out: {', '.join(outcome.left_out)} ({outcome.refused})" if outcome.median_error
+                          is not None else f"Refused: {outcome.refused}")
+        if outcome.median_error is None:
+            continue
+        cells.update({(row, method): float(outcome.median_error[m]) for m, method in enumerate(METHODS)})
+        cells[(row, "ranking (best first)")] = " < ".join(SHORT_NAMES[METHODS.index(m)] for m in outcome.ranking)
+        cells[(row, "A vs B pooled: W+ − W−")] = rank_sum(outcome.pooled.signed_rank_sum)
+        cells[(row, "A vs B pooled: p (Bonferroni)")] = outcome.pooled.p_bonferroni
+    return Table("How the methods' ranking depends on the finger (softtip, beyond the publication)", "variation",
+                 [outcome.variation.name for outcome in outcomes], columns, cells, digits=3, notes=notes, caption=(
+                     f"Median error (N) over the targets of {', '.join(humans)} under each variation of those "
+                     "fingertips (stiffness, shape, core position, mounting; softtip.systems.haptics.sensitivity), "
+                     "the casts as published. In softtip's contact model the core's position moves only the "
+                     "torques about the sensor's origin, and every method renders from forces. W+ − W− < 0: A's "
+                     "errors are the smaller over every fingertip and target studied."))
+
+
+def rank_sum(value: float) -> float | int:
+    """A Wilcoxon rank sum, as an integer when it is one (ties make halves)."""
+    return int(value) if float(value).is_integer() else float(value)
 
 
 def _test(result) -> dict:
@@ -148,8 +258,8 @@ def _error_table(found: RenderedTargets) -> Table:
     return Table("Rendering error per fingertip and method", "fingertip · method", rows,
                  ["median error (N)", "mean error (N)", "median rendered |F| (N)", "flagged targets"], cells,
                  digits=2, caption=("The publication reports medians and means per fingertip with box plots. Flagged: "
-                                    "the target lay outside the table's range or a sensor saturated (rendered all the "
-                                    "same, never silently)."))
+                                    "the target lay outside the table's range or the sensor under the test fingertip "
+                                    "saturated (rendered all the same, never silently)."))
 
 
 def _statistics_table(statistics: dict, pooled) -> Table:
@@ -160,10 +270,12 @@ def _statistics_table(statistics: dict, pooled) -> Table:
         cells.update({(name, "Friedman χ²"): rank.chi_square, (name, "Friedman p"): rank.p_value})
         for (a, b), test in zip(PAIRS, post_hoc, strict=True):
             label = f"{METHODS[a]} vs {METHODS[b]}"
-            cells.update({(name, f"{label}: W (scipy)"): test.w_scipy, (name, f"{label}: W+ − W−"): test.signed_rank_sum,
+            cells.update({(name, f"{label}: W (scipy)"): rank_sum(test.w_scipy),
+                          (name, f"{label}: W+ − W−"): rank_sum(test.signed_rank_sum),
                           (name, f"{label}: p (Bonferroni)"): test.p_bonferroni})
     label = f"{METHODS[A]} vs {METHODS[B]}"
-    cells.update({(POOLED, f"{label}: W (scipy)"): pooled.w_scipy, (POOLED, f"{label}: W+ − W−"): pooled.signed_rank_sum,
+    cells.update({(POOLED, f"{label}: W (scipy)"): rank_sum(pooled.w_scipy),
+                  (POOLED, f"{label}: W+ − W−"): rank_sum(pooled.signed_rank_sum),
                   (POOLED, f"{label}: p (Bonferroni)"): pooled.p_bonferroni})
     return Table("Statistics as published: Friedman per fingertip, Wilcoxon post hoc with Bonferroni", "fingertip",
                  [*statistics, POOLED], columns, cells, digits=3, layout="rows", caption=(

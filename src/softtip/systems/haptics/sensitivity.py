@@ -2,12 +2,21 @@
 
 The publication casts every test fingertip in one rubber, mounted like the FS. Real fingers differ
 in stiffness, shape and how the device sits on them; each :class:`FingerVariation` changes one of
-those on the three human fingertips (the casts stay as published) and :func:`sensitivity_study`
-reruns the study under each, reporting every method's pooled median error and their order.
+those on the human fingertips (the casts stay as published) and :func:`sensitivity_study` reruns
+their part of the study under each, reporting every method's median error over the human
+fingertips' targets, the methods' order and the pooled A-vs-B test.
 
 :func:`error_curves` reruns the study over the number of neighbours n, the weighting's power and
 the FS and user tables' sizes (the effects the authors named as future work), one at a time from
-the published settings, and :func:`curves_figure` draws them.
+the study's settings, and :func:`curves_figure` draws them.
+
+Both start from one :class:`Baseline`: the study at its own settings, with its FS table and targets.
+A rerun collects again only what its change touches (a new FS table for another FS size, the
+fingertips' user data and renderings otherwise), and every collection draws the noise stream it
+draws in the study (each stage of each fingertip its own stream of the seed), so the differences
+between points are the change's, not the noise's; the baseline's errors are the study's own. A
+fingertip's fixed user table and presses are collected once and reused by every rerun that keeps
+the finger and the user table's size.
 """
 
 from __future__ import annotations
@@ -17,79 +26,193 @@ from dataclasses import dataclass, replace
 import numpy as np
 from matplotlib.figure import Figure
 
-from softtip._core.config import PositiveNumber, Text, choice, schema
+from softtip._core.config import PositiveNumber, Text, checked, choice, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import PlateContactLaw
-from softtip.systems.haptics.fingertips import CASTS, HUMAN_FINGERTIPS, SHAPE_AXES, Fingertip
+from softtip.systems.haptics.collection import CollectionSettings
+from softtip.systems.haptics.device import DeviceSpec, load_device
+from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS, SHAPE_AXES, TEST_FINGERTIPS, Fingertip, Offset3
 from softtip.systems.haptics.statistics import WilcoxonResult
-from softtip.systems.haptics.study import METHODS, StudySettings, run_study
+from softtip.systems.haptics.study import (
+    METHODS,
+    FingertipOutcome,
+    SharedTables,
+    StudySettings,
+    UserData,
+    collect_user_data,
+    fs_table,
+    pooled_test,
+    shared_tables,
+    study_fingertip,
+)
 
 
 @schema(section="variation")
 class FingerVariation:
-    """A change to the human fingertips: their rubber's modulus scaled, another shape, another mounting
-    (None keeps the published setting)."""
+    """A change to the human fingertips: their rubber's modulus scaled, another shape, the core's
+    sensor origin moved (m, from the cap's centre; +z towards the nail), another mounting (None keeps
+    the published setting)."""
 
     name: Text
     stiffness_scale: PositiveNumber = 1.0
     shape: choice(*SHAPE_AXES) | None = None
+    core_offset: Offset3 | None = None
     mounting: choice("centre", "nail") | None = None
 
     def apply(self, fingertip: Fingertip) -> Fingertip:
         law: PlateContactLaw = fingertip.contact
         changes = {"contact": replace(law, youngs_modulus=law.youngs_modulus * self.stiffness_scale)}
-        if self.shape is not None:
-            changes["shape"] = self.shape
-        if self.mounting is not None:
-            changes["mounting"] = self.mounting
+        for name in ("shape", "core_offset", "mounting"):
+            if getattr(self, name) is not None:
+                changes[name] = getattr(self, name)
         return replace(fingertip, **changes)
 
 
-# stiffness: in-vivo finger pads span about a factor of two either way of a soft cast at these loads
+# stiffness: in-vivo finger pads span about a factor of two either way of a soft cast at these loads;
+# the core: a finger's distal phalanx sits off the pulp's centre, here 1.5 mm towards the nail
 DEFAULT_VARIATIONS = (
     FingerVariation(name="as published"),
     FingerVariation(name="human pads half as stiff", stiffness_scale=0.5),
     FingerVariation(name="human pads twice as stiff", stiffness_scale=2.0),
     FingerVariation(name="human pads ellipsoidal", shape="ellipsoid"),
     FingerVariation(name="human pads flattened", shape="pad"),
+    FingerVariation(name="core 1.5 mm towards the nail", core_offset=(0.0, 0.0, 1.5e-3)),
     FingerVariation(name="device resting on the nail", mounting="nail"),
 )
+
+VARIATION_NAMES = tuple(variation.name for variation in DEFAULT_VARIATIONS)
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """The study at ``settings`` on ``fingertips``: its FS table and targets, each fingertip's user
+    data and outcome."""
+
+    device: DeviceSpec
+    fingertips: tuple[Fingertip, ...]
+    settings: StudySettings
+    collection: CollectionSettings
+    seed: int
+    shared: SharedTables
+    user_data: tuple[UserData, ...]
+    outcomes: tuple[FingertipOutcome, ...]
+
+    @classmethod
+    def run(cls, settings: StudySettings = StudySettings(), seed: int = 0, device: DeviceSpec | None = None,
+            fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
+            collection: CollectionSettings = CollectionSettings(), progress: Progress = SILENT) -> Baseline:
+        seed = checked(integer(0), "seed", seed)
+        device = load_device() if device is None else device
+        with progress.task("the study's own tables", total=len(fingertips) + 1) as task:
+            shared = shared_tables(device, settings, collection, seed)
+            task.advance()
+            user_data = []
+            for index, finger in enumerate(fingertips):
+                try:
+                    user_data.append(collect_user_data(device, finger, settings, collection, seed, index))
+                except ValueError as problem:
+                    raise ValueError(f"fingertip {finger.name!r}: {problem}") from None
+                task.advance(note=finger.name)
+        baseline = cls(device, tuple(fingertips), settings, collection, seed, shared, tuple(user_data), ())
+        return replace(baseline, outcomes=baseline.rerun(settings, shared, range(len(fingertips))))
+
+    @property
+    def tests(self) -> int:
+        """The Wilcoxon tests the study makes: three per fingertip and the pooled one."""
+        return 3 * len(self.fingertips) + 1
+
+    def rerun(self, settings: StudySettings, shared: SharedTables, indices,
+              fingertips: tuple[Fingertip, ...] | None = None) -> tuple[FingertipOutcome, ...]:
+        """The outcomes of the fingertips at ``indices`` (of ``fingertips``, by default the baseline's)
+        under ``settings`` with ``shared`` tables; the baseline's user data where it still holds."""
+        fingertips = self.fingertips if fingertips is None else fingertips
+        outcomes = []
+        for i in indices:
+            same = fingertips[i] == self.fingertips[i] and settings.user_levels == self.settings.user_levels
+            outcomes.append(study_fingertip(self.device, fingertips[i], shared, settings, self.collection, self.seed,
+                                            i, self.tests, self.user_data[i] if same else None))
+        return tuple(outcomes)
 
 
 @dataclass(frozen=True)
 class VariationOutcome:
-    """One variation: each method's median error (N) over the human fingertips' targets, the
-    methods from best to worst, and the pooled A-vs-B test over every fingertip; or, when the study
-    cannot run under it (a fingertip out of the device's reach), why (and no figures)."""
+    """One variation: each method's median error (N) over the targets of the human fingertips it
+    could be studied on, the methods from best to worst, and the pooled A-vs-B test over every
+    fingertip studied; the human fingertips left out (the procedure cannot run on them, e.g. out of
+    the device's reach) and why. With every human fingertip left out, no figures."""
 
     variation: FingerVariation
     median_error: np.ndarray | None
     ranking: tuple[str, ...]
     pooled: WilcoxonResult | None
-    refused: str | None = None
+    left_out: tuple[str, ...] = ()
+    refused: str | None = None  # why each fingertip left out was, one after the other
+
+    def to_dict(self) -> dict:
+        """JSON-ready: medians in N by method, the ranking, the pooled test, what was left out and why."""
+        found = {"variation": self.variation.name, "left_out": list(self.left_out), "refused": self.refused}
+        if self.median_error is None:
+            return found
+        return found | {
+            "median_error_N": dict(zip(METHODS, self.median_error.tolist(), strict=True)),
+            "ranking": list(self.ranking),
+            "pooled_A_vs_B": {"W_signed_rank_sum": self.pooled.signed_rank_sum, "W_scipy_min": self.pooled.w_scipy,
+                              "p_bonferroni": self.pooled.p_bonferroni}}
 
 
-def sensitivity_study(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
+def sensitivity_study(baseline: Baseline, progress: Progress = SILENT,
                       variations: tuple[FingerVariation, ...] = DEFAULT_VARIATIONS) -> tuple[VariationOutcome, ...]:
-    """The study rerun under each variation of the human fingertips (same seed: same tables' noise draws)."""
+    """The human fingertips of ``baseline`` rerun under each variation (the casts as they are). A
+    human fingertip the procedure refuses under a variation is left out of its figures, and said so."""
     if not variations:
         raise ValueError("variations: expected at least one")
+    human = [i for i, finger in enumerate(baseline.fingertips) if finger in HUMAN_FINGERTIPS]
+    if not human:
+        raise ValueError("fingertips: the sensitivity study varies the human fingertips, expected at least one of "
+                         + ", ".join(finger.name for finger in HUMAN_FINGERTIPS))
     outcomes = []
     with progress.task("finger variations", total=len(variations)) as task:
         for variation in variations:
-            fingertips = CASTS + tuple(variation.apply(finger) for finger in HUMAN_FINGERTIPS)
-            try:
-                study = run_study(settings, seed, device=None, fingertips=fingertips)
-            except ValueError as problem:
-                outcomes.append(VariationOutcome(variation, None, (), None, str(problem)))
+            fingertips = tuple(variation.apply(f) if i in human else f for i, f in enumerate(baseline.fingertips))
+            varied, refusals = {}, {}
+            for i in human:
+                try:
+                    varied[i] = baseline.rerun(baseline.settings, baseline.shared, [i], fingertips)[0]
+                except ValueError as problem:
+                    refusals[baseline.fingertips[i].name] = str(problem)
+            left_out = tuple(refusals)
+            why = "; ".join(refusals.values()) or None
+            if not varied:
+                outcomes.append(VariationOutcome(variation, None, (), None, left_out, why))
                 task.advance(note=f"{variation.name}: refused")
                 continue
-            human = np.hstack([outcome.errors for outcome in study.fingertips[len(CASTS):]])
-            median = np.median(human, axis=1)
+            every = [varied.get(i, outcome) for i, outcome in enumerate(baseline.outcomes)
+                     if i in varied or i not in human]
+            median = np.median(np.hstack([outcome.errors for outcome in varied.values()]), axis=1)
             outcomes.append(VariationOutcome(variation, median, tuple(METHODS[i] for i in np.argsort(median)),
-                                             study.pooled))
+                                             pooled_test(every, baseline.tests), left_out, why))
             task.advance(note=variation.name)
     return tuple(outcomes)
+
+
+def sensitivity_figure(outcomes: tuple[VariationOutcome, ...]) -> Figure:
+    """Each method's median error (N) over the human fingertips under each variation (refused ones left out)."""
+    shown = [outcome for outcome in outcomes if outcome.median_error is not None]
+    if not shown:
+        raise ValueError("sensitivity: every variation was refused, nothing to draw")
+    figure = Figure(figsize=(1.6 * len(shown) + 3, 3.8), layout="constrained")
+    axis = figure.subplots()
+    width = 0.8 / len(METHODS)
+    places = np.arange(len(shown))
+    for m, method in enumerate(METHODS):
+        axis.bar(places + (m - (len(METHODS) - 1) / 2) * width, [o.median_error[m] for o in shown], width,
+                 label=method)
+    axis.set_xticks(places, [o.variation.name for o in shown], rotation=20, ha="right")
+    axis.set_ylabel("median rendering error, human fingertips (N)")
+    axis.set_yscale("log")
+    axis.grid(axis="y", alpha=0.3)
+    axis.legend(fontsize="small")
+    return figure
 
 
 @dataclass(frozen=True)
@@ -103,21 +226,33 @@ class CurvePoint:
 
 CURVES = (("n_neighbours", (1, 2, 4, 8, 16)), ("weighting_power", (0.0, 1.0, 2.0)),
           ("fs_levels", (7, 9, 11, 13)), ("user_levels", (4, 5, 7)))
+CURVE_LABELS = {"n_neighbours": "neighbours n", "weighting_power": "weighting power p (weights 1/d^p)",
+                "fs_levels": "FS table levels per servo (levels³ entries)",
+                "user_levels": "user table levels per servo (levels³ entries)"}
 
 
-def error_curves(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
+def error_curves(baseline: Baseline, progress: Progress = SILENT,
                  curves: tuple[tuple[str, tuple], ...] = CURVES) -> tuple[CurvePoint, ...]:
-    """The study rerun with each setting of ``curves`` varied alone (the others as ``settings``)."""
+    """The study rerun with each setting of ``curves`` varied alone (the others as the baseline's)."""
     runs = [(name, value) for name, values in curves for value in values]
     if not runs:
         raise ValueError("curves: expected at least one setting with values")
+    unknown = [name for name, _ in runs if name not in CURVE_LABELS]
+    if unknown:
+        raise ValueError(f"curves: {unknown[0]!r} is not a setting the curves vary, expected one of "
+                         + ", ".join(CURVE_LABELS))
+    every = range(len(baseline.fingertips))
     points = []
     with progress.task("error curves", total=len(runs)) as task:
         for name, value in runs:
-            if name not in StudySettings.__dataclass_fields__:
-                raise ValueError(f"curves: {name!r} is not a study setting")
-            study = run_study(replace(settings, **{name: value}), seed)
-            errors = np.hstack([outcome.errors for outcome in study.fingertips])
+            settings = replace(baseline.settings, **{name: value})
+            if settings == baseline.settings:
+                outcomes = baseline.outcomes
+            else:
+                shared = baseline.shared if name != "fs_levels" else replace(
+                    baseline.shared, fs=fs_table(baseline.device, value, baseline.collection, baseline.seed))
+                outcomes = baseline.rerun(settings, shared, every)
+            errors = np.hstack([outcome.errors for outcome in outcomes])
             points.append(CurvePoint(name, float(value), np.median(errors, axis=1)))
             task.advance(note=f"{name} = {value}")
     return tuple(points)
@@ -133,7 +268,8 @@ def curves_figure(points: tuple[CurvePoint, ...]) -> Figure:
         values = [point.value for point in mine]
         for m, method in enumerate(METHODS):
             axis.plot(values, [point.median_error[m] for point in mine], marker="o", label=method)
-        axis.set_xlabel(setting)
+        axis.set_xlabel(CURVE_LABELS[setting])
+        axis.set_yscale("log")
         axis.grid(alpha=0.3)
     axes[0].set_ylabel("median rendering error (N)")
     axes[0].legend(fontsize="small")

@@ -30,7 +30,13 @@ from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, int
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
 from softtip.systems.haptics.adaptive import adaptive_user_table
-from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
+from softtip.systems.haptics.collection import (
+    Collection,
+    CollectionSettings,
+    motor_grid,
+    sensed_by_fingertip,
+    sensed_contact,
+)
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import CORE_RADIUS, FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
 from softtip.systems.haptics.personalisation import (
@@ -46,6 +52,7 @@ from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, f
 # the publication's three methods, then softtip's additions: B with the user's stiffness from five
 # presses, and A from an adaptive user table of at most ``adaptive_budget`` configurations
 METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)", "data-driven, adaptive (A+)")
+SHORT_NAMES = ("standard", "A", "B", "B+", "A+")  # the methods as the plots' ticks name them
 PUBLISHED_METHODS = 3  # the statistics compare these, as published
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -71,7 +78,8 @@ class StudySettings:
 class FingertipOutcome:
     """One test fingertip: per method (rows in :data:`METHODS` order) and target, the error (N), the
     rendered force's magnitude (N), and whether the result is flagged (a target outside the table,
-    a pose out of reach, a sensor saturated); Friedman and the post hoc tests over the published three."""
+    a pose out of reach, the sensor under the fingertip saturated); Friedman and the post hoc tests
+    over the published three."""
 
     fingertip: Fingertip
     errors: np.ndarray
@@ -82,6 +90,7 @@ class FingertipOutcome:
     user_table_flagged: int  # FS entries whose personalisation was flagged, method A
     geometric_flagged: int  # FS entries whose geometric personalisation was out of reach
     fitted_modulus: float  # Pa: the user's Hertz modulus from the presses (method B+)
+    user_collection_s: float  # s: the user table's real collection time (method A)
     adaptive_collection_s: float  # s: the adaptive user table's real collection time (method A+)
     friedman: FriedmanResult
     post_hoc: tuple[WilcoxonResult, WilcoxonResult, WilcoxonResult]  # in PAIRS order
@@ -159,7 +168,7 @@ def error_box_plots(fingertips: list[str], errors: np.ndarray) -> Figure:
     figure = Figure(figsize=(4 * columns, 3.25 * -(-len(fingertips) // columns)), layout="constrained")
     axes = np.atleast_1d(figure.subplots(-(-len(fingertips) // columns), columns, sharey=True, squeeze=False)).ravel()
     for axis, name, per_method in zip(axes, fingertips, errors, strict=False):
-        axis.boxplot(list(per_method), tick_labels=["standard", "A", "B", "B+", "A+"])
+        axis.boxplot(list(per_method), tick_labels=list(SHORT_NAMES))
         axis.set_title(name)
         axis.grid(axis="y", alpha=0.3)
     for axis in axes[len(fingertips):]:
@@ -170,17 +179,122 @@ def error_box_plots(fingertips: list[str], errors: np.ndarray) -> Figure:
     return figure
 
 
-def _targets(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings,
-             rng: np.random.Generator) -> np.ndarray:
-    draws = rng.uniform(0.0, device.angle_max, (settings.target_draws, 3))
-    read = sensed_contact(device, FINGERTIP_SENSOR, draws, collection, rng)
-    magnitude = np.linalg.norm(read.finger_wrenches[:, :3], axis=1)
-    touching = np.flatnonzero((magnitude >= max(settings.min_target_force, settings.contact_threshold))
-                              & ~read.saturated)
-    if len(touching) < settings.targets:
-        raise ValueError(f"study.target_draws = {settings.target_draws}: only {len(touching)} random configurations "
+@dataclass(frozen=True)
+class SharedTables:
+    """What every test fingertip shares: the FS table (entries where a sensor saturated left out; its
+    real collection time is the whole procedure's) and the target sensations (targets, 6)."""
+
+    fs: Collection
+    targets: np.ndarray
+
+
+# each stage draws its noise from its own stream of the seed, so that a rerun which changes one
+# stage (another FS table size, another finger) leaves every other stage's draws as they were
+_FS_STREAM, _TARGET_STREAM, _FINGERTIP_STREAM = 0, 1, 2
+_TARGET_BATCH = 512  # random configurations driven per batch while looking for targets
+
+
+def _stream(seed: int, *keys: int) -> np.random.Generator:
+    return np.random.default_rng([seed, *keys])
+
+
+def fs_table(device: DeviceSpec, levels: int, collection: CollectionSettings, seed: int) -> Collection:
+    """The FS table of ``levels``³ configurations, collected as the procedure does."""
+    collected = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, levels), collection,
+                               _stream(seed, _FS_STREAM))
+    return collected.unsaturated()
+
+
+def record_targets(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings,
+                   seed: int) -> np.ndarray:
+    """The target sensations: random configurations over the servos' range, driven in batches until
+    ``settings.targets`` of them touch the FS (at most ``settings.target_draws`` tried), as read by the FS."""
+    rng = _stream(seed, _TARGET_STREAM)
+    least = max(settings.min_target_force, settings.contact_threshold)
+    found, tried = [], 0
+    while sum(map(len, found)) < settings.targets and tried < settings.target_draws:
+        draws = rng.uniform(0.0, device.angle_max, (min(_TARGET_BATCH, settings.target_draws - tried), 3))
+        tried += len(draws)
+        read = sensed_contact(device, FINGERTIP_SENSOR, draws, collection, rng)
+        touching = (np.linalg.norm(read.finger_wrenches[:, :3], axis=1) >= least) & ~read.saturated
+        found.append(read.finger_wrenches[touching])
+    found = np.vstack(found)
+    if len(found) < settings.targets:
+        raise ValueError(f"study.target_draws = {settings.target_draws}: only {len(found)} random configurations "
                          f"touch the FS, expected at least study.targets = {settings.targets}")
-    return read.finger_wrenches[touching[: settings.targets]]
+    return found[: settings.targets]
+
+
+def shared_tables(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings,
+                  seed: int) -> SharedTables:
+    return SharedTables(fs_table(device, settings.fs_levels, collection, seed),
+                        record_targets(device, settings, collection, seed))
+
+
+@dataclass(frozen=True)
+class UserData:
+    """What a test fingertip gives before any table is built: its fixed user table (``user_levels``³
+    configurations, read by the DS) and its five presses (method B+), each collected on its own stream."""
+
+    user_table: Collection
+    presses: Collection
+
+
+def _fingertip_stream(seed: int, index: int, stage: int) -> np.random.Generator:
+    return _stream(seed, _FINGERTIP_STREAM, index, stage)
+
+
+_USER, _PRESSES, _ADAPTIVE, _RENDERINGS = range(4)  # the stages of a fingertip, each on its own stream
+
+
+def collect_user_data(device: DeviceSpec, fingertip: Fingertip, settings: StudySettings,
+                      collection: CollectionSettings, seed: int, index: int) -> UserData:
+    """The ``index``-th test fingertip's user table and presses."""
+    return UserData(
+        sensed_contact(device, fingertip, motor_grid(device, settings.user_levels), collection,
+                       _fingertip_stream(seed, index, _USER)),
+        sensed_contact(device, fingertip, press_configurations(device, fingertip.radius), collection,
+                       _fingertip_stream(seed, index, _PRESSES)))
+
+
+def study_fingertip(device: DeviceSpec, fingertip: Fingertip, shared: SharedTables, settings: StudySettings,
+                    collection: CollectionSettings, seed: int, index: int, tests: int,
+                    user_data: UserData | None = None) -> FingertipOutcome:
+    """The ``index``-th test fingertip: its user data collected (unless given), the FS table
+    personalised by each method, every target rendered by each and read by the sensor under the
+    fingertip; the statistics count ``tests`` Wilcoxon tests in all. A fingertip the procedure
+    cannot personalise is refused in one line."""
+    fs, targets = shared.fs, shared.targets
+    try:
+        if user_data is None:
+            user_data = collect_user_data(device, fingertip, settings, collection, seed, index)
+        personal = _personalise(device, fingertip, fs, user_data, settings, collection,
+                                _fingertip_stream(seed, index, _ADAPTIVE))
+    except ValueError as problem:
+        raise ValueError(f"fingertip {fingertip.name!r}: {problem}") from None
+    standard = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold,
+                                        settings.weighting_power).get_params()
+    rng = _fingertip_stream(seed, index, _RENDERINGS)
+    wrenches, commanded, flagged = [], [], []
+    for motor in (fs.motor_inputs, *personal.motor_inputs):
+        rendering = NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, motor).render(targets)
+        produced, saturated = sensed_by_fingertip(device, fingertip, rendering.motor_inputs, collection, rng)
+        wrenches.append(produced)
+        commanded.append(rendering.motor_inputs)
+        flagged.append(rendering.outside | saturated)
+    wrenches = np.array(wrenches)
+    errors = np.linalg.norm(targets[:, :3] - wrenches[..., :3], axis=-1)
+    return FingertipOutcome(
+        fingertip, errors, np.linalg.norm(wrenches[..., :3], axis=-1), np.array(flagged), wrenches,
+        np.array(commanded), personal.data_driven_flagged, personal.geometric_flagged, personal.fitted_modulus,
+        user_data.user_table.duration_s, personal.adaptive_collection_s, friedman(errors[:PUBLISHED_METHODS]),
+        tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS))
+
+
+def pooled_test(outcomes, tests: int) -> WilcoxonResult:
+    """Personalisation A against B over every fingertip and target."""
+    return wilcoxon(np.concatenate([o.errors[1] for o in outcomes]), np.concatenate([o.errors[2] for o in outcomes]),
+                    tests)
 
 
 def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
@@ -189,48 +303,18 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
     """The published study on the simulated device (see the module's notes)."""
     seed = checked(integer(0), "seed", seed)
     device = load_device() if device is None else device
-    rng = np.random.default_rng(seed)
-    with progress.task("FS table and targets", total=2) as task:
-        fs_collected = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, settings.fs_levels), collection, rng)
-        fs = fs_collected.unsaturated()
+    with progress.task("FS table and targets", total=1) as task:
+        shared = shared_tables(device, settings, collection, seed)
         task.advance()
-        targets = _targets(device, settings, collection, rng)
-        task.advance()
-    renderer = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
-    standard = renderer.get_params()
-    fs_renderer = NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, fs.motor_inputs)
-    user_grid = motor_grid(device, settings.user_levels)
     tests = 3 * len(fingertips) + 1
-    outcomes, user_duration = [], 0.0
+    outcomes = []
     with progress.task("fingertips", total=len(fingertips)) as task:
-        for fingertip in fingertips:
-            try:
-                personal = _personalise(device, fingertip, fs, user_grid, settings, collection, rng)
-            except ValueError as problem:
-                raise ValueError(f"fingertip {fingertip.name!r}: {problem}") from None
-            user_duration = personal.user_collection_s
-            renderers = (fs_renderer, *(NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, motor)
-                                        for motor in personal.motor_inputs))
-            wrenches, commanded, flagged = [], [], []
-            for method in renderers:
-                rendering = method.render(targets)
-                produced = sensed_contact(device, fingertip, rendering.motor_inputs, collection, rng)
-                wrenches.append(produced.finger_wrenches)
-                commanded.append(rendering.motor_inputs)
-                flagged.append(rendering.outside | produced.saturated)
-            wrenches = np.array(wrenches)
-            errors = np.linalg.norm(targets[:, :3] - wrenches[..., :3], axis=-1)
-            outcomes.append(FingertipOutcome(
-                fingertip, errors, np.linalg.norm(wrenches[..., :3], axis=-1), np.array(flagged), wrenches,
-                np.array(commanded), personal.data_driven_flagged,
-                personal.geometric_flagged, personal.fitted_modulus, personal.adaptive_collection_s,
-                friedman(errors[:PUBLISHED_METHODS]),
-                tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS)))
+        for index, fingertip in enumerate(fingertips):
+            outcomes.append(study_fingertip(device, fingertip, shared, settings, collection, seed, index, tests))
             task.advance(note=fingertip.name)
-    pooled = wilcoxon(np.concatenate([o.errors[1] for o in outcomes]),
-                      np.concatenate([o.errors[2] for o in outcomes]), tests)
-    return HapticsStudy(settings, seed, targets, tuple(outcomes), pooled, fs.duration_s, user_duration,
-                        _contact_to_layer(device, fs, targets, fs_renderer), NOTES)
+    return HapticsStudy(settings, seed, shared.targets, tuple(outcomes), pooled_test(outcomes, tests),
+                        shared.fs.duration_s, outcomes[-1].user_collection_s,
+                        _contact_to_layer(device, shared.fs, shared.targets), NOTES)
 
 
 @dataclass(frozen=True)
@@ -241,19 +325,21 @@ class _Personalised:
     data_driven_flagged: int
     geometric_flagged: int
     fitted_modulus: float
-    user_collection_s: float
     adaptive_collection_s: float
 
 
-def _personalise(device: DeviceSpec, fingertip: Fingertip, fs, user_grid: np.ndarray, settings: StudySettings,
-                 collection: CollectionSettings, rng: np.random.Generator) -> _Personalised:
-    user = sensed_contact(device, fingertip, user_grid, collection, rng)
-    usable = user.unsaturated()
+def _personalise(device: DeviceSpec, fingertip: Fingertip, fs: Collection, user_data: UserData,
+                 settings: StudySettings, collection: CollectionSettings, rng: np.random.Generator) -> _Personalised:
+    usable = user_data.user_table.unsaturated()
+    if len(usable.motor_inputs) < settings.n_neighbours:
+        raise ValueError(f"user table: only {len(usable.motor_inputs)} of its {len(user_data.user_table.motor_inputs)} "
+                         f"configurations read without saturating a sensor, expected at least n_neighbours = "
+                         f"{settings.n_neighbours}")
     data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, usable.motor_inputs,
                                           usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
                                           settings.weighting_power)
     geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
-    presses = sensed_contact(device, fingertip, press_configurations(device, fingertip.radius), collection, rng)
+    presses = user_data.presses
     pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
                           settings.contact_threshold, saturated=presses.saturated)
     force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
@@ -267,11 +353,10 @@ def _personalise(device: DeviceSpec, fingertip: Fingertip, fs, user_grid: np.nda
         settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
     return _Personalised((data_driven.motor_inputs, geometric.motor_inputs, force_model.motor_inputs,
                           data_driven_adaptive.motor_inputs), int(data_driven.outside.sum()),
-                         int(geometric.outside.sum()), pressed.youngs_modulus, user.duration_s,
-                         adaptive.collection.duration_s)
+                         int(geometric.outside.sum()), pressed.youngs_modulus, adaptive.collection.duration_s)
 
 
-def _contact_to_layer(device: DeviceSpec, fs, targets: np.ndarray, fs_renderer: NearestNeighbourRenderer) -> float:
+def _contact_to_layer(device: DeviceSpec, fs: Collection, targets: np.ndarray) -> float:
     """The largest contact radius over the FS table's entries as strong as the targets, over the FS's
     rubber thickness over its core: χ = √(Rδ)/t, where the bonded-layer law stays near its derivation (χ <~ 1)."""
     strongest = np.linalg.norm(targets[:, :3], axis=1).max()
