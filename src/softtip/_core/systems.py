@@ -43,6 +43,8 @@ class Study:
     # protocol parameters the study sets over the protocol file's, and why (printed in the report)
     sets: Mapping[str, object] = field(default_factory=dict)
     because: str = ""
+    # protocol parameters a quick run sets beyond the cut trials: the study's coarse protocol
+    quick: Mapping[str, object] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,7 @@ def reproduce(
     studies: list[str] = typer.Argument(..., help=f"One or more of {', '.join(STUDY_NAMES)}, or all."),
     output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML reports and index.html."),
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments and the models."),
-    quick: bool = typer.Option(False, "--quick", help="Two trials per condition: a smoke run, not the study."),
+    quick: bool = typer.Option(False, "--quick", help="Two trials per condition and each study's coarse protocol: a smoke run, not the study."),
     json_output: bool = typer.Option(False, "--json", help="Print each study's results beside the published figures as JSON."),
 ) -> None:
     """Run published studies end to end (experiments on the twin -> models -> metrics); write one

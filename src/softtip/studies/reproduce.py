@@ -139,11 +139,12 @@ class StudyReport:
 def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path: str | Path | None = None,
                     progress: Progress = SILENT, command: str | None = None) -> StudyReport:
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
-    count to a minimum (a smoke run, not the study)."""
+    count to a minimum and sets the study's coarse protocol (a smoke run, not the study)."""
     study = studies().get(name) or owner("study", name)  # the second refuses an unknown name
     protocol = load_protocol(protocol_path or study.protocol).changed(seed=seed, **study.sets)
     parameters = asdict(protocol.parameters)
     cuts = {key: count for key, count in QUICK_TRIALS.items() if quick and parameters.get(key, 0) > count}
+    cuts |= dict(study.quick) if quick else {}
     protocol, quick_keys = protocol.changed(**cuts), set(cuts)
     started = datetime.now(timezone.utc)
     start = time.perf_counter()
@@ -155,7 +156,8 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
     provenance = {
         "softtip version": __version__, "study": f"{name}: {study.follows}", "protocol": source,
         "design(s)": ", ".join(outcome.designs or [protocol.design.name]), "seed": str(seed),
-        "quick (smoke run)": "yes: fewer trials than the study" if quick else "no",
+        "quick (smoke run)": ("no" if not quick else "yes: fewer trials than the study" +
+                              (", a coarse protocol" if study.quick else "")),
         "command": command or f"softtip.studies.reproduce.reproduce_study({name!r}, seed={seed}, quick={quick})",
         "started (UTC)": started.strftime("%Y-%m-%d %H:%M:%S"), "run time": f"{seconds:.1f} s",
         "python / platform": f"{platform.python_version()} / {platform.platform(terse=True)}"}
