@@ -67,16 +67,14 @@ def test_the_figure_of_merit_is_three_sigma_over_an_independent_slope():
 
 
 @pytest.mark.slow
-def test_the_search_finds_a_design_near_the_best_of_the_whole_grid():
-    """Two values per parameter (62 designs fit the die): the search's best for 0..13 mN after 16 evaluations
-    against every candidate evaluated."""
-    found = search_designs(DIE, (13e-3,), steps=2, budget=16, points=9, seed=0)
+def test_the_search_finds_the_best_of_the_whole_grid_more_often_than_chance():
+    """Two values per parameter (62 designs fit the die, 27 of them with a figure at 13 mN): the search's
+    best for 0..13 mN after 16 evaluations, at five seeds, against every candidate evaluated."""
     space = tuple(ParameterRange(n, lo, hi, hi - lo) for n, lo, hi in SPACE)
     space += (ParameterRange("pattern", 0, 3, 1, integer=True),)
     limit = magnetisation_limit(DIE)
     feasible = [PillarDesign.of(p) for p in grid_candidates(space)]
     feasible = [d for d in feasible if not refusal(DIE, d, limit)]
-    assert found.candidates == 256 and found.candidates - sum(found.refused.values()) == len(feasible) == 62
 
     def figure(design: PillarDesign) -> float:
         try:
@@ -85,14 +83,14 @@ def test_the_search_finds_a_design_near_the_best_of_the_whole_grid():
             return math.inf
 
     figures = np.array([figure(d) for d in feasible])
-    best = found.ranges[0].best.over(13e-3)
-    assert np.isfinite(figures).sum() == 27  # the thin tall pillars turn over (or do not solve) before 13 mN
-    assert best >= figures.min() * (1 - 1e-12)
-    # the second best of the 62 (measured: 111 µN against the best 58 µN); 16 random picks hold one of the
-    # best two with probability 0.45
-    assert np.sum(figures < best * (1 - 1e-9)) <= 1
-    assert found.ranges[0].evaluations == 16 and 0 < len(found.evaluated) <= 16
-    assert found.envelope(np.array([13e-3]))[0] <= best * (1 + 1e-12)
+    assert len(feasible) == 62 and np.isfinite(figures).sum() == 27  # thin tall pillars turn over before 13 mN
+    found = [search_designs(DIE, (13e-3,), steps=2, budget=16, points=9, seed=seed) for seed in range(5)]
+    assert all(f.candidates == 256 and f.candidates - sum(f.refused.values()) == 62 for f in found)
+    best = np.array([f.ranges[0].best.over(13e-3) for f in found])
+    assert np.all(best >= figures.min() * (1 - 1e-12))
+    # 16 random picks of 62 hold the best with probability 0.26 (three of five: 0.14); measured: 3 of 5
+    assert np.sum(np.isclose(best, figures.min(), rtol=1e-9)) >= 3
+    assert all(f.ranges[0].evaluations == 16 and f.envelope(np.array([13e-3]))[0] == b for f, b in zip(found, best))
 
 
 @pytest.mark.parametrize("call, message", [

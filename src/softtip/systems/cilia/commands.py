@@ -14,7 +14,6 @@ from softtip.cli.common import check_output, console, fail, progress_for
 MAX_FORCE_MN = 1000.0
 MAX_RANGE_MN = 200.0  # beyond, every pillar of the design space lies flat long before
 COARSE = {"steps": 3, "budget": 8, "points": 13}  # --coarse: a smoke run of the search
-FULL = {"steps": 5, "budget": 30, "points": 25}  # the study's own (the cilia protocol's defaults)
 
 app = typer.Typer(help="S4: the GMR cilia force sensor.", no_args_is_help=True)
 
@@ -73,7 +72,7 @@ def design_cilia(
                                          "for several. Default: 13, 26 (the published) and 39."),
     steps: int = typer.Option(None, "--steps", help="Values per design parameter (default 5; --coarse 3)."),
     budget: int = typer.Option(None, "--budget", help="Designs evaluated per range (default 30; --coarse 8)."),
-    points: int = typer.Option(None, "--points", help="Forces along each design's curve (default 25; --coarse 13)."),
+    points: int = typer.Option(None, "--points", help="Forces along each design's curve (default 17; --coarse 13)."),
     coarse: bool = typer.Option(False, "--coarse", help="A coarse, fast search: 3 values per parameter, 8 "
                                 "evaluations per range, 13 forces per curve (options given still count)."),
     sensor: str = typer.Option("X", "--sensor", help="The sensor read: X or Y."),
@@ -87,7 +86,7 @@ def design_cilia(
     """Search pillar diameter, taper, height, moment, placement and number of pillars on the same die for the
     smallest force resolved over each stated range (the largest 3σ minimum force from 0 to the range), with
     softtip's Bayesian optimiser; print the best designs beside the published one and the trade-off."""
-    ranges = tuple(range_mn) if range_mn else (13.0, 26.0, 39.0)
+    ranges = tuple(range_mn or ())
     for value in ranges:
         if not (math.isfinite(value) and 0 < value <= MAX_RANGE_MN):
             fail(f"--range-mn = {value}: expected a force above 0 and at most {MAX_RANGE_MN:g} mN")
@@ -96,7 +95,6 @@ def design_cilia(
                                      ("--points", points, 5, 200)):
         if value is not None and not low <= value <= high:
             fail(f"{option} = {value}: expected an integer from {low} to {high}")
-    settings = {key: (value if value is not None else (COARSE if coarse else FULL)[key]) for key, value in chosen.items()}
     if sensor not in ("X", "Y"):
         fail(f"--sensor = {sensor!r}: expected X or Y")
     if seed < 0:
@@ -110,7 +108,12 @@ def design_cilia(
         save = check_output(save, "--save", inputs=[*inputs, *([plot] if plot else [])], force=force)
     from softtip.systems.cilia.design import search_designs
     from softtip.systems.cilia.layout import read_die
+    from softtip.systems.cilia.study import CiliaSettings
 
+    study = CiliaSettings()  # the defaults: the cilia protocol's search
+    full = {"steps": study.design_steps, "budget": study.design_budget, "points": study.design_points}
+    settings = {key: (value if value is not None else (COARSE if coarse else full)[key]) for key, value in chosen.items()}
+    ranges = ranges or study.design_ranges_mN
     layout = read_die(die) if die is not None else read_die()  # a die file that cannot be built is refused here
     found = search_designs(layout, tuple(r * 1e-3 for r in ranges), sensor, settings["steps"], settings["budget"],
                            settings["points"], seed=seed, progress=progress_for(json_output))

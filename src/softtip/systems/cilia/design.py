@@ -23,8 +23,10 @@ composite cannot carry are refused before the search, with the reason (the die f
 :func:`softtip.systems.cilia.layout.placement_problem`). The search is softtip's optimiser
 (:class:`softtip.optimize.bayes.BayesianSearch`: Gaussian-process expected improvement on the discrete
 candidate grid, :mod:`softtip.optimize.space` for the grid), run once per stated range on log10 of the
-figure of merit; evaluations are shared between the ranges (a design's curve gives its figure at every
-range). The trade-off curve is the lower envelope of every evaluated design's figure against the range.
+figure of merit, smallest range first; each range's search is told every design the earlier ones
+evaluated (a design's curve gives its figure at every range), and its best is the best of all designs
+evaluated so far. The trade-off curve is the lower envelope of every evaluated design's figure against
+the range.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from softtip.systems.cilia.resolution import resolution
 
 MN = 1e-3  # newtons per millinewton
 UN = 1e-6  # newtons per micronewton
+INITIAL = 10  # the space-filling start of a range's search, at most half its budget (optimize's 2 x 7 + 1 is too many)
 PATTERNS = ("centre", "corners", "corners and centre", "3 x 3")
 SPACE = (("tip_diameter_um", 100.0, 300.0), ("taper", 1.0, 2.0), ("height_mm", 0.5, 1.5),
          ("moment_memu", 0.5, 4.5), ("pitch_mm", 0.4, 1.2), ("offset_mm", -0.6, 0.6))
@@ -267,20 +270,27 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
                 known[key] = None
         return known[key]
 
+    def figure_of(result: Evaluation | None, force_range: float) -> float:
+        return math.inf if result is None else result.over(force_range)
+
+    asked: dict[int, Evaluation | None] = {}  # every candidate evaluated, by its index
     searches = []
     for force_range in ranges:
-        search = BayesianSearch(points_, budget=budget, seed=seed)
-        best: Evaluation | None = None
+        search = BayesianSearch(points_, budget=budget, seed=seed, initial=min(INITIAL, max(1, budget // 2)))
+        for index, result in asked.items():  # the earlier ranges' evaluations inform this range's model
+            figure = figure_of(result, force_range)
+            search.tell(index, -math.log10(figure) if math.isfinite(figure) else None)
         with progress.task(f"design search, range {force_range / MN:g} mN", total=search.budget) as task:
             while picks := search.ask():
                 for index in picks:
-                    result = evaluated(candidates[index][1])
-                    figure = math.inf if result is None else result.over(force_range)
+                    asked[index] = evaluated(candidates[index][1])
+                    figure = figure_of(asked[index], force_range)
                     search.tell(index, -math.log10(figure) if math.isfinite(figure) else None)
-                    if math.isfinite(figure) and (best is None or figure < best.over(force_range)):
-                        best = result
-                    task.advance(note="best " + ("-" if best is None else f"{best.over(force_range) / UN:.3g} µN"))
-        searches.append(RangeSearch(force_range, best, len(search.asked), search.stop_reason))
+                    best = min(asked.values(), key=lambda e: figure_of(e, force_range))
+                    task.advance(note="best " + (f"{best.over(force_range) / UN:.3g} µN" if best else "-"))
+        best = min(asked.values(), key=lambda e: figure_of(e, force_range))
+        searches.append(RangeSearch(force_range, best if math.isfinite(figure_of(best, force_range)) else None,
+                                    len(search.asked), search.stop_reason))
     published = evaluate(die, published_design(die), sensor, force_top, points, chain_count)
     evaluations = tuple(e for e in known.values() if e is not None)
     outcome = DesignSearch(sensor, tuple(searches), evaluations, len(known) - len(evaluations), published,

@@ -342,11 +342,14 @@ def _roughness_tables(rough: RoughnessStudy, settings: CiliaSettings) -> list[Ta
                      caption="A random forest (scikit-learn) on one-second windows: log AC rms, log rms of the "
                              "reading-to-reading step, and three spectral band shares. No strip gives windows to "
                              "both training and validation. Chance: 0.25.")
-    confusion = Table("Confusion by strip (rows: true surface, columns: predicted)", "true", list(c.surfaces),
-                      list(c.surfaces), {(t, p): int(c.confusion_by_recording[i, j])
-                                         for i, t in enumerate(c.surfaces) for j, p in enumerate(c.surfaces)},
-                      digits=0)
-    return [level, by_rate, accuracy, confusion]
+    confusions = [Table(title, "true", list(c.surfaces), list(c.surfaces),
+                        {(t, p): int(matrix[i, j]) for i, t in enumerate(c.surfaces) for j, p in enumerate(c.surfaces)},
+                        digits=0)
+                  for title, matrix in (("Confusion by strip (rows: true surface, columns: predicted)",
+                                         c.confusion_by_recording),
+                                        (f"Confusion at the held-out {c.held_speed / MM:g} mm/s (rows: true surface, "
+                                         "columns: predicted)", c.confusion_at_held_speed))]
+    return [level, by_rate, accuracy, *confusions]
 
 
 def _roughness_figure(rough: RoughnessStudy) -> PlotFigure:

@@ -100,7 +100,7 @@ class CiliaSettings:
                                 expect("a non-empty list of positive forces in mN")] = (13.0, 26.0, 39.0)
     design_steps: integer(2, 9) = 5
     design_budget: integer(1, 500) = 30
-    design_points: integer(5, 200) = 25
+    design_points: integer(5, 200) = 17
 
     def __post_init__(self) -> None:
         speeds, rates = (self.brush_speed_mm_s, *self.brush_speeds_mm_s), (self.brush_rate_hz, *self.brush_rates_hz)
