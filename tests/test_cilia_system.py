@@ -216,7 +216,8 @@ def test_quick_runs_a_coarse_protocol():
     results = report.outcome.results
     assert results["design_search"]["steps"] == 3 and results["roughness"]["recordings"] == 4 * (2 * 3 + 2)
     assert report.provenance["quick (smoke run)"] == "yes: fewer trials than the study, a coarse protocol"
-    assert report.seconds < 30
+    # measured 12 s alone and 24 s with the two cores shared by eight jobs (the whole study: 82 s there)
+    assert report.seconds < 45
 
 
 def bench_app() -> typer.Typer:
