@@ -41,9 +41,23 @@ def test_the_published_design_is_the_die_files_and_carries_the_composites_magnet
     assert len(PillarDesign(3, 0.6, 0.0, 100, 1, 1, 1).positions) == 9
 
 
+def test_a_die_whose_pillars_are_no_placement_of_the_search_is_refused(tmp_path):
+    from softtip.systems.cilia.layout import SHIPPED_DIE
+
+    path = tmp_path / "moved.toml"
+    path.write_text(SHIPPED_DIE.read_text().replace("[0.0, 0.0]]", "[0.3, 0.0]]"))
+    with pytest.raises(DieError, match="moved.toml: pillars.positions_mm: expected one of the design search's"):
+        published_design(read_die(path))
+    shifted = tmp_path / "shifted.toml"
+    shifted.write_text(SHIPPED_DIE.read_text().replace("[[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0], "
+                                                       "[0.0, 0.0]]", "[[-0.8, -0.6], [0.8, -0.6], [0.0, 0.2]"
+                                                       ", [-0.8, 1.0], [0.8, 1.0]]"))
+    assert published_design(read_die(shifted)) == PillarDesign(2, 0.8, 0.2, 200.0, 1.6, 1.0, 2.8)
+
+
 @pytest.mark.parametrize("design, reason", [
-    (PillarDesign(3, 0.4, 0.0, 300.0, 1.5, 1.0, 1.0), "the bases overlap"),  # 450 µm bases 400 µm apart
-    (PillarDesign(2, 1.2, 0.3, 200.0, 1.0, 1.0, 1.0), "a base leaves the die"),  # 1.5 + 0.1 mm past the edge
+    (PillarDesign(3, 0.4, 0.0, 300.0, 1.5, 1.0, 1.0), "the pillars' bases overlap"),  # 450 µm bases 400 µm apart
+    (PillarDesign(2, 1.2, 0.3, 200.0, 1.0, 1.0, 1.0), "the pillar's base leaves the die"),  # 1.5 + 0.1 mm past the edge
     (PillarDesign(0, 0.4, 0.0, 300.0, 2.0, 0.5, 0.5), "the pillar is wider than long"),  # 600 µm wide, 500 long
     (PillarDesign(2, 1.0, 0.0, 200.0, 1.6, 1.0, 2.81), "more moment than the composite carries"),
 ])

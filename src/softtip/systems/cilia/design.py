@@ -5,7 +5,8 @@ pillar diameter, height, taper, moment, placement and number of pillars resolve 
 the range the application needs? The figure of merit of a design for a stated range R is the largest
 3σ minimum force over forces 0..R (:mod:`softtip.systems.cilia.resolution`: three standard deviations
 of one reading over the local slope): what the sensor can promise everywhere in its range. A curve whose
-slope changes sign within R reads two forces alike: such a design has no figure for that range.
+slope changes sign within R reads two forces alike: such a design has no figure for that range. The
+load is paper mode's (a tip force perpendicular to each pillar, as the published simulation and fit).
 
 The design space (each parameter on ``steps`` equal values):
 
@@ -101,11 +102,21 @@ class PillarDesign:
 
 
 def published_design(die: Die) -> PillarDesign:
-    """The die file's pillars as a candidate (the corners-and-centre pattern it declares)."""
+    """The die file's pillars as a candidate (on the shipped die: the published corners and centre); a die
+    whose pillars are none of the search's placements is refused."""
     pillars = die.pillars
     rod = pillars.rod
-    return PillarDesign(2, float(np.abs(pillars.positions).max() / MM), 0.0, rod.tip_diameter / UM,
-                        rod.base_diameter / rod.tip_diameter, rod.length / MM, abs(pillars.moment) / MEMU)
+    positions = pillars.positions / MM
+    offset = float(positions[:, 1].mean())
+    pitch = float(np.abs(positions - [0.0, offset]).max())
+    for pattern in range(len(PATTERNS)):
+        design = PillarDesign(pattern, pitch, offset, rod.tip_diameter / UM, rod.base_diameter / rod.tip_diameter,
+                              rod.length / MM, abs(pillars.moment) / MEMU)
+        if design.positions.shape == pillars.positions.shape and np.allclose(
+                np.sort(design.positions, axis=0), np.sort(pillars.positions, axis=0), rtol=0, atol=1e-9):
+            return design
+    raise DieError(f"{die.source}: pillars.positions_mm: expected one of the design search's placements "
+                   f"({', '.join(PATTERNS)}, centred in x)")
 
 
 def magnetisation_limit(die: Die) -> float:
@@ -119,7 +130,7 @@ def refusal(die: Die, design: PillarDesign, limit: float) -> str:
         return "the pillar is wider than long"
     problem = placement_problem(design.positions, design.base_diameter, die.size)
     if problem:
-        return "a base leaves the die" if "leaves" in problem else "the bases overlap"
+        return problem.split(": ", 1)[1]  # what is wrong, without the pillar it names
     if design.moment_memu * MEMU > limit * design.volume * (1 + 1e-9):
         return "more moment than the composite carries in its volume"
     return ""
