@@ -137,6 +137,18 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     assert np.all(np.diff(study.total_rms) > 0) and study.classification.windows > 0
     with pytest.raises(ValueError, match="dataset: expected the conditions mode, surface"):
         recordings_of(read.select(rows=read.column("mode") == "paper"), channel="s0_bx_uT")
+    # the command reads the same file the same way
+    from softtip.systems.cilia.commands import roughness_cilia
+
+    app = typer.Typer()
+    app.command()(user_errors(roughness_cilia))
+    ran = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--json"])
+    assert ran.exit_code == 0, ran.output
+    report = json.loads(ran.output)
+    assert report["recordings"] == 28 and np.allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-12)
+    assert report["accuracy_by_strip"] == study.classification.by_recording
+    refused = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "3"])
+    assert refused.exit_code == 2 and "cilia.parquet: recordings: no brushing of silicon at 3 mm/s" in refused.output
 
 
 @pytest.mark.parametrize("setting, message", [

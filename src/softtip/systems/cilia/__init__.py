@@ -17,7 +17,8 @@ The chain, stage by stage (each in the shared toolkit where it is generic):
   brushings; ``design`` — the design search on the same die (``softtip cilia design``);
 * ``bench`` — the lab's protocol ``cilia``: the twin's force–voltage curves (paper and balance modes, X and
   Y) and its brushings as a dataset; ``reproduce`` — ``softtip reproduce cilia``, the study of that dataset beside the
-  published figures (``published.toml``); ``commands`` — ``softtip bench cilia`` and ``softtip cilia design``.
+  published figures (``published.toml``); ``commands`` — ``softtip bench cilia``, ``softtip cilia design`` and
+  ``softtip cilia roughness``.
 
 Which sensor: the force experiments read X, whose strips sense the direction the pillars bend in and
 which has the larger magnetoresistance and sensitivity; Y is reported beside it.

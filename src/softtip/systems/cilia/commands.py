@@ -1,4 +1,4 @@
-"""S4's commands: ``softtip bench cilia`` and ``softtip cilia design``."""
+"""S4's commands: ``softtip bench cilia``, ``softtip cilia design`` and ``softtip cilia roughness``."""
 
 from __future__ import annotations
 
@@ -141,3 +141,55 @@ def design_cilia(
                           f"mm, {design['moment_memu']:g} memu: largest minimum force "
                           + ("- (ambiguous)" if worst is None else f"{worst:.1f} uN")
                           + f", at rest {design['minimum_force_at_rest_uN']:.1f} uN")
+
+
+@app.command("roughness")
+def roughness_cilia(
+    dataset: Path = typer.Argument(..., help="A dataset (.parquet) with brushing trials: softtip lab run cilia's, or "
+                                   "a measured one with the same conditions."),
+    speed_mm_s: float = typer.Option(1.0, "--speed-mm-s", help="The stage speed of the level and the rate curve (mm/s)."),
+    rate_hz: float = typer.Option(50.0, "--rate-hz", help="The sampling rate of the level and the classifier (/s)."),
+    channel: str = typer.Option("gmr_x_V", "--channel", help="The channel read."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the classifier."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The roughness study of a dataset's brushings: the AC rms against the surfaces' roughness (with the flat
+    surface's floor removed, and its slope), against the sampling rate, and a classifier of the surfaces
+    validated by strip and at a held-out stage speed."""
+    for option, value in (("--speed-mm-s", speed_mm_s), ("--rate-hz", rate_hz)):
+        if not (math.isfinite(value) and 0 < value <= 1e6):
+            fail(f"{option} = {value}: expected a positive number")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    from softtip.data import Dataset
+    from softtip.systems.cilia.bench import recordings_of
+    from softtip.systems.cilia.layout import DieError
+    from softtip.systems.cilia.roughness import analyse_roughness
+
+    data = Dataset.read(dataset)
+    if channel not in data.channels:
+        fail(f"--channel = {channel!r}: expected one of {dataset}'s channels: {', '.join(data.channels)}")
+    try:
+        recordings = recordings_of(data, channel)
+        with progress_for(json_output).task("roughness: the brushings, the classifier"):
+            study = analyse_roughness(recordings, speed_mm_s * 1e-3, rate_hz, seed)
+    except DieError as problem:  # the dataset holds no study of these settings: say which file
+        fail(f"{dataset}: {problem}")
+    c = study.classification
+    report = {"dataset": str(dataset), "channel": channel, "recordings": study.recordings,
+              "surfaces": list(study.surfaces), "roughness_um": (study.roughness * 1e6).tolist(),
+              "ac_rms_uV": (study.total_rms * 1e6).tolist(), "above_floor_uV": (study.above_floor * 1e6).tolist(),
+              "slope_uV_per_um": study.slope, "floor_uV": study.floor * 1e6, "rates_hz": study.rates.tolist(),
+              "ac_rms_by_rate_uV": (study.rms_by_rate * 1e6).tolist(), "accuracy_by_strip": c.by_recording,
+              "confusion_by_strip": c.confusion_by_recording.tolist(), "held_speed_mm_s": c.held_speed * 1e3,
+              "accuracy_at_held_speed": c.at_held_speed, "confusion_at_held_speed": c.confusion_at_held_speed.tolist()}
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    for name, roughness, total, above in zip(study.surfaces, report["roughness_um"], report["ac_rms_uV"],
+                                             report["above_floor_uV"]):
+        console.print(f"{name:10s} {roughness:8.2f} um rms   AC rms {total:9.3f} uV   above the floor {above:9.3f} uV",
+                      markup=False)
+    console.print(f"slope {report['slope_uV_per_um']:.3f} uV per um, floor {report['floor_uV']:.3f} uV; "
+                  f"accuracy {c.by_recording:.3f} by strip, {c.at_held_speed:.3f} at the held-out "
+                  f"{report['held_speed_mm_s']:g} mm/s ({c.windows} windows)", markup=False)
