@@ -149,9 +149,9 @@ def design_model(die: Die, design: PillarDesign, chain_count: int) -> CiliaModel
 @dataclass(frozen=True)
 class Evaluation:
     """One design's figures along its curve: ``force`` (N) from 0 to the largest stated range (or the span
-    its rod solved), the
-    largest 3σ minimum force over 0..force (``worst``, N; inf once the slope has changed sign), the one
-    at rest, the slope-criterion range (N, capped at the largest stated range) and the sensitivity (V/N)."""
+    its rod solved), the largest 3σ minimum force over 0..force (``worst``, N; inf once the slope has
+    changed sign), the one at rest, the slope-criterion range (N, capped at the span) and the sensitivity
+    (V/N)."""
 
     design: PillarDesign
     force: NDArray[np.float64]
@@ -219,13 +219,12 @@ class DesignSearch:
 
     def envelope(self, ranges: NDArray) -> NDArray[np.float64]:
         """The trade-off curve: the smallest figure of any evaluated design at each range in ``ranges`` (N)."""
-        return np.array([min(e.over(r) for e in self.evaluated) for r in ranges])
+        return np.array([min((e.over(r) for e in self.evaluated), default=math.inf) for r in ranges])
 
     def to_dict(self) -> dict:
-        def figures(e: Evaluation, force_range: float | None) -> dict:
+        def figures(e: Evaluation, force_range: float) -> dict:
             return {**e.design.to_dict(), "minimum_force_at_rest_uN": e.at_rest / UN,
-                    "worst_minimum_force_uN": None if force_range is None or not math.isfinite(e.over(force_range))
-                    else e.over(force_range) / UN,
+                    "worst_minimum_force_uN": e.over(force_range) / UN if math.isfinite(e.over(force_range)) else None,
                     "range_end_mN": e.range_end / MN, "sensitivity_mV_per_mN": e.sensitivity}
 
         grid = np.linspace(self.ranges[0].force_range * 0.25, self.ranges[-1].force_range, 16)
@@ -242,7 +241,7 @@ class DesignSearch:
 
 
 def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X", steps: int = 5,
-                   budget: int = 30, points: int = 25, chain_count: int = 10, seed: int = 0,
+                   budget: int = 30, points: int = 17, chain_count: int = 10, seed: int = 0,
                    progress: Progress = SILENT) -> DesignSearch:
     """Search the design space (``steps`` values per parameter) for the smallest figure of merit at each
     of ``force_ranges`` (N), ``budget`` evaluations each, every design's curve sampled at ``points``
@@ -255,6 +254,8 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
     if budget < 1 or points < 5:
         raise DieError(f"budget = {budget!r}, points = {points!r}: expected a budget >= 1 and >= 5 points")
     start = time.perf_counter()
+    force_top = ranges[-1]
+    published = evaluate(die, published_design(die), sensor, force_top, points, chain_count)  # refuses a die first
     space = tuple(ParameterRange(name, low, high, (high - low) / (steps - 1)) for name, low, high in SPACE)
     space += (ParameterRange("pattern", 0, len(PATTERNS) - 1, 1, integer=True),)
     limit = magnetisation_limit(die)
@@ -269,7 +270,6 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
     if not candidates:
         raise DieError("the design space holds no design that fits the die")
     points_ = normalised_points(space, [params for params, _ in candidates])
-    force_top = ranges[-1]
     known: dict[PillarDesign, Evaluation | None] = {}  # None: the rod did not converge
 
     def evaluated(design: PillarDesign) -> Evaluation | None:
@@ -302,7 +302,6 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
         best = min(asked.values(), key=lambda e: figure_of(e, force_range))
         searches.append(RangeSearch(force_range, best if math.isfinite(figure_of(best, force_range)) else None,
                                     len(search.asked), search.stop_reason))
-    published = evaluate(die, published_design(die), sensor, force_top, points, chain_count)
     evaluations = tuple(e for e in known.values() if e is not None)
     outcome = DesignSearch(sensor, tuple(searches), evaluations, len(known) - len(evaluations), published,
                            len(candidates) + sum(refused.values()), refused, steps, seed, 0.0, Figure())
