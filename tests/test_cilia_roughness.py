@@ -13,10 +13,13 @@ from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import CiliaModel
 from softtip.systems.cilia.roughness import (
     SPACING,
+    SURFACES,
     Brush,
+    Recording,
     ac_rms,
+    analyse_roughness,
+    brush_surfaces,
     read_brushing,
-    roughness_study,
     surface_profile,
 )
 
@@ -71,13 +74,32 @@ def test_bad_input_is_refused(brush, call, message):
 
 
 def test_rougher_surfaces_read_larger_and_a_slow_rate_misses_roughness():
-    study = roughness_study(MODEL, PlateContact(0.5, math.radians(0.5)), 150e-6, 1e-3, 50.0, 10e-3,
-                            (0.5e-3, 2e-3), (2.0, 20.0, 100.0), 2, seed=3)
+    brushings = brush_surfaces(MODEL, PlateContact(0.5, math.radians(0.5)), 150e-6, 10e-3, 1e-3, 50.0,
+                               (0.5e-3, 2e-3), (2.0, 20.0, 100.0), 2, np.random.default_rng(3))
+    # every strip at the nominal and both other speeds at 50/s, and the first strip at 1 mm/s at each rate
+    assert len(brushings) == 4 * (2 * 3 + 3)
+    force = brushings[-1].force  # P100: the vertical force rides the grains about the engagement's
+    assert force.min() >= 0 and force.std() > 0
+    study = analyse_roughness([b.recording for b in brushings], 1e-3, 50.0, seed=3)
     assert study.surfaces == ("silicon", "P1000", "P320", "P100")
     assert study.floor == study.total_rms[0] and np.all(np.diff(study.total_rms) > 0)
     assert study.slope > 0
-    # the rate curve: 2 readings/s average the grains away (measured on 20 mm: 7 × below 100/s on P1000)
+    assert list(study.rates) == [2.0, 20.0, 50.0, 100.0]  # the nominal rate's recordings join the curve
+    # the rate curve: 2 readings/s average the grains away (measured on 10 mm: 4 × below 100/s on P1000)
     assert np.all(study.rms_by_rate[1:3, 0] < 0.5 * study.rms_by_rate[1:3, -1])  # grains << 0.5 mm a reading
     classified = study.classification
     assert classified.confusion_by_recording.sum() == classified.windows
     assert classified.by_recording > 0.6  # chance: 0.25
+    assert classified.held_speed == 2e-3 and classified.confusion_at_held_speed.sum() > 0
+
+
+def test_the_analysis_refuses_recordings_without_a_flat_surface_or_a_nominal_run():
+    rng = np.random.default_rng(0)
+    rough = [Recording("P320", SURFACES["P320"], 0, 1e-3, 50.0, rng.normal(size=100))]
+    with pytest.raises(DieError, match="expected a flat surface"):
+        analyse_roughness(rough, 1e-3, 50.0, 0)
+    flat = [Recording("silicon", 0.0, 0, 1e-3, 50.0, rng.normal(size=100))]
+    with pytest.raises(DieError, match="no brushing of silicon at 2 mm/s"):
+        analyse_roughness(flat + rough, 2e-3, 50.0, 0)
+    with pytest.raises(DieError, match="found none"):
+        analyse_roughness([], 1e-3, 50.0, 0)

@@ -36,6 +36,9 @@ COARSE = """
     brush_strips = 2
     brush_speeds_mm_s = [0.5, 2.0]
     brush_rates_hz = [2.0, 50.0]
+    design_steps = 3
+    design_budget = 4
+    design_points = 9
 """
 
 
@@ -90,7 +93,9 @@ def test_the_protocol_writes_the_twins_curves_within_their_stated_noise(tmp_path
     protocol = load_protocol(coarse(tmp_path, points=8))
     dataset, _ = run_protocol(protocol)
     mode, repeat = dataset.column("mode"), dataset.column("repeat")
-    assert sorted(set(zip(mode, repeat))) == [("balance", 0), ("balance", 1), ("paper", 0), ("paper", 1)]
+    loadings = mode != "brushing"
+    assert sorted(set(zip(mode[loadings], repeat[loadings]))) == [("balance", 0), ("balance", 1), ("paper", 0),
+                                                                  ("paper", 1)]
     paper = dataset.select(rows=(mode == "paper") & (repeat == 1))
     force = paper.column("force_N")
     assert np.allclose(force, np.linspace(26e-3 / 8, 26e-3, 8))  # the plan: 8 equal steps to 26 mN
@@ -106,6 +111,44 @@ def test_the_protocol_writes_the_twins_curves_within_their_stated_noise(tmp_path
     assert paper.column("tare_x_V")[0] == pytest.approx(100e-6 * 183e3, rel=0.03)
     balance = dataset.select(rows=(mode == "balance") & (repeat == 0)).column("force_N")
     assert balance[0] == 0 and balance.max() > 0  # the balance reads nothing until the plate touches
+
+
+def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_the_file(tmp_path):
+    from softtip.data import Dataset
+    from softtip.systems.cilia.bench import recordings_of
+    from softtip.systems.cilia.roughness import analyse_roughness
+
+    dataset, _ = run_protocol(load_protocol(coarse(tmp_path, points=5)))
+    brushing = dataset.select(rows=dataset.column("mode") == "brushing")
+    conditions = brushing.trial_conditions
+    # 4 surfaces x (2 strips x 3 speeds at 50/s + the first strip at 1 mm/s at 2/s): 7 recordings each
+    assert len(brushing.trials) == 28
+    assert sorted(set(conditions["surface"])) == ["P100", "P1000", "P320", "silicon"]
+    assert set(zip(conditions["speed_mm_s"], conditions["rate_hz"])) == {(0.5, 50.0), (2.0, 50.0), (1.0, 2.0),
+                                                                         (1.0, 50.0)}
+    # at 2 mm/s and 50/s over 6 mm less the pillars' 2 mm spread: 2 s, 100 whole readings, 1/50 s apart
+    fast = brushing.select(trials=[conditions["trial"][np.flatnonzero(conditions["speed_mm_s"] == 2.0)[0]]])
+    assert len(fast) in (99, 100) and np.allclose(np.diff(fast.column("time_s")), 0.02)
+    read = Dataset.read(dataset.write(tmp_path / "cilia.parquet"))
+    recordings = recordings_of(read)
+    assert len(recordings) == 28
+    assert np.allclose(sorted({r.roughness for r in recordings}), [0.0, 18.3e-6, 46.2e-6, 162e-6], rtol=1e-12)
+    study = analyse_roughness(recordings, 1e-3, 50.0, seed=0)
+    assert np.all(np.diff(study.total_rms) > 0) and study.classification.windows > 0
+    with pytest.raises(ValueError, match="dataset: expected the conditions mode, surface"):
+        recordings_of(read.select(rows=read.column("mode") == "paper"), channel="s0_bx_uT")
+    # the command reads the same file the same way
+    from softtip.systems.cilia.commands import roughness_cilia
+
+    app = typer.Typer()
+    app.command()(user_errors(roughness_cilia))
+    ran = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--json"])
+    assert ran.exit_code == 0, ran.output
+    report = json.loads(ran.output)
+    assert report["recordings"] == 28 and np.allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-12)
+    assert report["accuracy_by_strip"] == study.classification.by_recording
+    refused = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "3"])
+    assert refused.exit_code == 2 and "cilia.parquet: recordings: no brushing of silicon at 3 mm/s" in refused.output
 
 
 @pytest.mark.parametrize("setting, message", [
@@ -158,7 +201,7 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     # the readout's resistance at rest against the spec's ≈ 183 and 169 kΩ (measured 187 and 172)
     assert verdicts[("X", "resistance")] == verdicts[("Y", "resistance")] == "within"
     assert ("X", "upper end") in verdicts
-    assert len(outcome.figures) == 5 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert len(outcome.figures) == 6 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     assert outcome.headline.value == pytest.approx(fit["moment_memu"])
     assert any("balance" in note for note in outcome.notes)
     # a minimum force of the X sensor of tens of µN (3σ of a 100 µV count over ≈ 5.7 V/N), Y beyond reach
@@ -168,6 +211,25 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     assert np.all(np.diff(rough["ac_rms_uV"]) > 0) and rough["slope_uV_per_um"] > 0
     assert rough["accuracy_by_strip"] > 0.5  # chance 0.25
     assert any(table.title.startswith("Roughness missed") for table in outcome.tables)
+    design = outcome.results["design_search"]
+    assert [r["range_mN"] for r in design["ranges"]] == [13.0, 26.0, 39.0]
+    assert all(r["evaluations"] == 4 and r["published"]["pillars"] == 5 for r in design["ranges"])
+    assert any(table.title.startswith("Design search") for table in outcome.tables)
+
+
+@pytest.mark.slow
+def test_quick_runs_a_coarse_protocol():
+    from softtip.studies.reproduce import reproduce_study
+
+    report = reproduce_study("cilia", seed=1, quick=True)
+    rows = {row: report.protocol_table.cells[(row, "where from")] for row in report.protocol_table.rows}
+    for key in ("points", "trials", "brush_length_mm", "brush_strips", "design_steps", "design_budget"):
+        assert rows[f"parameters.{key}"] == "--quick (a smoke run)"
+    results = report.outcome.results
+    assert results["design_search"]["steps"] == 3 and results["roughness"]["recordings"] == 4 * (2 * 3 + 2)
+    assert report.provenance["quick (smoke run)"] == "yes: fewer trials than the study, a coarse protocol"
+    # measured 12 s alone and 24 s with the two cores shared by eight jobs (the whole study: 82 s there)
+    assert report.seconds < 45
 
 
 def bench_app() -> typer.Typer:

@@ -126,6 +126,15 @@ def inputs(tmp_path_factory):
                    {"role": "calibration" if trial < 4 else "validation"})
     dataset = tmp / "dataset.parquet"
     writer.write(dataset)
+    brushings = TrialWriter({"gmr_x_V": "V"}, conditions={"mode": "1", "surface": "1", "roughness_um": "um",
+                                                          "repeat": "1", "speed_mm_s": "mm/s", "rate_hz": "Hz"})
+    for surface, roughness in (("silicon", 0.0), ("P1000", 18.3), ("P320", 46.2), ("P100", 162.0)):
+        for strip in range(2):
+            for speed in (1.0, 2.0):
+                brushings.add({"time_s": np.arange(100) / 50, "gmr_x_V": rng.normal(0, 1e-7 * (1 + roughness), 100)},
+                              {"mode": "brushing", "surface": surface, "roughness_um": roughness, "repeat": strip,
+                               "speed_mm_s": speed, "rate_hz": 50.0})
+    brushings.write(tmp / "brushing.parquet")
     u = rng.normal(size=300)
     y = np.convolve(u, [0.0, 0.5, 0.25], mode="full")[:300]
     (tmp / "recording.csv").write_text("time_s,u,y\n" + "".join(f"{k * 0.01},{a},{b}\n" for k, (a, b) in
@@ -157,6 +166,7 @@ def inputs(tmp_path_factory):
         "sysid predict": ([str(tmp / "sysid.npz")], ["--data", csv], "recording.csv", "data"),
         "recording repair": ([str(tmp / "recording.mcap")], [], "recording.mcap", "recording"),
         "live": ([], ["--emulate"], None, None),
+        "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "dataset"),
     }
     (tmp / "new").mkdir()
     (tmp / "work").mkdir()  # the current folder of every run: default outputs land here

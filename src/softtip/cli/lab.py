@@ -51,7 +51,8 @@ def reproduce(
     output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML reports and index.html."),
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments and the models."),
     quick: bool = typer.Option(False, "--quick",
-                               help="Two trials per condition and coarse sweeps: a smoke run, not the study."),
+                               help="Two trials per condition and each study's coarse protocol: a smoke run, "
+                                    "not the study."),
     json_output: bool = typer.Option(False, "--json", help="Print each study's results beside the published figures as JSON."),
 ) -> None:
     """Run published studies end to end (experiments on the twin -> models -> metrics); write one

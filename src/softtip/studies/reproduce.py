@@ -156,7 +156,8 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
     provenance = {
         "softtip version": __version__, "study": f"{name}: {study.follows}", "protocol": source,
         "design(s)": ", ".join(outcome.designs or [protocol.design.name]), "seed": str(seed),
-        "quick (smoke run)": "yes: fewer trials than the study" if quick else "no",
+        "quick (smoke run)": ("no" if not quick else "yes: fewer trials than the study" +
+                              (", a coarse protocol" if study.quick else "")),
         "command": command or f"softtip.studies.reproduce.reproduce_study({name!r}, seed={seed}, quick={quick})",
         "started (UTC)": started.strftime("%Y-%m-%d %H:%M:%S"), "run time": f"{seconds:.1f} s",
         "python / platform": f"{platform.python_version()} / {platform.platform(terse=True)}"}

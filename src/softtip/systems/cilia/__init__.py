@@ -13,10 +13,12 @@ The chain, stage by stage (each in the shared toolkit where it is generic):
 * ``resolution`` — the smallest force resolved (3σ over the slope; the smallest distinguishable step)
   and the measurement range;
 * ``study`` — :func:`~softtip.systems.cilia.study.run_study`, the whole force study as typed results and
-  figures;
+  figures; ``roughness`` — brushing the four surfaces, and the roughness study and classifier of a dataset's
+  brushings; ``design`` — the design search on the same die (``softtip cilia design``);
 * ``bench`` — the lab's protocol ``cilia``: the twin's force–voltage curves (paper and balance modes, X and
-  Y) as a dataset; ``reproduce`` — ``softtip reproduce cilia``, the study of that dataset beside the
-  published figures (``published.toml``); ``commands`` — ``softtip bench cilia``.
+  Y) and its brushings as a dataset; ``reproduce`` — ``softtip reproduce cilia``, the study of that dataset beside the
+  published figures (``published.toml``); ``commands`` — ``softtip bench cilia``, ``softtip cilia design`` and
+  ``softtip cilia roughness``.
 
 Which sensor: the force experiments read X, whose strips sense the direction the pillars bend in and
 which has the larger magnetoresistance and sensitivity; Y is reported beside it.
@@ -42,7 +44,13 @@ SYSTEM = System(
     studies=(
         Study("cilia", "cilia", "softtip.systems.cilia.reproduce:cilia",
               "S4: the pillars' moment and diameter fitted to the force-voltage curve, the minimum force and "
-              "the measurement range of a GMR cilia sensor"),
+              "the measurement range of a GMR cilia sensor",
+              # --quick: a coarse protocol (fewer load steps, short brushings on two strips, a coarse design
+              # search) on top of the two trials
+              quick={"points": 15, "depths_um": (20.0,), "meander_scales": (1.1,), "brush_length_mm": 6.0,
+                     "brush_strips": 2, "brush_rates_hz": (2.0, 20.0, 50.0), "design_steps": 3,
+                     "design_budget": 6, "design_points": 9}),
     ),
     bench_commands={"cilia": "softtip.systems.cilia.commands:bench_cilia"},
+    commands={"cilia": "softtip.systems.cilia.commands:app"},
 )

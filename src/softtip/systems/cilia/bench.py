@@ -1,4 +1,4 @@
-"""S4's force characterisation on the twin, as the lab's protocol ``cilia``: the die's force–voltage curves.
+"""S4 on the twin, as the lab's protocol ``cilia``: the die's force–voltage curves and its brushings.
 
 Paper mode (as the published simulation loads the pillars: a tip force perpendicular to each axis) at
 ``points`` equal steps up to ``force_max_mN``, and balance mode (as the measurement was made: the die
@@ -8,9 +8,19 @@ the meter's quantisation; :mod:`softtip.sensors.gmr`) and the bench's repeatabil
 each step, tared by a reading at zero force. The twin's truth is the die file with the protocol's moment,
 tip diameter and, where given, height and Young's modulus (:func:`softtip.systems.cilia.study.twin_model`).
 
-Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare). Label: ``force_N`` (the
-total force on the die: the load applied in paper mode, the balance's vertical reading in balance mode).
-Conditions: ``mode`` (paper, balance), ``repeat``, ``tare_x_V``, ``tare_y_V`` (the tare readings).
+Then the brushings (:mod:`softtip.systems.cilia.roughness`): the die held ``brush_engagement_um`` past first
+contact and moved over ``brush_strips`` strips of each of the four surfaces, every strip at
+``brush_speed_mm_s`` and at every one of ``brush_speeds_mm_s``, at ``brush_rate_hz``, and the first strip at ``brush_speed_mm_s`` at every one of
+``brush_rates_hz``: one trial (one recording) each, both sensors through their bridges (the rest voltage
+taken off before the meter).
+
+Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare, or from its bridge's
+reference in a brushing). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
+the balance's vertical reading in balance mode and under the surface in a brushing). Conditions: ``mode``
+(paper, balance, brushing), ``repeat`` (the loading's repeat; in a brushing, which strip of the surface),
+``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the bridges' reference: the rest voltage),
+``surface`` (none in a loading), ``roughness_um`` (the surface's rms roughness), ``speed_mm_s`` (the
+stage's speed; 0 in a loading) and ``rate_hz`` (readings per second).
 """
 
 from __future__ import annotations
@@ -31,6 +41,7 @@ from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
 from softtip.systems.cilia.layout import UM, DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
+from softtip.systems.cilia.roughness import Recording, brush_surfaces
 from softtip.systems.cilia.study import (
     CiliaSettings,
     balance_contact,
@@ -44,8 +55,10 @@ from softtip.systems.cilia.study import (
 SENSORS = ("X", "Y")
 CHANNELS = {"gmr_x_V": "V", "gmr_y_V": "V"}
 LABELS = {"force_N": "N"}
-CONDITIONS = {"mode": "1", "repeat": "1", "tare_x_V": "V", "tare_y_V": "V"}
+CONDITIONS = {"mode": "1", "repeat": "1", "tare_x_V": "V", "tare_y_V": "V", "surface": "1", "roughness_um": "um",
+              "speed_mm_s": "mm/s", "rate_hz": "Hz"}
 MODES = ("paper", "balance")
+BRUSHING = "brushing"
 
 
 @schema(section="realism")
@@ -110,7 +123,8 @@ def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Cilia
     bench = CiliaBench(prony=PronySeries((), ()), realism=protocol.realism, rng=np.random.default_rng(protocol.seed),
                        rate_hz=1.0 / protocol.realism.dwell_s, model=model)
     return bench, {"die_file": str(protocol.design.path.name)}, (
-        f"{protocol.name}: {p.trials} x paper and balance curves of {p.points} steps on {protocol.design.name}")
+        f"{protocol.name}: {p.trials} x paper and balance curves of {p.points} steps, and the brushings, on "
+        f"{protocol.design.name}")
 
 
 def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
@@ -121,14 +135,17 @@ def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, 
 
 
 def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:
-    """``trials`` repeats of the paper-mode and the balance-mode curve, both sensors read at every step."""
+    """``trials`` repeats of the paper-mode and the balance-mode curve, both sensors read at every step;
+    then the brushings of the four surfaces."""
     model, rng = bench.model, bench.rng
     writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
-        description="GMR cilia die: voltage change of both sensors against the force on the die",
+        description="GMR cilia die: voltage change of both sensors against the force on the die, and brushings "
+                    "across four surfaces",
         design={"die_file": record.get("die_file", ""), "moment_memu": p.truth_moment_memu,
                 "tip_diameter_um": p.truth_diameter_um},
         sensor_settings={"current_A": model.die.meander("X").readout.current}, protocol=record, seed=seed))
     curves = _curves(model, p)
+    loading = {"surface": "none", "roughness_um": 0.0, "speed_mm_s": 0.0, "rate_hz": bench.rate_hz}
     for repeat in range(p.trials):
         for mode in MODES:
             truth = curves[mode]
@@ -136,7 +153,17 @@ def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Datas
             rests = [curve.volts[0] - curve.change[0] for curve in truth]
             writer.add({"time_s": np.arange(truth[0].force.size) * bench.realism.dwell_s,
                         "gmr_x_V": measured[0].change, "gmr_y_V": measured[1].change, "force_N": truth[0].force},
-                       {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1]})
+                       {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1], **loading})
+    rests = [float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS]
+    for brushing in brush_surfaces(model, balance_contact(p), p.brush_engagement_um * UM, p.brush_length_mm * MM,
+                                   p.brush_speed_mm_s * MM, p.brush_rate_hz, tuple(v * MM for v in p.brush_speeds_mm_s),
+                                   tuple(p.brush_rates_hz), p.brush_strips, rng):
+        recording = brushing.recording
+        writer.add({"time_s": np.arange(recording.readings.size) / recording.rate, "gmr_x_V": recording.readings,
+                    "gmr_y_V": brushing.readings_y, "force_N": brushing.force},
+                   {"mode": BRUSHING, "repeat": recording.strip, "tare_x_V": rests[0], "tare_y_V": rests[1],
+                    "surface": recording.surface, "roughness_um": recording.roughness / UM,
+                    "speed_mm_s": recording.speed / MM, "rate_hz": recording.rate})
     return writer.to_dataset()
 
 
@@ -156,3 +183,26 @@ def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredC
         raise DieError(f"dataset: no {mode} curve of repeat {repeat}")
     part = dataset.select(rows=rows)
     return MeasuredCurve(part.column("force_N"), part.column(f"gmr_{sensor.lower()}_V"), sensor)
+
+
+def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]:
+    """The brushings of a ``cilia`` dataset (trials of mode ``brushing``: a lab run's or a user's own, with the
+    conditions ``surface``, ``roughness_um``, ``repeat`` (the strip), ``speed_mm_s`` and ``rate_hz``), read
+    from ``channel``."""
+    missing = [name for name in ("mode", "surface", "roughness_um", "repeat", "speed_mm_s", "rate_hz")
+               if name not in dataset.conditions]
+    if missing or channel not in dataset.channels:
+        raise DieError(f"dataset: expected the conditions mode, surface, roughness_um, repeat, speed_mm_s and "
+                       f"rate_hz and the channel {channel}; missing {', '.join(missing) or channel}")
+    brushing = dataset.select(rows=dataset.column("mode") == BRUSHING)
+    if len(brushing) == 0:
+        raise DieError("dataset: no brushing trials (mode = brushing)")
+    conditions = brushing.trial_conditions
+    readings = brushing.column(channel)
+    trials = brushing.column("trial")
+    recordings = []
+    for index, trial in enumerate(brushing.trials):
+        recordings.append(Recording(str(conditions["surface"][index]), float(conditions["roughness_um"][index]) * UM,
+                                    int(conditions["repeat"][index]), float(conditions["speed_mm_s"][index]) * MM,
+                                    float(conditions["rate_hz"][index]), np.array(readings[trials == trial])))
+    return recordings

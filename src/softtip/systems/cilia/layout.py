@@ -217,22 +217,31 @@ def _strips(bank: BankTable, axis: str, width: float) -> tuple[np.ndarray, np.nd
     return (narrow, wide) if axis == "x" else (wide, narrow)
 
 
+def placement_problem(positions: np.ndarray, base_diameter: float, size: np.ndarray) -> str:
+    """What keeps pillars of base ``base_diameter`` (m) at ``positions`` (P, 2) m off a die of ``size`` (2,)
+    m centred on the origin: a base leaving the die, or two bases overlapping; '' when they fit."""
+    radius = base_diameter / 2
+    for index, (x, y) in enumerate(positions):
+        if abs(x) + radius > size[0] / 2 or abs(y) + radius > size[1] / 2:
+            shown = [round(float(v) / MM, 6) for v in (x, y)]
+            return f"pillars.positions_mm[{index}] = {shown}: the pillar's base leaves the die"
+    gaps = np.linalg.norm(positions[:, None] - positions[None], axis=-1)
+    np.fill_diagonal(gaps, np.inf)
+    if np.any(gaps < base_diameter):
+        first, second = np.argwhere(gaps < base_diameter)[0]
+        return f"pillars.positions_mm[{first}] and [{second}]: the pillars' bases overlap"
+    return ""
+
+
 def build_die(table: DieFile, source: str) -> Die:
     """The SI die of a validated file, after the checks between its tables."""
     die, pillars = table.die, table.pillars
     size, area = np.array(die.size_mm) * MM, np.array(die.active_area_mm) * MM
     positions = np.array(pillars.positions_mm) * MM
     base = pillars.base_diameter_um * UM
-    radius = base / 2
-    for index, (x, y) in enumerate(positions):
-        if abs(x) + radius > size[0] / 2 or abs(y) + radius > size[1] / 2:
-            raise DieError(f"{source}: pillars.positions_mm[{index}] = {pillars.positions_mm[index]}: the pillar's "
-                           f"base leaves the die")
-    gaps = np.linalg.norm(positions[:, None] - positions[None], axis=-1)
-    np.fill_diagonal(gaps, np.inf)
-    if np.any(gaps < base):
-        first, second = np.argwhere(gaps < base)[0]
-        raise DieError(f"{source}: pillars.positions_mm[{first}] and [{second}]: the pillars' bases overlap")
+    problem = placement_problem(positions, base, size)
+    if problem:
+        raise DieError(f"{source}: {problem}")
     template = Rod(length=pillars.height_mm * MM, base_diameter=base, tip_diameter=pillars.tip_diameter_um * UM,
                    youngs_modulus=pillars.youngs_modulus_MPa * 1e6, poisson_ratio=pillars.poisson_ratio)
     compliant = pillars.base == "half-space"

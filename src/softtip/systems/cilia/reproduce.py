@@ -1,34 +1,39 @@
 """``softtip reproduce cilia``: the S4 force study of the lab's ``cilia`` dataset, beside the published figures.
 
 The protocol's dataset holds the twin's measured curves (paper and balance modes, both sensors, repeated
-loadings). The study fits the first paper-mode curve of the protocol's sensor (moment and tip diameter,
+loadings) and its brushings of four surfaces. The study fits the first paper-mode curve of the protocol's sensor (moment and tip diameter,
 height and modulus held, as published), every repeat for the recovery of the twin's truth, and the first
 balance-mode curve with the same paper-mode model (what the published fit would have made of the real
 test); then the resolution, the measurement range and the layout's weight
 (:func:`softtip.systems.cilia.study.analyse_curves`). Paper-mode is the fit the report leads with. The
-roughness experiment (:mod:`softtip.systems.cilia.roughness`) brushes the twin within the study.
+roughness study (:func:`softtip.systems.cilia.roughness.analyse_roughness`) reads the dataset's brushings
+from the written file; the design search (:mod:`softtip.systems.cilia.design`) runs on the twin's die.
 """
 
 from __future__ import annotations
 
 import math
+import tempfile
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure as PlotFigure
 
 from softtip._core.progress import Progress
 from softtip._core.units import MM
+from softtip.data import Dataset
 from softtip.lab import Protocol, run_protocol
 from softtip.published import published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.sensors.gmr import TESLA_PER_OERSTED
 from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.systems.cilia.bench import SENSORS, curve_of
+from softtip.systems.cilia.bench import SENSORS, curve_of, recordings_of
+from softtip.systems.cilia.design import DESIGN_CAPTION, design_table, search_designs
 from softtip.systems.cilia.fit import CurveFit
 from softtip.systems.cilia.layout import MEMU, UM
-from softtip.systems.cilia.roughness import RoughnessStudy, roughness_study
+from softtip.systems.cilia.roughness import RoughnessStudy, analyse_roughness
 from softtip.systems.cilia.study import (
     MN,
     CiliaSettings,
@@ -45,7 +50,9 @@ UN = 1e-6  # newtons per micronewton
 
 
 def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
-    dataset, timings = run_protocol(protocol, progress)
+    made, timings = run_protocol(protocol, progress)
+    with tempfile.TemporaryDirectory() as folder:  # the analysis reads the file, as it would a user's
+        dataset = Dataset.read(made.write(Path(folder) / f"{protocol.name}.parquet"))
     settings = replace(protocol.parameters, die=str(protocol.design.path))
     model = twin_model(settings)
     repeats = sorted({int(r) for r in dataset.column("repeat")})
@@ -55,14 +62,16 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     study = analyse_curves(settings, seed, model, truth, measured, balance,
                            curve_of(dataset, "balance", repeats[0], settings.sensor), progress)
     rest = {sensor: float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS}
-    with progress.task("roughness: brushing the four surfaces, the classifier"):
-        rough = roughness_study(model, balance_contact(settings), settings.brush_engagement_um * UM,
-                                settings.brush_speed_mm_s * MM, settings.brush_rate_hz, settings.brush_length_mm * MM,
-                                tuple(v * MM for v in settings.brush_speeds_mm_s), tuple(settings.brush_rates_hz),
-                                settings.brush_strips, seed)
+    with progress.task("roughness: the dataset's brushings, the classifier"):
+        rough = analyse_roughness(recordings_of(dataset), settings.brush_speed_mm_s * MM, settings.brush_rate_hz,
+                                  seed)
+    designs = search_designs(model.die, tuple(r * MN for r in settings.design_ranges_mN), settings.sensor,
+                             settings.design_steps, settings.design_budget, settings.design_points,
+                             settings.chain_count, seed, progress)
     tables = [_published_parameters(study), _range(study), _spin_valves(model), _readout(model, rest),
               _fit_table(study), _identifiability_table(study), _recovery_table(study), _resolution_table(study),
-              _balance_table(study), _layout_table(study, model.die.depth), *_roughness_tables(rough, settings)]
+              _balance_table(study), _layout_table(study, model.die.depth), *_roughness_tables(rough, settings),
+              design_table(designs)]
     figures = [Figure.of("Voltage change against force", "The measured curve (the twin read through the meter and "
                          "the bench), its truth, the paper-mode fit, and the balance test's curve: the pillars "
                          "buckle before they bend, so the balance curve has its own shape.", study.figures.curve),
@@ -75,9 +84,11 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                          "the 95 % interval is where it stays under 3.84.", study.figures.profiles),
                Figure.of("Roughness", "The AC rms of the voltage against the surfaces' rms roughness, and against "
                          "the sampling rate: a reading integrates over its interval, so a slow rate (or a fast "
-                         "stage) averages the grains away.", _roughness_figure(rough))]
+                         "stage) averages the grains away.", _roughness_figure(rough)),
+               Figure.of("Design search: the smallest force against the range", DESIGN_CAPTION, designs.figure)]
     headline = Headline.of(tables[0], MOMENT, "value", "fitted moment per pillar", unit="memu")
-    results = _results(study, rest, timings) | {"roughness": _roughness_results(rough)}
+    results = _results(study, rest, timings) | {"roughness": _roughness_results(rough),
+                                                "design_search": designs.to_dict()}
     return StudyOutcome(results, tables, figures, headline, _notes(study) + ROUGHNESS_NOTES)
 
 
@@ -290,7 +301,8 @@ def _notes(study: CiliaStudy) -> list[str]:
 ROUGHNESS_NOTES = [
     "Roughness: the published 18.3, 46.2 and 162 µm equal the grits' (P1000, P320, P100) average grain sizes; "
     "softtip makes each sandpaper a Gaussian random profile with that rms and that correlation length (a grain "
-    "wide). The brushing runs on the twin inside the study (not from the lab's dataset).",
+    "wide). The brushings are the lab's dataset (mode brushing: a trial per recording, its surface, strip, speed "
+    "and rate as conditions), read back from its file: the same analysis reads a measured dataset.",
     "Roughness: the published trend is linear; on the twin the coarsest paper reads less than linear, because "
     "its valleys are deeper than the engagement (the tips leave the surface) and its peaks reach where the "
     "pillars lie down. The published work trains no classifier: softtip adds one.",
@@ -330,11 +342,14 @@ def _roughness_tables(rough: RoughnessStudy, settings: CiliaSettings) -> list[Ta
                      caption="A random forest (scikit-learn) on one-second windows: log AC rms, log rms of the "
                              "reading-to-reading step, and three spectral band shares. No strip gives windows to "
                              "both training and validation. Chance: 0.25.")
-    confusion = Table("Confusion by strip (rows: true surface, columns: predicted)", "true", list(c.surfaces),
-                      list(c.surfaces), {(t, p): int(c.confusion_by_recording[i, j])
-                                         for i, t in enumerate(c.surfaces) for j, p in enumerate(c.surfaces)},
-                      digits=0)
-    return [level, by_rate, accuracy, confusion]
+    confusions = [Table(title, "true", list(c.surfaces), list(c.surfaces),
+                        {(t, p): int(matrix[i, j]) for i, t in enumerate(c.surfaces) for j, p in enumerate(c.surfaces)},
+                        digits=0)
+                  for title, matrix in (("Confusion by strip (rows: true surface, columns: predicted)",
+                                         c.confusion_by_recording),
+                                        (f"Confusion at the held-out {c.held_speed / MM:g} mm/s (rows: true surface, "
+                                         "columns: predicted)", c.confusion_at_held_speed))]
+    return [level, by_rate, accuracy, *confusions]
 
 
 def _roughness_figure(rough: RoughnessStudy) -> PlotFigure:
@@ -362,4 +377,5 @@ def _roughness_results(rough: RoughnessStudy) -> dict:
             "slope_uV_per_um": rough.slope * UM * 1e6, "floor_uV": rough.floor * 1e6,
             "rates_hz": list(rough.rates), "ac_rms_by_rate_uV": (rough.rms_by_rate * 1e6).tolist(),
             "accuracy_by_strip": c.by_recording, "accuracy_at_held_speed": c.at_held_speed,
-            "held_speed_mm_s": c.held_speed / MM, "confusion_by_strip": c.confusion_by_recording.tolist()}
+            "held_speed_mm_s": c.held_speed / MM, "confusion_by_strip": c.confusion_by_recording.tolist(),
+            "confusion_at_held_speed": c.confusion_at_held_speed.tolist(), "recordings": rough.recordings}

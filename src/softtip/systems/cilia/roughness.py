@@ -57,13 +57,15 @@ def surface_profile(rms: float, correlation: float, length: float, spacing: floa
 
 @dataclass(frozen=True)
 class Brush:
-    """The die's response to its engagement: the balance-mode voltage change of one sensor against the
-    descent past first contact (``descent`` m ascending from 0, ``change`` V of all pillars together)."""
+    """The die's response to its engagement: the balance-mode voltage change of one sensor and the vertical
+    force on the plate against the descent past first contact (``descent`` m ascending from 0, ``change`` V
+    and ``force`` N of all pillars together)."""
 
     model: CiliaModel
     sensor: str
     descent: NDArray[np.float64]
     change: NDArray[np.float64]
+    force: NDArray[np.float64]
 
     @classmethod
     def of(cls, model: CiliaModel, sensor: str = "X", contact: PlateContact = PlateContact(),
@@ -71,11 +73,18 @@ class Brush:
         rod = model.die.pillars.rod
         descent = np.linspace(0.0, 0.7 * rod.length, points)
         curve = model.balance_curve(descent, contact, sensor)
-        return cls(model, sensor, descent, curve.change)
+        return cls(model, sensor, descent, curve.change, curve.force)
 
     def trace(self, heights: NDArray, spacing: float, engagement: float) -> NDArray[np.float64]:
         """The noise-free voltage change (V) at each position of the die along a profile of ``heights``
         every ``spacing`` (m), each pillar over its own point of the surface."""
+        return self._shares(self.change, heights, spacing, engagement)
+
+    def load(self, heights: NDArray, spacing: float, engagement: float) -> NDArray[np.float64]:
+        """The vertical force (N) on the surface at each position, as :meth:`trace`."""
+        return self._shares(self.force, heights, spacing, engagement)
+
+    def _shares(self, values: NDArray, heights: NDArray, spacing: float, engagement: float) -> NDArray[np.float64]:
         if not 0 < engagement < self.descent[-1]:
             raise DieError(f"engagement = {engagement!r}: expected a descent past first contact within "
                            f"(0, {self.descent[-1]:.4g}) m")
@@ -86,8 +95,24 @@ class Brush:
             raise DieError("heights: the profile is shorter than the pillars' spread along it")
         under = np.stack([heights[o:o + span] for o in offsets])  # (P, positions)
         local = np.clip(engagement + under, 0.0, self.descent[-1])  # off the surface: at rest
-        # one pillar's share of the die's change at its own engagement; the shares add
-        return (np.interp(local, self.descent, self.change) / len(offsets)).sum(axis=0)
+        # one pillar's share of the die's value at its own engagement; the shares add
+        return (np.interp(local, self.descent, values) / len(offsets)).sum(axis=0)
+
+
+def _per_reading(trace: NDArray, spacing: float, speed: float, rate: float) -> NDArray[np.float64]:
+    """``trace`` (one value every ``spacing`` of travel) averaged over each reading's interval 1/``rate``
+    at ``speed``: whole readings only."""
+    for name, value in (("speed", speed), ("rate", rate)):
+        if not (math.isfinite(value) and value > 0):
+            raise DieError(f"{name} = {value!r}: expected a positive number")
+    per_reading = speed / rate / spacing  # profile samples the die crosses per reading
+    if per_reading < 1:
+        raise DieError(f"spacing = {spacing!r}: expected a profile finer than one reading's travel "
+                       f"({speed / rate:.3g} m)")
+    edges = np.arange(0.0, trace.size, per_reading).astype(int)
+    if edges.size < 3:
+        raise DieError("the profile holds fewer than 3 readings at this speed and rate")
+    return np.add.reduceat(trace[:edges[-1]], edges[:-1]) / np.diff(edges)
 
 
 def read_brushing(brush: Brush, heights: NDArray, spacing: float, engagement: float, speed: float, rate: float,
@@ -95,18 +120,7 @@ def read_brushing(brush: Brush, heights: NDArray, spacing: float, engagement: fl
     """Readings (V) of a brushing at ``speed`` (m/s) sampled at ``rate`` (Hz): each the meter's average
     over its interval 1/rate (the die moves ``speed/rate`` meanwhile), through the bridge (the rest voltage
     off) with the readout's noise at that integration time, and quantised."""
-    for name, value in (("speed", speed), ("rate", rate)):
-        if not (math.isfinite(value) and value > 0):
-            raise DieError(f"{name} = {value!r}: expected a positive number")
-    change = brush.trace(heights, spacing, engagement)
-    per_reading = speed / rate / spacing  # profile samples the die crosses per reading
-    if per_reading < 1:
-        raise DieError(f"spacing = {spacing!r}: expected a profile finer than one reading's travel "
-                       f"({speed / rate:.3g} m)")
-    edges = np.arange(0.0, change.size, per_reading).astype(int)
-    if edges.size < 3:
-        raise DieError("the profile holds fewer than 3 readings at this speed and rate")
-    averaged = np.add.reduceat(change[:edges[-1]], edges[:-1]) / np.diff(edges)  # whole readings only
+    averaged = _per_reading(brush.trace(heights, spacing, engagement), spacing, speed, rate)
     readout = brush.model.die.meander(brush.sensor).readout
     rest = float(brush.model.curve(np.array([0.0]), brush.sensor).volts[0])
     bridged = replace(readout, offset=rest, voltmeter=replace(readout.voltmeter, integration_time=1.0 / rate))
@@ -138,19 +152,22 @@ def window_features(readings: NDArray, window: int, rate: float) -> NDArray[np.f
 
 @dataclass(frozen=True)
 class Recording:
-    """One brushing: its surface, stage speed (m/s), realisation and readings (V)."""
+    """One brushing: its surface and that surface's rms roughness (m), which strip of it (the same strip is
+    brushed at every speed and rate), the stage speed (m/s), the sampling rate (Hz) and the readings (V)."""
 
     surface: str
+    roughness: float
+    strip: int
     speed: float
-    realisation: int
+    rate: float
     readings: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
 class Classification:
-    """Accuracy of telling the surfaces apart from windows: split by recording (whole recordings held out),
-    and trained on every speed but ``held_speed`` and tested on it; the confusion matrices (rows: true,
-    columns: predicted, in ``surfaces`` order)."""
+    """Accuracy of telling the surfaces apart from windows: split by strip (every recording of a strip held
+    out together), and trained on every speed but ``held_speed`` and tested on it; the confusion matrices
+    (rows: true, columns: predicted, in ``surfaces`` order)."""
 
     surfaces: tuple[str, ...]
     by_recording: float
@@ -162,27 +179,27 @@ class Classification:
 
 
 def classify(recordings: list[Recording], window: int, rate: float, seed: int) -> Classification:
-    """A random forest (scikit-learn) on :func:`window_features`, validated by recording (grouped folds:
-    no recording gives windows to both sides) and on the fastest speed held out."""
+    """A random forest (scikit-learn) on :func:`window_features`, validated by strip (grouped folds: no
+    strip gives windows to both sides, whatever the speed it was brushed at) and on the fastest speed held
+    out."""
     from sklearn.ensemble import RandomForestClassifier
     from sklearn.metrics import confusion_matrix
     from sklearn.model_selection import GroupKFold, cross_val_predict
 
-    surfaces = tuple(dict.fromkeys(r.surface for r in recordings))
-    features, labels, groups, speeds = [], [], [], []
-    for index, recording in enumerate(recordings):
+    surfaces = tuple(dict.fromkeys(r.surface for r in sorted(recordings, key=lambda r: r.roughness)))
+    features, labels, strips, speeds = [], [], [], []
+    for recording in recordings:
         rows = window_features(recording.readings, window, rate)
         features.append(rows)
         labels += [recording.surface] * len(rows)
-        groups += [index] * len(rows)
+        strips += [recording.strip] * len(rows)
         speeds += [recording.speed] * len(rows)
-    x, y, groups, speeds = np.concatenate(features), np.array(labels), np.array(groups), np.array(speeds)
-    folds = min(3, len({r.realisation for r in recordings}))
+    x, y, strips, speeds = np.concatenate(features), np.array(labels), np.array(strips), np.array(speeds)
+    folds = min(3, len(set(strips)))
     if folds < 2 or len(set(speeds)) < 2:
-        raise DieError("recordings: expected at least two realisations and two speeds of each surface")
+        raise DieError("recordings: expected at least two strips and two speeds of each surface")
     forest = RandomForestClassifier(n_estimators=100, random_state=seed)
-    realisation = np.array([recordings[g].realisation for g in groups])
-    predicted = cross_val_predict(forest, x, y, groups=realisation, cv=GroupKFold(n_splits=folds))
+    predicted = cross_val_predict(forest, x, y, groups=strips, cv=GroupKFold(n_splits=folds))
     held = float(max(speeds))
     train = speeds != held
     forest.fit(x[train], y[train])
@@ -196,11 +213,41 @@ SPACING = BRUSH_SPACING_MM * MM  # m: the profiles' sampling, a ninth of the fin
 
 
 @dataclass(frozen=True)
+class Brushing:
+    """One brushing as the lab records it: the :class:`Recording` of sensor X, sensor Y's readings (V,
+    through its own bridge) and the vertical force on the surface (N, averaged over each reading)."""
+
+    recording: Recording
+    readings_y: NDArray[np.float64]
+    force: NDArray[np.float64]
+
+
+def brush_surfaces(model: CiliaModel, contact: PlateContact, engagement: float, length: float, speed: float,
+                   rate: float, speeds: tuple[float, ...], rates: tuple[float, ...], strips: int,
+                   rng: np.random.Generator) -> list[Brushing]:
+    """The four surfaces brushed ``engagement`` (m) past first contact over ``length`` (m), ``strips``
+    strips of each: every strip at ``speed`` and at every one of ``speeds`` (m/s), at ``rate`` (Hz), and the
+    first strip at ``speed`` at every one of ``rates`` (each recording once)."""
+    brushes = {sensor: Brush.of(model, sensor, contact) for sensor in ("X", "Y")}
+    plan = dict.fromkeys([(strip, s, rate) for strip in range(strips) for s in (speed, *speeds)]
+                         + [(0, speed, r) for r in rates])
+    brushings = []
+    for name, rms in SURFACES.items():
+        profiles = [surface_profile(rms, max(rms, 2 * SPACING), length, SPACING, rng) for _ in range(strips)]
+        for strip, s, r in plan:
+            heights = profiles[strip]
+            x, y = (read_brushing(brushes[sensor], heights, SPACING, engagement, s, r, rng) for sensor in ("X", "Y"))
+            force = _per_reading(brushes["X"].load(heights, SPACING, engagement), SPACING, s, r)
+            brushings.append(Brushing(Recording(name, rms, strip, s, r, x), y, force))
+    return brushings
+
+
+@dataclass(frozen=True)
 class RoughnessStudy:
-    """The brushing experiment: per surface the AC rms (V) at the nominal speed and rate and with the
-    silicon floor removed, the slope (V per m of rms roughness, least squares through the origin of the
-    floor-removed rms) and the floor; the AC rms of every surface against the sampling rate; the
-    classifier."""
+    """The brushing experiment: per surface the AC rms (V) at the nominal speed and rate (mean over its
+    strips) and with the flat surface's floor removed, the slope (V per m of rms roughness, least squares
+    through the origin of the floor-removed rms) and the floor; the AC rms of every surface against the
+    sampling rate at the nominal speed; the classifier on the recordings at the nominal rate."""
 
     surfaces: tuple[str, ...]
     roughness: NDArray[np.float64]
@@ -211,29 +258,40 @@ class RoughnessStudy:
     rates: NDArray[np.float64]
     rms_by_rate: NDArray[np.float64]  # (surfaces, rates)
     classification: Classification
+    recordings: int
 
 
-def roughness_study(model: CiliaModel, contact: PlateContact, engagement: float, speed: float, rate: float,
-                    length: float, speeds: tuple[float, ...], rates: tuple[float, ...], realisations: int,
-                    seed: int) -> RoughnessStudy:
-    """The four surfaces brushed at ``speed`` (m/s) and ``rate`` (Hz) over ``length`` (m) at ``engagement``
-    (m past first contact), ``realisations`` strips of each; the rate curve at ``speed``; the classifier on
-    every strip at every one of ``speeds``, in windows of one second."""
-    rng = np.random.default_rng(seed)
-    brush = Brush.of(model, "X", contact)
-    strips = {name: [surface_profile(rms, max(rms, 2 * SPACING), length, SPACING, rng) for _ in range(realisations)]
-              for name, rms in SURFACES.items()}
-    names = tuple(SURFACES)
-    total = np.array([np.mean([ac_rms(read_brushing(brush, heights, SPACING, engagement, speed, rate, rng))
-                               for heights in strips[name]]) for name in names])
+def analyse_roughness(recordings: list[Recording], speed: float, rate: float, seed: int) -> RoughnessStudy:
+    """The roughness study of brushing ``recordings`` (a lab dataset's, :func:`recordings_of`): the level at
+    ``speed`` (m/s) and ``rate`` (Hz), the rate curve at ``speed``, the classifier at ``rate`` in windows of
+    one second. The surfaces in order of roughness; the smoothest must be flat (roughness 0: the floor)."""
+    if not recordings:
+        raise DieError("recordings: expected brushing recordings, found none")
+    order = sorted({(r.roughness, r.surface) for r in recordings})
+    names = tuple(name for _, name in order)
+    if len(names) != len({r.surface for r in recordings}):
+        raise DieError("recordings: expected one roughness per surface")
+    if order[0][0] != 0:
+        raise DieError(f"recordings: expected a flat surface (roughness 0) for the floor; the smoothest is "
+                       f"{order[0][1]} at {order[0][0]:g} m")
+
+    def close(a: float, b: float) -> bool:
+        return math.isclose(a, b, rel_tol=1e-9)
+
+    def level(name: str, s: float, r: float) -> float:
+        found = [ac_rms(x.readings) for x in recordings if x.surface == name and close(x.speed, s) and close(x.rate, r)]
+        if not found:
+            raise DieError(f"recordings: no brushing of {name} at {s / MM:g} mm/s and {r:g} readings/s")
+        return float(np.mean(found))
+
+    total = np.array([level(name, speed, rate) for name in names])
     floor = float(total[0])
     above = np.sqrt(np.clip(total**2 - floor**2, 0.0, None))
-    roughness = np.array([SURFACES[name] for name in names])
-    slope = float(roughness @ above / (roughness @ roughness))
-    by_rate = np.array([[ac_rms(read_brushing(brush, strips[name][0], SPACING, engagement, speed, r, rng))
-                         for r in rates] for name in names])
-    recordings = [Recording(name, s, index, read_brushing(brush, heights, SPACING, engagement, s, rate, rng))
-                  for name in names for index, heights in enumerate(strips[name]) for s in speeds]
+    roughness = np.array([value for value, _ in order])
+    slope = float(roughness @ above / (roughness @ roughness)) if roughness.any() else 0.0
+    rates = np.array(sorted({x.rate for x in recordings if close(x.speed, speed)}))
+    by_rate = np.array([[level(name, speed, r) for r in rates] for name in names])
+    at_rate = [x for x in recordings if close(x.rate, rate)]
     window = max(8, int(round(rate)))
-    return RoughnessStudy(names, roughness, total, above, slope, floor, np.array(rates), by_rate,
-                          classify(recordings, window, rate, seed))
+    return RoughnessStudy(names, roughness, total, above, slope, floor, rates, by_rate,
+                          classify(at_rate, window, rate, seed), len(recordings))

@@ -94,6 +94,14 @@ class CiliaSettings:
     brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
                               expect("a list of at least two positive rates")] = (2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
+    # the design search on the same die (softtip.systems.cilia.design): the stated force ranges, values per
+    # design parameter, evaluations per range, forces along each design's curve
+    design_ranges_mN: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
+                                expect("a non-empty list of positive forces in mN")] = (13.0, 26.0, 39.0)
+    design_steps: integer(2, 9) = 5
+    design_budget: integer(1, 500) = 30
+    design_points: integer(5, 200) = 17
+
     def __post_init__(self) -> None:
         speeds, rates = (self.brush_speed_mm_s, *self.brush_speeds_mm_s), (self.brush_rate_hz, *self.brush_rates_hz)
         if min(speeds) / max(rates) < BRUSH_SPACING_MM:  # a reading must cross at least one profile sample
