@@ -48,7 +48,7 @@ SYSTEM = System(
               # --quick: a coarse protocol (fewer load steps, short brushings on two strips, a coarse design
               # search) on top of the two trials
               quick={"points": 15, "depths_um": (20.0,), "meander_scales": (1.1,), "brush_length_mm": 6.0,
-                     "brush_strips": 2, "brush_rates_hz": (2.0, 20.0, 50.0), "design_steps": 3,
+                     "brush_strips": 2, "brush_rates_hz": (2.0, 20.0, 50.0), "brush_speeds_mm_s": (0.5, 2.0), "design_steps": 3,
                      "design_budget": 6, "design_points": 9}),
     ),
     bench_commands={"cilia": "softtip.systems.cilia.commands:bench_cilia"},

@@ -176,13 +176,7 @@ def roughness_cilia(
     except DieError as problem:  # the dataset holds no study of these settings: say which file
         fail(f"{dataset}: {problem}")
     c = study.classification
-    report = {"dataset": str(dataset), "channel": channel, "recordings": study.recordings,
-              "surfaces": list(study.surfaces), "roughness_um": (study.roughness * 1e6).tolist(),
-              "ac_rms_uV": (study.total_rms * 1e6).tolist(), "above_floor_uV": (study.above_floor * 1e6).tolist(),
-              "slope_uV_per_um": study.slope, "floor_uV": study.floor * 1e6, "rates_hz": study.rates.tolist(),
-              "ac_rms_by_rate_uV": (study.rms_by_rate * 1e6).tolist(), "accuracy_by_strip": c.by_recording,
-              "confusion_by_strip": c.confusion_by_recording.tolist(), "held_speed_mm_s": c.held_speed * 1e3,
-              "accuracy_at_held_speed": c.at_held_speed, "confusion_at_held_speed": c.confusion_at_held_speed.tolist()}
+    report = {"dataset": str(dataset), "channel": channel, **study.to_dict()}
     if json_output:
         print(json.dumps(report, indent=2))
         return

@@ -82,12 +82,12 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                          "horizontal) and in balance mode (compressed, buckled, lying).", study.figures.pillars),
                Figure.of("Profile likelihoods", "n ln(RSS/RSS_min) of each parameter with the other at its best; "
                          "the 95 % interval is where it stays under 3.84.", study.figures.profiles),
-               Figure.of("Roughness", "The AC rms of the voltage against the surfaces' rms roughness, and against "
-                         "the sampling rate: a reading integrates over its interval, so a slow rate (or a fast "
-                         "stage) averages the grains away.", _roughness_figure(rough)),
+               Figure.of("Roughness", "The AC rms of the voltage against the surfaces' rms roughness, against "
+                         "the sampling rate and against the stage speed: a reading integrates over its interval, "
+                         "so a slow rate or a fast stage averages the grains away.", _roughness_figure(rough)),
                Figure.of("Design search: the smallest force against the range", DESIGN_CAPTION, designs.figure)]
     headline = Headline.of(tables[0], MOMENT, "value", "fitted moment per pillar", unit="memu")
-    results = _results(study, rest, timings) | {"roughness": _roughness_results(rough),
+    results = _results(study, rest, timings) | {"roughness": rough.to_dict(),
                                                 "design_search": designs.to_dict()}
     return StudyOutcome(results, tables, figures, headline, _notes(study) + ROUGHNESS_NOTES)
 
@@ -324,12 +324,17 @@ def _roughness_tables(rough: RoughnessStudy, settings: CiliaSettings) -> list[Ta
                           f"(silicon): {rough.floor * 1e6:.3f} µV.",
                   notes={"P100": "Below the line of the finer papers: valleys deeper than the engagement lift the "
                                  "tips off, peaks push the pillars over."})
-    rate_columns = [f"{r:g}/s" for r in rough.rates]
-    by_rate = Table("Roughness missed: the AC rms (µV) against the sampling rate", "surface", rows, rate_columns,
-                    {(row, column): rough.rms_by_rate[i, j] * 1e6 for i, row in enumerate(rows)
-                     for j, column in enumerate(rate_columns)}, digits=2,
-                    caption=f"At {settings.brush_speed_mm_s:g} mm/s, one strip each; a reading integrates over "
-                            "its interval, so it averages the grains it crosses meanwhile.")
+    def missed(against: str, columns: list[str], rms: np.ndarray, caption: str) -> Table:
+        return Table(f"Roughness missed: the AC rms (µV) against the {against}", "surface", rows, columns,
+                     {(row, column): rms[i, j] * 1e6 for i, row in enumerate(rows) for j, column in enumerate(columns)},
+                     digits=2, caption=caption)
+
+    by_rate = missed("sampling rate", [f"{r:g}/s" for r in rough.rates], rough.rms_by_rate,
+                     f"At {settings.brush_speed_mm_s:g} mm/s, one strip each; a reading integrates over its interval, "
+                     "so it averages the grains it crosses meanwhile.")
+    by_speed = missed("stage speed", [f"{v / MM:g} mm/s" for v in rough.speeds], rough.rms_by_speed,
+                      f"At {settings.brush_rate_hz:g} readings/s, mean over the strips; the faster the stage, the more "
+                      "grains one reading crosses and averages.")
     c = rough.classification
     accuracy = Table("A classifier of the four surfaces (softtip's addition)", "validation",
                      ["by strip (grouped folds)", f"trained without {c.held_speed / MM:g} mm/s, tested on it"],
@@ -349,12 +354,12 @@ def _roughness_tables(rough: RoughnessStudy, settings: CiliaSettings) -> list[Ta
                                          c.confusion_by_recording),
                                         (f"Confusion at the held-out {c.held_speed / MM:g} mm/s (rows: true surface, "
                                          "columns: predicted)", c.confusion_at_held_speed))]
-    return [level, by_rate, accuracy, *confusions]
+    return [level, by_rate, by_speed, accuracy, *confusions]
 
 
 def _roughness_figure(rough: RoughnessStudy) -> PlotFigure:
-    figure = PlotFigure(figsize=(8.0, 3.6), layout="constrained")
-    left, right = figure.add_subplot(1, 2, 1), figure.add_subplot(1, 2, 2)
+    figure = PlotFigure(figsize=(11.0, 3.6), layout="constrained")
+    left, right, fast = (figure.add_subplot(1, 3, k) for k in (1, 2, 3))
     left.plot(rough.roughness / UM, rough.total_rms * 1e6, "o-", label="AC rms")
     left.plot(rough.roughness / UM, rough.above_floor * 1e6, "s--", label="above the floor")
     left.plot(rough.roughness / UM, rough.slope * rough.roughness * 1e6, ":", label="slope through the origin")
@@ -367,15 +372,11 @@ def _roughness_figure(rough: RoughnessStudy) -> PlotFigure:
     right.set_xlabel("readings per second")
     right.set_ylabel("AC rms (µV)")
     right.legend(fontsize=8)
+    for name, row in zip(rough.surfaces, rough.rms_by_speed):
+        fast.loglog(rough.speeds / MM, row * 1e6, "o-", label=name)
+    fast.set_xlabel("stage speed (mm/s)")
+    fast.set_ylabel("AC rms (µV)")
+    fast.legend(fontsize=8)
     return figure
 
 
-def _roughness_results(rough: RoughnessStudy) -> dict:
-    c = rough.classification
-    return {"surfaces": list(rough.surfaces), "roughness_um": list(rough.roughness / UM),
-            "ac_rms_uV": list(rough.total_rms * 1e6), "above_floor_uV": list(rough.above_floor * 1e6),
-            "slope_uV_per_um": rough.slope * UM * 1e6, "floor_uV": rough.floor * 1e6,
-            "rates_hz": list(rough.rates), "ac_rms_by_rate_uV": (rough.rms_by_rate * 1e6).tolist(),
-            "accuracy_by_strip": c.by_recording, "accuracy_at_held_speed": c.at_held_speed,
-            "held_speed_mm_s": c.held_speed / MM, "confusion_by_strip": c.confusion_by_recording.tolist(),
-            "confusion_at_held_speed": c.confusion_at_held_speed.tolist(), "recordings": rough.recordings}

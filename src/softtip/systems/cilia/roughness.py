@@ -247,7 +247,8 @@ class RoughnessStudy:
     """The brushing experiment: per surface the AC rms (V) at the nominal speed and rate (mean over its
     strips) and with the flat surface's floor removed, the slope (V per m of rms roughness, least squares
     through the origin of the floor-removed rms) and the floor; the AC rms of every surface against the
-    sampling rate at the nominal speed; the classifier on the recordings at the nominal rate."""
+    sampling rate at the nominal speed, and against the stage speed (m/s) at the nominal rate (mean over
+    the strips); the classifier on the recordings at the nominal rate."""
 
     surfaces: tuple[str, ...]
     roughness: NDArray[np.float64]
@@ -257,13 +258,27 @@ class RoughnessStudy:
     floor: float
     rates: NDArray[np.float64]
     rms_by_rate: NDArray[np.float64]  # (surfaces, rates)
+    speeds: NDArray[np.float64]
+    rms_by_speed: NDArray[np.float64]  # (surfaces, speeds)
     classification: Classification
     recordings: int
+
+    def to_dict(self) -> dict:
+        """The study in the units the reports print (µm, µV, mm/s)."""
+        c = self.classification
+        return {"recordings": self.recordings, "surfaces": list(self.surfaces),
+                "roughness_um": (self.roughness / UM).tolist(), "ac_rms_uV": (self.total_rms * 1e6).tolist(),
+                "above_floor_uV": (self.above_floor * 1e6).tolist(), "slope_uV_per_um": self.slope * UM * 1e6,
+                "floor_uV": self.floor * 1e6, "rates_hz": self.rates.tolist(),
+                "ac_rms_by_rate_uV": (self.rms_by_rate * 1e6).tolist(), "speeds_mm_s": (self.speeds / MM).tolist(),
+                "ac_rms_by_speed_uV": (self.rms_by_speed * 1e6).tolist(), "accuracy_by_strip": c.by_recording,
+                "confusion_by_strip": c.confusion_by_recording.tolist(), "held_speed_mm_s": c.held_speed / MM,
+                "accuracy_at_held_speed": c.at_held_speed, "confusion_at_held_speed": c.confusion_at_held_speed.tolist()}
 
 
 def analyse_roughness(recordings: list[Recording], speed: float, rate: float, seed: int) -> RoughnessStudy:
     """The roughness study of brushing ``recordings`` (a lab dataset's, :func:`recordings_of`): the level at
-    ``speed`` (m/s) and ``rate`` (Hz), the rate curve at ``speed``, the classifier at ``rate`` in windows of
+    ``speed`` (m/s) and ``rate`` (Hz), the rate curve at ``speed``, the speed curve at ``rate``, the classifier at ``rate`` in windows of
     one second. The surfaces in order of roughness; the smoothest must be flat (roughness 0: the floor)."""
     if not recordings:
         raise DieError("recordings: expected brushing recordings, found none")
@@ -292,6 +307,8 @@ def analyse_roughness(recordings: list[Recording], speed: float, rate: float, se
     rates = np.array(sorted({x.rate for x in recordings if close(x.speed, speed)}))
     by_rate = np.array([[level(name, speed, r) for r in rates] for name in names])
     at_rate = [x for x in recordings if close(x.rate, rate)]
+    speeds = np.array(sorted({x.speed for x in at_rate}))
+    by_speed = np.array([[level(name, s, rate) for s in speeds] for name in names])
     window = max(8, int(round(rate)))
-    return RoughnessStudy(names, roughness, total, above, slope, floor, rates, by_rate,
+    return RoughnessStudy(names, roughness, total, above, slope, floor, rates, by_rate, speeds, by_speed,
                           classify(at_rate, window, rate, seed), len(recordings))
