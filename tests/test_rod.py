@@ -165,3 +165,38 @@ def test_bad_input_is_refused_in_one_line():
         lower_plate(uniform(shear_and_stretch=False), [0.9 * L])
     with pytest.raises(RodError, match="imperfection"):
         PlateContact(imperfection=0.0)
+
+
+def test_slice_centroids_are_the_area_weighted_means_of_the_bent_centre_line():
+    """A small tip load on an unshearable, inextensible uniform rod: the linear cantilever's deflection
+    x(s) = F s² (3L − s) / (6 EI), so a slice's centroid (equal areas) is x's mean over the slice, in closed
+    form; the chord tangents average to the mean slope's direction."""
+    rod = uniform(segments=200, shear_and_stretch=False)
+    bending = E * math.pi * rod.base_diameter**4 / 64
+    force = 1e-4 * bending / L**2  # P L²/EI = 1e-4: linear to 1e-4
+    shapes = solve_tip_force(rod, [[force, 0.0]])
+    points, tangents = shapes.slice_means(4)
+
+    def deflection_integral(s: float) -> float:  # ∫ x ds
+        return force * (L * s**3 - s**4 / 4) / (6 * bending)
+
+    edges = np.linspace(0, L, 5)
+    exact = np.diff([deflection_integral(s) for s in edges]) / np.diff(edges)
+    slopes = np.diff([force * s**2 * (3 * L - s) / (6 * bending) for s in edges]) / np.diff(edges)
+    # measured: within 2.4e-4 (the root slice: second-order discretisation and the 1e-4 nonlinearity)
+    assert points[0, :, 0] == pytest.approx(exact, rel=4e-4)
+    assert points[0, :, 1] == pytest.approx(edges[:-1] + np.diff(edges) / 2, rel=1e-8)
+    assert tangents[0, :, 0] == pytest.approx(slopes, rel=2e-4)
+
+
+def test_slice_centroids_of_a_taper_sit_below_the_slices_middles():
+    """Unloaded, a cone's slices have their centroids where a frustum's is: h (R² + 2Rr + 3r²) /
+    (4 (R² + Rr + r²)) above the lower face, here checked against scipy's quadrature of ∫ z A dz / ∫ A dz."""
+    rod = Rod(length=L, base_diameter=320e-6, tip_diameter=200e-6, youngs_modulus=E, segments=60)
+    points, _ = solve_tip_force(rod, [[0.0, 0.0]]).slice_means(10)
+    edges = np.linspace(0, L, 11)
+    area = lambda z: float(rod.diameter(z)) ** 2  # noqa: E731
+    exact = [quad(lambda z: z * area(z), a, b)[0] / quad(area, a, b)[0] for a, b in zip(edges[:-1], edges[1:])]
+    assert points[0, :, 1] == pytest.approx(exact, rel=1e-10)
+    with pytest.raises(RodError, match="count = 0"):
+        solve_tip_force(rod, [[0.0, 0.0]]).slice_means(0)

@@ -150,6 +150,28 @@ class RodShapes:
         return np.stack([x, z], axis=-1), tangent
 
 
+    def slice_means(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The rod cut into ``count`` equal slices of its reference length: each slice's centroid (B, K, 2)
+        and the unit direction of its volume-mean tangent (B, K, 2), base first.
+
+        A cross-section's own centroid is its centre-line point (the section is symmetric about it), so a
+        slice's centroid is the centre line averaged with the sections' areas as weights; this is what a
+        solid's slice centroid is compared with (and where a uniformly magnetised slice's dipole sits).
+        Gauss–Legendre quadrature with three points per rod segment spanned."""
+        if not (isinstance(count, int) and 1 <= count <= self.angles.shape[1]):
+            raise RodError(f"count = {count!r}: expected an integer from 1 to the rod's {self.angles.shape[1]} segments")
+        order = 3 * -(-self.angles.shape[1] // count)
+        nodes, weights = np.polynomial.legendre.leggauss(order)
+        fractions = ((np.arange(count)[:, None] + 0.5 * (nodes[None, :] + 1)) / count).ravel()
+        points, tangents = self.centreline(fractions)
+        area = (weights[None, :] * self.rod.diameter(fractions * self.rod.length).reshape(count, order) ** 2).ravel()
+        shape = (len(points), count, order, 2)
+        centroids = np.einsum("bkqj,kq->bkj", points.reshape(shape), area.reshape(count, order))
+        centroids /= area.reshape(count, order).sum(axis=1)[None, :, None]
+        mean_tangent = np.einsum("bkqj,kq->bkj", tangents.reshape(shape), area.reshape(count, order))
+        return centroids, mean_tangent / np.linalg.norm(mean_tangent, axis=-1, keepdims=True)
+
+
 # ---------------------------------------------------------------------------------------------- kernel
 
 
