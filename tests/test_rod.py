@@ -13,9 +13,11 @@ from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
 from softtip.mechanics.rod import (
+    BONDED_ROOT_TABLE,
     PlateContact,
     Rod,
     RodError,
+    bonded_root_flexibility,
     half_space_rotational_stiffness,
     lower_plate,
     side_clearance,
@@ -200,3 +202,32 @@ def test_slice_centroids_of_a_taper_sit_below_the_slices_middles():
     assert points[0, :, 1] == pytest.approx(exact, rel=1e-10)
     with pytest.raises(RodError, match="count = 0"):
         solve_tip_force(rod, [[0.0, 0.0]]).slice_means(0)
+
+
+def test_a_bonded_root_turns_the_rod_less_by_its_flexibility_times_the_moment():
+    """Linear bending: a flexibility g(s) taken away near the root turns every section above it back by
+    ∫ g M ds and moves the tip back by ∫ g M (L − s) ds, M = F (L − s): scipy's quadrature of the
+    exponential profile against the rod's tip rotation and deflection under a small load."""
+    plain = uniform(diameter=250e-6, segments=200, shear_and_stretch=False, poisson_ratio=0.49)
+    bonded = uniform(diameter=250e-6, segments=200, shear_and_stretch=False, poisson_ratio=0.49, bonded_root=True)
+    bending = E * math.pi * plain.base_diameter**4 / 64
+    force = 1e-5 * bending / L**2  # linear to 1e-5
+    shapes = solve_tip_force(plain, [[force, 0.0]]), solve_tip_force(bonded, [[force, 0.0]])
+
+    def density(s: float) -> float:  # −d/ds of the flexibility taken away below s
+        step = 1e-9
+        return float(bonded_root_flexibility(bonded, s, s + step)) / step
+
+    turn = quad(lambda s: density(s) * force * (L - s), 0, L, points=[1e-5, 1e-4], limit=200)[0]
+    shift = quad(lambda s: density(s) * force * (L - s) ** 2, 0, L, points=[1e-5, 1e-4], limit=200)[0]
+    # measured: 4e-5 and 8e-5 apart (the 200 segments, the 1e-5 nonlinearity)
+    assert shapes[0].tip_angle[0] - shapes[1].tip_angle[0] == pytest.approx(turn, rel=3e-4)
+    assert shapes[0].tip[0, 0] - shapes[1].tip[0, 0] == pytest.approx(shift, rel=3e-4)
+    # the table's c: a turn of c M / (E r³) for a moment M constant over the root zone, here M falls by λ F
+    _, c, decay = BONDED_ROOT_TABLE[-1]
+    decay *= 125e-6
+    assert turn == pytest.approx(c * force * (L - decay * (1 - math.exp(-L / decay))) / (E * 125e-6**3), rel=1e-4)
+    with pytest.raises(RodError, match="bonded_root"):
+        uniform(base_stiffness=1e-6, bonded_root=True)
+    with pytest.raises(RodError, match="poisson_ratio"):
+        uniform(poisson_ratio=0.1, bonded_root=True)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse.linalg as spla
+from scipy.optimize import brentq
 from numpy.typing import ArrayLike, NDArray
 
 from softtip._core.errors import NotConverged
@@ -258,3 +259,121 @@ class PillarFE:
                 tangents[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * axis[b, :, j],
                                                 minlength=self.slices)
         return points, tangents / np.linalg.norm(tangents, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class MeshConvergence:
+    """Quantities of one problem solved on meshes of decreasing element size, and what Richardson
+    extrapolation makes of the three finest: ``sizes`` (M,) each mesh's mean element size (m), (volume /
+    elements)^⅓; ``values`` (M, ...) the quantities; ``order`` the observed order p of q = q* + C hᵖ;
+    ``extrapolated`` q*; ``error`` |q* − q| of the finest mesh, its estimated discretisation error;
+    ``asymptotic`` whether the three finest converge monotonically at an order from 0.5 to 6 (if not,
+    q* is the finest value and ``error`` the largest change over the meshes: a bound, not an estimate)."""
+
+    sizes: NDArray[np.float64]
+    values: NDArray[np.float64]
+    order: NDArray[np.float64]
+    extrapolated: NDArray[np.float64]
+    error: NDArray[np.float64]
+    asymptotic: NDArray[np.bool_]
+
+
+def richardson(sizes: ArrayLike, values: ArrayLike) -> MeshConvergence:
+    """Richardson extrapolation of ``values`` (M, ...) computed on meshes of ``sizes`` (M,), M ≥ 3, from
+    coarse to fine, elementwise over the trailing axes (L. F. Richardson, Phil. Trans. R. Soc. A 226, 1927;
+    the observed order from three unevenly refined meshes as in P. J. Roache, *Verification and Validation in
+    Computational Science and Engineering*, 1998, §5.4)."""
+    sizes, values = np.asarray(sizes, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    if sizes.ndim != 1 or sizes.size < 3 or np.any(np.diff(sizes) >= 0) or sizes[-1] <= 0:
+        raise RodError(f"sizes: expected three or more decreasing positive element sizes, got {sizes!r}")
+    if values.shape[:1] != sizes.shape or not np.all(np.isfinite(values)):
+        raise RodError(f"values: expected finite numbers of shape ({sizes.size}, ...), got shape {values.shape}")
+    h1, h2, h3 = sizes[-3:] / sizes[-1]  # relative sizes: h3 = 1
+    q1, q2, q3 = values[-3:]
+    flat = [np.ravel(q) for q in (q1, q2, q3)]
+    order = np.zeros(flat[0].size)
+    asymptotic = np.zeros(flat[0].size, dtype=bool)
+    for k, (a, b, c) in enumerate(zip(*flat)):
+        ratio = (a - b) / (b - c) if b != c else np.inf
+        if not (np.isfinite(ratio) and ratio > 0):
+            continue
+        mismatch = lambda p: (h1**p - h2**p) / (h2**p - h3**p) - ratio  # noqa: E731 (rises with p)
+        if mismatch(0.5) < 0 < mismatch(6.0):
+            order[k], asymptotic[k] = brentq(mismatch, 0.5, 6.0, xtol=1e-10), True
+    order = order.reshape(np.shape(q3))
+    asymptotic = asymptotic.reshape(np.shape(q3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        extrapolated = np.where(asymptotic, q3 - (q2 - q3) / (h2**order - 1.0), q3)
+    spread = np.max(np.abs(values - q3), axis=0)
+    error = np.where(asymptotic, np.abs(extrapolated - q3), spread)
+    return MeshConvergence(sizes, values, order, extrapolated, error, asymptotic)
+
+
+def mesh_convergence(rod: Rod, sizes: ArrayLike, force: ArrayLike, slices: int = 10,
+                     **solve_options: float) -> MeshConvergence:
+    """The pillar under the tip forces ``force`` (B,) N meshed at each element size of ``sizes`` (m,
+    decreasing); the quantities (B, slices + 1) are the sideways (x) positions of the slices' centroids and,
+    last, of the tip. ``solve_options`` go to :meth:`PillarFE.solve`; a solve that does not converge raises."""
+    sizes = np.asarray(sizes, dtype=np.float64)
+    if sizes.ndim != 1 or sizes.size < 3 or np.any(np.diff(sizes) >= 0):
+        raise RodError(f"sizes: expected three or more decreasing element sizes in m, got {sizes!r}")
+    values, effective = [], []
+    for size in sizes:
+        solid = PillarFE(rod, float(size), slices)
+        solution = solid.solve(force, **solve_options)
+        points, _ = solid.centreline(solution)
+        values.append(np.concatenate([points[..., 0], solution.tip[:, None, 0]], axis=1))
+        effective.append((solid._volume / solid.mesh.tets.shape[1]) ** (1 / 3))
+    return richardson(np.array(effective), np.array(values))
+
+
+@dataclass(frozen=True)
+class RootEndEffect:
+    """What a bonded base does to a uniform cylinder's section rotations, fitted to the solid (see
+    :func:`bonded_root_end_effect`): the stiffening ``c`` and decay length ``decay`` (in radii) of
+    :func:`~softtip.mechanics.rod.bonded_root_flexibility`, ``faceting`` the solid's excess curvature over
+    the rod's (the polygonal sections of the mesh: it falls as h²), ``misfit`` the rms residual of the fit
+    over the rotation offset it describes, and the mesh's ``unknowns``."""
+
+    c: float
+    decay: float
+    faceting: float
+    misfit: float
+    unknowns: int
+
+
+def bonded_root_end_effect(poisson_ratio: float, size: float, radius: float = 125e-6, slices: int = 25,
+                           youngs_modulus: float = 1e6) -> RootEndEffect:
+    """The end effect of a bonded base, from the solid: a uniform cylinder of ``radius`` and length 8 radii,
+    bonded at its base, under a small tip force (linear), meshed at ``size`` and cut into ``slices``. Each
+    slice's mean rotation minus the clamped Timoshenko rod's is fitted (least squares, the decay length by a
+    bounded scalar search) by the rod's correction, −c F (L − λ − (L − z − λ) e^(−z/λ)) / (E r³) averaged
+    over the slice, plus ``faceting`` times the rod's own rotation."""
+    from scipy.optimize import minimize_scalar
+
+    from softtip.mechanics.rod import solve_tip_force
+
+    length = 8 * radius
+    rod = Rod(length=length, base_diameter=2 * radius, tip_diameter=2 * radius, youngs_modulus=youngs_modulus,
+              poisson_ratio=poisson_ratio, segments=200)
+    force = 1e-6 * youngs_modulus * radius**2  # a tip turned by about 1e-5 rad: linear
+    solid = PillarFE(rod, size, slices)
+    _, tangents = solid.centreline(solid.solve([force], steps_per_force=1))
+    _, rod_tangents = solve_tip_force(rod, [[force, 0.0]]).slice_means(slices)
+    rod_turn = np.arcsin(rod_tangents[0, :, 0])
+    offset = np.arcsin(tangents[0, :, 0]) - rod_turn
+    heights = (np.arange(slices)[:, None] + np.linspace(0, 1, 401)[None, :]) * length / slices
+    unit = force / (youngs_modulus * radius**3)
+
+    def fit(decay: float) -> tuple[float, NDArray]:
+        lam = decay * radius
+        profile = length - lam - (length - heights - lam) * np.exp(-heights / lam)
+        design = np.stack([-unit * np.trapezoid(profile, heights, axis=1) / (length / slices), rod_turn], axis=-1)
+        coefficients = np.linalg.lstsq(design, offset, rcond=None)[0]
+        return float(np.sum((design @ coefficients - offset) ** 2)), coefficients
+
+    best = minimize_scalar(lambda decay: fit(decay)[0], bounds=(0.05, 2.0), method="bounded",
+                           options={"xatol": 1e-4})
+    squares, (c, faceting) = fit(best.x)
+    misfit = float(np.sqrt(squares / slices) / max(abs(c) * unit * length, 1e-300))
+    return RootEndEffect(float(c), float(best.x), float(faceting), misfit, solid.unknowns)
