@@ -95,12 +95,11 @@ def test_a_pillar_on_its_own_material_tilts_at_the_root_as_the_half_space_base_s
     clamped = PillarFE(ROD, size=80e-6).solve(force, steps_per_force=1)
     rod_soft = solve_tip_force(soft, [[force[0], 0.0]]).tip[0, 0]
     rod_clamped = solve_tip_force(ROD, [[force[0], 0.0]]).tip[0, 0]
-    # measured: the solid on its substrate deflects 3.1 % more than the rod on its half-space base at this
-    # mesh (1.3 % at 60 µm elements, 79k unknowns), and the root's share (15.6 µm against 13.5 µm) is 16 %
-    # larger in the solid
-    assert on_substrate.tip[0, 0] == pytest.approx(rod_soft, rel=0.04)
+    # measured: the solid on its substrate deflects 1.8 % more than the rod on its half-space base at this
+    # mesh (36k unknowns), and the root's share (15.4 µm against 13.5 µm) is 14 % larger in the solid
+    assert on_substrate.tip[0, 0] == pytest.approx(rod_soft, rel=0.025)
     root_solid = on_substrate.tip[0, 0] - clamped.tip[0, 0]
-    assert root_solid == pytest.approx(rod_soft - rod_clamped, rel=0.2)
+    assert root_solid == pytest.approx(rod_soft - rod_clamped, rel=0.16)
 
 
 def test_tetrahedron_quality_is_one_for_a_regular_and_zero_for_a_flat_one():

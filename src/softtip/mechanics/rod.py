@@ -204,7 +204,8 @@ class RodShapes:
         solid's slice centroid is compared with (and where a uniformly magnetised slice's dipole sits).
         Gauss–Legendre quadrature with three points per rod segment spanned."""
         if not (isinstance(count, int) and 1 <= count <= self.angles.shape[1]):
-            raise RodError(f"count = {count!r}: expected an integer from 1 to the rod's {self.angles.shape[1]} segments")
+            raise RodError(f"count = {count!r}: expected an integer from 1 to the rod's "
+                           f"{self.angles.shape[1]} segments")
         order = 3 * -(-self.angles.shape[1] // count)
         nodes, weights = np.polynomial.legendre.leggauss(order)
         fractions = ((np.arange(count)[:, None] + 0.5 * (nodes[None, :] + 1)) / count).ravel()
