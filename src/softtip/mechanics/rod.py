@@ -7,7 +7,9 @@ Under a force F at the tip (no loads along the length) the internal force is F e
 segment's axial strain ε = F·d3/EA and shear strain γ = F·d1/(κGA) follow from its own θ
 (d1 = (cos θ, −sin θ)), and its chord is a = h[(1 + ε) d3 + γ d1] (Reissner, ZAMP 23, 1972). The
 bending moment at a joint is EI κ with κ the change of θ over the distance between segment centres; at
-the base a rotational spring (the substrate's compliance) sits in series with the first half segment.
+the base a rotational spring (the substrate's compliance) sits in series with the first half segment, or,
+for a root bonded to a rigid support, the root's joints are stiffened by the end effect of the bond
+(:func:`bonded_root_flexibility`).
 Moment balance of segment j,
 
     M_j − M_{j+1} = F × a_j          (F × a = F_x a_z − F_z a_x),
@@ -194,7 +196,6 @@ class RodShapes:
         tangent = chord / np.linalg.norm(chord, axis=-1, keepdims=True)
         return np.stack([x, z], axis=-1), tangent
 
-
     def slice_means(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The rod cut into ``count`` equal slices of its reference length: each slice's centroid (B, K, 2)
         and the unit direction of its volume-mean tangent (B, K, 2), base first.
@@ -243,7 +244,7 @@ def _discretise(rod: Rod) -> _Discrete:
     flexibility[0] /= 2.0  # the base joint: the first half segment
     if rod.base_stiffness is not None:
         flexibility[0] += 1.0 / rod.base_stiffness
-    if rod.bonded_root:
+    if rod.bonded_root:  # at most c/λ = 0.56/(E r⁴) per metre at the face, below a section's 4/(π E r⁴)
         flexibility -= bonded_root_flexibility(rod, np.concatenate([[0.0], centres[:-1]]), centres)
     bending = 1.0 / flexibility
     rigid = 1.0 if rod.shear_and_stretch else np.inf
