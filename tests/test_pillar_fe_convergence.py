@@ -2,7 +2,12 @@
 
 The compared quantities (the sideways positions of the lowest slices' centroids and of the tip) on three
 meshes, with Richardson's estimate of the limit; and the bonded root's end-effect coefficient, set on a
-uniform cylinder (:data:`~softtip.mechanics.rod.BONDED_ROOT_TABLE`), reproduced from the solid."""
+uniform cylinder (:data:`~softtip.mechanics.rod.BONDED_ROOT_TABLE`), reproduced from the solid.
+
+Under the working loads (0.5 and 3 mN per pillar, too slow for a test: the 28 µm mesh takes minutes) the
+same three meshes gave, for the limit against the bonded-root rod: lowest slice 0.954 and 0.992, second
+0.979 and 1.023, tip 1.004 and 1.025 (the finest mesh within 1.3 % and 2.1 % of the limit at the lowest
+slice); against the plain rod 0.804 and 0.885 at the lowest slice."""
 
 from __future__ import annotations
 
