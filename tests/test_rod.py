@@ -13,9 +13,11 @@ from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
 from softtip.mechanics.rod import (
+    BONDED_ROOT_TABLE,
     PlateContact,
     Rod,
     RodError,
+    bonded_root_flexibility,
     half_space_rotational_stiffness,
     lower_plate,
     side_clearance,
@@ -165,3 +167,67 @@ def test_bad_input_is_refused_in_one_line():
         lower_plate(uniform(shear_and_stretch=False), [0.9 * L])
     with pytest.raises(RodError, match="imperfection"):
         PlateContact(imperfection=0.0)
+
+
+def test_slice_centroids_are_the_area_weighted_means_of_the_bent_centre_line():
+    """A small tip load on an unshearable, inextensible uniform rod: the linear cantilever's deflection
+    x(s) = F s² (3L − s) / (6 EI), so a slice's centroid (equal areas) is x's mean over the slice, in closed
+    form; the chord tangents average to the mean slope's direction."""
+    rod = uniform(segments=200, shear_and_stretch=False)
+    bending = E * math.pi * rod.base_diameter**4 / 64
+    force = 1e-4 * bending / L**2  # P L²/EI = 1e-4: linear to 1e-4
+    shapes = solve_tip_force(rod, [[force, 0.0]])
+    points, tangents = shapes.slice_means(4)
+
+    def deflection_integral(s: float) -> float:  # ∫ x ds
+        return force * (L * s**3 - s**4 / 4) / (6 * bending)
+
+    edges = np.linspace(0, L, 5)
+    exact = np.diff([deflection_integral(s) for s in edges]) / np.diff(edges)
+    slopes = np.diff([force * s**2 * (3 * L - s) / (6 * bending) for s in edges]) / np.diff(edges)
+    # measured: within 2.4e-4 (the root slice: second-order discretisation and the 1e-4 nonlinearity)
+    assert points[0, :, 0] == pytest.approx(exact, rel=4e-4)
+    assert points[0, :, 1] == pytest.approx(edges[:-1] + np.diff(edges) / 2, rel=1e-8)
+    assert tangents[0, :, 0] == pytest.approx(slopes, rel=2e-4)
+
+
+def test_slice_centroids_of_a_taper_sit_below_the_slices_middles():
+    """Unloaded, a cone's slices have their centroids where a frustum's is: h (R² + 2Rr + 3r²) /
+    (4 (R² + Rr + r²)) above the lower face, here checked against scipy's quadrature of ∫ z A dz / ∫ A dz."""
+    rod = Rod(length=L, base_diameter=320e-6, tip_diameter=200e-6, youngs_modulus=E, segments=60)
+    points, _ = solve_tip_force(rod, [[0.0, 0.0]]).slice_means(10)
+    edges = np.linspace(0, L, 11)
+    area = lambda z: float(rod.diameter(z)) ** 2  # noqa: E731
+    exact = [quad(lambda z: z * area(z), a, b)[0] / quad(area, a, b)[0] for a, b in zip(edges[:-1], edges[1:])]
+    assert points[0, :, 1] == pytest.approx(exact, rel=1e-10)
+    with pytest.raises(RodError, match="count = 0"):
+        solve_tip_force(rod, [[0.0, 0.0]]).slice_means(0)
+
+
+def test_a_bonded_root_turns_the_rod_less_by_its_flexibility_times_the_moment():
+    """Linear bending: a flexibility g(s) taken away near the root turns every section above it back by
+    ∫ g M ds and moves the tip back by ∫ g M (L − s) ds, M = F (L − s): scipy's quadrature of the
+    exponential profile against the rod's tip rotation and deflection under a small load."""
+    plain = uniform(diameter=250e-6, segments=200, shear_and_stretch=False, poisson_ratio=0.49)
+    bonded = uniform(diameter=250e-6, segments=200, shear_and_stretch=False, poisson_ratio=0.49, bonded_root=True)
+    bending = E * math.pi * plain.base_diameter**4 / 64
+    force = 1e-5 * bending / L**2  # linear to 1e-5
+    shapes = solve_tip_force(plain, [[force, 0.0]]), solve_tip_force(bonded, [[force, 0.0]])
+
+    def density(s: float) -> float:  # −d/ds of the flexibility taken away below s
+        step = 1e-9
+        return float(bonded_root_flexibility(bonded, s, s + step)) / step
+
+    turn = quad(lambda s: density(s) * force * (L - s), 0, L, points=[1e-5, 1e-4], limit=200)[0]
+    shift = quad(lambda s: density(s) * force * (L - s) ** 2, 0, L, points=[1e-5, 1e-4], limit=200)[0]
+    # measured: 4e-5 and 8e-5 apart (the 200 segments, the 1e-5 nonlinearity)
+    assert shapes[0].tip_angle[0] - shapes[1].tip_angle[0] == pytest.approx(turn, rel=3e-4)
+    assert shapes[0].tip[0, 0] - shapes[1].tip[0, 0] == pytest.approx(shift, rel=3e-4)
+    # the table's c: a turn of c M / (E r³) for a moment M constant over the root zone, here M falls by λ F
+    _, c, decay = BONDED_ROOT_TABLE[-1]
+    decay *= 125e-6
+    assert turn == pytest.approx(c * force * (L - decay * (1 - math.exp(-L / decay))) / (E * 125e-6**3), rel=1e-4)
+    with pytest.raises(RodError, match="bonded_root"):
+        uniform(base_stiffness=1e-6, bonded_root=True)
+    with pytest.raises(RodError, match="poisson_ratio"):
+        uniform(poisson_ratio=0.1, bonded_root=True)

@@ -7,7 +7,9 @@ Under a force F at the tip (no loads along the length) the internal force is F e
 segment's axial strain ε = F·d3/EA and shear strain γ = F·d1/(κGA) follow from its own θ
 (d1 = (cos θ, −sin θ)), and its chord is a = h[(1 + ε) d3 + γ d1] (Reissner, ZAMP 23, 1972). The
 bending moment at a joint is EI κ with κ the change of θ over the distance between segment centres; at
-the base a rotational spring (the substrate's compliance) sits in series with the first half segment.
+the base a rotational spring (the substrate's compliance) sits in series with the first half segment, or,
+for a root bonded to a rigid support, the root's joints are stiffened by the end effect of the bond
+(:func:`bonded_root_flexibility`).
 Moment balance of segment j,
 
     M_j − M_{j+1} = F × a_j          (F × a = F_x a_z − F_z a_x),
@@ -55,7 +57,9 @@ class Rod:
     (:func:`half_space_rotational_stiffness` gives the one of a rod rooted in an elastic substrate).
     ``shear_coefficient`` is Timoshenko's κ of the cross-section; the default is Cowper's value for a
     solid circle, 6(1 + ν)/(7 + 6ν), used when it is None. ``shear_and_stretch`` False makes the rod
-    Kirchhoff's (unshearable, inextensible): Euler's elastica for a uniform rod.
+    Kirchhoff's (unshearable, inextensible): Euler's elastica for a uniform rod. ``bonded_root`` True:
+    the base is bonded to a rigid support, which stiffens a nearly incompressible rod's root
+    (:func:`bonded_root_flexibility`); it excludes a compliant base.
     """
 
     length: PositiveNumber
@@ -67,10 +71,18 @@ class Rod:
     shear_coefficient: number("a number from 0 (excluded) to 1", gt=0.0, le=1.0) | None = None
     segments: integer(4, 2000) = 60
     shear_and_stretch: Flag = True
+    bonded_root: Flag = False
 
     def __post_init__(self) -> None:
         if max(self.base_diameter, self.tip_diameter) > self.length:
             raise Refusal("base_diameter", f"the rod is wider than long ({self.length} m): not a rod")
+        if self.bonded_root and self.base_stiffness is not None:
+            raise Refusal("bonded_root", "a root bonded to a rigid support has no base compliance: "
+                                         "give base_stiffness or bonded_root, not both")
+        if self.bonded_root and not BONDED_ROOT_POISSON[0] <= self.poisson_ratio <= BONDED_ROOT_POISSON[-1]:
+            raise Refusal("poisson_ratio", f"a bonded root's stiffening is known for Poisson's ratios from "
+                                           f"{BONDED_ROOT_POISSON[0]} to {BONDED_ROOT_POISSON[-1]}, "
+                                           f"not {self.poisson_ratio}")
 
     @property
     def shear_modulus(self) -> float:
@@ -99,6 +111,41 @@ def half_space_rotational_stiffness(youngs_modulus: float, poisson_ratio: float,
     own material tilts at its root this way."""
     shear = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
     return 8.0 * shear * (diameter / 2.0) ** 3 / (3.0 * (1.0 - poisson_ratio))
+
+
+# The end effect of a circular cylinder bonded at its base to a rigid support, under a bending moment M at
+# the root: beyond about one radius r its sections have turned less than a clamped Timoshenko rod's, by
+# c M / (E r³), built up over a length λ r from the face. Computed with 3-D elasticity
+# (softtip.mechanics.pillar_fe.bonded_root_end_effect: a cylinder of length 8 r under a small tip force,
+# P2 tetrahedra of 20 µm for r = 125 µm, 25 slices; no published value for a circular section was found).
+# The bonded rim is a stress singularity, so c converges slowly with the mesh: 0.1826, 0.1791, 0.1747 at
+# 40, 28, 20 µm (ν = 0.49), not yet at an asymptotic rate; the limit is probably a few per cent lower.
+# Per Poisson's ratio: (ν, c, λ).
+BONDED_ROOT_TABLE = np.array([
+    [0.30, 0.0680, 0.621],
+    [0.45, 0.1447, 0.367],
+    [0.49, 0.1747, 0.311],
+])
+BONDED_ROOT_POISSON = tuple(BONDED_ROOT_TABLE[[0, -1], 0])
+
+
+def bonded_root_flexibility(rod: Rod, lower: ArrayLike, upper: ArrayLike) -> NDArray[np.float64]:
+    """The bending flexibility (rad per N·m) a root bonded to a rigid support takes away from the rod between
+    reference arc lengths ``lower`` and ``upper`` (m): c (e^(−lower/λr) − e^(−upper/λr)) / (E r³), r the base
+    radius (:data:`BONDED_ROOT_TABLE`).
+
+    Why: bent, a section stretches on one side and shortens on the other, and a nearly incompressible
+    material keeps its volume by contracting or swelling sideways; at a bonded face it cannot, so near the
+    face bending strains the volume, against the far larger bulk modulus (the same restraint that makes a
+    thin bonded rubber disc far stiffer in tilt than its E I suggests: Gent & Meinecke, Polym. Eng. Sci. 10,
+    1970). A beam theory has no such restraint; the correction is Saint-Venant's: the end zone acts on the
+    rest of the rod only through a rotation offset proportional to the root moment. It vanishes with ν
+    (c < 0.005 at ν = 0)."""
+    nu = rod.poisson_ratio
+    c = float(np.interp(nu, BONDED_ROOT_TABLE[:, 0], BONDED_ROOT_TABLE[:, 1]))
+    decay = float(np.interp(nu, BONDED_ROOT_TABLE[:, 0], BONDED_ROOT_TABLE[:, 2])) * rod.base_diameter / 2
+    lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    return c * (np.exp(-lower / decay) - np.exp(-upper / decay)) / (rod.youngs_modulus * (rod.base_diameter / 2) ** 3)
 
 
 @dataclass(frozen=True)
@@ -149,6 +196,28 @@ class RodShapes:
         tangent = chord / np.linalg.norm(chord, axis=-1, keepdims=True)
         return np.stack([x, z], axis=-1), tangent
 
+    def slice_means(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The rod cut into ``count`` equal slices of its reference length: each slice's centroid (B, K, 2)
+        and the unit direction of its volume-mean tangent (B, K, 2), base first.
+
+        A cross-section's own centroid is its centre-line point (the section is symmetric about it), so a
+        slice's centroid is the centre line averaged with the sections' areas as weights; this is what a
+        solid's slice centroid is compared with (and where a uniformly magnetised slice's dipole sits).
+        Gauss–Legendre quadrature with three points per rod segment spanned."""
+        if not (isinstance(count, int) and 1 <= count <= self.angles.shape[1]):
+            raise RodError(f"count = {count!r}: expected an integer from 1 to the rod's "
+                           f"{self.angles.shape[1]} segments")
+        order = 3 * -(-self.angles.shape[1] // count)
+        nodes, weights = np.polynomial.legendre.leggauss(order)
+        fractions = ((np.arange(count)[:, None] + 0.5 * (nodes[None, :] + 1)) / count).ravel()
+        points, tangents = self.centreline(fractions)
+        area = (weights[None, :] * self.rod.diameter(fractions * self.rod.length).reshape(count, order) ** 2).ravel()
+        shape = (len(points), count, order, 2)
+        centroids = np.einsum("bkqj,kq->bkj", points.reshape(shape), area.reshape(count, order))
+        centroids /= area.reshape(count, order).sum(axis=1)[None, :, None]
+        mean_tangent = np.einsum("bkqj,kq->bkj", tangents.reshape(shape), area.reshape(count, order))
+        return centroids, mean_tangent / np.linalg.norm(mean_tangent, axis=-1, keepdims=True)
+
 
 # ---------------------------------------------------------------------------------------------- kernel
 
@@ -171,11 +240,13 @@ def _discretise(rod: Rod) -> _Discrete:
     centres = (np.arange(n) + 0.5) * h
     inertia = np.pi * rod.diameter(nodes) ** 4 / 64.0
     area = np.pi * rod.diameter(centres) ** 2 / 4.0
-    bending = rod.youngs_modulus * inertia / h
-    base_flexibility = (h / 2.0) / (rod.youngs_modulus * inertia[0])
+    flexibility = h / (rod.youngs_modulus * inertia)  # joint j spans the rod between segment centres
+    flexibility[0] /= 2.0  # the base joint: the first half segment
     if rod.base_stiffness is not None:
-        base_flexibility += 1.0 / rod.base_stiffness
-    bending[0] = 1.0 / base_flexibility
+        flexibility[0] += 1.0 / rod.base_stiffness
+    if rod.bonded_root:  # at most c/λ = 0.56/(E r⁴) per metre at the face, below a section's 4/(π E r⁴)
+        flexibility -= bonded_root_flexibility(rod, np.concatenate([[0.0], centres[:-1]]), centres)
+    bending = 1.0 / flexibility
     rigid = 1.0 if rod.shear_and_stretch else np.inf
     return _Discrete(h=h, bending=bending, axial=rigid * rod.youngs_modulus * area,
                      shear=rigid * rod.kappa * rod.shear_modulus * area, scale=rod.youngs_modulus * inertia[0] / rod.length)
