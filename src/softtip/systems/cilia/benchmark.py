@@ -50,13 +50,15 @@ def _entry(seconds: float, baseline: str, baseline_seconds: float, target: float
 
 def _fe_curve(model: CiliaModel, force_max: float, loads: int, repeats: int) -> tuple[float, float, float, int, int]:
     """The FE reference curve of the X sensor (mesh, solve, the slices' centre line as the dipole chain, the
-    readout) beside the rod's curve of the same loads, both with a bonded base; their largest relative gap
+    readout) beside the rod's curve of the same loads, both bonded to a rigid base (the rod with the bonded
+    root's end effect, :func:`softtip.mechanics.rod.bonded_root_flexibility`); their largest relative gap
     in the voltage change."""
     from softtip.mechanics.pillar_fe import PillarFE
 
     pillars = model.die.pillars
     rod = pillar_rod(pillars.rod, pillars.rod.tip_diameter, pillars.rod.base_diameter, compliant_base=False)
-    bonded = replace(model, die=model.die.with_pillars(replace(pillars, rod=rod, compliant_base=False)))
+    bonded = replace(model, die=model.die.with_pillars(replace(pillars, rod=replace(rod, bonded_root=True),
+                                                               compliant_base=False)))
     forces = np.linspace(force_max / loads, force_max, loads)
     meander = model.die.meander("X")
     start = time.perf_counter()
@@ -111,8 +113,8 @@ def bench_cilia(loads: int, force_max: float, repeats: int, die: Path | None, fe
             timings[f"FE reference curve (mesh, solve, field, readout), {fe_loads} loads"] = _entry(
                 fe_s, f"the rod's curve of the same {fe_loads} loads", rod_s, FE_TARGET_S)
             notes.append(f"FE: {unknowns} unknowns, {iterations} Newton iterations; its voltage changes within "
-                         f"{100 * gap:.2f} % of the rod's (both with a bonded base: the solid has no compliant "
-                         "film here).")
+                         f"{100 * gap:.2f} % of the rod's (both bonded to a rigid base, the rod with the bonded "
+                         "root's end effect: the solid has no compliant film here).")
             task.advance()
         else:
             notes.append(f"FE reference curve not timed: pass --fe (a mesh of ~{FE_MESH_SIZE / 1e-6:.0f} µm "
