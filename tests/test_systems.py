@@ -40,15 +40,15 @@ PACKAGE = {
     "bench.py": '''
         import dataclasses
         from dataclasses import asdict
-        from typing import Any
 
         import numpy as np
 
-        from softtip._core.config import NonNegativeNumber, PositiveNumber, Text, integer, schema
+        from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
         from softtip.data import DatasetMetadata, TrialWriter
         from softtip.hardware import PacedSource
         from softtip.lab import BenchKind
         from softtip.lab.bench import SeededBench
+        from softtip.lab.protocols import protocol_file_schema
         from softtip.mechanics.viscoelastic import PronySeries
         from softtip.published import published_table
         from softtip.realtime.scenario import LiveScenario
@@ -73,13 +73,7 @@ PACKAGE = {
         class Relaxation:
             pass
 
-        @schema
-        class ProtocolFile:
-            protocol: Text
-            seed: integer() = 0
-            parameters: dict[str, Any] = dataclasses.field(default_factory=dict)
-            realism: Realism = Realism()
-            viscoelastic: Relaxation = Relaxation()
+        ProtocolFile = protocol_file_schema(Realism, Relaxation)
 
         @dataclasses.dataclass(frozen=True)
         class Spring:

@@ -13,19 +13,34 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, make_dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from threadpoolctl import threadpool_limits
 
 from softtip._core.cache import artefact_key, cache_dir, code_hash
-from softtip._core.config import Text, parse, read_toml, refused
+from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import NotRegistered, load, names, owner
 from softtip.data import Dataset
 
 ProtocolName = Text  # the registry knows the names: protocol_from_dict refuses any other
+
+
+def protocol_file_schema(realism: type, viscoelastic: type, **keys: type | tuple[type, Any]) -> type:
+    """The schema of a bench's protocol files: ``protocol`` (a registered name), ``seed``, ``parameters``
+    (checked against the protocol's own schema once the name is known), the ``[realism]`` and
+    ``[viscoelastic]`` tables of these schemas, and the bench's own ``keys``: name -> its type (a key
+    every file must give) or (type, default)."""
+    given = [(name, kind) for name, kind in keys.items() if not isinstance(kind, tuple)]
+    defaults = [(name, kind, field(default=default)) for name, (kind, default) in
+                ((name, kind) for name, kind in keys.items() if isinstance(kind, tuple))]
+    return schema(make_dataclass("ProtocolFile", [
+        ("protocol", ProtocolName), *given, ("seed", integer(), field(default=0)),
+        ("parameters", dict[str, Any], field(default_factory=dict)),
+        ("realism", realism, field(default_factory=realism)),
+        ("viscoelastic", viscoelastic, field(default_factory=viscoelastic)), *defaults], frozen=True))
 
 
 @dataclass(frozen=True)
@@ -47,8 +62,7 @@ class ProtocolTooLarge(ValueError):
 class BenchKind:
     """A bench protocols run on.
 
-    ``protocol_file``: the schema of its protocol files (``protocol``, ``seed``, ``parameters``,
-    ``realism``, ``viscoelastic`` and its own keys); ``parameters``: each protocol's ``[parameters]``
+    ``protocol_file``: the schema of its protocol files (:func:`protocol_file_schema`); ``parameters``: each protocol's ``[parameters]``
     schema; ``runners``: each protocol's trials, ``runner(bench, parameters, seed, record) -> Dataset``
     (``parameters`` the schema's object, ``record`` what the dataset's metadata keeps of the protocol);
     ``device(file, parameters, source, folder)``: what the file describes the bench with;

@@ -25,18 +25,17 @@ stage's speed; 0 in a loading) and ``rate_hz`` (readings per second).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from softtip._core.config import PositiveNumber, integer, schema
+from softtip._core.config import PositiveNumber, schema
 from softtip._core.progress import Progress
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
-from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
 from softtip.systems.cilia.layout import UM, DieError, read_die
@@ -73,13 +72,7 @@ class NoRelaxation:
     """PDMS pillars at quasi-static load steps: the study models no relaxation."""
 
 
-@schema
-class CiliaProtocolFile:
-    protocol: ProtocolName
-    seed: integer() = 0
-    parameters: dict[str, Any] = field(default_factory=dict)  # checked against CiliaSettings
-    realism: CiliaRealism = CiliaRealism()
-    viscoelastic: NoRelaxation = NoRelaxation()
+CiliaProtocolFile = protocol_file_schema(CiliaRealism, NoRelaxation)
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from softtip._core.config import (Flag, NonNegativeNumber, Numbers, PositiveNumb
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.design.model import Design, load_design
-from softtip.lab.protocols import BenchKind, Protocol, ProtocolName, Size
+from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.published import published_table
 from softtip.systems.hall_fingertip import experiments
 from softtip.systems.hall_fingertip.realism import REALISM_SOURCES, Realism
@@ -119,14 +119,8 @@ class Viscoelastic:
     rest_s: NonNegativeNumber = 1.0
 
 
-@schema
-class _FingertipProtocolFile:
-    protocol: ProtocolName
-    design: Text  # a shipped design or a design TOML file
-    seed: integer() = 0
-    parameters: dict[str, Any] = field(default_factory=dict)  # checked against the protocol's own
-    realism: Realism = Realism()
-    viscoelastic: Viscoelastic = Viscoelastic()
+# ``design``: a shipped design or a design TOML file (beside the protocol file first)
+_FingertipProtocolFile = protocol_file_schema(Realism, Viscoelastic, design=Text)
 
 
 _FINGERTIPS: dict[tuple, InfluenceEngine] = {}

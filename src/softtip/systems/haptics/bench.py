@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 from pydantic import Field
@@ -32,7 +32,7 @@ from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect,
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
-from softtip.lab.protocols import BenchKind, Protocol, ProtocolName
+from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
@@ -138,14 +138,8 @@ class HapticsViscoelastic:
     has settled (no relaxation table)."""
 
 
-@schema
-class _HapticsProtocolFile:
-    protocol: ProtocolName
-    seed: integer() = 0
-    device: Text = "shipped"  # or a device TOML file (relative to the protocol file)
-    parameters: dict[str, Any] = field(default_factory=dict)  # checked against HapticsParameters
-    realism: HapticsRealism = HapticsRealism()
-    viscoelastic: HapticsViscoelastic = HapticsViscoelastic()
+# ``device``: "shipped" or a device TOML file (relative to the protocol file)
+_HapticsProtocolFile = protocol_file_schema(HapticsRealism, HapticsViscoelastic, device=(Text, "shipped"))
 
 
 @dataclass(frozen=True)

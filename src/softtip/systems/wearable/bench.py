@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 from pydantic import Field
@@ -34,12 +34,12 @@ from pydantic import Field
 from softtip._core.channels import AXES
 from softtip.systems.wearable.chip import FORCE
 from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
-                                  choice, expect, integer, schema)
+                                  choice, expect, schema)
 from softtip._core.progress import Progress
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import SeededBench
-from softtip.lab.protocols import BenchKind, Protocol, ProtocolName, Size
+from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.systems.wearable.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.systems.wearable.realism import REALISM_SOURCES, WearableRealism
 from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
@@ -203,13 +203,7 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
     return writer.to_dataset()
 
 
-@schema
-class _WearableProtocolFile:
-    protocol: ProtocolName
-    seed: integer() = 0
-    parameters: dict[str, Any] = field(default_factory=dict)  # checked against WearableParameters
-    realism: WearableRealism = WearableRealism()
-    viscoelastic: PadViscoelastic = PadViscoelastic()
+_WearableProtocolFile = protocol_file_schema(WearableRealism, PadViscoelastic)
 
 
 def _device(file: _WearableProtocolFile, parameters: WearableParameters, source: str,
