@@ -16,6 +16,7 @@ import contextlib
 import errno
 import functools
 import inspect
+import json
 import math
 import os
 import typing
@@ -30,6 +31,7 @@ from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress, RichProgress
+from softtip._core.systems import load
 
 console = Console()
 errors = Console(stderr=True)
@@ -270,6 +272,22 @@ def check_output_folder(path: str | os.PathLike, option: str) -> Path:
 
 FORCE = typer.Option(False, "--force", help="Replace output files that exist.")
 LONGEST_S = 7 * 24 * 3600.0  # a week: the longest a duration option may ask for (no --duration: until Ctrl-C)
+
+
+def demo_report(run: str, seed: int, duration: float | None, record: Path | None, force: bool,
+                json_output: bool) -> dict | None:
+    """A demo's common options checked before any work, then its ``run`` (``"module:function"``, imported
+    only then) called with them: its report, or None once printed as JSON."""
+    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
+    check_number(seed, "--seed", minimum=0)
+    if record is not None:
+        check_output(record, "--record", force=force)
+    report = load(run)(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
+                       progress=progress_for(json_output))
+    if json_output:
+        print(json.dumps(report, indent=2, default=float))
+        return None
+    return report
 
 
 def check_input(path: str | os.PathLike, option: str) -> Path:

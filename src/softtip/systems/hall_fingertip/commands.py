@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from softtip._core.units import MM
-from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
+from softtip.cli.common import FORCE, check_number, console, demo_report, fail, progress_for
 
 
 def demo(
@@ -26,17 +26,9 @@ def demo(
     the twin's true force). It ends by naming the model it saved and the command to run it next."""
     if context.invoked_subcommand is not None:
         return
-    from softtip.systems.hall_fingertip.demo import run_main_demo
-
-    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
-    check_number(seed, "--seed", minimum=0)
-    if record is not None:
-        check_output(record, "--record", force=force)
-
-    report = run_main_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
-                           progress=progress_for(json_output))
-    if json_output:
-        print(json.dumps(report, indent=2, default=float))
+    report = demo_report("softtip.systems.hall_fingertip.demo:run_main_demo", seed, duration, record, force,
+                         json_output)
+    if report is None:
         return
     table = Table(title="force estimates: validation trials (offline) and live frames from the emulator")
     for column in ("axis", "offline MAE (N)", "offline R²", "live MAE (N)", "live peak |F| (N)"):

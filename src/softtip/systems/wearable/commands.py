@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
 from rich.table import Table
 
-from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
+from softtip.cli.common import FORCE, console, demo_report, fail
 
 
 def demo_wearable(
@@ -22,17 +21,9 @@ def demo_wearable(
     """The wearable sensor (S2) end to end: the twin's calibration seatings, a 6th-order transfer function
     identified on them, and the emulated side chip streaming a further seating through the live pipeline,
     scored against the table force and against the offline simulation of the same frames."""
-    from softtip.systems.wearable.live import run_wearable_demo
-
-    check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
-    check_number(seed, "--seed", minimum=0)
-    if record is not None:
-        check_output(record, "--record", force=force)
-
-    report = run_wearable_demo(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
-                               progress=progress_for(json_output))
-    if json_output:
-        print(json.dumps(report, indent=2, default=float))
+    report = demo_report("softtip.systems.wearable.live:run_wearable_demo", seed, duration, record, force,
+                         json_output)
+    if report is None:
         return
     if "live" not in report:
         fail("no frame was estimated: stream for longer (--duration)")
