@@ -88,8 +88,6 @@ class SealedMcapWriter:
         self._chunk = RecordBuilder()  # the chunk being gathered, uncompressed
         self._chunk_index: defaultdict[int, list[tuple[int, int]]] = defaultdict(list)
         self._chunk_times = [0, 0]
-        self._schemas: dict[int, Schema] = {}
-        self._channels: dict[int, Channel] = {}
         # the summary's groups but statistics, serialised as their records are made: they never change
         self._summary = {opcode: bytearray() for opcode in _SUMMARY_GROUPS}
         self._statistics = Statistics(attachment_count=0, channel_count=0, channel_message_counts={},
@@ -99,11 +97,11 @@ class SealedMcapWriter:
 
     # ---------------------------------------------------------------- records
 
-    def _add(self, record: McapRecord) -> tuple[int, int]:
-        """Queues ``record`` for the data section and returns its offset and length."""
-        offset = self._end + self._pending.count
-        record.write(self._pending)
-        return offset, self._end + self._pending.count - offset
+    def _add(self, record: McapRecord) -> tuple[int, bytes]:
+        """Queues ``record`` for the data section and returns its offset and its bytes."""
+        offset, data = self._end + self._pending.count, _serialised(record)
+        self._pending.write(data)
+        return offset, data
 
     def start(self, profile: str = "", library: str = "") -> None:
         """Writes the magic and the header, and seals the file."""
@@ -112,28 +110,24 @@ class SealedMcapWriter:
         self.flush()
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
-        self._schemas[schema.id] = schema
         self._statistics.schema_count += 1
-        self._add(schema)
-        self._summary[Opcode.SCHEMA] += _serialised(schema)
+        schema = Schema(id=self._statistics.schema_count, name=name, encoding=encoding, data=data)
+        self._summary[Opcode.SCHEMA] += self._add(schema)[1]
         return schema.id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
                          metadata: dict[str, str] | None = None) -> int:
-        if schema_id and schema_id not in self._schemas:
+        if not 0 <= schema_id <= self._statistics.schema_count:  # ids count up from 1; 0: no schema
             raise RecordingError(f"channel {topic!r}: schema {schema_id} was never registered")
-        channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
-                          schema_id=schema_id, metadata=dict(metadata or {}))
-        self._channels[channel.id] = channel
         self._statistics.channel_count += 1
-        self._add(channel)
-        self._summary[Opcode.CHANNEL] += _serialised(channel)
+        channel = Channel(id=self._statistics.channel_count, topic=topic, message_encoding=message_encoding,
+                          schema_id=schema_id, metadata=dict(metadata or {}))
+        self._summary[Opcode.CHANNEL] += self._add(channel)[1]
         return channel.id
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
-        if channel_id not in self._channels:
+        if not 1 <= channel_id <= self._statistics.channel_count:
             raise RecordingError(f"a message on channel {channel_id}, which was never registered")
         if self._chunk.count == 0:
             self._chunk_times = [log_time, log_time]
@@ -152,15 +146,15 @@ class SealedMcapWriter:
             self._close_chunk()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        offset, length = self._add(Metadata(name=name, metadata=dict(data)))
-        self._summary[Opcode.METADATA_INDEX] += _serialised(MetadataIndex(offset=offset, length=length, name=name))
+        offset, record = self._add(Metadata(name=name, metadata=dict(data)))
+        self._summary[Opcode.METADATA_INDEX] += _serialised(MetadataIndex(offset=offset, length=len(record), name=name))
         self._statistics.metadata_count += 1
 
     def add_attachment(self, create_time: int, log_time: int, name: str, media_type: str, data: bytes) -> None:
-        offset, length = self._add(Attachment(create_time=create_time, log_time=log_time, name=name,
+        offset, record = self._add(Attachment(create_time=create_time, log_time=log_time, name=name,
                                               media_type=media_type, data=data))
         self._summary[Opcode.ATTACHMENT_INDEX] += _serialised(AttachmentIndex(
-            offset=offset, length=length, log_time=log_time, create_time=create_time, data_size=len(data), name=name,
+            offset=offset, length=len(record), log_time=log_time, create_time=create_time, data_size=len(data), name=name,
             media_type=media_type))
         self._statistics.attachment_count += 1
 
@@ -170,7 +164,7 @@ class SealedMcapWriter:
             return
         content = self._chunk.end()
         compressed = self._compress(content)
-        chunk_offset, chunk_length = self._add(Chunk(
+        chunk_offset, chunk = self._add(Chunk(
             compression=self._compression, data=compressed, message_start_time=self._chunk_times[0],
             message_end_time=self._chunk_times[1], uncompressed_crc=zlib.crc32(content),
             uncompressed_size=len(content)))
@@ -180,7 +174,7 @@ class SealedMcapWriter:
             index_offsets[channel_id] = self._add(MessageIndex(channel_id=channel_id, records=records))[0]
         self._summary[Opcode.CHUNK_INDEX] += _serialised(ChunkIndex(
             message_start_time=self._chunk_times[0], message_end_time=self._chunk_times[1],
-            chunk_start_offset=chunk_offset, chunk_length=chunk_length, message_index_offsets=index_offsets,
+            chunk_start_offset=chunk_offset, chunk_length=len(chunk), message_index_offsets=index_offsets,
             message_index_length=self._end + self._pending.count - index_start, compression=self._compression,
             compressed_size=len(compressed), uncompressed_size=len(content)))
         self._statistics.chunk_count += 1
@@ -191,9 +185,8 @@ class SealedMcapWriter:
     def _tail(self, summary_start: int, data_crc: int) -> bytes:
         """The DataEnd record, summary, footer and magic of a data section that ends at ``summary_start``."""
         self._summary[Opcode.STATISTICS] = _serialised(self._statistics)
-        data_end = RecordBuilder()
-        DataEnd(data_section_crc=data_crc).write(data_end)
-        summary_start += data_end.count
+        data_end = _serialised(DataEnd(data_section_crc=data_crc))
+        summary_start += len(data_end)
         groups = [self._summary[opcode] for opcode in _SUMMARY_GROUPS]
         offsets, start = bytearray(), summary_start
         for opcode, group in zip(_SUMMARY_GROUPS, groups, strict=True):
@@ -204,9 +197,8 @@ class SealedMcapWriter:
         summary_bytes = b"".join(groups) + offsets
         crc = zlib.crc32(_FOOTER_HEAD.pack(Opcode.FOOTER, 20, summary_start, offset_start),
                          zlib.crc32(summary_bytes))
-        footer = RecordBuilder()
-        Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc).write(footer)
-        return data_end.end() + summary_bytes + footer.end() + MAGIC
+        footer = _serialised(Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc))
+        return data_end + summary_bytes + footer + MAGIC
 
     def flush(self, *, fsync: bool = False) -> None:
         """Closes the chunk being gathered and writes every pending record, then the tail, in one
