@@ -164,13 +164,19 @@ def owner(kind: str, name: str) -> System:
     for system in systems().values():
         if name in _UNIQUE[kind](system):
             return system
-    known = [n for system in systems().values() for n in _UNIQUE[kind](system)]
-    raise NotRegistered(f"{kind} {name!r}: expected one of {', '.join(known) or '(none registered)'}")
+    raise NotRegistered(f"{kind} {name!r}: expected one of {', '.join(names(kind)) or '(none registered)'}")
 
 
 def names(kind: str) -> list[str]:
     """Every registered name of a kind, system by system."""
     return [n for system in systems().values() for n in _UNIQUE[kind](system)]
+
+
+def reference_design(use: str) -> str | None:
+    """The shipped design the first registered system that names one gives for ``use`` ("simulate",
+    "bench"): what the toolkit's commands default to."""
+    return next((system.reference_designs[use] for system in systems().values() if use in system.reference_designs),
+                None)
 
 
 def studies() -> dict[str, Study]:

@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
-from softtip.design.model import reference_design
+from softtip._core.systems import reference_design
 
 
 MAX_BATCH = 10_000_000  # samples or poses in one batch: some 1 GB of float64 field per sensor and magnet

@@ -14,7 +14,7 @@ from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
 from softtip.cli.common import check_number, check_output, console, fail, progress_for
-from softtip.design.model import reference_design
+from softtip._core.systems import reference_design
 
 
 class IndenterKind(str, Enum):

@@ -404,13 +404,6 @@ def shipped_designs() -> list[str]:
     return sorted(_shipped())
 
 
-def reference_design(use: str) -> str | None:
-    """The shipped design the first registered system that names one gives for ``use`` ("simulate",
-    "bench"): what the toolkit's commands default to."""
-    return next((system.reference_designs[use] for system in systems().values() if use in system.reference_designs),
-                None)
-
-
 def shipped_design_path(name: str) -> Path:
     """The file of shipped design ``name``."""
     designs = _shipped()
