@@ -172,6 +172,14 @@ def names(kind: str) -> list[str]:
     return [n for system in systems().values() for n in _UNIQUE[kind](system)]
 
 
+def study(name: str) -> Study:
+    """The registered study ``name``; a name no system registered is refused with the registered ones."""
+    registered = studies()
+    if name not in registered:
+        raise NotRegistered(f"study {name!r}: expected one of {', '.join(registered) or '(none registered)'}")
+    return registered[name]
+
+
 def reference_design(use: str) -> str | None:
     """The shipped design the first registered system that names one gives for ``use`` ("simulate",
     "bench"): what the toolkit's commands default to."""

@@ -161,7 +161,7 @@ def _pole_error(found: np.ndarray, truth: np.ndarray) -> float:
     return float(max(np.min(np.abs(found - pole)) / abs(pole) for pole in truth))
 
 
-def _siso_case(name: str, estimation: Recording, validation: Recording, truth: transfer.TransferFunctionMatrix,
+def _siso_case(estimation: Recording, validation: Recording, truth: transfer.TransferFunctionMatrix,
                n_zeros: int) -> dict:
     """One single-input case: our transfer function and continuous state space, nfoursid and SIPPY's
     output-error model on the same detrended record: seconds, validation fit % (from rest) and the
@@ -242,8 +242,8 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
     sippy = _sippy_state_space(estimation, validation, 8, state_space.horizon_)
     cases = {"rao_garnier": (rao_garnier(seed), rao_garnier(seed + 1)),
              "laboratory_process": (laboratory_process(seed), laboratory_process(seed + 1))}
-    siso = {"rao_garnier": _siso_case("rao_garnier", *cases["rao_garnier"], RAO_GARNIER, 1),
-            "laboratory_process": _siso_case("laboratory_process", *cases["laboratory_process"], PROCESS, 0)}
+    siso = {"rao_garnier": _siso_case(*cases["rao_garnier"], RAO_GARNIER, 1),
+            "laboratory_process": _siso_case(*cases["laboratory_process"], PROCESS, 0)}
     methods = subspace_methods({"force_3x3": (estimation, validation, 8),
                                 "rao_garnier": (*cases["rao_garnier"], 4),
                                 "laboratory_process": (*cases["laboratory_process"], 2)})

@@ -274,6 +274,13 @@ FORCE = typer.Option(False, "--force", help="Replace output files that exist.")
 LONGEST_S = 7 * 24 * 3600.0  # a week: the longest a duration option may ask for (no --duration: until Ctrl-C)
 
 
+def check_distinct(values: list[str], option: str, why: str = "") -> None:
+    """Refuses a value of a repeatable ``option`` given twice (``why``: what a repeat would mean)."""
+    repeated = [value for k, value in enumerate(values) if value in values[:k]]
+    if repeated:
+        fail(f"{option} {repeated[0]!r}: given twice" + (f"; {why}" if why else ""))
+
+
 def demo_report(run: str, seed: int, duration: float | None, record: Path | None, force: bool,
                 json_output: bool) -> dict | None:
     """A demo's common options checked before any work, then its ``run`` (``"module:function"``, imported

@@ -12,7 +12,8 @@ import numpy as np
 import typer
 
 from softtip._core.systems import names, studies
-from softtip.cli.common import FORCE, check_output, check_output_folder, console, errors, fail, printable, progress_for
+from softtip.cli.common import (FORCE, check_distinct, check_output, check_output_folder, console, errors, fail,
+                                printable, progress_for)
 
 STUDY_NAMES = tuple(studies())
 MODEL_KINDS = ("polynomial", "network", "classifier")
@@ -107,9 +108,7 @@ def calibrate(
 
     if model not in MODEL_KINDS:
         fail(f"--model = {model!r}: expected one of {', '.join(MODEL_KINDS)}")
-    repeated = [t for k, t in enumerate(target) if t in target[:k]]
-    if repeated:
-        fail(f"--target {repeated[0]!r}: given twice; each label is estimated once")
+    check_distinct(target, "--target", "each label is estimated once")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
     check_output(output, "--output", [dataset], force=force)
@@ -201,20 +200,17 @@ def _check_readings(data, dataset: Path) -> None:
     """Magnetic readings (changes from a baseline, µT) within what an MLX90393 can output: a change between
     two readings in range is at most twice the range, at the dataset's sensor settings or, without them,
     at the chip's widest (GAIN_SEL 0, RES 3)."""
-    import re
-
+    from softtip._core.channels import MAGNETIC
     from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
 
     stated = data.metadata.sensor_settings
     settings = MLX90393Settings.from_dict(stated) if stated else MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3))
     where = "the dataset's sensor settings" if stated else "its widest setting"
     limit = 2 * full_scale_uT(settings)
-    for column, channel in enumerate(data.channels):
-        axis = re.search(r"_b([xyz])_uT$", channel)
-        if axis is None:
-            continue
-        largest = float(np.nanmax(np.abs(data.X()[:, column]))) if len(data.groups) else 0.0
-        bound = limit["xyz".index(axis.group(1))]
+    for channel in filter(MAGNETIC.is_channel, data.channels):
+        values = data.columns[channel]
+        largest = float(np.nanmax(np.abs(values))) if len(values) else 0.0
+        bound = limit[MAGNETIC.channel_order(channel)[1]]
         if not largest <= bound:
             fail(f"{dataset}: channel {channel} reaches {largest:.4g} µT, beyond twice the MLX90393's "
                  f"{bound / 2:.4g} µT range at {where}")

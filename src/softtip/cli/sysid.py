@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from softtip.cli.common import FORCE, check_number, check_output, console, fail
+from softtip.cli.common import FORCE, check_distinct, check_number, check_output, console, fail
 
 
 class Kind(str, Enum):
@@ -262,7 +262,7 @@ def sysid_fit(
         fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
     check_number(lags, "--lags", minimum=1, maximum=100_000)
     _common_checks(ts, max_delay)
-    _full_scale(full_scale)
+    scale = _full_scale(full_scale)
     for option, path in (("--bode", bode), ("--residuals", residuals)):
         if path is not None and path.suffix.lower() not in FIGURE_SUFFIXES:
             fail(f"{option} {path}: expected a .png, .pdf or .svg file")
@@ -287,7 +287,6 @@ def sysid_fit(
     result["residual_tests"] = None if tests is None else \
         tests.to_dict() | {"data": str(validate if validation is not None else data)}
     if validation is not None:
-        scale = _full_scale(full_scale)
         result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
         result["validation_estimated_initial_state"] = estimator.evaluate(validation, full_scale=scale,
                                                                           initial_state="estimate").to_dict()
@@ -327,9 +326,7 @@ def sysid_fit(
 def _distinct(names: list[str], option: str) -> None:
     if not names:
         fail(f"{option}: expected at least one column name")
-    repeated = [name for k, name in enumerate(names) if name in names[:k]]
-    if repeated:
-        fail(f"{option} {repeated[0]!r}: given twice")
+    check_distinct(names, option)
 
 
 def _order_range(text: str) -> list[int]:
@@ -370,13 +367,14 @@ def sysid_orders(
     from softtip.sysid import order_table
 
     _common_checks(ts, max_delay)
+    delay_per_input = _delay(delay)
     chosen = None if orders is None else _order_range(orders)
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
-    params = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    params = {"detrend": detrend.value, "delay": delay_per_input, "max_delay": max_delay}
     params |= {"method": method.value} if kind is Kind.ss else {}
     rows = order_table(recording, kind.value, chosen, validation,
                        initial_state.value, **params)
@@ -424,7 +422,7 @@ def sysid_predict(
 
     check_number(horizon, "--horizon", minimum=1, maximum=10_000_000)
     check_number(ts, "--ts", above=0, unit="s")
-    _full_scale(full_scale)
+    scale = _full_scale(full_scale)
     if out is not None:
         check_output(out, "--out", [model_file, data], force=force)
     model = load_model(model_file)
@@ -439,7 +437,7 @@ def sysid_predict(
     predicted = model.predict(recording, horizon, initial_state.value) if measured else model.simulate(recording)
     scores = None
     if measured:
-        scores = replace(model.evaluate_predictions(recording, predicted, _full_scale(full_scale)),
+        scores = replace(model.evaluate_predictions(recording, predicted, scale),
                          initial_state="estimated" if initial_state is InitialState.estimate else "zero")
     result = {"model": str(model_file), "horizon": horizon, "trials": len(recording.trials),
               "samples": recording.n_samples, "scores": None if scores is None else scores.to_dict()}

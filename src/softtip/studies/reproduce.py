@@ -19,7 +19,8 @@ import numpy as np
 from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.progress import SILENT, Progress
-from softtip._core.systems import Study, load, owner, studies
+from softtip._core.systems import Study, load, studies
+from softtip._core.systems import study as registered_study
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import shipped_protocol_path
 from softtip.published import OUTSIDE
@@ -140,7 +141,7 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
                     progress: Progress = SILENT, command: str | None = None) -> StudyReport:
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
     count to a minimum and sets what the study's ``quick`` names (a smoke run, not the study)."""
-    study = studies().get(name) or owner("study", name)  # the second refuses an unknown name
+    study = registered_study(name)
     protocol = load_protocol(protocol_path or study.protocol).changed(seed=seed, **study.sets)
     parameters = asdict(protocol.parameters)
     cuts = {key: count for key, count in QUICK_TRIALS.items() if quick and parameters.get(key, 0) > count}

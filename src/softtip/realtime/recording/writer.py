@@ -88,7 +88,7 @@ class McapRecorder:
     estimates in order; ``classes``: the contact states (None without a classifier);
     ``covariance_T2``: the MagneticField covariance (9 values; Hall chips); ``metadata``: JSON values
     stored in the file's ``softtip`` metadata record. ``chunk_size`` bytes per chunk
-    before compression (``compression``: zstd, lz4 or none); :meth:`flush` closes the
+    before compression (``compression``: zstd or none); :meth:`flush` closes the
     chunk in progress and hands the bytes to the operating system (and, with ``fsync``,
     to the disk).
     """
