@@ -87,6 +87,12 @@ def test_rougher_surfaces_read_larger_and_a_slow_rate_misses_roughness():
     assert list(study.rates) == [2.0, 20.0, 50.0, 100.0]  # the nominal rate's recordings join the curve
     # the rate curve: 2 readings/s average the grains away (measured on 10 mm: 4 × below 100/s on P1000)
     assert np.all(study.rms_by_rate[1:3, 0] < 0.5 * study.rms_by_rate[1:3, -1])  # grains << 0.5 mm a reading
+    # the speed curve at 50/s: the nominal speed's column is the level itself; faster, a reading crosses more
+    # grains and reads less (measured: P1000 0.79 × at 2 mm/s of its 0.5 mm/s level)
+    np.testing.assert_allclose(study.speeds, [0.5e-3, 1e-3, 2e-3])
+    np.testing.assert_array_equal(study.rms_by_speed[:, 1], study.total_rms)
+    assert np.all(np.diff(study.rms_by_speed[1:], axis=1) < 0)
+    assert study.rms_by_speed[1, -1] < 0.85 * study.rms_by_speed[1, 0]
     classified = study.classification
     assert classified.confusion_by_recording.sum() == classified.windows
     assert classified.by_recording > 0.6  # chance: 0.25
