@@ -23,6 +23,7 @@ what was lost.
 from __future__ import annotations
 
 import json
+import operator
 import os
 import re
 from dataclasses import dataclass
@@ -44,8 +45,7 @@ from softtip.realtime.recording.format import (
     FLOAT64_MULTI_ARRAY,
     MESSAGE_ENCODING,
     METADATA_NAME,
-    MAGNETIC_FIELD,
-    VECTOR3_STAMPED,
+    READING_VECTORS,
     STRING,
     WRENCH_LABELS,
     WRENCH_STAMPED,
@@ -94,12 +94,8 @@ def _readings(topic: TopicMessages, reading: Reading) -> tuple[np.ndarray, np.nd
     """(header stamps in ns, readings (n, 3) in the reading's unit) of a topic of a chip's messages."""
     messages = topic.decoded()
     stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
-    per_message = per_message_unit(reading)
-    if reading.message == MAGNETIC_FIELD:
-        return stamps, _vectors(m.magnetic_field for m in messages) * per_message
-    if reading.message == VECTOR3_STAMPED:
-        return stamps, _vectors(m.vector for m in messages) * per_message
-    return stamps, _vectors(m.wrench.force for m in messages) * per_message
+    vector = operator.attrgetter(READING_VECTORS[reading.message])
+    return stamps, _vectors(vector(m) for m in messages) * per_message_unit(reading)
 
 
 def _reading_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str], Reading]:

@@ -76,6 +76,8 @@ FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 
 # the unit a chip's reading message carries, by message type (a Vector3Stamped: the reading's own)
 READING_MESSAGES = {MAGNETIC_FIELD: "T", WRENCH_STAMPED: "N", VECTOR3_STAMPED: None}
+# where the reading's vector sits in each of those messages
+READING_VECTORS = {MAGNETIC_FIELD: "magnetic_field", WRENCH_STAMPED: "wrench.force", VECTOR3_STAMPED: "vector"}
 
 WRENCH_FLOATS = 6  # force (3) + torque (3)
 

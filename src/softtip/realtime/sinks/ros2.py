@@ -28,6 +28,7 @@ from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     MAGNETIC_FIELD,
     VECTOR3_STAMPED,
+    WRENCH_STAMPED,
     frame_id,
     magnetic_covariance_T2,
     per_message_unit,
@@ -84,7 +85,6 @@ class ROS2Sink(Sink):
         self._covariance = magnetic_covariance_T2(stream.settings).tolist()
         node = self._node = rclpy.create_node(self.node_name)
         depth, prefix = self.qos_depth, self.prefix
-        self._magnetic = stream.reading.message == MAGNETIC_FIELD
         self._per_message = per_message_unit(stream.reading)
         leaf, _ = reading_topic(stream.reading)
         kind = {MAGNETIC_FIELD: msg_sensor.MagneticField, VECTOR3_STAMPED: msg_geometry.Vector3Stamped}.get(
@@ -141,7 +141,7 @@ class ROS2Sink(Sink):
         if self._stream.reading.message == VECTOR3_STAMPED:
             return msg_geometry.Vector3Stamped(header=self._header(frame, frame_id(self.prefix, chip)),
                                                vector=msg_geometry.Vector3(x=x, y=y, z=z))
-        if not self._magnetic:
+        if self._stream.reading.message == WRENCH_STAMPED:
             return self._wrench_stamped(frame, frame_id(self.prefix, chip), np.r_[x, y, z, np.full(3, np.nan)])
         return msg_sensor.MagneticField(header=self._header(frame, frame_id(self.prefix, chip)),
                                         magnetic_field=msg_geometry.Vector3(x=x, y=y, z=z),
