@@ -81,14 +81,30 @@ def _model_figures(model, seconds: float, validation: Recording) -> dict:
             "validation_fit_percent": _validation_fit(model.system_, validation)}
 
 
+def _end_to_end(recording: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """(u, y) of a recording's trials laid end to end: the one record the other libraries take."""
+    return np.vstack([trial.u for trial in recording.trials]), np.vstack([trial.y for trial in recording.trials])
+
+
+def _quiet_sippy(identify) -> tuple[object, float, str]:
+    """SIPPY's ``identify()`` timed on one BLAS thread: its result, seconds and what it printed (SIPPY prints
+    its warnings; the report keeps them, and the JSON on stdout clean)."""
+    printed = io.StringIO()
+
+    def run():
+        with single_threaded_blas(), contextlib.redirect_stdout(printed):
+            return identify()
+
+    found, seconds = timed(run)
+    return found, seconds, printed.getvalue().strip()
+
+
 def _nfoursid(estimation: Recording, validation: Recording, order: int, block_rows: int) -> dict:
     """nfoursid (PO-MOESP) on the same data: its figures, and its ``system`` (popped by callers that use it)."""
     import pandas as pd
     from nfoursid.nfoursid import NFourSID
 
-    # nfoursid takes one record: the trials laid end to end
-    u = np.vstack([trial.u for trial in estimation.trials])
-    y = np.vstack([trial.y for trial in estimation.trials])
+    u, y = _end_to_end(estimation)
     inputs, outputs = list(estimation.inputs), list(estimation.outputs)
     frame = pd.DataFrame(np.hstack([u, y]), columns=[*inputs, *outputs])
 
@@ -109,19 +125,12 @@ def _sippy_state_space(estimation: Recording, validation: Recording, order: int,
     record as nfoursid, with our horizon as its past and future windows."""
     from sippy_unipi import system_identification
 
-    u = np.vstack([trial.u for trial in estimation.trials])
-    y = np.vstack([trial.y for trial in estimation.trials])
-
-    def identify():
-        with single_threaded_blas(), contextlib.redirect_stdout(printed):
-            return system_identification(y.T, u.T, "MOESP", SS_fixed_order=order, SS_f=horizon, SS_p=horizon,
-                                         tsample=estimation.ts)
-
-    printed = io.StringIO()  # SIPPY prints its warnings; the report keeps them (and the JSON on stdout clean)
-    found, seconds = timed(identify)
+    u, y = _end_to_end(estimation)
+    found, seconds, printed = _quiet_sippy(lambda: system_identification(
+        y.T, u.T, "MOESP", SS_fixed_order=order, SS_f=horizon, SS_p=horizon, tsample=estimation.ts))
     system = StateSpace(found.A, found.B, found.C, found.D, estimation.ts)
     return {"seconds": seconds, "states": order, "horizon": horizon, "stable": system.is_stable(),
-            "validation_fit_percent": _validation_fit(system, validation), "printed": printed.getvalue().strip()}
+            "validation_fit_percent": _validation_fit(system, validation), "printed": printed}
 
 
 # ------------------------------------------------------------------------ single-input benchmark cases
@@ -188,12 +197,8 @@ def _siso_case(estimation: Recording, validation: Recording, truth: transfer.Tra
     figures["nfoursid"] = nfoursid | {"pole_error": _pole_error(np.log(system.poles().astype(complex)) / ts, poles)}
     u, y = centred_estimation.trials[0].u[:, 0], centred_estimation.trials[0].y[:, 0]
 
-    def output_error():
-        with single_threaded_blas(), contextlib.redirect_stdout(printed):
-            return system_identification(y, u, "OE", OE_orders=[n_zeros + 1, order, 1], tsample=ts)
-
-    printed = io.StringIO()
-    found, seconds = timed(output_error)
+    found, seconds, printed = _quiet_sippy(lambda: system_identification(y, u, "OE", OE_orders=[n_zeros + 1, order, 1],
+                                                                         tsample=ts))
     numerator, denominator = (np.asarray(part[0][0], dtype=np.float64) for part in (found.NUMERATOR, found.DENOMINATOR))
     discrete = np.roots(denominator)
     discrete = discrete[np.abs(discrete) > 1e-12]  # its delay's poles at the origin aside
@@ -204,7 +209,7 @@ def _siso_case(estimation: Recording, validation: Recording, truth: transfer.Tra
     figures["sippy_output_error"] = {"seconds": seconds, "validation_fit_percent": fit if np.isfinite(fit) else None,
                                      "pole_error": _pole_error(np.log(discrete.astype(complex)) / ts, poles),
                                      "stable": bool(np.all(np.abs(discrete) < 1)),
-                                     "printed": printed.getvalue().strip()}
+                                     "printed": printed}
     return figures
 
 
