@@ -152,14 +152,23 @@ def _unit_normals(plate_normal: np.ndarray) -> np.ndarray:
     return plate_normal / length
 
 
-def cap_indentation(centre, semi_axes, plate_point, plate_normal):
-    """Indentation δ (m, (...)), the contact point on the plate (..., 3) and the effective radius R
-    (m, (...)) of an ellipsoidal cap under plates; arrays broadcast over their leading axes."""
-    centre = np.asarray(centre, dtype=float)
+def _checked_cap(semi_axes, plate_normal) -> tuple[np.ndarray, np.ndarray]:
+    """The cap's semi-axes (m) and the plates' unit normals, refused in one line if unusable."""
     semi_axes = np.asarray(semi_axes, dtype=float)
     if semi_axes.shape[-1:] != (3,) or np.any(semi_axes <= 0):
         raise ValueError(f"semi_axes = {semi_axes.tolist()}: expected 3 positive lengths (m)")
-    normal = _unit_normals(plate_normal)
+    return semi_axes, _unit_normals(plate_normal)
+
+
+def cap_indentation(centre, semi_axes, plate_point, plate_normal):
+    """Indentation δ (m, (...)), the contact point on the plate (..., 3) and the effective radius R
+    (m, (...)) of an ellipsoidal cap under plates; arrays broadcast over their leading axes."""
+    semi_axes, normal = _checked_cap(semi_axes, plate_normal)
+    return _indentation(np.asarray(centre, dtype=float), semi_axes, plate_point, normal)
+
+
+def _indentation(centre: np.ndarray, semi_axes: np.ndarray, plate_point, normal: np.ndarray):
+    """:func:`cap_indentation` on checked semi-axes and unit ``normal``."""
     support = np.sqrt(np.sum((semi_axes * normal) ** 2, axis=-1))
     height = np.sum(normal * (centre - np.asarray(plate_point, dtype=float)), axis=-1)
     depth = support - height
@@ -172,7 +181,8 @@ def cap_indentation(centre, semi_axes, plate_point, plate_normal):
 def plate_wrench(law: PlateContactLaw, centre, semi_axes, plate_point, plate_normal, origin):
     """The wrench (..., 6: N, N·m about ``origin``) a frictionless plate applies to the cap, and the
     indentation (m, (...)); no contact gives a zero wrench and a negative indentation."""
-    depth, point, radius = cap_indentation(centre, semi_axes, plate_point, plate_normal)
-    force = normal_force(law, depth, radius)[..., None] * _unit_normals(plate_normal)
+    semi_axes, normal = _checked_cap(semi_axes, plate_normal)
+    depth, point, radius = _indentation(np.asarray(centre, dtype=float), semi_axes, plate_point, normal)
+    force = normal_force(law, depth, radius)[..., None] * normal
     torque = np.cross(point - np.asarray(origin, dtype=float), force)
     return np.concatenate([force, torque], axis=-1), depth

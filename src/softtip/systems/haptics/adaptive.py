@@ -34,7 +34,7 @@ from softtip.systems.haptics.collection import (
 )
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.fingertips import Fingertip
-from softtip.systems.haptics.personalisation import in_device_axes, user_table_renderer
+from softtip.systems.haptics.personalisation import in_device_axes, readings_renderer
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, FORCE
 
 NO_CONTACT, CONTACT, SATURATED = 0, 1, 2
@@ -102,13 +102,13 @@ def _aimed(device: DeviceSpec, parts: list[Collection], wanted: np.ndarray, pool
     touching = int(np.sum(np.linalg.norm(readings[:, FORCE], axis=1) >= contact_threshold))
     if not touching or not len(wanted):
         return np.zeros((0, 3))
-    user = user_table_renderer(device, np.vstack([part.motor_inputs for part in usable]),
-                               np.vstack([part.platform_wrenches for part in usable]),
-                               min(n_neighbours, touching + 1), contact_threshold)
+    user = readings_renderer(readings, np.vstack([part.motor_inputs for part in usable]),
+                             min(n_neighbours, touching + 1), contact_threshold)
     gaps, _ = cKDTree(readings[:, FORCE]).query(wanted)
     aims = user.predict(wanted[np.argsort(gaps)[::-1]])
     free = np.ones(len(pool), bool)
-    free[cKDTree(pool).query(driven)[1][cKDTree(pool).query(driven)[0] < 1e-9]] = False
+    distance, index = cKDTree(pool).query(driven)
+    free[index[distance < 1e-9]] = False
     chosen = []
     for aim in aims:
         candidates = np.flatnonzero(free)

@@ -115,7 +115,7 @@ class DeviceSpec:
     finger: FingerPlacement
 
     def __post_init__(self) -> None:
-        wound = self.device.released_length - self.device.pulley_radius * math.radians(self.servo.angle_max_deg)
+        wound = self.wound_length
         if wound <= 0:
             raise Refusal(("device", "released_length"),
                           f"expected above pulley_radius x angle_max ({self.device.released_length - wound:.4g} m): "
@@ -304,9 +304,3 @@ def cable_tensions(spec: DeviceSpec, angles, finger_wrench) -> np.ndarray:
     balance = np.stack([np.ones_like(ends[..., 0]), ends[..., 1], -ends[..., 0]], axis=-2)  # (..., 3, 3)
     load = np.stack([wrench[..., 2], wrench[..., 3], wrench[..., 4]], axis=-1)
     return spring_forces(spec, lengths) + np.linalg.solve(balance, load[..., None])[..., 0]
-
-
-def servo_overloaded(spec: DeviceSpec, tensions) -> np.ndarray:
-    """Where a cable is slack (tension < 0) or beyond its servo's stall torque, (..., 3)."""
-    tensions = np.asarray(tensions, dtype=float)
-    return (tensions < 0) | (tensions * spec.device.pulley_radius > spec.servo.stall_torque)

@@ -128,7 +128,7 @@ TEST_FINGERTIPS = (
 )
 
 
-CASTS, HUMAN_FINGERTIPS = TEST_FINGERTIPS[:3], TEST_FINGERTIPS[3:]
+HUMAN_FINGERTIPS = TEST_FINGERTIPS[3:]  # after the three casts
 
 
 def finger_wrench(fingertip: Fingertip, device: DeviceSpec, pose: PlatformPose) -> tuple[np.ndarray, np.ndarray]:

@@ -29,10 +29,10 @@ from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.systems.haptics import WANTED
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
-from softtip.systems.haptics.device import DeviceSpec
+from softtip.systems.haptics.device import DeviceSpec, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer
-from softtip.systems.haptics.servos import FrameResponse, ServoDevice, frame_command
+from softtip.systems.haptics.servos import FrameResponse, ServoDevice
 
 LOOP_RATE_HZ = 1000.0
 MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
@@ -155,7 +155,7 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
                 latencies[first + k] = time.perf_counter() - tick
                 outside += flagged
                 if k == 0:  # the servos read one command a frame: the frame's first
-                    servos.send(frames, frame_command(device, commands[0]))
+                    servos.send(frames, quantised(device, commands[0]))
                     frames += 1
             response = servos.frame(len(wanted)) or unknown
             rendered = response.wrench[:len(wanted), :3]

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from softtip.mechanics.plate_contact import fit_hertz_modulus, hertz_depth
+from softtip.mechanics.plate_contact import cap_indentation, fit_hertz_modulus, hertz_depth
 from softtip.sensors.wrench import wrench_in_frame
 from softtip.systems.haptics.device import (
     DeviceSpec,
@@ -42,6 +42,7 @@ from softtip.systems.haptics.device import (
     inverse_kinematics_unchecked,
     quantised,
     reachable,
+    servo_angles_of_lengths,
 )
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, Rendering
 
@@ -57,9 +58,16 @@ def user_table_renderer(device: DeviceSpec, user_motor_inputs, user_platform_wre
                         contact_threshold: float | None = None,
                         weighting_power: float = 1.0) -> NearestNeighbourRenderer:
     """The inverse of the user's table α_U: DS readings (turned into the device's axes) to motor inputs."""
+    return readings_renderer(in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs,
+                             n_neighbours, contact_threshold, weighting_power)
+
+
+def readings_renderer(device_readings, user_motor_inputs, n_neighbours: int = 8,
+                      contact_threshold: float | None = None, weighting_power: float = 1.0) -> NearestNeighbourRenderer:
+    """:func:`user_table_renderer` from DS readings already in the device's axes (:func:`in_device_axes`)."""
     options = {} if contact_threshold is None else {"contact_threshold": contact_threshold}
     return NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, **options).fit(
-        in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs)
+        device_readings, user_motor_inputs)
 
 
 def personalise_data_driven(device: DeviceSpec, fs_motor_inputs, fs_platform_wrenches, user_motor_inputs,
@@ -99,7 +107,7 @@ def press_configurations(device: DeviceSpec, user_radius: float, depths=PRESS_DE
     if not (np.isfinite(user_radius) and user_radius > 0):
         raise ValueError(f"user_radius = {user_radius!r}: expected a positive radius (m)")
     lengths = -(device.centre[2] - user_radius + depths)  # each cable to the level plane at that depth
-    angles = (device.device.released_length - lengths) / device.device.pulley_radius
+    angles = servo_angles_of_lengths(device, lengths)
     return np.repeat(np.clip(angles, 0.0, device.angle_max)[:, None], 3, axis=1)
 
 
@@ -112,7 +120,7 @@ def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius
     if not 1 <= len(motor_inputs) <= MAX_PRESSES:
         raise ValueError(f"presses: {len(motor_inputs)} given, expected 1 to {MAX_PRESSES}")
     pose = forward_kinematics(device, quantised(device, motor_inputs))
-    depths = user_radius - np.sum(pose.normal * (device.centre - pose.centroid), axis=-1)
+    depths = cap_indentation(device.centre, np.full(3, user_radius), pose.centroid, pose.normal)[0]
     forces = np.linalg.norm(np.asarray(platform_wrenches, dtype=float)[:, :3], axis=1)
     usable = np.ones(len(forces), bool) if saturated is None else ~np.asarray(saturated, dtype=bool)
     touching = (forces >= contact_threshold) & (depths > 0) & usable
@@ -126,10 +134,13 @@ def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius
 
 def personalise_force_model(device: DeviceSpec, fs_motor_inputs, fs_wrenches, fs_radius: float,
                             user_radius: float, user: PressFit, contact_threshold: float = CONTACT_THRESHOLD,
-                            poisson_ratio: float = 0.5) -> Rendering:
+                            poisson_ratio: float = 0.5, geometric: Rendering | None = None) -> Rendering:
     """Personalised motor inputs (entries, 3) by the geometric method with the user's fitted Hertz law;
-    flagged (and held at the servos' range) where the pose is out of reach."""
-    geometric = personalise_geometric(device, fs_motor_inputs, fs_radius, user_radius)
+    flagged (and held at the servos' range) where the pose is out of reach. ``geometric``: the
+    geometric method's personalisation of the same table, if already computed (without contact, the
+    entry keeps it)."""
+    if geometric is None:
+        geometric = personalise_geometric(device, fs_motor_inputs, fs_radius, user_radius)
     pose = forward_kinematics(device, fs_motor_inputs)
     force = np.linalg.norm(np.asarray(fs_wrenches, dtype=float)[:, :3], axis=1)
     depth = hertz_depth(force, user_radius, user.youngs_modulus, poisson_ratio)

@@ -6,8 +6,8 @@ The study's tables are computed from the dataset (:mod:`.bench`), so a dataset w
 lab run haptics`` gives the same tables as the study run in one go. The sweeps beyond the
 publication (error against n, weighting and table sizes; the methods' ranking as the human fingertips
 vary) rerun the simulated study over the protocol's ``curve_*`` and ``variations`` parameters
-(:mod:`.sensitivity`); their baseline draws the same noise as the dataset's run, so their errors at
-the protocol's own settings are the dataset's.
+(:mod:`.sensitivity`) from the dataset's errors: what they rerun draws the same noise as the dataset's
+run, and their errors at the protocol's own settings are the dataset's.
 """
 
 from __future__ import annotations
@@ -37,7 +37,15 @@ from softtip.systems.haptics.sensitivity import (
     sensitivity_study,
 )
 from softtip.systems.haptics.statistics import friedman, wilcoxon
-from softtip.systems.haptics.study import NOTES, METHODS, PAIRS, PUBLISHED_METHODS, SHORT_NAMES, error_box_plots
+from softtip.systems.haptics.study import (
+    NOTES,
+    METHODS,
+    PAIRS,
+    PUBLISHED_METHODS,
+    SHORT_NAMES,
+    error_box_plots,
+    wilcoxon_tests,
+)
 
 STANDARD, A, B = range(PUBLISHED_METHODS)
 DIRECTIONS = {"standard − A": (STANDARD, A), "standard − B": (STANDARD, B), "B − A": (B, A)}
@@ -79,7 +87,7 @@ class RenderedTargets:
 def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     dataset, timings = run_protocol(protocol, progress)
     p, found = protocol.parameters, RenderedTargets.of(dataset)
-    tests = PUBLISHED_METHODS * len(found.fingertips) + 1
+    tests = wilcoxon_tests(len(found.fingertips))
     statistics = {name: (friedman(errors[:PUBLISHED_METHODS]),
                          [wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS])
                   for name, errors in zip(found.fingertips, found.errors, strict=True)}
@@ -109,7 +117,7 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                          for (a, b), t in zip(PAIRS, statistics[name][1], strict=True)}}
             for name, errors, flagged in zip(found.fingertips, found.errors, found.flagged, strict=True)},
         "pooled_A_vs_B": _test(pooled)}
-    sweeps = _sweeps(protocol, progress)
+    sweeps = _sweeps(protocol, found.errors, progress)
     results |= sweeps.results
     headline_row = LARGEST if LARGEST in found.fingertips else POOLED
     headline = Headline.of(directions, headline_row, "B − A", f"median error B − A, {headline_row}", "N")
@@ -134,7 +142,8 @@ class Sweeps:
     notes: list[str]
 
 
-def _sweeps(protocol: Protocol, progress: Progress) -> Sweeps:
+def _sweeps(protocol: Protocol, errors: np.ndarray, progress: Progress) -> Sweeps:
+    """The sweeps from the study's own ``errors`` (fingertips, methods, targets), N."""
     p = protocol.parameters
     fingertips, curves, variations = p.selected_fingertips(), p.curves(), p.selected_variations()
     humans = [f.name for f in fingertips if f in HUMAN_FINGERTIPS]
@@ -145,7 +154,7 @@ def _sweeps(protocol: Protocol, progress: Progress) -> Sweeps:
     if not curves and not variations:
         return Sweeps([], [], {}, notes)
     baseline = Baseline.run(p.study_settings(), protocol.seed, protocol.design.device, fingertips,
-                            p.collection_settings(), progress)
+                            p.collection_settings(), progress, errors=errors)
     tables, figures, results = [], [], {}
     if curves:
         points = error_curves(baseline, progress, curves)

@@ -39,11 +39,12 @@ from softtip.systems.haptics.study import (
     SharedTables,
     StudySettings,
     UserData,
-    collect_user_data,
+    collect_study,
     fs_table,
     pooled_test,
-    shared_tables,
     study_fingertip,
+    study_fingertips,
+    wilcoxon_tests,
 )
 
 
@@ -86,7 +87,8 @@ VARIATION_NAMES = tuple(variation.name for variation in DEFAULT_VARIATIONS)
 @dataclass(frozen=True)
 class Baseline:
     """The study at ``settings`` on ``fingertips``: its FS table and targets, each fingertip's user
-    data and outcome."""
+    data and errors (methods, targets) in N; each fingertip's outcome when the baseline computed its
+    errors itself (none when they were given)."""
 
     device: DeviceSpec
     fingertips: tuple[Fingertip, ...]
@@ -95,43 +97,49 @@ class Baseline:
     seed: int
     shared: SharedTables
     user_data: tuple[UserData, ...]
-    outcomes: tuple[FingertipOutcome, ...]
+    errors: tuple[np.ndarray, ...]
+    outcomes: tuple[FingertipOutcome, ...] = ()
 
     @classmethod
     def run(cls, settings: StudySettings = StudySettings(), seed: int = 0, device: DeviceSpec | None = None,
             fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
-            collection: CollectionSettings = CollectionSettings(), progress: Progress = SILENT) -> Baseline:
+            collection: CollectionSettings = CollectionSettings(), progress: Progress = SILENT,
+            errors=None) -> Baseline:
+        """The study's tables and user data; its errors ``errors`` (fingertips, methods, targets) when
+        the study was already run on the same seed and settings, else computed here."""
         seed = checked(integer(0), "seed", seed)
+        if errors is not None and len(errors) != len(fingertips):
+            raise ValueError(f"errors: expected one (methods, targets) array per fingertip, {len(fingertips)}, "
+                             f"got {len(errors)}")
         device = load_device() if device is None else device
-        with progress.task("the study's own tables", total=len(fingertips) + 1) as task:
-            shared = shared_tables(device, settings, collection, seed)
-            task.advance()
-            user_data = []
-            for index, finger in enumerate(fingertips):
-                try:
-                    user_data.append(collect_user_data(device, finger, settings, collection, seed, index))
-                except ValueError as problem:
-                    raise ValueError(f"fingertip {finger.name!r}: {problem}") from None
-                task.advance(note=finger.name)
-        baseline = cls(device, tuple(fingertips), settings, collection, seed, shared, tuple(user_data), ())
-        return replace(baseline, outcomes=baseline.rerun(settings, shared, range(len(fingertips))))
+        shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+        outcomes = ()
+        if errors is None:
+            outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
+            errors = [outcome.errors for outcome in outcomes]
+        return cls(device, tuple(fingertips), settings, collection, seed, shared, user_data,
+                   tuple(np.asarray(e) for e in errors), outcomes)
 
     @property
     def tests(self) -> int:
-        """The Wilcoxon tests the study makes: three per fingertip and the pooled one."""
-        return 3 * len(self.fingertips) + 1
+        return wilcoxon_tests(len(self.fingertips))
 
     def rerun(self, settings: StudySettings, shared: SharedTables, indices,
-              fingertips: tuple[Fingertip, ...] | None = None) -> tuple[FingertipOutcome, ...]:
-        """The outcomes of the fingertips at ``indices`` (of ``fingertips``, by default the baseline's)
-        under ``settings`` with ``shared`` tables; the baseline's user data where it still holds."""
+              fingertips: tuple[Fingertip, ...] | None = None) -> tuple[np.ndarray, ...]:
+        """The errors of the fingertips at ``indices`` (of ``fingertips``, by default the baseline's)
+        under ``settings`` with ``shared`` tables: the baseline's own where nothing changed, its user
+        data where it still holds."""
         fingertips = self.fingertips if fingertips is None else fingertips
-        outcomes = []
+        errors = []
         for i in indices:
-            same = fingertips[i] == self.fingertips[i] and settings.user_levels == self.settings.user_levels
-            outcomes.append(study_fingertip(self.device, fingertips[i], shared, settings, self.collection, self.seed,
-                                            i, self.tests, self.user_data[i] if same else None))
-        return tuple(outcomes)
+            same_finger = fingertips[i] == self.fingertips[i]
+            if same_finger and settings == self.settings and shared is self.shared:
+                errors.append(self.errors[i])
+                continue
+            same = same_finger and settings.user_levels == self.settings.user_levels
+            errors.append(study_fingertip(self.device, fingertips[i], shared, settings, self.collection, self.seed,
+                                          i, self.tests, self.user_data[i] if same else None).errors)
+        return tuple(errors)
 
 
 @dataclass(frozen=True)
@@ -186,9 +194,8 @@ def sensitivity_study(baseline: Baseline, progress: Progress = SILENT,
                 outcomes.append(VariationOutcome(variation, None, (), None, left_out, why))
                 task.advance(note=f"{variation.name}: refused")
                 continue
-            every = [varied.get(i, outcome) for i, outcome in enumerate(baseline.outcomes)
-                     if i in varied or i not in human]
-            median = np.median(np.hstack([outcome.errors for outcome in varied.values()]), axis=1)
+            every = [varied.get(i, errors) for i, errors in enumerate(baseline.errors) if i in varied or i not in human]
+            median = np.median(np.hstack(list(varied.values())), axis=1)
             outcomes.append(VariationOutcome(variation, median, tuple(METHODS[i] for i in np.argsort(median)),
                                              pooled_test(every, baseline.tests), left_out, why))
             task.advance(note=variation.name)
@@ -246,13 +253,9 @@ def error_curves(baseline: Baseline, progress: Progress = SILENT,
     with progress.task("error curves", total=len(runs)) as task:
         for name, value in runs:
             settings = replace(baseline.settings, **{name: value})
-            if settings == baseline.settings:
-                outcomes = baseline.outcomes
-            else:
-                shared = baseline.shared if name != "fs_levels" else replace(
-                    baseline.shared, fs=fs_table(baseline.device, value, baseline.collection, baseline.seed))
-                outcomes = baseline.rerun(settings, shared, every)
-            errors = np.hstack([outcome.errors for outcome in outcomes])
+            shared = baseline.shared if settings.fs_levels == baseline.settings.fs_levels else replace(
+                baseline.shared, fs=fs_table(baseline.device, value, baseline.collection, baseline.seed))
+            errors = np.hstack(baseline.rerun(settings, shared, every))
             points.append(CurvePoint(name, float(value), np.median(errors, axis=1)))
             task.advance(note=f"{name} = {value}")
     return tuple(points)

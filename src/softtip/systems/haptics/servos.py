@@ -39,7 +39,7 @@ import serial
 from softtip.hardware.driver import PortError, open_serial
 from softtip.sensors.wrench import read_wrenches
 from softtip.systems.haptics.collection import CollectionSettings
-from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, quantised, servo_angles
+from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, servo_angles
 from softtip.systems.haptics.fingertips import Fingertip, finger_wrench
 
 PROTOCOL_VERSION = 1
@@ -74,11 +74,6 @@ class ServoDevice(Protocol):
 
     def close(self) -> None:
         """The stream is over: release the finger."""
-
-
-def frame_command(device: DeviceSpec, command: np.ndarray) -> np.ndarray:
-    """The command a servo frame carries (rad, (3,)): the renderer's, resolved to the dead band."""
-    return quantised(device, command)
 
 
 class SimulatedDevice:

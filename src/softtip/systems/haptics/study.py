@@ -21,6 +21,7 @@ the servos reach each commanded configuration to their dead band before the hold
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,11 +96,6 @@ class FingertipOutcome:
     friedman: FriedmanResult
     post_hoc: tuple[WilcoxonResult, WilcoxonResult, WilcoxonResult]  # in PAIRS order
 
-    def light_failures(self, target_magnitudes: np.ndarray, light_force: float, contact: float) -> int:
-        """Light targets (< ``light_force``) the standard method renders as no contact."""
-        light = target_magnitudes < light_force
-        return int(np.sum(light & (self.rendered[0] < contact)))
-
 
 @dataclass(frozen=True)
 class HapticsStudy:
@@ -128,37 +124,6 @@ class HapticsStudy:
     def figures(self) -> list[Figure]:
         return [error_box_plots([o.fingertip.name for o in self.fingertips],
                                 np.array([o.errors for o in self.fingertips]))]
-
-    def to_dict(self) -> dict:
-        """The results as JSON-ready values (forces in N, moduli in Pa, times in s)."""
-        magnitudes = self.target_magnitudes
-
-        def test(result: WilcoxonResult) -> dict:
-            return {"W_scipy_min": result.w_scipy, "W_signed_rank_sum": result.signed_rank_sum,
-                    "W_plus": result.w_plus, "W_minus": result.w_minus, "p": result.p_value,
-                    "p_bonferroni": result.p_bonferroni, "pairs": result.pairs, "tests": result.tests}
-
-        return {
-            "seed": self.seed, "methods": list(METHODS), "targets": len(magnitudes),
-            "target_force_N": {"mean": float(magnitudes.mean()), "median": float(np.median(magnitudes))},
-            "fs_collection_s": self.fs_collection_s, "user_collection_s": self.user_collection_s,
-            "max_contact_radius_over_layer": self.max_contact_to_layer,
-            "fingertips": [{
-                "name": o.fingertip.name, "radius_m": o.fingertip.radius,
-                "median_error_N": np.median(o.errors, axis=1).tolist(), "mean_error_N": o.errors.mean(axis=1).tolist(),
-                "median_rendered_N": np.median(o.rendered, axis=1).tolist(), "flagged": o.flagged.sum(axis=1).tolist(),
-                "light_targets": int(np.sum(magnitudes < self.settings.light_force)),
-                "light_targets_without_contact_standard": o.light_failures(
-                    magnitudes, self.settings.light_force, self.settings.contact_threshold),
-                "fs_entries_flagged_A": o.user_table_flagged, "fs_entries_out_of_reach_B": o.geometric_flagged,
-                "fitted_modulus_Pa": o.fitted_modulus, "adaptive_collection_s": o.adaptive_collection_s,
-                "friedman": {"chi_square": o.friedman.chi_square, "p": o.friedman.p_value},
-                "post_hoc": {f"{METHODS[a]} vs {METHODS[b]}": test(t)
-                             for (a, b), t in zip(PAIRS, o.post_hoc, strict=True)},
-            } for o in self.fingertips],
-            "pooled_A_vs_B": test(self.pooled),
-            "notes": list(self.notes),
-        }
 
 
 def error_box_plots(fingertips: list[str], errors: np.ndarray) -> Figure:
@@ -225,12 +190,6 @@ def record_targets(device: DeviceSpec, settings: StudySettings, collection: Coll
     return found[: settings.targets]
 
 
-def shared_tables(device: DeviceSpec, settings: StudySettings, collection: CollectionSettings,
-                  seed: int) -> SharedTables:
-    return SharedTables(fs_table(device, settings.fs_levels, collection, seed),
-                        record_targets(device, settings, collection, seed))
-
-
 @dataclass(frozen=True)
 class UserData:
     """What a test fingertip gives before any table is built: its fixed user table (``user_levels``³
@@ -265,13 +224,11 @@ def study_fingertip(device: DeviceSpec, fingertip: Fingertip, shared: SharedTabl
     fingertip; the statistics count ``tests`` Wilcoxon tests in all. A fingertip the procedure
     cannot personalise is refused in one line."""
     fs, targets = shared.fs, shared.targets
-    try:
+    with _refusing(fingertip):
         if user_data is None:
             user_data = collect_user_data(device, fingertip, settings, collection, seed, index)
         personal = _personalise(device, fingertip, fs, user_data, settings, collection,
                                 _fingertip_stream(seed, index, _ADAPTIVE))
-    except ValueError as problem:
-        raise ValueError(f"fingertip {fingertip.name!r}: {problem}") from None
     standard = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold,
                                         settings.weighting_power).get_params()
     rng = _fingertip_stream(seed, index, _RENDERINGS)
@@ -291,10 +248,56 @@ def study_fingertip(device: DeviceSpec, fingertip: Fingertip, shared: SharedTabl
         tuple(wilcoxon(errors[a], errors[b], tests) for a, b in PAIRS))
 
 
-def pooled_test(outcomes, tests: int) -> WilcoxonResult:
-    """Personalisation A against B over every fingertip and target."""
-    return wilcoxon(np.concatenate([o.errors[1] for o in outcomes]), np.concatenate([o.errors[2] for o in outcomes]),
-                    tests)
+def wilcoxon_tests(fingertips: int) -> int:
+    """The Wilcoxon tests the study makes on ``fingertips`` test fingertips, which Bonferroni's
+    correction counts: one per pair of published methods per fingertip, and the pooled A-vs-B test."""
+    return len(PAIRS) * fingertips + 1
+
+
+def pooled_test(errors, tests: int) -> WilcoxonResult:
+    """Personalisation A against B over every fingertip and target; ``errors``: each fingertip's
+    (methods, targets) errors."""
+    return wilcoxon(np.concatenate([e[1] for e in errors]), np.concatenate([e[2] for e in errors]), tests)
+
+
+@contextmanager
+def _refusing(fingertip: Fingertip):
+    """A fingertip the procedure cannot collect or personalise, refused in one line that names it."""
+    try:
+        yield
+    except ValueError as problem:
+        raise ValueError(f"fingertip {fingertip.name!r}: {problem}") from None
+
+
+def collect_study(device: DeviceSpec, fingertips: tuple[Fingertip, ...], settings: StudySettings,
+                  collection: CollectionSettings, seed: int,
+                  progress: Progress = SILENT) -> tuple[SharedTables, tuple[UserData, ...]]:
+    """What the study collects before it renders: the FS table and targets, then each test
+    fingertip's user table and presses, each on the stream the study draws it from."""
+    with progress.task("FS table and targets", total=1) as task:
+        shared = SharedTables(fs_table(device, settings.fs_levels, collection, seed),
+                              record_targets(device, settings, collection, seed))
+        task.advance()
+    user_data = []
+    with progress.task("user tables and presses", total=len(fingertips)) as task:
+        for index, fingertip in enumerate(fingertips):
+            with _refusing(fingertip):
+                user_data.append(collect_user_data(device, fingertip, settings, collection, seed, index))
+            task.advance(note=fingertip.name)
+    return shared, tuple(user_data)
+
+
+def study_fingertips(device: DeviceSpec, fingertips: tuple[Fingertip, ...], shared: SharedTables,
+                     user_data: tuple[UserData, ...], settings: StudySettings, collection: CollectionSettings,
+                     seed: int, progress: Progress = SILENT) -> tuple[FingertipOutcome, ...]:
+    """Every test fingertip's outcome (:func:`study_fingertip`) from its user data."""
+    tests = wilcoxon_tests(len(fingertips))
+    outcomes = []
+    with progress.task("fingertips", total=len(fingertips)) as task:
+        for index, (fingertip, data) in enumerate(zip(fingertips, user_data, strict=True)):
+            outcomes.append(study_fingertip(device, fingertip, shared, settings, collection, seed, index, tests, data))
+            task.advance(note=fingertip.name)
+    return tuple(outcomes)
 
 
 def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
@@ -303,16 +306,10 @@ def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress
     """The published study on the simulated device (see the module's notes)."""
     seed = checked(integer(0), "seed", seed)
     device = load_device() if device is None else device
-    with progress.task("FS table and targets", total=1) as task:
-        shared = shared_tables(device, settings, collection, seed)
-        task.advance()
-    tests = 3 * len(fingertips) + 1
-    outcomes = []
-    with progress.task("fingertips", total=len(fingertips)) as task:
-        for index, fingertip in enumerate(fingertips):
-            outcomes.append(study_fingertip(device, fingertip, shared, settings, collection, seed, index, tests))
-            task.advance(note=fingertip.name)
-    return HapticsStudy(settings, seed, shared.targets, tuple(outcomes), pooled_test(outcomes, tests),
+    shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+    outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
+    return HapticsStudy(settings, seed, shared.targets, outcomes,
+                        pooled_test([o.errors for o in outcomes], wilcoxon_tests(len(fingertips))),
                         shared.fs.duration_s, outcomes[-1].user_collection_s,
                         _contact_to_layer(device, shared.fs, shared.targets), NOTES)
 
@@ -343,7 +340,7 @@ def _personalise(device: DeviceSpec, fingertip: Fingertip, fs: Collection, user_
     pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
                           settings.contact_threshold, saturated=presses.saturated)
     force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
-                                          fingertip.radius, pressed, settings.contact_threshold)
+                                          fingertip.radius, pressed, settings.contact_threshold, geometric=geometric)
     adaptive = adaptive_user_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches, collection, rng,
                                    settings.adaptive_budget, candidate_levels=settings.fs_levels,
                                    n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
