@@ -11,7 +11,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from softtip.cli.common import check_output, console, fail, progress_for, user_errors
+from softtip.cli.common import check_output, console, fail, progress_for
 
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
@@ -124,7 +124,6 @@ def bench_haptics(
 
 
 @app.command("render")
-@user_errors
 def render(
     duration: float = typer.Option(None, "--duration", help="Seconds to render (default: 5 s synthetic, or the "
                                                             "whole file)."),
