@@ -61,7 +61,7 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     balance = model.balance_curve(balance_descent(model, settings), balance_contact(settings), settings.sensor)
     study = analyse_curves(settings, seed, model, truth, measured, balance,
                            curve_of(dataset, "balance", repeats[0], settings.sensor), progress)
-    rest = {sensor: float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS}
+    rest = {sensor: model.rest_volts(sensor) for sensor in SENSORS}
     with progress.task("roughness: the dataset's brushings, the classifier"):
         rough = analyse_roughness(recordings_of(dataset), settings.brush_speed_mm_s * MM, settings.brush_rate_hz,
                                   seed)

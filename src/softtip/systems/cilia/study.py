@@ -53,7 +53,7 @@ from softtip.systems.cilia.fit import (
 )
 from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, pillar_rod, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
-from softtip.systems.cilia.resolution import Resolution, resolution
+from softtip.systems.cilia.resolution import Resolution, resolutions
 
 MN = 1e-3  # newtons per millinewton
 SHIPPED = "shipped"  # the die setting that names the declared layout
@@ -258,8 +258,8 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
     recovery = Recovery(abs(model.die.pillars.moment), model.die.pillars.rod.tip_diameter, np.array(trials_m),
                         np.array(trials_d))
     with progress.task("resolution, balance, layout", total=3) as task:
-        resolved = resolution(model, first.sensor, 1.5 * settings.force_max_mN * MN)
-        other = resolution(model, "Y" if first.sensor == "X" else "X", 1.5 * settings.force_max_mN * MN)
+        resolved, other = resolutions(model, (first.sensor, "Y" if first.sensor == "X" else "X"),
+                                      1.5 * settings.force_max_mN * MN)
         task.advance()
         balanced = _balance(model, balance, balance_measured, settings)
         task.advance()
