@@ -140,10 +140,10 @@ def design_model(die: Die, design: PillarDesign, chain_count: int) -> CiliaModel
     """``die`` with ``design``'s pillars (Young's modulus, Poisson's ratio, base and bend direction kept)."""
     pillars = die.pillars
     template = replace(pillars.rod, length=design.height_mm * MM)
-    rod = pillar_rod(template, design.tip_diameter_um * UM, design.base_diameter, pillars.compliant_base)
+    rod = pillar_rod(template, design.tip_diameter_um * UM, design.base_diameter)
     moment = math.copysign(design.moment_memu * MEMU, pillars.moment)
-    return CiliaModel(die.with_pillars(Pillars(design.positions, rod, moment, pillars.bend_azimuth,
-                                               pillars.compliant_base)), chain_count=chain_count)
+    return CiliaModel(die.with_pillars(Pillars(design.positions, rod, moment, pillars.bend_azimuth)),
+                      chain_count=chain_count)
 
 
 @dataclass(frozen=True)

@@ -199,7 +199,7 @@ def twin_model(settings: CiliaSettings) -> CiliaModel:
     template = replace(rod, length=rod.length if settings.height_mm is None else settings.height_mm * MM,
                        youngs_modulus=(rod.youngs_modulus if settings.youngs_modulus_MPa is None
                                        else settings.youngs_modulus_MPa * 1e6))
-    pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter, pillars.compliant_base))
+    pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter))
     truth = replace(pillars.with_diameter(settings.truth_diameter_um * UM),
                     moment=math.copysign(settings.truth_moment_memu * MEMU, pillars.moment))
     return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count)
