@@ -246,7 +246,7 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
         task.advance(note=f"moment {fitted.moment / MEMU:.3f} memu")
         profile_d, profile_m = profiles(fitted, predictor, first)
         fraction = max(settings.linear_fraction, min(0.99, (5 + 1e-9) / force.size))
-        identified = identifiability(model, first, fraction, cache=predictor)
+        identified = identifiability(model, first, fraction, cache=predictor, whole=fitted)
         task.advance(note="profiles")
     trials_m, trials_d = [fitted.moment], [fitted.diameter]
     with progress.task("recovery of the twin's truth", total=len(measured) - 1) as task:
