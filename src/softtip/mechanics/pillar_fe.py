@@ -242,23 +242,24 @@ class PillarFE:
         space = self.body.space
         per_node = np.array([-0.05] * 4 + [0.2] * 6)
         cell_mean = np.einsum("a,bcaj->bcj", per_node, solution.displacements[:, space.cell_nodes])  # (B, ne, 3)
-        points = np.zeros((len(solution.force), self.slices, 3))
-        for b in range(len(solution.force)):
-            for j in range(3):
-                points[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * cell_mean[b, :, j],
-                                              minlength=self.slices)
+        points = self._slice_mean(cell_mean)
         points[..., 2] += frustum_slice_centroids(self.rod, self.slices)
         # F e_z = e_z + Σ_a u_a ∂N_a/∂Z, averaged with the quadrature weights
         weighted_dz = np.einsum("eqa,eq->ea", space.grads[..., 2], space.weights)  # (ne, 10)
         volume = space.weights.sum(axis=1)
         axis = np.einsum("ea,beaj->bej", weighted_dz, solution.displacements[:, space.cell_nodes]) / volume[:, None]
         axis[..., 2] += 1.0
-        tangents = np.zeros_like(points)
-        for b in range(len(solution.force)):
-            for j in range(3):
-                tangents[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * axis[b, :, j],
-                                                minlength=self.slices)
+        tangents = self._slice_mean(axis)
         return points, tangents / np.linalg.norm(tangents, axis=-1, keepdims=True)
+
+    def _slice_mean(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(B, K, 3) the volume average over each slice of the per-element ``values`` (B, ne, 3)."""
+        means = np.zeros((values.shape[0], self.slices, 3))
+        for b in range(values.shape[0]):
+            for j in range(3):
+                means[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * values[b, :, j],
+                                             minlength=self.slices)
+        return means
 
 
 @dataclass(frozen=True)
