@@ -32,13 +32,13 @@ import numpy as np
 
 from softtip._core.config import PositiveNumber, schema
 from softtip._core.progress import Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
-from softtip.systems.cilia.layout import UM, DieError, read_die
+from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
 from softtip.systems.cilia.roughness import Recording, brush_surfaces
 from softtip.systems.cilia.study import (

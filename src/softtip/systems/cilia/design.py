@@ -42,16 +42,14 @@ from numpy.typing import NDArray
 
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, MN, UM, UN
 from softtip.optimize.bayes import BayesianSearch
 from softtip.optimize.space import ParameterRange, grid_candidates, normalised_points
 from softtip.report.tables import Table
-from softtip.systems.cilia.layout import MEMU, UM, Die, DieError, Pillars, pillar_rod, placement_problem
+from softtip.systems.cilia.layout import MEMU, Die, DieError, Pillars, pillar_rod, placement_problem
 from softtip.systems.cilia.model import CiliaModel
 from softtip.systems.cilia.resolution import resolution
 
-MN = 1e-3  # newtons per millinewton
-UN = 1e-6  # newtons per micronewton
 INITIAL = 10  # the space-filling start of a range's search, at most half its budget (optimize's 2 x 7 + 1 is too many)
 PATTERNS = ("centre", "corners", "corners and centre", "3 x 3")
 SPACE = (("tip_diameter_um", 100.0, 300.0), ("taper", 1.0, 2.0), ("height_mm", 0.5, 1.5),

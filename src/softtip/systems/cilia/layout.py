@@ -30,12 +30,11 @@ from softtip._core.config import (
     read_toml,
     schema,
 )
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.magnetics.dipoles import Rectangles
 from softtip.mechanics.rod import Rod, half_space_rotational_stiffness
 from softtip.sensors.gmr import ConstantCurrentReadout, SpinValveSensor, published_spin_valve
 
-UM = 1e-6  # metres per micrometre
 MEMU = 1e-6  # A·m² per milli-emu (1 emu = 1e-3 A·m²)
 SHIPPED_DIE = Path(__file__).with_name("die.toml")
 

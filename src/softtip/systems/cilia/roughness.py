@@ -24,12 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.mechanics.rod import PlateContact
-from softtip.systems.cilia.layout import UM, DieError
+from softtip.systems.cilia.layout import DieError
 from softtip.systems.cilia.model import CiliaModel
-from softtip.systems.cilia.study import BRUSH_SPACING_MM
 
+BRUSH_SPACING_MM = 2e-3  # the profiles' sampling (mm), a ninth of the finest grain
+SPACING = BRUSH_SPACING_MM * MM  # m
 SURFACES = {"silicon": 0.0, "P1000": 18.3 * UM, "P320": 46.2 * UM, "P100": 162.0 * UM}  # rms = grain size, m
 
 
@@ -214,9 +215,6 @@ def classify(recordings: list[Recording], window: int, rate: float, seed: int) -
     return Classification(surfaces, float(np.mean(predicted == y)), confusion_matrix(y, predicted, labels=surfaces),
                           held, float(np.mean(at_held == y[~train])),
                           confusion_matrix(y[~train], at_held, labels=surfaces), int(len(y)))
-
-
-SPACING = BRUSH_SPACING_MM * MM  # m: the profiles' sampling, a ninth of the finest grain
 
 
 @dataclass(frozen=True)
