@@ -25,7 +25,7 @@ from softtip.mechanics.contact.load import LoadCase
 from softtip.mechanics.contact.nodal import solve_linear_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.indenters import Plate
-from softtip.mechanics.mesh import _GMSH_LOCK, TetMesh, tet_mesh_from_gmsh
+from softtip.mechanics.mesh import TetMesh, gmsh_session, tet_mesh_from_gmsh
 from softtip.mechanics.plate_contact import bonded_layer_force, hertz_force
 
 FE_POISSON_RATIO = 0.49
@@ -37,47 +37,39 @@ def cap_mesh(radius: float, thickness: float, size: float, tip_size: float, tip_
     ``tip_reach`` of the apex, ``size`` elsewhere."""
     if not 0 < thickness < radius:
         raise ValueError(f"thickness = {thickness!r}: expected a layer thinner than the radius {radius!r} m")
-    import gmsh
-
-    with _GMSH_LOCK:
-        gmsh.initialize(interruptible=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.model.add("cap")
-            occ = gmsh.model.occ
-            outer = occ.addSphere(0, 0, 0, radius)
-            core = occ.addSphere(0, 0, 0, radius - thickness)
-            quarter = occ.addBox(0, 0, 0, radius, radius, radius)
-            shell, _ = occ.cut([(3, outer)], [(3, core)])
-            occ.intersect(shell, [(3, quarter)])
-            occ.synchronize()
-            groups: dict[str, list[int]] = {"outer": [], "base": [], "symmetry_x": [], "symmetry_y": []}
-            flat = 1e-3 * thickness  # gmsh pads bounding boxes by a small tolerance
-            for _, tag in gmsh.model.getEntities(2):
-                x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, tag)
-                if x1 - x0 < flat:
-                    groups["symmetry_x"].append(tag)
-                elif y1 - y0 < flat:
-                    groups["symmetry_y"].append(tag)
-                elif z1 - z0 < flat or z1 < radius - thickness / 2:
-                    groups["base"].append(tag)  # the flat face, or the core's surface
-                else:
-                    groups["outer"].append(tag)
-            field = gmsh.model.mesh.field
-            ball = field.add("Ball")
-            for name, value in (("Radius", tip_reach), ("VIn", tip_size), ("VOut", size), ("XCenter", 0.0),
-                                ("YCenter", 0.0), ("ZCenter", radius), ("Thickness", tip_reach)):
-                field.setNumber(ball, name, value)
-            field.setAsBackgroundMesh(ball)
-            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-            gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-            gmsh.option.setNumber("Mesh.Optimize", 1)
-            gmsh.model.mesh.generate(3)
-            return tet_mesh_from_gmsh(groups, f"cap-{radius}-{thickness}-{size}-{tip_size}-{tip_reach}")
-        finally:
-            gmsh.finalize()
+    with gmsh_session("cap") as gmsh:
+        occ = gmsh.model.occ
+        outer = occ.addSphere(0, 0, 0, radius)
+        core = occ.addSphere(0, 0, 0, radius - thickness)
+        quarter = occ.addBox(0, 0, 0, radius, radius, radius)
+        shell, _ = occ.cut([(3, outer)], [(3, core)])
+        occ.intersect(shell, [(3, quarter)])
+        occ.synchronize()
+        groups: dict[str, list[int]] = {"outer": [], "base": [], "symmetry_x": [], "symmetry_y": []}
+        flat = 1e-3 * thickness  # gmsh pads bounding boxes by a small tolerance
+        for _, tag in gmsh.model.getEntities(2):
+            x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, tag)
+            if x1 - x0 < flat:
+                groups["symmetry_x"].append(tag)
+            elif y1 - y0 < flat:
+                groups["symmetry_y"].append(tag)
+            elif z1 - z0 < flat or z1 < radius - thickness / 2:
+                groups["base"].append(tag)  # the flat face, or the core's surface
+            else:
+                groups["outer"].append(tag)
+        field = gmsh.model.mesh.field
+        ball = field.add("Ball")
+        for name, value in (("Radius", tip_reach), ("VIn", tip_size), ("VOut", size), ("XCenter", 0.0),
+                            ("YCenter", 0.0), ("ZCenter", radius), ("Thickness", tip_reach)):
+            field.setNumber(ball, name, value)
+        field.setAsBackgroundMesh(ball)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        gmsh.model.mesh.generate(3)
+        return tet_mesh_from_gmsh(groups, f"cap-{radius}-{thickness}-{size}-{tip_size}-{tip_reach}")
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import json
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -25,6 +28,23 @@ from softtip._core.units import MM
 from softtip.design.model import Design
 
 _GMSH_LOCK = threading.Lock()  # gmsh keeps global state
+
+
+@contextmanager
+def gmsh_session(model: str) -> Iterator[ModuleType]:
+    """gmsh, one model at a time (it keeps global state): the lock held, gmsh initialised without its own
+    signal handler (it may run off the main thread) and silent, an empty model named ``model`` added;
+    finalised on leaving."""
+    import gmsh
+
+    with _GMSH_LOCK:
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.model.add(model)
+            yield gmsh
+        finally:
+            gmsh.finalize()
 
 
 @dataclass(frozen=True)
@@ -71,8 +91,7 @@ def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 
             return _load(path, key)
         except (OSError, ValueError, KeyError):
             path.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
-    with _GMSH_LOCK:
-        mesh = _build(design, size, curvature_points, key, contact_layer)
+    mesh = _build(design, size, curvature_points, key, contact_layer)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {"points": mesh.points, "tets": mesh.tets, "names": np.array(json.dumps(sorted(mesh.boundaries))),
@@ -90,12 +109,7 @@ def _load(path: Path, key: str) -> TetMesh:
 
 def _build(design: Design, size: float, curvature_points: int, key: str,
            contact_layer: tuple[float, float] | None) -> TetMesh:
-    import gmsh
-
-    gmsh.initialize(interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("fingertip")
+    with gmsh_session("fingertip") as gmsh:
         occ = gmsh.model.occ
         body, cavity_box = _body_and_cavity(design, occ)
         magnet_tags = []
@@ -130,8 +144,6 @@ def _build(design: Design, size: float, curvature_points: int, key: str,
         gmsh.model.mesh.generate(3)
 
         return tet_mesh_from_gmsh(groups, key)
-    finally:
-        gmsh.finalize()
 
 
 def tet_mesh_from_gmsh(groups: dict[str, list[int]], key: str) -> TetMesh:

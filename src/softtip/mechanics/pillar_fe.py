@@ -34,7 +34,7 @@ from softtip._core.errors import NotConverged
 from softtip.design.model import Material
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.linsolve import NotPositiveDefinite, SPDSolver
-from softtip.mechanics.mesh import TetMesh, tet_mesh_from_gmsh
+from softtip.mechanics.mesh import TetMesh, gmsh_session, tet_mesh_from_gmsh
 from softtip.mechanics.rod import Rod, RodError
 
 MIN_QUALITY = 1e-3  # a tetrahedron flatter than this makes the stiffness singular to round-off
@@ -44,18 +44,15 @@ def mesh_frustum(rod: Rod, size: float, slices: int = 10, substrate: float | Non
     slices along its axis that the mesh conforms to (no element straddles two), boundaries "base" and
     "top". With ``substrate`` (m), the pillar stands on a cylinder of that radius and depth of its own
     material, meshed coarser away from the root, whose bottom is the "base"."""
-    import gmsh
-
     if not (np.isfinite(size) and 0 < size <= rod.length):
         raise RodError(f"size = {size!r}: expected an element size in m, 0 < size <= the length")
     if not (isinstance(slices, int) and slices >= 1):
         raise RodError(f"slices = {slices!r}: expected a positive integer")
+    if substrate is not None and not (np.isfinite(substrate) and substrate > rod.base_diameter):
+        raise RodError(f"substrate = {substrate!r}: expected a radius in m wider than the pillar's base")
     heights = np.linspace(0.0, rod.length, slices + 1)
     radii = rod.diameter(heights) / 2
-    gmsh.initialize()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("frustum")
+    with gmsh_session("frustum") as gmsh:
         occ = gmsh.model.occ
         # OpenCASCADE refuses a cone of equal radii: a uniform rod's slices are cylinders
         pieces = [(3, occ.addCone(0, 0, heights[k], 0, 0, heights[k + 1] - heights[k], radii[k], radii[k + 1])
@@ -64,8 +61,6 @@ def mesh_frustum(rod: Rod, size: float, slices: int = 10, substrate: float | Non
                   for k in range(slices)]
         bottom = 0.0
         if substrate is not None:
-            if not (np.isfinite(substrate) and substrate > rod.base_diameter):
-                raise RodError(f"substrate = {substrate!r}: expected a radius in m wider than the pillar's base")
             bottom = -substrate
             pieces.append((3, occ.addCylinder(0, 0, bottom, 0, 0, substrate, substrate)))
         if len(pieces) > 1:
@@ -97,8 +92,6 @@ def mesh_frustum(rod: Rod, size: float, slices: int = 10, substrate: float | Non
         gmsh.model.mesh.generate(3)
         mesh = tet_mesh_from_gmsh(groups, key=f"frustum-{rod.length}-{rod.base_diameter}-{rod.tip_diameter}-{size}-"
                                               f"{slices}-{substrate}")
-    finally:
-        gmsh.finalize()
     worst = float(tetrahedron_quality(mesh.points, mesh.tets).min())
     if worst < MIN_QUALITY:
         raise NotConverged(f"pillar mesh of {size:.3g} m elements: a degenerate tetrahedron (quality {worst:.2e}, "
@@ -249,23 +242,24 @@ class PillarFE:
         space = self.body.space
         per_node = np.array([-0.05] * 4 + [0.2] * 6)
         cell_mean = np.einsum("a,bcaj->bcj", per_node, solution.displacements[:, space.cell_nodes])  # (B, ne, 3)
-        points = np.zeros((len(solution.force), self.slices, 3))
-        for b in range(len(solution.force)):
-            for j in range(3):
-                points[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * cell_mean[b, :, j],
-                                              minlength=self.slices)
+        points = self._slice_mean(cell_mean)
         points[..., 2] += frustum_slice_centroids(self.rod, self.slices)
         # F e_z = e_z + Σ_a u_a ∂N_a/∂Z, averaged with the quadrature weights
         weighted_dz = np.einsum("eqa,eq->ea", space.grads[..., 2], space.weights)  # (ne, 10)
         volume = space.weights.sum(axis=1)
         axis = np.einsum("ea,beaj->bej", weighted_dz, solution.displacements[:, space.cell_nodes]) / volume[:, None]
         axis[..., 2] += 1.0
-        tangents = np.zeros_like(points)
-        for b in range(len(solution.force)):
-            for j in range(3):
-                tangents[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * axis[b, :, j],
-                                                minlength=self.slices)
+        tangents = self._slice_mean(axis)
         return points, tangents / np.linalg.norm(tangents, axis=-1, keepdims=True)
+
+    def _slice_mean(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(B, K, 3) the volume average over each slice of the per-element ``values`` (B, ne, 3)."""
+        means = np.zeros((values.shape[0], self.slices, 3))
+        for b in range(values.shape[0]):
+            for j in range(3):
+                means[b, :, j] = np.bincount(self._slice_of, weights=self._slice_weight * values[b, :, j],
+                                             minlength=self.slices)
+        return means
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ elliptic integrals; the tests hold the solver to it. Every solve either meets it
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -176,6 +176,19 @@ class RodShapes:
     def tip_angle(self) -> NDArray[np.float64]:
         """(B,) rotation of the last segment (second-order accurate at a free tip, where κ = 0)."""
         return self.angles[:, -1]
+
+    def take(self, rows: slice | NDArray) -> RodShapes:
+        """The shapes of the loads ``rows`` only."""
+        return replace(self, x=self.x[rows], z=self.z[rows], angles=self.angles[rows], force=self.force[rows],
+                       saturated=self.saturated[rows])
+
+    def concatenate(self, other: RodShapes) -> RodShapes:
+        """These shapes followed by ``other``'s (the solver's record, ``iterations`` and ``residual``, is
+        ``other``'s)."""
+        return replace(other, x=np.concatenate([self.x, other.x]), z=np.concatenate([self.z, other.z]),
+                       angles=np.concatenate([self.angles, other.angles]),
+                       force=np.concatenate([self.force, other.force]),
+                       saturated=np.concatenate([self.saturated, other.saturated]))
 
     def centreline(self, fractions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Points on the deformed centre line at reference arc-length ``fractions`` of the length (K,),
@@ -348,9 +361,9 @@ def _newton(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure
     raise NotConverged(f"rod: Newton did not converge in {max_iterations} iterations (residual {size:.2e} of EI/L)")
 
 
-def _unstable_mode(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure,
-                   target: NDArray) -> NDArray | None:
-    """The direction (N,) in which one equilibrium under a tip constraint is unstable, or None.
+def _unstable(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure: Closure,
+              target: NDArray) -> bool:
+    """Whether one equilibrium under a tip constraint is unstable (has a direction of negative stiffness).
 
     The tip force follows the angles through the closing conditions (dF = −D⁻¹ C dθ for the Jacobian's
     blocks [[K, B], [C, D]]; D is invertible for an extensible rod), so the stiffness of the angles is
@@ -360,10 +373,8 @@ def _unstable_mode(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, 
     n = theta.shape[1]
     k, b, c, dd = jacobian[0, :n, :n], jacobian[0, :n, n:], jacobian[0, n:, :n], jacobian[0, n:, n:]
     stiffness = k - b @ np.linalg.solve(dd, c)
-    values, vectors = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
-    if values[0] >= -1e-9 * abs(values).max():
-        return None
-    return vectors[:, 0]
+    values, _ = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
+    return bool(values[0] < -1e-9 * abs(values).max())
 
 
 def _residual_size(d: _Discrete, residual: NDArray, closing_scale: tuple[float, float]) -> float:
@@ -514,7 +525,11 @@ class PlatePath:
     standing: RodShapes
     vertical_force: NDArray[np.float64]
     sliding: NDArray[np.bool_]
-    lying: NDArray[np.bool_]
+
+    @property
+    def lying(self) -> NDArray[np.bool_]:
+        """(G,) the rod lies on its side: its shapes' ``saturated``."""
+        return self.shapes.saturated
 
 
 def _bow(rod: Rod, contact: PlateContact) -> NDArray[np.float64]:
@@ -580,7 +595,7 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
     lying_all = np.array(lying)
     shapes = _shapes(rod, d, theta_all, force_all, lying_all, iterations, residual)
     return PlatePath(gaps=gaps, shapes=shapes, standing=standing, vertical_force=-force_all[:, 1],
-                     sliding=np.array([row.sliding for row in states]), lying=lying_all)
+                     sliding=np.array([row.sliding for row in states]))
 
 
 @dataclass(frozen=True)
@@ -619,7 +634,7 @@ def _stable(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closure
     turn of an imperfect column's path, and Newton found the straight column's continuation) raises
     :class:`NotConverged`, so that the caller takes a shorter step."""
     theta, force, used, final = _newton(d, theta, force, rest, closure, target)
-    if _unstable_mode(d, theta, force, rest, closure, target) is not None:
+    if _unstable(d, theta, force, rest, closure, target):
         raise NotConverged("rod: the equilibrium found under the plate is unstable")
     return theta, force, used, final
 

@@ -32,13 +32,13 @@ import numpy as np
 
 from softtip._core.config import PositiveNumber, schema
 from softtip._core.progress import Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
-from softtip.systems.cilia.layout import UM, DieError, read_die
+from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
 from softtip.systems.cilia.roughness import Recording, brush_surfaces
 from softtip.systems.cilia.study import (
@@ -123,8 +123,7 @@ def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Cilia
 def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
     """The twin's noise-free curves, per mode: (X, Y)."""
     forces, descent, contact = paper_forces(p), balance_descent(model, p), balance_contact(p)
-    return {"paper": tuple(model.curve(forces, sensor) for sensor in SENSORS),
-            "balance": tuple(model.balance_curve(descent, contact, sensor) for sensor in SENSORS)}
+    return {"paper": model.curves(forces, SENSORS), "balance": model.balance_curves(descent, contact, SENSORS)}
 
 
 def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:
@@ -147,7 +146,7 @@ def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Datas
             writer.add({"time_s": np.arange(truth[0].force.size) * bench.realism.dwell_s,
                         "gmr_x_V": measured[0].change, "gmr_y_V": measured[1].change, "force_N": truth[0].force},
                        {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1], **loading})
-    rests = [float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS]
+    rests = [model.rest_volts(sensor) for sensor in SENSORS]
     for brushing in brush_surfaces(model, balance_contact(p), p.brush_engagement_um * UM, p.brush_length_mm * MM,
                                    p.brush_speed_mm_s * MM, p.brush_rate_hz, tuple(v * MM for v in p.brush_speeds_mm_s),
                                    tuple(p.brush_rates_hz), p.brush_strips, rng):

@@ -24,7 +24,7 @@ from scipy import optimize
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.rod import solve_tip_force
 from softtip.systems.cilia.fit import fit_curve
-from softtip.systems.cilia.layout import SHIPPED_DIE, pillar_rod, read_die
+from softtip.systems.cilia.layout import SHIPPED_DIE, read_die
 from softtip.systems.cilia.model import CiliaModel, chain_dipoles, element_fields
 from softtip.systems.cilia.study import measure
 
@@ -56,9 +56,8 @@ def _fe_curve(model: CiliaModel, force_max: float, loads: int, repeats: int) -> 
     from softtip.mechanics.pillar_fe import PillarFE
 
     pillars = model.die.pillars
-    rod = pillar_rod(pillars.rod, pillars.rod.tip_diameter, pillars.rod.base_diameter, compliant_base=False)
-    bonded = replace(model, die=model.die.with_pillars(replace(pillars, rod=replace(rod, bonded_root=True),
-                                                               compliant_base=False)))
+    rod = replace(pillars.rod, base_stiffness=None)
+    bonded = replace(model, die=model.die.with_pillars(replace(pillars, rod=replace(rod, bonded_root=True))))
     forces = np.linspace(force_max / loads, force_max, loads)
     meander = model.die.meander("X")
     start = time.perf_counter()

@@ -42,16 +42,14 @@ from numpy.typing import NDArray
 
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, MN, UM, UN
 from softtip.optimize.bayes import BayesianSearch
 from softtip.optimize.space import ParameterRange, grid_candidates, normalised_points
 from softtip.report.tables import Table
-from softtip.systems.cilia.layout import MEMU, UM, Die, DieError, Pillars, pillar_rod, placement_problem
+from softtip.systems.cilia.layout import MEMU, Die, DieError, Pillars, pillar_rod, placement_problem
 from softtip.systems.cilia.model import CiliaModel
 from softtip.systems.cilia.resolution import resolution
 
-MN = 1e-3  # newtons per millinewton
-UN = 1e-6  # newtons per micronewton
 INITIAL = 10  # the space-filling start of a range's search, at most half its budget (optimize's 2 x 7 + 1 is too many)
 PATTERNS = ("centre", "corners", "corners and centre", "3 x 3")
 SPACE = (("tip_diameter_um", 100.0, 300.0), ("taper", 1.0, 2.0), ("height_mm", 0.5, 1.5),
@@ -140,10 +138,10 @@ def design_model(die: Die, design: PillarDesign, chain_count: int) -> CiliaModel
     """``die`` with ``design``'s pillars (Young's modulus, Poisson's ratio, base and bend direction kept)."""
     pillars = die.pillars
     template = replace(pillars.rod, length=design.height_mm * MM)
-    rod = pillar_rod(template, design.tip_diameter_um * UM, design.base_diameter, pillars.compliant_base)
+    rod = pillar_rod(template, design.tip_diameter_um * UM, design.base_diameter)
     moment = math.copysign(design.moment_memu * MEMU, pillars.moment)
-    return CiliaModel(die.with_pillars(Pillars(design.positions, rod, moment, pillars.bend_azimuth,
-                                               pillars.compliant_base)), chain_count=chain_count)
+    return CiliaModel(die.with_pillars(Pillars(design.positions, rod, moment, pillars.bend_azimuth)),
+                      chain_count=chain_count)
 
 
 @dataclass(frozen=True)

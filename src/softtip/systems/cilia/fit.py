@@ -251,8 +251,9 @@ class Identifiability:
 
 
 def identifiability(model: CiliaModel, curve: MeasuredCurve, linear_fraction: float = 0.3,
-                    cache: CurveModel | None = None) -> Identifiability:
-    """Fit the forces up to ``linear_fraction`` of the largest (the linear part) and the whole curve."""
+                    cache: CurveModel | None = None, whole: CurveFit | None = None) -> Identifiability:
+    """Fit the forces up to ``linear_fraction`` of the largest (the linear part) and the whole curve
+    (``whole``: its fit, if already made)."""
     if not 0 < linear_fraction < 1:
         raise CurveError(f"linear_fraction = {linear_fraction!r}: expected a number strictly between 0 and 1")
     limit = linear_fraction * float(curve.force.max())
@@ -261,6 +262,7 @@ def identifiability(model: CiliaModel, curve: MeasuredCurve, linear_fraction: fl
         raise CurveError(f"linear_fraction = {linear_fraction!r}: {keep.sum()} points up to {limit:.4g} N, "
                          "expected at least 5 for the linear part")
     part = curve.part(keep)
-    whole = fit_curve(model, curve, cache=cache)
+    if whole is None:
+        whole = fit_curve(model, curve, cache=cache)
     linear = fit_curve(model, part, start=(whole.moment, whole.diameter))
     return Identifiability(limit, linear, whole)

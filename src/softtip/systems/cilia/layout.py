@@ -9,7 +9,7 @@ A file states lengths in the units its keys name (``_mm``, ``_um``); :class:`Die
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -30,12 +30,11 @@ from softtip._core.config import (
     read_toml,
     schema,
 )
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.magnetics.dipoles import Rectangles
 from softtip.mechanics.rod import Rod, half_space_rotational_stiffness
 from softtip.sensors.gmr import ConstantCurrentReadout, SpinValveSensor, published_spin_valve
 
-UM = 1e-6  # metres per micrometre
 MEMU = 1e-6  # A·m² per milli-emu (1 emu = 1e-3 A·m²)
 SHIPPED_DIE = Path(__file__).with_name("die.toml")
 
@@ -138,22 +137,30 @@ class Pillars:
     rod: Rod
     moment: float
     bend_azimuth: float
-    compliant_base: bool
+
+    @property
+    def compliant_base(self) -> bool:
+        """The pillars are rooted in an elastic substrate (their rod has a base stiffness)."""
+        return self.rod.base_stiffness is not None
 
     def with_diameter(self, tip_diameter: float) -> Pillars:
         """The same pillars with tip diameter ``tip_diameter`` (m), the taper ratio kept."""
         ratio = self.rod.base_diameter / self.rod.tip_diameter
-        return Pillars(self.positions, pillar_rod(self.rod, tip_diameter, ratio * tip_diameter, self.compliant_base),
-                       self.moment, self.bend_azimuth, self.compliant_base)
+        return replace(self, rod=pillar_rod(self.rod, tip_diameter, ratio * tip_diameter))
 
 
-def pillar_rod(template: Rod, tip_diameter: float, base_diameter: float, compliant_base: bool) -> Rod:
-    """``template`` with new diameters (the base stiffness follows the base)."""
-    stiffness = (half_space_rotational_stiffness(template.youngs_modulus, template.poisson_ratio, base_diameter)
-                 if compliant_base else None)
-    return Rod(length=template.length, base_diameter=base_diameter, tip_diameter=tip_diameter,
-               youngs_modulus=template.youngs_modulus, poisson_ratio=template.poisson_ratio,
-               base_stiffness=stiffness, segments=template.segments)
+def pillar_rod(template: Rod, tip_diameter: float, base_diameter: float) -> Rod:
+    """``template`` with new diameters; a compliant base's stiffness follows the base
+    (a half-space of the rod's material)."""
+    return replace(template, tip_diameter=tip_diameter, base_diameter=base_diameter,
+                   base_stiffness=_half_space_stiffness(template, base_diameter)
+                   if template.base_stiffness is not None else None)
+
+
+def _half_space_stiffness(rod: Rod, base_diameter: float) -> float:
+    """The rotational stiffness (N·m/rad) of a base of ``base_diameter`` (m) rooted in a half-space of the
+    ``rod``'s material."""
+    return half_space_rotational_stiffness(rod.youngs_modulus, rod.poisson_ratio, base_diameter)
 
 
 @dataclass(frozen=True)
@@ -242,13 +249,12 @@ def build_die(table: DieFile, source: str) -> Die:
     problem = placement_problem(positions, base, size)
     if problem:
         raise DieError(f"{source}: {problem}")
-    template = Rod(length=pillars.height_mm * MM, base_diameter=base, tip_diameter=pillars.tip_diameter_um * UM,
-                   youngs_modulus=pillars.youngs_modulus_MPa * 1e6, poisson_ratio=pillars.poisson_ratio)
-    compliant = pillars.base == "half-space"
-    rod = pillar_rod(template, template.tip_diameter, base, compliant)
+    rigid = Rod(length=pillars.height_mm * MM, base_diameter=base, tip_diameter=pillars.tip_diameter_um * UM,
+                youngs_modulus=pillars.youngs_modulus_MPa * 1e6, poisson_ratio=pillars.poisson_ratio)
+    rod = (replace(rigid, base_stiffness=_half_space_stiffness(rigid, base)) if pillars.base == "half-space"
+           else rigid)
     sign = 1.0 if pillars.magnetisation == "up" else -1.0
-    column = Pillars(positions, rod, sign * pillars.moment_memu * MEMU, math.radians(pillars.bend_azimuth_deg),
-                     compliant)
+    column = Pillars(positions, rod, sign * pillars.moment_memu * MEMU, math.radians(pillars.bend_azimuth_deg))
     meanders = []
     for name, sensor in table.sensors.items():
         width = sensor.element_width_um * UM

@@ -132,18 +132,32 @@ class CiliaModel:
     def curve(self, forces: ArrayLike, sensor: str = "X") -> ForceCurve:
         """Voltage of ``sensor`` against the total forces ``forces`` (B,) N (zero force is added for the tare
         if absent)."""
+        return self.curves(forces, (sensor,))[0]
+
+    def curves(self, forces: ArrayLike, sensors: tuple[str, ...]) -> tuple[ForceCurve, ...]:
+        """:meth:`curve` of each of ``sensors``: the pillars' shapes solved once for all."""
         forces = _forces(forces, "forces")
         with_zero = forces if forces[0] == 0 else np.concatenate([[0.0], forces])
         shapes = self.shapes(with_zero)
-        volts = self.volts(abs(self.die.pillars.moment) * self.unit_fields(shapes, sensor), sensor)
         start = 0 if forces[0] == 0 else 1
-        return ForceCurve(sensor, forces, volts[start:], volts[start:] - volts[0], shapes.saturated[start:],
-                          _take(shapes, slice(start, None)))
+        loaded, lying = shapes.take(slice(start, None)), shapes.saturated[start:]
+        volts = [self._volts(shapes, sensor) for sensor in sensors]
+        return tuple(ForceCurve(sensor, forces, v[start:], v[start:] - v[0], lying, loaded)
+                     for sensor, v in zip(sensors, volts, strict=True))
+
+    def rest_volts(self, sensor: str) -> float:
+        """Voltage (V) across ``sensor`` at zero force: its tare."""
+        return float(self.curve(np.array([0.0]), sensor).volts[0])
 
     def balance_curve(self, descent: ArrayLike, contact: PlateContact = PlateContact(),
                       sensor: str = "X") -> ForceCurve:
         """The balance test: the die lowered by ``descent`` (G,) m (increasing, from 0) past the height where
         the plate first touches the pillars; the force is the balance's reading, all pillars together."""
+        return self.balance_curves(descent, contact, (sensor,))[0]
+
+    def balance_curves(self, descent: ArrayLike, contact: PlateContact,
+                       sensors: tuple[str, ...]) -> tuple[ForceCurve, ...]:
+        """:meth:`balance_curve` of each of ``sensors``: the plate lowered once for all."""
         descent = np.asarray(descent, dtype=np.float64)
         rod = self.die.pillars.rod
         start = touching_height(rod, contact)
@@ -155,19 +169,11 @@ class CiliaModel:
             path = lower_plate(rod, start - descent, contact)
         except RodError as problem:
             raise DieError(f"balance: {problem}") from None
-        both = _concatenate(path.standing, path.shapes)  # the tare: the pillars before the plate touches them
-        volts = self.volts(abs(self.die.pillars.moment) * self.unit_fields(both, sensor), sensor)
-        return ForceCurve(sensor, path.vertical_force * self.pillar_count, volts[1:], volts[1:] - volts[0],
-                          path.lying, path.shapes)
+        both = path.standing.concatenate(path.shapes)  # the tare: the pillars before the plate touches them
+        force = path.vertical_force * self.pillar_count
+        volts = [self._volts(both, sensor) for sensor in sensors]
+        return tuple(ForceCurve(sensor, force, v[1:], v[1:] - v[0], path.lying, path.shapes)
+                     for sensor, v in zip(sensors, volts, strict=True))
 
-
-def _take(shapes: RodShapes, rows: slice) -> RodShapes:
-    return replace(shapes, x=shapes.x[rows], z=shapes.z[rows], angles=shapes.angles[rows], force=shapes.force[rows],
-                   saturated=shapes.saturated[rows])
-
-
-def _concatenate(first: RodShapes, second: RodShapes) -> RodShapes:
-    return replace(second, x=np.concatenate([first.x, second.x]), z=np.concatenate([first.z, second.z]),
-                   angles=np.concatenate([first.angles, second.angles]),
-                   force=np.concatenate([first.force, second.force]),
-                   saturated=np.concatenate([first.saturated, second.saturated]))
+    def _volts(self, shapes: RodShapes, sensor: str) -> NDArray[np.float64]:
+        return self.volts(abs(self.die.pillars.moment) * self.unit_fields(shapes, sensor), sensor)

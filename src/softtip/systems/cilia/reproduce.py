@@ -21,7 +21,7 @@ import numpy as np
 from matplotlib.figure import Figure as PlotFigure
 
 from softtip._core.progress import Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, MN, UM, UN
 from softtip.data import Dataset
 from softtip.lab import Protocol, run_protocol
 from softtip.published import published_table
@@ -32,10 +32,9 @@ from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.cilia.bench import SENSORS, curve_of, recordings_of
 from softtip.systems.cilia.design import DESIGN_CAPTION, design_table, search_designs
 from softtip.systems.cilia.fit import CurveFit
-from softtip.systems.cilia.layout import MEMU, UM
+from softtip.systems.cilia.layout import MEMU
 from softtip.systems.cilia.roughness import RoughnessStudy, analyse_roughness
 from softtip.systems.cilia.study import (
-    MN,
     CiliaSettings,
     CiliaStudy,
     analyse_curves,
@@ -46,7 +45,6 @@ from softtip.systems.cilia.study import (
 )
 
 MOMENT, DIAMETER = "moment per pillar (memu)", "tip diameter (µm)"
-UN = 1e-6  # newtons per micronewton
 
 
 def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
@@ -61,7 +59,7 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     balance = model.balance_curve(balance_descent(model, settings), balance_contact(settings), settings.sensor)
     study = analyse_curves(settings, seed, model, truth, measured, balance,
                            curve_of(dataset, "balance", repeats[0], settings.sensor), progress)
-    rest = {sensor: float(model.curve(np.array([0.0]), sensor).volts[0]) for sensor in SENSORS}
+    rest = {sensor: model.rest_volts(sensor) for sensor in SENSORS}
     with progress.task("roughness: the dataset's brushings, the classifier"):
         rough = analyse_roughness(recordings_of(dataset), settings.brush_speed_mm_s * MM, settings.brush_rate_hz,
                                   seed)

@@ -14,14 +14,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from softtip.sensors.gmr import NoiseBudget
 from softtip.systems.cilia.layout import DieError
-from softtip.systems.cilia.model import CiliaModel
+from softtip.systems.cilia.model import CiliaModel, ForceCurve
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,12 @@ class Resolution:
 def resolution(model: CiliaModel, sensor: str, force_max: float, points: int = 101,
                saturation: float = 0.1) -> Resolution:
     """The resolution of ``sensor`` along ``points`` forces from 0 to ``force_max`` (N)."""
+    return resolutions(model, (sensor,), force_max, points, saturation)[0]
+
+
+def resolutions(model: CiliaModel, sensors: tuple[str, ...], force_max: float, points: int = 101,
+                saturation: float = 0.1) -> tuple[Resolution, ...]:
+    """:func:`resolution` of each of ``sensors``: the pillars' shapes solved once for all."""
     if not (math.isfinite(force_max) and force_max > 0):
         raise DieError(f"force_max = {force_max!r}: expected a positive force in N")
     if points < 5:
@@ -66,16 +72,19 @@ def resolution(model: CiliaModel, sensor: str, force_max: float, points: int = 1
     # the local slope by differences over 1e-4 of the range (central; one-sided second order at zero force)
     step = 1e-4 * force_max
     below = np.where(force > 0, force - step, 2 * step)
-    curve = model.curve(np.concatenate([force, force + step, below]), sensor)
+    curves = model.curves(np.concatenate([force, force + step, below]), sensors)
+    return tuple(_resolution(model, curve, force, step, saturation) for curve in curves)
+
+
+def _resolution(model: CiliaModel, curve: ForceCurve, force: NDArray, step: float, saturation: float) -> Resolution:
     change, above, under = np.split(curve.change, 3)
     slope = (above - under) / (2 * step)
     slope[0] = (4 * above[0] - under[0] - 3 * change[0]) / (2 * step)
-    curve = replace(curve, force=force, change=change, volts=np.split(curve.volts, 3)[0])
-    budget = model.die.meander(sensor).readout.noise(float(curve.volts[0]))
+    budget = model.die.meander(curve.sensor).readout.noise(float(curve.volts[0]))
     sigma = budget.total
     with np.errstate(divide="ignore"):
         minimum = np.where(slope != 0, 3 * sigma / np.abs(slope), np.inf)
         smallest = np.where(slope != 0, max(budget.resolution, 3 * math.sqrt(2) * sigma) / np.abs(slope), np.inf)
     flat = np.flatnonzero(np.abs(slope) < saturation * abs(slope[0]))
-    upper = float(force[flat[0]]) if flat.size else float(force_max)
-    return Resolution(sensor, force, curve.change, slope, budget, minimum, smallest, (0.0, upper))
+    upper = float(force[flat[0]]) if flat.size else float(force[-1])
+    return Resolution(curve.sensor, force, change, slope, budget, minimum, smallest, (0.0, upper))

@@ -24,12 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from softtip._core.units import MM
+from softtip._core.units import MM, UM
 from softtip.mechanics.rod import PlateContact
-from softtip.systems.cilia.layout import UM, DieError
+from softtip.systems.cilia.layout import DieError
 from softtip.systems.cilia.model import CiliaModel
-from softtip.systems.cilia.study import BRUSH_SPACING_MM
 
+BRUSH_SPACING_MM = 2e-3  # the profiles' sampling (mm), a ninth of the finest grain
+SPACING = BRUSH_SPACING_MM * MM  # m
 SURFACES = {"silicon": 0.0, "P1000": 18.3 * UM, "P320": 46.2 * UM, "P100": 162.0 * UM}  # rms = grain size, m
 
 
@@ -59,21 +60,29 @@ def surface_profile(rms: float, correlation: float, length: float, spacing: floa
 class Brush:
     """The die's response to its engagement: the balance-mode voltage change of one sensor and the vertical
     force on the plate against the descent past first contact (``descent`` m ascending from 0, ``change`` V
-    and ``force`` N of all pillars together)."""
+    and ``force`` N of all pillars together); ``rest`` the sensor's voltage at zero force (V)."""
 
     model: CiliaModel
     sensor: str
     descent: NDArray[np.float64]
     change: NDArray[np.float64]
     force: NDArray[np.float64]
+    rest: float
 
     @classmethod
     def of(cls, model: CiliaModel, sensor: str = "X", contact: PlateContact = PlateContact(),
            points: int = 60) -> Brush:
+        return cls.each(model, (sensor,), contact, points)[0]
+
+    @classmethod
+    def each(cls, model: CiliaModel, sensors: tuple[str, ...], contact: PlateContact = PlateContact(),
+             points: int = 60) -> tuple[Brush, ...]:
+        """:meth:`of` each of ``sensors``: the plate lowered once for all."""
         rod = model.die.pillars.rod
         descent = np.linspace(0.0, 0.7 * rod.length, points)
-        curve = model.balance_curve(descent, contact, sensor)
-        return cls(model, sensor, descent, curve.change, curve.force)
+        curves = model.balance_curves(descent, contact, sensors)
+        return tuple(cls(model, curve.sensor, descent, curve.change, curve.force, model.rest_volts(curve.sensor))
+                     for curve in curves)
 
     def trace(self, heights: NDArray, spacing: float, engagement: float) -> NDArray[np.float64]:
         """The noise-free voltage change (V) at each position of the die along a profile of ``heights``
@@ -122,9 +131,8 @@ def read_brushing(brush: Brush, heights: NDArray, spacing: float, engagement: fl
     off) with the readout's noise at that integration time, and quantised."""
     averaged = _per_reading(brush.trace(heights, spacing, engagement), spacing, speed, rate)
     readout = brush.model.die.meander(brush.sensor).readout
-    rest = float(brush.model.curve(np.array([0.0]), brush.sensor).volts[0])
-    bridged = replace(readout, offset=rest, voltmeter=replace(readout.voltmeter, integration_time=1.0 / rate))
-    return bridged.read(rest + averaged, rng)
+    bridged = replace(readout, offset=brush.rest, voltmeter=replace(readout.voltmeter, integration_time=1.0 / rate))
+    return bridged.read(brush.rest + averaged, rng)
 
 
 def ac_rms(readings: NDArray) -> float:
@@ -209,9 +217,6 @@ def classify(recordings: list[Recording], window: int, rate: float, seed: int) -
                           confusion_matrix(y[~train], at_held, labels=surfaces), int(len(y)))
 
 
-SPACING = BRUSH_SPACING_MM * MM  # m: the profiles' sampling, a ninth of the finest grain
-
-
 @dataclass(frozen=True)
 class Brushing:
     """One brushing as the lab records it: the :class:`Recording` of sensor X, sensor Y's readings (V,
@@ -228,7 +233,7 @@ def brush_surfaces(model: CiliaModel, contact: PlateContact, engagement: float, 
     """The four surfaces brushed ``engagement`` (m) past first contact over ``length`` (m), ``strips``
     strips of each: every strip at ``speed`` and at every one of ``speeds`` (m/s), at ``rate`` (Hz), and the
     first strip at ``speed`` at every one of ``rates`` (each recording once)."""
-    brushes = {sensor: Brush.of(model, sensor, contact) for sensor in ("X", "Y")}
+    brushes = dict(zip(("X", "Y"), Brush.each(model, ("X", "Y"), contact), strict=True))
     plan = dict.fromkeys([(strip, s, rate) for strip in range(strips) for s in (speed, *speeds)]
                          + [(0, speed, r) for r in rates])
     brushings = []

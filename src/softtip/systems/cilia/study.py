@@ -37,10 +37,12 @@ from softtip._core.config import (
 )
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
-from softtip._core.units import MM
+from softtip._core.units import MM, MN, UM
 from softtip.magnetics.dipoles import dipole_field
 from softtip.mechanics.rod import PlateContact
+from softtip.sensors.gmr import TESLA_PER_OERSTED
 from softtip.systems.cilia.fit import (
+    CHI2_95,
     CurveError,
     CurveFit,
     CurveModel,
@@ -51,13 +53,12 @@ from softtip.systems.cilia.fit import (
     identifiability,
     profiles,
 )
-from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, UM, DieError, pillar_rod, read_die
+from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, DieError, pillar_rod, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
-from softtip.systems.cilia.resolution import Resolution, resolution
+from softtip.systems.cilia.resolution import Resolution, resolutions
+from softtip.systems.cilia.roughness import BRUSH_SPACING_MM
 
-MN = 1e-3  # newtons per millinewton
 SHIPPED = "shipped"  # the die setting that names the declared layout
-BRUSH_SPACING_MM = 2e-3  # the roughness profiles' sampling (softtip.systems.cilia.roughness.SPACING)
 
 
 @schema(section="cilia", error=DieError)
@@ -199,7 +200,7 @@ def twin_model(settings: CiliaSettings) -> CiliaModel:
     template = replace(rod, length=rod.length if settings.height_mm is None else settings.height_mm * MM,
                        youngs_modulus=(rod.youngs_modulus if settings.youngs_modulus_MPa is None
                                        else settings.youngs_modulus_MPa * 1e6))
-    pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter, pillars.compliant_base))
+    pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter))
     truth = replace(pillars.with_diameter(settings.truth_diameter_um * UM),
                     moment=math.copysign(settings.truth_moment_memu * MEMU, pillars.moment))
     return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count)
@@ -246,7 +247,7 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
         task.advance(note=f"moment {fitted.moment / MEMU:.3f} memu")
         profile_d, profile_m = profiles(fitted, predictor, first)
         fraction = max(settings.linear_fraction, min(0.99, (5 + 1e-9) / force.size))
-        identified = identifiability(model, first, fraction, cache=predictor)
+        identified = identifiability(model, first, fraction, cache=predictor, whole=fitted)
         task.advance(note="profiles")
     trials_m, trials_d = [fitted.moment], [fitted.diameter]
     with progress.task("recovery of the twin's truth", total=len(measured) - 1) as task:
@@ -258,8 +259,8 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
     recovery = Recovery(abs(model.die.pillars.moment), model.die.pillars.rod.tip_diameter, np.array(trials_m),
                         np.array(trials_d))
     with progress.task("resolution, balance, layout", total=3) as task:
-        resolved = resolution(model, first.sensor, 1.5 * settings.force_max_mN * MN)
-        other = resolution(model, "Y" if first.sensor == "X" else "X", 1.5 * settings.force_max_mN * MN)
+        resolved, other = resolutions(model, (first.sensor, "Y" if first.sensor == "X" else "X"),
+                                      1.5 * settings.force_max_mN * MN)
         task.advance()
         balanced = _balance(model, balance, balance_measured, settings)
         task.advance()
@@ -337,9 +338,10 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
     points = np.column_stack([grid_x.ravel(), grid_y.ravel(), np.full(grid_x.size, -die.depth)])
     states = model.shapes(np.array([0.0, truth.force[-1]]))
     dipoles = pillar_dipoles(die.pillars, states, model.chain_count)
-    field = dipole_field(points, dipoles.positions, dipoles.moments)[..., meander.axis] / 1e-4  # gauss (≙ Oe)
+    field = dipole_field(points, dipoles.positions, dipoles.moments)[..., meander.axis] / TESLA_PER_OERSTED  # gauss (≙ Oe)
     figure = Figure(figsize=(9.0, 4.2), layout="constrained")
-    low, high = meander.readout.sensor.field_low / 1e-4, meander.readout.sensor.field_high / 1e-4
+    low, high = (meander.readout.sensor.field_low / TESLA_PER_OERSTED,
+                 meander.readout.sensor.field_high / TESLA_PER_OERSTED)
     norm = SymLogNorm(linthresh=max(abs(low), abs(high)), vmin=-3000, vmax=3000)
     for index, title in enumerate(("at rest", f"at {truth.force[-1] / MN:.1f} mN")):
         axes = figure.add_subplot(1, 2, index + 1)
@@ -396,7 +398,7 @@ def _profiles_figure(profile_d: Profile, profile_m: Profile, fit: CurveFit, reco
         axes = figure.add_subplot(1, 2, index + 1)
         rss_min = min(profile_d.rss.min(), profile_m.rss.min())
         axes.plot(profile.values / scale, fit.points * np.log(profile.rss / rss_min), "o-", ms=3)
-        axes.axhline(3.841, color="k", ls=":", lw=0.8, label="95 % (χ²₁)")
+        axes.axhline(CHI2_95, color="k", ls=":", lw=0.8, label="95 % (χ²₁)")
         axes.axvline(best / scale, color="C1", lw=0.8, label="fit")
         axes.set_xlabel(unit)
         axes.set_ylabel("n ln(RSS / RSS_min)")
