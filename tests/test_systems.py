@@ -100,7 +100,7 @@ PACKAGE = {
 
         BENCH = BenchKind(protocol_file=ProtocolFile, parameters={"spring-push": Parameters},
                           runners={"spring-push": push}, device=lambda *_: Spring(), setup=setup,
-                          realism_sources={"noise_mm": "none"}, viscoelastic=Relaxation, viscoelastic_sources={})
+                          realism_sources={"noise_mm": "none"}, viscoelastic_sources={})
 
         def analyse(protocol, seed, progress):
             from softtip.lab import run_protocol

@@ -79,7 +79,6 @@ class BenchKind:
     device: Callable[[Any, dict, str, Path | None], Any]
     setup: Callable[[Protocol, Progress, dict], tuple[Any, dict, str]]
     realism_sources: Mapping[str, str]
-    viscoelastic: type
     viscoelastic_sources: Mapping[str, str]
     size: Callable[[str, Any], Size] | None = None
 

@@ -80,7 +80,7 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study:
     defaults = asdict(type(protocol.realism)())
     for key, value in protocol.realism.to_dict().items():
         add("realism", key, value, defaults[key], bench.realism_sources[key])
-    defaults = asdict(bench.viscoelastic())
+    defaults = asdict(type(protocol.viscoelastic)())
     for key, value in asdict(protocol.viscoelastic).items():
         add("viscoelastic", key, value, defaults[key], bench.viscoelastic_sources[key])
     return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from"], cells,

@@ -163,7 +163,7 @@ BENCH = BenchKind(
     protocol_file=CiliaProtocolFile, parameters={"cilia": CiliaSettings}, runners={"cilia": cilia},
     device=_device, setup=_setup,
     realism_sources={"dwell_s": "chosen: a load step every 2 s (the publication gives no rate)"},
-    viscoelastic=NoRelaxation, viscoelastic_sources={})
+    viscoelastic_sources={})
 
 
 def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredCurve:

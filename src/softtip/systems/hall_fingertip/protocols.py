@@ -179,7 +179,7 @@ def _size(protocol: str, p: Any) -> Size:
 
 BENCH = BenchKind(
     protocol_file=_FingertipProtocolFile, parameters=PARAMETER_SCHEMAS, runners=RUNNERS, device=_design, setup=_bench,
-    realism_sources=REALISM_SOURCES, viscoelastic=Viscoelastic, viscoelastic_sources={
+    realism_sources=REALISM_SOURCES, viscoelastic_sources={
         "hysteresis_percent": f"published: {_HYSTERESIS.source} ({_HYSTERESIS.system})",
         **{key: "the calibration cycle: the article's hysteresis test" for key in ("depth_mm", "speed_mm_s", "rest_s")}},
     size=_size)

@@ -229,5 +229,5 @@ def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Hapti
 
 BENCH = BenchKind(
     protocol_file=_HapticsProtocolFile, parameters={"haptics": HapticsParameters}, runners={"haptics": haptics},
-    device=_device, setup=_bench, realism_sources={}, viscoelastic=HapticsViscoelastic, viscoelastic_sources={})
+    device=_device, setup=_bench, realism_sources={}, viscoelastic_sources={})
 

@@ -232,7 +232,7 @@ def _size(protocol: str, p: WearableParameters) -> Size:
 
 BENCH = BenchKind(
     protocol_file=_WearableProtocolFile, parameters={"wearable": WearableParameters}, runners={"wearable": wearable},
-    device=_device, setup=_bench, realism_sources=REALISM_SOURCES, viscoelastic=PadViscoelastic,
+    device=_device, setup=_bench, realism_sources=REALISM_SOURCES,
     viscoelastic_sources={"g": "assumed weights (softtip.systems.wearable.fingerpad)",
                           "tau_s": "time constants of Pawluk & Howe 1999 (softtip.systems.wearable.fingerpad)"},
     size=_size)
