@@ -249,6 +249,7 @@ class IdentifiedModel(BaseEstimator):
     def is_stable(self) -> bool:
         """Whether the discrete system is stable: its poles inside the unit circle and its simulation of the
         fit data not running away (a model whose simulation runs away is not stable, whatever its poles)."""
+        self._check_fitted()
         return self.system_.is_stable() and not self.simulation_diverges_
 
     def _checked_covariance(self):
@@ -259,6 +260,7 @@ class IdentifiedModel(BaseEstimator):
         return self.covariance_
 
     def _uncertainty_summary(self) -> dict:
+        """The summary's intervals (None without a covariance) and why there are none."""
         return {"uncertainty": None if self.covariance_ is None else self.uncertainty(),
                 "uncertainty_note": self.covariance_note_}
 
