@@ -13,8 +13,9 @@ over outputs, simulated), ``evaluate`` (every metric per output), ``streaming()`
 Both run as a discrete system ``system_`` at the recording's sample time, from the zero state or
 from each trial's estimated initial state (``initial_state="estimate"``), about the levels
 ``trend_`` (``detrend``) and behind the input delays ``delays_`` (``delay``); both carry the
-covariance of their parameters (``covariance_``, ``uncertainty()``, ``bode()``) and test their
-residuals (``residual_tests``). :func:`order_table` fits a range of orders.
+covariance of their parameters (``covariance_``, ``uncertainty()``, ``bode()``; not computed with
+``estimate_covariance=False``, for fits that never read it) and test their residuals
+(``residual_tests``). :func:`order_table` fits a range of orders.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ from softtip.sysid.uncertainty import (
     empirical_transfer_function,
     frequency_band,
     intervals,
-    state_space_band,
+    state_space_bands,
     state_space_intervals,
 )
 
@@ -124,6 +125,7 @@ class IdentifiedModel(BaseEstimator):
     def _identify(self, recording: Recording) -> list[np.ndarray]:
         """Identifies on ``recording``; returns the model's simulation of it (what ``fit_percent_`` scores)."""
         started = time.perf_counter()
+        self.delay_search_ = self.level_rounds_ = None  # set by the delay search and the level estimation
         segments, delays = self._prepared(recording)
         if delays is None:
             delays = self._searched_delays(segments, recording.ts)
@@ -134,7 +136,10 @@ class IdentifiedModel(BaseEstimator):
                 core = self._fit_delay_free(shifted, recording.ts)
                 if self.detrend == "estimate":
                     core, shifted = self._with_estimated_output_levels(core, shifted, recording.ts)
-                self._estimate_uncertainty(core, shifted, recording.ts)
+                if self.estimate_covariance:
+                    self._estimate_uncertainty(core, shifted, recording.ts)
+                else:
+                    self.covariance_, self.covariance_note_ = None, "not computed (estimate_covariance=False)"
         except np.linalg.LinAlgError as problem:
             raise IdentificationError(f"{recording.source}: the identification failed numerically ({problem}): "
                                       "try a lower order or detrend") from None
@@ -241,6 +246,24 @@ class IdentifiedModel(BaseEstimator):
         self.fit_seconds_ = time.perf_counter() - started
         return simulated
 
+    def is_stable(self) -> bool:
+        """Whether the discrete system is stable: its poles inside the unit circle and its simulation of the
+        fit data not running away (a model whose simulation runs away is not stable, whatever its poles)."""
+        self._check_fitted()
+        return self.system_.is_stable() and not self.simulation_diverges_
+
+    def _checked_covariance(self):
+        """The parameter covariance, or a refusal saying why there is none."""
+        self._check_fitted()
+        if self.covariance_ is None:
+            raise IdentificationError(f"this model's parameter covariance was {self.covariance_note_ or 'not saved'}")
+        return self.covariance_
+
+    def _uncertainty_summary(self) -> dict:
+        """The summary's intervals (None without a covariance) and why there are none."""
+        return {"uncertainty": None if self.covariance_ is None else self.uncertainty(),
+                "uncertainty_note": self.covariance_note_}
+
     def _check_fitted(self) -> None:
         if not hasattr(self, "system_"):
             raise IdentificationError(f"this {type(self).__name__} is not fitted: call fit(recording) first")
@@ -262,14 +285,13 @@ class IdentifiedModel(BaseEstimator):
             raise IdentificationError(f"{recording.source}: outputs {list(recording.outputs)}, the model gives "
                                       f"{list(self.outputs_)}")
 
-    def simulate(self, data: Recording | np.ndarray, initial_state: str = "zero") -> list[np.ndarray] | np.ndarray:
-        """The simulated outputs, in the recording's units: of every trial of a recording (a list of (N, ny)),
-        or of an input array u (N, nu) whose first sample is at time 0 of the trend. ``initial_state``:
-        "zero" (from rest) or "estimate" (each trial's best initial state, from its outputs)."""
+    def simulate(self, data: Recording | np.ndarray) -> list[np.ndarray] | np.ndarray:
+        """The simulated outputs from rest, in the recording's units: of every trial of a recording (a list of
+        (N, ny)), or of an input array u (N, nu) whose first sample is at time 0 of the trend (``predict`` with
+        ``k`` None simulates from each trial's estimated initial state)."""
         self._check_fitted()
         if isinstance(data, Recording):
-            return self.predict(data, None, initial_state) if initial_state != "zero" else \
-                self._run(data, lambda trial: simulate(self.system_, trial.u))
+            return self._run(data, lambda trial: simulate(self.system_, trial.u))
         u = np.asarray(data, dtype=np.float64)
         t = np.arange(len(u)) * self.ts_
         return simulate(self.system_, u - self.trend_.inputs_at(t)) + self.trend_.outputs_at(t)
@@ -279,12 +301,6 @@ class IdentifiedModel(BaseEstimator):
         self._check_recording(recording)
         deviations = self.trend_.remove(recording)
         return self.trend_.restore(recording, [run(trial) for trial in deviations.trials])
-
-    def initial_states(self, recording: Recording) -> list[np.ndarray]:
-        """Each trial's estimated initial state of ``system_`` (least squares on its simulation error)."""
-        self._check_outputs(recording)
-        return [estimate_initial_state(self.system_, trial.u, trial.y)
-                for trial in self.trend_.remove(recording).trials]
 
     def predict(self, recording: Recording, k: int | None = 1, initial_state: str = "zero") -> list[np.ndarray]:
         """k-step-ahead predictions of every trial (``k`` None: simulation), from the zero or the estimated
@@ -384,7 +400,7 @@ class IdentifiedModel(BaseEstimator):
                  "input_units": list(self.input_units_), "output_units": list(self.output_units_),
                  "data": self.data_, "fit_percent": [float(v) for v in self.fit_percent_],
                  "fit_seconds": self.fit_seconds_, "trend": self.trend_.to_dict(), "delays": list(self.delays_),
-                 "simulation_diverges": self.simulation_diverges_}
+                 "simulation_diverges": self.simulation_diverges_, "covariance_note": self.covariance_note_}
         return state, arrays
 
     def _restore_common(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -395,6 +411,8 @@ class IdentifiedModel(BaseEstimator):
         self.fit_percent_ = np.asarray(state["fit_percent"], dtype=np.float64)
         self.fit_seconds_ = float(state["fit_seconds"])
         self.simulation_diverges_ = bool(state.get("simulation_diverges", False))
+        self.covariance_note_ = state.get("covariance_note")
+        self.delay_search_ = self.level_rounds_ = None  # not saved
         self.system_ = StateSpace(arrays["system/A"], arrays["system/B"], arrays["system/C"], arrays["system/D"],
                                   self.ts_, arrays.get("system/K"), arrays.get("system/noise_covariance"))
         sizes = (self.system_.n_inputs, self.system_.n_outputs, len(self.fit_percent_))
@@ -415,14 +433,13 @@ class IdentifiedModel(BaseEstimator):
                 "outputs": list(self.outputs_), "input_units": list(self.input_units_),
                 "output_units": list(self.output_units_), "states": self.system_.n_states,
                 "parameters": self.n_parameters, "discrete_poles": _poles(self.system_.poles()),
-                # a model whose simulation runs away is not stable, whatever the moduli of its poles
-                "stable": self.system_.is_stable() and not self.simulation_diverges_,
+                "stable": self.is_stable(),
                 "simulation_diverges": self.simulation_diverges_,
-                "trend": self.trend_.to_dict() | {"estimation_rounds": getattr(self, "level_rounds_", None)},
+                "trend": self.trend_.to_dict() | {"estimation_rounds": self.level_rounds_},
                 "delays": {name: {"samples": d, "seconds": d * self.ts_}
                            for name, d in zip(self.inputs_, self.delays_, strict=True)},
                 "fit_percent": {name: float(v) for name, v in zip(self.outputs_, self.fit_percent_, strict=True)},
-                "delay_search": getattr(self, "delay_search_", None),
+                "delay_search": self.delay_search_,
                 "fit_percent_initial_state": "zero",
                 "fit_seconds": self.fit_seconds_, "data": self.data_}
 
@@ -439,17 +456,20 @@ class StateSpaceModel(IdentifiedModel):
     ``detrend``: "none", "mean" or "linear", the levels taken out before identification and kept
     (:mod:`softtip.sysid.trends`), or "estimate" (the output levels and each trial's initial state
     estimated with the model); ``delay``: input delays in samples, one for all inputs or one per
-    input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`).
+    input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`);
+    ``estimate_covariance``: False skips the parameter covariance (``covariance_`` None, no intervals
+    or bands), for fits that never read it.
     """
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
                    "enforce_stability": Flag, "horizon": Optional[integer(2)], "max_order": PositiveInteger,
-                   "max_iterations": PositiveInteger, "tolerance": OpenFraction}
+                   "max_iterations": PositiveInteger, "tolerance": OpenFraction, "estimate_covariance": Flag}
 
     def __init__(self, order: int | str = AUTO, method: str = "moesp", *, refine: bool = False,
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4,
-                 detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40):
+                 detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40,
+                 estimate_covariance: bool = True):
         self.order = order
         self.method = method
         self.refine = refine
@@ -462,6 +482,7 @@ class StateSpaceModel(IdentifiedModel):
         self.detrend = detrend
         self.delay = delay
         self.max_delay = max_delay
+        self.estimate_covariance = estimate_covariance
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         n = 1 if self.order == AUTO else self.order
@@ -503,16 +524,12 @@ class StateSpaceModel(IdentifiedModel):
     def uncertainty(self, confidence: float = 0.95) -> dict:
         """Every pole (continuous with ``domain="continuous"``) and DC gain with its standard deviation and
         ``confidence`` interval (:func:`softtip.sysid.uncertainty.state_space_intervals`)."""
-        self._check_fitted()
-        if self.covariance_ is None:
-            raise IdentificationError(f"this model's parameter covariance was {self.covariance_note_ or 'not saved'}")
-        return state_space_intervals(without_input_delays(self.system_, self.delays_), self.covariance_,
+        return state_space_intervals(without_input_delays(self.system_, self.delays_), self._checked_covariance(),
                                      confidence, continuous=self.domain == "continuous")
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         core = without_input_delays(self.system_, self.delays_)
-        band = None if self.covariance_ is None else \
-            (lambda i, j: state_space_band(core, self.covariance_, omega, i, j, confidence))
+        band = None if self.covariance_ is None else state_space_bands(core, self.covariance_, omega, confidence)
         return core.frequency_response(omega), np.array(self.delays_) * self.ts_, band
 
     @property
@@ -528,7 +545,6 @@ class StateSpaceModel(IdentifiedModel):
             arrays["ss/covariance"] = self.covariance_.covariance
             for name, derivative in zip("ABCD", self.covariance_.derivatives, strict=True):
                 arrays[f"ss/derivatives/{name}"] = derivative
-        state["covariance_note"] = self.covariance_note_
         state |= {"order": self.order_, "horizon": self.horizon_, "reflected_poles": self.reflected_poles_,
                   "kalman": self.kalman_, "refinement": None if self.refinement_ is None else self.refinement_.to_dict()}
         return state, arrays
@@ -539,7 +555,6 @@ class StateSpaceModel(IdentifiedModel):
             raise IdentificationError("a state-space model needs its Kalman gain K")
         self.order_, self.horizon_ = int(state["order"]), int(state["horizon"])
         self.singular_values_ = np.asarray(arrays["singular_values"], dtype=np.float64)
-        self.covariance_note_ = state.get("covariance_note")
         self.covariance_ = None
         if "ss/covariance" in arrays:
             self.covariance_ = StateSpaceCovariance(arrays["ss/covariance"],
@@ -563,8 +578,7 @@ class StateSpaceModel(IdentifiedModel):
             "singular_values": [float(v) for v in self.singular_values_[:2 * MAX_ORDER]],
             "reflected_poles": self.reflected_poles_, "kalman": self.kalman_,
             "refinement": None if self.refinement_ is None else self.refinement_.to_dict(),
-            "uncertainty": None if self.covariance_ is None else self.uncertainty(),
-            "uncertainty_note": self.covariance_note_}
+            **self._uncertainty_summary()}
         if self.continuous_ is not None:
             summary["continuous_poles"] = _poles(self.continuous_.poles())
         return summary
@@ -576,16 +590,16 @@ class TransferFunctionModel(IdentifiedModel):
 
     ``tf_`` is G; ``system_`` its block-diagonal canonical realisation discretised by zero-order
     hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it, behind
-    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend`` as for
-    :class:`StateSpaceModel`.
+    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend`` and
+    ``estimate_covariance`` as for :class:`StateSpaceModel`.
     """
 
     _PARAMETERS = {"n_poles": PositiveInteger, "refine": Flag, "enforce_stability": Flag,
-                   "max_iterations": PositiveInteger}
+                   "max_iterations": PositiveInteger, "estimate_covariance": Flag}
 
     def __init__(self, n_poles: int = 6, n_zeros: int | None = None, *, refine: bool = True,
                  enforce_stability: bool = True, max_iterations: int = 100, detrend: str = "none",
-                 delay: int | list[int] | str = 0, max_delay: int = 40):
+                 delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True):
         self.n_poles = n_poles
         self.n_zeros = n_zeros
         self.refine = refine
@@ -594,6 +608,7 @@ class TransferFunctionModel(IdentifiedModel):
         self.detrend = detrend
         self.delay = delay
         self.max_delay = max_delay
+        self.estimate_covariance = estimate_covariance
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         zeros = self.n_poles - 1 if self.n_zeros is None else self.n_zeros
@@ -620,17 +635,17 @@ class TransferFunctionModel(IdentifiedModel):
 
     def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
                               ts: float) -> None:
-        self.covariance_ = transfer.parameter_covariance(self.tf_, segments, ts)
+        self.covariance_, self.covariance_note_ = transfer.parameter_covariance(self.tf_, segments, ts), None
 
     def uncertainty(self, confidence: float = 0.95) -> dict:
         """Every coefficient, pole and zero with its standard deviation and ``confidence`` interval
         (:func:`softtip.sysid.uncertainty.intervals`)."""
-        self._check_fitted()
-        return intervals(self.tf_, self.covariance_, confidence)
+        return intervals(self.tf_, self._checked_covariance(), confidence)
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
-        return self.tf_.frequency_response(omega), np.array(self.delays_) * self.ts_, \
-            lambda i, j: frequency_band(self.tf_, self.covariance_, omega, i, j, confidence)
+        band = None if self.covariance_ is None else \
+            (lambda i, j: frequency_band(self.tf_, self.covariance_, omega, i, j, confidence))
+        return self.tf_.frequency_response(omega), np.array(self.delays_) * self.ts_, band
 
     def _set_transfer_function(self, tf: transfer.TransferFunctionMatrix, ts: float) -> None:
         self.tf_ = tf
@@ -643,7 +658,7 @@ class TransferFunctionModel(IdentifiedModel):
             for i, row in enumerate(getattr(self.tf_, role)):
                 for j, coefficients in enumerate(row):
                     arrays[f"tf/{role}/{i}/{j}"] = coefficients
-        for i, covariance in enumerate(self.covariance_):
+        for i, covariance in enumerate(self.covariance_ or ()):
             arrays[f"tf/covariance/{i}"] = covariance
         state["report"] = self.report_.to_dict()
         return state, arrays
@@ -663,8 +678,10 @@ class TransferFunctionModel(IdentifiedModel):
                 for name in ("A", "B", "C", "D")):
             raise IdentificationError("the saved discrete system is not the realisation of the saved transfer function")
         self.report_ = transfer.FitReport.from_dict(state["report"])
-        self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
-        intervals(self.tf_, self.covariance_)  # checks their shapes
+        self.covariance_ = None
+        if "tf/covariance/0" in arrays:
+            self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
+            intervals(self.tf_, self.covariance_)  # checks their shapes
 
     @property
     def n_parameters(self) -> int:
@@ -677,7 +694,7 @@ class TransferFunctionModel(IdentifiedModel):
             "continuous_stable": self.tf_.is_stable(),
             "numerators": [[b.tolist() for b in row] for row in self.tf_.numerators],
             "denominators": [[a.tolist() for a in row] for row in self.tf_.denominators],
-            "uncertainty": self.uncertainty(),
+            **self._uncertainty_summary(),
             # the summary's fit % per output is by name, above
             "report": {key: value for key, value in self.report_.to_dict().items() if key != "per_output_fit_percent"}}
 
@@ -720,11 +737,12 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
     if len(set(orders)) < len(orders):
         raise IdentificationError(f"orders: {', '.join(map(str, orders))} repeats an order")
     # the largest order's data check before any fit: a refusal at once, not after fitting every order below it
-    largest = max(orders)
-    (KINDS[kind](largest, **params) if kind == "ss" else KINDS[kind](n_poles=largest, **params))._prepared(recording)
+    # no row reads a parameter covariance: none is computed
+    settings = params | {"estimate_covariance": False}
+    KINDS[kind](max(orders), **settings)._prepared(recording)  # the first parameter is the order of either kind
     rows = []
     for order in orders:
-        model = KINDS[kind](order, **params) if kind == "ss" else KINDS[kind](n_poles=order, **params)
+        model = KINDS[kind](order, **settings)
         started = time.perf_counter()
         simulated = model._identify(recording)
         seconds = time.perf_counter() - started
@@ -740,5 +758,5 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
         rows.append({"order": order, "parameters": model.n_parameters, "fit_percent": float(np.mean(fits)),
                      "fit_percent_per_output": {name: float(v) for name, v in zip(model.outputs_, fits, strict=True)},
                      "initial_state": scores.initial_state, "aic": aic, "bic": bic,
-                     "stable": model.system_.is_stable() and not model.simulation_diverges_, "seconds": seconds})
+                     "stable": model.is_stable(), "seconds": seconds})
     return rows

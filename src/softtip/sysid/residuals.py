@@ -26,6 +26,7 @@ import numpy as np
 import scipy.stats
 
 from softtip.sysid.statespace import IdentificationError
+from softtip.sysid.uncertainty import normal_quantile
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -122,8 +123,7 @@ def residual_tests(residuals: Sequence[np.ndarray], inputs: Sequence[np.ndarray]
                    input_names: Sequence[str] | None = None) -> ResidualTests:
     """The two tests (see the module notes) on ``residuals`` (one (N, ny) array per trial) and the trials'
     ``inputs`` ((N, nu) each)."""
-    if not 0 < confidence < 1:
-        raise IdentificationError(f"confidence: expected a fraction between 0 and 1, got {confidence!r}")
+    z = normal_quantile(confidence)
     if isinstance(lags, bool) or not isinstance(lags, (int, np.integer)) or lags < 1:
         raise IdentificationError(f"lags: expected a positive integer, got {lags!r}")
     errors = [np.asarray(e, dtype=np.float64) for e in residuals]
@@ -134,7 +134,6 @@ def residual_tests(residuals: Sequence[np.ndarray], inputs: Sequence[np.ndarray]
     ny, nu = errors[0].shape[1], signals[0].shape[1]
     errors = [e - np.concatenate(errors).mean(axis=0) for e in errors]
     signals = [u - np.concatenate(signals).mean(axis=0) for u in signals]
-    z = float(scipy.stats.norm.ppf(0.5 + confidence / 2))
     positive, both = np.arange(lags + 1), np.arange(-lags, lags + 1)
     auto = np.array([_correlation([e[:, i] for e in errors], [e[:, i] for e in errors], positive) for i in range(ny)])
     input_auto = np.array([_correlation([u[:, j] for u in signals], [u[:, j] for u in signals], positive)

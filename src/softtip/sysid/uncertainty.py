@@ -19,6 +19,7 @@ input spectral matrix is inverted per frequency).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -34,7 +35,9 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-def _quantile(confidence: float) -> float:
+def normal_quantile(confidence: float) -> float:
+    """z of a two-sided ``confidence`` interval of a normal variable (1.96 for 0.95); refuses a confidence
+    outside (0, 1)."""
     if not 0 < confidence < 1:
         raise IdentificationError(f"confidence: expected a fraction between 0 and 1, got {confidence!r}")
     return float(scipy.stats.norm.ppf(0.5 + confidence / 2))
@@ -94,7 +97,7 @@ def frequency_band(tf: TransferFunctionMatrix, covariances: list[np.ndarray], om
                    confidence: float = 0.95) -> Band:
     """Entry (i, j)'s response G(jω) and its magnitude and phase spread (see the module notes)."""
     _check(tf, covariances)
-    z = _quantile(confidence)
+    z = normal_quantile(confidence)
     omega = np.asarray(omega, dtype=np.float64)
     s = 1j * omega
     a, b = tf.denominators[i][j], tf.numerators[i][j]
@@ -115,7 +118,7 @@ def frequency_band(tf: TransferFunctionMatrix, covariances: list[np.ndarray], om
 def intervals(tf: TransferFunctionMatrix, covariances: list[np.ndarray], confidence: float = 0.95) -> dict:
     """JSON-able: per entry, every coefficient, pole and zero with its standard deviation and interval."""
     _check(tf, covariances)
-    z = _quantile(confidence)
+    z = normal_quantile(confidence)
     entries = []
     for i, (row_b, row_a) in enumerate(zip(tf.numerators, tf.denominators)):
         for j, ((den, num), a, b) in enumerate(zip(_entry_slices(tf, i), row_a, row_b)):
@@ -232,17 +235,22 @@ def _spread(gradient: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.einsum("pw,pq,qw->w", gradient, covariance, gradient), 0.0))
 
 
-def state_space_band(system: StateSpace, covariance: StateSpaceCovariance, omega: np.ndarray, i: int, j: int,
-                     confidence: float = 0.95) -> Band:
-    """Entry (i, j)'s discrete response on ``omega`` (rad/s) with its magnitude and phase spread."""
-    z = _quantile(confidence)
+def state_space_bands(system: StateSpace, covariance: StateSpaceCovariance, omega: np.ndarray,
+                      confidence: float = 0.95) -> Callable[[int, int], Band]:
+    """``band(i, j)``: entry (i, j)'s discrete response on ``omega`` (rad/s) with its magnitude and phase
+    spread, every entry sliced from one computation of the response's gradient."""
+    z = normal_quantile(confidence)
+    omega = np.asarray(omega, dtype=np.float64)
     response, gradient = _state_space_gradient(system, covariance, omega)
-    G, dG = response[:, i, j], gradient[:, :, i, j]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        magnitude = np.real(np.conj(G) * dG) / np.abs(G)
-        phase = np.imag(dG / G)
-    return Band(np.asarray(omega, dtype=np.float64), G, _spread(magnitude, covariance.covariance),
-                _spread(phase, covariance.covariance), z)
+
+    def band(i: int, j: int) -> Band:
+        G, dG = response[:, i, j], gradient[:, :, i, j]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            magnitude = np.real(np.conj(G) * dG) / np.abs(G)
+            phase = np.imag(dG / G)
+        return Band(omega, G, _spread(magnitude, covariance.covariance), _spread(phase, covariance.covariance), z)
+
+    return band
 
 
 def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, confidence: float = 0.95,
@@ -250,7 +258,7 @@ def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, 
     """JSON-able: every pole (discrete, or continuous s = ln z / ts) with the standard deviations of its real
     and imaginary parts (dλ = (V⁻¹ dA V)_ii, V the eigenvectors of A) and every entry's DC gain with its
     standard deviation and interval."""
-    z = _quantile(confidence)
+    z = normal_quantile(confidence)
     values, vectors = np.linalg.eig(system.A)
     derivatives = np.einsum("in,pnm,mi->pi", np.linalg.inv(vectors), covariance.derivatives[0], vectors)
     if continuous:

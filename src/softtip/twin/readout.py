@@ -13,15 +13,14 @@ from softtip._core.units import UT_PER_T
 from softtip.design.model import Design
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.poses import MagnetPoses
-from softtip.sensors import MLX90393, Sensor
+from softtip.sensors import MLX90393
 
 
 class Readout:
     def __init__(self, design: Design, *, magnet_centers: np.ndarray | None = None,
                  polarizations: np.ndarray | None = None, sensor_positions: np.ndarray | None = None,
-                 ambient_field: np.ndarray | None = None, sensor: Sensor | None = None):
-        # any 3-axis magnetometer through the sensor contract; the design's MLX90393 by default
-        self.sensor = MLX90393(design.sensor_settings) if sensor is None else sensor
+                 ambient_field: np.ndarray | None = None):
+        self.sensor = MLX90393(design.sensor_settings)
         magnets = design.magnets
         self.design = design
         self.rest_positions = (np.array([m.center for m in magnets]) if magnet_centers is None

@@ -22,20 +22,13 @@ from softtip import metrics
 from softtip.data import Dataset
 from softtip.design.model import load_design
 from softtip.lab import Protocol, run_protocol
-from softtip.data.splits import CALIBRATION, VALIDATION, by_role
+from softtip.data.splits import by_role
 from softtip.published import OUTSIDE, published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
 
 METHODS = {"polynomial": "polynomial (PFM)", "network": "network (FNN)"}  # softtip's name -> the article's
-
-
-def _rows(dataset: Dataset, mask_rows: np.ndarray, role: str | None) -> np.ndarray:
-    if role is None:
-        return mask_rows.copy()
-    calibration, validation = by_role(dataset)
-    return mask_rows & (calibration if role == CALIBRATION else validation)
 
 
 def _degrees(value: float) -> str:
@@ -124,8 +117,8 @@ def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         dataset, timings = run_protocol(replace(protocol, design=load_design(name)), progress)
         # orientation is only defined once the board presses: samples 1 mm deep or more
         pressed = dataset.column("depth_mm") >= 1.0
-        train = _rows(dataset, pressed, CALIBRATION)
-        test = _rows(dataset, pressed, VALIDATION)
+        calibration, validation = by_role(dataset)
+        train, test = pressed & calibration, pressed & validation
         X, y = dataset.X(), dataset.column("angle_deg")
         letter = _design_letter(name)
         results[name] = {}
@@ -187,7 +180,8 @@ def force3(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     X = dataset.X()
     y = np.column_stack([dataset.column(k) for k in ("fx_N", "fy_N", "fz_N")])
     contact = np.abs(y).max(axis=1) > 0.05
-    train, test = _rows(dataset, contact, CALIBRATION), _rows(dataset, contact, VALIDATION)
+    calibration, validation = by_role(dataset)
+    train, test = contact & calibration, contact & validation
     full_scale = np.abs(y).max(axis=0)
     results = {"timings_s": timings, "full_scale_N": full_scale.tolist()}
     figure = PlotFigure(figsize=(12, 7))
@@ -277,7 +271,8 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
     X, y = dataset.X(), dataset.column("angle_deg")
     gripped = dataset.column("grip_force_N") > 0.1 * dataset.column("grip_force_N").max()
     trained = dataset.column("trained")
-    train = _rows(dataset, gripped & trained, CALIBRATION)
+    calibration, validation = by_role(dataset)
+    train = gripped & trained & calibration
     results = {"timings_s": timings}
     published = published_table("grasp-two-orientation-error")
     letter = _design_letter(protocol.design.name)
@@ -285,7 +280,7 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
     ax = figure.subplots()
     model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     cells = {}
-    for name, mask in (("trained", gripped & trained & by_role(dataset)[1]),
+    for name, mask in (("trained", gripped & trained & validation),
                        ("untrained", gripped & ~trained)):
         estimate = model.predict(X[mask])
         by_angle = metrics.per_condition(metrics.mean_abs_error, y[mask], estimate, y[mask])
@@ -322,14 +317,15 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyO
     y = np.column_stack([dataset.column("angle_deg"), dataset.column("grip_force_N")])
     gripped = y[:, 1] > 0.1 * y[:, 1].max()
     sets = dataset.column("set")
-    train = _rows(dataset, gripped & (sets == "trained"), CALIBRATION)
+    calibration, validation = by_role(dataset)
+    train = gripped & (sets == "trained") & calibration
     model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
     results = {"timings_s": timings}
     tables = []
     figure = PlotFigure(figsize=(11, 4.5))
     axes = figure.subplots(1, 2)
     for name in ("trained", "untrained-position", "untrained-position-orientation", "thickness"):
-        mask = gripped & (sets == name) & by_role(dataset)[1]
+        mask = gripped & (sets == name) & validation
         if not mask.any():
             continue
         estimate = model.predict(X[mask])

@@ -25,7 +25,7 @@ from softtip.published import published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.sysid.models import StateSpaceModel, TransferFunctionModel
+from softtip.sysid.models import KINDS, StateSpaceModel, TransferFunctionModel
 from softtip.sysid.recording import Recording
 from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
 
@@ -40,7 +40,8 @@ EXTENSION_CONTACTS = ("curved", "edge", "point")
 
 
 def _models() -> dict[str, object]:
-    return {TF: TransferFunctionModel(6), SS: StateSpaceModel(8)}
+    # the study reads scores only, never a parameter covariance: every fit skips it
+    return {TF: TransferFunctionModel(6, estimate_covariance=False), SS: StateSpaceModel(8, estimate_covariance=False)}
 
 
 def _split(recording: Recording, split: str, seed: int) -> tuple[Recording, Recording]:
@@ -88,14 +89,14 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
             estimation, validation = split_by_trial(recording, 0.8, seed=seed)
             for kind, values in (("tf", TF_ORDERS), ("ss", SS_ORDERS)):
                 for order in values:
-                    model = TransferFunctionModel(order) if kind == "tf" else StateSpaceModel(order)
+                    model = KINDS[kind](order, estimate_covariance=False)
                     scores = model.fit(estimation).evaluate(validation)
                     entry["orders"][f"{kind}{order}"] = {"r2_mean": scores.mean("r2"),
                                                          "rmse_fs_percent_mean": scores.mean("rmse_fs_percent")}
                     orders.setdefault((kind, order), []).append(scores)
             others = np.isin(contact, EXTENSION_CONTACTS) & (participant == p)
             if others.any():
-                model = TransferFunctionModel(6).fit(recording)
+                model = TransferFunctionModel(6, estimate_covariance=False).fit(recording)
                 for shape in EXTENSION_CONTACTS:
                     rows = (contact == shape) & (participant == p)
                     if rows.any():
@@ -106,7 +107,7 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
             if centre_rows.any():
                 located = _recording(dataset, centre_rows, OUTPUTS + CENTRE)
                 estimation, validation = split_by_trial(located, 0.8, seed=seed)
-                scores = StateSpaceModel(8).fit(estimation).evaluate(validation)
+                scores = StateSpaceModel(8, estimate_covariance=False).fit(estimation).evaluate(validation)
                 centre.setdefault("state space, order 8", []).append(scores)
                 entry["centre_of_force"] = scores.to_dict()
             task.advance()
