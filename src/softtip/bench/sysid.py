@@ -188,7 +188,7 @@ def _siso_case(estimation: Recording, validation: Recording, truth: transfer.Tra
     ss_model, seconds = timed(StateSpaceModel(order, domain="continuous", detrend="mean").fit, estimation)
     figures["softtip_state_space"] = {
         "seconds": seconds, "validation_fit_percent": float(ss_model.evaluate(validation).values["fit_percent"][0]),
-        "pole_error": _pole_error(ss_model.continuous_.poles(), poles), "stable": ss_model.summary()["stable"],
+        "pole_error": _pole_error(ss_model.continuous_.poles(), poles), "stable": ss_model.is_stable(),
         "horizon": ss_model.horizon_}
     level = ss_model.trend_
     centred_estimation, centred_validation = level.remove(estimation), level.remove(validation)

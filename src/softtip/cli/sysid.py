@@ -277,9 +277,7 @@ def sysid_fit(
     recording = _read(data, inputs, outputs, ts, time_column, trial_column)
     validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
     estimator.fit(recording)
-    result = {"model": estimator.summary(), "note": _level_note(recording, detrend)}
-    if kind is Kind.tf or estimator.covariance_ is not None:
-        result["model"]["uncertainty"] = estimator.uncertainty(confidence)
+    result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend)}
     checked = recording if validation is None else validation
     # a short record takes fewer lags: four samples a lag at least
     usable = min(lags, checked.n_samples // 4)

@@ -259,9 +259,9 @@ class IdentifiedModel(BaseEstimator):
             raise IdentificationError(f"this model's parameter covariance was {self.covariance_note_ or 'not saved'}")
         return self.covariance_
 
-    def _uncertainty_summary(self) -> dict:
-        """The summary's intervals (None without a covariance) and why there are none."""
-        return {"uncertainty": None if self.covariance_ is None else self.uncertainty(),
+    def _uncertainty_summary(self, confidence: float) -> dict:
+        """The summary's ``confidence`` intervals (None without a covariance) and why there are none."""
+        return {"uncertainty": None if self.covariance_ is None else self.uncertainty(confidence),
                 "uncertainty_note": self.covariance_note_}
 
     def _check_fitted(self) -> None:
@@ -572,13 +572,14 @@ class StateSpaceModel(IdentifiedModel):
         self.continuous_ = without_input_delays(self.system_, self.delays_).to_continuous() \
             if self.domain == "continuous" else None
 
-    def summary(self) -> dict:
+    def summary(self, confidence: float = 0.95) -> dict:
+        """What was identified, with ``confidence`` intervals where the covariance was estimated."""
         summary = self._summary("state space") | {
             "method": self.method, "order": self.order_, "horizon": self.horizon_, "domain": self.domain,
             "singular_values": [float(v) for v in self.singular_values_[:2 * MAX_ORDER]],
             "reflected_poles": self.reflected_poles_, "kalman": self.kalman_,
             "refinement": None if self.refinement_ is None else self.refinement_.to_dict(),
-            **self._uncertainty_summary()}
+            **self._uncertainty_summary(confidence)}
         if self.continuous_ is not None:
             summary["continuous_poles"] = _poles(self.continuous_.poles())
         return summary
@@ -688,13 +689,14 @@ class TransferFunctionModel(IdentifiedModel):
         """Coefficients of every entry: n_poles (monic denominator) + n_zeros + 1."""
         return int(np.sum(self.tf_.n_poles + self.tf_.n_zeros + 1))
 
-    def summary(self) -> dict:
+    def summary(self, confidence: float = 0.95) -> dict:
+        """What was identified, with ``confidence`` intervals where the covariance was estimated."""
         return self._summary("transfer function") | {
             "n_poles": self.tf_.n_poles.tolist(), "n_zeros": self.tf_.n_zeros.tolist(),
             "continuous_stable": self.tf_.is_stable(),
             "numerators": [[b.tolist() for b in row] for row in self.tf_.numerators],
             "denominators": [[a.tolist() for a in row] for row in self.tf_.denominators],
-            **self._uncertainty_summary(),
+            **self._uncertainty_summary(confidence),
             # the summary's fit % per output is by name, above
             "report": {key: value for key, value in self.report_.to_dict().items() if key != "per_output_fit_percent"}}
 
