@@ -62,7 +62,7 @@ def test_a_spec_whose_range_is_empty_is_refused_naming_the_axis():
 def test_the_hall_chip_and_a_force_sensor_keep_one_sensor_contract():
     from softtip._core.channels import MAGNETIC
     from softtip.sensors import MLX90393, ForceSensor, MLX90393Settings, Sensor, lsb_uT
-    from softtip.systems.wearable.chip import FORCE
+    from softtip.systems.wearable.reading import FORCE
 
     hall = MLX90393(MLX90393Settings(gain_sel=7))
     chip = ForceSensor(NANO17, FORCE)

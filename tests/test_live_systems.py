@@ -11,7 +11,7 @@ import scipy.signal
 from typer.testing import CliRunner
 
 from softtip._core.channels import MAGNETIC
-from softtip.systems.wearable.chip import FORCE
+from softtip.systems.wearable.reading import FORCE
 from softtip.calibration import ModelFileError
 from softtip.cli.main import app
 from softtip.hardware import PacedSource, Sample

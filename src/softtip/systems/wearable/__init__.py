@@ -6,7 +6,7 @@ Importing this package loads only its registration record (:data:`SYSTEM`).
 """
 
 from softtip._core.systems import Study, System
-from softtip.systems.wearable.chip import FORCE
+from softtip.systems.wearable.reading import FORCE
 
 SYSTEM = System(
     name="wearable",

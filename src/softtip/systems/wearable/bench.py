@@ -32,7 +32,7 @@ import numpy as np
 from pydantic import Field
 
 from softtip._core.channels import AXES
-from softtip.systems.wearable.chip import FORCE
+from softtip.systems.wearable.reading import FORCE
 from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
                                   choice, expect, schema)
 from softtip._core.progress import Progress

@@ -7,17 +7,13 @@ assumptions for a piezoresistive MEMS chip of that class read by a 12-bit conver
 (a compression-only axis: the chip cannot be pulled), shear ±2.5 N, so one step of
 5 N / 4096 = 1.22 mN on every axis, and 2 mN RMS noise.
 
-Channel ``side_f{x|y|z}_N`` is its axis (a second chip would be ``side1_f...``); its readings are
-recorded and published as ``geometry_msgs/WrenchStamped`` on ``chip{k}/force`` (torque NaN).
+Its reading, :data:`~softtip.systems.wearable.reading.FORCE`, and the table sensor's are declared in
+:mod:`softtip.systems.wearable.reading`.
 """
 
-from softtip._core.channels import Reading
-from softtip._core.units import FORCE_UNITS
 from softtip.sensors.force_sensor import NANO17, ForceSensor, ForceSensorSpec
+from softtip.systems.wearable.reading import FORCE, TABLE
 
-FORCE = Reading("force", "N", "F", "N", prefix="side", infix="f", units=FORCE_UNITS, drift_threshold=0.05,
-                baseline_step=1e-4, decimals=3, topic="force", message="geometry_msgs/msg/WrenchStamped",
-                first_numbered=False)
 TACTILE_CHIP = ForceSensorSpec(
     name="ShokacChip-class MEMS 3-axis tactile chip", lowest=(-2.5, -2.5, 0.0), highest=(2.5, 2.5, 5.0),
     resolution=(5.0 / 4096,) * 3, noise=(2e-3,) * 3,
@@ -25,7 +21,4 @@ TACTILE_CHIP = ForceSensorSpec(
 CHIP = ForceSensor(TACTILE_CHIP, FORCE)
 
 # the table's reference sensor under the object: it labels the calibration and is not streamed
-TABLE = Reading("table force", "N", "F", "N", prefix="table", infix="f", units=FORCE_UNITS, drift_threshold=0.05,
-                baseline_step=1e-4, decimals=3, topic="force", message="geometry_msgs/msg/WrenchStamped",
-                first_numbered=False)
 TABLE_SENSOR = ForceSensor(NANO17, TABLE)

@@ -23,7 +23,7 @@ from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stre
 from softtip.sysid import load_model as load_system
 from softtip.sysid import save_model as save_system
 from softtip.sysid.metrics import score_outputs
-from softtip.systems.wearable.chip import FORCE
+from softtip.systems.wearable.reading import FORCE
 
 FORCES = ("fx_N", "fy_N", "fz_N")
 
