@@ -280,3 +280,86 @@ def test_bench_sysid_reports_every_figure_beside_its_baseline():
         assert figures["softtip_transfer_function"]["pole_error"] < 0.04
     methods = report["subspace_methods"]
     assert methods["default"] == "moesp" and max(methods["default_points_below_the_best"].values()) < 0.5
+
+
+def _side_by_side(path, header: bool = True):
+    """A benchmark file as DaISy and the Cascaded Tanks publish them: the estimation and the validation
+    record side by side (uEst uVal yEst yVal), whitespace-separated, no time column."""
+    rng = np.random.default_rng(4)
+    first_order = StateSpace(np.array([[-0.5]]), [[1.0]], [[2.0]], [[0.0]]).to_discrete(TS)
+    u = rng.normal(size=(300, 2))
+    y = np.column_stack([simulate(first_order, u[:, [k]])[:, 0] for k in range(2)]) + 0.01 * rng.normal(size=(300, 2))
+    rows = np.column_stack([u, y])
+    path.write_text(("uEst uVal yEst yVal\n" if header else "") + "\n".join(" ".join(f"{v:.17g}" for v in row)
+                                                                           for row in rows) + "\n")
+    return path, rows
+
+
+def test_validation_columns_side_by_side_in_one_whitespace_file_validate_as_a_file_of_their_own(tmp_path):
+    """uVal, yVal beside uEst, yEst: the same validation figures as the validation record written alone,
+    and the units given on the command line in the scores, the tables and the saved model."""
+    path, rows = _side_by_side(tmp_path / "benchmark.dat")
+    alone = tmp_path / "validation.csv"
+    alone.write_text("uEst,yEst\n" + "\n".join(f"{a:.17g},{b:.17g}" for a, b in rows[:, [1, 3]]) + "\n")
+    common = ("--kind", "tf", "--order", "1", "--ts", TS, "--unit", "uEst=V", "--unit", "yEst=degC")
+    side = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--validate-input", "uVal",
+               "--validate-output", "yVal", *common, "-o", tmp_path / "model.npz", "--json")
+    assert side.exit_code == 0, side.output
+    separate = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--validate", alone, *common, "--json")
+    assert separate.exit_code == 0, separate.output
+    side, separate = json.loads(side.stdout), json.loads(separate.stdout)
+    assert side["validation"]["outputs"] == separate["validation"]["outputs"]
+    row = side["validation"]["outputs"]["yEst"]
+    assert row["unit"] == "degC" and row["fit_percent"] > 95
+    assert side["residual_tests"]["data"] == f"{path} (uVal → yVal)"
+    from softtip.sysid import load_model
+
+    model = load_model(tmp_path / "model.npz")
+    assert model.input_units_ == ("V",) and model.output_units_ == ("degC",)
+    printed = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--validate-input", "uVal",
+                  "--validate-output", "yVal", *common)
+    assert printed.exit_code == 0 and "degC" in printed.stdout and "(uVal → yVal)" in printed.stdout
+
+
+def test_a_headerless_dat_file_takes_its_column_names_from_the_command_line(tmp_path):
+    path, _ = _side_by_side(tmp_path / "dryer.dat", header=False)
+    named = run("sysid", "orders", "--data", path, "--columns", "u,u_val,y,y_val", "-u", "u", "-y", "y", "--ts", TS,
+                "--validate-input", "u_val", "--validate-output", "y_val", "--kind", "tf", "--orders", "1-2",
+                "--json")
+    by_position = run("sysid", "orders", "--data", path, "-u", "1", "-y", "3", "--ts", TS, "--validate-input", "2",
+                      "--validate-output", "4", "--kind", "tf", "--orders", "1-2", "--json")
+    assert named.exit_code == 0 and by_position.exit_code == 0, named.output + by_position.output
+    fits = [[row["fit_percent"] for row in json.loads(result.stdout)] for result in (named, by_position)]
+    assert fits[0] == fits[1] and fits[0][0] > 95
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--validate-input", "uVal,uEst"), "--validate-input: 2 columns for 1 inputs: expected one each"),
+    (("--unit", "yEst"), "--unit 'yEst': expected NAME=UNIT, like heater=V"),
+    (("--unit", "heater=V"), "--unit heater=...: 'heater' is not an --input or --output"),
+    (("--unit", "yEst=V", "--unit", "yEst=K"), "--unit: 'yEst' given more than once"),
+    (("--columns", "a,b,c,d"), "the file names its columns in its first line"),
+    (("--resample", "0.1"), "resample: needs a time column"),
+])
+def test_bad_reading_options_are_refused_in_one_line(tmp_path, args, message):
+    path, _ = _side_by_side(tmp_path / "benchmark.dat")
+    ts = () if "--resample" in args else ("--ts", TS)
+    result = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--kind", "tf", "--order", "1", *ts,
+                 *args)
+    assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_resample_says_what_it_did(tmp_path):
+    rng = np.random.default_rng(5)
+    time = np.cumsum(np.r_[0.0, rng.uniform(0.08, 0.12, 400)])
+    u = np.sin(0.7 * time) + np.sign(np.sin(0.23 * time))
+    y = np.cos(0.5 * time)
+    path = tmp_path / "serial.csv"
+    path.write_text("time_s,u,y\n" + "\n".join(f"{t:.17g},{a:.17g},{b:.17g}" for t, a, b in zip(time, u, y)) + "\n")
+    refused = run("sysid", "fit", "--data", path, "-u", "u", "-y", "y", "--kind", "tf", "--order", "1")
+    assert refused.exit_code == 2 and "--resample SECONDS" in refused.output
+    result = run("sysid", "fit", "--data", path, "-u", "u", "-y", "y", "--kind", "tf", "--order", "1",
+                 "--resample", "0.1", "--json")
+    assert result.exit_code == 0, result.output
+    assert "resampled every 0.1 s by linear interpolation" in result.stderr
+    assert json.loads(result.stdout)["model"]["ts"] == pytest.approx(0.1)

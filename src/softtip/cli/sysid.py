@@ -4,14 +4,15 @@ recordings (CSV, Parquet or softtip datasets)."""
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from enum import Enum
 from pathlib import Path
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
-from softtip.cli.common import FORCE, check_distinct, check_number, check_output, console, fail
+from softtip.cli.common import FORCE, check_distinct, check_number, check_output, console, errors, fail
 
 
 class Kind(str, Enum):
@@ -56,19 +57,94 @@ DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all i
 MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")
 
 
-def _common_checks(ts, max_delay: int) -> None:
+COLUMNS = typer.Option(None, "--columns", help="Names of the columns of a whitespace .dat/.txt file without a "
+                                                "header, in order, separated by commas (default: 1, 2 ... by "
+                                                "position).")
+UNIT = typer.Option(None, "--unit", help="A column's unit as NAME=UNIT (repeat; e.g. heater=V): carried into every "
+                                         "table, plot and the saved model.")
+RESAMPLE = typer.Option(None, "--resample", help="Interpolate irregular time stamps linearly onto an even grid of "
+                                                 "this sample time (s), trial by trial; what it did is printed.")
+VALIDATE_INPUT = typer.Option(None, "--validate-input",
+                              help="The validation record's input columns, one per --input (default: the same "
+                                   "names); without --validate they are read from --data, as in a file with uEst, "
+                                   "uVal, yEst, yVal side by side.")
+VALIDATE_OUTPUT = typer.Option(None, "--validate-output",
+                               help="The validation record's output columns, one per --output (see "
+                                    "--validate-input).")
+
+
+@dataclass(frozen=True)
+class Reading:
+    """How to read a recording's file: what the command line says beyond its columns."""
+
+    ts: float | None
+    time_column: str | None
+    trial_column: str | None
+    columns: list[str] | None
+    units: dict[str, str]
+    resample: float | None
+
+
+def _reading(ts, time_column, trial_column, columns, units, resample) -> Reading:
     check_number(ts, "--ts", above=0, unit="s")
-    check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
+    check_number(resample, "--resample", above=0, unit="s")
+    if resample is not None and ts is not None:
+        fail("--resample and --ts: give one sample time (--resample for irregular time stamps)")
+    names = None if columns is None else _names([columns])
+    if names is not None:
+        _distinct(names, "--columns")
+    pairs = {}
+    for text in units or ():
+        name, equals, unit = text.partition("=")
+        if not equals or not name.strip() or not unit.strip() or not unit.strip().isprintable():
+            fail(f"--unit {text!r}: expected NAME=UNIT, like heater=V")
+        if name.strip() in pairs:
+            fail(f"--unit: {name.strip()!r} given more than once")
+        pairs[name.strip()] = unit.strip()
+    return Reading(ts, time_column, trial_column, names, pairs, resample)
 
 
 def _names(values: list[str]) -> list[str]:
     return [name.strip() for value in values for name in value.split(",") if name.strip()]
 
 
-def _read(path: Path, inputs: list[str], outputs: list[str], ts, time_column, trial_column):
+def _read(path: Path, inputs: list[str], outputs: list[str], reading: Reading, units: dict[str, str] | None = None):
     from softtip.sysid import read_recording
 
-    return read_recording(path, inputs, outputs, ts=ts, time_column=time_column, trial_column=trial_column)
+    units = reading.units if units is None else units
+    unknown = [name for name in units if name not in (*inputs, *outputs)]
+    if unknown:
+        fail(f"--unit {unknown[0]}=...: {unknown[0]!r} is not an --input or --output")
+    recording = read_recording(path, inputs, outputs, ts=reading.ts, time_column=reading.time_column,
+                               trial_column=reading.trial_column, units=units or None, names=reading.columns,
+                               resample=reading.resample)
+    if recording.resampled is not None:
+        errors.print(f"[yellow]note:[/] {path}: {escape(recording.resampled.describe())}")
+    return recording
+
+
+def _records(data: Path, validate: Path | None, inputs: list[str], outputs: list[str], validate_inputs,
+             validate_outputs, reading: Reading):
+    """The estimation record and the validation record (None without one), the latter under the estimation
+    columns' names whatever its own columns are called."""
+    from dataclasses import replace
+
+    val_inputs = inputs if not validate_inputs else _names(validate_inputs)
+    val_outputs = outputs if not validate_outputs else _names(validate_outputs)
+    for option, names, matched in (("--validate-input", val_inputs, inputs), ("--validate-output", val_outputs,
+                                                                              outputs)):
+        if len(names) != len(matched):
+            fail(f"{option}: {len(names)} columns for {len(matched)} {option.split('-')[-1]}s: expected one each")
+    recording = _read(data, inputs, outputs, reading)
+    if validate is None and not (validate_inputs or validate_outputs):
+        return recording, None
+    renamed = dict(zip((*inputs, *outputs), (*val_inputs, *val_outputs), strict=True))
+    units = {renamed[name]: unit for name, unit in reading.units.items() if name in renamed}
+    path = data if validate is None else validate
+    validation = _read(path, val_inputs, val_outputs, reading, units)
+    label = str(path) if renamed == {name: name for name in renamed} else \
+        f"{path} ({', '.join(val_inputs)} → {', '.join(val_outputs)})"
+    return recording, replace(validation, inputs=tuple(inputs), outputs=tuple(outputs), source=label)
 
 
 def _full_scale(values: list[float] | None):
@@ -240,7 +316,12 @@ def sysid_fit(
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
+    columns: str = COLUMNS,
+    unit: list[str] = UNIT,
+    resample: float = RESAMPLE,
     validate: Path = VALIDATE,
+    validate_input: list[str] = VALIDATE_INPUT,
+    validate_output: list[str] = VALIDATE_OUTPUT,
     full_scale: list[float] = FULL_SCALE,
     model_file: Path = typer.Option(None, "--model", "-o", help="Save the model here (.npz)."),
     bode: Path = typer.Option(None, "--bode", help="Save the Bode plot here (.png, .pdf, .svg), with its "
@@ -261,7 +342,8 @@ def sysid_fit(
     if not 0 < confidence < 1:
         fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
     check_number(lags, "--lags", minimum=1, maximum=100_000)
-    _common_checks(ts, max_delay)
+    check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
+    reading = _reading(ts, time_column, trial_column, columns, unit, resample)
     scale = _full_scale(full_scale)
     for option, path in (("--bode", bode), ("--residuals", residuals)):
         if path is not None and path.suffix.lower() not in FIGURE_SUFFIXES:
@@ -274,8 +356,7 @@ def sysid_fit(
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
     estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
-    recording = _read(data, inputs, outputs, ts, time_column, trial_column)
-    validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
+    recording, validation = _records(data, validate, inputs, outputs, validate_input, validate_output, reading)
     estimator.fit(recording)
     result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend)}
     checked = recording if validation is None else validation
@@ -283,7 +364,7 @@ def sysid_fit(
     usable = min(lags, checked.n_samples // 4)
     tests = estimator.residual_tests(checked, lags=usable) if usable >= 1 else None
     result["residual_tests"] = None if tests is None else \
-        tests.to_dict() | {"data": str(validate if validation is not None else data)}
+        tests.to_dict() | {"data": checked.source}
     if validation is not None:
         result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
         result["validation_estimated_initial_state"] = estimator.evaluate(validation, full_scale=scale,
@@ -310,9 +391,11 @@ def sysid_fit(
         _print_state_space_uncertainty(result["model"]["uncertainty"], inputs, outputs)
     else:
         console.print(f"parameter covariance {result['model']['uncertainty_note']}")
-    if validate is not None:
-        console.print(_scores_table(f"validation on {validate} (simulated from rest)", result["validation"]))
-        console.print(_scores_table(f"validation on {validate} (simulated from each trial's estimated initial state)",
+    if validation is not None:
+        console.print(_scores_table(f"validation on {escape(validation.source)} (simulated from rest)",
+                                    result["validation"]))
+        console.print(_scores_table(f"validation on {escape(validation.source)} (simulated from each trial's "
+                                    "estimated initial state)",
                                     result["validation_estimated_initial_state"]))
     if result["residual_tests"] is not None:
         _print_residual_tests(result["residual_tests"])
@@ -354,7 +437,12 @@ def sysid_orders(
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
+    columns: str = COLUMNS,
+    unit: list[str] = UNIT,
+    resample: float = RESAMPLE,
     validate: Path = VALIDATE,
+    validate_input: list[str] = VALIDATE_INPUT,
+    validate_output: list[str] = VALIDATE_OUTPUT,
     initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
                                                help="Score each fit from rest (zero) or from each trial's "
                                                     "estimated initial state (estimate)."),
@@ -364,14 +452,14 @@ def sysid_orders(
     estimation data: N ln det Σ + 2p (AIC) or + p ln N (BIC), + N ny (ln 2π + 1), Σ the residual covariance)."""
     from softtip.sysid import order_table
 
-    _common_checks(ts, max_delay)
+    check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
+    reading = _reading(ts, time_column, trial_column, columns, unit, resample)
     delay_per_input = _delay(delay)
     chosen = None if orders is None else _order_range(orders)
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
-    recording = _read(data, inputs, outputs, ts, time_column, trial_column)
-    validation = None if validate is None else _read(validate, inputs, outputs, ts, time_column, trial_column)
+    recording, validation = _records(data, validate, inputs, outputs, validate_input, validate_output, reading)
     params = {"detrend": detrend.value, "delay": delay_per_input, "max_delay": max_delay}
     params |= {"method": method.value} if kind is Kind.ss else {}
     rows = order_table(recording, kind.value, chosen, validation,
@@ -380,7 +468,7 @@ def sysid_orders(
     if json_output:
         print(json.dumps(rows, indent=2))
         return
-    where = (f"on {validate}" if validate is not None else "on the estimation data") + \
+    where = (f"on {escape(validation.source)}" if validation is not None else "on the estimation data") + \
         (" from rest" if initial_state is InitialState.zero else " from the estimated initial states")
     table = Table(title=f"{'transfer functions (poles per entry)' if kind is Kind.tf else 'state space (states)'}: "
                         f"fit % {where}")
@@ -406,6 +494,8 @@ def sysid_predict(
     ts: float = TS,
     time_column: str = TIME_COLUMN,
     trial_column: str = TRIAL_COLUMN,
+    columns: str = COLUMNS,
+    resample: float = RESAMPLE,
     full_scale: list[float] = FULL_SCALE,
     out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
     force: bool = FORCE,
@@ -419,19 +509,18 @@ def sysid_predict(
     from softtip.sysid.recording import file_columns
 
     check_number(horizon, "--horizon", minimum=1, maximum=10_000_000)
-    check_number(ts, "--ts", above=0, unit="s")
+    reading = _reading(ts, time_column, trial_column, columns, None, resample)
     scale = _full_scale(full_scale)
     if out is not None:
         check_output(out, "--out", [model_file, data], force=force)
     model = load_model(model_file)
-    present = file_columns(data)
+    present = file_columns(data, reading.columns)
     measured = all(name in present for name in model.outputs_)
     if horizon is not None and not measured:
         fail(f"{data}: --horizon needs the measured outputs {', '.join(model.outputs_)}")
     if initial_state is InitialState.estimate and not measured:
         fail(f"{data}: --initial-state estimate needs the measured outputs {', '.join(model.outputs_)}")
-    recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], ts, time_column,
-                      trial_column)
+    recording = _read(data, list(model.inputs_), list(model.outputs_) if measured else [], reading)
     predicted = model.predict(recording, horizon, initial_state.value) if measured else model.simulate(recording)
     scores = None
     if measured:

@@ -379,7 +379,8 @@ class IdentifiedModel(BaseEstimator):
                 measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
         response, delays_s, band = self._bode_curves(omega, confidence)
         return bode_figure(response, omega, band=band, confidence=confidence, delays_s=delays_s, measured=measured,
-                           names=(list(self.inputs_), list(self.outputs_)))
+                           names=(list(self.inputs_), list(self.outputs_)),
+                           units=(self.input_units_, self.output_units_))
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         """(response (len(ω), ny, nu), delays not in it (s), band per entry or None) for :meth:`bode`: the

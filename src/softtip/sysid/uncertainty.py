@@ -19,7 +19,7 @@ input spectral matrix is inverted per frequency).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -169,8 +169,9 @@ def empirical_transfer_function(u: np.ndarray, y: np.ndarray, ts: float, segment
 
 def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidence: float = 0.95,
                 delays_s: np.ndarray | None = None, measured: tuple[np.ndarray, np.ndarray] | None = None,
-                names: tuple[list[str], list[str]] | None = None) -> Figure:
-    """Magnitude (dB) and phase (degrees) of every entry of ``response`` (len(ω), ny, nu) against ω (rad/s),
+                names: tuple[list[str], list[str]] | None = None,
+                units: tuple[Sequence[str], Sequence[str]] | None = None) -> Figure:
+    """Magnitude (dB, of the output's ``units`` per the input's when given) and phase (degrees) of every entry of ``response`` (len(ω), ny, nu) against ω (rad/s),
     with the ``confidence`` band of ``band(i, j)`` (a :class:`Band`, see :func:`frequency_band`) when given,
     input delays ``delays_s`` (s) not in the response added to the phase, and ``measured`` (ω, G) points of
     :func:`empirical_transfer_function` beside it."""
@@ -203,13 +204,21 @@ def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidenc
                 wrapped = model_phase + np.angle(H[:, i, j] * np.exp(-1j * model_phase))
                 phase_axis.semilogx(w, np.degrees(wrapped), ".", markersize=3)
             magnitude_axis.set_title(f"{inputs[j]} → {outputs[i]}")
-            magnitude_axis.set_ylabel("magnitude (dB)")
+            magnitude_axis.set_ylabel(f"magnitude (dB{gain_unit(units, i, j)})")
             phase_axis.set_ylabel("phase (°)")
             phase_axis.set_xlabel("ω (rad/s)")
             magnitude_axis.grid(True, which="both", alpha=0.3)
             phase_axis.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize="small")
     return figure
+
+
+def gain_unit(units: tuple[Sequence[str], Sequence[str]] | None, output: int, input: int) -> str:
+    """The unit of the gain from input ``input`` to output ``output`` for a dB axis (" re 1 V/N"); empty
+    without units."""
+    if units is None or not (units[0][input] or units[1][output]):
+        return ""
+    return f" re 1 {units[1][output] or '1'}/{units[0][input] or '1'}"
 
 
 # ------------------------------------------------------------------------------- state-space models
