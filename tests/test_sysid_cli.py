@@ -52,7 +52,7 @@ def test_fit_prints_the_summary_and_validation_metrics_and_saves_the_model(files
     result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", kind, "--order", order,
                  "--validate", validation, "-o", tmp_path / "model.npz", "--json")
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     assert report["model"]["ts"] == pytest.approx(TS) and report["model"]["inputs"] == ["Fx_side", "Fz_side"]
     assert report["saved"] == str(tmp_path / "model.npz") and (tmp_path / "model.npz").is_file()
     scored = report["validation"]
@@ -67,7 +67,7 @@ def test_fit_with_a_rated_full_scale_reports_it(files):
     estimation, validation = files
     result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "--validate",
                  validation, "--full-scale", 100, "--full-scale", 50, "--json")
-    scored = json.loads(result.output)["validation"]
+    scored = json.loads(result.stdout)["validation"]
     assert scored["full_scale"]["definition"] == "rated"
     assert scored["outputs"]["Fz"]["full_scale"] == 50.0
     assert scored["outputs"]["Fx"]["rmse_fs_percent"] == pytest.approx(scored["outputs"]["Fx"]["rmse"])
@@ -78,7 +78,7 @@ def test_orders_tabulates_every_order(files):
     result = run("sysid", "orders", "--data", estimation, *COLUMNS, "--kind", "ss", "--orders", "1-5",
                  "--validate", validation, "--json")
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.output)
+    rows = json.loads(result.stdout)
     assert [row["order"] for row in rows] == [1, 2, 3, 4, 5]
     assert min(rows, key=lambda row: row["bic"])["order"] == 3  # the true order
     assert rows[2]["fit_percent"] > 95 and rows[0]["fit_percent"] < rows[2]["fit_percent"]
@@ -90,11 +90,11 @@ def test_predict_scores_simulation_and_k_step_predictions_and_writes_them(files,
     estimation, validation = files
     model = tmp_path / "model.npz"
     run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "ss", "--order", "3", "-o", model)
-    simulated = json.loads(run("sysid", "predict", model, "--data", validation, "--json").output)
+    simulated = json.loads(run("sysid", "predict", model, "--data", validation, "--json").stdout)
     result = run("sysid", "predict", model, "--data", validation, "--horizon", 1, "-o", tmp_path / "out.parquet",
                  "--json")
     assert result.exit_code == 0, result.output
-    one_step = json.loads(result.output)
+    one_step = json.loads(result.stdout)
     assert one_step["horizon"] == 1 and one_step["samples"] == 400
     assert one_step["scores"]["outputs"]["Fx"]["r2"] > 0.99 and simulated["scores"]["outputs"]["Fz"]["r2"] > 0.99
     table = pq.read_table(tmp_path / "out.parquet")
@@ -112,7 +112,7 @@ def test_predict_runs_the_model_over_each_trial_once(files, tmp_path, monkeypatc
     monkeypatch.setattr(simulation, "state_sequence", lambda A, drive, x0: runs.append(len(drive)) or original(A, drive, x0))
     result = run("sysid", "predict", model, "--data", validation, *horizon, "--json")
     assert result.exit_code == 0, result.output
-    assert runs == [200, 200] and json.loads(result.output)["scores"]["samples"] == 400  # two trials of 200
+    assert runs == [200, 200] and json.loads(result.stdout)["scores"]["samples"] == 400  # two trials of 200
 
 
 def test_predict_simulates_a_recording_without_outputs(files, tmp_path):
@@ -122,7 +122,7 @@ def test_predict_simulates_a_recording_without_outputs(files, tmp_path):
     inputs_only = _write(tmp_path / "live.csv", range(1), 2, outputs=False)
     result = run("sysid", "predict", model, "--data", inputs_only, "-o", tmp_path / "out.parquet", "--json")
     assert result.exit_code == 0, result.output
-    assert json.loads(result.output)["scores"] is None
+    assert json.loads(result.stdout)["scores"] is None
     predicted = pq.read_table(tmp_path / "out.parquet").column("Fx_predicted").to_numpy()
     rng = np.random.default_rng(2)
     np.testing.assert_allclose(predicted, simulate(SYSTEM, rng.normal(size=(200, 2)))[:, 0], atol=0.05)
@@ -164,7 +164,7 @@ def test_fit_with_detrending_and_an_estimated_delay_validates_from_both_initial_
     result = run(*common, "--detrend", "mean", "--delay", "estimate", "--bode", tmp_path / "bode.png",
                  "--residuals", tmp_path / "residuals.svg", "-o", tmp_path / "model.npz")
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     # the state-space model counts a delay to its first responding sample: 6 or 7
     assert all(delay["samples"] in (6, 7) for delay in report["model"]["delays"].values())
     assert report["model"]["trend"]["kind"] == "mean"
@@ -177,14 +177,21 @@ def test_fit_with_detrending_and_an_estimated_delay_validates_from_both_initial_
     assert (tmp_path / "bode.png").stat().st_size > 10_000 and (tmp_path / "residuals.svg").stat().st_size > 10_000
     # the saved model runs in the recording's units: predict gives the same validation figures
     again = json.loads(run("sysid", "predict", tmp_path / "model.npz", "--data", validation, "--initial-state",
-                           "estimate", "--json").output)["scores"]
+                           "estimate", "--json").stdout)["scores"]
     assert again["outputs"]["Fx"]["rmse"] == pytest.approx(estimated["outputs"]["Fx"]["rmse"], rel=1e-9)
-    without = json.loads(run(*common, "--detrend", "none", "--delay", "0").output)
+    without = json.loads(run(*common, "--detrend", "none", "--delay", "0").stdout)
     # levels and delay left in: measured -369 % from rest, 35 % from the estimated initial state
     assert without["validation"]["outputs"]["Fx"]["fit_percent"] < 0
     assert "Fx_side 4.931 (± 0.979)" in without["note"] and without["note"].endswith("try --detrend mean")
     assert report["note"] is None
     assert without["validation_estimated_initial_state"]["outputs"]["Fx"]["fit_percent"] < 50
+    # that gap is warned of, in the JSON, on stderr and in the table; the detrended fit has no warning
+    rest, state = (without[key]["outputs"]["Fx"]["fit_percent"] for key in ("validation",
+                                                                               "validation_estimated_initial_state"))
+    gap = f"Fx: the fit from rest, {rest:.4g} %, is {state - rest:.3g} points below"
+    assert any(gap in text for text in without["warnings"]) and report["warnings"] == []
+    printed = run(*common[:-1], "--detrend", "none", "--delay", "0")
+    assert gap in printed.stderr and "warning:" in printed.stdout
 
 
 def test_the_command_line_reaches_what_the_library_reaches_by_hand(tmp_path):
@@ -206,11 +213,11 @@ def test_the_command_line_reaches_what_the_library_reaches_by_hand(tmp_path):
     expected = model.evaluate(centred(read_recording(validation, *names))).values["rmse"]
     result = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "tf", "--order", "2", "--detrend", "mean",
                  "--delay", "2", "--validate", validation, "--json")
-    scored = json.loads(result.output)["validation"]["outputs"]
+    scored = json.loads(result.stdout)["validation"]["outputs"]
     np.testing.assert_allclose([scored["Fx"]["rmse"], scored["Fz"]["rmse"]], expected, rtol=1e-9)
     rows = json.loads(run("sysid", "orders", "--data", estimation, *COLUMNS, "--kind", "tf", "--orders", "1-2",
                           "--detrend", "mean", "--delay", "2", "--validate", validation, "--initial-state", "estimate",
-                          "--json").output)
+                          "--json").stdout)
     assert [row["initial_state"] for row in rows] == ["estimated", "estimated"]
     assert rows[1]["fit_percent"] > rows[0]["fit_percent"]
 
@@ -221,7 +228,7 @@ def test_a_transfer_function_fit_prints_its_intervals_and_residual_tests(tmp_pat
     assert result.exit_code == 0, result.output
     assert "± 95 % intervals" in result.output and "residual tests on" in result.output
     report = json.loads(run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "tf", "--order", "2",
-                            "--detrend", "mean", "--confidence", "0.9", "--json").output)
+                            "--detrend", "mean", "--confidence", "0.9", "--json").stdout)
     assert report["model"]["uncertainty"]["confidence"] == 0.9
     assert len(report["model"]["uncertainty"]["entries"]) == 4
 
@@ -260,7 +267,7 @@ def test_a_damaged_model_file_gives_one_line(files, tmp_path):
 def test_bench_sysid_reports_every_figure_beside_its_baseline():
     result = run("bench", "sysid", "--calls", 200, "--json")
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     assert report["data"]["estimation_samples"] == 1500
     for name in ("transfer_function_order_6", "state_space_order_8", "state_space_order_8_refined", "nfoursid_order_8"):
         assert report[name]["seconds"] > 0 and len(report[name]["validation_fit_percent"]) == 3

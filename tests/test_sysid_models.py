@@ -300,3 +300,25 @@ def test_kalman_predictor_of_a_fitted_model_beats_simulation_on_coloured_noise()
     simulated = model.evaluate(recording).values["rmse"][0]
     assert one_step == pytest.approx(0.5, rel=0.05)  # the innovations' standard deviation
     assert simulated > 1.3 * one_step
+
+
+def test_fit_warnings_name_a_fit_from_rest_and_a_validation_fit_far_below_the_others():
+    """Fits of 90, 75 and 65 % made exactly (ŷ = y - a (y - ȳ) fits 100 (1 - a) %): a gap of 20 points
+    or more is warned of, naming the record, the output and both figures; 15 points is not."""
+    from softtip.sysid.metrics import MEASURED, score_outputs
+    from softtip.sysid.verdicts import fit_warnings
+
+    y = np.sin(np.linspace(0, 20, 500))[:, None]
+
+    def scores(fit):
+        return score_outputs(y, y - (1 - fit / 100) * (y - y.mean()), ("temperature",), ("degC",), MEASURED)
+
+    assert scores(75.0).values["fit_percent"][0] == pytest.approx(75.0)
+    assert fit_warnings(("temperature",), scores(75.0), scores(90.0), "run.dat") == []
+    [rest] = fit_warnings(("temperature",), scores(65.0), scores(90.0), "run.dat")
+    assert rest.startswith("run.dat: temperature: the fit from rest, 65 %, is 25 points below the fit from each "
+                           "trial's estimated initial state (90 %)")
+    assert fit_warnings(("temperature",), scores(75.0), scores(75.0), "val.dat", scores(90.0)) == []
+    [validation] = fit_warnings(("temperature",), scores(65.0), scores(65.0), "val.dat", scores(90.0))
+    assert validation.startswith("val.dat: temperature: the validation fit, 65 %, is 25 points below the "
+                                 "estimation fit (90 %")

@@ -182,3 +182,68 @@ def test_a_covariance_too_large_to_hold_is_not_computed_and_says_why(tmp_path, m
         model.uncertainty()
     loaded = load_model(save_model(tmp_path / "model.npz", model))
     assert loaded.covariance_ is None and isinstance(loaded.bode(), Figure)
+
+
+def test_a_discrete_poles_modulus_spread_is_the_finite_difference_delta_method():
+    """σ(|λ|) from d|λ| = Re(conj λ dλ)/|λ| against central differences of |eig(A + h ∂A/∂θ_p)| taken
+    with numpy's eigenvalues: the same gradient to 1e-6, so the same spread."""
+    u, y = _record(2)
+    model = StateSpaceModel(2, refine=True).fit(Recording.from_arrays(u, y, TS))
+    found = model.uncertainty()
+    A, covariance = model.system_.A, model.covariance_
+    dA = covariance.derivatives[0]
+    h = 1e-7
+    for pole in found["poles"]:
+        value = complex(pole["real"], pole["imag"])
+
+        def modulus(matrix):
+            values = np.linalg.eigvals(matrix)
+            return abs(values[np.argmin(np.abs(values - value))])
+
+        gradient = np.array([(modulus(A + h * d) - modulus(A - h * d)) / (2 * h) for d in dA])
+        expected = np.sqrt(gradient @ covariance.covariance @ gradient)
+        assert pole["modulus_std"] == pytest.approx(expected, rel=1e-5)
+
+
+def test_a_pole_whose_interval_reaches_the_boundary_leaves_stability_uncertain():
+    from softtip.sysid.verdicts import boundary_poles, stability
+
+    def tf(real, real_std):
+        return {"z": 1.96, "confidence": 0.95, "entries": [{"poles": [
+            {"real": -3.0, "imag": 0.0, "real_std": 0.1, "imag_std": 0.0},
+            {"real": real, "imag": 0.0016, "real_std": real_std, "imag_std": 1e-4}]}]}
+
+    # -2.5e-7 ± 1.96 x 2e-7 = -2.5e-7 + 3.92e-7 > 0: reaches the axis; ± 1.96 x 1e-7 does not
+    assert stability(True, tf(-2.5e-7, 2e-7))[0] == "uncertain"
+    assert stability(True, tf(-2.5e-7, 1e-7)) == ("stable", [])
+    assert stability(False, tf(-2.5e-7, 2e-7)) == ("unstable", [])
+    [text] = boundary_poles(tf(-2.5e-7, 2e-7))
+    assert "-2.5e-07+0.0016j rad/s" in text and "± 3.9e-07 on the real part" in text
+    discrete = {"z": 2.0, "confidence": 0.9545, "poles_domain": "discrete",
+                "poles": [{"real": 0.6, "imag": 0.79, "real_std": 0.0, "imag_std": 0.0, "modulus_std": 0.0}]}
+    # |0.6 + 0.79j| = 0.99201: within 1 by 0.00799, reached by 2 x 0.0041 and not by 2 x 0.0039
+    discrete["poles"][0]["modulus_std"] = 0.0041
+    assert stability(True, discrete)[0] == "uncertain"
+    discrete["poles"][0]["modulus_std"] = 0.0039
+    assert stability(True, discrete)[0] == "stable"
+
+
+def test_a_near_integrator_fitted_on_a_short_record_is_called_uncertain_not_stable():
+    """A plant with a pole at -0.002 rad/s seen for 80 s: its interval takes in the axis, and the summary
+    says so (stability "uncertain", with the warning); the well-damped plant of this module stays "stable"."""
+    slow = transfer.TransferFunctionMatrix([[[0.01]]], [[[1.0, 0.002]]])
+    rng = np.random.default_rng(7)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=251), 4)[:1000, None]
+    y = transfer.simulate(slow, u, TS) + 0.01 * rng.normal(size=(1000, 1))
+    summary = TransferFunctionModel(1, 0).fit(Recording.from_arrays(u, y, TS)).summary()
+    [pole] = summary["uncertainty"]["entries"][0]["poles"]
+    reach = summary["uncertainty"]["z"] * pole["real_std"]
+    # measured -0.00023 ± 0.0017 rad/s (the truth -0.002): its poles are all in the left half-plane, and
+    # the interval reaches past 0
+    assert pole["real"] < 0 < pole["real"] + reach
+    assert summary["stable"] and summary["stability"] == "uncertain"
+    assert summary["warnings"] == [f"stability uncertain: pole {pole['real']:.4g}+0j rad/s: its 95 % interval, "
+                                   f"± {reach:.2g} on the real part, reaches the imaginary axis"]
+    u, y = _record(3)
+    damped = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS)).summary()
+    assert damped["stability"] == "stable" and damped["warnings"] == []

@@ -198,10 +198,11 @@ def _delay(text: str) -> int | list[int] | str:
 
 
 def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool,
-           detrend: Detrend = Detrend.none, delay: str = "0", max_delay: int = 40):
+           detrend: Detrend, delay: str, max_delay: int, initial_state: InitialState):
     from softtip.sysid import StateSpaceModel, TransferFunctionModel
 
-    common = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay}
+    common = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay,
+              "initial_state": initial_state.value}
     common |= {} if refine is None else {"refine": refine}
     if kind is Kind.tf:
         if continuous:
@@ -212,7 +213,7 @@ def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refi
     return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete", **common)
 
 
-def _scores_table(title: str, scores: dict) -> Table:
+def _scores_table(title: str, scores: dict, warnings: list[str] = ()) -> Table:
     table = Table(title=title)
     for heading in ("output", "R²", "r", "RMSE", "RMSE % FS", "MAE % FS", "fit %", "full scale"):
         table.add_column(heading, justify="left" if heading == "output" else "right")
@@ -223,11 +224,14 @@ def _scores_table(title: str, scores: dict) -> Table:
                       f"{row['fit_percent']:.1f}" if row["fit_percent"] is not None else "—",
                       f"{row['full_scale']:.4g} {row['unit']}".strip())
     table.caption = (f"full scale: {scores['full_scale']['description']}; {scores['samples']} samples; "
-                     f"initial state: {scores['initial_state']}")
+                     f"initial state: {scores['initial_state']}" +
+                     "".join(f"\n[yellow]warning:[/] {escape(text)}" for text in warnings))
     return table
 
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+STABILITY = {"stable": "stable", "unstable": "[red]unstable[/]",
+             "uncertain": "[yellow]stability uncertain[/] (a pole's interval reaches the boundary)"}
 
 
 def _print_residual_tests(tests: dict) -> None:
@@ -276,7 +280,7 @@ def _print_state_space_uncertainty(uncertainty: dict, inputs: list[str], outputs
 
 def _print_summary(summary: dict) -> None:
     console.print(f"[bold]{summary['kind']}[/] model, {summary['states']} states, {summary['parameters']} parameters, "
-                  f"ts = {summary['ts']:g} s, {'stable' if summary['stable'] else '[red]unstable[/]'}; "
+                  f"ts = {summary['ts']:g} s, {STABILITY[summary['stability']]}; "
                   f"fitted in {summary['fit_seconds']:.2f} s on {summary['data']['trials']} trials "
                   f"({summary['data']['samples']} samples)")
     console.print("fit % on the estimation data (simulated from rest): " +
@@ -311,6 +315,10 @@ def sysid_fit(
                                 help="Prediction-error refinement (default: tf yes, ss no)."),
     continuous: bool = typer.Option(False, "--continuous", help="A continuous state-space model (ss)."),
     detrend: Detrend = DETREND,
+    initial_state: InitialState = typer.Option(InitialState.zero, "--initial-state",
+                                               help="zero: every trial starts at rest; estimate: each trial's "
+                                                    "initial state estimated with the model (--detrend estimate "
+                                                    "estimates them too)."),
     delay: str = DELAY,
     max_delay: int = MAX_DELAY,
     ts: float = TS,
@@ -338,6 +346,7 @@ def sysid_fit(
     R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated from rest, and from each trial's
     estimated initial state), and the residual tests (whiteness, independence of the inputs)."""
     from softtip.sysid import save_model
+    from softtip.sysid.verdicts import fit_warnings
 
     if not 0 < confidence < 1:
         fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
@@ -355,7 +364,8 @@ def sysid_fit(
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
-    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay)
+    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay,
+                       initial_state)
     recording, validation = _records(data, validate, inputs, outputs, validate_input, validate_output, reading)
     estimator.fit(recording)
     result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend)}
@@ -365,10 +375,18 @@ def sysid_fit(
     tests = estimator.residual_tests(checked, lags=usable) if usable >= 1 else None
     result["residual_tests"] = None if tests is None else \
         tests.to_dict() | {"data": checked.source}
+    fitted = [estimator.evaluate(recording, full_scale=scale, initial_state=state) for state in ("zero", "estimate")]
+    result["estimation_estimated_initial_state"] = fitted[1].to_dict()
+    warnings = {"model": result["model"]["warnings"],
+                "estimation": fit_warnings(estimator.outputs_, *fitted, str(data))}
     if validation is not None:
-        result["validation"] = estimator.evaluate(validation, full_scale=scale).to_dict()
-        result["validation_estimated_initial_state"] = estimator.evaluate(validation, full_scale=scale,
-                                                                          initial_state="estimate").to_dict()
+        validated = [estimator.evaluate(validation, full_scale=scale, initial_state=state)
+                     for state in ("zero", "estimate")]
+        result["validation"], result["validation_estimated_initial_state"] = (s.to_dict() for s in validated)
+        warnings["validation"] = fit_warnings(estimator.outputs_, *validated, validation.source, fitted[1])
+    result["warnings"] = [text for texts in warnings.values() for text in texts]
+    for text in result["warnings"]:
+        errors.print(f"[yellow]warning:[/] {escape(text)}")
     if model_file is not None:
         result["saved"] = str(save_model(model_file, estimator))
     if bode is not None:
@@ -391,12 +409,17 @@ def sysid_fit(
         _print_state_space_uncertainty(result["model"]["uncertainty"], inputs, outputs)
     else:
         console.print(f"parameter covariance {result['model']['uncertainty_note']}")
+    for text in warnings["model"]:
+        console.print(f"[yellow]warning:[/] {escape(text)}")
+    console.print(_scores_table(f"estimation on {escape(recording.source)} (simulated from each trial's estimated "
+                                "initial state)", result["estimation_estimated_initial_state"],
+                                warnings["estimation"]))
     if validation is not None:
         console.print(_scores_table(f"validation on {escape(validation.source)} (simulated from rest)",
                                     result["validation"]))
         console.print(_scores_table(f"validation on {escape(validation.source)} (simulated from each trial's "
                                     "estimated initial state)",
-                                    result["validation_estimated_initial_state"]))
+                                    result["validation_estimated_initial_state"], warnings["validation"]))
     if result["residual_tests"] is not None:
         _print_residual_tests(result["residual_tests"])
     for name in ("saved", "bode", "residuals"):

@@ -63,6 +63,7 @@ from softtip.sysid.uncertainty import (
     state_space_bands,
     state_space_intervals,
 )
+from softtip.sysid.verdicts import stability
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -118,6 +119,9 @@ class IdentifiedModel(BaseEstimator):
     def _check_common_params(self) -> None:
         if self.detrend not in TREND_KINDS:
             raise IdentificationError(f"detrend: expected one of {', '.join(TREND_KINDS)}, got {self.detrend!r}")
+        if self.initial_state not in INITIAL_STATES:
+            raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, "
+                                      f"got {self.initial_state!r}")
         if self.delay != ESTIMATE:
             resolve(self.delay, np.size(self.delay))
         checked(PositiveInteger, "max_delay", self.max_delay, IdentificationError)
@@ -134,8 +138,9 @@ class IdentifiedModel(BaseEstimator):
         try:
             with single_threaded_blas():
                 core = self._fit_delay_free(shifted, recording.ts)
-                if self.detrend == "estimate":
-                    core, shifted = self._with_estimated_output_levels(core, shifted, recording.ts)
+                if self.detrend == "estimate" or self.initial_state == "estimate":
+                    core, shifted = self._with_estimated_initial_states(core, shifted, recording.ts,
+                                                                        levels=self.detrend == "estimate")
                 if self.estimate_covariance:
                     self._estimate_uncertainty(core, shifted, recording.ts)
                 else:
@@ -146,11 +151,11 @@ class IdentifiedModel(BaseEstimator):
         self.system_ = with_input_delays(core, delays)
         return self._remember(recording, started)
 
-    def _with_estimated_output_levels(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
-                                      ts: float) -> tuple[StateSpace, list[tuple[np.ndarray, np.ndarray]]]:
-        """The output levels and each trial's initial state as parameters, with the model: the simulation
-        error is minimised over the model and over (levels, initial states) in turn, each round from the
-        last. Given the model, the levels and states are one linear least-squares problem (a constant and
+    def _with_estimated_initial_states(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                                       ts: float, levels: bool) -> tuple[StateSpace, list[tuple[np.ndarray, np.ndarray]]]:
+        """Each trial's initial state, and with ``levels`` the output levels, as parameters with the model:
+        the simulation error is minimised over the model and over (levels, initial states) in turn, each
+        round from the last. Given the model, the levels and states are one linear least-squares problem (a constant and
         the free responses C Aᵗ); given them, the model is identified on the outputs less the levels and
         the free responses. (The level alone would be confounded with the transient of a record that does
         not start at rest.) It stops when the simulation error falls by less than 1e-6 of itself, or after
@@ -158,6 +163,7 @@ class IdentifiedModel(BaseEstimator):
         lowers the same criterion."""
         deviations = [y for _, y in segments]
         ny = deviations[0].shape[1]
+        nl = ny if levels else 0  # level unknowns
         previous = np.inf
         level = np.zeros(ny)
         for rounds in range(1, _LEVEL_ROUNDS + 1):
@@ -166,14 +172,14 @@ class IdentifiedModel(BaseEstimator):
             rows, targets = [], []
             for k, ((u, y), sim) in enumerate(zip(segments, simulated, strict=True)):
                 N = len(u)
-                block = np.zeros((N, ny, ny + n * len(segments)))
-                block[:, :, :ny] = np.eye(ny)
-                block[:, :, ny + k * n:ny + (k + 1) * n] = free_response(core.A, core.C, N)
+                block = np.zeros((N, ny, nl + n * len(segments)))
+                block[:, :, :nl] = np.eye(ny)[:, :nl]
+                block[:, :, nl + k * n:nl + (k + 1) * n] = free_response(core.A, core.C, N)
                 rows.append(block.reshape(N * ny, -1))
                 targets.append((deviations[k] - sim).ravel())
             solution = np.linalg.lstsq(np.vstack(rows), np.concatenate(targets), rcond=None)[0]
-            level = solution[:ny]
-            states = solution[ny:].reshape(len(segments), n)
+            level = solution[:nl] if levels else np.zeros(ny)
+            states = solution[nl:].reshape(len(segments), n)
             corrected = [y - level - free_response(core.A, core.C, len(y)) @ x0
                          for y, x0 in zip(deviations, states, strict=True)]
             cost = sum(float(np.sum((c - sim) ** 2)) for c, sim in zip(corrected, simulated, strict=True))
@@ -260,9 +266,13 @@ class IdentifiedModel(BaseEstimator):
         return self.covariance_
 
     def _uncertainty_summary(self, confidence: float) -> dict:
-        """The summary's ``confidence`` intervals (None without a covariance) and why there are none."""
-        return {"uncertainty": None if self.covariance_ is None else self.uncertainty(confidence),
-                "uncertainty_note": self.covariance_note_}
+        """The summary's ``confidence`` intervals (None without a covariance) and why there are none, and the
+        stability they leave: "stable", "unstable" or "uncertain" (a pole's interval reaching the boundary),
+        with the warnings that say so."""
+        uncertainty = None if self.covariance_ is None else self.uncertainty(confidence)
+        verdict, warnings = stability(self.is_stable(), uncertainty)
+        return {"uncertainty": uncertainty, "uncertainty_note": self.covariance_note_, "stability": verdict,
+                "warnings": warnings}
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "system_"):
@@ -459,7 +469,9 @@ class StateSpaceModel(IdentifiedModel):
     estimated with the model); ``delay``: input delays in samples, one for all inputs or one per
     input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`);
     ``estimate_covariance``: False skips the parameter covariance (``covariance_`` None, no intervals
-    or bands), for fits that never read it.
+    or bands), for fits that never read it; ``initial_state``: "zero" (every trial starts at rest) or
+    "estimate" (each trial's initial state estimated with the model, for records that do not start at
+    rest; "estimate" detrending estimates them too).
     """
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
@@ -470,7 +482,7 @@ class StateSpaceModel(IdentifiedModel):
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4,
                  detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40,
-                 estimate_covariance: bool = True):
+                 estimate_covariance: bool = True, initial_state: str = "zero"):
         self.order = order
         self.method = method
         self.refine = refine
@@ -484,6 +496,7 @@ class StateSpaceModel(IdentifiedModel):
         self.delay = delay
         self.max_delay = max_delay
         self.estimate_covariance = estimate_covariance
+        self.initial_state = initial_state
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         n = 1 if self.order == AUTO else self.order
@@ -592,8 +605,8 @@ class TransferFunctionModel(IdentifiedModel):
 
     ``tf_`` is G; ``system_`` its block-diagonal canonical realisation discretised by zero-order
     hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it, behind
-    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend`` and
-    ``estimate_covariance`` as for :class:`StateSpaceModel`.
+    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend``,
+    ``estimate_covariance`` and ``initial_state`` as for :class:`StateSpaceModel`.
     """
 
     _PARAMETERS = {"n_poles": PositiveInteger, "refine": Flag, "enforce_stability": Flag,
@@ -601,7 +614,8 @@ class TransferFunctionModel(IdentifiedModel):
 
     def __init__(self, n_poles: int = 6, n_zeros: int | None = None, *, refine: bool = True,
                  enforce_stability: bool = True, max_iterations: int = 100, detrend: str = "none",
-                 delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True):
+                 delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True,
+                 initial_state: str = "zero"):
         self.n_poles = n_poles
         self.n_zeros = n_zeros
         self.refine = refine
@@ -611,6 +625,7 @@ class TransferFunctionModel(IdentifiedModel):
         self.delay = delay
         self.max_delay = max_delay
         self.estimate_covariance = estimate_covariance
+        self.initial_state = initial_state
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         zeros = self.n_poles - 1 if self.n_zeros is None else self.n_zeros

@@ -274,9 +274,13 @@ def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, 
         derivatives = derivatives / (values * system.ts)
         values = np.log(values.astype(complex)) / system.ts
     order = np.argsort(-np.abs(values), kind="stable")
+    # d|λ| = Re(conj(λ) dλ) / |λ|: how near the unit circle a discrete pole may be
+    modulus = np.real(np.conj(values) * derivatives) / np.abs(values)
     poles = [{"real": float(values[k].real), "imag": float(values[k].imag),
               "real_std": float(_spread(derivatives.real[:, [k]], covariance.covariance)[0]),
-              "imag_std": float(_spread(derivatives.imag[:, [k]], covariance.covariance)[0])} for k in order]
+              "imag_std": float(_spread(derivatives.imag[:, [k]], covariance.covariance)[0])} |
+             ({} if continuous else {"modulus_std": float(_spread(modulus[:, [k]], covariance.covariance)[0])})
+             for k in order]
     response, gradient = _state_space_gradient(system, covariance, np.zeros(1))
     gains = []
     for i in range(system.n_outputs):
