@@ -326,6 +326,11 @@ def test_validation_columns_side_by_side_in_one_whitespace_file_validate_as_a_fi
     printed = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--validate-input", "uVal",
                   "--validate-output", "yVal", *common)
     assert printed.exit_code == 0 and "degC" in printed.stdout and "(uVal → yVal)" in printed.stdout
+    # the intervals say how they were made and what they assume
+    assert side["model"]["uncertainty"]["method"] == "sandwich"
+    assert "intervals: sandwich: holds for coloured residuals" in " ".join(printed.stdout.split())
+    white = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", *common, "--intervals", "white", "--json")
+    assert json.loads(white.stdout)["model"]["uncertainty"]["assumption"].startswith("assumes white residuals")
 
 
 def test_a_headerless_dat_file_takes_its_column_names_from_the_command_line(tmp_path):

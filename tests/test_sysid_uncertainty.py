@@ -73,9 +73,13 @@ def test_pole_and_frequency_response_spreads_match_monte_carlo(monte_carlo):
 
 def test_the_covariance_equals_scipys_finite_difference_gauss_newton_covariance():
     """Independently: the Jacobian by scipy's finite differences of scipy's ZOH simulation (cont2discrete,
-    dlsim), σ² (JᵀJ)⁻¹ at the same optimum."""
+    dlsim), σ² (JᵀJ)⁻¹ at the same optimum (white intervals), and statsmodels' Newey-West covariance of
+    the residuals on that Jacobian at the lags the model chose (sandwich intervals)."""
+    import statsmodels.api as sm
+
     u, y = _record(0)
-    model = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
+    model = TransferFunctionModel(2, 1, intervals="white").fit(Recording.from_arrays(u, y, TS))
+    sandwich = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
     theta = np.concatenate([model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]])
 
     def residual(parameters):
@@ -86,6 +90,13 @@ def test_the_covariance_equals_scipys_finite_difference_gauss_newton_covariance(
     errors = residual(theta)
     expected = errors @ errors / (len(y) - 4) * np.linalg.inv(jacobian.T @ jacobian)
     np.testing.assert_allclose(model.covariance_[0], expected, rtol=1e-5)  # measured 1.7e-6
+    # at the optimum Jᵀe = 0, so regressing the errors on J leaves them as they are: statsmodels' residuals
+    [lags] = sandwich.covariance_lags_
+    regression = sm.OLS(errors, jacobian).fit(cov_type="HAC", cov_kwds={"maxlags": lags, "use_correction": True})
+    assert lags >= 1 and np.max(np.abs(regression.params)) < 1e-6 * np.max(np.abs(theta))
+    np.testing.assert_allclose(sandwich.covariance_[0], regression.cov_params(), rtol=1e-4)
+    assert sandwich.uncertainty()["method"] == "sandwich" and model.uncertainty()["method"] == "white"
+    assert f"over {lags} lags" in sandwich.uncertainty()["assumption"]
 
 
 def test_the_empirical_transfer_function_follows_python_control_s_response():
@@ -247,3 +258,25 @@ def test_a_near_integrator_fitted_on_a_short_record_is_called_uncertain_not_stab
     u, y = _record(3)
     damped = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS)).summary()
     assert damped["stability"] == "stable" and damped["warnings"] == []
+
+
+@pytest.mark.slow
+def test_sandwich_intervals_stay_honest_under_coloured_output_noise_where_white_ones_understate():
+    """Output noise with a lag-1 autocorrelation of 0.9 (the real record's): over 40 runs the sandwich
+    standard deviations match the coefficients' sample spread (measured ratios 0.85-0.97; a sample
+    standard deviation of 40 runs is uncertain by about 11 %), the white ones understate it 2-3 x
+    (measured 0.37-0.54), each from the same fit."""
+    estimates, sandwich, white = [], [], []
+    for seed in range(40):
+        rng = np.random.default_rng(100 + seed)
+        u = np.repeat(rng.choice([-1.0, 1.0], size=251), 4)[:1000, None]
+        noise = scipy.signal.lfilter([1.0], [1.0, -0.9], 0.03 * rng.normal(size=1000))
+        y = transfer.simulate(TRUTH, u, TS) + noise[:, None]
+        model = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
+        estimates.append(np.concatenate([model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]]))
+        sandwich.append(np.sqrt(np.diag(model.covariance_[0])))
+        [assumed], _ = transfer.parameter_covariance(model.tf_, [(u, y)], TS, "white")
+        white.append(np.sqrt(np.diag(assumed)))
+    spread = np.std(estimates, axis=0, ddof=1)
+    assert np.all(np.abs(np.mean(sandwich, axis=0) / spread - 1) < 0.2)
+    assert np.all(np.mean(white, axis=0) / spread < 0.6)

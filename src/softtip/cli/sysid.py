@@ -32,6 +32,11 @@ class InitialState(str, Enum):
     estimate = "estimate"
 
 
+class Intervals(str, Enum):
+    sandwich = "sandwich"
+    white = "white"
+
+
 class Method(str, Enum):
     n4sid = "n4sid"
     moesp = "moesp"
@@ -198,7 +203,7 @@ def _delay(text: str) -> int | list[int] | str:
 
 
 def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refine: bool | None, continuous: bool,
-           detrend: Detrend, delay: str, max_delay: int, initial_state: InitialState):
+           detrend: Detrend, delay: str, max_delay: int, initial_state: InitialState, intervals: Intervals):
     from softtip.sysid import StateSpaceModel, TransferFunctionModel
 
     common = {"detrend": detrend.value, "delay": _delay(delay), "max_delay": max_delay,
@@ -207,9 +212,12 @@ def _model(kind: Kind, order: int | str, zeros: int | None, method: Method, refi
     if kind is Kind.tf:
         if continuous:
             fail("--continuous: a transfer function is continuous already (it runs discretised)")
-        return TransferFunctionModel(order, zeros, **common)
+        return TransferFunctionModel(order, zeros, intervals=intervals.value, **common)
     if zeros is not None:
         fail("--zeros: only for --kind tf")
+    if intervals is not Intervals.sandwich:
+        fail("--intervals: only for --kind tf (a state-space model's come from its Kalman predictor's white "
+             "prediction errors)")
     return StateSpaceModel(order, method.value, domain="continuous" if continuous else "discrete", **common)
 
 
@@ -251,6 +259,7 @@ def _print_residual_tests(tests: dict) -> None:
 
 
 def _print_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str]) -> None:
+    """A transfer function's coefficients and poles with their intervals, and what the intervals assume."""
     z, level = uncertainty["z"], f"± {100 * uncertainty['confidence']:g} %"
     table = Table(title=f"coefficients (descending powers of s) and poles, {level} intervals")
     for heading in ("entry", "denominator", "numerator", "poles (rad/s)"):
@@ -264,6 +273,7 @@ def _print_uncertainty(uncertainty: dict, inputs: list[str], outputs: list[str])
                           for p in entry["poles"])
         table.add_row(f"{inputs[entry['input']]} → {outputs[entry['output']]}", "1, " + ranges(entry["denominator"]),
                       ranges(entry["numerator"]), poles)
+    table.caption = f"intervals: {uncertainty['method']}: {uncertainty['assumption']}"
     console.print(table)
 
 
@@ -276,6 +286,7 @@ def _print_state_space_uncertainty(uncertainty: dict, inputs: list[str], outputs
     console.print(f"DC gains, {level} intervals: " + ", ".join(
         f"{inputs[g['input']]} → {outputs[g['output']]} {g['value']:.4g} ± {z * g['std']:.2g}"
         for g in uncertainty["dc_gains"]))
+    console.print(f"intervals: {uncertainty['assumption']}")
 
 
 def _print_summary(summary: dict) -> None:
@@ -338,6 +349,10 @@ def sysid_fit(
     residuals: Path = typer.Option(None, "--residuals", help="Save the residual tests' plot here (.png, .pdf, "
                                                              ".svg): on --validate, else on the estimation data."),
     confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
+    intervals: Intervals = typer.Option(Intervals.sandwich, "--intervals",
+                                        help="tf: the coefficients' covariance: sandwich (Newey-West; honest for "
+                                             "coloured output errors) or white (σ² (JᵀJ)⁻¹, white errors "
+                                             "assumed)."),
     lags: int = typer.Option(25, "--lags", help="Lags of the residual tests."),
     force: bool = FORCE,
     json_output: bool = JSON,
@@ -365,7 +380,7 @@ def sysid_fit(
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
     estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay,
-                       initial_state)
+                       initial_state, intervals)
     recording, validation = _records(data, validate, inputs, outputs, validate_input, validate_output, reading)
     estimator.fit(recording)
     result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend)}

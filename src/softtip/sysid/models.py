@@ -44,6 +44,7 @@ from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, StateSpaceCovariance, parameter_covariance, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
+from softtip.sysid.robust import ASSUMPTIONS, COVARIANCES, SANDWICH, WHITE
 from softtip.sysid.simulation import (
     StreamingSimulator,
     estimate_initial_state,
@@ -606,16 +607,19 @@ class TransferFunctionModel(IdentifiedModel):
     ``tf_`` is G; ``system_`` its block-diagonal canonical realisation discretised by zero-order
     hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it, behind
     the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend``,
-    ``estimate_covariance`` and ``initial_state`` as for :class:`StateSpaceModel`.
+    ``estimate_covariance`` and ``initial_state`` as for :class:`StateSpaceModel`; ``intervals``: the
+    coefficients' covariance, "sandwich" (honest for coloured output errors, which an output-error
+    model's usually are; :mod:`softtip.sysid.robust`) or "white" (σ² (JᵀJ)⁻¹, white errors assumed).
     """
 
     _PARAMETERS = {"n_poles": PositiveInteger, "refine": Flag, "enforce_stability": Flag,
+                   "intervals": choice(*COVARIANCES),
                    "max_iterations": PositiveInteger, "estimate_covariance": Flag}
 
     def __init__(self, n_poles: int = 6, n_zeros: int | None = None, *, refine: bool = True,
                  enforce_stability: bool = True, max_iterations: int = 100, detrend: str = "none",
                  delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True,
-                 initial_state: str = "zero"):
+                 initial_state: str = "zero", intervals: str = SANDWICH):
         self.n_poles = n_poles
         self.n_zeros = n_zeros
         self.refine = refine
@@ -626,6 +630,7 @@ class TransferFunctionModel(IdentifiedModel):
         self.max_delay = max_delay
         self.estimate_covariance = estimate_covariance
         self.initial_state = initial_state
+        self.intervals = intervals
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         zeros = self.n_poles - 1 if self.n_zeros is None else self.n_zeros
@@ -652,12 +657,18 @@ class TransferFunctionModel(IdentifiedModel):
 
     def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
                               ts: float) -> None:
-        self.covariance_, self.covariance_note_ = transfer.parameter_covariance(self.tf_, segments, ts), None
+        self.covariance_, self.covariance_lags_ = transfer.parameter_covariance(self.tf_, segments, ts, self.intervals)
+        self.covariance_note_ = None
 
     def uncertainty(self, confidence: float = 0.95) -> dict:
         """Every coefficient, pole and zero with its standard deviation and ``confidence`` interval
         (:func:`softtip.sysid.uncertainty.intervals`)."""
-        return intervals(self.tf_, self._checked_covariance(), confidence)
+        covariance = self._checked_covariance()
+        # from the lags the covariance was made with (a file written before sandwich estimates has none)
+        method = WHITE if None in self.covariance_lags_ else SANDWICH
+        lags = ", ".join(str(lag) for lag in self.covariance_lags_)
+        return intervals(self.tf_, covariance, confidence) | {
+            "method": method, "assumption": ASSUMPTIONS[method].format(lags=lags)}
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         band = None if self.covariance_ is None else \
@@ -678,6 +689,7 @@ class TransferFunctionModel(IdentifiedModel):
         for i, covariance in enumerate(self.covariance_ or ()):
             arrays[f"tf/covariance/{i}"] = covariance
         state["report"] = self.report_.to_dict()
+        state["covariance_lags"] = None if self.covariance_ is None else list(self.covariance_lags_)
         return state, arrays
 
     def _restore(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -698,6 +710,7 @@ class TransferFunctionModel(IdentifiedModel):
         self.covariance_ = None
         if "tf/covariance/0" in arrays:
             self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
+            self.covariance_lags_ = list(state.get("covariance_lags") or [None] * ny)
             intervals(self.tf_, self.covariance_)  # checks their shapes
 
     @property

@@ -292,4 +292,6 @@ def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, 
     return {"confidence": confidence, "z": z, "poles": poles, "poles_domain": "continuous" if continuous else
             "discrete", "dc_gains": gains,
             "method": "prediction-error covariance H⁻¹ (Σ Jᵀ W Λ W J) H⁻¹ in local coordinates; poles and "
-                      "responses to first order"}
+                      "responses to first order",
+            "assumption": "assumes white one-step prediction errors (the Kalman predictor's innovations): the "
+                          "residual whiteness test checks it"}
