@@ -177,15 +177,16 @@ def _level_note(recording, detrend: Detrend) -> str | None:
             "; a model from rest cannot follow them: try --detrend mean")
 
 
-def _order(kind: Kind, order: str) -> int | str:
-    if kind is Kind.ss and order == "auto":
+def _order(kind: Kind, order: str, validated: bool) -> int | str:
+    if order == "auto" and (validated or kind is Kind.ss):
         return order
     try:
         value = int(order)
     except ValueError:
         value = 0
     if value < 1:
-        fail(f"--order = {order!r}: expected a positive integer{' or auto' if kind is Kind.ss else ''}")
+        fail(f"--order = {order!r}: expected a positive integer or auto (a transfer function's auto order needs a "
+             "validation record: --validate or --validate-output)")
     return value
 
 
@@ -319,7 +320,10 @@ def sysid_fit(
     input: list[str] = INPUTS,
     output: list[str] = OUTPUTS,
     kind: Kind = typer.Option(..., "--kind", help="tf: transfer-function matrix; ss: state space."),
-    order: str = typer.Option(..., "--order", help="Poles per entry (tf) or states (ss; or auto)."),
+    order: str = typer.Option(..., "--order", help="Poles per entry (tf) or states (ss), or auto: with a validation "
+                                                   "record the order that validates best (from estimated initial "
+                                                   "states; tf 2-8, ss 2-12), else (ss) the singular values' "
+                                                   "largest drop."),
     zeros: int = typer.Option(None, "--zeros", help="Zeros per entry (tf; default order - 1)."),
     method: Method = typer.Option(Method.moesp, "--method", help="Subspace method (ss; MOESP validates best on the benchmark cases)."),
     refine: bool = typer.Option(None, "--refine/--no-refine",
@@ -360,7 +364,8 @@ def sysid_fit(
     """Identify a model of the outputs from the inputs; print its summary and, with --validate, per output
     R², r, RMSE, RMSE and MAE in % of full scale and the fit % (simulated from rest, and from each trial's
     estimated initial state), and the residual tests (whiteness, independence of the inputs)."""
-    from softtip.sysid import save_model
+    from softtip.sysid import save_model, validated_order
+    from softtip.sysid.models import DEFAULT_ORDERS
     from softtip.sysid.verdicts import fit_warnings
 
     if not 0 < confidence < 1:
@@ -379,11 +384,28 @@ def sysid_fit(
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
-    estimator = _model(kind, _order(kind, order), zeros, method, refine, continuous, detrend, delay, max_delay,
-                       initial_state, intervals)
+    validated = validate is not None or bool(validate_input or validate_output)
+    chosen_order = _order(kind, order, validated)
+    cross_validate = chosen_order == "auto" and validated
+    # an auto order by validation is set once chosen; the options are checked now, on the smallest
+    estimator = _model(kind, min(DEFAULT_ORDERS[kind.value]) if cross_validate else chosen_order, zeros, method,
+                       refine, continuous, detrend, delay, max_delay, initial_state, intervals)
     recording, validation = _records(data, validate, inputs, outputs, validate_input, validate_output, reading)
+    selection = None
+    if cross_validate:
+        order_name = "n_poles" if kind is Kind.tf else "order"
+        params = {name: value for name, value in estimator.get_params().items()
+                  if name not in (order_name, "estimate_covariance")}
+        best, rows = validated_order(recording, validation, kind.value, **params)
+        estimator.set_params(**{order_name: best})
+        selection = {"method": f"validation on {validation.source}, each fit from its estimated initial states: "
+                               "the best mean fit %, a smaller order within 0.5 points preferred",
+                     "order": best, "fit_percent": {row["order"]: row["fit_percent"] for row in rows}}
+        errors.print(f"order {best} chosen by validation: " + ", ".join(
+            f"{row['order']}: {row['fit_percent']:.1f} %" for row in rows))
     estimator.fit(recording)
-    result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend)}
+    result = {"model": estimator.summary(confidence), "note": _level_note(recording, detrend),
+              "order_selection": selection}
     checked = recording if validation is None else validation
     # a short record takes fewer lags: four samples a lag at least
     usable = min(lags, checked.n_samples // 4)

@@ -30,7 +30,13 @@ force sensor's (side-sensor forces in, table-sensor forces out, at 10 Hz):
 from softtip.sysid.delays import estimate_delays
 from softtip.sysid.files import load_model, save_model
 from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, rated, score_outputs
-from softtip.sysid.models import StateSpaceModel, TransferFunctionModel, information_criteria, order_table
+from softtip.sysid.models import (
+    StateSpaceModel,
+    TransferFunctionModel,
+    information_criteria,
+    order_table,
+    validated_order,
+)
 from softtip.sysid.recording import Recording, Trial, read_recording
 from softtip.sysid.residuals import ResidualTests, residual_tests
 from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
@@ -72,4 +78,5 @@ __all__ = [
     "split_by_sample",
     "split_by_time",
     "split_by_trial",
+    "validated_order",
 ]

@@ -752,16 +752,16 @@ def information_criteria(errors: np.ndarray, n_parameters: int) -> tuple[float, 
 
 
 def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = None,
-                validation: Recording | None = None, initial_state: str = "zero", **params) -> list[dict]:
+                validation: Recording | None = None, scored_from: str = "zero", **params) -> list[dict]:
     """One fit per order (``kind`` "tf": poles per entry, default 2-8; "ss": states, default 2-12),
     each row with the order, the parameter count, the fit % per output and its mean (on ``validation``
-    when given, else on the estimation data; simulated from the zero or the estimated initial state, as
-    the row says), AIC and BIC (one-step prediction errors on the estimation data; the simulation errors
+    when given, else on the estimation data; simulated from the zero or the estimated initial state,
+    ``scored_from``, as the row says), AIC and BIC (one-step prediction errors on the estimation data; the simulation errors
     of a transfer function, which has no noise model), whether it is stable, and the seconds the fit took."""
     if kind not in KINDS:
         raise IdentificationError(f"kind: expected one of {', '.join(KINDS)}, got {kind!r}")
-    if initial_state not in INITIAL_STATES:
-        raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, got {initial_state!r}")
+    if scored_from not in INITIAL_STATES:
+        raise IdentificationError(f"scored_from: expected one of {', '.join(INITIAL_STATES)}, got {scored_from!r}")
     orders = list(DEFAULT_ORDERS[kind] if orders is None else orders)
     if not orders:
         raise IdentificationError("orders: none given")
@@ -779,10 +779,10 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
         seconds = time.perf_counter() - started
         # the fit's simulation of the estimation data scores it there, and is the one-step prediction of a
         # model without a noise model
-        if validation is None and initial_state == "zero":
+        if validation is None and scored_from == "zero":
             scores = model.evaluate_predictions(recording, simulated)
         else:
-            scores = model.evaluate(recording if validation is None else validation, initial_state=initial_state)
+            scores = model.evaluate(recording if validation is None else validation, initial_state=scored_from)
         one_step = simulated if model.system_.K is None else model.predict(recording, 1)
         aic, bic = information_criteria(_errors(recording, one_step), model.n_parameters)
         fits = scores.values["fit_percent"]
@@ -791,3 +791,22 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
                      "initial_state": scores.initial_state, "aic": aic, "bic": bic,
                      "stable": model.is_stable(), "seconds": seconds})
     return rows
+
+
+# a validation fit within this many points of the best is a tie, which the smaller model wins
+_ORDER_TIE = 0.5
+
+
+def validated_order(recording: Recording, validation: Recording, kind: str, orders: Iterable[int] | None = None,
+                    **params) -> tuple[int, list[dict]]:
+    """The order chosen by validation: every order of :func:`order_table` fitted on ``recording`` and
+    scored on ``validation`` from each trial's estimated initial state; the stable one of the best mean
+    fit, a smaller one within ``_ORDER_TIE`` points of it preferred. Returns it and the table's rows."""
+    rows = order_table(recording, kind, orders, validation, "estimate", **params)
+    stable = [row for row in rows if row["stable"]]
+    if not stable:
+        raise IdentificationError(f"{validation.source}: no order of {', '.join(str(row['order']) for row in rows)} "
+                                  "gives a stable model to validate")
+    best = max(row["fit_percent"] for row in stable)
+    return min(row["order"] for row in stable if row["fit_percent"] >= best - _ORDER_TIE), rows
+
