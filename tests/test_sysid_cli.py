@@ -287,6 +287,9 @@ def test_bench_sysid_reports_every_figure_beside_its_baseline():
         assert figures["softtip_transfer_function"]["pole_error"] < 0.04
     methods = report["subspace_methods"]
     assert methods["default"] == "moesp" and max(methods["default_points_below_the_best"].values()) < 0.5
+    start = report["start"]  # fresh processes: the interpreter alone is the floor of every other start
+    assert 0 < start["interpreter_s"] < min(start["import_sysid_s"], start["help_s"], start["fit_s"])
+    assert len(start["load_average"]) == 3 and report["targets_met"]["start_s"] in (True, False)
 
 
 def _side_by_side(path, header: bool = True):
@@ -399,3 +402,19 @@ def test_an_auto_order_with_a_validation_record_is_the_order_that_validates_best
     assert selection["fit_percent"][str(truth)] >= best - 0.5 > selection["fit_percent"][str(truth - 1)]
     refused = run("sysid", "fit", "--data", estimation, *COLUMNS, "--kind", "tf", "--order", "auto")
     assert refused.exit_code == 2 and "a transfer function's auto order needs a validation record" in refused.output
+
+
+def test_fit_draws_the_compare_plot_and_the_step_and_impulse_responses(tmp_path):
+    path, _ = _side_by_side(tmp_path / "benchmark.dat")
+    figures = {name: tmp_path / f"{name}.png" for name in ("compare", "step", "impulse")}
+    result = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--validate-input", "uVal",
+                 "--validate-output", "yVal", "--kind", "tf", "--order", "1", "--ts", TS, "--unit", "uEst=V",
+                 "--unit", "yEst=degC", *(item for name, file in figures.items() for item in (f"--{name}", file)),
+                 "--json")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    for name, file in figures.items():
+        assert report[name] == str(file) and file.stat().st_size > 10_000
+    same = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--kind", "tf", "--order", "1", "--ts", TS,
+               "--step", tmp_path / "one.png", "--impulse", tmp_path / "one.png")
+    assert same.exit_code == 2 and "two outputs name the same file" in same.output

@@ -280,3 +280,63 @@ def test_sandwich_intervals_stay_honest_under_coloured_output_noise_where_white_
     spread = np.std(estimates, axis=0, ddof=1)
     assert np.all(np.abs(np.mean(sandwich, axis=0) / spread - 1) < 0.2)
     assert np.all(np.mean(white, axis=0) / spread < 0.6)
+
+
+def test_step_and_impulse_bands_equal_the_exact_delta_method_of_a_first_order_plant():
+    """G(s) = b / (s + a): under a zero-order hold the step response at t = k ts is exactly
+    (b/a)(1 - e^(-a t)), with ∂/∂a = -(b/a²)(1 - e^(-a t)) + (b/a) t e^(-a t) and ∂/∂b = (1 - e^(-a t))/a;
+    the unit-area pulse's response is the step's first difference over ts. Response and standard
+    deviation (gᵀ C g with the fit's covariance) equal these formulas."""
+    rng = np.random.default_rng(5)
+    first = transfer.TransferFunctionMatrix([[[1.5]]], [[[1.0, 0.8]]])
+    u = np.repeat(rng.choice([-1.0, 1.0], size=201), 5)[:1000, None]
+    y = transfer.simulate(first, u, TS) + 0.05 * rng.normal(size=(1000, 1))
+    model = TransferFunctionModel(1, 0).fit(Recording.from_arrays(u, y, TS))
+    (a,), (b,) = model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]
+    covariance = model.covariance_[0]  # order (a, b)
+    t = np.arange(150) * TS
+    decay = np.exp(-a * t)
+    step = b / a * (1 - decay)
+    gradient = np.array([-b / a**2 * (1 - decay) + b / a * t * decay, (1 - decay) / a])
+    found = model.time_response("step", steps=150)
+    np.testing.assert_allclose(found.time, t)
+    np.testing.assert_allclose(found.response[:, 0, 0], step, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(found.std[:, 0, 0], np.sqrt(np.einsum("pt,pq,qt->t", gradient, covariance, gradient)),
+                               rtol=1e-5, atol=1e-12)
+    pulse = model.time_response("impulse", steps=150)
+    first_difference = np.diff(np.r_[0.0, step]) / TS
+    pulse_gradient = np.diff(np.c_[np.zeros(2), gradient], axis=1) / TS
+    np.testing.assert_allclose(pulse.response[:, 0, 0], first_difference, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(pulse.std[:, 0, 0], np.sqrt(np.einsum("pt,pq,qt->t", pulse_gradient, covariance,
+                                                                     pulse_gradient)), rtol=1e-5, atol=1e-12)
+
+
+def test_a_state_space_step_band_settles_on_the_dc_gains_interval():
+    """The step response's spread, from finite differences of the perturbed systems, ends at the DC
+    gain's, from the analytic gradient of G(1) (two separate computations of one delta method)."""
+    u, y = _record(4)
+    model = StateSpaceModel(2, refine=True).fit(Recording.from_arrays(u, y, TS))
+    found = model.time_response("step", steps=400)
+    [gain] = model.uncertainty()["dc_gains"]
+    assert found.response[-1, 0, 0] == pytest.approx(gain["value"], rel=1e-9)
+    assert found.std[-1, 0, 0] == pytest.approx(gain["std"], rel=1e-4)
+
+
+def test_the_compare_and_response_figures_carry_the_fit_units_and_bands(tmp_path):
+    u, y = _record(6)
+    recording = Recording.from_arrays([u[:500], u[500:]], [y[:500], y[500:]], TS, inputs=["heater"],
+                                      outputs=["plate"], input_units="V", output_units="degC")
+    model = TransferFunctionModel(2, 1).fit(recording)
+    figure = model.compare(recording)
+    [axis] = figure.axes
+    fit = model.evaluate(recording, initial_state="estimate").values["fit_percent"][0]
+    assert axis.get_title() == f"plate: fit {fit:.1f} %" and axis.get_ylabel() == "plate (degC)"
+    assert len(axis.lines) == 3  # measured, simulated, the join of the two trials
+    for kind in ("step", "impulse"):
+        drawn = model.response_figure(kind)
+        [response] = drawn.axes
+        assert response.get_title() == f"{kind}: heater → plate"
+        assert response.get_ylabel() == ("plate (degC/V)" if kind == "step" else "plate (degC/(V·s))")
+        assert len(response.collections) == 1  # the band
+        drawn.savefig(tmp_path / f"{kind}.png")
+    figure.savefig(tmp_path / "compare.png")

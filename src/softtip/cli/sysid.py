@@ -352,6 +352,14 @@ def sysid_fit(
                                                    "function."),
     residuals: Path = typer.Option(None, "--residuals", help="Save the residual tests' plot here (.png, .pdf, "
                                                              ".svg): on --validate, else on the estimation data."),
+    compare: Path = typer.Option(None, "--compare", help="Save the measured against the simulated outputs here (.png, "
+                                                         ".pdf, .svg), per output with its fit %, each trial from its "
+                                                         "estimated initial state: on the validation record if "
+                                                         "given, else on the estimation data."),
+    step: Path = typer.Option(None, "--step", help="Save every input's step response here (.png, .pdf, .svg), "
+                                                   "with its confidence band."),
+    impulse: Path = typer.Option(None, "--impulse", help="Save every input's impulse response (a pulse of unit "
+                                                         "area) here (.png, .pdf, .svg), with its confidence band."),
     confidence: float = typer.Option(0.95, "--confidence", help="Confidence of the intervals and the Bode band."),
     intervals: Intervals = typer.Option(Intervals.sandwich, "--intervals",
                                         help="tf: the coefficients' covariance: sandwich (Newey-West; honest for "
@@ -374,13 +382,18 @@ def sysid_fit(
     check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
     reading = _reading(ts, time_column, trial_column, columns, unit, resample)
     scale = _full_scale(full_scale)
-    for option, path in (("--bode", bode), ("--residuals", residuals)):
+    figures = (("--bode", bode), ("--residuals", residuals), ("--compare", compare), ("--step", step),
+               ("--impulse", impulse))
+    for option, path in figures:
         if path is not None and path.suffix.lower() not in FIGURE_SUFFIXES:
             fail(f"{option} {path}: expected a .png, .pdf or .svg file")
     sources = [data] + ([validate] if validate is not None else [])
-    for option, path in (("--model", model_file), ("--bode", bode), ("--residuals", residuals)):
+    for option, path in (("--model", model_file), *figures):
         if path is not None:
             check_output(path, option, sources, force=force)
+    written = [path for _, path in (("--model", model_file), *figures) if path is not None]
+    if len({path.resolve() for path in written}) < len(written):
+        fail("--model, --bode, --residuals, --compare, --step, --impulse: two outputs name the same file")
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
@@ -434,6 +447,13 @@ def sysid_fit(
             fail(f"--residuals: {checked.n_samples} samples are too few for residual tests")
         tests.figure().savefig(residuals)
         result["residuals"] = str(residuals)
+    if compare is not None:
+        estimator.compare(checked).savefig(compare)
+        result["compare"] = str(compare)
+    for name, path in (("step", step), ("impulse", impulse)):
+        if path is not None:
+            estimator.response_figure(name, confidence).savefig(path)
+            result[name] = str(path)
     if json_output:
         print(json.dumps(result, indent=2))
         return
@@ -459,7 +479,7 @@ def sysid_fit(
                                     result["validation_estimated_initial_state"], warnings["validation"]))
     if result["residual_tests"] is not None:
         _print_residual_tests(result["residual_tests"])
-    for name in ("saved", "bode", "residuals"):
+    for name in ("saved", "bode", "residuals", "compare", "step", "impulse"):
         if name in result:
             console.print(f"{name} -> {result[name]}")
 

@@ -20,13 +20,13 @@ covariance of their parameters (``covariance_``, ``uncertainty()``, ``bode()``; 
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Iterable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Annotated, Any, Optional, Self, Union
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from softtip._core.config import Flag, OpenFraction, PositiveInteger, checked, choice, expect, integer
 from softtip._core.threads import single_threaded_blas
@@ -44,6 +44,14 @@ from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, StateSpaceCovariance, parameter_covariance, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
+from softtip.sysid.responses import (
+    TimeResponse,
+    compare_figure,
+    response_figure,
+    response_length,
+    response_spread,
+    time_responses,
+)
 from softtip.sysid.robust import ASSUMPTIONS, COVARIANCES, SANDWICH, WHITE
 from softtip.sysid.simulation import (
     StreamingSimulator,
@@ -61,6 +69,7 @@ from softtip.sysid.uncertainty import (
     empirical_transfer_function,
     frequency_band,
     intervals,
+    normal_quantile,
     state_space_bands,
     state_space_intervals,
 )
@@ -99,7 +108,38 @@ def _require_levels_within_reach(recording: Recording) -> None:
                                           "'linear'; --detrend on the command line)")
 
 
-class IdentifiedModel(BaseEstimator):
+class Estimator:
+    """scikit-learn's estimator convention, without importing scikit-learn (whose import takes seconds,
+    longer than a command's start may): the keyword parameters of ``__init__`` are the estimator's
+    parameters, stored as given; ``get_params``/``set_params`` read and change them as
+    ``sklearn.base.BaseEstimator``'s do, so ``sklearn.base.clone`` copies one."""
+
+    @classmethod
+    def _parameter_names(cls) -> list[str]:
+        return sorted(name for name in inspect.signature(cls.__init__).parameters if name != "self")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The parameters by name (``deep`` as scikit-learn's: no parameter here is an estimator)."""
+        return {name: getattr(self, name) for name in self._parameter_names()}
+
+    def set_params(self, **params) -> Self:
+        """Changes the parameters named; refuses a name that is not one."""
+        names = self._parameter_names()
+        for name, value in params.items():
+            if name not in names:
+                raise IdentificationError(f"{name}: not a parameter of {type(self).__name__} "
+                                          f"(parameters: {', '.join(names)})")
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        signature = inspect.signature(type(self).__init__).parameters
+        defaults = {name: parameter.default for name, parameter in signature.items()}
+        changed = [f"{name}={value!r}" for name, value in self.get_params().items() if value != defaults[name]]
+        return f"{type(self).__name__}({', '.join(changed)})"
+
+
+class IdentifiedModel(Estimator):
     """What both kinds share once fitted: the discrete system ``system_`` at the sample time ``ts_``.
 
     Each kind identifies itself in ``_identify(recording)``, which returns its simulation of the
@@ -347,6 +387,33 @@ class IdentifiedModel(BaseEstimator):
         yhat = np.vstack([values[mask] for values, mask in zip(predicted, masks, strict=True)])
         return score_outputs(y, yhat, self.outputs_, self.output_units_, full_scale)
 
+    def compare(self, recording: Recording, initial_state: str = "estimate") -> Figure:
+        """The measured outputs of ``recording`` against the model's simulation from each trial's estimated
+        (or the zero) initial state, one axis per output with its fit % (MATLAB's ``compare``)."""
+        simulated = self.predict(recording, None, initial_state)
+        fits = self.evaluate_predictions(recording, simulated).values["fit_percent"]
+        return compare_figure([trial.y for trial in recording.trials], simulated, self.ts_, self.outputs_,
+                              self.output_units_, fits, recording.source,
+                              "estimated" if initial_state == "estimate" else "zero")
+
+    def time_response(self, kind: str = "step", steps: int | None = None, confidence: float = 0.95) -> TimeResponse:
+        """Each input's ``kind`` response ("step" or "impulse", see :mod:`softtip.sysid.responses`) over
+        ``steps`` samples (default: five time constants of the slowest pole, input delays added), with
+        its standard deviation where the parameter covariance was estimated."""
+        self._check_fitted()
+        z = normal_quantile(confidence)
+        if steps is None:
+            steps = response_length(self.system_) + max(self.delays_)
+        steps = checked(PositiveInteger, "steps", steps, IdentificationError)
+        response = time_responses(self.system_, steps, kind)
+        std = None if self.covariance_ is None else np.sqrt(self._response_variance(steps, kind))
+        return TimeResponse(kind, np.arange(steps) * self.ts_, response, std, z, confidence)
+
+    def response_figure(self, kind: str = "step", confidence: float = 0.95) -> Figure:
+        """:meth:`time_response` plotted, entry by entry, with its ``confidence`` band."""
+        return response_figure(self.time_response(kind, confidence=confidence), (self.inputs_, self.outputs_),
+                               (self.input_units_, self.output_units_))
+
     def score(self, recording: Recording, k: int | None = None) -> float:
         """The mean over outputs of R² (scikit-learn's ``score``), simulated unless ``k`` is given."""
         return self.evaluate(recording, k).mean("r2")
@@ -542,6 +609,17 @@ class StateSpaceModel(IdentifiedModel):
         return state_space_intervals(without_input_delays(self.system_, self.delays_), self._checked_covariance(),
                                      confidence, continuous=self.domain == "continuous")
 
+    def _response_variance(self, steps: int, kind: str) -> np.ndarray:
+        core = without_input_delays(self.system_, self.delays_)
+        dA, dB, dC, dD = self.covariance_.derivatives
+
+        def perturbed(k: int, h: float) -> StateSpace:
+            return with_input_delays(StateSpace(core.A + h * dA[k], core.B + h * dB[k], core.C + h * dC[k],
+                                                core.D + h * dD[k], core.ts), self.delays_)
+
+        # local coordinates: unit-sized directions
+        return response_spread(perturbed, np.zeros(len(dA)), self.covariance_.covariance, steps, kind)
+
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         core = without_input_delays(self.system_, self.delays_)
         band = None if self.covariance_ is None else state_space_bands(core, self.covariance_, omega, confidence)
@@ -669,6 +747,29 @@ class TransferFunctionModel(IdentifiedModel):
         lags = ", ".join(str(lag) for lag in self.covariance_lags_)
         return intervals(self.tf_, covariance, confidence) | {
             "method": method, "assumption": ASSUMPTIONS[method].format(lags=lags)}
+
+    def _response_variance(self, steps: int, kind: str) -> np.ndarray:
+        """Each output's coefficients move its row only: the rows' variances, summed."""
+        variance = np.zeros((steps, len(self.outputs_), len(self.inputs_)))
+        for i, covariance in enumerate(self.covariance_):
+            # the row's coefficients in the covariance's order: each entry's denominator after its 1, numerator
+            entries = [(a, b) for a, b in zip(self.tf_.denominators[i], self.tf_.numerators[i], strict=True)]
+            theta = np.concatenate([np.concatenate([a[1:], b]) for a, b in entries])
+            cuts = np.cumsum([0] + [len(a) - 1 + len(b) for a, b in entries])
+
+            def perturbed(k: int, h: float, i: int = i, theta: np.ndarray = theta, cuts: np.ndarray = cuts):
+                moved = theta.copy()
+                moved[k] += h
+                numerators = [list(row) for row in self.tf_.numerators]
+                denominators = [list(row) for row in self.tf_.denominators]
+                for j, (a, _) in enumerate(entries):
+                    part = moved[cuts[j]:cuts[j + 1]]
+                    denominators[i][j] = np.r_[1.0, part[:len(a) - 1]]
+                    numerators[i][j] = part[len(a) - 1:]
+                return with_input_delays(realise(numerators, denominators).to_discrete(self.ts_), self.delays_)
+
+            variance += response_spread(perturbed, theta, covariance, steps, kind)
+        return variance
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         band = None if self.covariance_ is None else \

@@ -27,7 +27,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-import scipy.signal
 
 from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
@@ -308,6 +307,8 @@ class Recording:
         """
         if kind not in ("mean", "linear"):
             raise DatasetError(f"detrend: expected 'mean' or 'linear', got {kind!r}")
+        import scipy.signal  # only here: it takes a third of a second to import
+
         how = "constant" if kind == "mean" else "linear"
         trials = [replace(trial, u=scipy.signal.detrend(trial.u, axis=0, type=how),
                           y=scipy.signal.detrend(trial.y, axis=0, type=how)) for trial in self.trials]

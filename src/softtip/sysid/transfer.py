@@ -70,7 +70,7 @@ from dataclasses import dataclass
 from math import comb
 
 import numpy as np
-from scipy import linalg, optimize
+from scipy import linalg
 
 from softtip._core.threads import single_threaded_blas
 from softtip.sysid.metrics import fit_percent
@@ -742,6 +742,8 @@ def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, sta
                 residual = np.full_like(residual, np.nan)
             last.update(theta=theta.copy(), residual=residual, jacobian=-sensitivities)
         return last
+
+    from scipy import optimize  # here, not at import: a command that fits nothing need not load it
 
     result = optimize.least_squares(lambda theta: evaluate(theta)["residual"], row.parameters(),
                                     jac=lambda theta: evaluate(theta)["jacobian"], method="trf", x_scale="jac",

@@ -23,9 +23,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from statistics import NormalDist
+
 import numpy as np
-import scipy.signal
-import scipy.stats
 
 from softtip.sysid.refine import StateSpaceCovariance
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -40,7 +40,7 @@ def normal_quantile(confidence: float) -> float:
     outside (0, 1)."""
     if not 0 < confidence < 1:
         raise IdentificationError(f"confidence: expected a fraction between 0 and 1, got {confidence!r}")
-    return float(scipy.stats.norm.ppf(0.5 + confidence / 2))
+    return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
 def _entry_slices(tf: TransferFunctionMatrix, i: int) -> list[tuple[slice, slice]]:
@@ -152,6 +152,8 @@ def empirical_transfer_function(u: np.ndarray, y: np.ndarray, ts: float, segment
     nu, ny = u.shape[1], y.shape[1]
 
     def cross(a, b):
+        import scipy.signal  # only here: it takes a third of a second to import
+
         return scipy.signal.csd(a, b, fs=1 / ts, nperseg=segment)
 
     frequency = cross(u[:, 0], u[:, 0])[0]
