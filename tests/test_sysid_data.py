@@ -279,3 +279,25 @@ def test_the_honest_splits_do_not_warn():
         warnings.simplefilter("error")
         split_by_trial(recording, 0.8)
         split_by_time(recording, 0.8)
+
+
+def test_a_loggers_missing_readings_are_dropped_and_a_headerless_csv_is_named(tmp_path):
+    """A CSV without a header (named by ``names``) whose logger writes -1 for "no reading" in every other
+    row: those rows are dropped, so the rest is resampled from the readings alone (np.interp on them the
+    reference); without ``missing`` the -1 stay in as values."""
+    t = 100.0 + np.cumsum(np.full(200, 0.05))
+    force = np.sin(t)
+    force[1::2] = -1.0
+    path = tmp_path / "states.csv"
+    path.write_text("".join(f"{a:.6f},{b:.6f},{c:.6f}\r\n" for a, b, c in zip(t, np.cos(t), force)))
+    recording = read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time",
+                               missing=-1, resample=0.1)
+    grid = t[0] + 0.1 * np.arange(recording.n_samples)
+    np.testing.assert_allclose(recording.trials[0].y[:, 0], np.interp(grid, t[::2], np.round(np.sin(t[::2]), 6)),
+                               atol=1e-12)
+    assert recording.resampled.before == 100
+    kept = read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time", ts=0.05)
+    assert kept.n_samples == 200 and np.sum(kept.trials[0].y == -1) == 100
+    with pytest.raises(DatasetError, match="every row holds the missing value 0.5 in a signal"):
+        path.write_text("1,0.5,0.5\n2,0.5,0.5\n")
+        read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time", missing=0.5)

@@ -4,6 +4,7 @@ recordings (CSV, Parquet or softtip datasets)."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, replace
 from enum import Enum
 from pathlib import Path
@@ -62,9 +63,11 @@ DELAY = typer.Option("0", "--delay", help="Input delay in samples: one for all i
 MAX_DELAY = typer.Option(40, "--max-delay", help="Longest delay (samples) --delay estimate searches.")
 
 
-COLUMNS = typer.Option(None, "--columns", help="Names of the columns of a whitespace .dat/.txt file without a "
-                                                "header, in order, separated by commas (default: 1, 2 ... by "
-                                                "position).")
+COLUMNS = typer.Option(None, "--columns", help="Names of the columns of a text file without a header (.csv, "
+                                                "whitespace .dat/.txt), in order, separated by commas (.dat/.txt "
+                                                "default: 1, 2 ... by position).")
+MISSING = typer.Option(None, "--missing", help="The value the logger writes for 'no reading' (like -1): rows "
+                                               "holding it in an input or output are dropped (then --resample).")
 UNIT = typer.Option(None, "--unit", help="A column's unit as NAME=UNIT (repeat; e.g. heater=V): carried into every "
                                          "table, plot and the saved model.")
 RESAMPLE = typer.Option(None, "--resample", help="Interpolate irregular time stamps linearly onto an even grid of "
@@ -88,9 +91,10 @@ class Reading:
     columns: list[str] | None
     units: dict[str, str]
     resample: float | None
+    missing: float | None
 
 
-def _reading(ts, time_column, trial_column, columns, units, resample) -> Reading:
+def _reading(ts, time_column, trial_column, columns, units, resample, missing) -> Reading:
     check_number(ts, "--ts", above=0, unit="s")
     check_number(resample, "--resample", above=0, unit="s")
     if resample is not None and ts is not None:
@@ -106,7 +110,9 @@ def _reading(ts, time_column, trial_column, columns, units, resample) -> Reading
         if name.strip() in pairs:
             fail(f"--unit: {name.strip()!r} given more than once")
         pairs[name.strip()] = unit.strip()
-    return Reading(ts, time_column, trial_column, names, pairs, resample)
+    if missing is not None and not math.isfinite(missing):
+        fail(f"--missing = {missing}: expected a finite number (the value written for 'no reading')")
+    return Reading(ts, time_column, trial_column, names, pairs, resample, missing)
 
 
 def _names(values: list[str]) -> list[str]:
@@ -122,7 +128,7 @@ def _read(path: Path, inputs: list[str], outputs: list[str], reading: Reading, u
         fail(f"--unit {unknown[0]}=...: {unknown[0]!r} is not an --input or --output")
     recording = read_recording(path, inputs, outputs, ts=reading.ts, time_column=reading.time_column,
                                trial_column=reading.trial_column, units=units or None, names=reading.columns,
-                               resample=reading.resample)
+                               resample=reading.resample, missing=reading.missing)
     if recording.resampled is not None:
         errors.print(f"[yellow]note:[/] {path}: {escape(recording.resampled.describe())}")
     return recording
@@ -342,6 +348,7 @@ def sysid_fit(
     columns: str = COLUMNS,
     unit: list[str] = UNIT,
     resample: float = RESAMPLE,
+    missing: float = MISSING,
     validate: Path = VALIDATE,
     validate_input: list[str] = VALIDATE_INPUT,
     validate_output: list[str] = VALIDATE_OUTPUT,
@@ -380,7 +387,7 @@ def sysid_fit(
         fail(f"--confidence = {confidence}: expected a fraction between 0 and 1")
     check_number(lags, "--lags", minimum=1, maximum=100_000)
     check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
-    reading = _reading(ts, time_column, trial_column, columns, unit, resample)
+    reading = _reading(ts, time_column, trial_column, columns, unit, resample, missing)
     scale = _full_scale(full_scale)
     figures = (("--bode", bode), ("--residuals", residuals), ("--compare", compare), ("--step", step),
                ("--impulse", impulse))
@@ -520,6 +527,7 @@ def sysid_orders(
     columns: str = COLUMNS,
     unit: list[str] = UNIT,
     resample: float = RESAMPLE,
+    missing: float = MISSING,
     validate: Path = VALIDATE,
     validate_input: list[str] = VALIDATE_INPUT,
     validate_output: list[str] = VALIDATE_OUTPUT,
@@ -533,7 +541,7 @@ def sysid_orders(
     from softtip.sysid import order_table
 
     check_number(max_delay, "--max-delay", minimum=0, maximum=100_000)
-    reading = _reading(ts, time_column, trial_column, columns, unit, resample)
+    reading = _reading(ts, time_column, trial_column, columns, unit, resample, missing)
     delay_per_input = _delay(delay)
     chosen = None if orders is None else _order_range(orders)
     inputs, outputs = _names(input), _names(output)
@@ -576,6 +584,7 @@ def sysid_predict(
     trial_column: str = TRIAL_COLUMN,
     columns: str = COLUMNS,
     resample: float = RESAMPLE,
+    missing: float = MISSING,
     full_scale: list[float] = FULL_SCALE,
     out: Path = typer.Option(None, "--out", "-o", help="Write trial, time_s and the predicted outputs (.parquet)."),
     force: bool = FORCE,
@@ -589,7 +598,7 @@ def sysid_predict(
     from softtip.sysid.recording import file_columns
 
     check_number(horizon, "--horizon", minimum=1, maximum=10_000_000)
-    reading = _reading(ts, time_column, trial_column, columns, None, resample)
+    reading = _reading(ts, time_column, trial_column, columns, None, resample, missing)
     scale = _full_scale(full_scale)
     if out is not None:
         check_output(out, "--out", [model_file, data], force=force)

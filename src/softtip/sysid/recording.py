@@ -451,13 +451,13 @@ def _suffix(path: Path) -> str:
 
 def file_columns(path: str | os.PathLike, names: Sequence[str] | None = None) -> list[str]:
     """The column names of a CSV (``.csv``), Parquet (``.parquet``) or whitespace-separated (``.dat``,
-    ``.txt``; ``names`` those of a file without a header) file."""
+    ``.txt``) file; ``names`` those of a text file without a header."""
     path = Path(path)
     suffix = _suffix(path)
-    if suffix in WHITESPACE:
-        return list(whitespace_columns(path, names))
+    if suffix in WHITESPACE or (suffix == ".csv" and names is not None):
+        return list(whitespace_columns(path, names, None if suffix in WHITESPACE else ","))
     if names is not None:
-        raise DatasetError(f"{path}: column names are for a whitespace-separated file without a header")
+        raise DatasetError(f"{path}: column names are for a text file without a header (.csv, .dat, .txt)")
     try:
         return pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
     except (pa.ArrowException, OSError) as problem:
@@ -468,24 +468,29 @@ def file_columns(path: str | os.PathLike, names: Sequence[str] | None = None) ->
 def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequence[str], *,
                    ts: float | None = None, time_column: str | None = None, trial_column: str | None = None,
                    units: Mapping[str, str] | None = None, time_tolerance: float = 0.02,
-                   names: Sequence[str] | None = None, resample: float | None = None) -> Recording:
+                   names: Sequence[str] | None = None, resample: float | None = None,
+                   missing: float | None = None) -> Recording:
     """The columns ``inputs`` and ``outputs`` of a CSV file (``.csv``), a Parquet file (``.parquet``) or a
     whitespace-separated text file (``.dat``, ``.txt``: DaISy's files; ``names`` the columns of one
-    without a header row, else they are named 1, 2 ... by position).
+    without a header row, else they are named 1, 2 ... by position; a CSV file without a header row is
+    read with ``names`` too).
 
     A softtip dataset file is read as a :class:`~softtip.data.Dataset` (its channels and labels, with
     their units). Any other file is read as plain columns: ``time_column`` (seconds; default ``time_s``
     when present, else ``ts`` must be given) and ``trial_column`` (integer ids, the rows of a trial
     contiguous; default ``trial`` when present, else one trial), ``units`` a mapping of column to unit.
     ``resample`` (s): irregular time stamps interpolated linearly onto that even grid, trial by trial
-    (what was done is kept as the recording's ``resampled``).
+    (what was done is kept as the recording's ``resampled``). ``missing``: the value a logger writes for
+    "no reading" (such as -1): a row holding it in a signal is dropped (then resample).
     """
     path = Path(path)
     suffix = _suffix(path)
-    whitespace = whitespace_columns(path, names) if suffix in WHITESPACE else None
+    whitespace = whitespace_columns(path, names, None if suffix in WHITESPACE else ",") \
+        if suffix in WHITESPACE or (suffix == ".csv" and names is not None) else None
     present = list(whitespace) if whitespace is not None else file_columns(path, names)
     if suffix == ".parquet" and _is_dataset_file(path):
-        if time_column is not None or trial_column is not None or units is not None or resample is not None:
+        if time_column is not None or trial_column is not None or units is not None or resample is not None \
+                or missing is not None:
             raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units, and is evenly sampled")
         return Recording.from_dataset(Dataset.read(path), inputs, outputs, ts=ts, time_tolerance=time_tolerance,
                                       source=str(path))
@@ -512,6 +517,12 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     unknown = [name for name in units if name not in (*inputs, *outputs)]
     if unknown:
         raise DatasetError(f"{path}: units: {unknown[0]!r} is not an input or output")
+    if missing is not None:
+        kept = ~np.any([columns[name] == missing for name in (*inputs, *outputs)], axis=0)
+        if not kept.any():
+            raise DatasetError(f"{path}: every row holds the missing value {missing:g} in a signal")
+        columns = {name: columns[name][kept] for name in wanted}
+        trial = trial[kept]
     return _assemble(str(path), trial, None if time_name is None else columns[time_name], columns, list(inputs),
                      list(outputs), [units.get(name, "") for name in inputs], [units.get(name, "") for name in outputs],
                      ts, time_tolerance, time_name or TIME, resample)
