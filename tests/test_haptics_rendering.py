@@ -215,3 +215,22 @@ def test_presses_that_never_touch_are_refused():
         fit_presses(DEVICE, np.zeros((2, 3)), np.zeros((2, 6)), 7.5e-3)
     with pytest.raises(ValueError, match="presses: 6 given"):
         fit_presses(DEVICE, np.zeros((6, 3)), np.zeros((6, 6)), 7.5e-3)
+
+
+def test_saturated_presses_stay_out_of_the_hertz_fit():
+    from softtip.mechanics.plate_contact import PlateContactLaw
+    from softtip.systems.haptics.personalisation import fit_presses, press_configurations
+
+    # a stiff 9 mm Hertz finger: the two deepest presses push the Nano17's Fz past its 17 N range
+    stiff = Fingertip(name="stiff 9 mm", radius=9e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=5e6))
+    presses = press_configurations(DEVICE, stiff.radius)
+    read = sensed_contact(DEVICE, stiff, presses, CollectionSettings(), np.random.default_rng(8))
+    assert read.saturated.tolist() == [False, False, False, True, True]
+    fit = fit_presses(DEVICE, presses, read.platform_wrenches, stiff.radius, saturated=read.saturated)
+    assert fit.touching == 3
+    # Hertz by hand over the three unsaturated presses: F = (4/3) E/(1 − ν²) √R δ^1.5, least squares in E
+    depth, force = fit.depths[:3], np.linalg.norm(read.platform_wrenches[:3, :3], axis=1)
+    shape = 4 / 3 / (1 - 0.5**2) * math.sqrt(9e-3) * depth**1.5
+    assert fit.youngs_modulus == pytest.approx(np.sum(shape * force) / np.sum(shape**2), rel=1e-12)
+    # the window-averaged noise moves the modulus by under 0.1 %; the clipped 17 N readings would pull it to 3.8 MPa
+    assert fit.youngs_modulus == pytest.approx(5e6, rel=1e-3)
