@@ -37,6 +37,7 @@ from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
+from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
 from softtip.systems.haptics.sensitivity import CURVES, DEFAULT_VARIATIONS, VARIATION_NAMES, FingerVariation
 from softtip.systems.haptics.study import METHODS, StudySettings, run_study
@@ -79,6 +80,8 @@ class HapticsParameters:
     light_force_N: PositiveNumber = _STUDY.light_force
     contact_threshold_N: PositiveNumber = CONTACT_THRESHOLD
     target_draws: integer(1) = _STUDY.target_draws
+    data_driven: choice(*DATA_DRIVEN_VARIANTS) = _STUDY.data_driven
+    ds_torque_length_m: PositiveNumber = _STUDY.torque_length
     hold_s: PositiveNumber = _COLLECTION.hold_s
     window_s: PositiveNumber = _COLLECTION.window_s
     fingertips: Fingertips = field(default_factory=lambda: list(FINGERTIP_NAMES))
@@ -104,7 +107,8 @@ class HapticsParameters:
                              adaptive_budget=self.adaptive_budget, n_neighbours=self.n_neighbours,
                              weighting_power=self.weighting_power, light_force=self.light_force_N,
                              contact_threshold=self.contact_threshold_N, target_draws=self.target_draws,
-                             min_target_force=self.contact_threshold_N)
+                             min_target_force=self.contact_threshold_N, data_driven=self.data_driven,
+                             torque_length=self.ds_torque_length_m)
 
     def selected_fingertips(self) -> tuple[Fingertip, ...]:
         """The test fingertips ``fingertips`` names, in the study's order."""

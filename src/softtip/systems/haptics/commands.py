@@ -87,7 +87,8 @@ def bench_haptics(
                                                   user_finger.radius).motor_inputs))
     data_driven_s = timed(lambda: NearestNeighbourRenderer(**standard).fit(
         fs.finger_wrenches, personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
-                                                    user.platform_wrenches, **standard).motor_inputs))
+                                                    user.platform_wrenches, renderer.n_neighbours,
+                                                    renderer.contact_threshold).motor_inputs))
     index_s = timed(lambda: NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, fs.motor_inputs))
     report = {
         "rendering": {"p50_us": _percentile_us(render_s, 50), "p99_us": _percentile_us(render_s, 99),

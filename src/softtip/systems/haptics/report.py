@@ -25,6 +25,7 @@ from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.haptics.bench import CONDITIONS, RENDERED
 from softtip.systems.haptics.collection import collection_duration, motor_grid
+from softtip.systems.haptics.data_driven import compare_data_driven
 from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS
 from softtip.systems.haptics.sensitivity import (
     CURVE_LABELS,
@@ -43,6 +44,7 @@ from softtip.systems.haptics.study import (
     PAIRS,
     PUBLISHED_METHODS,
     SHORT_NAMES,
+    collect_study,
     error_box_plots,
     wilcoxon_tests,
 )
@@ -119,9 +121,18 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "pooled_A_vs_B": _test(pooled)}
     sweeps = _sweeps(protocol, found.errors, progress)
     results |= sweeps.results
+    fingertips, settings, collection = p.selected_fingertips(), p.study_settings(), p.collection_settings()
+    variants = compare_data_driven(device, fingertips, *collect_study(device, fingertips, settings, collection,
+                                                                      protocol.seed), settings, collection, protocol.seed)
+    tables.append(variants.table())
+    variants_figure = Figure.of("Personalisation A: as published against softtip's 3-D variant", (
+        "Median error (N) per fingertip of A searching the DS's raw 6-D wrenches and of A searching its 3-D forces "
+        "in the device's axes, on the same tables. Look for whether the published search loses anything by "
+        "needing no device model."), variants.figure())
+    results["data_driven_variants"] = variants.to_dict()
     headline_row = LARGEST if LARGEST in found.fingertips else POOLED
     headline = Headline.of(directions, headline_row, "B − A", f"median error B − A, {headline_row}", "N")
-    return StudyOutcome(results, tables + sweeps.tables, [figure, *sweeps.figures], headline, [
+    return StudyOutcome(results, tables + sweeps.tables, [figure, variants_figure, *sweeps.figures], headline, [
         *NOTES,
         "The targets are the FS's readings of random configurations over the servos' whole range that touch it: "
         "on softtip's device (its dimensions are softtip's choice, device.toml) they press harder than the "
@@ -343,6 +354,9 @@ def _departures_table() -> Table:
                     "the same procedure over the servos' whole range: stronger targets"),
         "people": ("a perception study rated realism", "not reproduced: only the forces"),
         "methods": ("standard, A, B", "also B+ (presses) and A+ (adaptive table), softtip's"),
+        "method A's search": ("the DS's raw wrenches (force and torque)",
+                              "the same, torques over the FS's radius; softtip's 3-D variant in the device's axes "
+                              "compared beside it"),
     }
     cells = {(row, column): text for row, texts in rows.items()
              for column, text in zip(("published", "softtip"), texts, strict=True)}
