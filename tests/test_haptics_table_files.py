@@ -218,3 +218,54 @@ def test_exported_table_is_the_personalised_one_for_the_geometric_method(tmp_pat
     assert np.allclose(table.wrenches, standard.features_, rtol=0, atol=0)
     assert np.all(table.motor_inputs.sum(axis=1)[1:] <= standard.motor_inputs_.sum(axis=1)[1:] + 1e-12)
     assert not np.allclose(table.motor_inputs, standard.motor_inputs_)
+
+
+def _protocol(tmp_path, **top):
+    from softtip.lab.protocols import protocol_from_dict
+
+    parameters = {"trials": 12, "fs_levels": 7, "user_levels": 6, "fingertips": ["human 3 (10 mm)"],
+                  "curve_n_neighbours": [], "curve_weighting_powers": [], "curve_fs_levels": [], "curve_user_levels": [],
+                  "variations": []}
+    return protocol_from_dict({"protocol": "haptics", "seed": 3, "parameters": parameters, **top}, "test.toml", tmp_path)
+
+
+def test_a_protocol_takes_fingertip_files_and_a_recorded_fs_table(tmp_path):
+    from softtip.lab import run_protocol
+    from softtip.systems.haptics.study import fs_table
+
+    (tmp_path / "mine.toml").write_text('[fingertip]\nname = "mine"\nradius_mm = 10.0\n')
+    simulated = _protocol(tmp_path)
+    # the FS table the simulated study collects, written as a researcher's recording (with the DS's readings)
+    fs = fs_table(DEVICE, 7, simulated.parameters.collection_settings(), 3)
+    names = ["fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm"]
+    columns = {**dict(zip(names, fs.finger_wrenches.T)), **{f"ds_{n}": c for n, c in zip(names, fs.platform_wrenches.T)},
+               **{f"motor{k + 1}_rad": c for k, c in enumerate(fs.motor_inputs.T)}}
+    parquet.write_table(pa.table(columns), tmp_path / "fs.parquet")
+    recorded = _protocol(tmp_path, fingertip_files=["mine.toml"], fs_table="fs.parquet")
+    assert [f.name for f in recorded.design.fingertips] == ["mine"]
+    expected, _ = run_protocol(simulated)
+    found, _ = run_protocol(recorded)
+    rows = found.column("fingertip") == "human 3 (10 mm)"
+    # the recording is the simulation's own table: the study renders exactly as the simulated one did
+    assert np.array_equal(found.column("error_N")[rows], expected.column("error_N"))
+    assert found.metadata.sensor_settings["fs_table"] == str(tmp_path / "fs.parquet")
+    # the file's fingertip is the 10 mm cast: the same commanded motor inputs for the noise-free methods
+    methods = found.column("method")
+    for method in ("standard", "geometric (B)"):
+        mine, cast = (found.column("fingertip") == "mine") & (methods == method), rows & (methods == method)
+        for motor in ("motor1_rad", "motor2_rad", "motor3_rad"):
+            assert np.array_equal(found.column(motor)[mine], found.column(motor)[cast])
+
+
+@pytest.mark.parametrize(("top", "words"), [
+    ({"fingertip_files": ["missing.toml"]}, "missing.toml"),
+    ({"fingertip_files": ["same.toml"]}, "fingertip_files = .*'human 3 \\(10 mm\\)' is used twice"),
+    ({"fs_table": "plain.csv"}, "plain.csv: the study's personalisation A needs the DS's readings"),
+    ({"fs_table": "missing.csv"}, "missing.csv: no such file"),
+])
+def test_bad_researcher_files_in_a_protocol_are_refused_in_one_line(tmp_path, top, words):
+    (tmp_path / "same.toml").write_text('[fingertip]\nname = "human 3 (10 mm)"\nradius_mm = 10.0\n')
+    (tmp_path / "plain.csv").write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n0,0,1,1,1,1\n")
+    with pytest.raises(ValueError, match=words) as refused:
+        _protocol(tmp_path, **top)
+    assert "\n" not in str(refused.value)

@@ -275,12 +275,12 @@ def _refusing(fingertip: Fingertip):
 
 
 def collect_study(device: DeviceSpec, fingertips: tuple[Fingertip, ...], settings: StudySettings,
-                  collection: CollectionSettings, seed: int,
-                  progress: Progress = SILENT) -> tuple[SharedTables, tuple[UserData, ...]]:
-    """What the study collects before it renders: the FS table and targets, then each test
-    fingertip's user table and presses, each on the stream the study draws it from."""
+                  collection: CollectionSettings, seed: int, progress: Progress = SILENT,
+                  fs: Collection | None = None) -> tuple[SharedTables, tuple[UserData, ...]]:
+    """What the study collects before it renders: the FS table (``fs``: a recorded one instead) and
+    targets, then each test fingertip's user table and presses, each on the stream the study draws it from."""
     with progress.task("FS table and targets", total=1) as task:
-        shared = SharedTables(fs_table(device, settings.fs_levels, collection, seed),
+        shared = SharedTables(fs_table(device, settings.fs_levels, collection, seed) if fs is None else fs,
                               record_targets(device, settings, collection, seed))
         task.advance()
     user_data = []
@@ -307,11 +307,12 @@ def study_fingertips(device: DeviceSpec, fingertips: tuple[Fingertip, ...], shar
 
 def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
               device: DeviceSpec | None = None, fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
-              collection: CollectionSettings = CollectionSettings()) -> HapticsStudy:
-    """The published study on the simulated device (see the module's notes)."""
+              collection: CollectionSettings = CollectionSettings(), fs: Collection | None = None) -> HapticsStudy:
+    """The published study on the simulated device (see the module's notes); ``fs``: a recorded FS
+    table instead of the simulated one."""
     seed = checked(integer(0), "seed", seed)
     device = load_device() if device is None else device
-    shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+    shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress, fs)
     outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
     return HapticsStudy(settings, seed, shared.targets, outcomes,
                         pooled_test([o.errors for o in outcomes], wilcoxon_tests(len(fingertips))),
