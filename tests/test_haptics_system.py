@@ -146,6 +146,8 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"curve_fs_levels": [7, 7]}}, "curve_fs_levels = .*each value once"),
              ({"parameters": {"curve_weighting_powers": [5.0]}}, "curve_weighting_powers"),
              ({"parameters": {"variations": ["thumb"]}}, "variations"),
+             ({"parameters": {"data_driven": "raw"}}, "data_driven = 'raw'"),
+             ({"parameters": {"ds_torque_length_m": 0.0}}, "ds_torque_length_m = 0"),
              ({"device": "missing.toml"}, "missing.toml")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:
