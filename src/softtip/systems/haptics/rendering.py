@@ -139,9 +139,9 @@ class NearestNeighbourRenderer:
         wrenches, motor = _checked_table(table.wrenches, "wrenches"), np.asarray(table.motor_inputs, dtype=float)
         if self.torque_length is not None and wrenches.shape[1] != 6:
             raise TableError(f"wrenches have shape {wrenches.shape}: a torque length needs (entries, 6) wrenches")
-        forces = wrench_features(wrenches, self.torque_length)
+        features = wrench_features(wrenches, self.torque_length)
         touching = np.linalg.norm(wrenches[:, FORCE], axis=1) >= self.contact_threshold
-        duplicate = _first_duplicate(forces[touching])
+        duplicate = _first_duplicate(features[touching])
         if duplicate is not None:
             rows = np.flatnonzero(touching)
             read = "force" if self.torque_length is None else "wrench"
@@ -149,16 +149,16 @@ class NearestNeighbourRenderer:
         free = np.flatnonzero(~touching)
         if len(free):
             released = free[np.argmin(motor[free].sum(axis=1))]  # argmin: the first on a tie
-            forces = np.vstack([np.zeros((1, forces.shape[1])), forces[touching]])
+            features = np.vstack([np.zeros((1, features.shape[1])), features[touching]])
             motor = np.vstack([motor[released], motor[touching]])
-        if len(forces) < self.n_neighbours:
-            raise TableError(f"n_neighbours = {self.n_neighbours}: the table has only {len(forces)} distinct entries")
-        self.features_, self.motor_inputs_ = forces, motor
-        self.tree_ = cKDTree(forces)
+        if len(features) < self.n_neighbours:
+            raise TableError(f"n_neighbours = {self.n_neighbours}: the table has only {len(features)} distinct entries")
+        self.features_, self.motor_inputs_ = features, motor
+        self.tree_ = cKDTree(features)
         self.merged_ = len(free)
-        gaps, _ = self.tree_.query(forces, k=2)
+        gaps, _ = self.tree_.query(features, k=2)
         self.widest_gap_ = float(gaps[:, 1].max())
-        self.lowest_, self.highest_ = forces.min(axis=0), forces.max(axis=0)
+        self.lowest_, self.highest_ = features.min(axis=0), features.max(axis=0)
         # what render_one reads each call, precomputed
         self._query, self._k = self.tree_.query, max(self.n_neighbours, 2)
         self._motor_and_ones = np.hstack([motor, np.ones((len(motor), 1))])
