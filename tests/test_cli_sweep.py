@@ -288,7 +288,8 @@ BAD_TABLES = [("table-garbage.parquet", GARBAGE), ("table-missing.csv", None), (
               ("table-motors.csv", b"fx_N,fy_N,fz_N\n0,0,1\n0,0,2\n"),
               ("table-torques.csv", b"fx_N,fy_N,fz_N,tx_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,1,0,0,0,0\n"),
               ("table-text.csv", (_TABLE + "0,0,one,0,0,10\n0,0,2,0,0,20\n").encode()),
-              ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode())]
+              ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode()),
+              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode())]
 FILE_CASES = [(words, option, name, content) for words in (("haptics", "render"), ("haptics", "table", "export"))
               for option, files in (("--fingertip", BAD_FINGERTIPS), ("--table", BAD_TABLES))
               for name, content in files]

@@ -71,13 +71,15 @@ def test_a_parquet_table_with_torques_and_the_ds_reads_back_as_written(tmp_path)
     ("fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n0,0,0,0,0,0\n1,1,1,1,1,181\n",
      "column motor3_deg, row 1: 181 is beyond"),
     ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,1,1,-0.1,1,1\n", "column motor1_rad, row 1"),
+    ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,1,1,1,1,1\n0,0,1,1,1,1\n",
+     "n_neighbours = 8: the table has only 3 distinct entries"),
 ])
 def test_bad_table_files_are_refused_in_one_line(tmp_path, text, words):
     path = tmp_path / "table.csv"
     path.write_text(text)
     with pytest.raises(TableFileError, match=f"table file {path}: .*" + words.replace("(", r"\(").replace(")", r"\)")) \
             as refused:
-        read_table(path, DEVICE)
+        read_table(path, DEVICE).renderer()
     assert "\n" not in str(refused.value)
 
 

@@ -151,8 +151,8 @@ def _check_choices(method: str, fs_levels: int, seed: int) -> None:
         fail(f"--seed = {seed}: expected an integer >= 0")
 
 
-def _renderer(device, table, fs_levels: int, rng: np.random.Generator, method: str, finger, progress):
-    """The renderer for ``finger``: on the recorded ``table`` or on a simulated FS table of
+def _renderer(device, renderer, fs_levels: int, rng: np.random.Generator, method: str, finger, progress):
+    """The renderer for ``finger``: ``renderer`` (a recorded table's), or one on a simulated FS table of
     ``fs_levels``³ configurations, personalised by ``method``; and how many entries the geometric
     method could not reach."""
     from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
@@ -160,10 +160,10 @@ def _renderer(device, table, fs_levels: int, rng: np.random.Generator, method: s
     from softtip.systems.haptics.personalisation import personalise_geometric
     from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 
-    with progress.task("haptics: FS table", total=1) as task:
-        renderer = (fs_renderer(device, fs_levels, rng) if table is None
-                    else NearestNeighbourRenderer().fit(table.wrenches, table.motor_inputs))
-        task.advance()
+    if renderer is None:
+        with progress.task("haptics: FS table", total=1) as task:
+            renderer = fs_renderer(device, fs_levels, rng)
+            task.advance()
     if method != "geometric":
         return renderer, 0
     personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
@@ -228,6 +228,7 @@ def render(
     device = device_from_file(device_file or "shipped").device
     check_baud(baud, device.servo.command_rate_hz, "--baud")
     table = read_table(table_file, device) if table_file else None
+    recorded = table.renderer() if table else None
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
     rng = np.random.default_rng(seed)
     # the port is the last check: opened before any work, released whatever happens next
@@ -235,7 +236,7 @@ def render(
               else SerialDevice(port, device, baud, "--port", "--baud"))
     try:
         sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
-        renderer, out_of_reach = _renderer(device, table, fs_levels, rng, method, finger, progress_for(json_output))
+        renderer, out_of_reach = _renderer(device, recorded, fs_levels, rng, method, finger, progress_for(json_output))
         if wanted is None:
             wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
     except BaseException:
@@ -298,7 +299,7 @@ def export_table(
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
     table = read_table(table_file, device) if table_file else None
-    renderer, out_of_reach = _renderer(device, table, fs_levels, np.random.default_rng(seed), method, finger,
+    renderer, out_of_reach = _renderer(device, table.renderer() if table else None, fs_levels, np.random.default_rng(seed), method, finger,
                                        progress_for(json_output))
     source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
     provenance = (f"{source} on {device.device.name}, {method}"

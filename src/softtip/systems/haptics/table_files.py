@@ -25,7 +25,7 @@ import numpy as np
 
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.live import table_columns
-from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+from softtip.systems.haptics.rendering import NearestNeighbourRenderer, TableError
 
 FORCES = ("fx_N", "fy_N", "fz_N")
 TORQUES = ("tx_Nm", "ty_Nm", "tz_Nm")
@@ -40,7 +40,7 @@ class TableFileError(ValueError):
 
 @dataclass(frozen=True)
 class RecordedTable:
-    """A table read from a file: the sensor's wrenches (entries, 3 or 6: N, N·m), the motor inputs
+    """A table read from the file ``source``: the sensor's wrenches (entries, 3 or 6: N, N·m), the motor inputs
     (entries, 3, rad), the DS's wrenches (entries, 6) if the file has them, and how many of the file's
     rows were merged into others (equal forces)."""
 
@@ -49,6 +49,14 @@ class RecordedTable:
     motor_inputs: np.ndarray
     platform_wrenches: np.ndarray | None
     merged: int
+
+    def renderer(self, **settings) -> NearestNeighbourRenderer:
+        """The renderer on this table (``settings``: the renderer's); a table it cannot index (fewer
+        distinct entries than neighbours ...) is refused naming the file."""
+        try:
+            return NearestNeighbourRenderer(**settings).fit(self.wrenches, self.motor_inputs)
+        except TableError as problem:
+            raise TableFileError(f"table file {self.source}: {problem}") from None
 
 
 def _numbers(columns: dict, names: tuple[str, ...], path: Path) -> np.ndarray:
