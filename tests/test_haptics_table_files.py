@@ -264,10 +264,14 @@ def test_a_protocol_takes_fingertip_files_and_a_recorded_fs_table(tmp_path):
     ({"fingertip_files": ["same.toml"]}, "fingertip_files = .*'human 3 \\(10 mm\\)' is used twice"),
     ({"fs_table": "plain.csv"}, "plain.csv: the study's personalisation A needs the DS's readings"),
     ({"fs_table": "missing.csv"}, "missing.csv: no such file"),
+    ({"fs_table": "small.csv"}, "small.csv: n_neighbours = 8: the table has only 2 distinct entries"),
 ])
 def test_bad_researcher_files_in_a_protocol_are_refused_in_one_line(tmp_path, top, words):
     (tmp_path / "same.toml").write_text('[fingertip]\nname = "human 3 (10 mm)"\nradius_mm = 10.0\n')
     (tmp_path / "plain.csv").write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n0,0,1,1,1,1\n")
+    ds = ",".join(f"ds_{n}" for n in ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm"))
+    (tmp_path / "small.csv").write_text(f"fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad,{ds}\n"
+                                        "0,0,0,0,0,0,0,0,0,0,0,0\n0,0,1,1,1,1,0,0,-1,0,0,0\n")
     with pytest.raises(ValueError, match=words) as refused:
         _protocol(tmp_path, **top)
     assert "\n" not in str(refused.value)

@@ -177,15 +177,17 @@ def study_fingertips(parameters: HapticsParameters, setup: HapticsDevice) -> tup
     return parameters.selected_fingertips() + setup.fingertips
 
 
-def recorded_fs_table(path: Path, device: DeviceSpec, hold_s: float) -> Collection:
-    """A recorded FS table for the study: its DS readings are needed (personalisation A), its real
-    collection time is that of its configurations on ``device``, held ``hold_s`` each."""
+def recorded_fs_table(path: Path, device: DeviceSpec, parameters: HapticsParameters) -> Collection:
+    """A recorded FS table for the study, checked before any work: its DS readings are needed
+    (personalisation A) and the renderer must index it; its real collection time is that of its
+    configurations on ``device``, each held as the protocol holds them."""
     table = read_table(path, device)
     if table.platform_wrenches is None:
         raise TableFileError(f"table file {path}: the study's personalisation A needs the DS's readings too "
                              "(ds_fx_N, ds_fy_N, ds_fz_N, ds_tx_Nm, ds_ty_Nm, ds_tz_Nm)")
-    return Collection(table.motor_inputs, table.wrenches, table.platform_wrenches,
-                      np.zeros(len(table.motor_inputs), bool), collection_duration(device, table.motor_inputs, hold_s))
+    table.renderer(n_neighbours=parameters.n_neighbours, contact_threshold=parameters.contact_threshold_N)
+    return Collection(table.motor_inputs, table.wrenches, table.platform_wrenches, np.zeros(len(table.motor_inputs), bool),
+                      collection_duration(device, table.motor_inputs, parameters.hold_s))
 
 
 def device_from_file(path: str | Path) -> HapticsDevice:
@@ -211,7 +213,7 @@ def _device(file: _HapticsProtocolFile, parameters: HapticsParameters, source: s
         raise refused(f"the fingertip name {repeated!r} is used twice: expected each test fingertip's name once",
                       source, "fingertip_files", value=list(file.fingertip_files))
     fs = None if file.fs_table == "simulated" else recorded_fs_table(located(file.fs_table), setup.device,
-                                                                        parameters.hold_s)
+                                                                        parameters)
     return replace(setup, fingertips=fingertips, fingertip_sources=tuple(map(str, map(located, file.fingertip_files))),
                    fs=fs, fs_source=file.fs_table if fs is None else str(located(file.fs_table)))
 
