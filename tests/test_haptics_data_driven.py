@@ -45,6 +45,15 @@ def test_each_variant_renders_as_the_study_does_with_it(collected):
             assert np.allclose(comparison.errors[index, v], outcome.errors[1], rtol=0, atol=1e-6)
     # the two variants do differ
     assert not np.allclose(comparison.errors[:, 0], comparison.errors[:, 1])
+    # the published search with other torque lengths: as the study renders with that length
+    lengths = [length for length, _, _ in comparison.length_sweep]
+    assert lengths == pytest.approx([SETTINGS.torque_length * f for f in (0.25, 1.0, 4.0)], rel=1e-12)
+    for length, median, mean in comparison.length_sweep:
+        pooled = np.concatenate([
+            study_fingertip(DEVICE, fingertip, shared, replace(SETTINGS, torque_length=length), EXACT, 2, index,
+                            tests=7, user_data=user_data[index]).errors[1] for index, fingertip in enumerate(FINGERTIPS)])
+        assert median == pytest.approx(np.median(pooled), abs=1e-6) and mean == pytest.approx(pooled.mean(), abs=1e-6)
+    assert comparison.length_sweep[1][1] == comparison.rows()[-1][1]  # the stated length: the comparison's own
 
 
 def test_comparison_statistics_are_scipys(collected):
@@ -58,7 +67,9 @@ def test_comparison_statistics_are_scipys(collected):
         # Bonferroni over the two fingertips and the pooled test
         assert row[5] == pytest.approx(min(1.0, 3 * stats.wilcoxon(errors[0], errors[1]).pvalue), rel=1e-9)
     table = comparison.table()
-    assert table.rows == [row[0] for row in rows] and len(table.columns) == 5
+    assert table.rows[:3] == [row[0] for row in rows] and len(table.columns) == 5
+    assert table.rows[3:] == [f"all fingertips (pooled), torques over {length * 1e3:g} mm"
+                              for length, _, _ in comparison.length_sweep]
     assert isinstance(comparison.figure(), Figure)
     assert comparison.to_dict()["torque_length_m"] == SETTINGS.torque_length
     with pytest.raises(ValueError, match="user_data: expected one per fingertip, 2, got 1"):

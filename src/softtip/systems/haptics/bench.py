@@ -186,7 +186,8 @@ def recorded_fs_table(path: Path, device: DeviceSpec, parameters: HapticsParamet
         raise TableFileError(f"table file {path}: the study's personalisation A needs the DS's readings too "
                              "(ds_fx_N, ds_fy_N, ds_fz_N, ds_tx_Nm, ds_ty_Nm, ds_tz_Nm)")
     table.renderer(n_neighbours=parameters.n_neighbours, contact_threshold=parameters.contact_threshold_N)
-    return Collection(table.motor_inputs, table.wrenches, table.platform_wrenches, np.zeros(len(table.motor_inputs), bool),
+    entries = len(table.motor_inputs)
+    return Collection(table.motor_inputs, table.wrenches, table.platform_wrenches, np.zeros(entries, bool),
                       collection_duration(device, table.motor_inputs, parameters.hold_s))
 
 

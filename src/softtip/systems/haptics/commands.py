@@ -177,8 +177,9 @@ def render(
                                                             "whole file)."),
     sensation: Path = typer.Option(None, "--sensation", help="A recorded sensation (.csv or .parquet: time_s, fx_N, "
                                                              "fy_N, fz_N); default a synthetic one."),
-    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip", help="The test fingertip in the device: a "
-                                                                         "shipped one's name or a fingertip .toml file."),
+    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip",
+                                  help="The test fingertip in the device: a shipped one's name or a fingertip .toml "
+                                       "file."),
     method: str = typer.Option("standard", "--method", help="standard or geometric (B, for --fingertip's radius)."),
     device_file: Path = typer.Option(None, "--device", help="A device TOML file (default softtip's device)."),
     table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet: fx_N, fy_N, "
@@ -299,8 +300,8 @@ def export_table(
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
     table = read_table(table_file, device) if table_file else None
-    renderer, out_of_reach = _renderer(device, table.renderer() if table else None, fs_levels, np.random.default_rng(seed), method, finger,
-                                       progress_for(json_output))
+    renderer, out_of_reach = _renderer(device, table.renderer() if table else None, fs_levels,
+                                       np.random.default_rng(seed), method, finger, progress_for(json_output))
     source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
     provenance = (f"{source} on {device.device.name}, {method}"
                   + (f" for {finger.name}" if method == "geometric" else ""))

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from softtip.report.tables import Table
-from softtip.systems.haptics.collection import CollectionSettings, sensed_by_fingertip
+from softtip.systems.haptics.collection import Collection, CollectionSettings, sensed_by_fingertip
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.fingertips import Fingertip
 from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS, personalise_data_driven
@@ -33,13 +33,15 @@ _VARIANT_STREAM = 3  # the renderings' noise: a stream of the seed the study's s
 class VariantComparison:
     """Errors (fingertips, variants in :data:`DATA_DRIVEN_VARIANTS` order, targets) in N, the FS
     entries each variant flagged (fingertips, variants), and the published-vs-device-axes Wilcoxon
-    tests, one per fingertip and then the pooled one (None where both erred alike on every target)."""
+    tests, one per fingertip and then the pooled one (None where both erred alike on every target); the
+    published variant's pooled median and mean error at other torque lengths."""
 
     fingertips: tuple[str, ...]
     errors: np.ndarray
     flagged_entries: np.ndarray
     tests: tuple[WilcoxonResult | None, ...]
     torque_length: float
+    length_sweep: tuple[tuple[float, float, float], ...]  # the published variant: (torque length m, median, mean N)
 
     @property
     def pooled(self) -> WilcoxonResult | None:
@@ -59,6 +61,8 @@ class VariantComparison:
 
     def to_dict(self) -> dict:
         return {"torque_length_m": self.torque_length, "variants": list(DATA_DRIVEN_VARIANTS),
+                "torque_length_sweep": [{"torque_length_m": length, "median_error_N": median, "mean_error_N": mean}
+                                        for length, median, mean in self.length_sweep],
                 "rows": [{"fingertip": name, "median_error_N": [median_p, median_d], "mean_error_N": [mean_p, mean_d],
                           "p_bonferroni": p, "signed_rank_sum": None if test is None else test.signed_rank_sum,
                           "w_scipy": None if test is None else test.w_scipy}
@@ -73,14 +77,22 @@ class VariantComparison:
                    for variant in DATA_DRIVEN_VARIANTS] + ["p (Bonferroni)"]
         rows = self.rows()
         cells = {(row[0], column): value for row in rows for column, value in zip(columns, row[1:], strict=True)}
-        notes = {row[0]: "Both variants rendered every target alike: nothing to test." for row in rows if row[5] is None}
+        notes = {row[0]: "Both variants rendered every target alike: nothing to test."
+                 for row in rows if row[5] is None}
+        swept = []
+        for length, median, mean in self.length_sweep:
+            row = f"all fingertips (pooled), torques over {length * 1e3:g} mm"
+            swept.append(row)
+            cells |= {(row, columns[0]): median, (row, columns[2]): mean}
         return Table("Personalisation A as published (raw 6-D DS wrenches) against softtip's 3-D variant",
-                     "fingertip", [row[0] for row in rows], columns, cells, digits=3, notes=notes, caption=(
+                     "fingertip", [row[0] for row in rows] + swept, columns, cells, digits=3, notes=notes, caption=(
                          "The same FS table, user tables and targets, each personalised by both variants and "
                          "rendered with the same noise. Published: the DS's raw wrenches, the torques divided by "
                          f"{self.torque_length * 1e3:g} mm, no device model; device axes: the DS's forces turned "
                          "into the static platform's axes by the forward kinematics. p: Wilcoxon signed-rank, "
-                         "Bonferroni over every fingertip and the pooled test."))
+                         "Bonferroni over every fingertip and the pooled test. The last rows: the published search "
+                         "with the torque length a quarter, once and four times the stated one: how much the "
+                         "choice matters."))
 
     def figure(self) -> Figure:
         """Median error per fingertip, the two variants side by side."""
@@ -99,35 +111,53 @@ class VariantComparison:
         return figure
 
 
+# the torque length scaled by these factors in the comparison's sweep: how much the stated length matters
+TORQUE_LENGTH_FACTORS = (0.25, 1.0, 4.0)
+
+
+def _rendered_errors(device: DeviceSpec, fingertip: Fingertip, index: int, shared: SharedTables, user: Collection,
+                     settings: StudySettings, collection: CollectionSettings, seed: int, variant: str,
+                     torque_length: float) -> tuple[np.ndarray, int]:
+    """The ``index``-th fingertip's errors (targets,) with A personalised by ``variant`` from its usable
+    ``user`` table, and how many FS entries that flagged; the renderings' noise is the fingertip's own
+    stream, the same for every variant."""
+    fs, targets = shared.fs, shared.targets
+    personal = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
+                                       user.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
+                                       settings.weighting_power, variant, torque_length)
+    renderer = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
+    motor = renderer.fit(fs.finger_wrenches, personal.motor_inputs).predict(targets)
+    produced, _ = sensed_by_fingertip(device, fingertip, motor, collection,
+                                      np.random.default_rng([seed, _VARIANT_STREAM, index]))
+    return np.linalg.norm(targets[:, :3] - produced[:, :3], axis=1), int(personal.outside.sum())
+
+
 def compare_data_driven(device: DeviceSpec, fingertips: tuple[Fingertip, ...], shared: SharedTables,
                         user_data: tuple[UserData, ...], settings: StudySettings, collection: CollectionSettings,
                         seed: int) -> VariantComparison:
     """Both variants of personalisation A on the study's own tables (``shared``, ``user_data``: what
-    :func:`~.study.collect_study` returns) at its ``settings``."""
+    :func:`~.study.collect_study` returns) at its ``settings``, and the published one's pooled errors
+    with the torque length scaled by :data:`TORQUE_LENGTH_FACTORS`."""
     if len(user_data) != len(fingertips):
         raise ValueError(f"user_data: expected one per fingertip, {len(fingertips)}, got {len(user_data)}")
-    fs, targets = shared.fs, shared.targets
-    standard = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold,
-                                        settings.weighting_power).get_params()
-    errors, flagged = [], []
-    for index, (fingertip, data) in enumerate(zip(fingertips, user_data, strict=True)):
-        user = data.user_table.unsaturated()
-        per_variant, outside = [], []
-        for variant in DATA_DRIVEN_VARIANTS:
-            personal = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
-                                               user.platform_wrenches, settings.n_neighbours,
-                                               settings.contact_threshold, settings.weighting_power, variant,
-                                               settings.torque_length)
-            motor = NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, personal.motor_inputs).predict(targets)
-            produced, _ = sensed_by_fingertip(device, fingertip, motor, collection,
-                                              np.random.default_rng([seed, _VARIANT_STREAM, index]))
-            per_variant.append(np.linalg.norm(targets[:, :3] - produced[:, :3], axis=1))
-            outside.append(int(personal.outside.sum()))
-        errors.append(per_variant)
-        flagged.append(outside)
-    errors = np.array(errors)
+    users = [data.user_table.unsaturated() for data in user_data]
+
+    def rendered(variant: str, torque_length: float) -> tuple[np.ndarray, np.ndarray]:
+        found = [_rendered_errors(device, fingertip, index, shared, user, settings, collection, seed, variant,
+                                  torque_length)
+                 for index, (fingertip, user) in enumerate(zip(fingertips, users, strict=True))]
+        return np.array([errors for errors, _ in found]), np.array([flagged for _, flagged in found])
+
+    both = [rendered(variant, settings.torque_length) for variant in DATA_DRIVEN_VARIANTS]
+    errors = np.stack([errors for errors, _ in both], axis=1)  # (fingertips, variants, targets)
+    flagged = np.stack([outside for _, outside in both], axis=1)
+    sweep = []
+    for factor in TORQUE_LENGTH_FACTORS:
+        length = settings.torque_length * factor
+        pooled = (errors[:, 0] if factor == 1.0 else rendered("published", length)[0]).ravel()
+        sweep.append((length, float(np.median(pooled)), float(pooled.mean())))
     tests = len(fingertips) + 1
     paired = (*errors, errors.transpose(1, 0, 2).reshape(len(DATA_DRIVEN_VARIANTS), -1))
-    return VariantComparison(tuple(f.name for f in fingertips), errors, np.array(flagged),
+    return VariantComparison(tuple(f.name for f in fingertips), errors, flagged,
                              tuple(None if np.array_equal(*e) else wilcoxon(*e, tests) for e in paired),
-                             settings.torque_length)
+                             settings.torque_length, tuple(sweep))

@@ -27,7 +27,8 @@ from softtip._core.config import (ConfigError, PositiveNumber, Real, Refusal, Te
                                   parse, read_toml, schema)
 from softtip._core.units import MM
 from softtip.mechanics.plate_contact import PlateContactLaw
-from softtip.systems.haptics.fingertips import CALIBRATED_RADII, SHAPE_AXES, VYTAFLEX_30_MODULUS, Fingertip, layer_thickness
+from softtip.systems.haptics.fingertips import (CALIBRATED_RADII, SHAPE_AXES, VYTAFLEX_30_MODULUS, Fingertip,
+                                                layer_thickness)
 
 MPA = 1e6  # Pa per MPa
 _EXPONENTIAL = PlateContactLaw(law="exponential")
@@ -77,6 +78,7 @@ def load_fingertip(path: str | Path) -> Fingertip:
     table = read_toml(path, "fingertip", FingertipFileError)
     if set(table) != {"fingertip"}:
         extra = sorted(set(table) - {"fingertip"})
-        raise FingertipFileError(f"fingertip file {path}: " + (f"unknown table or key {extra[0]!r}, expected only "
-                                                               "[fingertip]" if extra else "expected a [fingertip] table"))
+        problem = (f"unknown table or key {extra[0]!r}, expected only [fingertip]" if extra
+                   else "expected a [fingertip] table")
+        raise FingertipFileError(f"fingertip file {path}: {problem}")
     return parse(FingertipFile, table["fingertip"], str(path), "fingertip", error=FingertipFileError).fingertip()
