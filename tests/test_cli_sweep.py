@@ -167,6 +167,7 @@ def inputs(tmp_path_factory):
         "recording repair": ([str(tmp / "recording.mcap")], [], "recording.mcap", "recording"),
         "live": ([], ["--emulate"], None, None),
         "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "dataset"),
+        "haptics table export": ([str(tmp / "new" / "table.h")], [], None, None),
     }
     (tmp / "new").mkdir()
     (tmp / "work").mkdir()  # the current folder of every run: default outputs land here
@@ -273,6 +274,37 @@ def test_a_bad_value_is_refused_in_one_line_before_any_work(inputs, case):
     param = next(p for p in command_of(words).params if p.name == name)
     verdict, said = judge(words, param, bad, inputs)
     assert verdict == "refused", f"softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {verdict}: {said}"
+
+
+# A researcher's own files, each wrong in one way, for every option that reads one: (file name, content)
+GARBAGE = b"\x00\x1b[2J not a file of any kind \xff" * 8
+BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None),
+                  ("finger-small.toml", b'[fingertip]\nname = "x"\nradius_mm = 5.0\n'),
+                  ("finger-key.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nstifness = 2\n'),
+                  ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n')]
+_TABLE = "fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n"
+BAD_TABLES = [("table-garbage.parquet", GARBAGE), ("table-missing.csv", None), ("table.txt", b"fx_N\n1\n"),
+              ("table-nan.csv", (_TABLE + "0,0,1,0,0,10\n0,0,nan,0,0,20\n").encode()),
+              ("table-motors.csv", b"fx_N,fy_N,fz_N\n0,0,1\n0,0,2\n"),
+              ("table-torques.csv", b"fx_N,fy_N,fz_N,tx_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,1,0,0,0,0\n"),
+              ("table-text.csv", (_TABLE + "0,0,one,0,0,10\n0,0,2,0,0,20\n").encode()),
+              ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode()),
+              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode())]
+FILE_CASES = [(words, option, name, content) for words in (("haptics", "render"), ("haptics", "table", "export"))
+              for option, files in (("--fingertip", BAD_FINGERTIPS), ("--table", BAD_TABLES))
+              for name, content in files]
+
+
+@pytest.mark.parametrize(("words", "option", "name", "content"), FILE_CASES,
+                         ids=[f"{' '.join(w)} {o} {n}" for w, o, n, _ in FILE_CASES])
+def test_a_bad_file_of_ones_own_is_refused_in_one_line(inputs, words, option, name, content):
+    tmp, _ = inputs
+    path = tmp / name
+    if content is not None:
+        path.write_bytes(content)
+    param = next(p for p in command_of(words).params if option in p.opts)
+    verdict, said = judge(words, param, Bad("bad file", str(path)), inputs)
+    assert verdict == "refused", f"softtip {' '.join(words)} {option} {name}: {verdict}: {said}"
 
 
 def count(inputs) -> dict[str, dict[str, int]]:

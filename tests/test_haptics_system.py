@@ -88,7 +88,11 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     reference = wilcoxon(found.errors[:, 1].ravel(), found.errors[:, 2].ravel(), 7)
     assert outcome.results["pooled_A_vs_B"]["p_bonferroni"] == pytest.approx(reference.p_bonferroni)
     assert any(c.verdict for c in directions.comparisons())
-    assert len(outcome.figures) == 3 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert len(outcome.figures) == 4 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    # A's two variants on the dataset's own tables, per fingertip and pooled
+    variants = outcome.results["data_driven_variants"]
+    assert [row["fingertip"] for row in variants["rows"]] == [*found.fingertips, "all fingertips (pooled)"]
+    assert variants["variants"] == ["published", "device axes"]
     collection = {c.row: c for table in outcome.tables for c in table.comparisons() if c.column == "entries"}
     assert collection["FS table (13³)"].value == 2197 and collection["user table (7³)"].value == 343
     # counts print as counts, beside the published ones
@@ -125,7 +129,7 @@ def test_no_sweep_without_its_settings(coarse_protocol):
     bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"])
     outcome = haptics(bare, 3, SILENT)
     assert "error_curves" not in outcome.results and "sensitivity" not in outcome.results
-    assert len(outcome.figures) == 1
+    assert len(outcome.figures) == 2  # the box plots and A's two variants
     assert any(note.startswith("No sensitivity study") for note in outcome.notes)
 
 
@@ -142,6 +146,8 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"curve_fs_levels": [7, 7]}}, "curve_fs_levels = .*each value once"),
              ({"parameters": {"curve_weighting_powers": [5.0]}}, "curve_weighting_powers"),
              ({"parameters": {"variations": ["thumb"]}}, "variations"),
+             ({"parameters": {"data_driven": "raw"}}, "data_driven = 'raw'"),
+             ({"parameters": {"ds_torque_length_m": 0.0}}, "ds_torque_length_m = 0"),
              ({"device": "missing.toml"}, "missing.toml")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:

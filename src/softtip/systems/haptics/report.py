@@ -23,8 +23,9 @@ from softtip.published import OUTSIDE, published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.systems.haptics.bench import CONDITIONS, RENDERED
+from softtip.systems.haptics.bench import CONDITIONS, RENDERED, study_fingertips
 from softtip.systems.haptics.collection import collection_duration, motor_grid
+from softtip.systems.haptics.data_driven import compare_data_driven
 from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS
 from softtip.systems.haptics.sensitivity import (
     CURVE_LABELS,
@@ -43,6 +44,7 @@ from softtip.systems.haptics.study import (
     PAIRS,
     PUBLISHED_METHODS,
     SHORT_NAMES,
+    collect_study,
     error_box_plots,
     wilcoxon_tests,
 )
@@ -119,9 +121,19 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "pooled_A_vs_B": _test(pooled)}
     sweeps = _sweeps(protocol, found.errors, progress)
     results |= sweeps.results
+    fingertips, settings, collection = study_fingertips(p, protocol.design), p.study_settings(), p.collection_settings()
+    variants = compare_data_driven(device, fingertips, *collect_study(device, fingertips, settings, collection,
+                                                                      protocol.seed, fs=protocol.design.fs),
+                                   settings, collection, protocol.seed)
+    tables.append(variants.table())
+    variants_figure = Figure.of("Personalisation A: as published against softtip's 3-D variant", (
+        "Median error (N) per fingertip of A searching the DS's raw 6-D wrenches and of A searching its 3-D forces "
+        "in the device's axes, on the same tables. Look for whether the published search loses anything by "
+        "needing no device model."), variants.figure())
+    results["data_driven_variants"] = variants.to_dict()
     headline_row = LARGEST if LARGEST in found.fingertips else POOLED
     headline = Headline.of(directions, headline_row, "B − A", f"median error B − A, {headline_row}", "N")
-    return StudyOutcome(results, tables + sweeps.tables, [figure, *sweeps.figures], headline, [
+    return StudyOutcome(results, tables + sweeps.tables, [figure, variants_figure, *sweeps.figures], headline, [
         *NOTES,
         "The targets are the FS's readings of random configurations over the servos' whole range that touch it: "
         "on softtip's device (its dimensions are softtip's choice, device.toml) they press harder than the "
@@ -145,7 +157,9 @@ class Sweeps:
 def _sweeps(protocol: Protocol, errors: np.ndarray, progress: Progress) -> Sweeps:
     """The sweeps from the study's own ``errors`` (fingertips, methods, targets), N."""
     p = protocol.parameters
-    fingertips, curves, variations = p.selected_fingertips(), p.curves(), p.selected_variations()
+    fingertips, curves, variations = study_fingertips(p, protocol.design), p.curves(), p.selected_variations()
+    if protocol.design.fs is not None:  # a recorded FS table has one size: no sweep over it
+        curves = tuple((setting, values) for setting, values in curves if setting != "fs_levels")
     humans = [f.name for f in fingertips if f in HUMAN_FINGERTIPS]
     notes = []
     if variations and not humans:
@@ -154,7 +168,7 @@ def _sweeps(protocol: Protocol, errors: np.ndarray, progress: Progress) -> Sweep
     if not curves and not variations:
         return Sweeps([], [], {}, notes)
     baseline = Baseline.run(p.study_settings(), protocol.seed, protocol.design.device, fingertips,
-                            p.collection_settings(), progress, errors=errors)
+                            p.collection_settings(), progress, errors=errors, fs=protocol.design.fs)
     tables, figures, results = [], [], {}
     if curves:
         points = error_curves(baseline, progress, curves)
@@ -343,6 +357,9 @@ def _departures_table() -> Table:
                     "the same procedure over the servos' whole range: stronger targets"),
         "people": ("a perception study rated realism", "not reproduced: only the forces"),
         "methods": ("standard, A, B", "also B+ (presses) and A+ (adaptive table), softtip's"),
+        "method A's search": ("the DS's raw wrenches (force and torque)",
+                              "the same, torques over the FS's radius; softtip's 3-D variant in the device's axes "
+                              "compared beside it"),
     }
     cells = {(row, column): text for row, texts in rows.items()
              for column, text in zip(("published", "softtip"), texts, strict=True)}

@@ -104,15 +104,16 @@ class Baseline:
     def run(cls, settings: StudySettings = StudySettings(), seed: int = 0, device: DeviceSpec | None = None,
             fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
             collection: CollectionSettings = CollectionSettings(), progress: Progress = SILENT,
-            errors=None) -> Baseline:
+            errors=None, fs=None) -> Baseline:
         """The study's tables and user data; its errors ``errors`` (fingertips, methods, targets) when
-        the study was already run on the same seed and settings, else computed here."""
+        the study was already run on the same seed and settings, else computed here; ``fs``: the
+        study's recorded FS table, if it had one."""
         seed = checked(integer(0), "seed", seed)
         if errors is not None and len(errors) != len(fingertips):
             raise ValueError(f"errors: expected one (methods, targets) array per fingertip, {len(fingertips)}, "
                              f"got {len(errors)}")
         device = load_device() if device is None else device
-        shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+        shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress, fs)
         outcomes = ()
         if errors is None:
             outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
