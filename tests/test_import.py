@@ -34,10 +34,13 @@ def _mapping(document: dict) -> ImportMapping:
     return parse(ImportMapping, document, "mapping", error=DatasetError)
 
 
-def _hand_join(folder: Path, baseline: int, tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _hand_join(folder: Path, baseline: int | float, tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(time from the first sensor row, field changes (rows, 15), force in N) of one eFlesh recording:
-    every sensor row paired with the label row nearest in time among those with a scale reading."""
+    every sensor row paired with the label row nearest in time among those with a scale reading; the
+    zero is the mean of the first ``baseline`` rows (an int) or seconds (a float)."""
     sensor = np.loadtxt(folder / "sensor.csv", delimiter=",")
+    if isinstance(baseline, float):
+        baseline = int(np.sum(sensor[:, 0] - sensor[0, 0] < baseline))  # the rows are in time order
     states = np.loadtxt(folder / "states.csv", delimiter=",")
     states = states[states[:, 4] != -1]
     distance = np.abs(sensor[:, :1] - states[None, :, 0])  # every pair: no search to get wrong
@@ -81,7 +84,7 @@ def test_the_rest_rule_zeroes_each_trial_on_its_samples_at_rest():
         assert 0 < np.sum(force < 0.05) < len(force)
         np.testing.assert_allclose(dataset.select(trials=[trial]).X(), absolute - absolute[force < 0.05].mean(axis=0),
                                    rtol=0, atol=1e-9)
-    with pytest.raises(DatasetError, match="no sample of a trial has fz_N below -1"):
+    with pytest.raises(DatasetError, match="baseline.label = fz_N: a trial has no sample that is at its zero"):
         import_logs(RECORDINGS, replace(rest, trials=replace(rest.trials, baseline=Baseline(label="fz_N", below=-1.0))))
 
 
@@ -152,6 +155,23 @@ def test_trials_split_by_gap_follow_the_time_column(tmp_path):
         "trials": {"split": "gap", "gap_s": 0.5, "validation": {"last": 1}}}))
     assert list(dataset.trial_lengths) == [3, 2, 1]
     assert dataset.labels == {"load": "kN"}  # a name that states no unit keeps the logged one
+
+
+def test_a_log_out_of_time_order_is_refused_naming_the_line(tmp_path):
+    mapping = _mapping({"sensor": {"time": "t_ms", "chips": [["bx", "by", "bz"]]},
+                        "labels": {"columns": {"fz_N": {"column": "load_kN", "unit": "kN"}}}})
+    path = _one_file_log(tmp_path / "log.csv", [(0, t, 0, 0, 0, 0.0) for t in (0, 10, 10, 30)])
+    with pytest.raises(DatasetError, match=r"log.csv: line 4, column t_ms: the time does not increase"):
+        import_logs([path], mapping)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    _counts_log(folder / "sensor.csv", [(1, 2, 3)] * 3)
+    (folder / "scale.csv").write_text("0.0,5\n0.02,6\n0.01,7\n")
+    joined = _mapping({"sensor": {"file": "sensor.csv", "header": False, "time": 1, "chips": [[2, 3, 4]]},
+                       "labels": {"file": "scale.csv", "header": False, "time": 1, "tolerance_s": 0.01,
+                                  "columns": {"fz_N": {"column": 2, "unit": "N"}}}})
+    with pytest.raises(DatasetError, match=r"scale.csv: line 3, column 1: the time goes back"):
+        import_logs([folder], joined)
 
 
 @pytest.mark.parametrize("unit, factor", [("g", GRAM_FORCE_N), ("mN", 1e-3), ("lbf", 4.4482216152605), ("N", 1.0)])
@@ -247,7 +267,7 @@ def test_the_validation_and_baseline_refuse_what_cannot_be(tmp_path):
         import_logs(RECORDINGS, replace(mapping, trials=replace(mapping.trials, validation=Validation(last=2))))
     with pytest.raises(DatasetError, match="there is no trial 5"):
         import_logs(RECORDINGS, replace(mapping, trials=replace(mapping.trials, validation=Validation(trials=[5]))))
-    with pytest.raises(DatasetError, match="baseline.*covers every sample"):
+    with pytest.raises(DatasetError, match="baseline.samples = 240 covers every sample of a trial of 240"):
         import_logs(RECORDINGS, replace(mapping, trials=replace(mapping.trials, baseline=Baseline(samples=240))))
 
 
@@ -274,8 +294,9 @@ def test_the_command_imports_and_calibrate_and_evaluate_read_it(tmp_path):
     dataset = Dataset.read(out)
     assert summary["validation_trials"] == [0] and summary["samples"] == len(dataset)
     assert summary["largest_join_offset_s"] <= 0.01 and summary["labels"] == {"fz_N": "N", "saturated": "1"}
-    _, _, force = _hand_join(RECORDINGS[1], baseline=1, tolerance=0.01)
+    _, field, force = _hand_join(RECORDINGS[1], baseline=0.5, tolerance=0.01)
     np.testing.assert_allclose(dataset.select(trials=[1]).column("fz_N"), force)
+    np.testing.assert_allclose(dataset.select(trials=[1]).X(), field, rtol=0, atol=1e-9)
     fitted = CliRunner().invoke(app, ["calibrate", str(out), "-t", "fz_N", "--model", "polynomial",
                                       "-o", str(tmp_path / "m.npz"), "--json"])
     assert fitted.exit_code == 0, fitted.output

@@ -50,8 +50,7 @@ from softtip._core.config import (Flag, OpenFraction, PositiveInteger, PositiveN
                                   integer, parse, read_toml, schema)
 from softtip._core.units import FORCE_UNITS, MM, UM
 from softtip.data.csvload import TIME_UNITS_IN_S, WHITESPACE, read_columns
-from softtip.data.dataset import (DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata,
-                                  subtract_trial_baseline, trial_runs)
+from softtip.data.dataset import DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata, trial_runs
 from softtip.data.splits import CALIBRATION, VALIDATION
 from softtip.sensors.mlx90393 import MLX90393, Hallconf, MLX90393Settings, Resolutions, full_scale_uT, lsb_uT
 
@@ -362,19 +361,31 @@ def _refuse_beyond(path: Path, sensor: SensorLog, where: np.ndarray, what: str) 
                        f"(chip {chip} {AXES[axis]}): beyond {what}")
 
 
+def _check_time_order(path: Path, log: _Log, time: np.ndarray, ids: np.ndarray, *, strictly: bool) -> None:
+    """Refuses, naming the line, a time that is not a number or that goes back (or, ``strictly``, stays)
+    within a trial."""
+    first = 2 if log.header else 1
+    if not np.all(np.isfinite(time)):
+        raise DatasetError(f"{path}: line {np.flatnonzero(~np.isfinite(time))[0] + first}, column {log.time}: "
+                           "the time is not a finite number")
+    step = np.diff(time)
+    wrong = (step <= 0 if strictly else step < 0) & (ids[1:] == ids[:-1])
+    if wrong.any():
+        raise DatasetError(f"{path}: line {np.flatnonzero(wrong)[0] + 1 + first}, column {log.time}: the time "
+                           f"{'does not increase' if strictly else 'goes back'}; expected a log in time order")
+
+
 def _join(path: Path, labels: LabelLog, sensor_time: np.ndarray, label_time: np.ndarray,
           label_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(sensor rows kept, their labels, |time offset|): each sensor row takes the label row nearest in
     time whose every label is a reading, if it lies within the tolerance."""
+    _check_time_order(path, labels, label_time, np.zeros(len(label_time), dtype=np.int64), strictly=False)
     valid = np.all(np.isfinite(label_values), axis=1)
     if labels.missing is not None:
         valid &= ~np.any(label_values == labels.missing, axis=1)
     label_time, label_values = label_time[valid], label_values[valid]
     if label_time.size == 0:
         raise DatasetError(f"{path}: no row holds a reading of every label")
-    if np.any(np.diff(label_time) < 0):
-        raise DatasetError(f"{path}: the times go backwards at line "
-                           f"{np.flatnonzero(np.diff(label_time) < 0)[0] + 2}; expected a log in time order")
     after = np.clip(np.searchsorted(label_time, sensor_time), 1, max(len(label_time) - 1, 1))
     before = after - 1
     after = np.minimum(after, len(label_time) - 1)
@@ -404,15 +415,20 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     values = read_columns(sensor_file, refs, header=sensor.header, delimiter=sensor.delimiter)
     if len(values) == 0:
         raise DatasetError(f"{sensor_file}: no rows")
-    n_time = len(sensor.columns_used()) - 3 * len(sensor.chips)
+    n_time = 0 if sensor.time is None else 1
     time = _times(sensor, values)
     readings, saturated = _sensor_values(sensor_file, sensor, values[:, n_time:n_time + 3 * len(sensor.chips)])
     rest = values[:, n_time + 3 * len(sensor.chips):]
     own = rest[:, :len(own_labels)]
     ids = _trial_ids(sensor_file, mapping.trials, time, rest[:, len(own_labels):])
+    _check_time_order(sensor_file, sensor, time, ids, strictly=True)
+    starts, lengths = trial_runs(ids)
+    clock, time = time, time - np.repeat(time[starts], lengths)  # from each trial's first sample, kept or not
     baseline = mapping.trials.baseline
     if baseline is not None and baseline.label is None:
-        readings = _subtract_baseline(sensor_file, baseline, readings, time, ids)
+        at_zero = (np.arange(len(ids)) - np.repeat(starts, lengths) < baseline.samples if baseline.samples
+                   else time < baseline.seconds)
+        readings = _subtract_zero(sensor_file, baseline, readings, ids, at_zero)
     dropped, largest = 0, None
     if labels is None:
         label_values = np.zeros((len(time), 0))
@@ -428,7 +444,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     else:
         label_refs = [labels.time, *(label.column for label in labels.columns.values())]
         logged = read_columns(label_file, label_refs, header=labels.header, delimiter=labels.delimiter)
-        keep, label_values, offset = _join(label_file, labels, time, _times(labels, logged),
+        keep, label_values, offset = _join(label_file, labels, clock, _times(labels, logged),
                                            logged[:, 1:])
         dropped = int((~keep).sum())
         largest = float(offset.max()) if offset.size else None
@@ -437,17 +453,16 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     if labels is not None:
         factors = [_label_factor(name, label.unit) for name, label in labels.columns.items()]
         label_values = label_values * np.asarray(factors)
-    if baseline is not None and baseline.label is not None:
-        readings = _subtract_rest(sensor_file, baseline, readings, ids, label_values[:, list(labels.columns).index(
-            baseline.label)])
-    trials = []
-    starts, lengths = trial_runs(ids)
-    for start, length in zip(starts, lengths, strict=True):
-        rows = slice(start, start + length)
-        trials.append(_Trial(source.name, time[rows] - time[start], readings[rows], label_values[rows],
-                             None if saturated is None else saturated[rows]))
-    if not trials:
+    if not len(ids):
         raise DatasetError(f"{source}: no sensor row has a label reading within the tolerance")
+    if baseline is not None and baseline.label is not None:
+        at_rest = label_values[:, list(labels.columns).index(baseline.label)] < baseline.below
+        readings = _subtract_zero(sensor_file, baseline, readings, ids, at_rest)
+    trials = []
+    for start, length in zip(*trial_runs(ids), strict=True):
+        rows = slice(start, start + length)
+        trials.append(_Trial(source.name, time[rows], readings[rows], label_values[rows],
+                             None if saturated is None else saturated[rows]))
     return trials, dropped, largest
 
 
@@ -463,37 +478,19 @@ def _trial_ids(path: Path, trials: Trials, time: np.ndarray, column: np.ndarray)
     return np.concatenate([[0], np.cumsum(ids[1:] != ids[:-1])]).astype(np.int64)
 
 
-def _subtract_baseline(path: Path, baseline: Baseline, readings: np.ndarray, time: np.ndarray,
-                       ids: np.ndarray) -> np.ndarray:
-    if baseline.samples is not None:
-        count = baseline.samples
-    else:  # the samples within the first seconds of the shortest-starting trial
-        starts, _ = trial_runs(ids)
-        first = time - np.repeat(time[starts], np.diff(np.r_[starts, len(time)]))
-        counts = [int(np.sum(first[ids == ids[start]] < baseline.seconds)) for start in starts]
-        count = min(counts)
-        if count < 1:
-            raise DatasetError(f"{path}: baseline.seconds = {baseline.seconds}: a trial has no sample that early")
-    shortest = int(trial_runs(ids)[1].min())
-    if count >= shortest:
-        shown = f"samples = {count}" if baseline.samples is not None else f"seconds = {baseline.seconds}"
-        raise DatasetError(f"{path}: baseline.{shown} covers every sample of a trial of {shortest}: "
-                           "a zero must leave samples to measure")
-    try:
-        return subtract_trial_baseline(readings, ids, count)
-    except DatasetError as problem:
-        raise DatasetError(f"{path}: baseline: {problem}") from None
-
-
-def _subtract_rest(path: Path, baseline: Baseline, readings: np.ndarray, ids: np.ndarray,
-                   label: np.ndarray) -> np.ndarray:
-    """``readings`` minus, per trial, the mean of its samples at rest."""
+def _subtract_zero(path: Path, baseline: Baseline, readings: np.ndarray, ids: np.ndarray,
+                   at_zero: np.ndarray) -> np.ndarray:
+    """``readings`` minus, per trial, the mean of its samples ``at_zero`` (the baseline rule's samples)."""
     starts, lengths = trial_runs(ids)
-    at_rest = label < baseline.below
-    rest = np.add.reduceat(at_rest, starts)
-    if np.any(rest == 0):
-        raise DatasetError(f"{path}: baseline: no sample of a trial has {baseline.label} below {baseline.below:g}")
-    zero = np.add.reduceat(readings * at_rest[:, None, None], starts) / rest[:, None, None]
+    counts = np.add.reduceat(at_zero, starts)
+    rule = next(f"{key} = {value}" for key, value in (("samples", baseline.samples), ("seconds", baseline.seconds),
+                                                       ("label", baseline.label)) if value is not None)
+    if np.any(counts == 0):
+        raise DatasetError(f"{path}: baseline.{rule}: a trial has no sample that is at its zero by this rule")
+    if np.any(counts == lengths):
+        raise DatasetError(f"{path}: baseline.{rule} covers every sample of a trial of {lengths[counts == lengths][0]}"
+                           ": a zero must leave samples to measure")
+    zero = np.add.reduceat(readings * at_zero[:, None, None], starts) / counts[:, None, None]
     return readings - np.repeat(zero, lengths, axis=0)
 
 
