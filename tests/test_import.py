@@ -230,8 +230,10 @@ def test_another_sensor_is_imported_in_its_own_unit(tmp_path):
 
 @pytest.mark.parametrize("change, message", [
     ({"sensor": {"chips": [[2, 3]]}}, "sensor.chips.*one per chip"),
-    ({"sensor": {"chips": [["bx", 3, 4]]}}, "'bx' is named, but the file has no header"),
-    ({"sensor": {"unit": "V"}}, "'V': an MLX90393 reads in"),
+    ({"sensor": {"chips": [["bx", 3, 4]]}},
+     r"sensor.chips\[0\]\[0\] = 'bx': column 'bx' is named, but the file has no header"),
+    ({"sensor": {"time": 0}}, r"sensor.time = 0: column 0: columns are numbered from 1"),
+    ({"sensor": {"unit": "V"}}, "sensor.unit = 'V': an MLX90393 reads in"),
     ({"sensor": {"unit": "counts", "gain_sel": None}}, "raw counts need the chips' gain_sel and res_xyz"),
     ({"sensor": {"delimiter": "."}}, "delimiter.*not part of a number"),
     ({"labels": {"tolerance_s": None}}, "tolerance_s"),
@@ -314,6 +316,31 @@ def test_the_command_refuses_contradicting_options_in_one_line(tmp_path, args, m
                                       "-o", str(tmp_path / "x.parquet"), *args])
     assert result.exit_code == 2 and message in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "x.parquet").exists()
+
+
+def test_options_alone_import_a_log_as_its_mapping_does(tmp_path):
+    rows = [(run, 100 * k + 1000 * run, 10 * run + k, -k, 2 * k, 0.5 * k) for run in range(2) for k in range(5)]
+    path = _one_file_log(tmp_path / "log.csv", rows)
+    spaced = tmp_path / "log.dat"  # the same numbers, no header, whitespace between them
+    spaced.write_text("".join(" ".join(map(str, row)) + "\n" for row in rows))
+    reference, _ = import_logs([path], _mapping({
+        "sensor": {"time": "t_ms", "time_unit": "s", "unit": "mT", "chips": [["bx", "by", "bz"]]},
+        "labels": {"columns": {"fz_N": {"column": "load_kN", "unit": "kN"}}},
+        "trials": {"baseline": {"samples": 2}}}))
+    for log, columns in ((path, ["--chips", "bx,by,bz", "--time", "t_ms", "--label", "fz_N=load_kN:kN"]),
+                         (spaced, ["--chips", "3,4,5", "--time", "2", "--label", "fz_N=6:kN", "--no-header",
+                                   "--delimiter", "whitespace"])):
+        out = tmp_path / f"{log.suffix[1:]}.parquet"
+        made = CliRunner().invoke(app, ["import", str(log), *columns, "--unit", "mT", "--baseline-samples", "2",
+                                        "-o", str(out)])
+        assert made.exit_code == 0, made.output
+        imported = Dataset.read(out)
+        assert "role" in imported.conditions and set(imported.column("role")) == {"calibration"}
+        for name in ("trial", "time_s", "s0_bx_uT", "s0_by_uT", "s0_bz_uT", "fz_N"):
+            np.testing.assert_array_equal(imported.column(name), reference.column(name), err_msg=name)
+    refused = CliRunner().invoke(app, ["import", str(path), "--chips", "bx,by,bz", "--time", "t_ms",
+                                       "--label", "fz_N=load_kN:kN", "--tolerance", "0.1", "-o", str(out)])
+    assert refused.exit_code == 2 and "the options: labels.tolerance_s" in refused.output
 
 
 def _readme_block(heading: str) -> list[str]:

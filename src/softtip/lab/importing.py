@@ -82,16 +82,19 @@ class _Log:
 
     def __post_init__(self) -> None:
         if self.delimiter != WHITESPACE and (len(self.delimiter) != 1 or self.delimiter in "0123456789.-+eE\"\n"):
-            raise Refusal("delimiter", f"{self.delimiter!r}: expected one character that is not part of a number, "
-                                       f"or {WHITESPACE!r}")
-        for ref in self.columns_used():
+            raise Refusal("delimiter", f"expected one character that is not part of a number, or {WHITESPACE!r}")
+        for key, ref in self.columns_named():
             if isinstance(ref, int) and ref < 1:
-                raise Refusal(None, f"column {ref}: columns are numbered from 1")
+                raise Refusal(key, f"column {ref}: columns are numbered from 1")
             if isinstance(ref, str) and not self.header:
-                raise Refusal("header", f"column {ref!r} is named, but the file has no header: number it from 1")
+                raise Refusal(key, f"column {ref!r} is named, but the file has no header: number it from 1")
 
-    def columns_used(self) -> list:
-        return [] if self.time is None else [self.time]
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        """Every column the log's settings name, each with the key that names it."""
+        return [] if self.time is None else [(("time",), self.time)]
+
+    def columns_used(self) -> list[int | str]:
+        return [ref for _, ref in self.columns_named()]
 
 
 @schema
@@ -117,7 +120,7 @@ class SensorLog(_Log):
             raise Refusal("time", "give the time column or rate_hz (evenly spaced samples), one of them")
         mlx = self.chip == "mlx90393"
         if mlx and self.unit not in (*MAGNETIC.units, COUNTS):
-            raise Refusal("unit", f"{self.unit!r}: an MLX90393 reads in {', '.join(MAGNETIC.units)} or {COUNTS}; "
+            raise Refusal("unit", f"an MLX90393 reads in {', '.join(MAGNETIC.units)} or {COUNTS}; "
                                   "another sensor is chip = \"other\"")
         settings = (self.gain_sel, self.res_xyz)
         if mlx and self.unit == COUNTS and None in settings:
@@ -130,8 +133,9 @@ class SensorLog(_Log):
         if mlx and (self.gain_sel is None) != (self.res_xyz is None):
             raise Refusal("res_xyz", "give both gain_sel and res_xyz, or neither")
 
-    def columns_used(self) -> list:
-        return [*super().columns_used(), *(ref for chip in self.chips for ref in chip)]
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        return [*super().columns_named(), *((("chips", k, a), ref) for k, chip in enumerate(self.chips)
+                                             for a, ref in enumerate(chip))]
 
     @property
     def settings(self) -> MLX90393Settings | None:
@@ -179,8 +183,9 @@ class LabelLog(_Log):
                                          "that is not a channel or a column softtip writes")
             stored_unit(name, label.unit)
 
-    def columns_used(self) -> list:
-        return [*super().columns_used(), *(label.column for label in self.columns.values())]
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        return [*super().columns_named(), *((("columns", name, "column"), label.column)
+                                             for name, label in self.columns.items())]
 
 
 @schema
@@ -269,7 +274,12 @@ class ImportMapping:
 
 def load_mapping(path: str | os.PathLike) -> ImportMapping:
     """A mapping file, validated: a mistake is one line naming the file and the key."""
-    return parse(ImportMapping, read_toml(path, "import mapping", DatasetError), str(path), error=DatasetError)
+    return mapping_from(read_toml(path, "import mapping", DatasetError), str(path))
+
+
+def mapping_from(document: Any, source: str) -> ImportMapping:
+    """A mapping from its tables (a parsed file, edited by options), validated; ``source`` names it in errors."""
+    return parse(ImportMapping, document, source, error=DatasetError)
 
 
 def stored_unit(name: str, unit: str) -> str:
