@@ -1,4 +1,4 @@
-"""``softtip import``: a rig's delimited text logs into a softtip dataset, as a mapping file says."""
+"""``softtip import``: a rig's delimited text logs into a softtip dataset, as a mapping file or the options say."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import typer
 
 from softtip.cli.common import FORCE, check_input, check_number, check_output, console, errors, fail, printable
 
-LONGEST_TOLERANCE_S = 3600.0  # a join across more than an hour pairs readings that have nothing to do with each other
+LONGEST_SPAN_S = 3600.0  # a join tolerance or a baseline over an hour pairs readings that do not belong together
 
 
 def _trial_numbers(text: str) -> list[int]:
@@ -108,8 +108,8 @@ def import_logs(
         fail(f"--baseline-samples = {baseline_samples}: expected a number of samples >= 1")
     if validate_fraction is not None and not 0 < validate_fraction < 1:
         fail(f"--validate-fraction = {validate_fraction:g}: expected a fraction of the trials, between 0 and 1")
-    check_number(baseline_seconds, "--baseline-seconds", above=0, maximum=LONGEST_TOLERANCE_S, unit="s")
-    check_number(tolerance, "--tolerance", above=0, maximum=LONGEST_TOLERANCE_S, unit="s")
+    check_number(baseline_seconds, "--baseline-seconds", above=0, maximum=LONGEST_SPAN_S, unit="s")
+    check_number(tolerance, "--tolerance", above=0, maximum=LONGEST_SPAN_S, unit="s")
     document = {} if mapping is None else read_toml(mapping, "import mapping", DatasetError)
     as_written = copy.deepcopy(document)
     options = {"chips": None if chips is None else _chips(chips), "time": None if time is None else _column(time),
