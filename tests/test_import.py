@@ -174,12 +174,15 @@ def test_a_log_out_of_time_order_is_refused_naming_the_line(tmp_path):
         import_logs([folder], joined)
 
 
-@pytest.mark.parametrize("unit, factor", [("g", GRAM_FORCE_N), ("mN", 1e-3), ("lbf", 4.4482216152605), ("N", 1.0)])
-def test_labels_are_converted_to_the_unit_their_name_states(tmp_path, unit, factor):
+@pytest.mark.parametrize("name, unit, factor", [
+    ("fz_N", "g", GRAM_FORCE_N), ("fz_N", "mN", 1e-3), ("fz_N", "lbf", 4.4482216152605), ("fz_N", "N", 1.0),
+    ("fz_mN", "kN", 1e6), ("depth_mm", "m", 1e3), ("depth_mm", "um", 1e-3), ("angle_deg", "rad", 180 / np.pi)])
+def test_labels_are_converted_to_the_unit_their_name_states(tmp_path, name, unit, factor):
     path = _one_file_log(tmp_path / "log.csv", [(0, k, 0, 0, 0, 10.0 * k) for k in range(3)])
     dataset, _ = import_logs([path], _mapping({"sensor": {"time": "t_ms", "chips": [["bx", "by", "bz"]]},
-                                               "labels": {"columns": {"fz_N": {"column": "load_kN", "unit": unit}}}}))
-    np.testing.assert_allclose(dataset.column("fz_N"), [0, 10 * factor, 20 * factor], rtol=1e-15)
+                                               "labels": {"columns": {name: {"column": "load_kN", "unit": unit}}}}))
+    np.testing.assert_allclose(dataset.column(name), [0, 10 * factor, 20 * factor], rtol=1e-14)
+    assert dataset.labels[name] == name.rsplit("_", 1)[1]
 
 
 def _counts_log(path: Path, words: list[tuple[int, int, int]]) -> Path:
@@ -304,6 +307,29 @@ def test_the_command_imports_and_calibrate_and_evaluate_read_it(tmp_path):
     assert fitted.exit_code == 0, fitted.output
     scored = CliRunner().invoke(app, ["evaluate", str(tmp_path / "m.npz"), str(out), "--json"])
     assert scored.exit_code == 0 and json.loads(scored.output)["fz_N"]["rmse"] >= 0
+
+
+def test_an_imported_dataset_feeds_sysid(tmp_path):
+    # y[k] = 0.8 y[k-1] + 0.5 u[k-1], noise-free: sysid must find the pole 0.8
+    u = np.random.default_rng(0).normal(size=300)
+    y = np.zeros_like(u)
+    for k in range(1, len(u)):
+        y[k] = 0.8 * y[k - 1] + 0.5 * u[k - 1]
+    (tmp_path / "process.dat").write_text("".join(f"  {a:.12f}   {b:.12f}  0 0\n" for a, b in zip(u, y, strict=True)))
+    (tmp_path / "process.toml").write_text(
+        '[sensor]\nheader = false\ndelimiter = "whitespace"\nrate_hz = 10.0\nchip = "other"\nname = "plate"\n'
+        'unit = "V"\nchips = [[2, 3, 4]]\n[labels]\ncolumns = { heater_V = { column = 1, unit = "V" } }\n')
+    runner = CliRunner()
+    made = runner.invoke(app, ["import", str(tmp_path / "process.dat"), "-m", str(tmp_path / "process.toml"),
+                               "-o", str(tmp_path / "process.parquet")])
+    assert made.exit_code == 0, made.output
+    fitted = runner.invoke(app, ["sysid", "fit", "--data", str(tmp_path / "process.parquet"), "-u", "heater_V",
+                                 "-y", "plate0_x_V", "--kind", "tf", "--order", "1", "-o", str(tmp_path / "p.npz"),
+                                 "--json"])
+    assert fitted.exit_code == 0, fitted.output
+    model = json.loads(fitted.output)["model"]
+    assert model["ts"] == pytest.approx(0.1) and model["input_units"] == ["V"]
+    np.testing.assert_allclose(model["discrete_poles"][0], [0.8, 0.0], atol=1e-6)
 
 
 @pytest.mark.parametrize("args, message", [
