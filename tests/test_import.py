@@ -88,6 +88,28 @@ def test_the_rest_rule_zeroes_each_trial_on_its_samples_at_rest():
         import_logs(RECORDINGS, replace(rest, trials=replace(rest.trials, baseline=Baseline(label="fz_N", below=-1.0))))
 
 
+def test_pieces_of_a_recording_split_at_its_pauses_share_its_zero():
+    from dataclasses import replace
+
+    from softtip.lab.importing import Baseline, Trials, Validation
+
+    mapping = load_mapping(EXCERPT / "import.toml")
+    pieces = replace(mapping, trials=Trials(split="gap", gap_s=0.5, validation=Validation(last=1),
+                                            baseline=Baseline(samples=20, per="source")))
+    dataset, _ = import_logs(RECORDINGS[:1], pieces)
+    time, field, force = _hand_join(RECORDINGS[0], baseline=20, tolerance=0.02)
+    sensor_time = np.loadtxt(RECORDINGS[0] / "sensor.csv", delimiter=",", usecols=0)
+    pauses = np.flatnonzero(np.diff(sensor_time) > 0.5)
+    assert len(dataset.trials) == len(pauses) + 1 >= 2
+    np.testing.assert_allclose(dataset.X(), field, rtol=0, atol=1e-9)  # one zero: the recording's first 20 rows
+    np.testing.assert_allclose(dataset.column("fz_N"), force, rtol=1e-12)
+    first_rows = np.r_[0, pauses + 1]  # each piece's time counts from its own first sensor row
+    clock = time + sensor_time[0]
+    piece = np.searchsorted(first_rows, np.searchsorted(sensor_time, clock), side="right") - 1
+    np.testing.assert_allclose(dataset.column("time_s"), clock - sensor_time[first_rows][piece], atol=1e-9)
+    np.testing.assert_array_equal(dataset.groups, piece)
+
+
 def _whitespace_copy(source: Path, target: Path, names: list[str]) -> None:
     """The same numbers as a whitespace-separated file with a header, padded unevenly."""
     rows = np.loadtxt(source, delimiter=",", dtype=str)
@@ -369,11 +391,11 @@ def test_options_alone_import_a_log_as_its_mapping_does(tmp_path):
     assert refused.exit_code == 2 and "the options: labels.tolerance_s" in refused.output
 
 
-def _readme_block(heading: str) -> list[str]:
-    """The commands of the README's bash block that follows ``heading``."""
-    text = (ROOT / "README.md").read_text()
-    block = text.split(heading, 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
-    return [line.split("  #", 1)[0].strip() for line in block.splitlines() if line.strip()]
+def _readme_commands(heading: str) -> list[str]:
+    """The commands of every bash block of the README's section under ``heading``."""
+    section = (ROOT / "README.md").read_text().split(heading, 1)[1].split("\n#", 1)[0]
+    blocks = [part.split("```", 1)[0] for part in section.split("```bash\n")[1:]]
+    return [line.split("  #", 1)[0].strip() for block in blocks for line in block.splitlines() if line.strip()]
 
 
 @pytest.mark.slow
@@ -381,19 +403,23 @@ def test_the_readme_walk_through_runs_as_written_and_scores_the_held_out_recordi
     import shlex
 
     shutil.copytree(SHIPPED, tmp_path / "examples" / "data" / "eflesh-normal")
-    commands = _readme_block("### A walk through a real dataset")
-    assert [shlex.split(line)[:2] for line in commands] == [["softtip", "import"], ["softtip", "calibrate"]]
+    commands = _readme_commands("### A walk through a real dataset")
+    assert [shlex.split(line)[1] for line in commands] == ["import", "calibrate"] * 2
+    scores = []
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(tmp_path)
         for line in commands:
-            words = shlex.split(line)[1:]
-            words = [str(path) for word in words
+            words = [str(path) for word in shlex.split(line)[1:]
                      for path in (sorted(tmp_path.glob(word)) if "*" in word else [word])]
             result = CliRunner().invoke(app, words)
             assert result.exit_code == 0, f"{line}: {result.output}"
-    report = json.loads(result.output)
+            if words[0] == "calibrate":
+                scores.append(json.loads(result.output))
     dataset = Dataset.read(tmp_path / "eflesh.parquet")
     held_out = dataset.select(rows=dataset.column("role") == "validation")
     assert set(held_out.column("source")) == {"20250401_015717_probe"}
-    assert report["validation_samples"] == len(held_out)
-    assert report["validation"]["fz_N"]["rmse"] <= 0.40
+    assert scores[0]["validation_samples"] == len(held_out)
+    assert scores[0]["validation"]["fz_N"]["rmse"] <= 0.40  # the issue's bound for a whole held-out recording
+    within = Dataset.read(tmp_path / "within.parquet")
+    assert len(within.trials) == 20 and list(within.trial_conditions["role"]).count("validation") == 4
+    assert scores[1]["validation"]["fz_N"]["rmse"] <= 0.27  # the published figure of the authors' split

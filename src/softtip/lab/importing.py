@@ -24,7 +24,8 @@ A mapping, written once as a small TOML file, says how a rig's logs become trial
     split = "file"                # one source per trial; or "column" (a trial id column), "gap" (gap_s)
     validation = { last = 1 }     # or { trials = [0, 3] }, or { fraction = 0.2 } (the last trials)
     baseline = { samples = 20 }   # each trial's first samples are its zero; or { seconds = 1.0 }, or
-                                  # { label = "fz_N", below = 0.05 }: its samples at rest
+                                  # { label = "fz_N", below = 0.05 }: its samples at rest; per = "source":
+                                  # one zero for all the trials of a source
 
 A source is a file (the sensor log, labels in it) or a folder holding the mapping's files. Labels are
 converted to the unit their name ends in (``fz_N``: N) from the unit they were logged in; a label whose
@@ -224,12 +225,14 @@ class Validation:
 class Baseline:
     """Each trial's zero: the mean of its first samples, of its first seconds, or of its samples at rest
     (those whose ``label``, in the unit it is stored in, is below ``below``: the reference says nothing
-    presses)."""
+    presses); ``per = "source"`` takes one zero per source for all its trials (trials split from one
+    recording at gaps or by a column, which need not start at rest)."""
 
     samples: PositiveInteger | None = None
     seconds: PositiveNumber | None = None
     label: Annotated[str, Strict(), Field(min_length=1), expect("a label's name")] | None = None
     below: Annotated[float, Strict(), Field(allow_inf_nan=False), expect("a number")] | None = None
+    per: choice("trial", "source") = "trial"
 
     def __post_init__(self) -> None:
         if (self.label is None) != (self.below is None):
@@ -435,10 +438,14 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     starts, lengths = trial_runs(ids)
     clock, time = time, time - np.repeat(time[starts], lengths)  # from each trial's first sample, kept or not
     baseline = mapping.trials.baseline
+    zero_ids = ids if baseline is None or baseline.per == "trial" else np.zeros_like(ids)  # whose zero each row takes
     if baseline is not None and baseline.label is None:
-        at_zero = (np.arange(len(ids)) - np.repeat(starts, lengths) < baseline.samples if baseline.samples
-                   else time < baseline.seconds)
-        readings = _subtract_zero(sensor_file, baseline, readings, ids, at_zero)
+        if baseline.samples:
+            zero_starts, zero_lengths = trial_runs(zero_ids)
+            at_zero = np.arange(len(ids)) - np.repeat(zero_starts, zero_lengths) < baseline.samples
+        else:
+            at_zero = (time if baseline.per == "trial" else clock - clock[0]) < baseline.seconds
+        readings = _subtract_zero(sensor_file, baseline, readings, zero_ids, at_zero)
     dropped, largest = 0, None
     if labels is None:
         label_values = np.zeros((len(time), 0))
@@ -449,7 +456,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
             missing |= np.any(own == labels.missing, axis=1)
         keep = ~missing
         dropped = int(missing.sum())
-        time, readings, label_values, ids = time[keep], readings[keep], own[keep], ids[keep]
+        time, readings, label_values, ids, zero_ids = time[keep], readings[keep], own[keep], ids[keep], zero_ids[keep]
         saturated = None if saturated is None else saturated[keep]
     else:
         label_refs = [labels.time, *(label.column for label in labels.columns.values())]
@@ -458,7 +465,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
                                            logged[:, 1:])
         dropped = int((~keep).sum())
         largest = float(offset.max()) if offset.size else None
-        time, readings, ids = time[keep], readings[keep], ids[keep]
+        time, readings, ids, zero_ids = time[keep], readings[keep], ids[keep], zero_ids[keep]
         saturated = None if saturated is None else saturated[keep]
     if labels is not None:
         factors = [_label_factor(name, label.unit) for name, label in labels.columns.items()]
@@ -467,7 +474,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
         raise DatasetError(f"{source}: no sensor row has a label reading within the tolerance")
     if baseline is not None and baseline.label is not None:
         at_rest = label_values[:, list(labels.columns).index(baseline.label)] < baseline.below
-        readings = _subtract_zero(sensor_file, baseline, readings, ids, at_rest)
+        readings = _subtract_zero(sensor_file, baseline, readings, zero_ids, at_rest)
     trials = []
     for start, length in zip(*trial_runs(ids), strict=True):
         rows = slice(start, start + length)
@@ -496,10 +503,11 @@ def _subtract_zero(path: Path, baseline: Baseline, readings: np.ndarray, ids: np
     rule = next(f"{key} = {value}" for key, value in (("samples", baseline.samples), ("seconds", baseline.seconds),
                                                        ("label", baseline.label)) if value is not None)
     if np.any(counts == 0):
-        raise DatasetError(f"{path}: baseline.{rule}: a trial has no sample that is at its zero by this rule")
+        raise DatasetError(f"{path}: baseline.{rule}: a {baseline.per} has no sample that is at its zero by "
+                           "this rule")
     if np.any(counts == lengths):
-        raise DatasetError(f"{path}: baseline.{rule} covers every sample of a trial of {lengths[counts == lengths][0]}"
-                           ": a zero must leave samples to measure")
+        raise DatasetError(f"{path}: baseline.{rule} covers every sample of a {baseline.per} of "
+                           f"{lengths[counts == lengths][0]}: a zero must leave samples to measure")
     zero = np.add.reduceat(readings * at_zero[:, None, None], starts) / counts[:, None, None]
     return readings - np.repeat(zero, lengths, axis=0)
 
