@@ -142,7 +142,7 @@ def _one_file_log(path: Path, rows: list[tuple]) -> Path:
     return path
 
 
-def test_trials_by_column_by_gap_and_the_validation_rules(tmp_path):
+def test_trials_by_column_and_the_validation_rules(tmp_path):
     # three runs of four rows; the load in kN, NaN and the sentinel -1 mark rows without a reading
     rows = [(run, 100 * k + 1000 * run * (run > 1), 10 * run + k, -k, 2 * k, 0.001 * k)
             for run in range(3) for k in range(4)]
