@@ -75,6 +75,7 @@ ACCEPTED = {
     "--delay": {"zero"},  # "0": no delay
     "--full-scale": {"huge"},  # a sensor's rated range is the user's to state; the % of it are then small, not wrong
     "--validate": {"same as input"},  # validating on the estimation data is allowed (and optimistic)
+    "--validate-trials": {"zero"},  # trial 0 is a trial like any other
 }
 if os.geteuid() == 0:  # the superuser writes into read-only folders: nothing to refuse
     PATH = [bad for bad in PATH if bad.kind != "read-only folder"]
@@ -140,6 +141,8 @@ def inputs(tmp_path_factory):
     (tmp / "recording.csv").write_text("time_s,u,y\n" + "".join(f"{k * 0.01},{a},{b}\n" for k, (a, b) in
                                                                 enumerate(zip(u, y))))
     shutil.copy(DATA / "recording-0.1.0.mcap", tmp / "recording.mcap")
+    logs = sorted(str(path) for path in (DATA / "eflesh-excerpt").iterdir() if path.is_dir())
+    shutil.copy(DATA / "eflesh-excerpt" / "import.toml", tmp / "import.toml")
     (tmp / "study.toml").write_text(Path(__file__).parents[1].joinpath("examples", "estimation-grid.toml").read_text())
     runner = CliRunner()
     for args in (["calibrate", str(dataset), "-t", "fz_N", "--model", "polynomial", "-o", str(tmp / "model.npz")],
@@ -168,6 +171,8 @@ def inputs(tmp_path_factory):
         "live": ([], ["--emulate"], None, None),
         "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "dataset"),
         "haptics table export": ([str(tmp / "new" / "table.h")], [], None, None),
+        "import": (logs, ["-m", str(tmp / "import.toml"), "-o", str(tmp / "work" / "imported.parquet")], "import.toml",
+                   "mapping"),
     }
     (tmp / "new").mkdir()
     (tmp / "work").mkdir()  # the current folder of every run: default outputs land here
