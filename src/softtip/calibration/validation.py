@@ -1,0 +1,232 @@
+"""Validating a calibration made of few trials, each unlike the others (a real rig's recordings).
+
+**Early stopping.** The network stops when its error on a held-out share of the calibration data
+stops falling (:mod:`softtip.calibration.network`). Which share is held out decides whether that
+works:
+
+* ``trials`` — whole trials (the toolbox's rule with trial groups). Right when there are many
+  trials of every kind. With a few trials that differ (one taxel, one session, one load path per
+  trial) the held-out trial is unlike every training trial: its error rises from the first epochs
+  and training stops before the network has learnt, or with two or three trials nothing is held out
+  at all and training runs to its epoch cap;
+* ``blocks`` — every trial cut into consecutive blocks of ``block_s`` seconds
+  (:func:`softtip.data.splits.time_blocks`), whole blocks held out. Every kind of trial is in
+  training and in validation; a block is long against the time over which neighbouring samples are
+  alike, so the validation error is not that of samples the network was trained on (a random share
+  of samples would follow the training error and never stop training);
+* ``auto`` (the default) — ``trials`` when the calibration set has at least
+  :data:`MIN_TRIALS_HELD_OUT` trials (the default 15 % validation share is then two trials or
+  more), ``blocks`` otherwise.
+
+**Model selection** across trials is :func:`cross_validate_by_trial`: every calibration trial in
+turn (or a fold of them) is held out, each candidate fitted on the rest with the same early-stopping
+rule, and the held-out errors averaged. It tells which model carries over to a trial it has not
+seen, which a validation share inside the calibration trials cannot.
+
+**Covariate shift** (:func:`range_shift`): a validation set is scored as the model will be used only
+if it lies where the model was calibrated. The statistic is the *out-of-range share*: the share of
+validation samples with at least one input channel (or target) beyond the calibration set's range
+widened by :data:`RANGE_MARGIN` of its span on each side. Above :data:`SHIFT_WARNING_SHARE` the
+validation error measures extrapolation, and a warning says so.
+
+**Baselines** (:func:`baselines`): scikit-learn's ridge regression, gradient boosting and MLP,
+fitted on the same calibration samples and scored on the same validation samples, as a reference
+for whether softtip's model is competitive on the data. Each is a plain, documented configuration
+(inputs standardised; no early stopping on a random share of samples, which would leak), not a
+tuned one.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.compose import TransformedTargetRegressor
+from sklearn.ensemble import HistGradientBoostingRegressor
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.linear_model import RidgeCV
+from sklearn.multioutput import MultiOutputRegressor
+from sklearn.neural_network import MLPRegressor
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import StandardScaler
+
+from softtip import metrics
+from softtip._core.threads import single_threaded
+from softtip.data.splits import TrialKFold, time_blocks
+
+StoppingRule = Literal["auto", "trials", "blocks"]
+STOPPING_RULES: tuple[str, ...] = ("auto", "trials", "blocks")
+MIN_TRIALS_HELD_OUT = 10  # round(0.15 * 10) = 2 validation trials: fewer, and one trial decides when to stop
+DEFAULT_BLOCK_S = 5.0  # several seconds: longer than a press's rise, short against a recording
+RANGE_MARGIN = 0.05  # of the calibration span, each side: quantisation steps and noise are not a shift
+SHIFT_WARNING_SHARE = 0.01  # of the validation samples beyond the widened range
+BASELINES: tuple[str, ...] = ("ridge", "boosting", "mlp")
+RIDGE_ALPHAS = np.logspace(-6, 6, 13)
+MLP_HIDDEN = (100,)  # scikit-learn's default size
+MLP_MAX_ITER = 1000
+
+
+def stopping_groups(trial: np.ndarray, time_s: np.ndarray, rule: StoppingRule,
+                    block_s: float = DEFAULT_BLOCK_S) -> tuple[np.ndarray, str]:
+    """(the group of every sample for a network's held-out shares, the rule applied: ``trials`` or
+    ``blocks``); ``auto`` resolved as in the module notes."""
+    if rule not in STOPPING_RULES:
+        raise ValueError(f"early stopping rule: expected one of {', '.join(STOPPING_RULES)}, got {rule!r}")
+    trial = np.asarray(trial)
+    if rule == "auto":
+        rule = "trials" if np.unique(trial).size >= MIN_TRIALS_HELD_OUT else "blocks"
+    if rule == "trials":
+        return trial, rule
+    return time_blocks(trial, time_s, block_s), rule
+
+
+# --------------------------------------------------------------------------
+# Covariate shift
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RangeShift:
+    """How far a validation set lies outside its calibration set (see the module notes).
+
+    ``input_share``: share of validation samples with any input beyond the widened calibration range;
+    ``target_share``: the same for the targets; ``channel_shares``: per input channel, its share.
+    """
+
+    input_share: float
+    target_share: float
+    channel_shares: tuple[float, ...]
+
+    @property
+    def shifted(self) -> bool:
+        return max(self.input_share, self.target_share) > SHIFT_WARNING_SHARE
+
+    def warning(self, channels: tuple[str, ...], targets: tuple[str, ...]) -> str:
+        """One line saying where the validation set leaves the calibration range ("" when it does not)."""
+        if not self.shifted:
+            return ""
+        worst = np.argsort(self.channel_shares)[::-1][:3]
+        named = ", ".join(f"{channels[k]} {100 * self.channel_shares[k]:.0f} %" for k in worst
+                          if self.channel_shares[k] > 0)
+        return (f"validation set unlike the calibration set: {100 * self.input_share:.1f} % of its samples have an "
+                f"input beyond the calibration range (± {100 * RANGE_MARGIN:.0f} % of its span; {named or 'none'}) "
+                f"and {100 * self.target_share:.1f} % a target ({', '.join(targets)}) beyond it; its errors measure "
+                "extrapolation")
+
+    def to_json(self, channels: tuple[str, ...]) -> dict:
+        return {"input_share": self.input_share, "target_share": self.target_share,
+                "channel_shares": dict(zip(channels, self.channel_shares, strict=True)),
+                "margin_of_span": RANGE_MARGIN, "warning_above": SHIFT_WARNING_SHARE}
+
+
+def _beyond(reference: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per sample and column of ``values``: beyond the range of ``reference``'s column widened by the margin."""
+    low, high = reference.min(axis=0), reference.max(axis=0)
+    margin = RANGE_MARGIN * (high - low)
+    return (values < low - margin) | (values > high + margin)
+
+
+def range_shift(calibration_X: np.ndarray, validation_X: np.ndarray, calibration_y: np.ndarray,
+                validation_y: np.ndarray) -> RangeShift:
+    """The out-of-range shares of a validation set (X: (n, channels); y: (n,) or (n, targets))."""
+    if not len(calibration_X) or not len(validation_X):
+        raise ValueError("range_shift: the calibration and validation sets must both hold samples")
+    inputs = _beyond(calibration_X, validation_X)
+    targets = _beyond(calibration_y.reshape(len(calibration_y), -1), validation_y.reshape(len(validation_y), -1))
+    return RangeShift(float(inputs.any(axis=1).mean()), float(targets.any(axis=1).mean()),
+                      tuple(float(share) for share in inputs.mean(axis=0)))
+
+
+# --------------------------------------------------------------------------
+# Scores, baselines, cross-validation
+# --------------------------------------------------------------------------
+
+
+def regression_scores(truth: np.ndarray, estimate: np.ndarray, targets: tuple[str, ...]) -> dict[str, dict]:
+    """Per target: mean absolute error, RMSE and R² of ``estimate`` against ``truth``."""
+    truth, estimate = truth.reshape(len(truth), -1), estimate.reshape(len(truth), -1)
+    return {name: {"mean_abs_error": float(metrics.mean_abs_error(truth[:, k], estimate[:, k])),
+                   "rmse": float(metrics.rmse(truth[:, k], estimate[:, k])),
+                   "r2": float(metrics.r2(truth[:, k], estimate[:, k]))} for k, name in enumerate(targets)}
+
+
+def baseline(name: str, seed: int) -> BaseEstimator:
+    """A scikit-learn reference regressor by name (one of :data:`BASELINES`), multi-output."""
+    if name == "ridge":
+        return make_pipeline(StandardScaler(), RidgeCV(alphas=RIDGE_ALPHAS))
+    if name == "boosting":
+        return MultiOutputRegressor(HistGradientBoostingRegressor(early_stopping=False, random_state=seed))
+    if name == "mlp":
+        network = make_pipeline(StandardScaler(), MLPRegressor(hidden_layer_sizes=MLP_HIDDEN, max_iter=MLP_MAX_ITER,
+                                                               random_state=seed))
+        return TransformedTargetRegressor(network, transformer=StandardScaler())
+    raise ValueError(f"baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
+
+
+@dataclass(frozen=True)
+class BaselineScore:
+    name: str
+    scores: dict[str, dict]  # per target, as regression_scores
+    fit_s: float
+    converged: bool  # False when scikit-learn warned that the fit stopped at its iteration cap
+
+    def to_json(self) -> dict:
+        return {"validation": self.scores, "fit_s": round(self.fit_s, 3), "converged": self.converged}
+
+
+def fit_quietly(estimator: BaseEstimator, X: np.ndarray, y: np.ndarray) -> bool:
+    """Fit on one thread; whether it converged (scikit-learn's ConvergenceWarning caught and reported, not
+    printed)."""
+    with warnings.catch_warnings(record=True) as caught, single_threaded():
+        warnings.simplefilter("always", ConvergenceWarning)
+        estimator.fit(X, y)
+    return not any(issubclass(w.category, ConvergenceWarning) for w in caught)
+
+
+def baselines(calibration: tuple[np.ndarray, np.ndarray], validation: tuple[np.ndarray, np.ndarray],
+              targets: tuple[str, ...], seed: int, names: tuple[str, ...] = BASELINES) -> list[BaselineScore]:
+    """Each baseline fitted on the calibration (X, y) and scored on the validation (X, y)."""
+    (X, y), (X_val, y_val) = calibration, validation
+    results = []
+    for name in names:
+        model = baseline(name, seed)
+        start = time.perf_counter()
+        converged = fit_quietly(model, X, y.reshape(len(y), -1))
+        seconds = time.perf_counter() - start
+        results.append(BaselineScore(name, regression_scores(y_val, model.predict(X_val), targets), seconds, converged))
+    return results
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A model to cross-validate: a factory of unfitted estimators, and whether its fit takes early-stopping groups."""
+
+    name: str
+    make: Callable[[], BaseEstimator]
+    takes_groups: bool
+
+
+def cross_validate_by_trial(candidates: list[Candidate], X: np.ndarray, y: np.ndarray, trial: np.ndarray,
+                            time_s: np.ndarray, n_splits: int, rule: StoppingRule = "auto",
+                            block_s: float = DEFAULT_BLOCK_S) -> dict[str, np.ndarray]:
+    """Per candidate, the RMSE of every target on held-out trials: ``n_splits`` folds of whole trials
+    (:class:`~softtip.data.splits.TrialKFold`), every sample predicted once by a model fitted without
+    its trial; the early-stopping groups of each fold's fit are made from its own trials."""
+    folds = list(TrialKFold(trial, n_splits).split(X))
+    targets = y.reshape(len(y), -1)
+    predicted = {candidate.name: np.empty_like(targets) for candidate in candidates}
+    for train, test in folds:
+        groups, _ = stopping_groups(trial[train], time_s[train], rule, block_s)
+        for candidate in candidates:
+            model = candidate.make()
+            if candidate.takes_groups:
+                model.fit(X[train], y[train], groups=groups)
+            else:
+                fit_quietly(model, X[train], targets[train])
+            predicted[candidate.name][test] = model.predict(X[test]).reshape(len(test), -1)
+    return {name: np.atleast_1d(metrics.rmse(targets, estimate)) for name, estimate in predicted.items()}
