@@ -94,21 +94,23 @@ def test_range_shift_counts_samples_beyond_the_widened_range_by_hand():
 # --------------------------------------------------------------------------
 
 
-def taxel_trials(peaks_n: list[float], rng: np.random.Generator, rate_hz: float = 20.0):
-    """(X, y, trial, time) of trials that each press one taxel of a 2 x 2 array of 3-axis chips 10 mm apart,
-    ten presses a trial: each chip reads a saturating field of the force, falling off with its distance from
-    the pressed taxel as a dipole's (1/(1 + (d/5 mm)²)^1.5), tilted towards the taxel, with 1 µT noise."""
+def taxel_trials(peaks_n: list[float], rng: np.random.Generator, rate_hz: float = 20.0, every_taxel: bool = False):
+    """(X, y, trial, time) of trials of ten presses on a 2 x 2 array of 3-axis chips 10 mm apart, each trial on
+    one taxel (trial k on taxel k mod 4), or with ``every_taxel`` press n of a trial on taxel n mod 4. Each
+    chip reads a saturating field of the force, falling off with its distance from the pressed taxel as a
+    dipole's (1/(1 + (d/5 mm)²)^1.5), tilted towards the taxel, with 1 µT noise."""
     chips = np.array([[0, 0], [10, 0], [0, 10], [10, 10]], dtype=float)
     X, y, trial, time = [], [], [], []
     for index, peak in enumerate(peaks_n):
-        taxel = chips[index % 4]
         t = np.arange(0, 50, 1 / rate_hz)
+        press = np.floor(t / 5).astype(int)
+        taxel = chips[press % 4 if every_taxel else np.full(len(t), index % 4)]
         force = peak * np.clip(np.sin(2 * np.pi * t / 5), 0, None) ** 2  # ten presses of 2.5 s
         field = 300 * force / (1 + force / 8)  # µT, softening as the elastomer stiffens
-        offset = taxel - chips
-        fall = (1 + (np.linalg.norm(offset, axis=1) / 5) ** 2) ** -1.5
-        direction = np.column_stack([offset / 10, np.ones(4)])
-        readings = field[:, None, None] * (fall[:, None] * direction)[None]
+        offset = taxel[:, None, :] - chips[None]
+        fall = (1 + (np.linalg.norm(offset, axis=2) / 5) ** 2) ** -1.5
+        direction = np.concatenate([offset / 10, np.ones((len(t), 4, 1))], axis=2)
+        readings = field[:, None, None] * fall[:, :, None] * direction
         X.append(readings.reshape(len(t), 12) + rng.normal(0, 1.0, (len(t), 12)))
         y.append(force)
         trial.append(np.full(len(t), index))
@@ -224,3 +226,32 @@ def test_a_held_out_recording_beyond_the_calibration_range_is_warned_of(eflesh, 
     assert summary["warnings"] and "unlike the calibration set" in summary["warnings"][0]
     assert "warning: validation set unlike the calibration set" in stderr
     assert set(summary["cross_validation"]["rmse"]) == {"polynomial"}
+
+
+def test_selection_weighs_each_target_by_its_spread():
+    y = np.column_stack([np.linspace(0, 10, 11), np.linspace(0, 0.1, 11)])  # spreads 3.162 and 0.03162
+    rmse = {"a": np.array([1.0, 0.001]),   # 0.316 + 0.032 of the spreads
+            "b": np.array([0.1, 0.02])}    # 0.032 + 0.632: the smaller errors in N, the larger relative to the spread
+    assert checks.selected(rmse, y) == "a"
+    assert checks.selected({"a": np.array([2.0]), "b": np.array([1.0])}, y[:, 0]) == "b"
+
+
+def test_calibrate_selects_the_hidden_layer_of_the_lowest_error_on_held_out_trials(tmp_path):
+    X, y, trial, time = taxel_trials([10.0, 9.0, 11.0, 10.0, 9.5, 10.5], np.random.default_rng(3), rate_hz=5.0,
+                                     every_taxel=True)
+    role = np.where(trial < 4, "calibration", "validation")
+    channels = {f"s{k // 3}_b{'xyz'[k % 3]}_uT": X[:, k] for k in range(12)}
+    path = Dataset({"trial": trial, "time_s": time, "fz_N": y, "role": role, **channels}, {"fz_N": "N"},
+                   {"role": "1"}).write(tmp_path / "taxels.parquet")
+    summary, _ = calibrate(path, "-t", "fz_N", "-o", tmp_path / "m.npz", "--cv", "4", "--hidden", "1",
+                           "--hidden", "8")
+    cross = summary["cross_validation"]["rmse"]
+    # measured: held-out trials 0.049 N with one tanh neuron, 0.016 N with eight; the selected network of
+    # eight, refitted on the four trials, 0.014 N on the two validation trials
+    assert summary["cross_validation"]["selected"] == summary["label"] == "network 8"
+    assert cross["network 1"]["fz_N"] > 2 * cross["network 8"]["fz_N"]
+    assert summary["validation"]["fz_N"]["rmse"] < 0.5 * cross["network 1"]["fz_N"]
+    assert summary["hidden"] == [8]
+    refused = CliRunner().invoke(app, ["calibrate", str(path), "-t", "fz_N", "-o", str(tmp_path / "n.npz"),
+                                       "--hidden", "1", "--hidden", "8"])
+    assert refused.exit_code == 2 and "--cv" in refused.output

@@ -20,8 +20,9 @@ works:
 
 **Model selection** across trials is :func:`cross_validate_by_trial`: every calibration trial in
 turn (or a fold of them) is held out, each candidate fitted on the rest with the same early-stopping
-rule, and the held-out errors averaged. It tells which model carries over to a trial it has not
-seen, which a validation share inside the calibration trials cannot.
+rule, and the held-out errors averaged; :func:`selected` takes the candidate of the lowest error.
+It tells which model carries over to a trial it has not seen, which a validation share inside the
+calibration trials cannot.
 
 **Covariate shift** (:func:`range_shift`): a validation set is scored as the model will be used only
 if it lies where the model was calibrated. The statistic is the *out-of-range share*: the share of
@@ -230,3 +231,11 @@ def cross_validate_by_trial(candidates: list[Candidate], X: np.ndarray, y: np.nd
                 fit_quietly(model, X[train], targets[train])
             predicted[candidate.name][test] = model.predict(X[test]).reshape(len(test), -1)
     return {name: np.atleast_1d(metrics.rmse(targets, estimate)) for name, estimate in predicted.items()}
+
+
+def selected(rmse: dict[str, np.ndarray], y: np.ndarray) -> str:
+    """The name whose cross-validated RMSE, each target's divided by its spread (standard deviation) over the
+    calibration samples ``y`` so that targets in different units weigh alike, is lowest on average."""
+    spread = np.std(y.reshape(len(y), -1), axis=0)
+    spread = np.where(spread > 0, spread, 1.0)
+    return min(rmse, key=lambda name: float(np.mean(rmse[name] / spread)))

@@ -100,7 +100,9 @@ def calibrate(
     dataset: Path = typer.Argument(..., help="Dataset (.parquet) from softtip lab run or softtip convert."),
     target: list[str] = typer.Option(..., "--target", "-t", help="Label column(s) to estimate."),
     model: str = typer.Option("network", "--model", help=f"One of {', '.join(MODEL_KINDS)}."),
-    hidden: str = typer.Option("10", "--hidden", help="Hidden layer sizes, e.g. 20 or 10,10,10,10."),
+    hidden: list[str] = typer.Option(["10"], "--hidden",
+                                     help="Hidden layer sizes, e.g. 20 or 10,10,10,10. Given more than once (with "
+                                          "--cv), the candidates are cross-validated by trial and the best is fitted."),
     min_force: float = typer.Option(None, "--min-label", help="Use only samples whose first target is above this."),
     early_stopping: str = typer.Option(
         "auto", "--early-stopping",
@@ -109,7 +111,8 @@ def calibrate(
              f"{MIN_TRIALS_HELD_OUT} calibration trials, else blocks)."),
     block_s: float = typer.Option(DEFAULT_BLOCK_S, "--block-s", help="Length of the early-stopping blocks, seconds."),
     cv: int = typer.Option(None, "--cv", help="Also cross-validate by trial: K folds of whole calibration trials "
-                                             "(2 to their number), for the model and every baseline."),
+                                             "(2 to their number), for the model, each --hidden candidate and "
+                                             "every baseline."),
     baseline: bool = typer.Option(False, "--baseline", help="Also fit and score scikit-learn's ridge, gradient "
                                                             "boosting and MLP on the same samples, as a reference."),
     output: Path = typer.Option(Path("model.npz"), "--output", "-o", help="Saved model (.npz)."),
@@ -139,6 +142,12 @@ def calibrate(
         fail(f"--seed = {seed}: expected an integer >= 0")
     if cv is not None and cv < 2:
         fail(f"--cv = {cv}: expected a number of folds >= 2")
+    candidates = [_layer_sizes(text) for text in hidden]
+    if len(set(candidates)) < len(candidates):
+        fail("--hidden: a candidate is given twice; each is cross-validated once")
+    if len(candidates) > 1 and (cv is None or model == "polynomial"):
+        fail(f"--hidden given {len(candidates)} times: choosing between candidates needs --cv K and a network "
+             "or classifier" if model != "polynomial" else "--hidden: the polynomial has no hidden layers")
     check_output(output, "--output", [dataset], force=force)
     data = Dataset.read(dataset)
     unknown = [t for t in target if t not in data.labels]
@@ -146,12 +155,6 @@ def calibrate(
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
     _check_label_units(data, dataset, target)
     _check_readings(data, dataset)
-    try:
-        sizes = tuple(int(v) for v in hidden.split(","))
-    except ValueError:
-        sizes = ()
-    if not sizes or min(sizes) < 1 or max(sizes) > MAX_HIDDEN:
-        fail(f"--hidden = {hidden!r}: expected sizes from 1 to {MAX_HIDDEN} separated by commas, e.g. 10,10")
     X, y = data.X(), _targets(data, target, model)
     keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
     calibration, _ = by_role(data)
@@ -163,16 +166,22 @@ def calibrate(
     if cv is not None and cv > n_trials:
         fail(f"--cv = {cv}: {dataset} has {n_trials} calibration trials, fewer than the folds asked for")
     groups, rule = stopping_groups(trial, time_s, early_stopping, block_s)
+    names = tuple(target)
+    sizes = candidates[0]
+    if cv is not None:
+        cross = _cross_validation(X[train], y[train], trial, time_s, cv, model, candidates, seed, early_stopping,
+                                  block_s, baseline, names, json_output)
+        sizes = candidates[[_label(model, c) for c in candidates].index(cross["selected"])]
     estimator = _make_model(model, sizes, seed)
     start = time.perf_counter()
     estimator.fit(X[train], y[train], groups=groups)
     seconds = time.perf_counter() - start
-    names = tuple(target)
     report = _score(estimator, model, X[test], y[test], names) if test.any() else {}
     warned = []
     if not test.any():
         warned.append(f"{dataset} has no validation samples (role = validation): the model is saved unscored")
-    summary = {"model": str(output), "kind": model, "hidden": list(sizes), "targets": list(target),
+    summary = {"model": str(output), "kind": model, "label": _label(model, sizes), "hidden": list(sizes),
+               "targets": list(target),
                "fit_s": round(seconds, 2), "calibration_samples": int(train.sum()),
                "calibration_trials": int(n_trials), "validation_samples": int(test.sum()), "validation": report}
     if model != "polynomial":
@@ -195,8 +204,7 @@ def calibrate(
     elif baseline:
         warned.append("--baseline: no validation samples to score the baselines on")
     if cv is not None:
-        summary["cross_validation"] = _cross_validation(X[train], y[train], trial, time_s, cv, model, sizes, seed,
-                                                        early_stopping, block_s, baseline, names, json_output)
+        summary["cross_validation"] = cross
     summary["warnings"] = warned
     save_model(output, estimator, input_channels=list(data.channels),
                input_units=[data.channel_units[c] for c in data.channels],
@@ -213,19 +221,38 @@ def calibrate(
         console.print(f"model saved: {output}")
 
 
-def _cross_validation(X, y, trial, time_s, folds: int, kind: str, sizes: tuple[int, ...], seed: int,
+def _layer_sizes(text: str) -> tuple[int, ...]:
+    """The hidden layer sizes of one --hidden value, or a one-line refusal."""
+    try:
+        sizes = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        sizes = ()
+    if not sizes or min(sizes) < 1 or max(sizes) > MAX_HIDDEN:
+        fail(f"--hidden = {text!r}: expected sizes from 1 to {MAX_HIDDEN} separated by commas, e.g. 10,10")
+    return sizes
+
+
+def _label(kind: str, sizes: tuple[int, ...]) -> str:
+    """A model's name in tables: its kind, and its hidden layers if it has any."""
+    return kind if kind == "polynomial" else f"{kind} {','.join(map(str, sizes))}"
+
+
+def _cross_validation(X, y, trial, time_s, folds: int, kind: str, candidates: list[tuple[int, ...]], seed: int,
                       early_stopping: str, block_s: float, with_baselines: bool, targets: tuple[str, ...],
                       json_output: bool) -> dict:
-    """The RMSE per target of the model (and the baselines) on held-out calibration trials."""
-    from softtip.calibration.validation import BASELINES, Candidate, baseline, cross_validate_by_trial
+    """The RMSE per target of every candidate of softtip's model (and of the baselines) on held-out
+    calibration trials, and the candidate selected."""
+    from softtip.calibration.validation import BASELINES, Candidate, baseline, cross_validate_by_trial, selected
 
-    candidates = [Candidate(kind, lambda: _make_model(kind, sizes, seed), True)]
+    models = [Candidate(_label(kind, sizes), lambda sizes=sizes: _make_model(kind, sizes, seed), True)
+              for sizes in candidates]
     if with_baselines:
-        candidates += [Candidate(name, lambda name=name: baseline(name, seed), False) for name in BASELINES]
+        models += [Candidate(name, lambda name=name: baseline(name, seed), False) for name in BASELINES]
     with progress_for(json_output).task(f"cross-validating by trial ({folds} folds)"):
-        rmse = cross_validate_by_trial(candidates, X, y, trial, time_s, folds, early_stopping, block_s)
-    return {"folds": folds, "rmse": {name: dict(zip(targets, map(float, values), strict=True))
-                                     for name, values in rmse.items()}}
+        rmse = cross_validate_by_trial(models, X, y, trial, time_s, folds, early_stopping, block_s)
+    own = {model.name: rmse[model.name] for model in models[:len(candidates)]}
+    return {"folds": folds, "selected": selected(own, y),
+            "rmse": {name: dict(zip(targets, map(float, values), strict=True)) for name, values in rmse.items()}}
 
 
 def _calibration_table(summary: dict, units: dict[str, str]):
@@ -233,7 +260,7 @@ def _calibration_table(summary: dict, units: dict[str, str]):
     from rich.table import Table
 
     stopping = summary.get("early_stopping")
-    title = f"{summary['kind']} on {summary['calibration_samples']} calibration samples"
+    title = f"{summary['label']} on {summary['calibration_samples']} calibration samples"
     if stopping:
         title += f", early stopping by {stopping['rule']} ({stopping['stop_reason']} at epoch {stopping['best_epoch']})"
     table = Table(title=title, caption="\n".join(f"warning: {warning}" for warning in summary["warnings"]) or None,
@@ -241,7 +268,7 @@ def _calibration_table(summary: dict, units: dict[str, str]):
     cross = summary.get("cross_validation")
     for column in ("model", "target", "RMSE", "MAE", "R²", *(["CV RMSE by trial"] if cross else [])):
         table.add_column(column, justify="left" if column in ("model", "target") else "right")
-    rows = [(summary["kind"], summary["validation"])]
+    rows = [(summary["label"], summary["validation"])]
     rows += [(name, reference["validation"]) for name, reference in summary.get("baselines", {}).items()]
     for name, scores in rows:
         for label, score in scores.items():
@@ -253,6 +280,10 @@ def _calibration_table(summary: dict, units: dict[str, str]):
             if cross:
                 cells.append(f"{cross['rmse'][name][label]:.4g} {unit}")
             table.add_row(name, label, *cells)
+    for name, scores in (cross or {}).get("rmse", {}).items():  # the candidates not selected: cross-validated only
+        if name != summary["label"] and name not in summary.get("baselines", {}):
+            for label, rmse in scores.items():
+                table.add_row(name, label, "", "", "", f"{rmse:.4g} {units.get(label, '')}")
     return table
 
 
