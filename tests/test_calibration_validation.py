@@ -80,12 +80,13 @@ def test_range_shift_counts_samples_beyond_the_widened_range_by_hand():
                            [10.6, 0.0],    # x beyond
                            [5.0, -1.2],    # y beyond
                            [-0.6, 1.2]])   # both beyond
-    shift = checks.range_shift(calibration, validation, np.linspace(0, 1, 11), np.array([0.5, 1.04, 1.06, -0.2]))
+    shift = checks.CalibrationRange.of(calibration, np.linspace(0, 1, 11)).shift(validation,
+                                                                                 np.array([0.5, 1.04, 1.06, -0.2]))
     assert shift.input_share == 3 / 4
     assert shift.channel_shares == (2 / 4, 2 / 4)
     assert shift.target_share == 2 / 4  # 1.06 and -0.2 beyond [0 - 0.05, 1 + 0.05]
     assert shift.shifted and "75.0 %" in shift.warning(("a", "b"), ("f",))
-    inside = checks.range_shift(calibration, calibration[::2], np.zeros(11), np.zeros(6))
+    inside = checks.CalibrationRange.of(calibration, np.zeros(11)).shift(calibration[::2], np.zeros(6))
     assert not inside.shifted and inside.warning(("a", "b"), ("f",)) == ""
 
 
@@ -255,3 +256,35 @@ def test_calibrate_selects_the_hidden_layer_of_the_lowest_error_on_held_out_tria
     refused = CliRunner().invoke(app, ["calibrate", str(path), "-t", "fz_N", "-o", str(tmp_path / "n.npz"),
                                        "--hidden", "1", "--hidden", "8"])
     assert refused.exit_code == 2 and "--cv" in refused.output
+
+
+def test_evaluate_warns_when_a_dataset_leaves_the_saved_models_calibration_range(eflesh, tmp_path):
+    first, last = (Dataset.read(eflesh[name]) for name in (RECORDINGS[0], RECORDINGS[-1]))
+    for calibrated_on, scored, shifted in ((eflesh[RECORDINGS[0]], first.select(trials=[0]), True),
+                                           (eflesh[RECORDINGS[-1]], last.select(trials=[2]), False)):
+        model, recording = tmp_path / "m.npz", tmp_path / "recording.parquet"
+        summary, _ = calibrate(calibrated_on, "-t", "fz_N", "--model", "polynomial", "-o", model, "--force")
+        scored.write(recording)
+        result = CliRunner().invoke(app, ["evaluate", str(model), str(recording), "--json"])
+        assert result.exit_code == 0, result.output
+        report = json.loads(result.stdout)
+        # the same recording as the calibration's validation set: the same shares, and the same errors
+        assert report["shift"]["input_share"] == pytest.approx(summary["shift"]["input_share"], abs=1e-12)
+        assert report["fz_N"]["rmse"] == pytest.approx(summary["validation"]["fz_N"]["rmse"], rel=1e-9)
+        assert bool(report["warnings"]) == shifted == ("warning: validation set unlike" in result.stderr)
+
+
+def test_evaluate_refuses_a_calibration_range_that_does_not_fit_the_model(eflesh, tmp_path):
+    from softtip.calibration import load_model, save_model
+
+    model = tmp_path / "m.npz"
+    calibrate(eflesh[RECORDINGS[-1]], "-t", "fz_N", "--model", "polynomial", "-o", model)
+    estimator, meta = load_model(model)
+    stored = meta.extra["calibration_range"]
+    for broken in ({**stored, "input_low": stored["input_low"][:-1]}, {**stored, "target_low": [1e9]}):
+        save_model(model, estimator, input_channels=list(meta.input_channels), input_units=list(meta.input_units),
+                   target_names=list(meta.target_names), target_units=list(meta.target_units),
+                   extra={**meta.extra, "calibration_range": broken})
+        result = CliRunner().invoke(app, ["evaluate", str(model), str(eflesh[RECORDINGS[-1]])])
+        assert result.exit_code == 2 and "calibration range" in result.output
+        assert len(result.output.strip().splitlines()) == 1

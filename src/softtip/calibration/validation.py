@@ -24,7 +24,7 @@ rule, and the held-out errors averaged; :func:`selected` takes the candidate of 
 It tells which model carries over to a trial it has not seen, which a validation share inside the
 calibration trials cannot.
 
-**Covariate shift** (:func:`range_shift`): a validation set is scored as the model will be used only
+**Covariate shift** (:class:`CalibrationRange`): a validation set is scored as the model will be used only
 if it lies where the model was calibrated. The statistic is the *out-of-range share*: the share of
 validation samples with at least one input channel (or target) beyond the calibration set's range
 widened by :data:`RANGE_MARGIN` of its span on each side. Above :data:`SHIFT_WARNING_SHARE` the
@@ -125,22 +125,61 @@ class RangeShift:
                 "margin_of_span": RANGE_MARGIN, "warning_above": SHIFT_WARNING_SHARE}
 
 
-def _beyond(reference: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Per sample and column of ``values``: beyond the range of ``reference``'s column widened by the margin."""
-    low, high = reference.min(axis=0), reference.max(axis=0)
+@dataclass(frozen=True)
+class CalibrationRange:
+    """Per input channel and per target, the lowest and highest value of a calibration set: what a model
+    file keeps so that any later dataset can be checked against it (:meth:`shift`)."""
+
+    input_low: tuple[float, ...]
+    input_high: tuple[float, ...]
+    target_low: tuple[float, ...]
+    target_high: tuple[float, ...]
+
+    @classmethod
+    def of(cls, X: np.ndarray, y: np.ndarray) -> CalibrationRange:
+        """The range of calibration inputs X (n, channels) and targets y ((n,) or (n, targets))."""
+        if not len(X):
+            raise ValueError("calibration range: the calibration set holds no samples")
+        y = y.reshape(len(y), -1)
+        return cls(*(tuple(map(float, values)) for values in (X.min(axis=0), X.max(axis=0), y.min(axis=0),
+                                                               y.max(axis=0))))
+
+    @classmethod
+    def from_json(cls, stored: object, n_inputs: int, n_targets: int) -> CalibrationRange:
+        """The range a model file stored, checked: one finite value per input and per target, low <= high."""
+        if not isinstance(stored, dict) or set(stored) != {"input_low", "input_high", "target_low", "target_high"}:
+            raise ValueError("the model's calibration range must hold input_low, input_high, target_low, target_high")
+        parts = {}
+        for name, size in (("input_low", n_inputs), ("input_high", n_inputs), ("target_low", n_targets),
+                           ("target_high", n_targets)):
+            values = stored[name]
+            if (not isinstance(values, list) or len(values) != size
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values)):
+                raise ValueError(f"the model's calibration range {name}: expected {size} finite numbers")
+            parts[name] = tuple(map(float, values))
+        made = cls(**parts)
+        if any(np.greater(made.input_low, made.input_high)) or any(np.greater(made.target_low, made.target_high)):
+            raise ValueError("the model's calibration range has a low end above its high end")
+        return made
+
+    def to_json(self) -> dict:
+        return {"input_low": list(self.input_low), "input_high": list(self.input_high),
+                "target_low": list(self.target_low), "target_high": list(self.target_high)}
+
+    def shift(self, X: np.ndarray, y: np.ndarray) -> RangeShift:
+        """The out-of-range shares of a dataset of inputs X and targets y (see the module notes)."""
+        if not len(X):
+            raise ValueError("range shift: the dataset holds no samples")
+        inputs = _beyond(np.array(self.input_low), np.array(self.input_high), X)
+        targets = _beyond(np.array(self.target_low), np.array(self.target_high), y.reshape(len(y), -1))
+        return RangeShift(float(inputs.any(axis=1).mean()), float(targets.any(axis=1).mean()),
+                          tuple(float(share) for share in inputs.mean(axis=0)))
+
+
+def _beyond(low: np.ndarray, high: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per sample and column of ``values``: beyond [low, high] widened by the margin of the span."""
     margin = RANGE_MARGIN * (high - low)
     return (values < low - margin) | (values > high + margin)
-
-
-def range_shift(calibration_X: np.ndarray, validation_X: np.ndarray, calibration_y: np.ndarray,
-                validation_y: np.ndarray) -> RangeShift:
-    """The out-of-range shares of a validation set (X: (n, channels); y: (n,) or (n, targets))."""
-    if not len(calibration_X) or not len(validation_X):
-        raise ValueError("range_shift: the calibration and validation sets must both hold samples")
-    inputs = _beyond(calibration_X, validation_X)
-    targets = _beyond(calibration_y.reshape(len(calibration_y), -1), validation_y.reshape(len(validation_y), -1))
-    return RangeShift(float(inputs.any(axis=1).mean()), float(targets.any(axis=1).mean()),
-                      tuple(float(share) for share in inputs.mean(axis=0)))
 
 
 # --------------------------------------------------------------------------

@@ -126,7 +126,7 @@ def calibrate(
     scikit-learn references are scored beside it; a validation set outside the calibration range is warned of.
     """
     from softtip.calibration import save_model
-    from softtip.calibration.validation import range_shift, stopping_groups
+    from softtip.calibration.validation import CalibrationRange, stopping_groups
     from softtip.data import Dataset
     from softtip.data.splits import by_role
 
@@ -188,8 +188,9 @@ def calibrate(
         summary["early_stopping"] = {"rule": rule, "block_s": block_s if rule == "blocks" else None,
                                      "groups": int(np.unique(groups).size), "stop_reason": estimator.stop_reason_,
                                      "best_epoch": int(estimator.best_epoch_)}
-    if test.any() and model != "classifier":
-        shift = range_shift(X[train], X[test], y[train], y[test])
+    calibration_range = CalibrationRange.of(X[train], y[train]) if model != "classifier" else None
+    if test.any() and calibration_range is not None:
+        shift = calibration_range.shift(X[test], y[test])
         summary["shift"] = shift.to_json(data.channels)
         if shift.shifted:
             warned.append(shift.warning(data.channels, names))
@@ -211,7 +212,8 @@ def calibrate(
                target_names=list(target) if model != "classifier" else [target[0]],
                target_units=[data.labels[t] for t in target][: 1 if model == "classifier" else None],
                extra={"dataset": str(dataset), "validation": report,
-                      "early_stopping": summary.get("early_stopping")})
+                      "early_stopping": summary.get("early_stopping"),
+                      "calibration_range": calibration_range and calibration_range.to_json()})
     for warning in warned:
         errors.print(printable(f"warning: {warning}"), markup=False, highlight=False, soft_wrap=True)
     if json_output:
@@ -292,8 +294,13 @@ def evaluate(
     dataset: Path = typer.Argument(..., help="Dataset (.parquet)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Score a saved model on every sample of a dataset (its validation report, by condition)."""
+    """Score a saved model on every sample of a dataset (its validation report, by condition).
+
+    A regression model saved with its calibration range is checked against the dataset: "shift" holds the
+    out-of-range shares, and "warnings" (also on stderr) says when the dataset lies outside that range.
+    """
     from softtip.calibration import load_model
+    from softtip.calibration.validation import CalibrationRange
     from softtip.data import Dataset
 
     estimator, meta = load_model(model_file)
@@ -311,6 +318,13 @@ def evaluate(
     X = data.X(list(meta.input_channels))
     y = _targets(data, targets, kind)
     report = _score(estimator, kind, X, y, targets)
+    stored = meta.extra.get("calibration_range")
+    if kind == "regression" and stored is not None:
+        shift = CalibrationRange.from_json(stored, len(meta.input_channels), len(targets)).shift(X, y)
+        report["shift"] = shift.to_json(tuple(meta.input_channels))
+        report["warnings"] = [shift.warning(tuple(meta.input_channels), tuple(targets))] if shift.shifted else []
+        for warning in report["warnings"]:
+            errors.print(printable(f"warning: {warning}"), markup=False, highlight=False, soft_wrap=True)
     if json_output:
         print(json.dumps(report, indent=2))
     else:
