@@ -43,7 +43,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -61,7 +61,7 @@ from softtip._core.threads import single_threaded
 from softtip.data.splits import TrialKFold, time_blocks
 
 StoppingRule = Literal["auto", "trials", "blocks"]
-STOPPING_RULES: tuple[str, ...] = ("auto", "trials", "blocks")
+STOPPING_RULES: tuple[str, ...] = get_args(StoppingRule)
 MIN_TRIALS_HELD_OUT = 10  # round(0.15 * 10) = 2 validation trials: fewer, and one trial decides when to stop
 DEFAULT_BLOCK_S = 5.0  # several seconds: longer than a press's rise, short against a recording
 RANGE_MARGIN = 0.05  # of the calibration span, each side: quantisation steps and noise are not a shift
