@@ -144,13 +144,19 @@ def test_cross_validation_by_trial_equals_a_hand_made_leave_one_trial_out():
     rng = np.random.default_rng(2)
     X, y, trial, time = taxel_trials([10.0, 9.0, 11.0, 10.0, 9.5, 10.5, 10.0, 9.0], rng)
     candidates = [checks.Candidate("ridge", lambda: checks.baseline("ridge", 0), False)]
-    rmse = checks.cross_validate_by_trial(candidates, X, y, trial, time, n_splits=8)
+    cross = checks.cross_validate_by_trial(candidates, X, y, trial, time, n_splits=8)
     predicted = np.empty_like(y)
     for held_out in range(8):
         train = trial != held_out
         model = make_pipeline(StandardScaler(), RidgeCV(alphas=np.logspace(-6, 6, 13))).fit(X[train], y[train])
         predicted[~train] = model.predict(X[~train])
-    assert rmse["ridge"][0] == pytest.approx(metrics.rmse(y, predicted), rel=1e-12)
+    assert cross.rmse["ridge"][0] == pytest.approx(metrics.rmse(y, predicted), rel=1e-12)
+    assert sorted(cross.held_out_trials) == [(k,) for k in range(8)]
+    for (held_out,), shift in zip(cross.held_out_trials, cross.held_out_shifts, strict=True):
+        rest, kept = X[trial != held_out], X[trial == held_out]
+        low, high = rest.min(axis=0), rest.max(axis=0)
+        beyond = (kept < low - 0.05 * (high - low)) | (kept > high + 0.05 * (high - low))
+        assert shift.input_share == pytest.approx(beyond.any(axis=1).mean(), abs=1e-15)
 
 
 # --------------------------------------------------------------------------
@@ -227,6 +233,19 @@ def test_a_held_out_recording_beyond_the_calibration_range_is_warned_of(eflesh, 
     assert summary["warnings"] and "unlike the calibration set" in summary["warnings"][0]
     assert "warning: validation set unlike the calibration set" in stderr
     assert set(summary["cross_validation"]["rmse"]) == {"polynomial"}
+    # the two later recordings lie within each other's range (measured: 0.0 and 0.25 % of samples beyond)
+    assert all(fold["input_share"] < checks.SHIFT_WARNING_SHARE for fold in summary["cross_validation"]["held_out"])
+    assert len(summary["warnings"]) == 1
+
+
+def test_cross_validation_warns_of_a_held_out_trial_beyond_the_others(eflesh, tmp_path):
+    summary, stderr = calibrate(eflesh[RECORDINGS[-1]], "-t", "fz_N", "-o", tmp_path / "m.npz", "--model",
+                                "polynomial", "--cv", "2")
+    folds = {tuple(fold["trials"]): fold["input_share"] for fold in summary["cross_validation"]["held_out"]}
+    # calibrated on the first two recordings: the first, held out, lies beyond the second (measured 31 %)
+    assert folds[(0,)] > 0.2 and folds[(1,)] < checks.SHIFT_WARNING_SHARE
+    assert summary["warnings"] == [summary["cross_validation"]["warning"]]
+    assert "holds out trials beyond the range of the others: trials 0 (31 %" in stderr
 
 
 def test_selection_weighs_each_target_by_its_spread():

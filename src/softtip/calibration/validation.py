@@ -251,12 +251,23 @@ class Candidate:
     takes_groups: bool
 
 
+@dataclass(frozen=True)
+class CrossValidation:
+    """Errors on held-out trials: per candidate, the RMSE of every target; per fold, its held-out trials
+    and how far they lie outside the range of the trials fitted on (a fold far outside measures
+    extrapolation, and so does the RMSE it adds to)."""
+
+    rmse: dict[str, np.ndarray]
+    held_out_trials: tuple[tuple[int, ...], ...]
+    held_out_shifts: tuple[RangeShift, ...]
+
+
 def cross_validate_by_trial(candidates: list[Candidate], X: np.ndarray, y: np.ndarray, trial: np.ndarray,
                             time_s: np.ndarray, n_splits: int, rule: StoppingRule = "auto",
-                            block_s: float = DEFAULT_BLOCK_S) -> dict[str, np.ndarray]:
-    """Per candidate, the RMSE of every target on held-out trials: ``n_splits`` folds of whole trials
-    (:class:`~softtip.data.splits.TrialKFold`), every sample predicted once by a model fitted without
-    its trial; the early-stopping groups of each fold's fit are made from its own trials."""
+                            block_s: float = DEFAULT_BLOCK_S) -> CrossValidation:
+    """``n_splits`` folds of whole trials (:class:`~softtip.data.splits.TrialKFold`), every sample predicted
+    once by each candidate fitted without its trial; the early-stopping groups of each fold's fit are made
+    from its own trials."""
     folds = list(TrialKFold(trial, n_splits).split(X))
     targets = y.reshape(len(y), -1)
     predicted = {candidate.name: np.empty_like(targets) for candidate in candidates}
@@ -269,7 +280,10 @@ def cross_validate_by_trial(candidates: list[Candidate], X: np.ndarray, y: np.nd
             else:
                 fit_quietly(model, X[train], targets[train])
             predicted[candidate.name][test] = model.predict(X[test]).reshape(len(test), -1)
-    return {name: np.atleast_1d(metrics.rmse(targets, estimate)) for name, estimate in predicted.items()}
+    return CrossValidation(
+        {name: np.atleast_1d(metrics.rmse(targets, estimate)) for name, estimate in predicted.items()},
+        tuple(tuple(int(t) for t in np.unique(trial[test])) for _, test in folds),
+        tuple(CalibrationRange.of(X[train], targets[train]).shift(X[test], targets[test]) for train, test in folds))
 
 
 def selected(rmse: dict[str, np.ndarray], y: np.ndarray) -> str:

@@ -206,6 +206,7 @@ def calibrate(
         warned.append("--baseline: no validation samples to score the baselines on")
     if cv is not None:
         summary["cross_validation"] = cross
+        warned += [cross["warning"]] if cross["warning"] else []
     summary["warnings"] = warned
     save_model(output, estimator, input_channels=list(data.channels),
                input_units=[data.channel_units[c] for c in data.channels],
@@ -251,10 +252,16 @@ def _cross_validation(X, y, trial, time_s, folds: int, kind: str, candidates: li
     if with_baselines:
         models += [Candidate(name, lambda name=name: baseline(name, seed), False) for name in BASELINES]
     with progress_for(json_output).task(f"cross-validating by trial ({folds} folds)"):
-        rmse = cross_validate_by_trial(models, X, y, trial, time_s, folds, early_stopping, block_s)
-    own = {model.name: rmse[model.name] for model in models[:len(candidates)]}
+        cross = cross_validate_by_trial(models, X, y, trial, time_s, folds, early_stopping, block_s)
+    own = {model.name: cross.rmse[model.name] for model in models[:len(candidates)]}
+    shifted = [f"trials {', '.join(map(str, trials))} ({100 * shift.input_share:.0f} % of samples)"
+               for trials, shift in zip(cross.held_out_trials, cross.held_out_shifts, strict=True) if shift.shifted]
     return {"folds": folds, "selected": selected(own, y),
-            "rmse": {name: dict(zip(targets, map(float, values), strict=True)) for name, values in rmse.items()}}
+            "rmse": {name: dict(zip(targets, map(float, values), strict=True)) for name, values in cross.rmse.items()},
+            "held_out": [{"trials": list(trials), "input_share": shift.input_share, "target_share": shift.target_share}
+                         for trials, shift in zip(cross.held_out_trials, cross.held_out_shifts, strict=True)],
+            "warning": (f"cross-validation holds out trials beyond the range of the others: {'; '.join(shifted)}; "
+                        "their errors measure extrapolation") if shifted else ""}
 
 
 def _calibration_table(summary: dict, units: dict[str, str]):
