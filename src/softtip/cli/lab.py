@@ -145,9 +145,8 @@ def calibrate(
     candidates = [_layer_sizes(text) for text in hidden]
     if len(set(candidates)) < len(candidates):
         fail("--hidden: a candidate is given twice; each is cross-validated once")
-    if len(candidates) > 1 and (cv is None or model == "polynomial"):
-        fail(f"--hidden given {len(candidates)} times: choosing between candidates needs --cv K and a network "
-             "or classifier" if model != "polynomial" else "--hidden: the polynomial has no hidden layers")
+    if len(candidates) > 1 and (cv is None or model != "network"):
+        fail(f"--hidden given {len(candidates)} times: choosing between candidates needs --cv K and --model network")
     check_output(output, "--output", [dataset], force=force)
     data = Dataset.read(dataset)
     unknown = [t for t in target if t not in data.labels]
@@ -181,8 +180,7 @@ def calibrate(
     if not test.any():
         warned.append(f"{dataset} has no validation samples (role = validation): the model is saved unscored")
     summary = {"model": str(output), "kind": model, "label": _label(model, sizes), "hidden": list(sizes),
-               "targets": list(target),
-               "fit_s": round(seconds, 2), "calibration_samples": int(train.sum()),
+               "targets": list(target), "fit_s": round(seconds, 2), "calibration_samples": int(train.sum()),
                "calibration_trials": int(n_trials), "validation_samples": int(test.sum()), "validation": report}
     if model != "polynomial":
         summary["early_stopping"] = {"rule": rule, "block_s": block_s if rule == "blocks" else None,
@@ -289,8 +287,9 @@ def _calibration_table(summary: dict, units: dict[str, str]):
             if cross:
                 cells.append(f"{cross['rmse'][name][label]:.4g} {unit}")
             table.add_row(name, label, *cells)
-    for name, scores in (cross or {}).get("rmse", {}).items():  # the candidates not selected: cross-validated only
-        if name != summary["label"] and name not in summary.get("baselines", {}):
+    scored = {name for name, scores in rows if scores}
+    for name, scores in (cross or {}).get("rmse", {}).items():  # cross-validated only: not chosen, or no validation
+        if name not in scored:
             for label, rmse in scores.items():
                 table.add_row(name, label, "", "", "", f"{rmse:.4g} {units.get(label, '')}")
     return table
