@@ -1,0 +1,95 @@
+"""The device's unknowns fitted to the publication's scale: the shipped fit reaches its figures within
+its recorded residuals, recomputed through the study's own procedure; the uncertainty's moves span
+the covariance; the device file's fit record is checked; the human casts are not the spheres."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, load_device
+from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS, TEST_FINGERTIPS
+from softtip.systems.haptics.fit import (
+    FIT_SEEDS,
+    FIT_TARGETS,
+    FITTED,
+    LARGEST_HUMAN,
+    SMALL_SPHERE,
+    fitted_values,
+    principal_moves,
+    published_scale,
+    scale_figures,
+)
+from softtip.systems.haptics.study import METHODS, StudySettings, run_study
+
+DEVICE = load_device()
+
+
+@pytest.fixture(scope="module")
+def shipped_figures():
+    return scale_figures(DEVICE)
+
+
+def test_the_shipped_device_records_the_fit_of_its_unknowns():
+    assert DEVICE.fit is not None and tuple(DEVICE.fit.parameters) == FITTED
+    assert DEVICE.fit.figures == ["targets, on the FS", "standard method, small sphere (6.5 mm)",
+                                  "standard method, human 3 (10 mm)"]
+    assert np.all(fitted_values(DEVICE) > 0)
+
+
+def test_the_fit_reaches_the_published_scale_within_its_recorded_residuals(shipped_figures):
+    residuals = shipped_figures.mean - published_scale()
+    assert np.allclose(residuals, DEVICE.fit.residuals, atol=5e-4)
+    # and within the sampling error of a 100-target mean, as the fit asked
+    assert np.all(np.abs(residuals) < 2 * shipped_figures.standard_error())
+    assert np.all(shipped_figures.standard_error() < 0.2 * published_scale())
+
+
+def test_the_fit_figures_are_the_studys_own(shipped_figures):
+    # the same figures through the whole study on the fit's first seed: its targets and the standard
+    # method's renderings on the two fingertips (their sensor noise drawn on other streams)
+    study = run_study(StudySettings(targets=FIT_TARGETS, target_draws=50 * FIT_TARGETS), seed=FIT_SEEDS[0],
+                      fingertips=(SMALL_SPHERE, LARGEST_HUMAN))
+    standard = METHODS.index("standard")
+    found = [study.target_magnitudes.mean(), *(o.rendered[standard].mean() for o in study.fingertips)]
+    assert np.allclose(found, shipped_figures.per_seed[0], rtol=2e-3, atol=2e-3)
+
+
+def test_the_moves_within_the_uncertainty_span_its_covariance():
+    rng = np.random.default_rng(0)
+    root = rng.normal(size=(3, 3))
+    covariance = root @ root.T
+    moves = np.array(principal_moves(covariance))
+    assert moves.shape == (6, 3)
+    # ±σ along each principal axis: the moves' second moment is the covariance itself, twice
+    assert np.allclose(moves.T @ moves, 2 * covariance)
+    assert np.allclose(moves[0::2], -moves[1::2])
+    errors = np.sqrt(np.diag(covariance))
+    assert np.all(np.diff([np.linalg.norm(m / errors) for m in moves[::2]]) <= 1e-12)  # largest first, unit-free
+
+
+@pytest.mark.parametrize(("old", "new", "named"), [
+    ('"cables.stiffness"]', '"cables.nothing"]', "fit.parameters"),
+    ("standard_errors = [", "standard_errors = [1.0, ", "fit.standard_errors"),
+    ("correlation = [[1.0,", "correlation = [[2.0,", "fit.correlation"),
+    ("[cables]\nstiffness", "[cables]\nstiffness = 1.0\nspan", "cables.span: unknown key"),
+])
+def test_a_fit_record_that_does_not_describe_the_file_is_refused(tmp_path, old, new, named):
+    text = DEVICE_FILE.read_text()
+    assert old in text
+    broken = tmp_path / "device.toml"
+    broken.write_text(text.replace(old, new, 1))
+    with pytest.raises(DeviceError, match=named) as refused:
+        load_device(broken)
+    assert "\n" not in str(refused.value)
+
+
+def test_the_human_casts_are_not_spheres_and_no_two_fingertips_err_alike():
+    assert all(finger.shape != "sphere" for finger in HUMAN_FINGERTIPS)
+    assert len({(f.radius, f.shape) for f in TEST_FINGERTIPS}) == len(TEST_FINGERTIPS)
+    study = run_study(StudySettings(targets=20, fs_levels=7, user_levels=5), seed=5)
+    errors = [o.errors[:3] for o in study.fingertips]
+    for i in range(len(errors)):
+        for j in range(i):
+            assert not np.allclose(errors[i], errors[j]), (study.fingertips[i].fingertip.name,
+                                                           study.fingertips[j].fingertip.name)
