@@ -90,6 +90,18 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     assert ("human 3 (10 mm)" in directions.notes) == (directions.cells[("human 3 (10 mm)", "B − A")] <= 0)
     if "human 3 (10 mm)" in directions.notes:
         assert f"{floor:.2f} N" in directions.notes["human 3 (10 mm)"]
+    # the fit's tables: the device's own values and record; the scale figures this run's, each "fitted"
+    device = coarse_protocol.design.device
+    fitted = tables["The device's fitted unknowns"]
+    assert fitted.cells[("cables.stiffness (N/m)", "fitted value")] == device.cables.stiffness
+    assert fitted.cells[("device.pulley_radius (mm)", "standard error")] == pytest.approx(
+        1e3 * device.fit.standard_errors[1])
+    # the wound platform's height above the FS's pad (at the centre's height less the FS's 7.5 mm)
+    stroke = device.device.pulley_radius * np.pi - device.device.released_length - (device.centre[2] - 7.5e-3)
+    assert fitted.cells[("stroke past the FS's pad (mm)", "fitted value")] == pytest.approx(1e3 * stroke)
+    scale = [c for c in tables["The experiment's scale: the figures the device's unknowns are fitted to"].comparisons()]
+    assert {c.verdict for c in scale} <= {"fitted", "outside"} and len(scale) == 2  # no small sphere in this run
+    assert scale[0].value == pytest.approx(outcome.results["target_force_N"]["mean"])
     # the headline counts the published predictions the twin meets, over every prediction table
     predictions = [c for table in outcome.tables if table.published and not table.published.fitted
                    and table.published.key != "haptics-collection" for c in table.comparisons()]
@@ -203,3 +215,23 @@ def test_reproduce_quick_renders_fewer_targets_and_writes_the_report(tmp_path):
     # the headline: the published predictions this run can make, and how many hold
     assert report.outcome.headline.label.startswith("published predictions the fitted twin reproduces")
     assert [run["seed"] for run in report.outcome.results["robustness"]] == [3, 2]  # the study, then quick's seed 2
+
+
+def test_a_failing_pooled_comparison_is_shown_without_the_fingertips_held_at_the_floor():
+    from scipy import stats
+
+    from softtip.systems.haptics.report import prediction_tables
+
+    rng = np.random.default_rng(0)
+    names = ("small cast (6.5 mm)", "human 3 (10 mm)")
+    errors = rng.uniform(0.05, 0.3, (2, len(METHODS), 60))
+    errors[0, 1] *= 0.5  # A clearly better on the small cast
+    errors[1, 1] += 1.0  # and worse on the floored fingertip, enough to drown the pooled test
+    found = RenderedTargets(names, errors, np.ones_like(errors), np.zeros(errors.shape, bool), np.full(60, 1.7))
+    significance = prediction_tables(found, 0.015625, {names[0]: 0.0, names[1]: 3.4})[-1]
+    note = significance.notes["all fingertips (pooled)"]
+    reference = stats.wilcoxon(errors[0, 1], errors[0, 2])
+    assert "Without human 3 (10 mm)" in note and f"p = {reference.pvalue:.2g}" in note
+    # with no fingertip above the targets' median force, nothing to leave out: no note
+    calm = prediction_tables(found, 0.015625, {names[0]: 0.0, names[1]: 1.0})[-1]
+    assert "all fingertips (pooled)" not in calm.notes
