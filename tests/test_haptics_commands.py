@@ -125,7 +125,8 @@ def test_render_with_the_geometric_table_follows_a_large_finger():
     standard = json.loads(run(*common).stdout)
     geometric = json.loads(run(*common, "--method", "geometric").stdout)
     # the standard table presses an 8.5 mm finger as if it were the 7.5 mm FS: far too hard (measured: 5.4 times
-    # the geometric method's median error; the 10 mm finger is pressed 3.4 N by the released device, every method's floor)
+    # the geometric method's median error; the 10 mm finger is pressed 3.4 N by the released device, every
+    # method's floor there)
     assert geometric["median_error_N"] < standard["median_error_N"] / 3
     # a larger finger sits lower: the FS entries with the platform lowest cannot be placed lower still
     assert geometric["table_entries_out_of_reach"] > 0 and standard["table_entries_out_of_reach"] == 0

@@ -85,12 +85,16 @@ def test_unreachable_pose_is_refused_in_one_line():
     ("centre = [0.0, 0.0, -0.0085]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
     ("stall_torque = 0.078", "stall_torque = -1", "servo.stall_torque"),
     ("[springs]", "[springs]\ndamping = 3", "springs.damping: unknown key"),
+    ("[cables]\nstiffness", "[cables]\nstiffness = 1.0\nspan", "cables.span: unknown key"),
+    ('"cables.stiffness"]', '"cables.nothing"]', "fit.parameters"),
+    ("standard_errors = [", "standard_errors = [1.0, ", "fit.standard_errors"),
+    ("correlation = [[1.0,", "correlation = [[2.0,", "fit.correlation"),
 ])
 def test_device_file_that_breaks_the_kinematics_is_refused_naming_the_key(tmp_path, old, new, named):
     text = DEVICE_FILE.read_text()
     assert old in text
     broken = tmp_path / "device.toml"
-    broken.write_text(text.replace(old, new))
+    broken.write_text(text.replace(old, new, 1))
     with pytest.raises(DeviceError, match=named) as refused:
         load_device(broken)
     assert "\n" not in str(refused.value)

@@ -193,7 +193,8 @@ class DeviceSpec:
         for key, value in zip(keys, values, strict=True):
             section, _, name = key.partition(".")
             changes.setdefault(section, {})[name] = float(value)
-        return replace(self, **{section: replace(getattr(self, section), **names) for section, names in changes.items()})
+        return replace(self, **{section: replace(getattr(self, section), **names)
+                                for section, names in changes.items()})
 
     @property
     def wound_length(self) -> float:

@@ -171,4 +171,5 @@ def principal_moves(covariance, sigmas: float = 1.0) -> list[np.ndarray]:
     errors = np.sqrt(np.diag(covariance))
     variances, axes = np.linalg.eigh(covariance / np.outer(errors, errors))
     order = np.argsort(variances)[::-1]
-    return [sign * sigmas * np.sqrt(max(variances[k], 0.0)) * errors * axes[:, k] for k in order for sign in (-1.0, 1.0)]
+    return [sign * sigmas * np.sqrt(max(variances[k], 0.0)) * errors * axes[:, k]
+            for k in order for sign in (-1.0, 1.0)]

@@ -99,7 +99,8 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     minutes = {levels: collection_duration(device, motor_grid(device, levels), p.hold_s) / 60 for levels in (13, 7, 5)}
     floors = released_forces(device, p.selected_fingertips())
     predictions = prediction_tables(found, p.contact_threshold_N, floors)
-    tables = [_scale_table(found), *_fit_tables(device), *predictions, _floor_table(floors, release_gap(device)), _error_table(found),
+    tables = [_scale_table(found), *_fit_tables(device), *predictions, _floor_table(floors, release_gap(device)),
+              _error_table(found),
               _statistics_table(statistics, pooled), _collection_table(minutes),
               _light_table(found, p.light_force_N, p.contact_threshold_N), _departures_table()]
     figure = Figure.of("Rendering error per fingertip and method", (
@@ -167,7 +168,7 @@ def _sweeps(protocol: Protocol, found: RenderedTargets, progress: Progress) -> S
         study = RobustnessRun(f"fitted device, seed {protocol.seed} (the study)", protocol.seed, fitted, found.errors,
                               found.rendered)
         table, rows = _robustness_table((study, *runs), found, p.contact_threshold_N,
-                                        device.fit.parameters if device.fit else ())
+                                        device.fit.parameters if device.fit else (), p.robustness_sigmas)
         tables.append(table)
         results["robustness"] = rows
     if curves:
@@ -311,18 +312,17 @@ def _fit_tables(device) -> list[Table]:
     rows = [_fitted_label(key) for key in fit.parameters]
     scale = [_shown_unit(key)[1] for key in fit.parameters]
     cells = {}
-    for row, key, factor, error in zip(rows, fit.parameters, scale, fit.standard_errors, strict=True):
+    for i, (row, key, factor, error) in enumerate(zip(rows, fit.parameters, scale, fit.standard_errors, strict=True)):
         cells[(row, "fitted value")] = device.value(key) * factor
         cells[(row, "standard error")] = error * factor
-        cells.update({(row, f"correlation with {_fitted_label(other).split(' (')[0]}"): fit.correlation[i][j]
-                      for j, other in enumerate(fit.parameters) for i in [fit.parameters.index(key)]})
+        cells.update({(row, f"correlation with {other}"): fit.correlation[i][j]
+                      for j, other in enumerate(fit.parameters)})
     gap = release_gap(device)
     derived = {"release gap below the FS's pad (mm)": gap * 1e3,
                "stroke past the FS's pad (mm)": (device.device.released_length - gap - device.wound_length) * 1e3}
     for row, value in derived.items():
         cells[(row, "fitted value")] = value
-    columns = ["fitted value", "standard error", *(f"correlation with {_fitted_label(k).split(' (')[0]}"
-                                                   for k in fit.parameters)]
+    columns = ["fitted value", "standard error", *(f"correlation with {key}" for key in fit.parameters)]
     parameters = Table("The device's fitted unknowns", "parameter", [*rows, *derived], columns, cells, digits=3,
                        caption=(f"Fitted: {fit.method} Standard errors from the fit's Jacobian, each published "
                                 "figure weighted by the standard error of a 100-target mean. The last two rows follow "
@@ -377,7 +377,8 @@ def _no_contact_table(found: RenderedTargets, contact: float) -> Table:
     column = published.columns[0]
     cells = {(name, column): 100.0 * float(np.mean(rendered[STANDARD] < contact))
              for name, rendered in zip(found.fingertips, found.rendered, strict=True) if name in published.rows}
-    return paper_table(published, cells, caption=f"No contact: the sensor under the fingertip reads below {contact:g} N.")
+    return paper_table(published, cells,
+                       caption=f"No contact: the sensor under the fingertip reads below {contact:g} N.")
 
 
 def _significance_table(found: RenderedTargets, floors: dict[str, float] | None = None) -> Table:
@@ -401,18 +402,19 @@ def _significance_table(found: RenderedTargets, floors: dict[str, float] | None 
     a_better = pooled.signed_rank_sum < 0 and pooled.p_value < BONFERRONI_THRESHOLD
     if not a_better and held_down and kept:
         without = wilcoxon(found.errors[kept, A].ravel(), found.errors[kept, B].ravel(), tests)
-        notes[POOLED] = (f"A is not significantly better at 0.0028. Without {', '.join(held_down)} (pressed harder released than "
-                         f"the targets' median, the floor table): W+ − W− = {rank_sum(without.signed_rank_sum)}, p = "
-                         f"{without.p_value:.2g}. The robustness table shows the comparison over the fit's devices "
-                         "and seeds.")
+        notes[POOLED] = (f"A is not significantly better at 0.0028. Without {', '.join(held_down)} (pressed harder "
+                         f"released than the targets' median, the floor table): W+ − W− = "
+                         f"{rank_sum(without.signed_rank_sum)}, p = {without.p_value:.2g}. The robustness table "
+                         "shows the comparison over the fit's devices and seeds.")
     return paper_table(published, cells, notes=notes, caption=(
         "p as computed, to be read against the publication's Bonferroni threshold 0.0028 (the statistics table "
         "gives the corrected p). W+ − W− < 0: A's errors are the smaller."))
 
 
-def _robustness_table(runs, found: RenderedTargets, contact: float, keys) -> tuple[Table, list[dict]]:
-    """Each run's fitted values (``keys``), median errors of the published methods over every fingertip and target, the pooled
-    A-vs-B test, and how many of the published predictions it meets; a last row counts the runs."""
+def _robustness_table(runs, found: RenderedTargets, contact: float, keys, sigmas: float) -> tuple[Table, list[dict]]:
+    """Each run's fitted values (``keys``), median errors of the published methods over every fingertip
+    and target, pooled A-vs-B test and count of the published predictions it meets; a last row counts
+    the runs. ``sigmas``: how far the devices were moved, in standard deviations."""
     columns = ["fitted values", "standard", "A", "B", "B − A pooled (N)", "A vs B pooled: W+ − W−",
                "A vs B pooled: p", "A better than B, pooled (p < 0.0028)", "predictions held"]
     tests = wilcoxon_tests(len(found.fingertips))
@@ -427,7 +429,8 @@ def _robustness_table(runs, found: RenderedTargets, contact: float, keys) -> tup
         cells[(run.label, "fitted values")] = ", ".join(_shown(key, value)
                                                         for key, value in zip(keys, run.values, strict=True))
         cells.update({(run.label, "standard"): float(medians[STANDARD]), (run.label, "A"): float(medians[A]),
-                      (run.label, "B"): float(medians[B]), (run.label, "B − A pooled (N)"): float(medians[B] - medians[A]),
+                      (run.label, "B"): float(medians[B]),
+                      (run.label, "B − A pooled (N)"): float(medians[B] - medians[A]),
                       (run.label, "A vs B pooled: W+ − W−"): rank_sum(pooled.signed_rank_sum),
                       (run.label, "A vs B pooled: p"): pooled.p_value,
                       (run.label, "A better than B, pooled (p < 0.0028)"): "yes" if better else "no",
@@ -446,10 +449,13 @@ def _robustness_table(runs, found: RenderedTargets, contact: float, keys) -> tup
     return Table("Robustness: the conclusions over the devices the fit allows and over seeds", "run", rows, columns,
                  cells, digits=3, layout="rows", caption=(
                      "The study rerun on the devices the published scale cannot tell apart (the fitted values moved "
-                     "one standard deviation down and up each principal axis of their covariance, the fit table) "
+                     f"{sigmas:g} standard deviations down and up each principal axis of their correlation, the fit "
+                     "table) "
                      "and on the fitted device over other seeds. Medians (N) over every fingertip and target. A "
                      "conclusion that holds on every row is the method's; one that flips is the device's or the "
                      "draw's.")), results
+
+
 def _error_table(found: RenderedTargets) -> Table:
     rows, cells = [], {}
     for name, errors, rendered, flagged in zip(found.fingertips, found.errors, found.rendered, found.flagged,
