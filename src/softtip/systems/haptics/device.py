@@ -274,12 +274,7 @@ def cable_ends(spec: DeviceSpec, lengths) -> np.ndarray:
 
 def forward_kinematics(spec: DeviceSpec, angles) -> PlatformPose:
     """The mobile platform's pose at servo angles (rad, (..., 3)), its cables rigid."""
-    return pose_of_lengths(spec, cable_lengths(spec, angles))
-
-
-def pose_of_lengths(spec: DeviceSpec, lengths) -> PlatformPose:
-    """The mobile platform's pose with cables of ``lengths`` (m, (..., 3))."""
-    ends = cable_ends(spec, lengths)
+    ends = cable_ends(spec, cable_lengths(spec, angles))
     normal = np.cross(ends[..., 1, :] - ends[..., 0, :], ends[..., 2, :] - ends[..., 0, :])
     normal *= np.sign(normal[..., 2:3])  # up, towards the pad, whatever the order of the cables
     return PlatformPose(ends.mean(axis=-2), normal / np.linalg.norm(normal, axis=-1, keepdims=True))
@@ -372,12 +367,7 @@ def cable_tensions(spec: DeviceSpec, angles, finger_wrench) -> np.ndarray:
     springs and the contact: ``finger_wrench`` (..., 6) is the wrench the platform applies to the
     finger, about the origin of frame {0}. Balance in z and in moment about x and y (the parallel
     cables cannot hold a lateral force, which the kinematics' assumption neglects)."""
-    return tensions_at_lengths(spec, cable_lengths(spec, angles), finger_wrench)
-
-
-def tensions_at_lengths(spec: DeviceSpec, lengths, finger_wrench) -> np.ndarray:
-    """:func:`cable_tensions` with the cables at ``lengths`` (m, (..., 3))."""
-    lengths = np.asarray(lengths, dtype=float)
+    lengths = cable_lengths(spec, angles)
     ends = cable_ends(spec, lengths)
     wrench = np.asarray(finger_wrench, dtype=float)
     balance = np.stack([np.ones_like(ends[..., 0]), ends[..., 1], -ends[..., 0]], axis=-2)  # (..., 3, 3)
@@ -385,7 +375,7 @@ def tensions_at_lengths(spec: DeviceSpec, lengths, finger_wrench) -> np.ndarray:
     return spring_forces(spec, lengths) + np.linalg.solve(balance, load[..., None])[..., 0]
 
 
-_GIVE_TOLERANCE = 1e-15  # m: the cables' give, far below the servos' dead band (a 19 µm step of cable)
+_GIVE_TOLERANCE = 1e-15  # m: the cables' give, far below a servo's dead band (microns of cable)
 _GIVE_ITERATIONS = 100
 
 
@@ -407,7 +397,7 @@ def loaded_pose(spec: DeviceSpec, angles, contact) -> tuple[PlatformPose, np.nda
 
     low = np.zeros(rigid.normal.shape[:-1])
     low_value = balance(low)
-    high, high_value = -low_value, np.zeros_like(low)  # g(F_n(0)/3k) >= 0: the force there is no larger
+    high = -low_value  # F_n(0) / 3k, where g >= 0: the force there is no larger than at 0
     high_value = np.where(high > 0, balance(high), 0.0)
     kept = np.zeros(low.shape, dtype=int)  # which end stayed twice: -1 low, +1 high (Illinois' halving)
     for _ in range(_GIVE_ITERATIONS):
