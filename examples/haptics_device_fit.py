@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+from rich.console import Console
 
 from softtip._core.progress import RichProgress
 from softtip.published import published_table
@@ -24,8 +25,7 @@ from softtip.systems.haptics.fit import FIT_SEEDS, FIT_TARGETS, FITTED, SCALE_TA
 
 def main() -> None:
     device = load_device(sys.argv[1] if len(sys.argv) > 1 else DEVICE_FILE)
-    with RichProgress() as progress:
-        fit = fit_device(device, progress=progress)
+    fit = fit_device(device, progress=RichProgress(Console(stderr=True)))
     for key, value, error in zip(FITTED, fit.values, fit.standard_errors, strict=True):
         print(f"{key} = {value:.6g}  # ± {error:.3g}")
     print(f"figures {np.round(fit.figures, 4).tolist()} N, published {fit.published.tolist()} N, "
@@ -33,7 +33,7 @@ def main() -> None:
     rows = published_table(SCALE_TABLE).rows
     print("\n[fit]")
     print(f'method = "scipy least squares (softtip.systems.haptics.fit) over seeds '
-          f'{", ".join(map(str, FIT_SEEDS))}, {FIT_TARGETS} targets each, to the three figures below."')
+          f'{", ".join(map(str, FIT_SEEDS))}, {FIT_TARGETS} targets each, to the three figures of the scale table."')
     print(f"parameters = {list(FITTED)}".replace("'", '"'))
     print(f"standard_errors = {[float(f'{e:.4g}') for e in fit.standard_errors]}")
     print(f"correlation = {np.round(fit.correlation, 4).tolist()}")

@@ -37,7 +37,6 @@ SCALE_COLUMN = "mean |F| (N)"
 # the fingertips the standard method's two figures are rendered to: the small sphere, the largest human cast
 SMALL_SPHERE, LARGEST_HUMAN = TEST_FINGERTIPS[0], TEST_FINGERTIPS[-1]
 FITTED = ("device.released_length", "device.pulley_radius", "cables.stiffness")
-FIT_UNITS = ("m", "m", "N/m")
 FIT_SEEDS = (11, 12, 13)  # apart from the study's own seeds, so the fit never sees the report's draws
 FIT_TARGETS = 300  # per seed: the expected figure, three times the published sample
 PUBLISHED_TARGETS = 100  # each published figure is a mean over the publication's 100 targets
