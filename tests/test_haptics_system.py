@@ -104,6 +104,11 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     scale = [c for c in tables["The experiment's scale: the figures the device's unknowns are fitted to"].comparisons()]
     assert {c.verdict for c in scale} <= {"fitted", "outside"} and len(scale) == 2  # no small sphere in this run
     assert scale[0].value == pytest.approx(outcome.results["target_force_N"]["mean"])
+    # the servos' stall, not modelled, is shown to be far from what the cables carry
+    servos = tables["Where softtip's procedure departs from the published one"].cells[("servos", "softtip")]
+    stall = device.servo.stall_torque / device.device.pulley_radius
+    tension = float(servos.split("test fingertips is ")[1].split(" N")[0])
+    assert f"the stall's {stall:.0f} N" in servos and 1.0 < tension < stall / 4
     # the headline counts the published predictions the twin meets, over every prediction table
     predictions = [c for table in outcome.tables if table.published and not table.published.fitted
                    and table.published.key != "haptics-collection" for c in table.comparisons()]

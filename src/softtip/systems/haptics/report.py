@@ -22,9 +22,11 @@ from softtip.lab import Protocol, run_protocol
 from softtip.published import BETTER, WITHIN, published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
+from softtip.sensors.wrench import shift_wrench
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.haptics.bench import CONDITIONS, RENDERED
 from softtip.systems.haptics.collection import collection_duration, motor_grid
+from softtip.systems.haptics.device import cable_tensions
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, HUMAN_FINGERTIPS, loaded_contact
 from softtip.systems.haptics.fit import FIT_SEEDS, FIT_TARGETS, LARGEST_HUMAN, SCALE_COLUMN, SMALL_SPHERE
 from softtip.systems.haptics.sensitivity import (
@@ -102,7 +104,9 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     tables = [_scale_table(found), *_fit_tables(device), *predictions, _floor_table(floors, release_gap(device)),
               _error_table(found),
               _statistics_table(statistics, pooled), _collection_table(minutes),
-              _light_table(found, p.light_force_N, p.contact_threshold_N), _departures_table()]
+              _light_table(found, p.light_force_N, p.contact_threshold_N),
+              _departures_table(largest_tension(device, p.selected_fingertips(), p.fs_levels),
+                                device.servo.stall_torque / device.device.pulley_radius)]
     figure = Figure.of("Rendering error per fingertip and method", (
         "Box plots over the targets of |F_target − F_rendered| (N), read by the sensor under each test fingertip. "
         "Look for the standard method's spread growing with the size mismatch, and for A against B on the "
@@ -519,7 +523,19 @@ def _light_table(found: RenderedTargets, light_force: float, contact: float) -> 
                  caption="On a smaller fingertip the FS table's light entries leave the platform short of the pad.")
 
 
-def _departures_table() -> Table:
+def largest_tension(device, fingertips, levels: int) -> float:
+    """The largest cable tension (N) over the FS table's configurations (``levels``³) pressed on each of
+    ``fingertips``: what the servos must hold."""
+    grid = motor_grid(device, levels)
+    largest = 0.0
+    for fingertip in fingertips:
+        _, on_finger = loaded_contact(fingertip, device, grid)
+        about_device = shift_wrench(on_finger, fingertip.centre(device) + np.array(fingertip.core_offset), np.zeros(3))
+        largest = max(largest, float(cable_tensions(device, grid, about_device).max()))
+    return largest
+
+
+def _departures_table(tension: float, stall: float) -> Table:
     rows = {
         "device": ("a built device, dimensions not given",
                    "softtip's dimensions in a device file (device.toml); its released length, pulley radius and "
@@ -534,7 +550,8 @@ def _departures_table() -> Table:
         "contact": ("with friction (a tilted platform pushes sideways too)",
                     "frictionless: force along the platform's normal only"),
         "servos": ("position commands at about 50 Hz", "reach each configuration to their dead band before the hold; "
-                   "their stall torque is not modelled"),
+                   f"their stall is not modelled: the largest cable tension over the FS table on the test fingertips "
+                   f"is {tension:.1f} N, the stall's {stall:.0f} N"),
         "targets": ("100 from random configurations that touch the FS",
                     "the same procedure, the servos' angles drawn uniformly over their range"),
         "statistics": ("Bonferroni over the publication's tests (threshold 0.0028)",
