@@ -10,7 +10,10 @@ fingertips' targets, the methods' order and the pooled A-vs-B test.
 the FS and user tables' sizes (the effects the authors named as future work), one at a time from
 the study's settings, and :func:`curves_figure` draws them.
 
-Both start from one :class:`Baseline`: the study at its own settings, with its FS table and targets.
+:func:`robustness_study` reruns the whole study on the devices the fit of the device's unknowns
+cannot tell apart (:mod:`.fit`) and over seeds: whether a conclusion is the method's or one device's.
+
+All start from one :class:`Baseline`: the study at its own settings, with its FS table and targets.
 A rerun collects again only what its change touches (a new FS table for another FS size, the
 fingertips' user data and renderings otherwise), and every collection draws the noise stream it
 draws in the study (each stage of each fingertip its own stream of the seed), so the differences
@@ -32,6 +35,7 @@ from softtip.mechanics.plate_contact import PlateContactLaw
 from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DeviceSpec, load_device
 from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS, SHAPE_AXES, TEST_FINGERTIPS, Fingertip, Offset3
+from softtip.systems.haptics.fit import principal_moves
 from softtip.systems.haptics.statistics import WilcoxonResult
 from softtip.systems.haptics.study import (
     METHODS,
@@ -281,13 +285,12 @@ def curves_figure(points: tuple[CurvePoint, ...]) -> Figure:
 
 @dataclass(frozen=True)
 class RobustnessRun:
-    """The study on one device and seed: what differs from the study's own (``change``; empty for
-    the study itself), and each fingertip's errors (fingertips, methods, targets) and rendered force
-    magnitudes (same shape), in N."""
+    """The study on one device and seed: its label, the fitted parameters' values on its device, and
+    each fingertip's errors (fingertips, methods, targets) and rendered force magnitudes (same shape), in N."""
 
     label: str
     seed: int
-    values: tuple[float, ...]  # the fitted parameters' values on this run's device
+    values: tuple[float, ...]
     errors: np.ndarray
     rendered: np.ndarray
 
@@ -296,10 +299,8 @@ def robustness_study(baseline: Baseline, seeds=(), sigmas: float = 1.0,
                      progress: Progress = SILENT) -> tuple[RobustnessRun, ...]:
     """The study rerun on the devices the published figures cannot tell from the fitted one (the
     fitted values moved ``sigmas`` standard deviations down and up each principal axis of their
-    covariance, the device file's ``[fit]``; none without one or with ``sigmas`` 0) at the
+    correlation, the device file's ``[fit]``; none without one or with ``sigmas`` 0) at the
     baseline's seed, and on the fitted device over the other ``seeds``."""
-    from softtip.systems.haptics.fit import principal_moves
-
     device, fit = baseline.device, baseline.device.fit
     keys = tuple(fit.parameters) if fit else ()
     values = np.array([device.value(key) for key in keys])
