@@ -33,7 +33,7 @@ from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 from softtip.systems.haptics.study import StudySettings, fs_table, record_targets
 
 SCALE_TABLE = "haptics-scale"
-SCALE_COLUMN = "mean |F| (N)"
+SCALE_COLUMN = "mean |F|"
 # the fingertips the standard method's two figures are rendered to: the small sphere, the largest human cast
 SMALL_SPHERE, LARGEST_HUMAN = TEST_FINGERTIPS[0], TEST_FINGERTIPS[-1]
 FITTED = ("device.released_length", "device.pulley_radius", "cables.stiffness")

@@ -453,8 +453,7 @@ def _robustness_table(runs, found: RenderedTargets, contact: float, keys, sigmas
     return Table("Robustness: the conclusions over the devices the fit allows and over seeds", "run", rows, columns,
                  cells, digits=3, layout="rows", caption=(
                      "The study rerun on the devices the published scale cannot tell apart (the fitted values moved "
-                     f"{sigmas:g} standard deviations down and up each principal axis of their correlation, the fit "
-                     "table) "
+                     f"{sigmas:g}σ down and up each principal axis of their correlation, the fit table) "
                      "and on the fitted device over other seeds. Medians (N) over every fingertip and target. A "
                      "conclusion that holds on every row is the method's; one that flips is the device's or the "
                      "draw's.")), results
