@@ -122,6 +122,9 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     assert len(outcome.figures) == 3 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     collection = {c.row: c for table in outcome.tables for c in table.comparisons() if c.column == "entries"}
     assert collection["FS table (13³)"].value == 2197 and collection["user table (7³)"].value == 343
+    # a collection time short of the published one is broken down: 7³ holds of 1 s are 5.7 min
+    collection_table = tables["Table collection: entries and the time a real collection takes"]
+    assert collection_table.notes["user table (7³)"].split(" min are ")[1].startswith("5.7 min of holds")
     # counts print as counts, beside the published ones
     assert "<td class='num within' title='published 2197; difference +0'>2197 " in tables[
         "Table collection: entries and the time a real collection takes"].html()
