@@ -14,7 +14,7 @@ table, or the sensor under the test fingertip saturated). Conditions: ``target_f
 ``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
 personalisation figures are in the metadata's ``sensor_settings``.
 
-The ``curve_*`` and ``variations`` parameters are not the dataset's: the report
+The ``curve_*``, ``variations`` and ``robustness_*`` parameters are not the dataset's: the report
 (:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).
 """
 
@@ -27,7 +27,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, refused,
+from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
                                   schema)
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
@@ -66,6 +66,7 @@ WeightingPowers = Annotated[list[WeightingPower], expect("a list of numbers from
 FsLevels = Annotated[list[integer(2, 21)], expect("a list of integers 2..21")]
 UserLevels = Annotated[list[integer(2, 13)], expect("a list of integers 2..13")]
 Variations = Annotated[list[choice(*VARIATION_NAMES)], expect(f"a list of: {', '.join(VARIATION_NAMES)}")]
+RobustnessSeeds = Annotated[list[integer(0)], expect("a list of seeds (integers >= 0)")]
 
 
 @schema(section="parameters")
@@ -92,9 +93,11 @@ class HapticsParameters:
     curve_fs_levels: FsLevels = field(default_factory=lambda: list(_CURVES["fs_levels"]))
     curve_user_levels: UserLevels = field(default_factory=lambda: list(_CURVES["user_levels"]))
     variations: Variations = field(default_factory=lambda: list(VARIATION_NAMES))
+    robustness_seeds: RobustnessSeeds = field(default_factory=lambda: [2, 3])
+    robustness_sigmas: number("a number of standard deviations from 0 to 3", ge=0, le=3) = 1.0
 
     def __post_init__(self) -> None:
-        for key in ("fingertips", *CURVE_SETTINGS, "variations"):
+        for key in ("fingertips", *CURVE_SETTINGS, "variations", "robustness_seeds"):
             values = getattr(self, key)
             if len(set(values)) != len(values):
                 raise Refusal(key, f"expected each {'fingertip' if key == 'fingertips' else 'value'} once")
