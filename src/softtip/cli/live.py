@@ -21,8 +21,21 @@ MAX_RATE_HZ = 10_000  # frames per second the pipeline is specified for (a frame
 MAX_CHIPS = 64  # chips on one board's bus
 
 
+class BoardFormat(str, Enum):
+    """What the board on --port streams: softtip's firmware, or a ReSkin / AnySkin board's records
+    (the two send the same binary records, so both names read them)."""
+
+    softtip = "softtip"
+    anyskin = "anyskin"
+    reskin = "reskin"
+
+
 def live(
     port: str = typer.Option(None, "--port", help="Serial port of a fingertip board (e.g. /dev/ttyACM0)."),
+    board_format: BoardFormat = typer.Option(BoardFormat.softtip, "--format",
+                                             help="What the board on --port streams: softtip's firmware, or the "
+                                                  "binary records of a ReSkin / AnySkin board (5 chips unless "
+                                                  "--chips; temperature, x, y, z per chip)."),
     model: list[Path] = typer.Option([], "--model", help="Saved softtip model(s) to run on every frame "
                                                          "(with --emulate, default: the scenario's own)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated sensor replaying a registered system's "
@@ -62,7 +75,16 @@ def live(
     if record is not None:
         check_output(record, "--record", model, force=force)
     scenario = getattr(scenario, "value", scenario)
+    board_format = BoardFormat(board_format)
     source, settings, emulator_source, frames = port, None, None, baseline_frames or 50
+    if board_format is not BoardFormat.softtip:
+        if emulate:
+            fail(f"--format {board_format.value}: reads a board on --port; --emulate plays softtip's firmware")
+        if rate is not None:
+            fail(f"--rate = {rate}: a {board_format.value} board streams at its own rate; leave --rate out")
+        from softtip.hardware.reskin import RESKIN_CHIPS, ReSkinStream
+
+        source = ReSkinStream(port, chips or RESKIN_CHIPS, name=board_format.value)
     if emulate:
         if scenario not in SCENARIOS:
             fail(f"--scenario = {scenario!r}: expected one of {', '.join(SCENARIOS)}")
