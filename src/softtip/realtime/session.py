@@ -184,6 +184,7 @@ def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path
              duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
              settings: MLX90393Settings | None = None, baudrate: int = 1_000_000, baseline_frames: int = 50,
              drift_time_constant_s: float | None = None, drift_threshold: float | None = None,
+             rest_s: float | None = None, rest_band: float | None = None,
              free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),
              stop: threading.Event | None = None, emulator_source: Callable[[float], np.ndarray] | None = None) -> dict:
     """Stream from a fingertip (or ``"emulator"``, or a :class:`~softtip.hardware.ThreadedSource`) through
@@ -193,11 +194,12 @@ def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path
     takes a new baseline (``kill -USR1 <pid>``), and SIGTERM and SIGHUP end the session as Ctrl-C
     does: the sinks are closed, a recording gets its summary. ``emulator_source``: what the emulated
     fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT). ``drift_threshold``:
-    in the reading's unit (default: the reading's)."""
+    in the reading's unit (default: the reading's). ``rest_s``, ``rest_band``: re-zero at rest
+    (:class:`~softtip.realtime.baseline.Baseline`)."""
     estimators = [Estimator.from_file(path) for path in model_paths]
     reading = source_spec.reading if isinstance(source_spec, ThreadedSource) else MAGNETIC
     baseline = Baseline(baseline_frames, drift_time_constant_s=drift_time_constant_s,
-                        drift_threshold=drift_threshold, reading=reading)
+                        drift_threshold=drift_threshold, rest_s=rest_s, rest_band=rest_band, reading=reading)
     session = LiveSession(source_spec, estimators, sinks, rate_hz=rate_hz, chips=chips, settings=settings,
                           baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)
