@@ -147,14 +147,16 @@ def session_curve(model, X: np.ndarray, y: np.ndarray, trials: np.ndarray, *, pr
                   groups: np.ndarray) -> SessionCurve:
     """``model`` on a new session (``X`` changes from its rest, ``y`` its loads, rows in time order):
     re-calibrated by :class:`SessionGains` on the rows up to the end of its first k presses, for k in
-    0..``presses``, and scored on the rows after the ``presses``-th (the presses found on the first
-    output, above ``above``). ValueError if the session has too few presses or nothing after them."""
+    0..``presses``, and scored on the rows after the ``presses``-th (a press: rows whose largest
+    absolute output exceeds ``above``). ValueError if the session has too few presses or nothing after
+    them."""
     y2 = np.asarray(y, dtype=np.float64).reshape(len(y), -1)
-    ends = press_ends(y2[:, 0], trials, above)
+    load = np.abs(y2).max(axis=1)
+    ends = press_ends(load, trials, above)
     if len(ends) < presses:
         raise ValueError(f"the new session has {len(ends)} presses above {above:g}; {presses} asked for")
     start = int(ends[presses - 1]) if presses else 0
-    if start >= len(X) or not (y2[start:, 0] > above).any():
+    if start >= len(X) or not (load[start:] > above).any():
         raise ValueError(f"the new session has no press after its first {presses} to score on")
     scored = slice(start, None)
 

@@ -28,8 +28,9 @@ def recalibrate(
                                              "(re-zeroed), its loads as labels, rows in time order."),
     presses: int = typer.Option(5, "--presses", help=f"Presses of the new session to re-calibrate from (1-"
                                                      f"{MAX_PRESSES}); the rows after the last are scored."),
-    press_above: float = typer.Option(None, "--press-above", help="A press is a run of rows whose first target "
-                                      "exceeds this, in its unit (default: a tenth of its largest value)."),
+    press_above: float = typer.Option(None, "--press-above", help="A press is a run of rows whose largest "
+                                      "|target| exceeds this, in the targets' unit (default: a tenth of the "
+                                      "largest)."),
     gains: GainGrouping = typer.Option(GainGrouping.chip, "--gains", help="One gain per chip (its magnet and "
                                        "sensitivity scale its three axes alike), per channel, or one for all."),
     output: Path = typer.Option(None, "--output", "-o", help="Save the model re-calibrated from every press here "
@@ -65,10 +66,10 @@ def recalibrate(
     targets = list(meta.target_names)
     X = data.X(list(meta.input_channels))
     y = np.column_stack([np.asarray(data.column(t), dtype=float) for t in targets])
-    largest = float(np.nanmax(y[:, 0])) if len(y) else 0.0
+    largest = float(np.nanmax(np.abs(y))) if y.size else 0.0
     above = largest / 10 if press_above is None else press_above
     if not above > 0:
-        fail(f"{dataset}: target {targets[0]!r} never exceeds 0: no press to re-calibrate from")
+        fail(f"{dataset}: the targets are 0 throughout: no press to re-calibrate from")
     groups = gain_groups(list(meta.input_channels), gains.value)
     curve = session_curve(estimator, X, y, data.groups, presses=presses, above=above, groups=groups)
     summary = {
