@@ -179,10 +179,10 @@ class ReSkinReader:
 
 
 class ReSkinStream:
-    """A ReSkin / AnySkin board on ``port`` as a live source: ``open()`` opens the port,
-    ``start(deliver)`` calls ``deliver(sample)`` for every record, on the stream's thread, as it is decoded. The boards
-    send no rate: :attr:`rate_hz` is None and the samples carry no device time (the pipeline then
-    stamps them with their arrival)."""
+    """A ReSkin / AnySkin board on ``port`` as a live source: ``open()`` opens the port and
+    ``start(deliver)`` calls ``deliver(sample)`` for every record as it is decoded, on the stream's
+    thread. The boards send no rate: :attr:`rate_hz` is None and the samples carry no device time
+    (the pipeline then stamps them with their arrival)."""
 
     reading = MAGNETIC
     rate_hz = None
@@ -229,7 +229,8 @@ class ReSkinBoard:
     ``source(t_s)`` (µT, shape (chips, 3); t_s since :meth:`start`) with the chips at
     ``temperature_C``, in float32 as the boards send it. :attr:`port` is the device to open;
     :attr:`sent` counts the records generated, :attr:`dropped` those not written because no host
-    was reading (a full pty, as a board's USB buffer fills)."""
+    was reading (a full pty, as a board's USB buffer fills). :meth:`close` re-raises a failure of
+    ``source``."""
 
     def __init__(self, source: Callable[[float], np.ndarray], rate_hz: float = 100.0, chips: int = RESKIN_CHIPS,
                  temperature_C: float = 25.0) -> None:
@@ -243,6 +244,7 @@ class ReSkinBoard:
         self._thread = BackgroundThread("reskin-board")
         self._directory: str | None = None
         self._master_fd = self._slave_fd = None
+        self._error: Exception | None = None
 
     @property
     def port(self) -> str:
@@ -269,12 +271,15 @@ class ReSkinBoard:
 
     def _run(self) -> None:
         period, started = 1.0 / self.rate_hz, time.perf_counter()
-        while not self._thread.closing.wait(max(started + self.sent * period - time.perf_counter(), 0.0)):
-            try:
-                os.write(self._master_fd, self.record(self.sent * period))
-            except BlockingIOError:
-                self.dropped += 1
-            self.sent += 1
+        try:
+            while not self._thread.closing.wait(max(started + self.sent * period - time.perf_counter(), 0.0)):
+                try:
+                    os.write(self._master_fd, self.record(self.sent * period))
+                except BlockingIOError:
+                    self.dropped += 1
+                self.sent += 1
+        except Exception as error:  # re-raised by close()
+            self._error = error
 
     def close(self) -> None:
         self._thread.stop()
@@ -286,6 +291,8 @@ class ReSkinBoard:
             with contextlib.suppress(FileNotFoundError):
                 shutil.rmtree(self._directory)
             self._directory = None
+        if self._error is not None:
+            raise RuntimeError(f"board emulator stopped: {self._error}") from self._error
 
     def __enter__(self) -> Self:
         return self.start()

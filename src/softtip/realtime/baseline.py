@@ -55,9 +55,8 @@ def drift_step(filtered: np.ndarray, reading: np.ndarray, alpha: float,
 
 class Baseline:
     """The baseline in use, shape (chips, 3), in the unit of ``reading``; see the module notes.
-    ``drift_threshold`` and ``step`` default to the reading's.
-
-    ``rest_band`` defaults to half the drift threshold.
+    ``drift_threshold`` and ``step`` default to the reading's, ``rest_band`` to half the drift
+    threshold.
 
     ``update`` is called for every frame from the acquisition thread; ``take`` may be
     called from any thread.

@@ -68,7 +68,12 @@ class DashboardSink(Sink):
     def _read_keys(self) -> None:
         while not self._key_thread.closing.is_set():
             readable, _, _ = select.select([self.keys], [], [], _KEY_POLL_S)
-            if readable and os.read(self.keys, 1).decode(errors="replace").lower() == REZERO_KEY:
+            if not readable:
+                continue
+            key = os.read(self.keys, 1)
+            if not key:  # the terminal is gone
+                return
+            if key.decode(errors="replace").lower() == REZERO_KEY:
                 self.rezero_requests += 1
                 self._stream.take_baseline()
 
