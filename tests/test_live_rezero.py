@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 
 from softtip.cli.main import app
 from softtip.hardware import ReSkinBoard
-from softtip.realtime import Baseline, DashboardSink, StreamInfo, convert
+from softtip.realtime import Baseline, DashboardSink, Estimator, Pipeline, StreamInfo, convert
 
 DT_S = 1 / 64  # exact in binary: the rest period's length is summed without rounding
 CHIPS = 2
@@ -125,3 +125,19 @@ def test_live_rezero_at_rest_takes_out_an_offset_step(tmp_path, rezero):
 def test_rest_options_are_checked():
     result = CliRunner().invoke(app, ["live", "--emulate", "--rest-band", "5"])
     assert result.exit_code == 2 and "--rest-band = 5: only with --rezero-at-rest" in result.output
+
+
+class PressedAbove50:
+    """A contact-state classifier on one input: 'pressed' above 50 µT, else 'free'."""
+
+    classes_ = np.array(["free", "pressed"])
+
+    def predict(self, X):
+        return np.where(np.asarray(X)[:, 0] > 50.0, "pressed", "free")
+
+
+def test_rezeroing_at_rest_with_a_contact_state_classifier_needs_its_free_states_named():
+    state = Estimator(PressedAbove50(), ["s0_bz_uT"], name="state")
+    with pytest.raises(ValueError, match="re-zeroing at rest with a contact-state classifier"):
+        Pipeline(CHIPS, [state], baseline=Baseline(5, rest_s=1.0))
+    Pipeline(CHIPS, [state], baseline=Baseline(5, rest_s=1.0), free_states=["free"])

@@ -124,9 +124,11 @@ class Pipeline:
             if unknown:
                 raise ValueError(f"free_states: {unknown[0]!r} is not a class of {self._classifier.name} "
                                  f"({', '.join(self._classifier.classes)})")
-            if self.baseline.drift_time_constant_s is not None and not self.free_states:
+            if (self.baseline.drift_time_constant_s is not None or self.baseline.rest_s is not None) \
+                    and not self.free_states:
                 raise ValueError("free_states: name the contact states in which the fingertip is free "
-                                 "(drift tracking with a contact-state classifier only runs in them)")
+                                 "(drift tracking and re-zeroing at rest with a contact-state classifier only "
+                                 "run in them)")
         self.sinks = list(sinks)
         for sink in self.sinks:
             if not callable(getattr(sink, "write", None)):
