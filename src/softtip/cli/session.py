@@ -33,8 +33,8 @@ def recalibrate(
                                       "largest)."),
     gains: GainGrouping = typer.Option(GainGrouping.chip, "--gains", help="One gain per chip (its magnet and "
                                        "sensitivity scale its three axes alike), per channel, or one for all."),
-    output: Path = typer.Option(None, "--output", "-o", help="Save the model re-calibrated from every press here "
-                                                              "(.npz)."),
+    output: Path = typer.Option(None, "--output", "-o", help="Save the model re-calibrated from the --presses "
+                                                              "presses here (.npz)."),
     plot: Path = typer.Option(None, "--plot", help="Save the error against the number of presses to this PNG."),
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
