@@ -163,6 +163,7 @@ def inputs(tmp_path_factory):
         "reproduce": (["pushing"], [], None, None),
         "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
         "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
+        "recalibrate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
         "lab run": (["pushing"], [], None, None),
         "sysid fit": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss", "--order", "2"], "recording.csv", "data"),
         "sysid orders": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss"], "recording.csv", "data"),

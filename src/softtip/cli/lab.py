@@ -311,16 +311,9 @@ def evaluate(
 
     estimator, meta = load_model(model_file)
     data = Dataset.read(dataset)
-    missing = [c for c in meta.input_channels if c not in data.channels]
-    if missing:
-        fail(f"{dataset}: lacks the model's input channel {missing[0]!r}")
     kind = "classifier" if hasattr(estimator, "predict_proba") else "regression"
     targets = list(meta.target_names)
-    absent = [t for t in targets if t not in data.labels]
-    if absent:
-        fail(f"{dataset}: lacks the model's target {absent[0]!r}")
-    _check_label_units(data, dataset, targets)
-    _check_readings(data, dataset)
+    check_model_data(meta, data, dataset)
     X = data.X(list(meta.input_channels))
     y = _targets(data, targets, kind)
     report = _score(estimator, kind, X, y, targets)
@@ -339,6 +332,19 @@ def evaluate(
 
 # The units softtip's label names end in (SI or the tables' mm, degrees, mN, mT, µT), by that ending.
 NAMED_UNITS = ("N", "mN", "m", "mm", "deg", "rad", "s", "Pa", "kPa", "T", "mT", "uT")
+
+
+def check_model_data(meta, data, dataset: Path) -> None:
+    """A dataset a saved model (``meta``: its metadata) can be scored on: the model's input channels
+    and targets, labels in the units their names state, readings within the chip's range."""
+    missing = [c for c in meta.input_channels if c not in data.channels]
+    if missing:
+        fail(f"{dataset}: lacks the model's input channel {missing[0]!r}")
+    absent = [t for t in meta.target_names if t not in data.labels]
+    if absent:
+        fail(f"{dataset}: lacks the model's target {absent[0]!r}")
+    _check_label_units(data, dataset, list(meta.target_names))
+    _check_readings(data, dataset)
 
 
 def _check_label_units(data, dataset: Path, targets: list[str]) -> None:

@@ -13,7 +13,7 @@ import typer
 
 from softtip import __version__
 from softtip._core.systems import load, systems
-from softtip.cli import bench, importing, lab, live, optimize, recording, sysid, twin
+from softtip.cli import bench, importing, lab, live, optimize, recording, session, sysid, twin
 from softtip.cli.common import Toolkit, console
 
 app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
@@ -38,7 +38,7 @@ def _group(name: str, help_text: str, commands: dict, callback=None) -> None:
 
 
 for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.optimize, lab.reproduce,
-                lab.calibrate, lab.evaluate):
+                lab.calibrate, lab.evaluate, session.recalibrate):
     app.command()(command)
 app.command("import")(importing.import_logs)
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
