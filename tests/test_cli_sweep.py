@@ -76,6 +76,7 @@ ACCEPTED = {
     "--full-scale": {"huge"},  # a sensor's rated range is the user's to state; the % of it are then small, not wrong
     "--validate": {"same as input"},  # validating on the estimation data is allowed (and optimistic)
     "--missing": {"zero", "negative", "huge"},  # any finite number may be a logger's "no reading"
+    "--validate-trials": {"zero"},  # trial 0 is a trial like any other
 }
 if os.geteuid() == 0:  # the superuser writes into read-only folders: nothing to refuse
     PATH = [bad for bad in PATH if bad.kind != "read-only folder"]
@@ -141,6 +142,8 @@ def inputs(tmp_path_factory):
     (tmp / "recording.csv").write_text("time_s,u,y\n" + "".join(f"{k * 0.01},{a},{b}\n" for k, (a, b) in
                                                                 enumerate(zip(u, y))))
     shutil.copy(DATA / "recording-0.1.0.mcap", tmp / "recording.mcap")
+    logs = sorted(str(path) for path in (DATA / "eflesh-excerpt").iterdir() if path.is_dir())
+    shutil.copy(DATA / "eflesh-excerpt" / "import.toml", tmp / "import.toml")
     (tmp / "study.toml").write_text(Path(__file__).parents[1].joinpath("examples", "estimation-grid.toml").read_text())
     runner = CliRunner()
     for args in (["calibrate", str(dataset), "-t", "fz_N", "--model", "polynomial", "-o", str(tmp / "model.npz")],
@@ -161,6 +164,7 @@ def inputs(tmp_path_factory):
         "reproduce": (["pushing"], [], None, None),
         "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
         "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
+        "recalibrate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
         "lab run": (["pushing"], [], None, None),
         "sysid fit": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss", "--order", "2"], "recording.csv", "data"),
         "sysid orders": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss"], "recording.csv", "data"),
@@ -168,6 +172,9 @@ def inputs(tmp_path_factory):
         "recording repair": ([str(tmp / "recording.mcap")], [], "recording.mcap", "recording"),
         "live": ([], ["--emulate"], None, None),
         "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "dataset"),
+        "haptics table export": ([str(tmp / "new" / "table.h")], [], None, None),
+        "import": (logs, ["-m", str(tmp / "import.toml"), "-o", str(tmp / "work" / "imported.parquet")], "import.toml",
+                   "mapping"),
     }
     (tmp / "new").mkdir()
     (tmp / "work").mkdir()  # the current folder of every run: default outputs land here
@@ -274,6 +281,37 @@ def test_a_bad_value_is_refused_in_one_line_before_any_work(inputs, case):
     param = next(p for p in command_of(words).params if p.name == name)
     verdict, said = judge(words, param, bad, inputs)
     assert verdict == "refused", f"softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {verdict}: {said}"
+
+
+# A researcher's own files, each wrong in one way, for every option that reads one: (file name, content)
+GARBAGE = b"\x00\x1b[2J not a file of any kind \xff" * 8
+BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None),
+                  ("finger-small.toml", b'[fingertip]\nname = "x"\nradius_mm = 5.0\n'),
+                  ("finger-key.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nstifness = 2\n'),
+                  ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n')]
+_TABLE = "fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n"
+BAD_TABLES = [("table-garbage.parquet", GARBAGE), ("table-missing.csv", None), ("table.txt", b"fx_N\n1\n"),
+              ("table-nan.csv", (_TABLE + "0,0,1,0,0,10\n0,0,nan,0,0,20\n").encode()),
+              ("table-motors.csv", b"fx_N,fy_N,fz_N\n0,0,1\n0,0,2\n"),
+              ("table-torques.csv", b"fx_N,fy_N,fz_N,tx_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,1,0,0,0,0\n"),
+              ("table-text.csv", (_TABLE + "0,0,one,0,0,10\n0,0,2,0,0,20\n").encode()),
+              ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode()),
+              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode())]
+FILE_CASES = [(words, option, name, content) for words in (("haptics", "render"), ("haptics", "table", "export"))
+              for option, files in (("--fingertip", BAD_FINGERTIPS), ("--table", BAD_TABLES))
+              for name, content in files]
+
+
+@pytest.mark.parametrize(("words", "option", "name", "content"), FILE_CASES,
+                         ids=[f"{' '.join(w)} {o} {n}" for w, o, n, _ in FILE_CASES])
+def test_a_bad_file_of_ones_own_is_refused_in_one_line(inputs, words, option, name, content):
+    tmp, _ = inputs
+    path = tmp / name
+    if content is not None:
+        path.write_bytes(content)
+    param = next(p for p in command_of(words).params if option in p.opts)
+    verdict, said = judge(words, param, Bad("bad file", str(path)), inputs)
+    assert verdict == "refused", f"softtip {' '.join(words)} {option} {name}: {verdict}: {said}"
 
 
 def count(inputs) -> dict[str, dict[str, int]]:

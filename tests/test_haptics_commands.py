@@ -120,12 +120,15 @@ def test_bench_reports_each_figure_beside_its_baseline():
 
 
 def test_render_with_the_geometric_table_follows_a_large_finger():
-    common = ("haptics", "render", "--duration", "0.5", "--fs-levels", "9", "--fingertip", "human 3 (10 mm)", "--json")
+    common = ("haptics", "render", "--duration", "0.5", "--fs-levels", "9", "--fingertip", "large cast (8.5 mm)",
+              "--json")
     standard = json.loads(run(*common).stdout)
     geometric = json.loads(run(*common, "--method", "geometric").stdout)
-    # the standard table presses a 10 mm finger as if it were the 7.5 mm FS: far too hard
+    # the standard table presses an 8.5 mm finger as if it were the 7.5 mm FS: far too hard (measured: 5.4 times
+    # the geometric method's median error; the 10 mm finger is pressed 3.4 N by the released device, every
+    # method's floor there)
     assert geometric["median_error_N"] < standard["median_error_N"] / 3
-    # a larger finger sits lower: the FS entries that lift the platform highest cannot be reproduced on it
+    # a larger finger sits lower: the FS entries with the platform lowest cannot be placed lower still
     assert geometric["table_entries_out_of_reach"] > 0 and standard["table_entries_out_of_reach"] == 0
 
 

@@ -3,6 +3,7 @@ both personalisations, and the simulated collection."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -60,6 +61,31 @@ def test_one_rendering_for_the_loop_is_the_batch_rendering(n_neighbours, power):
         renderer.render_one([1.0, 2.0])
 
 
+def test_with_a_torque_length_the_renderer_searches_the_whole_wrench():
+    length = 7.5e-3
+    renderer = NearestNeighbourRenderer(torque_length=length).fit(WRENCHES, MOTOR)
+    wanted = RNG.normal(size=(40, 6))
+    scaled = np.hstack([WRENCHES[:, :3], WRENCHES[:, 3:] / length])  # torques as forces at 7.5 mm
+    wanted_scaled = np.hstack([wanted[:, :3], wanted[:, 3:] / length])
+    expected = np.array([brute_force(w, scaled, MOTOR, 8) for w in wanted_scaled])
+    assert np.allclose(renderer.predict(wanted), expected, rtol=1e-12)
+    reference = KNeighborsRegressor(n_neighbors=8, weights="distance", algorithm="brute").fit(scaled, MOTOR)
+    assert np.allclose(renderer.predict(wanted), reference.predict(wanted_scaled), rtol=1e-12)
+    # the torques now choose the neighbours: other torques, other motor inputs
+    shuffled = wanted.copy()
+    shuffled[:, 3:] = RNG.normal(size=(40, 3))
+    assert not np.allclose(renderer.predict(shuffled), renderer.predict(wanted))
+    motor, outside = renderer.render_one(wanted[0])
+    assert np.allclose(motor, expected[0], rtol=1e-12) and outside == renderer.render(wanted[:1]).outside[0]
+    assert renderer.get_params()["torque_length"] == length
+    with pytest.raises(TableError, match=r"a torque length needs \(entries, 6\) wrenches"):
+        NearestNeighbourRenderer(torque_length=length).fit(WRENCHES[:, :3], MOTOR)
+    with pytest.raises(ValueError, match=r"expected \(\.\.\., 6\)$"):
+        renderer.predict(wanted[:, :3])
+    with pytest.raises(TableError, match="torque_length = -1"):
+        NearestNeighbourRenderer(torque_length=-1.0)
+
+
 def test_an_exact_match_renders_its_own_entry():
     renderer = NearestNeighbourRenderer().fit(WRENCHES, MOTOR)
     assert np.allclose(renderer.predict(WRENCHES[17]), MOTOR[17])
@@ -105,7 +131,7 @@ def test_bad_tables_are_refused_in_one_line(change, message):
 def test_renderer_parameters_follow_scikit_learn_and_are_checked():
     renderer = NearestNeighbourRenderer(n_neighbours=4)
     assert renderer.get_params() == {"n_neighbours": 4, "contact_threshold": pytest.approx(5 / 320),
-                                     "weighting_power": 1.0}
+                                     "weighting_power": 1.0, "torque_length": None}
     assert renderer.set_params(n_neighbours=2).n_neighbours == 2
     with pytest.raises(TableError, match="n_neighbours = 0"):
         NearestNeighbourRenderer(n_neighbours=0)
@@ -140,18 +166,54 @@ def test_geometric_method_flags_poses_out_of_reach():
         personalise_geometric(DEVICE, wound, FINGERTIP_SENSOR.radius, float("nan"))
 
 
-def test_data_driven_method_with_the_fs_as_user_returns_the_fs_table():
+@pytest.mark.parametrize("variant", ["published", "device axes"])
+def test_data_driven_method_with_the_fs_as_user_returns_the_fs_table(variant):
     grid = motor_grid(DEVICE, 7)
     exact = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None).unsaturated()
     grid = exact.motor_inputs
     result = personalise_data_driven(DEVICE, grid, exact.platform_wrenches, grid, exact.platform_wrenches,
-                                     n_neighbours=1)
+                                     n_neighbours=1, variant=variant)
     touching = np.linalg.norm(exact.platform_wrenches[:, :3], axis=1) >= 5 / 320
     # turned into the device's axes, the DS's force is the opposite of the fingertip's
     turned = in_device_axes(DEVICE, grid, exact.platform_wrenches)[:, :3]
     assert np.allclose(turned, -exact.finger_wrenches[:, :3], atol=1e-12)
     assert np.allclose(result.motor_inputs[touching], grid[touching], atol=1e-12)
     assert not result.outside.any()
+
+
+def test_published_data_driven_method_needs_no_device_model():
+    from dataclasses import replace
+
+    from softtip.systems.haptics.fingertips import cast
+    from softtip.systems.haptics.personalisation import DS_TORQUE_LENGTH
+
+    grid = motor_grid(DEVICE, 9)
+    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None).unsaturated()
+    user = sensed_contact(DEVICE, cast("small", 6.5e-3), motor_grid(DEVICE, 5), CollectionSettings(),
+                          None).unsaturated()
+    tables = (fs.motor_inputs, fs.platform_wrenches, user.motor_inputs, user.platform_wrenches)
+    published = personalise_data_driven(DEVICE, *tables)
+    # scikit-learn on the raw readings, torques over the FS's radius, the no-contact entries merged as the
+    # renderer merges them (into one zero wrench, the least-wound configuration's motor inputs)
+    touching = np.linalg.norm(user.platform_wrenches[:, :3], axis=1) >= 5 / 320
+    released = np.flatnonzero(~touching)[np.argmin(user.motor_inputs[~touching].sum(axis=1))]
+    scale = np.r_[np.ones(3), np.full(3, 1 / DS_TORQUE_LENGTH)]
+    features = np.vstack([np.zeros(6), user.platform_wrenches[touching] * scale])
+    motor = np.vstack([user.motor_inputs[released], user.motor_inputs[touching]])
+    reference = KNeighborsRegressor(n_neighbors=8, weights="distance", algorithm="brute").fit(features, motor)
+    # the device is symmetric: mirrored configurations tie, and a tie at the 8th neighbour may go either way
+    distances, _ = reference.kneighbors(fs.platform_wrenches * scale, n_neighbors=9)
+    untied = (distances[:, 0] == 0) | (distances[:, 8] - distances[:, 7] > 1e-9)  # an exact match is no tie
+    assert untied.sum() > 0.95 * len(untied)
+    assert np.allclose(published.motor_inputs[untied], reference.predict(fs.platform_wrenches[untied] * scale),
+                       rtol=1e-10)
+    # another device file changes nothing of the published search, everything of the kinematic one
+    wider = replace(DEVICE, device=replace(DEVICE.device, attachment_radius=0.015))
+    assert np.array_equal(personalise_data_driven(wider, *tables).motor_inputs, published.motor_inputs)
+    kinematic = personalise_data_driven(DEVICE, *tables, variant="device axes").motor_inputs
+    assert not np.allclose(personalise_data_driven(wider, *tables, variant="device axes").motor_inputs, kinematic)
+    with pytest.raises(ValueError, match="variant = 'raw'"):
+        personalise_data_driven(DEVICE, *tables, variant="raw")
 
 
 def test_collection_reads_each_held_configuration_and_times_the_procedure():
@@ -186,25 +248,27 @@ def test_presses_recover_the_users_modulus_and_the_force_model_renders_the_fs_fo
         press_configurations,
     )
 
-    softer = Fingertip(name="soft 9 mm", radius=9e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=0.5e6))
-    presses = press_configurations(DEVICE, softer.radius)
+    # the presses' model takes the cables rigid: so does this device (the shipped cables' give is the fit's)
+    device = dataclasses.replace(DEVICE, cables=dataclasses.replace(DEVICE.cables, stiffness=1e12))
+    softer = Fingertip(name="soft 7 mm", radius=7e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=0.5e6))
+    presses = press_configurations(device, softer.radius)
     assert len(presses) == 5 and np.all(presses[:, 0] > 0)
-    read = sensed_contact(DEVICE, softer, presses, CollectionSettings(), None)
-    fit = fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, saturated=read.saturated)
-    assert fit.youngs_modulus == pytest.approx(0.5e6, rel=1e-9)  # exact readings: the modulus itself
-    # the presses reach the planned depths, but for the servos' dead band (0.54 degree of a 2 mm pulley)
-    assert np.allclose(fit.depths, PRESS_DEPTHS, rtol=0, atol=0.5 * np.radians(0.54) * 2e-3)
-    grid = motor_grid(DEVICE, 7)
-    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None)
-    personal = personalise_force_model(DEVICE, grid, fs.finger_wrenches, FINGERTIP_SENSOR.radius, softer.radius, fit)
+    read = sensed_contact(device, softer, presses, CollectionSettings(), None)
+    fit = fit_presses(device, presses, read.platform_wrenches, softer.radius, saturated=read.saturated)
+    assert fit.youngs_modulus == pytest.approx(0.5e6, rel=1e-6)  # exact readings: the modulus itself
+    # the presses reach the planned depths, but for the servos' dead band (0.54 degree of the pulley)
+    assert np.allclose(fit.depths, PRESS_DEPTHS, rtol=0, atol=0.5 * np.radians(0.54) * device.device.pulley_radius)
+    grid = motor_grid(device, 7)
+    fs = sensed_contact(device, FINGERTIP_SENSOR, grid, CollectionSettings(), None)
+    personal = personalise_force_model(device, grid, fs.finger_wrenches, FINGERTIP_SENSOR.radius, softer.radius, fit)
     fs_force = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1)
-    wrench, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, personal.motor_inputs))
+    wrench, _ = finger_wrench(softer, device, forward_kinematics(device, personal.motor_inputs))
     ok = ~personal.outside & (fs_force > 0.1) & ~fs.saturated
     assert ok.sum() > 30
     # the user feels the FS's force (the servos' dead band aside), where the plain geometric method does not
-    assert np.allclose(np.linalg.norm(wrench[ok, :3], axis=1), fs_force[ok], rtol=1e-9)
-    geometric = personalise_geometric(DEVICE, grid, FINGERTIP_SENSOR.radius, softer.radius)
-    plain, _ = finger_wrench(softer, DEVICE, forward_kinematics(DEVICE, geometric.motor_inputs))
+    assert np.allclose(np.linalg.norm(wrench[ok, :3], axis=1), fs_force[ok], rtol=1e-6)
+    geometric = personalise_geometric(device, grid, FINGERTIP_SENSOR.radius, softer.radius)
+    plain, _ = finger_wrench(softer, device, forward_kinematics(device, geometric.motor_inputs))
     assert np.median(np.abs(np.linalg.norm(plain[ok, :3], axis=1) / fs_force[ok] - 1)) > 0.2
 
 
@@ -215,3 +279,22 @@ def test_presses_that_never_touch_are_refused():
         fit_presses(DEVICE, np.zeros((2, 3)), np.zeros((2, 6)), 7.5e-3)
     with pytest.raises(ValueError, match="presses: 6 given"):
         fit_presses(DEVICE, np.zeros((6, 3)), np.zeros((6, 6)), 7.5e-3)
+
+
+def test_saturated_presses_stay_out_of_the_hertz_fit():
+    from softtip.mechanics.plate_contact import PlateContactLaw
+    from softtip.systems.haptics.personalisation import fit_presses, press_configurations
+
+    # a stiff 9 mm Hertz finger: the two deepest presses push the Nano17's Fz past its 17 N range
+    stiff = Fingertip(name="stiff 9 mm", radius=9e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=5e6))
+    presses = press_configurations(DEVICE, stiff.radius)
+    read = sensed_contact(DEVICE, stiff, presses, CollectionSettings(), np.random.default_rng(8))
+    assert read.saturated.tolist() == [False, False, False, True, True]
+    fit = fit_presses(DEVICE, presses, read.platform_wrenches, stiff.radius, saturated=read.saturated)
+    assert fit.touching == 3
+    # Hertz by hand over the three unsaturated presses: F = (4/3) E/(1 − ν²) √R δ^1.5, least squares in E
+    depth, force = fit.depths[:3], np.linalg.norm(read.platform_wrenches[:3, :3], axis=1)
+    shape = 4 / 3 / (1 - 0.5**2) * math.sqrt(9e-3) * depth**1.5
+    assert fit.youngs_modulus == pytest.approx(np.sum(shape * force) / np.sum(shape**2), rel=1e-12)
+    # the window-averaged noise moves the modulus by under 0.1 %; the clipped 17 N readings would pull it to 3.8 MPa
+    assert fit.youngs_modulus == pytest.approx(5e6, rel=1e-3)

@@ -95,9 +95,9 @@ def test_bad_recordings_are_refused_in_one_line_naming_the_file_and_column(tmp_p
 
 def _daisy(path, columns: dict[str, np.ndarray], header: bool):
     """A whitespace text file as DaISy publishes them: numbers in columns separated by runs of spaces
-    (and a tab), a comment line, optionally a header of names."""
+    (and a tab), optionally a header of names."""
     rows = zip(*columns.values(), strict=True)
-    lines = ["% a comment, as MATLAB's save -ascii files may carry", *(["\t".join(columns)] if header else []),
+    lines = [*(["\t".join(columns)] if header else []),
              *("   " + "  \t ".join(f"{v:.16e}" for v in row) for row in rows)]
     path.write_text("\n".join(lines) + "\n\n")
     return path
@@ -119,12 +119,13 @@ def test_a_whitespace_dat_file_is_read_with_or_without_its_header(tmp_path, head
 
 
 @pytest.mark.parametrize("text, names, message", [
-    ("1 2 3\n4 5\n", None, r"line 2 has 2 values, expected 3 \(1, 2, 3\)"),
+    ("1 2 3\n4 5\n", None, r"cannot be read as delimited text \(CSV parse error: Expected 3 columns, got 2: 4 5\)"),
     ("u y\n1 2\n3 x\n", None, r"column 'y', line 3: 'x' is not a number"),
-    ("1 2\n3 4\n", ["u", "y", "z"], r"3 column names given for 2 columns"),
+    ("1 2\n3 4\n", ["u", "y", "z"], r"3 column names given for 2 columns \(its first line: 1 2\)"),
     ("u y\n1 2\n", ["a", "b"], r"the file names its columns in its first line \(u y\)"),
     ("u u\n1 2\n", None, r"column 'u' appears more than once"),
-    ("% nothing\n\n", None, r"no rows of numbers"),
+    ("\n\n", None, r"no rows of numbers"),
+    ("u y\n", None, r"cannot be read as delimited text \(Could not skip initial 1 rows"),
 ])
 def test_bad_whitespace_files_are_refused_naming_line_and_column(tmp_path, text, names, message):
     path = tmp_path / "bad.dat"
@@ -180,8 +181,8 @@ def test_unknown_columns_and_text_are_refused_naming_them(tmp_path):
     with pytest.raises(DatasetError, match="record.json: expected a .csv, .parquet, or whitespace-separated "
                                            ".dat or .txt file"):
         read_recording(path.rename(tmp_path / "record.json"), ["Fx_side"], ["Fz"])
-    with pytest.raises(DatasetError, match="record.txt: line 1 is separated by commas or semicolons, not whitespace: "
-                                           "name the file .csv"):
+    with pytest.raises(DatasetError, match="record.txt: its first line is separated by commas or semicolons, not "
+                                           "whitespace: name the file .csv"):
         read_recording((tmp_path / "record.json").rename(tmp_path / "record.txt"), ["Fx_side"], ["Fz"])
 
 

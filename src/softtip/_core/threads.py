@@ -47,3 +47,10 @@ def single_threaded_blas():
     system identification) are small and thin; on a shared 2-core machine a second BLAS thread made
     them 15-30× slower, not faster."""
     return _blas_controller().limit(limits=1, user_api="blas")
+
+
+def single_threaded():
+    """Context limiting every native thread pool (BLAS and OpenMP) to one thread: scikit-learn's gradient
+    boosting on a few thousand samples took 48 s with its OpenMP threads on a shared 2-core machine
+    (load average 7), 0.5 s on one."""
+    return _blas_controller().limit(limits=1)

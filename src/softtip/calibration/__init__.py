@@ -8,7 +8,10 @@
   conjugate gradient (``patternnet``/``trainscg``).
 
 All three are scikit-learn estimators with an unchecked ``predict_one`` for real time.
-:mod:`softtip.metrics` holds the papers' metrics; :func:`save_model` and
+:mod:`softtip.calibration.validation` decides what the network's early stopping holds out
+(whole trials, or time blocks of every trial when there are few, different trials), warns of a
+validation set outside the calibration range, cross-validates by trial and scores scikit-learn
+baselines beside softtip's models. :mod:`softtip.metrics` holds the papers' metrics; :func:`save_model` and
 :func:`load_model` store fitted models as ``.npz`` + JSON, never pickle.
 """
 

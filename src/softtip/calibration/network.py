@@ -9,7 +9,8 @@ Semantics followed:
 * hidden layers are tanh, initialised by Nguyen–Widrow; the output layer is linear,
   initialised uniformly in [-1, 1];
 * the data are divided at random into train/validation/test (``division``, default
-  0.70/0.15/0.15); ``fit(..., groups=trial_ids)`` divides whole trials instead, and
+  0.70/0.15/0.15); ``fit(..., groups=trial_ids)`` divides whole groups instead (trials, or the
+  time blocks of :func:`softtip.calibration.validation.stopping_groups` when trials are few), and
   ``fit(..., validation_data=(X_val, y_val))`` trains on all of X and validates on the given
   set (no test share). The test share is never used for training; its error is recorded;
 * each epoch solves (JᵀJ + μI) δ = Jᵀe by Cholesky, J the Jacobian of the outputs, e the

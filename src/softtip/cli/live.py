@@ -19,10 +19,24 @@ SCENARIO_HELP = "; ".join(f"{name} ({owner('scenario', name).name})" for name in
 Scenario = Enum("Scenario", {name: name for name in SCENARIOS}, type=str)  # the choices shown in the help
 MAX_RATE_HZ = 10_000  # frames per second the pipeline is specified for (a frame of 4 chips in 100 µs)
 MAX_CHIPS = 64  # chips on one board's bus
+MAX_REST_BAND = 1e6  # above any reading's full scale (the MLX90393's widest is about 1.4e5 µT)
+
+
+class BoardFormat(str, Enum):
+    """What the board on --port streams: softtip's firmware, or a ReSkin / AnySkin board's records
+    (the two send the same binary records, so both names read them)."""
+
+    softtip = "softtip"
+    anyskin = "anyskin"
+    reskin = "reskin"
 
 
 def live(
     port: str = typer.Option(None, "--port", help="Serial port of a fingertip board (e.g. /dev/ttyACM0)."),
+    board_format: BoardFormat = typer.Option(BoardFormat.softtip, "--format",
+                                             help="What the board on --port streams: softtip's firmware, or the "
+                                                  "binary records of a ReSkin / AnySkin board (5 chips unless "
+                                                  "--chips; temperature, x, y, z per chip)."),
     model: list[Path] = typer.Option([], "--model", help="Saved softtip model(s) to run on every frame "
                                                          "(with --emulate, default: the scenario's own)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated sensor replaying a registered system's "
@@ -39,11 +53,20 @@ def live(
                                                                        "(default 50, or the scenario's)."),
     drift_tau: float = typer.Option(None, "--drift-tau", help="Track slow baseline drift with this time "
                                                               "constant (s) while nothing touches."),
+    rezero_at_rest: float = typer.Option(None, "--rezero-at-rest", help="Re-zero when the sensor has rested "
+                                         "this many seconds: every channel within --rest-band (peak to peak) and "
+                                         "within the drift threshold (20 µT; 0.05 N for a force chip) of the "
+                                         "baseline, and in a free contact state; the rest's mean becomes the "
+                                         "baseline."),
+    rest_band: float = typer.Option(None, "--rest-band", help="With --rezero-at-rest, the largest peak-to-peak "
+                                    "change of a channel at rest, in the reading's unit (default: half the drift "
+                                    "threshold, 10 µT)."),
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print the session's summary as JSON."),
 ) -> None:
     """Stream a fingertip (or an emulated sensor) through baseline -> models -> dashboard, recording,
-    Foxglove, ROS 2. Retake the baseline with kill -USR1 PID."""
+    Foxglove, ROS 2. Re-zero (retake the baseline) with the z key on the dashboard or kill -USR1 PID,
+    or at rest with --rezero-at-rest."""
     from softtip._core.systems import load
     from softtip.realtime.session import run_live
     from softtip.realtime.sinks.factory import live_sinks
@@ -52,6 +75,10 @@ def live(
         fail("give either --port PORT or --emulate")
     check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
     check_number(drift_tau, "--drift-tau", above=0, maximum=LONGEST_S, unit="s")
+    check_number(rezero_at_rest, "--rezero-at-rest", above=0, maximum=LONGEST_S, unit="s")
+    check_number(rest_band, "--rest-band", above=0, maximum=MAX_REST_BAND)
+    if rest_band is not None and rezero_at_rest is None:
+        fail(f"--rest-band = {rest_band:g}: only with --rezero-at-rest SECONDS")
     for path in model:
         if not zipfile.is_zipfile(check_input(path, "--model")):
             fail(f"--model = {path}: not a saved softtip model (an .npz archive)")
@@ -62,7 +89,16 @@ def live(
     if record is not None:
         check_output(record, "--record", model, force=force)
     scenario = getattr(scenario, "value", scenario)
+    board_format = BoardFormat(board_format)
     source, settings, emulator_source, frames = port, None, None, baseline_frames or 50
+    if board_format is not BoardFormat.softtip:
+        if emulate:
+            fail(f"--format {board_format.value}: reads a board on --port; --emulate plays softtip's firmware")
+        if rate is not None:
+            fail(f"--rate = {rate}: a {board_format.value} board streams at its own rate; leave --rate out")
+        from softtip.hardware.reskin import RESKIN_CHIPS, ReSkinStream
+
+        source = ReSkinStream(port, chips or RESKIN_CHIPS, name=board_format.value)
     if emulate:
         if scenario not in SCENARIOS:
             fail(f"--scenario = {scenario!r}: expected one of {', '.join(SCENARIOS)}")
@@ -86,7 +122,8 @@ def live(
     summary = run_live(source, model,
                        live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
                        duration, rate_hz=rate or 50, chips=chips, settings=settings, baseline_frames=frames,
-                       drift_time_constant_s=drift_tau, emulator_source=emulator_source, callbacks=[note_first_frame])
+                       drift_time_constant_s=drift_tau, rest_s=rezero_at_rest, rest_band=rest_band,
+                       emulator_source=emulator_source, callbacks=[note_first_frame])
     summary["first_frame_s"] = first_frame[0] if first_frame else None
     if json_output:
         print(json.dumps(summary, indent=2, default=float))

@@ -1,6 +1,6 @@
 """The ``softtip`` command line: a thin layer over the library, every command registered here.
 
-Each command lives in the module of its stage (:mod:`.twin`, :mod:`.lab`, :mod:`.optimize`,
+Each command lives in the module of its stage (:mod:`.twin`, :mod:`.importing`, :mod:`.lab`, :mod:`.optimize`,
 :mod:`.live`, :mod:`.demo`, :mod:`.sysid`, :mod:`.bench`); they share only :mod:`.common`. ``softtip`` and
 ``python -m softtip`` run this same application.
 """
@@ -13,7 +13,7 @@ import typer
 
 from softtip import __version__
 from softtip._core.systems import load, systems
-from softtip.cli import bench, lab, live, optimize, recording, sysid, twin
+from softtip.cli import bench, importing, lab, live, optimize, recording, session, sysid, twin
 from softtip.cli.common import Toolkit, console
 
 app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
@@ -38,8 +38,9 @@ def _group(name: str, help_text: str, commands: dict, callback=None) -> None:
 
 
 for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.optimize, lab.reproduce,
-                lab.calibrate, lab.evaluate):
+                lab.calibrate, lab.evaluate, session.recalibrate):
     app.command()(command)
+app.command("import")(importing.import_logs)
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
 _registered = systems().values()
 _main_demo = next((load(system.main_demo) for system in _registered if system.main_demo), None)

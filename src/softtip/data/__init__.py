@@ -5,14 +5,14 @@
   (:func:`channel_name`, :func:`channel_names`, :func:`channel_columns`, from
   :mod:`softtip._core.channels`);
 - :mod:`softtip.data.csvload`: :func:`read_csv_recording` (a column mapping and unit
-  conversion for real recordings);
+  conversion for real recordings) and :func:`read_columns` (numbers from any delimited text);
 - :mod:`softtip.data.splits`: calibration / validation splits that keep every trial on one
   side (:func:`split_by_trial`, :func:`kfold_by_trial`, :class:`TrialKFold`,
   :func:`leave_condition_out`), and :func:`split_by_sample`, which warns.
 """
 
 from softtip._core.channels import channel_columns, channel_name, channel_names
-from softtip.data.csvload import TIME_UNITS_IN_S, read_csv_recording
+from softtip.data.csvload import TIME_UNITS_IN_S, read_columns, read_csv_recording
 from softtip.data.dataset import (
     FORMAT,
     SCHEMA_VERSION,
@@ -48,6 +48,7 @@ __all__ = [
     "concat",
     "kfold_by_trial",
     "leave_condition_out",
+    "read_columns",
     "read_csv_recording",
     "split_by_sample",
     "split_by_trial",

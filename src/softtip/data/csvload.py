@@ -26,10 +26,15 @@ line (the header is line 1). The mapping is a dict, or a TOML file::
 
 Every top-level key of the file is also a keyword of :func:`read_csv_recording`; a setting
 given both ways is refused.
+
+:func:`read_columns` reads chosen columns of any delimited text (a header or none, one character or
+whitespace between the cells) as numbers: the reader under ``softtip import``
+(:mod:`softtip.lab.importing`), for any command that takes such files.
 """
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import KW_ONLY, dataclass, field, replace
@@ -60,6 +65,7 @@ from softtip.data.dataset import (
     unknown_and_missing,
 )
 
+WHITESPACE = "whitespace"  # the delimiter of columns separated by runs of spaces or tabs
 TIME_UNITS_IN_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
 _FIRST_DATA_LINE = 2  # line 1 is the header
 
@@ -127,13 +133,15 @@ def _magnetic_units(source: str, units: str | Mapping[str, str], magnetic: list[
     return dict(units)
 
 
-def parse_numbers(path: Path, csv_name: str, column: pa.ChunkedArray) -> np.ndarray:
-    """A CSV column read as text, parsed as float64, with the first bad cell named on failure."""
+def parse_numbers(path: Path, csv_name: str, column: pa.ChunkedArray, *, first_line: int = _FIRST_DATA_LINE
+                  ) -> np.ndarray:
+    """A CSV column read as text, parsed as float64, with the first bad cell named on failure (its line
+    counted from ``first_line``, the line of the first row: 2 below a header)."""
     text = pc.utf8_trim_whitespace(column)
     try:
         return pc.cast(text, pa.float64()).to_numpy(zero_copy_only=False)
     except pa.ArrowInvalid:
-        for line, cell in enumerate(text.to_pylist(), start=_FIRST_DATA_LINE):
+        for line, cell in enumerate(text.to_pylist(), start=first_line):
             try:
                 float(cell)
             except (TypeError, ValueError):
@@ -275,3 +283,54 @@ def read_csv_recording(path: str | os.PathLike, mapping: Mapping[str, str] | str
         return Dataset(data, options.labels, options.conditions, metadata)
     except DatasetError as problem:
         raise DatasetError(f"{path}: {problem}") from None
+
+
+def read_columns(path: str | os.PathLike, columns: Sequence[int | str], *, header: bool = True,
+                 delimiter: str = ",") -> np.ndarray:
+    """The ``columns`` (numbered from 1, or named by the header) of a delimited text file as an
+    (n_rows, len(columns)) float array. ``delimiter`` is one character or ``"whitespace"`` (runs of
+    spaces and tabs, as in DaISy's and MATLAB's ``.dat`` files). A missing column, a row of the wrong
+    length or a cell that is not a number is one line naming the file, the column and the line."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"{path}: {'is a folder, expected a file' if path.is_dir() else 'does not exist'}")
+    try:
+        content = path.read_bytes()
+    except OSError as problem:
+        raise DatasetError(f"{path}: cannot be read ({problem.strerror})") from None
+    if delimiter == WHITESPACE:
+        lines = content.decode("utf-8", errors="replace").splitlines()
+        content = "\n".join(" ".join(line.split()) for line in lines).encode()  # empty lines are skipped below
+        delimiter = " "
+    names = _header(path, content, header, delimiter)
+    wanted = [str(ref) if isinstance(ref, int) else ref for ref in columns]
+    for ref, name in zip(columns, wanted, strict=True):
+        if name not in names:
+            shown = f"column {ref}" if isinstance(ref, int) else f"no column {ref!r}"
+            raise DatasetError(f"{path}: {shown} " + (f"(it has {len(names)})" if isinstance(ref, int) else
+                                                      f"(columns: {', '.join(names)})"))
+    try:
+        table = pacsv.read_csv(io.BytesIO(content), read_options=pacsv.ReadOptions(
+            column_names=names, skip_rows=1 if header else 0),
+            parse_options=pacsv.ParseOptions(delimiter=delimiter),
+            convert_options=pacsv.ConvertOptions(include_columns=list(dict.fromkeys(wanted)),
+                                                 column_types=dict.fromkeys(wanted, pa.string())))
+    except (pa.ArrowException, OSError) as problem:
+        raise DatasetError(f"{path}: cannot be read as delimited text ({first_line(problem)})") from None
+    first = 2 if header else 1
+    return np.column_stack([parse_numbers(path, name, table.column(name), first_line=first) for name in wanted]
+                           ) if table.num_rows else np.zeros((0, len(wanted)))
+
+
+def _header(path: Path, content: bytes, header: bool, delimiter: str) -> list[str]:
+    """The column names: the header's, or the numbers 1..n of the first line's cells."""
+    line = content.split(b"\n", 1)[0].decode("utf-8", errors="replace").strip().lstrip("\ufeff")
+    if not line:
+        raise DatasetError(f"{path}: the first line is empty, expected {'a header' if header else 'numbers'}")
+    cells = [cell.strip() for cell in line.split(delimiter)]
+    if not header:
+        return [str(k) for k in range(1, len(cells) + 1)]
+    if len(set(cells)) != len(cells):
+        twice = next(cell for k, cell in enumerate(cells) if cell in cells[:k])
+        raise DatasetError(f"{path}: column {twice!r} appears more than once in the header")
+    return cells

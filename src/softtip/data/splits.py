@@ -3,7 +3,9 @@
 Samples of one trial are strongly correlated (one motion, one contact), so a model
 validated on samples of trials it was calibrated on looks better than it is. Every
 split here keeps each trial whole on one side, except :func:`split_by_sample`, which
-exists for comparison and warns.
+exists for comparison and warns, and :func:`time_blocks`, which cuts trials into
+consecutive blocks for a network's early stopping when there are too few trials to hold
+whole ones out.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from softtip.data.dataset import TRIAL, Dataset, DatasetError
+from softtip.data.dataset import TRIAL, Dataset, DatasetError, trial_runs
 
 # the roles a protocol gives its trials, in the condition ``role``
 CALIBRATION, VALIDATION = "calibration", "validation"
@@ -165,6 +167,22 @@ def kfold_by_trial(dataset: Dataset, n_splits: int = 5, *, seed: int | None = No
                    ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(train, test) row indices of ``n_splits`` folds, each trial in exactly one test fold."""
     return TrialKFold.for_dataset(dataset, n_splits, seed).split(dataset.groups)
+
+
+def time_blocks(trial: np.ndarray, time: np.ndarray, block_s: float) -> np.ndarray:
+    """A block id per row: each trial (a run of rows of one id) cut every ``block_s`` seconds of its time,
+    counted from its first row; ids 0, 1, ... in row order, so no block spans two trials."""
+    if isinstance(block_s, bool) or not isinstance(block_s, numbers.Real) or not 0 < block_s < math.inf:
+        raise DatasetError(f"block_s: expected a finite number of seconds > 0, got {block_s!r}")
+    trial, time = np.asarray(trial), np.asarray(time, dtype=np.float64)
+    if trial.shape != time.shape or trial.ndim != 1:
+        raise DatasetError(f"time_blocks: trial and time must be 1-D of one length, got {trial.shape} and {time.shape}")
+    if not trial.size:
+        return np.zeros(0, dtype=np.intp)
+    starts, lengths = trial_runs(trial)
+    index = np.floor((time - np.repeat(time[starts], lengths)) / block_s)
+    new_block = np.r_[False, (trial[1:] != trial[:-1]) | (index[1:] != index[:-1])]
+    return np.cumsum(new_block)
 
 
 def leave_condition_out(dataset: Dataset, column: str, values: Iterable[Any]) -> tuple[Dataset, Dataset]:

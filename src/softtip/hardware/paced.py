@@ -3,14 +3,15 @@
 A sensor with no firmware of softtip's and no published interface (a system's force chip) is not
 emulated behind a serial link: :class:`PacedSource` hands the live pipeline one frame of
 ``readings`` per sample period on a thread of its own, as a driver would on arrival. The same
-serves to replay readings of any sensor at their rate.
+serves to replay readings of any sensor at their rate. :class:`ThreadedSource` is what the live
+session asks of such a source (a ReSkin / AnySkin board's stream is another).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Self
+from typing import Protocol, Self, runtime_checkable
 
 import numpy as np
 
@@ -20,6 +21,30 @@ from softtip._core.threads import BackgroundThread
 from softtip.hardware.driver import Sample
 
 _SEQ_MODULUS = 1 << 16  # sequence numbers wrap as the firmware's do
+
+
+@runtime_checkable
+class ThreadedSource(Protocol):
+    """A source that delivers Samples on a thread of its own: ``name``, ``chips``, ``rate_hz``
+    (None: no stated rate), ``reading`` (what its chips read), ``finished`` (its last frame is
+    delivered), ``open()`` (takes its device, before the live session opens its sinks),
+    ``start(deliver)``, ``counters()`` and ``close()``."""
+
+    name: str
+    chips: int
+    rate_hz: float | None
+    reading: Reading
+
+    @property
+    def finished(self) -> bool: ...
+
+    def open(self) -> Self: ...
+
+    def start(self, deliver: Callable[[Sample], None]) -> Self: ...
+
+    def counters(self) -> dict: ...
+
+    def close(self) -> None: ...
 
 
 class PacedSource:
@@ -55,6 +80,10 @@ class PacedSource:
     def finished(self) -> bool:
         """Every frame delivered (never, when looping)."""
         return not self.loop and self.delivered >= len(self.readings)
+
+    def open(self) -> Self:
+        """Nothing to take: the readings are in memory."""
+        return self
 
     def start(self, deliver: Callable[[Sample], None]) -> Self:
         self._thread.start(lambda: self._run(deliver))

@@ -19,21 +19,36 @@ chip of every confirming record: unlikely for real readings, whose temperatures
 are near room temperature, but not impossible for readings that hardly change.
 Once synchronised, each record only needs its own
 terminator and plausible values; on a failure the decoder searches again.
+
+:class:`ReSkinStream` runs a reader on a thread of its own and hands every Sample to the live
+pipeline, as :class:`~softtip.hardware.PacedSource` does. :class:`ReSkinBoard` emulates such a board
+on a pseudo-terminal: records of ``source(t_s)`` at a rate, as the boards' burst-mode firmware
+(the AnySkin repository's ``5X_binary_burst_stream``) writes them.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
+import tempfile
 import time
+import tty
+from collections.abc import Callable
+from typing import Self
 
 import numpy as np
 
-from softtip._core.config import PositiveInteger, checked
+from softtip._core.channels import MAGNETIC
+from softtip._core.config import PositiveInteger, PositiveNumber, checked
+from softtip._core.threads import BackgroundThread
 from softtip.hardware.driver import Sample, open_serial
 
 TERMINATOR = b"\r\n"
 VALUES_PER_CHIP = 4  # t, x, y, z
 RESKIN_CHIPS = 5
 RESKIN_BAUDRATE = 115_200
+_READ_WAIT_S = 0.1  # how long the stream's thread waits for bytes before it looks whether to stop
 # Above every MLX90393 range (the widest is about 0.14 T on Z).
 PLAUSIBLE_FIELD_UT = 200_000.0
 PLAUSIBLE_TEMPERATURE_C = (-50.0, 150.0)
@@ -158,6 +173,129 @@ class ReSkinReader:
 
     def __enter__(self) -> ReSkinReader:
         return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class ReSkinStream:
+    """A ReSkin / AnySkin board on ``port`` as a live source: ``open()`` opens the port and
+    ``start(deliver)`` calls ``deliver(sample)`` for every record as it is decoded, on the stream's
+    thread. The boards send no rate: :attr:`rate_hz` is None and the samples carry no device time
+    (the pipeline then stamps them with their arrival)."""
+
+    reading = MAGNETIC
+    rate_hz = None
+    finished = False  # a board streams until it is closed
+
+    def __init__(self, port: str, chips: int = RESKIN_CHIPS, baudrate: int = RESKIN_BAUDRATE,
+                 name: str = "anyskin") -> None:
+        self.port = port
+        self.chips = checked(PositiveInteger, "chips", chips)
+        self.baudrate = baudrate
+        self.name = f"{name} board on {port}"
+        self._reader: ReSkinReader | None = None
+        self._decoder = ReSkinDecoder(self.chips)  # replaced by the reader's: its counters outlive the port
+        self._thread = BackgroundThread(f"reskin-{port}")
+
+    def open(self) -> Self:
+        self._reader = ReSkinReader(self.port, self.baudrate, self.chips)
+        self._decoder = self._reader.decoder
+        return self
+
+    def start(self, deliver: Callable[[Sample], None]) -> Self:
+        self._thread.start(lambda: self._run(deliver))
+        return self
+
+    def _run(self, deliver: Callable[[Sample], None]) -> None:
+        while not self._thread.closing.is_set():
+            for sample in self._reader.read(_READ_WAIT_S):
+                deliver(sample)
+
+    def counters(self) -> dict:
+        """Records delivered, bytes in no record, and times the record boundary was lost."""
+        decoder = self._decoder
+        return {"delivered": decoder.records, "bytes_discarded": decoder.bytes_discarded, "resyncs": decoder.resyncs}
+
+    def close(self) -> None:
+        self._thread.stop()
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+
+class ReSkinBoard:
+    """A ReSkin / AnySkin board on a pseudo-terminal: every ``1 / rate_hz`` s one record of
+    ``source(t_s)`` (µT, shape (chips, 3); t_s since :meth:`start`) with the chips at
+    ``temperature_C``, in float32 as the boards send it. :attr:`port` is the device to open;
+    :attr:`sent` counts the records generated, :attr:`dropped` those not written because no host
+    was reading (a full pty, as a board's USB buffer fills). :meth:`close` re-raises a failure of
+    ``source``."""
+
+    def __init__(self, source: Callable[[float], np.ndarray], rate_hz: float = 100.0, chips: int = RESKIN_CHIPS,
+                 temperature_C: float = 25.0) -> None:
+        if not callable(source):
+            raise ValueError(f"source = {source!r}: expected a callable t_s -> field_uT (chips, 3)")
+        self._source = source
+        self.rate_hz = checked(PositiveNumber, "rate_hz", rate_hz)
+        self.chips = checked(PositiveInteger, "chips", chips)
+        self.temperature_C = float(temperature_C)
+        self.sent = self.dropped = 0
+        self._thread = BackgroundThread("reskin-board")
+        self._directory: str | None = None
+        self._master_fd = self._slave_fd = None
+        self._error: Exception | None = None
+
+    @property
+    def port(self) -> str:
+        if self._directory is None:
+            raise RuntimeError("board not started")
+        return os.path.join(self._directory, "anyskin")
+
+    def start(self) -> Self:
+        self._master_fd, self._slave_fd = os.openpty()
+        tty.setraw(self._slave_fd)
+        os.set_blocking(self._master_fd, False)
+        self._directory = tempfile.mkdtemp(prefix="softtip-anyskin-")
+        os.symlink(os.ttyname(self._slave_fd), self.port)
+        self._thread.start(self._run)
+        return self
+
+    def record(self, t_s: float) -> bytes:
+        """The bytes of the record the board sends at t_s."""
+        field = np.asarray(self._source(t_s), dtype=np.float64)
+        if field.shape != (self.chips, 3):
+            raise ValueError(f"source: expected a field of shape ({self.chips}, 3), got {field.shape}")
+        values = np.column_stack([np.full(self.chips, self.temperature_C), field]).astype("<f4")
+        return values.tobytes() + TERMINATOR
+
+    def _run(self) -> None:
+        period, started = 1.0 / self.rate_hz, time.perf_counter()
+        try:
+            while not self._thread.closing.wait(max(started + self.sent * period - time.perf_counter(), 0.0)):
+                try:
+                    os.write(self._master_fd, self.record(self.sent * period))
+                except BlockingIOError:
+                    self.dropped += 1
+                self.sent += 1
+        except Exception as error:  # re-raised by close()
+            self._error = error
+
+    def close(self) -> None:
+        self._thread.stop()
+        if self._master_fd is not None:
+            os.close(self._master_fd)
+            os.close(self._slave_fd)
+            self._master_fd = self._slave_fd = None
+        if self._directory is not None:
+            with contextlib.suppress(FileNotFoundError):
+                shutil.rmtree(self._directory)
+            self._directory = None
+        if self._error is not None:
+            raise RuntimeError(f"board emulator stopped: {self._error}") from self._error
+
+    def __enter__(self) -> Self:
+        return self.start()
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()

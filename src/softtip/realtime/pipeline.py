@@ -13,7 +13,7 @@
    targets: regression models to values, one classifier to a contact state. Frames in which a
    chip reported a fault are not estimated. A dynamic model (an identified system) keeps its
    state from frame to frame and restarts from rest with every baseline taken (at start, on
-   command; not with drift steps): its estimates are the simulation of the frames since;
+   command, at rest; not with drift steps): its estimates are the simulation of the frames since;
 4. the result goes to every sink (recorder, dashboard, live view, ROS 2; see
    :mod:`softtip.realtime.sinks`) and callback, in the acquisition thread: sinks only
    hand the frame to their own thread, callbacks must be as quick (a controller that
@@ -124,9 +124,11 @@ class Pipeline:
             if unknown:
                 raise ValueError(f"free_states: {unknown[0]!r} is not a class of {self._classifier.name} "
                                  f"({', '.join(self._classifier.classes)})")
-            if self.baseline.drift_time_constant_s is not None and not self.free_states:
+            if (self.baseline.drift_time_constant_s is not None or self.baseline.rest_s is not None) \
+                    and not self.free_states:
                 raise ValueError("free_states: name the contact states in which the fingertip is free "
-                                 "(drift tracking with a contact-state classifier only runs in them)")
+                                 "(drift tracking and re-zeroing at rest with a contact-state classifier only "
+                                 "run in them)")
         self.sinks = list(sinks)
         for sink in self.sinks:
             if not callable(getattr(sink, "write", None)):
@@ -144,7 +146,8 @@ class Pipeline:
                 "baseline": {"frames": self.baseline.frames,
                              "drift_time_constant_s": self.baseline.drift_time_constant_s,
                              "drift_threshold": self.baseline.drift_threshold,
-                             "step": self.baseline.step, "free_states": sorted(self.free_states)},
+                             "step": self.baseline.step, "free_states": sorted(self.free_states),
+                             "rest_s": self.baseline.rest_s, "rest_band": self.baseline.rest_band},
                 "reading": {"quantity": reading.quantity, "unit": reading.unit},
                 "sensor_settings": None if settings is None else settings.to_dict(),
                 "rate_hz": rate_hz, **dict(metadata or {})},
@@ -272,7 +275,8 @@ class Pipeline:
         counters = {
             "frames": self.frames, "estimated": self.estimated, "with_chip_fault": self.unsound,
             "sink_errors": self.sink_errors, "baseline_version": self.baseline.version,
-            "baseline_collecting": self.baseline.collecting, "latency_ms": percentiles_ms(latencies),
+            "baseline_collecting": self.baseline.collecting,
+            "baseline_rezeroed_at_rest": self.baseline.rezeroed_at_rest, "latency_ms": percentiles_ms(latencies),
         }
         if self._source_counters is not None:
             counters |= dict(self._source_counters())

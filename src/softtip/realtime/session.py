@@ -1,5 +1,5 @@
-"""A fingertip (or an emulated one in a child process, or a paced source), its driver and a live
-pipeline, run together.
+"""A fingertip (or an emulated one in a child process, or a source on a thread of its own), its
+driver and a live pipeline, run together.
 
 :class:`LiveSession` runs a source, a driver and a :class:`~softtip.realtime.pipeline.Pipeline`
 together; :func:`run_live` is its one-call form for the command line.
@@ -18,7 +18,8 @@ from typing import Self
 import numpy as np
 
 from softtip._core.channels import MAGNETIC
-from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PacedSource, PressCycle, Sample
+from softtip.hardware import (EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PressCycle, Sample,
+                              ThreadedSource)
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.estimator import Estimator
 from softtip.realtime.frames import FrameResult
@@ -35,8 +36,9 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if 
 class LiveSession:
     """A fingertip (``source_spec``: a serial device path or pyserial URL, or
     ``"emulator"`` for an emulated one in a child process), its driver and a pipeline; or a
-    :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, such as an
-    emulated force chip) and a pipeline of its reading.
+    :class:`~softtip.hardware.ThreadedSource` (a sensor with no softtip firmware: an emulated
+    force chip's :class:`~softtip.hardware.PacedSource`, a ReSkin / AnySkin board's
+    :class:`~softtip.hardware.ReSkinStream`) and a pipeline of its reading.
 
     ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
     :meth:`summary` reports frames, lost frames, latency and the CPU time of this process
@@ -44,19 +46,19 @@ class LiveSession:
     models' chips, or 4). Other arguments: see :class:`Pipeline` and :class:`Baseline`.
     """
 
-    def __init__(self, source_spec: str | PacedSource, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
+    def __init__(self, source_spec: str | ThreadedSource, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
                  rate_hz: int = 50, chips: int | None = None, settings: MLX90393Settings | None = None,
                  baudrate: int = 1_000_000, baseline: Baseline | None = None, free_states: Sequence[str] = (),
                  callbacks: Sequence[Callable[[FrameResult], None]] = (),
                  emulator_source: Callable[[float], np.ndarray] | None = None,
                  emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0) -> None:
-        self.paced = source_spec if isinstance(source_spec, PacedSource) else None
-        if self.paced is None and (not isinstance(source_spec, str) or not source_spec.strip()):
-            raise ValueError(f"source = {source_spec!r}: expected a serial port, {EMULATOR!r} or a PacedSource")
-        self.source_spec = source_spec if self.paced is None else self.paced.name
+        self.threaded = source_spec if isinstance(source_spec, ThreadedSource) else None
+        if self.threaded is None and (not isinstance(source_spec, str) or not source_spec.strip()):
+            raise ValueError(f"source = {source_spec!r}: expected a serial port, {EMULATOR!r} or a threaded source")
+        self.source_spec = source_spec if self.threaded is None else self.threaded.name
         self.estimators = list(estimators)
         self.sinks = list(sinks)
-        self.rate_hz = rate_hz if self.paced is None else self.paced.rate_hz
+        self.rate_hz = rate_hz if self.threaded is None else self.threaded.rate_hz
         self.settings = MLX90393Settings() if settings is None else settings
         self.baudrate = baudrate
         self.baseline = baseline
@@ -64,7 +66,7 @@ class LiveSession:
         self.callbacks = list(callbacks)
         self.emulated = source_spec == EMULATOR
         needed = max((e.chips_needed for e in self.estimators), default=1)
-        self.chips = (self.paced.chips if self.paced is not None else
+        self.chips = (self.threaded.chips if self.threaded is not None else
                       chips if chips is not None else (max(needed, 4) if self.emulated else None))
         self._emulator = (EmulatorProcess(emulator_source or PressCycle(self.chips), rate_hz, self.chips,
                                           self.settings, emulator_faults, emulator_seed)
@@ -76,8 +78,8 @@ class LiveSession:
         self._started = False
 
     def start(self) -> LiveSession:
-        if self.paced is not None:
-            return self._start_paced()
+        if self.threaded is not None:
+            return self._start_threaded()
         try:
             port = self._emulator.start().port if self._emulator is not None else self.source_spec
             self.driver = FingertipDriver(port, self.baudrate, self.settings, self.rate_hz,
@@ -101,9 +103,10 @@ class LiveSession:
             raise
         return self
 
-    def _start_paced(self) -> LiveSession:
-        source = self.paced
+    def _start_threaded(self) -> LiveSession:
+        source = self.threaded
         try:
+            source.open()
             self.pipeline = Pipeline(source.chips, self.estimators, self.sinks, baseline=self.baseline,
                                      free_states=self.free_states, callbacks=self.callbacks, settings=None,
                                      rate_hz=source.rate_hz, metadata={"source": source.name, "device": source.name},
@@ -127,12 +130,12 @@ class LiveSession:
                 "reconnects": stats.reconnects}
 
     def wait(self, duration_s: float | None = None, stop: threading.Event | None = None) -> None:
-        """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C), or until a paced
+        """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C), or until a threaded
         source that does not loop has delivered its last frame."""
         stop = threading.Event() if stop is None else stop
         deadline = None if duration_s is None else time.monotonic() + duration_s
         try:
-            while not stop.is_set() and not (self.paced is not None and self.paced.finished):
+            while not stop.is_set() and not (self.threaded is not None and self.threaded.finished):
                 remaining = None if deadline is None else deadline - time.monotonic()
                 if remaining is not None and remaining <= 0:
                     break
@@ -149,8 +152,8 @@ class LiveSession:
         try:
             if self.driver is not None:
                 self.driver.close()
-            if self.paced is not None:
-                self.paced.close()
+            if self.threaded is not None:
+                self.threaded.close()
         finally:
             try:
                 if self.pipeline is not None:
@@ -177,24 +180,26 @@ class LiveSession:
         return summary
 
 
-def run_live(source_spec: str | PacedSource, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
+def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
              duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
              settings: MLX90393Settings | None = None, baudrate: int = 1_000_000, baseline_frames: int = 50,
              drift_time_constant_s: float | None = None, drift_threshold: float | None = None,
+             rest_s: float | None = None, rest_band: float | None = None,
              free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),
              stop: threading.Event | None = None, emulator_source: Callable[[float], np.ndarray] | None = None) -> dict:
-    """Stream from a fingertip (or ``"emulator"``, or a :class:`~softtip.hardware.PacedSource`) through
+    """Stream from a fingertip (or ``"emulator"``, or a :class:`~softtip.hardware.ThreadedSource`) through
     the saved models (calibration models or identified systems) in
     ``model_paths`` to ``sinks`` for ``duration_s`` seconds (None: until Ctrl-C, SIGTERM, SIGHUP or
     ``stop``), and return :meth:`LiveSession.summary`. In the main thread, SIGUSR1
     takes a new baseline (``kill -USR1 <pid>``), and SIGTERM and SIGHUP end the session as Ctrl-C
     does: the sinks are closed, a recording gets its summary. ``emulator_source``: what the emulated
     fingertip's chips read (a picklable ``source(t_s) -> (chips, 3)`` µT). ``drift_threshold``:
-    in the reading's unit (default: the reading's)."""
+    in the reading's unit (default: the reading's). ``rest_s``, ``rest_band``: re-zero at rest
+    (:class:`~softtip.realtime.baseline.Baseline`)."""
     estimators = [Estimator.from_file(path) for path in model_paths]
-    reading = source_spec.reading if isinstance(source_spec, PacedSource) else MAGNETIC
+    reading = source_spec.reading if isinstance(source_spec, ThreadedSource) else MAGNETIC
     baseline = Baseline(baseline_frames, drift_time_constant_s=drift_time_constant_s,
-                        drift_threshold=drift_threshold, reading=reading)
+                        drift_threshold=drift_threshold, rest_s=rest_s, rest_band=rest_band, reading=reading)
     session = LiveSession(source_spec, estimators, sinks, rate_hz=rate_hz, chips=chips, settings=settings,
                           baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)

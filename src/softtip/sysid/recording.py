@@ -43,7 +43,7 @@ from softtip.data.dataset import (
     trial_runs,
 )
 from softtip.sysid.textfile import SUFFIXES as WHITESPACE
-from softtip.sysid.textfile import whitespace_columns
+from softtip.sysid.textfile import text_columns
 
 DETRENDS = ("none", "mean", "linear")
 READABLE = (".csv", ".parquet", *WHITESPACE)
@@ -455,7 +455,7 @@ def file_columns(path: str | os.PathLike, names: Sequence[str] | None = None) ->
     path = Path(path)
     suffix = _suffix(path)
     if suffix in WHITESPACE or (suffix == ".csv" and names is not None):
-        return list(whitespace_columns(path, names, None if suffix in WHITESPACE else ","))
+        return list(text_columns(path, names, None if suffix in WHITESPACE else ","))
     if names is not None:
         raise DatasetError(f"{path}: column names are for a text file without a header (.csv, .dat, .txt)")
     try:
@@ -485,7 +485,7 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     """
     path = Path(path)
     suffix = _suffix(path)
-    whitespace = whitespace_columns(path, names, None if suffix in WHITESPACE else ",") \
+    whitespace = text_columns(path, names, None if suffix in WHITESPACE else ",") \
         if suffix in WHITESPACE or (suffix == ".csv" and names is not None) else None
     present = list(whitespace) if whitespace is not None else file_columns(path, names)
     if suffix == ".parquet" and _is_dataset_file(path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 from rich.console import Console
 
@@ -15,11 +16,12 @@ from softtip.realtime.sinks.ros2 import ROS2Sink
 
 def live_sinks(*, dashboard: bool = True, record: str | os.PathLike | None = None, foxglove_port: int | None = None,
                ros2: bool = False, console: Console | None = None) -> list[Sink]:
-    """The sinks of ``softtip live``: the dashboard, an MCAP recording, a Foxglove live view
-    on ``foxglove_port`` and a ROS 2 node, each when asked for."""
+    """The sinks of ``softtip live``: the dashboard (its re-zero key read from standard input when
+    that is a terminal), an MCAP recording, a Foxglove live view on ``foxglove_port`` and a ROS 2
+    node, each when asked for."""
     sinks: list[Sink] = []
     if dashboard:
-        sinks.append(DashboardSink(console))
+        sinks.append(DashboardSink(console, keys=sys.stdin.fileno() if sys.stdin and sys.stdin.isatty() else None))
     if record is not None:
         sinks.append(RecorderSink(record))
     if foxglove_port is not None:

@@ -38,5 +38,6 @@ SYSTEM = System(
                "insertion": "softtip.systems.hall_fingertip.live:insertion_scenario"},
     demos={"insertion": "softtip.systems.hall_fingertip.commands:demo_insertion"},
     main_demo="softtip.systems.hall_fingertip.commands:demo",
+    commands={"fingertip": "softtip.systems.hall_fingertip.commands:app"},
     reference_designs={"simulate": "cylindrical-A", "bench": "cylindrical-D"},
 )

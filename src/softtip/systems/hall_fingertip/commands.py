@@ -1,4 +1,5 @@
-"""The Hall fingertip's commands: ``softtip demo`` (the main job) and ``softtip demo insertion``."""
+"""The Hall fingertip's commands: ``softtip demo`` (the main job), ``softtip demo insertion`` and
+``softtip fingertip drift``."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ import typer
 from rich.table import Table
 
 from softtip._core.units import MM
-from softtip.cli.common import FORCE, check_number, console, demo_report, fail, progress_for
+from softtip.cli.common import FORCE, check_number, check_output, console, demo_report, fail, progress_for
+
+app = typer.Typer(help="S1: the Hall-effect soft fingertip.", no_args_is_help=True)
 
 
 def demo(
@@ -78,3 +81,45 @@ def demo_insertion(
                   f"{'-' if estimated is None else f'{estimated:.3f}'} N "
                   f"(true {outcome['true_force_at_decision_N']:.3f} N)")
 
+
+@app.command("drift")
+def drift(
+    seed: int = typer.Option(1, "--seed", help="Seed of the fabricated unit, its trials and the network."),
+    quick: bool = typer.Option(False, "--quick", help="4 trials per motion instead of 15: a smoke run (some 3 "
+                                                      "minutes), not the study."),
+    plot: Path = typer.Option(None, "--plot", help="Save the causes' sizes and the correction's curve to this PNG."),
+    force: bool = FORCE,
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The size of each cause of drift between sessions (the magnets' and the chips' temperature, the
+    elastomer's aging and creep, a steel plate near the chips) on one unit of design D in the 3-axis
+    force protocol, and the force error of a later session with all of them, re-calibrated from its
+    first 0..5 presses."""
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    if plot is not None:
+        if plot.suffix.lower() != ".png":
+            fail(f"--plot {plot}: expected a file name ending in .png")
+        check_output(plot, "--plot", force=force)
+    from softtip.systems.hall_fingertip.drift import TARGETS, drift_study, plot_drift
+
+    study = drift_study(seed, quick, progress_for(json_output))
+    if plot is not None:
+        plot_drift(study, plot)
+    if json_output:
+        print(json.dumps({**study.to_dict(), "plot": None if plot is None else str(plot)}, indent=2))
+        return
+    table = Table(title=f"Drift between sessions, unit of seed {seed}: force RMSE (N) on the later session")
+    for column in ("cause", "readings' change (%)", *TARGETS):
+        table.add_column(column, justify="right")
+    table.add_row("none (the calibration session)", "0", *(f"{v:.3f}" for v in study.calibration_rmse_N))
+    for cause in study.causes:
+        table.add_row(cause.name, f"{100 * cause.reading_change:.2f}", *(f"{v:.3f}" for v in cause.force_rmse_N))
+    console.print(table)
+    curve = Table(title=f"Every cause at once, re-calibrated from its first presses ({study.scored_rows} rows scored)")
+    for column in ("presses", *TARGETS):
+        curve.add_column(column, justify="right")
+    curve.add_row("predicting zero", *(f"{v:.3f}" for v in study.zero_rmse_N))
+    for k, row in enumerate(study.presses_rmse_N):
+        curve.add_row(str(k), *(f"{v:.3f}" for v in row))
+    console.print(curve)

@@ -14,32 +14,35 @@ table, or the sensor under the test fingertip saturated). Conditions: ``target_f
 ``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
 personalisation figures are in the metadata's ``sensor_settings``.
 
-The ``curve_*`` and ``variations`` parameters are not the dataset's: the report
+The ``curve_*``, ``variations`` and ``robustness_*`` parameters are not the dataset's: the report
 (:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 from pydantic import Field
 
-from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer,
+from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
                                   schema)
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
-from softtip.systems.haptics.collection import CollectionSettings
+from softtip.systems.haptics.collection import Collection, CollectionSettings, collection_duration
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
+from softtip.systems.haptics.fingertip_file import load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
+from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
 from softtip.systems.haptics.sensitivity import CURVES, DEFAULT_VARIATIONS, VARIATION_NAMES, FingerVariation
 from softtip.systems.haptics.study import METHODS, StudySettings, run_study
+from softtip.systems.haptics.table_files import TableFileError, read_table
 
 WRENCH_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 WRENCH_UNITS = ("N", "N", "N", "Nm", "Nm", "Nm")
@@ -63,6 +66,7 @@ WeightingPowers = Annotated[list[WeightingPower], expect("a list of numbers from
 FsLevels = Annotated[list[integer(2, 21)], expect("a list of integers 2..21")]
 UserLevels = Annotated[list[integer(2, 13)], expect("a list of integers 2..13")]
 Variations = Annotated[list[choice(*VARIATION_NAMES)], expect(f"a list of: {', '.join(VARIATION_NAMES)}")]
+RobustnessSeeds = Annotated[list[integer(0)], expect("a list of seeds (integers >= 0)")]
 
 
 @schema(section="parameters")
@@ -79,6 +83,8 @@ class HapticsParameters:
     light_force_N: PositiveNumber = _STUDY.light_force
     contact_threshold_N: PositiveNumber = CONTACT_THRESHOLD
     target_draws: integer(1) = _STUDY.target_draws
+    data_driven: choice(*DATA_DRIVEN_VARIANTS) = _STUDY.data_driven
+    ds_torque_length_m: PositiveNumber = _STUDY.torque_length
     hold_s: PositiveNumber = _COLLECTION.hold_s
     window_s: PositiveNumber = _COLLECTION.window_s
     fingertips: Fingertips = field(default_factory=lambda: list(FINGERTIP_NAMES))
@@ -87,9 +93,11 @@ class HapticsParameters:
     curve_fs_levels: FsLevels = field(default_factory=lambda: list(_CURVES["fs_levels"]))
     curve_user_levels: UserLevels = field(default_factory=lambda: list(_CURVES["user_levels"]))
     variations: Variations = field(default_factory=lambda: list(VARIATION_NAMES))
+    robustness_seeds: RobustnessSeeds = field(default_factory=lambda: [2, 3])
+    robustness_sigmas: number("a number of standard deviations from 0 to 3", ge=0, le=3) = 1.0
 
     def __post_init__(self) -> None:
-        for key in ("fingertips", *CURVE_SETTINGS, "variations"):
+        for key in ("fingertips", *CURVE_SETTINGS, "variations", "robustness_seeds"):
             values = getattr(self, key)
             if len(set(values)) != len(values):
                 raise Refusal(key, f"expected each {'fingertip' if key == 'fingertips' else 'value'} once")
@@ -104,7 +112,8 @@ class HapticsParameters:
                              adaptive_budget=self.adaptive_budget, n_neighbours=self.n_neighbours,
                              weighting_power=self.weighting_power, light_force=self.light_force_N,
                              contact_threshold=self.contact_threshold_N, target_draws=self.target_draws,
-                             min_target_force=self.contact_threshold_N)
+                             min_target_force=self.contact_threshold_N, data_driven=self.data_driven,
+                             torque_length=self.ds_torque_length_m)
 
     def selected_fingertips(self) -> tuple[Fingertip, ...]:
         """The test fingertips ``fingertips`` names, in the study's order."""
@@ -138,21 +147,51 @@ class HapticsViscoelastic:
     has settled (no relaxation table)."""
 
 
-# ``device``: "shipped" or a device TOML file (relative to the protocol file)
-_HapticsProtocolFile = protocol_file_schema(HapticsRealism, HapticsViscoelastic, device=(Text, "shipped"))
+# ``device``: "shipped" or a device TOML file; ``fingertip_files``: a researcher's fingertips (TOML,
+# .fingertip_file), tested after the named ones; ``fs_table``: "simulated" or a recorded FS table (CSV or
+# Parquet with the DS's readings, .table_files) used instead of the simulated collection; paths relative
+# to the protocol file
+_HapticsProtocolFile = protocol_file_schema(HapticsRealism, HapticsViscoelastic, device=(Text, "shipped"),
+                                            fingertip_files=(tuple[Text, ...], ()), fs_table=(Text, "simulated"))
 
 
 @dataclass(frozen=True)
 class HapticsDevice:
-    """What the haptics protocol runs on: a device file, loaded and checked."""
+    """What the haptics protocol runs on: a device file, loaded and checked; the researcher's own
+    fingertips (from files) and recorded FS table (None: simulated), if the protocol names any."""
 
     name: str
     source: str
     device: DeviceSpec
+    fingertips: tuple[Fingertip, ...] = ()
+    fingertip_sources: tuple[str, ...] = ()
+    fs: Collection | None = None
+    fs_source: str = "simulated"
 
     @property
     def spec(self) -> dict:
-        return {"name": self.name, "file": self.source, **asdict(self.device)}
+        return {"name": self.name, "file": self.source, **asdict(self.device),
+                "fingertip_files": dict(zip((f.name for f in self.fingertips), self.fingertip_sources, strict=True)),
+                "fs_table": self.fs_source}
+
+
+def study_fingertips(parameters: HapticsParameters, setup: HapticsDevice) -> tuple[Fingertip, ...]:
+    """The test fingertips a protocol names, then those of its fingertip files."""
+    return parameters.selected_fingertips() + setup.fingertips
+
+
+def recorded_fs_table(path: Path, device: DeviceSpec, parameters: HapticsParameters) -> Collection:
+    """A recorded FS table for the study, checked before any work: its DS readings are needed
+    (personalisation A) and the renderer must index it; its real collection time is that of its
+    configurations on ``device``, each held as the protocol holds them."""
+    table = read_table(path, device)
+    if table.platform_wrenches is None:
+        raise TableFileError(f"table file {path}: the study's personalisation A needs the DS's readings too "
+                             "(ds_fx_N, ds_fy_N, ds_fz_N, ds_tx_Nm, ds_ty_Nm, ds_tz_Nm)")
+    table.renderer(n_neighbours=parameters.n_neighbours, contact_threshold=parameters.contact_threshold_N)
+    entries = len(table.motor_inputs)
+    return Collection(table.motor_inputs, table.wrenches, table.platform_wrenches, np.zeros(entries, bool),
+                      collection_duration(device, table.motor_inputs, parameters.hold_s))
 
 
 def device_from_file(path: str | Path) -> HapticsDevice:
@@ -166,10 +205,21 @@ def device_from_file(path: str | Path) -> HapticsDevice:
 
 
 def _device(file: _HapticsProtocolFile, parameters: HapticsParameters, source: str, base: Path | None) -> HapticsDevice:
-    if file.device == "shipped":
-        return device_from_file("shipped")
-    path = Path(file.device)
-    return device_from_file(path if path.is_absolute() or base is None else base / path)
+    def located(name: str) -> Path:
+        path = Path(name)
+        return path if path.is_absolute() or base is None else base / path
+
+    setup = device_from_file("shipped" if file.device == "shipped" else located(file.device))
+    fingertips = tuple(load_fingertip(located(name)) for name in file.fingertip_files)
+    names = [*parameters.fingertips, *(f.name for f in fingertips)]
+    repeated = next((name for k, name in enumerate(names) if name in names[:k]), None)
+    if repeated is not None:
+        raise refused(f"the fingertip name {repeated!r} is used twice: expected each test fingertip's name once",
+                      source, "fingertip_files", value=list(file.fingertip_files))
+    fs = None if file.fs_table == "simulated" else recorded_fs_table(located(file.fs_table), setup.device,
+                                                                        parameters)
+    return replace(setup, fingertips=fingertips, fingertip_sources=tuple(map(str, map(located, file.fingertip_files))),
+                   fs=fs, fs_source=file.fs_table if fs is None else str(located(file.fs_table)))
 
 
 @dataclass
@@ -182,9 +232,10 @@ class HapticsBench(SeededBench):
 def haptics(bench: HapticsBench, p: HapticsParameters, seed: int, record: dict) -> Dataset:
     """S3's study: collect the tables, record the targets and render each on each fingertip by each method."""
     collection = p.collection_settings()
-    study = run_study(p.study_settings(), seed, device=bench.device.device, fingertips=p.selected_fingertips(),
-                      collection=collection)
+    study = run_study(p.study_settings(), seed, device=bench.device.device,
+                      fingertips=study_fingertips(p, bench.device), collection=collection, fs=bench.device.fs)
     settings = {"sensor": asdict(collection.sensor), "hold_s": p.hold_s, "window_s": p.window_s,
+                "fs_table": bench.device.fs_source,
                 "fs_collection_s": study.fs_collection_s, "user_collection_s": study.user_collection_s,
                 "max_contact_radius_over_layer": study.max_contact_to_layer,
                 "fingertips": {o.fingertip.name: {

@@ -15,8 +15,8 @@ import numpy as np
 
 from softtip._core.config import PositiveNumber, Refusal, checked, instance, integer, schema
 from softtip.sensors.wrench import NANO17_WRENCH, WrenchSensorSpec, held_wrench
-from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, move_time, quantised
-from softtip.systems.haptics.fingertips import Fingertip, finger_wrench, platform_wrench
+from softtip.systems.haptics.device import DeviceSpec, move_time, quantised
+from softtip.systems.haptics.fingertips import Fingertip, loaded_contact, platform_wrench
 
 
 @schema(section="collection")
@@ -73,10 +73,9 @@ def collection_duration(device: DeviceSpec, motor_inputs, hold_s: float) -> floa
 
 
 def _driven(device: DeviceSpec, fingertip: Fingertip, motor_inputs: np.ndarray):
-    """The platform's pose with ``motor_inputs`` commanded (the servos reach their quantised angles)
-    and the wrench it applies to the fingertip."""
-    pose = forward_kinematics(device, quantised(device, motor_inputs))
-    return pose, finger_wrench(fingertip, device, pose)[0]
+    """The platform's pose with ``motor_inputs`` commanded (the servos reach their quantised angles,
+    the cables stretch under their load) and the wrench it applies to the fingertip."""
+    return loaded_contact(fingertip, device, quantised(device, motor_inputs))
 
 
 def sensed_contact(device: DeviceSpec, fingertip: Fingertip, motor_inputs, settings: CollectionSettings,

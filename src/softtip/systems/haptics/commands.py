@@ -87,7 +87,8 @@ def bench_haptics(
                                                   user_finger.radius).motor_inputs))
     data_driven_s = timed(lambda: NearestNeighbourRenderer(**standard).fit(
         fs.finger_wrenches, personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, user.motor_inputs,
-                                                    user.platform_wrenches, **standard).motor_inputs))
+                                                    user.platform_wrenches, renderer.n_neighbours,
+                                                    renderer.contact_threshold).motor_inputs))
     index_s = timed(lambda: NearestNeighbourRenderer(**standard).fit(fs.finger_wrenches, fs.motor_inputs))
     report = {
         "rendering": {"p50_us": _percentile_us(render_s, 50), "p99_us": _percentile_us(render_s, 99),
@@ -123,16 +124,69 @@ def bench_haptics(
     console.print(table)
 
 
+def _fingertip(value: str, option: str):
+    """A shipped test fingertip's name, or a fingertip TOML file (refused in one line)."""
+    from softtip.systems.haptics.bench import FINGERTIP_NAMES
+    from softtip.systems.haptics.fingertip_file import load_fingertip
+    from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
+
+    if value in FINGERTIP_NAMES:
+        return next(f for f in TEST_FINGERTIPS if f.name == value)
+    if not value.endswith(".toml"):
+        fail(f"{option} = {value!r}: expected one of {', '.join(FINGERTIP_NAMES)}, or a fingertip .toml file")
+    return load_fingertip(value)
+
+
+def _file(fingertip: str) -> Path | None:
+    return Path(fingertip) if fingertip.endswith(".toml") else None
+
+
+def _check_choices(method: str, fs_levels: int, seed: int) -> None:
+    if method not in ("standard", "geometric"):
+        fail(f"--method = {method!r}: expected standard or geometric")
+    if not 2 <= fs_levels <= MAX_FS_LEVELS:
+        fail(f"--fs-levels = {fs_levels}: expected an integer from 2 to {MAX_FS_LEVELS} (a table of levels³ "
+             "configurations)")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+
+
+def _renderer(device, renderer, fs_levels: int, rng: np.random.Generator, method: str, finger, progress):
+    """The renderer for ``finger``: ``renderer`` (a recorded table's), or one on a simulated FS table of
+    ``fs_levels``³ configurations, personalised by ``method``; and how many entries the geometric
+    method could not reach."""
+    from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
+    from softtip.systems.haptics.live import fs_renderer
+    from softtip.systems.haptics.personalisation import personalise_geometric
+    from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+
+    if renderer is None:
+        with progress.task("haptics: FS table", total=1) as task:
+            renderer = fs_renderer(device, fs_levels, rng)
+            task.advance()
+    if method != "geometric":
+        return renderer, 0
+    personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
+    personalised = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
+    return personalised, int(personal.outside.sum())
+
+
 @app.command("render")
 def render(
     duration: float = typer.Option(None, "--duration", help="Seconds to render (default: 5 s synthetic, or the "
                                                             "whole file)."),
     sensation: Path = typer.Option(None, "--sensation", help="A recorded sensation (.csv or .parquet: time_s, fx_N, "
                                                              "fy_N, fz_N); default a synthetic one."),
-    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip", help="The test fingertip in the device."),
+    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip",
+                                  help="The test fingertip in the device: a shipped one's name or a fingertip .toml "
+                                       "file."),
     method: str = typer.Option("standard", "--method", help="standard or geometric (B, for --fingertip's radius)."),
     device_file: Path = typer.Option(None, "--device", help="A device TOML file (default softtip's device)."),
-    fs_levels: int = typer.Option(13, "--fs-levels", help="FS table levels per servo (13: 13³ entries)."),
+    table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet: fx_N, fy_N, "
+                                                          "fz_N [, tx_Nm, ty_Nm, tz_Nm], motor1_rad.. or motor1_deg..) "
+                                                          "instead of a simulated FS table."),
+    fs_levels: int = typer.Option(13, "--fs-levels", help="Simulated FS table levels per servo (13: 13³ entries), "
+                                                          "without --table."),
     seed: int = typer.Option(1, "--seed", help="Seed of the table collection, the synthetic sensation and the noise."),
     record: Path = typer.Option(None, "--record", help="Record the stream to this MCAP file."),
     foxglove_port: int = typer.Option(None, "--foxglove-port", help="Serve a Foxglove live view on this port."),
@@ -153,71 +207,112 @@ def render(
     _finite_positive(duration, "--duration")
     if duration is not None and duration > MAX_DURATION_S:
         fail(f"--duration = {duration}: expected at most {MAX_DURATION_S:g} s (the sequence is built in memory)")
-    if method not in ("standard", "geometric"):
-        fail(f"--method = {method!r}: expected standard or geometric")
-    if not 2 <= fs_levels <= MAX_FS_LEVELS:
-        fail(f"--fs-levels = {fs_levels}: expected an integer from 2 to {MAX_FS_LEVELS} (a table of levels³ "
-             "configurations)")
-    if seed < 0:
-        fail(f"--seed = {seed}: expected an integer >= 0")
+    _check_choices(method, fs_levels, seed)
     if foxglove_port is not None and not 0 < foxglove_port < 65536:
         fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
     if port is not None and not port.isprintable():
         fail(f"--port = {port!r}: expected a serial device path or a pyserial URL")
     from softtip.realtime.sinks.factory import live_sinks
     from softtip.realtime.sinks.ros2 import ros2_available
-    from softtip.systems.haptics.bench import FINGERTIP_NAMES, device_from_file
-    from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS
-    from softtip.systems.haptics.live import (LOOP_RATE_HZ, fs_renderer, recorded_sensation, render_stream,
-                                              synthetic_sensation)
-    from softtip.systems.haptics.personalisation import personalise_geometric
-    from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+    from softtip.systems.haptics.bench import device_from_file
+    from softtip.systems.haptics.live import LOOP_RATE_HZ, recorded_sensation, render_stream, synthetic_sensation
     from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice, check_baud
+    from softtip.systems.haptics.table_files import read_table
 
-    if fingertip not in FINGERTIP_NAMES:
-        fail(f"--fingertip = {fingertip!r}: expected one of {', '.join(FINGERTIP_NAMES)}")
+    finger = _fingertip(fingertip, "--fingertip")
     if ros2 and not ros2_available():
         fail("--ros2: ROS 2 is not available (rclpy and the standard message packages do not import; source the "
              "ROS 2 setup script first)")
-    inputs = [p for p in (sensation, device_file) if p is not None]
+    inputs = [p for p in (sensation, device_file, table_file, _file(fingertip)) if p is not None]
     if record is not None:
         record = check_output(record, "--record", inputs, force=force)
     device = device_from_file(device_file or "shipped").device
     check_baud(baud, device.servo.command_rate_hz, "--baud")
+    table = read_table(table_file, device) if table_file else None
+    recorded = table.renderer() if table else None
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
     rng = np.random.default_rng(seed)
-    finger = next(f for f in TEST_FINGERTIPS if f.name == fingertip)
     # the port is the last check: opened before any work, released whatever happens next
     servos = (SimulatedDevice(device, finger, LOOP_RATE_HZ, rng) if port is None
               else SerialDevice(port, device, baud, "--port", "--baud"))
     try:
         sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
-        with progress_for(json_output).task("haptics: FS table", total=1) as task:
-            renderer = fs_renderer(device, fs_levels, rng)
-            task.advance()
-        out_of_reach = 0
-        if method == "geometric":
-            personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
-            renderer = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
-            out_of_reach = int(personal.outside.sum())
+        renderer, out_of_reach = _renderer(device, recorded, fs_levels, rng, method, finger, progress_for(json_output))
         if wanted is None:
             wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
     except BaseException:
         servos.close()
         raise
+    source = str(table_file) if table_file else f"simulated FS table, {fs_levels}³"
     summary = render_stream(device, renderer, servos, wanted, sinks, metadata={
-        "fingertip": fingertip, "method": method, "fs_levels": fs_levels, "seed": seed,
+        "fingertip": finger.name, "method": method, "table": source, "seed": seed,
         "sensation": str(sensation) if sensation else "synthetic", "device": port or "simulated"},
         paced=realtime).to_dict()
-    summary |= {"fingertip": fingertip, "method": method, "table_entries_out_of_reach": out_of_reach,
-                "device": port or "simulated", "record": str(record) if record else None}
+    summary |= {"fingertip": finger.name, "method": method, "table": source,
+                "table_entries_out_of_reach": out_of_reach, "device": port or "simulated",
+                "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
     error = ("not measured (a serial device reports no wrench)" if summary["median_error_N"] is None else
              f"median {summary['median_error_N']:.3f} N, p90 {summary['p90_error_N']:.3f} N")
-    console.print(f"{summary['ticks']} ticks at 1 kHz on {fingertip} ({method}, {summary['device']} device), "
+    console.print(f"{summary['ticks']} ticks at 1 kHz on {finger.name} ({method}, {summary['device']} device), "
                   f"{summary['servo_frames']} servo commands, {summary['late_ticks']} late: rendering p99 "
                   f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| {error}; {summary['outside_table']} "
                   f"ticks outside the table, {out_of_reach} table entries out of reach"
                   + (f"; recorded to {record}" if record else ""))
+
+
+table_app = typer.Typer(help="Lookup tables: export one for a device's firmware.", no_args_is_help=True)
+app.add_typer(table_app, name="table")
+
+
+@table_app.command("export")
+def export_table(
+    header: Path = typer.Argument(..., help="The C header to write (.h): the table as const float arrays."),
+    csv_file: Path = typer.Option(None, "--csv", help="Also write the same entries as a table file (.csv)."),
+    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip", help="The user's fingertip (for --method "
+                                                                         "geometric): a shipped one's name or a "
+                                                                         "fingertip .toml file."),
+    method: str = typer.Option("standard", "--method", help="standard or geometric (B, for --fingertip's radius)."),
+    device_file: Path = typer.Option(None, "--device", help="A device TOML file (default softtip's device)."),
+    table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet) instead of a "
+                                                          "simulated FS table."),
+    fs_levels: int = typer.Option(13, "--fs-levels", help="Simulated FS table levels per servo, without --table."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the simulated table collection."),
+    force: bool = typer.Option(False, "--force", help="Replace output files that exist."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Write a lookup table for a device's firmware: the renderer's entries (forces in N, motor inputs
+    in degrees) as a C header of const arrays with its settings as macros, and with --csv as a CSV."""
+    _check_choices(method, fs_levels, seed)
+    from softtip.systems.haptics.bench import device_from_file
+    from softtip.systems.haptics.table_files import c_header, read_table, write_table_csv
+
+    inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]
+    if header.suffix != ".h":
+        fail(f"header = {header}: expected a C header file name ending in .h")
+    header = check_output(header, "header", inputs, force=force)
+    if csv_file is not None:
+        if csv_file.suffix.lower() != ".csv":
+            fail(f"--csv = {csv_file}: expected a file name ending in .csv")
+        csv_file = check_output(csv_file, "--csv", [*inputs, header], force=force)
+    finger = _fingertip(fingertip, "--fingertip")
+    device = device_from_file(device_file or "shipped").device
+    table = read_table(table_file, device) if table_file else None
+    renderer, out_of_reach = _renderer(device, table.renderer() if table else None, fs_levels,
+                                       np.random.default_rng(seed), method, finger, progress_for(json_output))
+    source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
+    provenance = (f"{source} on {device.device.name}, {method}"
+                  + (f" for {finger.name}" if method == "geometric" else ""))
+    header.write_text(c_header(renderer, "SOFTTIP_HAPTICS_TABLE_H", provenance.replace("*/", "* /")))
+    if csv_file is not None:
+        write_table_csv(csv_file, renderer)
+    summary = {"header": str(header), "csv": str(csv_file) if csv_file else None, "entries": len(renderer.features_),
+               "file_rows_merged": table.merged if table is not None else 0,
+               "entries_out_of_reach": out_of_reach, "provenance": provenance}
+    if json_output:
+        print(json.dumps(summary, indent=2))
+        return
+    console.print(f"{summary['entries']} entries (those without contact as one) written to {header}"
+                  + (f" and {csv_file}" if csv_file else "") + f": {provenance}")

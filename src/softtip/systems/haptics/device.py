@@ -18,12 +18,17 @@ move at a finite slew rate (:func:`servo_angles`). The springs round the cables 
 apart; with the contact wrench on the platform, the cables' tensions follow from the platform's
 balance in z and in moment about x and y (:func:`cable_tensions`): a cable whose tension would be
 negative is slack, and one beyond the servo's stall torque cannot be held.
+
+Each cable, with its knots and the servo horn's give, is a spring in series (``[cables] stiffness``):
+under the contact's load it stretches, so a pressing platform sits lower than its kinematics say.
+:func:`loaded_pose` solves that balance with the contact; :func:`forward_kinematics` is the
+unloaded, rigid-cable pose every method's model uses.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -42,6 +47,7 @@ from softtip._core.config import (
     read_toml,
     schema,
 )
+from softtip._core.errors import NotConverged
 
 DEVICE_FILE = Path(__file__).with_name("device.toml")
 _TOLERANCE = 1e-9  # rad: rounding in the kinematics' inverse, far below a servo's dead band
@@ -98,6 +104,14 @@ class Springs:
     free_length: PositiveNumber
 
 
+@schema(section="cables", error=DeviceError)
+class Cables:
+    """Each cable's axial stiffness (N/m) in series with its servo: the cable, its knots and the servo
+    horn's give, which lengthen a cable by its tension over this stiffness."""
+
+    stiffness: PositiveNumber
+
+
 @schema(section="finger", error=DeviceError)
 class FingerPlacement:
     """The fingertip's centre in the static platform's frame (m)."""
@@ -105,14 +119,49 @@ class FingerPlacement:
     centre: Point3
 
 
+@schema(section="fit", error=DeviceError)
+class FitRecord:
+    """Which of the file's values were fitted (dotted keys, e.g. ``cables.stiffness``), their standard
+    errors (each value's unit) and correlations, how they were fitted, the figures fitted to and the
+    fit's residuals there (figure − published, in the figures' unit). A file without it states no fit."""
+
+    method: Text
+    parameters: list[Text]
+    standard_errors: list[PositiveNumber]
+    correlation: list[list[Real]]
+    figures: list[Text]
+    residuals: list[Real]
+
+    def __post_init__(self) -> None:
+        count = len(self.parameters)
+        if len(self.standard_errors) != count:
+            raise Refusal("standard_errors", f"expected one per parameter, {count}")
+        matrix = np.array(self.correlation, dtype=float) if all(len(r) == count for r in self.correlation) else None
+        if (matrix is None or matrix.shape != (count, count) or not np.allclose(matrix, matrix.T)
+                or not np.allclose(np.diag(matrix), 1.0) or np.linalg.eigvalsh(matrix).min() < -1e-9):
+            raise Refusal("correlation", f"expected a symmetric {count} x {count} correlation matrix (ones on "
+                                         "its diagonal, positive semi-definite)")
+        if len(self.residuals) != len(self.figures):
+            raise Refusal("residuals", f"expected one per figure, {len(self.figures)}")
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """The fitted values' covariance, in their units."""
+        errors = np.array(self.standard_errors)
+        return np.array(self.correlation) * np.outer(errors, errors)
+
+
 @schema(error=DeviceError)
 class DeviceSpec:
-    """A whole device file: ``[device]``, ``[servo]``, ``[springs]``, ``[finger]``."""
+    """A whole device file: ``[device]``, ``[servo]``, ``[springs]``, ``[cables]``, ``[finger]`` and, when
+    some values were fitted, ``[fit]``."""
 
     device: Geometry
     servo: Servo
     springs: Springs
+    cables: Cables
     finger: FingerPlacement
+    fit: FitRecord | None = None
 
     def __post_init__(self) -> None:
         wound = self.wound_length
@@ -126,6 +175,26 @@ class DeviceSpec:
                           "released cables would go slack")
         if not -self.device.released_length < self.finger.centre[2] < 0:
             raise Refusal(("finger", "centre"), "expected the centre between the platforms (-released_length < z < 0)")
+        for key in self.fit.parameters if self.fit else ():
+            section, _, name = key.partition(".")
+            if section not in {"device", "servo", "springs", "cables", "finger"} or not isinstance(
+                    getattr(getattr(self, section), name, None), float):
+                raise Refusal(("fit", "parameters"), f"{key!r}: expected a number of the file as section.key, "
+                                                     "e.g. cables.stiffness")
+
+    def value(self, key: str) -> float:
+        """The value of a dotted key, e.g. ``cables.stiffness``."""
+        section, _, name = key.partition(".")
+        return getattr(getattr(self, section), name)
+
+    def with_values(self, keys, values) -> DeviceSpec:
+        """This device with the dotted ``keys`` set to ``values``, validated as a device file is."""
+        changes: dict[str, dict[str, float]] = {}
+        for key, value in zip(keys, values, strict=True):
+            section, _, name = key.partition(".")
+            changes.setdefault(section, {})[name] = float(value)
+        return replace(self, **{section: replace(getattr(self, section), **names)
+                                for section, names in changes.items()})
 
     @property
     def wound_length(self) -> float:
@@ -204,7 +273,7 @@ def cable_ends(spec: DeviceSpec, lengths) -> np.ndarray:
 
 
 def forward_kinematics(spec: DeviceSpec, angles) -> PlatformPose:
-    """The mobile platform's pose at servo angles (rad, (..., 3))."""
+    """The mobile platform's pose at servo angles (rad, (..., 3)), its cables rigid."""
     ends = cable_ends(spec, cable_lengths(spec, angles))
     normal = np.cross(ends[..., 1, :] - ends[..., 0, :], ends[..., 2, :] - ends[..., 0, :])
     normal *= np.sign(normal[..., 2:3])  # up, towards the pad, whatever the order of the cables
@@ -304,3 +373,47 @@ def cable_tensions(spec: DeviceSpec, angles, finger_wrench) -> np.ndarray:
     balance = np.stack([np.ones_like(ends[..., 0]), ends[..., 1], -ends[..., 0]], axis=-2)  # (..., 3, 3)
     load = np.stack([wrench[..., 2], wrench[..., 3], wrench[..., 4]], axis=-1)
     return spring_forces(spec, lengths) + np.linalg.solve(balance, load[..., None])[..., 0]
+
+
+_GIVE_TOLERANCE = 1e-15  # m: the cables' give, far below a servo's dead band (microns of cable)
+_GIVE_ITERATIONS = 100
+
+
+def loaded_pose(spec: DeviceSpec, angles, contact) -> tuple[PlatformPose, np.ndarray]:
+    """The platform's pose at servo ``angles`` (rad, (..., 3)) pressed on a finger, the cables
+    stretched by the contact, and the contact wrench there: ``contact(pose)`` gives the wrench
+    (..., 6) the platform applies to the finger. The three cables in parallel give way along the
+    platform's normal by F_n / (3k) (k = ``spec.cables.stiffness``), F_n the normal force there; the
+    springs' steady preload is part of the released length, and the platform keeps its tilt (the
+    contact's moment is left to the rigid balance, :func:`cable_tensions`). The give s solves
+    g(s) = s − F_n(s) / 3k = 0, g rising with s, bracketed by 0 and F_n(0) / 3k: the Illinois
+    false-position method narrows the bracket below 1e-15 m, or raises :class:`NotConverged`."""
+    rigid = forward_kinematics(spec, angles)
+    stiffness = 3.0 * spec.cables.stiffness
+
+    def balance(give):
+        wrench = contact(rigid.moved_along_normal(-give))
+        return give - np.sum(wrench[..., :3] * rigid.normal, axis=-1) / stiffness
+
+    low = np.zeros(rigid.normal.shape[:-1])
+    low_value = balance(low)
+    high = -low_value  # F_n(0) / 3k, where g >= 0: the force there is no larger than at 0
+    high_value = np.where(high > 0, balance(high), 0.0)
+    kept = np.zeros(low.shape, dtype=int)  # which end stayed twice: -1 low, +1 high (Illinois' halving)
+    for _ in range(_GIVE_ITERATIONS):
+        if np.all(high - low <= _GIVE_TOLERANCE):
+            pose = rigid.moved_along_normal(-high)
+            return pose, contact(pose)
+        span = high_value - low_value
+        middle = np.where(span > 0, (low * high_value - high * low_value) / np.where(span > 0, span, 1.0), low)
+        middle = np.clip(middle, low, high)
+        value = balance(middle)
+        below = value < 0
+        low_value = np.where(below, value, np.where(kept == -1, low_value / 2, low_value))
+        high_value = np.where(below, np.where(kept == 1, high_value / 2, high_value), value)
+        kept = np.where(below, 1, -1)  # the end that did not move this time
+        low, high = np.where(below, middle, low), np.where(below, high, middle)
+        exact = value == 0
+        low, high = np.where(exact, middle, low), np.where(exact, middle, high)
+    raise NotConverged(f"loaded platform: the cables' give still spans {np.max(high - low):.3g} m after "
+                       f"{_GIVE_ITERATIONS} steps (cables.stiffness = {spec.cables.stiffness:g} N/m)")

@@ -11,7 +11,9 @@ The settings and their values (softtip's, beyond the publication except where sa
 - ``radius``: the cap's radius. The publication's six casts: spheres of 6.5 (small), 7.5 (the FS)
   and 8.5 mm (large), and three human fingertips approximated as spheres of 6.5, 8 and 10 mm.
 - ``shape``: ``sphere``; ``ellipsoid``, longer along the finger (y) by 1.6, the ratio of the finger
-  pad's radii (Serina et al. 1998's ellipsoidal pulp);
+  pad's radii (Serina et al. 1998's ellipsoidal pulp), the shape of the three human casts (a cast of
+  a human fingertip is no sphere: the publication approximates each by a sphere of its radius for the
+  geometric method only, and softtip keeps that approximation in the method, not in the cast);
   ``pad``, broader than deep (1.3 r across and along, r deep), so flatter under the pad: its radius
   of curvature there is 1.69 r. Every shape keeps its lowest point r below its centre.
 - ``contact``: the normal law and material (:class:`~softtip.mechanics.plate_contact.PlateContactLaw`).
@@ -42,7 +44,7 @@ import numpy as np
 from softtip._core.config import PositiveNumber, Real, Text, choice, expect, from_numpy, schema
 from softtip.mechanics.plate_contact import PlateContactLaw, plate_wrench
 from softtip.sensors.wrench import shift_wrench, wrench_in_frame
-from softtip.systems.haptics.device import DeviceSpec, PlatformPose
+from softtip.systems.haptics.device import DeviceSpec, PlatformPose, loaded_pose
 
 FS_RADIUS = 7.5e-3  # m: the fingertip sensor's quarter-sphere tip (the publication)
 CORE_RADIUS = 4.5e-3  # m: the rigid core inside every cast, 3 mm of rubber under the FS's pad (softtip's choice)
@@ -108,23 +110,25 @@ def layer_thickness(radius: float) -> float:
     return float(_layer_interpolant()(radius))
 
 
-def cast(name: str, radius: float) -> Fingertip:
-    """A VytaFlex 30 cast of ``radius`` (m) over the FS's core, with the FE-calibrated contact law
-    (:func:`layer_thickness`)."""
+def cast(name: str, radius: float, shape: str = "sphere") -> Fingertip:
+    """A VytaFlex 30 cast of ``radius`` (m) and ``shape`` over the FS's core, with the FE-calibrated
+    contact law (:func:`layer_thickness`; a shape keeps the rubber's depth under the pad, r minus the core)."""
     law = PlateContactLaw(law="bonded-layer", youngs_modulus=VYTAFLEX_30_MODULUS,
                           layer_thickness=layer_thickness(radius))
-    return Fingertip(name=name, radius=radius, contact=law)
+    return Fingertip(name=name, radius=radius, shape=shape, contact=law)
 
 
 FINGERTIP_SENSOR = cast("FS (7.5 mm)", FS_RADIUS)
-# the publication's six test fingertips, all cast in VytaFlex 30 over a rigid core
+# the publication's six test fingertips, all cast in VytaFlex 30 over a rigid core: three spheres and
+# three casts of human fingertips, ellipsoidal pulps named by the sphere the geometric method takes for them
+HUMAN_SHAPE = "ellipsoid"
 TEST_FINGERTIPS = (
     cast("small cast (6.5 mm)", 6.5e-3),
     cast("FS cast (7.5 mm)", 7.5e-3),
     cast("large cast (8.5 mm)", 8.5e-3),
-    cast("human 1 (6.5 mm)", 6.5e-3),
-    cast("human 2 (8 mm)", 8.0e-3),
-    cast("human 3 (10 mm)", 10.0e-3),
+    cast("human 1 (6.5 mm)", 6.5e-3, HUMAN_SHAPE),
+    cast("human 2 (8 mm)", 8.0e-3, HUMAN_SHAPE),
+    cast("human 3 (10 mm)", 10.0e-3, HUMAN_SHAPE),
 )
 
 
@@ -137,6 +141,13 @@ def finger_wrench(fingertip: Fingertip, device: DeviceSpec, pose: PlatformPose) 
     centre = fingertip.centre(device)
     return plate_wrench(fingertip.contact, centre, fingertip.semi_axes, pose.centroid, pose.normal,
                         centre + np.array(fingertip.core_offset))
+
+
+def loaded_contact(fingertip: Fingertip, device: DeviceSpec, angles) -> tuple[PlatformPose, np.ndarray]:
+    """The platform's pose at servo ``angles`` (rad, (..., 3)) pressed on ``fingertip``, its cables
+    stretched under its load (:func:`~.device.loaded_pose`), and the wrench (..., 6) it applies to
+    the fingertip about its core's origin."""
+    return loaded_pose(device, angles, lambda pose: finger_wrench(fingertip, device, pose)[0])
 
 
 def platform_wrench(fingertip: Fingertip, device: DeviceSpec, pose: PlatformPose,

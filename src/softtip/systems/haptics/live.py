@@ -68,7 +68,7 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
     """Wanted wrenches (ticks, 6) at 1 kHz from a CSV or Parquet file with columns ``time_s``, ``fx_N``,
     ``fy_N``, ``fz_N`` (increasing times, finite forces), held between samples (zero-order, as a
     stream is), cut to ``duration_s``."""
-    table = _columns(Path(path))
+    table = table_columns(Path(path), "sensation file", SensationError)
     missing = [name for name in SENSATION_COLUMNS if name not in table]
     if missing:
         raise SensationError(f"sensation file {path}: missing column {missing[0]} (expected {', '.join(SENSATION_COLUMNS)})")
@@ -84,19 +84,21 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
     return np.hstack([held, np.zeros((len(held), 3))])
 
 
-def _columns(path: Path) -> dict[str, np.ndarray]:
+def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, np.ndarray]:
+    """The columns of a CSV or Parquet file, a ``what`` ("sensation file" ...); a file of another kind,
+    missing or unreadable raises ``error`` naming it."""
     import pyarrow as pa
     from pyarrow import csv, parquet
 
     readers = {".csv": csv.read_csv, ".parquet": parquet.read_table}
     if path.suffix.lower() not in readers:
-        raise SensationError(f"sensation file {path}: expected a .csv or .parquet file")
+        raise error(f"{what} {path}: expected a .csv or .parquet file")
     if not path.is_file():
-        raise SensationError(f"sensation file {path}: no such file")
+        raise error(f"{what} {path}: no such file")
     try:
         table = readers[path.suffix.lower()](path)
     except (pa.ArrowException, OSError) as problem:
-        raise SensationError(f"sensation file {path}: unreadable ({' '.join(str(problem).split())})") from None
+        raise error(f"{what} {path}: unreadable ({' '.join(str(problem).split())})") from None
     return {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
 
 

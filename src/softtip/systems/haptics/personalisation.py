@@ -4,11 +4,18 @@
 configuration m*. The user wears the device and a smaller set of configurations m*,U is driven while
 the DS reads d*,U. For each FS entry, its d* is rendered from the user's table (the n nearest d*,U,
 their m*,U averaged with inverse-distance weights, :class:`~.rendering.NearestNeighbourRenderer`)
-into m̃*, which replaces m* in the FS table. The DS turns with the platform: its force, read in the
-platform's axes, is the contact's normal force alone when the contact is frictionless, the same for
-every tilt. Each DS reading is therefore turned into the static platform's axes by the orientation
-the forward kinematics give for its own configuration (which the device knows, dead band included), so that d* carries
-the direction of the force as f* does.
+into m̃*, which replaces m* in the FS table. Two variants of what "nearest" means:
+
+- ``published`` (the publication's): the DS's raw wrenches, 6-D, as it read them in the platform's
+  axes, the torques divided by ``torque_length`` (:func:`~.rendering.wrench_features`); no model of
+  the device. With a frictionless contact the DS's force is the normal force alone, the same for
+  every tilt; its torques, the force times the contact point's offset on the platform, carry the
+  tilt. :data:`DS_TORQUE_LENGTH` is the FS's radius: tilting the platform by θ about a fingertip of
+  radius r moves the contact about r sin θ across it, so τ / r ≈ |F| sin θ, the size of the
+  tangential force the same tilt gives in the device's axes.
+- ``device axes`` (softtip's earlier variant): the DS's forces alone, 3-D, each turned into the
+  static platform's axes by the orientation the forward kinematics give for its own configuration
+  (which the device knows, dead band included), so that d* carries the direction of the force as f* does.
 
 **B, geometric.** The FS and the user's fingertip are spheres of radii r_F and r_U at one centre p.
 For each FS entry the forward kinematics give the platform's pose (centroid p_c, normal z1); the FS
@@ -47,6 +54,10 @@ from softtip.systems.haptics.device import (
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, Rendering
 
 
+DATA_DRIVEN_VARIANTS = ("published", "device axes")
+DS_TORQUE_LENGTH = 7.5e-3  # m: the FS's radius (see the module's notes)
+
+
 def in_device_axes(device: DeviceSpec, motor_inputs, platform_wrenches) -> np.ndarray:
     """DS readings (entries, 6, in the platform's axes) turned into the static platform's axes by the
     platform's orientation at their ``motor_inputs`` (entries, 3), as the servos resolve them."""
@@ -54,30 +65,35 @@ def in_device_axes(device: DeviceSpec, motor_inputs, platform_wrenches) -> np.nd
     return wrench_in_frame(platform_wrenches, np.swapaxes(turn, -1, -2))
 
 
-def user_table_renderer(device: DeviceSpec, user_motor_inputs, user_platform_wrenches, n_neighbours: int = 8,
-                        contact_threshold: float | None = None,
-                        weighting_power: float = 1.0) -> NearestNeighbourRenderer:
-    """The inverse of the user's table α_U: DS readings (turned into the device's axes) to motor inputs."""
-    return readings_renderer(in_device_axes(device, user_motor_inputs, user_platform_wrenches), user_motor_inputs,
-                             n_neighbours, contact_threshold, weighting_power)
-
-
 def readings_renderer(device_readings, user_motor_inputs, n_neighbours: int = 8,
-                      contact_threshold: float | None = None, weighting_power: float = 1.0) -> NearestNeighbourRenderer:
-    """:func:`user_table_renderer` from DS readings already in the device's axes (:func:`in_device_axes`)."""
+                      contact_threshold: float | None = None, weighting_power: float = 1.0,
+                      torque_length: float | None = None) -> NearestNeighbourRenderer:
+    """The inverse of the user's table α_U: DS readings (the variant's: raw, or in the device's axes,
+    :func:`in_device_axes`) to motor inputs; a ``torque_length`` searches the whole wrench."""
     options = {} if contact_threshold is None else {"contact_threshold": contact_threshold}
-    return NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, **options).fit(
-        device_readings, user_motor_inputs)
+    return NearestNeighbourRenderer(n_neighbours, weighting_power=weighting_power, torque_length=torque_length,
+                                    **options).fit(device_readings, user_motor_inputs)
 
 
 def personalise_data_driven(device: DeviceSpec, fs_motor_inputs, fs_platform_wrenches, user_motor_inputs,
                             user_platform_wrenches, n_neighbours: int = 8,
-                            contact_threshold: float | None = None, weighting_power: float = 1.0) -> Rendering:
+                            contact_threshold: float | None = None, weighting_power: float = 1.0,
+                            variant: str = "published", torque_length: float = DS_TORQUE_LENGTH) -> Rendering:
     """Personalised motor inputs m̃* (entries, 3) for the FS table (m*, its DS readings d*), from the
-    user's table (m*,U, d*,U); flagged where a d* lies outside the user's table."""
-    user = user_table_renderer(device, user_motor_inputs, user_platform_wrenches, n_neighbours, contact_threshold,
-                               weighting_power)
-    return user.render(in_device_axes(device, fs_motor_inputs, fs_platform_wrenches))
+    user's table (m*,U, d*,U), by ``variant`` (:data:`DATA_DRIVEN_VARIANTS`; ``published`` searches
+    the raw wrenches with the torques over ``torque_length``, m); flagged where a d* lies outside the
+    user's table."""
+    if variant == "published":
+        user, fs = user_platform_wrenches, fs_platform_wrenches
+    elif variant == "device axes":
+        user = in_device_axes(device, user_motor_inputs, user_platform_wrenches)
+        fs = in_device_axes(device, fs_motor_inputs, fs_platform_wrenches)
+        torque_length = None
+    else:
+        raise ValueError(f"variant = {variant!r}: expected one of {', '.join(DATA_DRIVEN_VARIANTS)}")
+    renderer = readings_renderer(user, user_motor_inputs, n_neighbours, contact_threshold, weighting_power,
+                                 torque_length)
+    return renderer.render(fs)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,10 @@ to f (an entry that f matches exactly is returned as it is). The choices, each t
 - **Features**: the three force components, in N, unscaled. Only the rendered force matters to the
   study and its error is a force distance in N, so the search uses that same metric; the torques
   depend on where each finger's sensor sits and would pull the neighbours towards the FS's geometry.
-  Standardising each component would weight a newton of shear above a newton of pressure.
+  Standardising each component would weight a newton of shear above a newton of pressure. With a
+  ``torque_length`` L (m) the features are the whole wrench, the torques divided by L (so in N: a
+  torque counts as the force that makes it at the distance L): what the published personalisation
+  A searches the device-mounted sensor's raw readings by.
 - **Search**: scipy's k-d tree (``cKDTree``), exact Euclidean n nearest.
 - **Weighting**: 1/d^p with p = ``weighting_power`` (1, the published distance weighting, by
   default; 0 a plain average of the n; 2 inverse-square).
@@ -33,7 +36,7 @@ from scipy.spatial import cKDTree
 
 from softtip._core.config import PositiveInteger, PositiveNumber, checked, number
 
-FORCE = slice(0, 3)  # the wrench components the renderer uses
+FORCE = slice(0, 3)  # the wrench components the renderer uses without a torque length
 # 5 steps of the Nano17's force resolution (1/320 N): above the window-averaged noise of a held
 # configuration (one step / √200), below any force a person notices
 CONTACT_THRESHOLD = 5 / 320
@@ -44,14 +47,22 @@ class TableError(ValueError):
     """A lookup table that cannot be rendered from."""
 
 
-def _features(wrenches, name: str) -> np.ndarray:
+def _checked_table(wrenches, name: str) -> np.ndarray:
     wrenches = np.asarray(wrenches, dtype=float)
     if wrenches.ndim != 2 or wrenches.shape[1] not in (3, 6):
         raise TableError(f"{name} has shape {wrenches.shape}: expected (entries, 6) wrenches or (entries, 3) forces")
     bad = ~np.all(np.isfinite(wrenches), axis=1)
     if bad.any():
         raise TableError(f"{name}: entry {int(np.flatnonzero(bad)[0])} is not finite (NaN or inf)")
-    return wrenches[:, FORCE]
+    return wrenches
+
+
+def wrench_features(wrenches: np.ndarray, torque_length: float | None) -> np.ndarray:
+    """The search's coordinates of wrenches (..., 6; or (..., 3) forces without ``torque_length``):
+    the forces (N), or with a ``torque_length`` L (m) the forces beside the torques over L (N)."""
+    if torque_length is None:
+        return wrenches[..., FORCE]
+    return np.concatenate([wrenches[..., :3], wrenches[..., 3:] / torque_length], axis=-1)
 
 
 def _first_duplicate(rows: np.ndarray) -> tuple[int, int] | None:
@@ -78,7 +89,7 @@ class LookupTable:
     motor_inputs: np.ndarray
 
     def __post_init__(self) -> None:
-        _features(self.wrenches, "wrenches")
+        _checked_table(self.wrenches, "wrenches")
         motor = np.asarray(self.motor_inputs, dtype=float)
         if motor.ndim != 2 or motor.shape[1] != 3 or len(motor) != len(self.wrenches):
             raise TableError(f"motor_inputs has shape {motor.shape}: expected ({len(self.wrenches)}, 3)")
@@ -102,44 +113,52 @@ class Rendering:
 
 class NearestNeighbourRenderer:
     """The k-nearest-neighbour, inverse-distance-weighted inverse of a lookup table (scikit-learn
-    conventions: ``fit(wrenches, motor_inputs)``, ``predict(wrenches)``, ``get_params``)."""
+    conventions: ``fit(wrenches, motor_inputs)``, ``predict(wrenches)``, ``get_params``). Its
+    coordinates are the forces, or with a ``torque_length`` (m) the whole wrench (:func:`wrench_features`)."""
 
     def __init__(self, n_neighbours: int = 8, contact_threshold: float = CONTACT_THRESHOLD,
-                 weighting_power: float = 1.0):
+                 weighting_power: float = 1.0, torque_length: float | None = None):
         self.n_neighbours = checked(PositiveInteger, "n_neighbours", n_neighbours, TableError)
         self.contact_threshold = checked(PositiveNumber, "contact_threshold", contact_threshold, TableError)
         self.weighting_power = checked(WeightingPower, "weighting_power", weighting_power, TableError)
+        self.torque_length = (None if torque_length is None
+                              else checked(PositiveNumber, "torque_length", torque_length, TableError))
 
     def get_params(self, deep: bool = True) -> dict:
         return {"n_neighbours": self.n_neighbours, "contact_threshold": self.contact_threshold,
-                "weighting_power": self.weighting_power}
+                "weighting_power": self.weighting_power, "torque_length": self.torque_length}
 
     def set_params(self, **params) -> NearestNeighbourRenderer:
         self.__init__(**(self.get_params() | params))
         return self
 
     def fit(self, wrenches, motor_inputs) -> NearestNeighbourRenderer:
-        """Index the table (entries, 6 or 3) → (entries, 3), merging the entries without contact."""
+        """Index the table (entries, 6, or 3 without a torque length) → (entries, 3), merging the
+        entries without contact."""
         table = LookupTable(np.asarray(wrenches, dtype=float), np.asarray(motor_inputs, dtype=float))
-        forces, motor = _features(table.wrenches, "wrenches"), np.asarray(table.motor_inputs, dtype=float)
-        touching = np.linalg.norm(forces, axis=1) >= self.contact_threshold
-        duplicate = _first_duplicate(forces[touching])
+        wrenches, motor = _checked_table(table.wrenches, "wrenches"), np.asarray(table.motor_inputs, dtype=float)
+        if self.torque_length is not None and wrenches.shape[1] != 6:
+            raise TableError(f"wrenches have shape {wrenches.shape}: a torque length needs (entries, 6) wrenches")
+        features = wrench_features(wrenches, self.torque_length)
+        touching = np.linalg.norm(wrenches[:, FORCE], axis=1) >= self.contact_threshold
+        duplicate = _first_duplicate(features[touching])
         if duplicate is not None:
             rows = np.flatnonzero(touching)
-            raise TableError(f"wrenches: entries {rows[duplicate[0]]} and {rows[duplicate[1]]} read the same force")
+            read = "force" if self.torque_length is None else "wrench"
+            raise TableError(f"wrenches: entries {rows[duplicate[0]]} and {rows[duplicate[1]]} read the same {read}")
         free = np.flatnonzero(~touching)
         if len(free):
             released = free[np.argmin(motor[free].sum(axis=1))]  # argmin: the first on a tie
-            forces = np.vstack([np.zeros((1, 3)), forces[touching]])
+            features = np.vstack([np.zeros((1, features.shape[1])), features[touching]])
             motor = np.vstack([motor[released], motor[touching]])
-        if len(forces) < self.n_neighbours:
-            raise TableError(f"n_neighbours = {self.n_neighbours}: the table has only {len(forces)} distinct entries")
-        self.features_, self.motor_inputs_ = forces, motor
-        self.tree_ = cKDTree(forces)
+        if len(features) < self.n_neighbours:
+            raise TableError(f"n_neighbours = {self.n_neighbours}: the table has only {len(features)} distinct entries")
+        self.features_, self.motor_inputs_ = features, motor
+        self.tree_ = cKDTree(features)
         self.merged_ = len(free)
-        gaps, _ = self.tree_.query(forces, k=2)
+        gaps, _ = self.tree_.query(features, k=2)
         self.widest_gap_ = float(gaps[:, 1].max())
-        self.lowest_, self.highest_ = forces.min(axis=0), forces.max(axis=0)
+        self.lowest_, self.highest_ = features.min(axis=0), features.max(axis=0)
         # what render_one reads each call, precomputed
         self._query, self._k = self.tree_.query, max(self.n_neighbours, 2)
         self._motor_and_ones = np.hstack([motor, np.ones((len(motor), 1))])
@@ -149,11 +168,13 @@ class NearestNeighbourRenderer:
 
     def _wanted(self, wrenches) -> np.ndarray:
         wanted = np.asarray(wrenches, dtype=float)
-        if wanted.shape[-1:] not in ((3,), (6,)):
-            raise ValueError(f"wanted wrenches have shape {wanted.shape}: expected (..., 6) or (..., 3)")
+        shapes = ((3,), (6,)) if self.torque_length is None else ((6,),)
+        if wanted.shape[-1:] not in shapes:
+            raise ValueError(f"wanted wrenches have shape {wanted.shape}: expected (..., 6)"
+                             + (" or (..., 3)" if self.torque_length is None else ""))
         if not np.all(np.isfinite(wanted)):
             raise ValueError("wanted wrenches: expected finite numbers")
-        return wanted[..., FORCE]
+        return wrench_features(wanted, self.torque_length)
 
     def render(self, wrenches) -> Rendering:
         """Motor inputs for wanted wrenches (..., 6 or 3), with the out-of-range flag."""
@@ -168,7 +189,10 @@ class NearestNeighbourRenderer:
         table: :meth:`render` for the real-time loop. Its arithmetic is :meth:`render`'s on arrays
         precomputed by :meth:`fit` (the motor inputs beside a column of ones, so one product gives
         both the weighted sum and the weights' total) and its checks are on three Python floats: no
-        small temporaries besides the k-d tree's answer."""
+        small temporaries besides the k-d tree's answer. With a torque length it is :meth:`render` of one."""
+        if self.torque_length is not None:
+            one = self.render(np.asarray(wrench, dtype=float)[None])
+            return one.motor_inputs[0], bool(one.outside[0])
         force = np.asarray(wrench, dtype=float)
         if force.shape != (6,) and force.shape != (3,):
             raise ValueError(f"wanted wrench has shape {force.shape}: expected 6 (or 3) finite numbers")

@@ -10,7 +10,10 @@ fingertips' targets, the methods' order and the pooled A-vs-B test.
 the FS and user tables' sizes (the effects the authors named as future work), one at a time from
 the study's settings, and :func:`curves_figure` draws them.
 
-Both start from one :class:`Baseline`: the study at its own settings, with its FS table and targets.
+:func:`robustness_study` reruns the whole study on the devices the fit of the device's unknowns
+cannot tell apart (:mod:`.fit`) and over seeds: whether a conclusion is the method's or one device's.
+
+All start from one :class:`Baseline`: the study at its own settings, with its FS table and targets.
 A rerun collects again only what its change touches (a new FS table for another FS size, the
 fingertips' user data and renderings otherwise), and every collection draws the noise stream it
 draws in the study (each stage of each fingertip its own stream of the seed), so the differences
@@ -32,6 +35,7 @@ from softtip.mechanics.plate_contact import PlateContactLaw
 from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DeviceSpec, load_device
 from softtip.systems.haptics.fingertips import HUMAN_FINGERTIPS, SHAPE_AXES, TEST_FINGERTIPS, Fingertip, Offset3
+from softtip.systems.haptics.fit import principal_moves
 from softtip.systems.haptics.statistics import WilcoxonResult
 from softtip.systems.haptics.study import (
     METHODS,
@@ -75,7 +79,7 @@ DEFAULT_VARIATIONS = (
     FingerVariation(name="as published"),
     FingerVariation(name="human pads half as stiff", stiffness_scale=0.5),
     FingerVariation(name="human pads twice as stiff", stiffness_scale=2.0),
-    FingerVariation(name="human pads ellipsoidal", shape="ellipsoid"),
+    FingerVariation(name="human pads spherical", shape="sphere"),
     FingerVariation(name="human pads flattened", shape="pad"),
     FingerVariation(name="core 1.5 mm towards the nail", core_offset=(0.0, 0.0, 1.5e-3)),
     FingerVariation(name="device resting on the nail", mounting="nail"),
@@ -104,15 +108,16 @@ class Baseline:
     def run(cls, settings: StudySettings = StudySettings(), seed: int = 0, device: DeviceSpec | None = None,
             fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
             collection: CollectionSettings = CollectionSettings(), progress: Progress = SILENT,
-            errors=None) -> Baseline:
+            errors=None, fs=None) -> Baseline:
         """The study's tables and user data; its errors ``errors`` (fingertips, methods, targets) when
-        the study was already run on the same seed and settings, else computed here."""
+        the study was already run on the same seed and settings, else computed here; ``fs``: the
+        study's recorded FS table, if it had one."""
         seed = checked(integer(0), "seed", seed)
         if errors is not None and len(errors) != len(fingertips):
             raise ValueError(f"errors: expected one (methods, targets) array per fingertip, {len(fingertips)}, "
                              f"got {len(errors)}")
         device = load_device() if device is None else device
-        shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+        shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress, fs)
         outcomes = ()
         if errors is None:
             outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
@@ -207,7 +212,7 @@ def sensitivity_figure(outcomes: tuple[VariationOutcome, ...]) -> Figure:
     shown = [outcome for outcome in outcomes if outcome.median_error is not None]
     if not shown:
         raise ValueError("sensitivity: every variation was refused, nothing to draw")
-    figure = Figure(figsize=(1.6 * len(shown) + 3, 3.8), layout="constrained")
+    figure = Figure(figsize=(1.6 * len(shown) + 5, 3.8), layout="constrained")
     axis = figure.subplots()
     width = 0.8 / len(METHODS)
     places = np.arange(len(shown))
@@ -218,7 +223,7 @@ def sensitivity_figure(outcomes: tuple[VariationOutcome, ...]) -> Figure:
     axis.set_ylabel("median rendering error, human fingertips (N)")
     axis.set_yscale("log")
     axis.grid(axis="y", alpha=0.3)
-    axis.legend(fontsize="small")
+    axis.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the bars, never on them
     return figure
 
 
@@ -275,5 +280,44 @@ def curves_figure(points: tuple[CurvePoint, ...]) -> Figure:
         axis.set_yscale("log")
         axis.grid(alpha=0.3)
     axes[0].set_ylabel("median rendering error (N)")
-    axes[0].legend(fontsize="small")
+    figure.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper", fontsize="small")  # off the lines
     return figure
+
+
+@dataclass(frozen=True)
+class RobustnessRun:
+    """The study on one device and seed: its label, the fitted parameters' values on its device, and
+    each fingertip's errors (fingertips, methods, targets) and rendered force magnitudes (same shape), in N."""
+
+    label: str
+    seed: int
+    values: tuple[float, ...]
+    errors: np.ndarray
+    rendered: np.ndarray
+
+
+def robustness_study(baseline: Baseline, seeds=(), sigmas: float = 1.0,
+                     progress: Progress = SILENT) -> tuple[RobustnessRun, ...]:
+    """The study rerun on the devices the published figures cannot tell from the fitted one (the
+    fitted values moved ``sigmas`` standard deviations down and up each principal axis of their
+    correlation, the device file's ``[fit]``; none without one or with ``sigmas`` 0) at the
+    baseline's seed, and on the fitted device over the other ``seeds``."""
+    device, fit = baseline.device, baseline.device.fit
+    keys = tuple(fit.parameters) if fit else ()
+    values = np.array([device.value(key) for key in keys])
+    runs = []
+    if fit and sigmas > 0:
+        for k, move in enumerate(principal_moves(fit.covariance, sigmas)):
+            sign = "−" if k % 2 == 0 else "+"
+            runs.append((f"principal axis {k // 2 + 1} {sign}{sigmas:g}σ, seed {baseline.seed}",
+                         device.with_values(keys, values + move), baseline.seed, values + move))
+    runs += [(f"fitted device, seed {seed}", device, seed, values) for seed in seeds if seed != baseline.seed]
+    found = []
+    with progress.task("robustness", total=len(runs)) as task:
+        for label, variant, seed, moved in runs:
+            outcomes = Baseline.run(baseline.settings, seed, variant, baseline.fingertips, baseline.collection).outcomes
+            found.append(RobustnessRun(label, seed, tuple(float(v) for v in moved),
+                                       np.array([o.errors for o in outcomes]),
+                                       np.array([o.rendered for o in outcomes])))
+            task.advance(note=label)
+    return tuple(found)

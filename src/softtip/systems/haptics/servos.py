@@ -39,8 +39,8 @@ import serial
 from softtip.hardware.driver import PortError, open_serial
 from softtip.sensors.wrench import read_wrenches
 from softtip.systems.haptics.collection import CollectionSettings
-from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, servo_angles
-from softtip.systems.haptics.fingertips import Fingertip, finger_wrench
+from softtip.systems.haptics.device import DeviceSpec, servo_angles
+from softtip.systems.haptics.fingertips import Fingertip, loaded_contact
 
 PROTOCOL_VERSION = 1
 DEFAULT_BAUD = 115_200
@@ -95,7 +95,7 @@ class SimulatedDevice:
     def frame(self, ticks: int) -> FrameResponse:
         angles = servo_angles(self.device, self.angle, np.broadcast_to(self.command, (ticks, 3)), self.loop_rate_hz)
         self.angle = angles[-1]
-        on_finger, _ = finger_wrench(self.fingertip, self.device, forward_kinematics(self.device, angles))
+        _, on_finger = loaded_contact(self.fingertip, self.device, angles)
         wrench, saturated = read_wrenches(on_finger, self.collection.sensor, self.rng)
         return FrameResponse(angles, wrench, saturated[:, :3])
 

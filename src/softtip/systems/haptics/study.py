@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from matplotlib.figure import Figure
 
-from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, integer, schema
+from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, choice, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
 from softtip.systems.haptics.adaptive import adaptive_user_table
@@ -41,6 +41,8 @@ from softtip.systems.haptics.collection import (
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import CORE_RADIUS, FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
 from softtip.systems.haptics.personalisation import (
+    DATA_DRIVEN_VARIANTS,
+    DS_TORQUE_LENGTH,
     fit_presses,
     personalise_data_driven,
     personalise_force_model,
@@ -61,7 +63,8 @@ PAIRS = ((0, 1), (0, 2), (1, 2))
 @schema(section="study")
 class StudySettings:
     """The study's sizes: targets, FS and user table levels per servo (13 → 13³), neighbours and
-    their weighting, the light-target bound (N) and the force below which a reading is no contact (N)."""
+    their weighting, the light-target bound (N) and the force below which a reading is no contact (N);
+    personalisation A's variant and its torque length (m, :mod:`.personalisation`)."""
 
     targets: integer(2) = 100
     fs_levels: integer(2) = 13
@@ -73,6 +76,8 @@ class StudySettings:
     contact_threshold: PositiveNumber = CONTACT_THRESHOLD
     target_draws: integer(1) = 20_000  # random configurations tried to find targets that touch the FS
     min_target_force: NonNegativeNumber = CONTACT_THRESHOLD
+    data_driven: choice(*DATA_DRIVEN_VARIANTS) = "published"
+    torque_length: PositiveNumber = DS_TORQUE_LENGTH
 
 
 @dataclass(frozen=True)
@@ -270,12 +275,12 @@ def _refusing(fingertip: Fingertip):
 
 
 def collect_study(device: DeviceSpec, fingertips: tuple[Fingertip, ...], settings: StudySettings,
-                  collection: CollectionSettings, seed: int,
-                  progress: Progress = SILENT) -> tuple[SharedTables, tuple[UserData, ...]]:
-    """What the study collects before it renders: the FS table and targets, then each test
-    fingertip's user table and presses, each on the stream the study draws it from."""
+                  collection: CollectionSettings, seed: int, progress: Progress = SILENT,
+                  fs: Collection | None = None) -> tuple[SharedTables, tuple[UserData, ...]]:
+    """What the study collects before it renders: the FS table (``fs``: a recorded one instead) and
+    targets, then each test fingertip's user table and presses, each on the stream the study draws it from."""
     with progress.task("FS table and targets", total=1) as task:
-        shared = SharedTables(fs_table(device, settings.fs_levels, collection, seed),
+        shared = SharedTables(fs_table(device, settings.fs_levels, collection, seed) if fs is None else fs,
                               record_targets(device, settings, collection, seed))
         task.advance()
     user_data = []
@@ -302,11 +307,12 @@ def study_fingertips(device: DeviceSpec, fingertips: tuple[Fingertip, ...], shar
 
 def run_study(settings: StudySettings = StudySettings(), seed: int = 0, progress: Progress = SILENT,
               device: DeviceSpec | None = None, fingertips: tuple[Fingertip, ...] = TEST_FINGERTIPS,
-              collection: CollectionSettings = CollectionSettings()) -> HapticsStudy:
-    """The published study on the simulated device (see the module's notes)."""
+              collection: CollectionSettings = CollectionSettings(), fs: Collection | None = None) -> HapticsStudy:
+    """The published study on the simulated device (see the module's notes); ``fs``: a recorded FS
+    table instead of the simulated one."""
     seed = checked(integer(0), "seed", seed)
     device = load_device() if device is None else device
-    shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress)
+    shared, user_data = collect_study(device, fingertips, settings, collection, seed, progress, fs)
     outcomes = study_fingertips(device, fingertips, shared, user_data, settings, collection, seed, progress)
     return HapticsStudy(settings, seed, shared.targets, outcomes,
                         pooled_test([o.errors for o in outcomes], wilcoxon_tests(len(fingertips))),
@@ -334,7 +340,7 @@ def _personalise(device: DeviceSpec, fingertip: Fingertip, fs: Collection, user_
                          f"{settings.n_neighbours}")
     data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, usable.motor_inputs,
                                           usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
-                                          settings.weighting_power)
+                                          settings.weighting_power, settings.data_driven, settings.torque_length)
     geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
     presses = user_data.presses
     pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
@@ -345,9 +351,10 @@ def _personalise(device: DeviceSpec, fingertip: Fingertip, fs: Collection, user_
                                    settings.adaptive_budget, candidate_levels=settings.fs_levels,
                                    n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
     adaptive_usable = adaptive.collection.unsaturated()
+    # A+ picks its configurations by the DS's forces in the device's axes (.adaptive), and renders by them
     data_driven_adaptive = personalise_data_driven(
         device, fs.motor_inputs, fs.platform_wrenches, adaptive_usable.motor_inputs, adaptive_usable.platform_wrenches,
-        settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
+        settings.n_neighbours, settings.contact_threshold, settings.weighting_power, "device axes")
     return _Personalised((data_driven.motor_inputs, geometric.motor_inputs, force_model.motor_inputs,
                           data_driven_adaptive.motor_inputs), int(data_driven.outside.sum()),
                          int(geometric.outside.sum()), pressed.youngs_modulus, adaptive.collection.duration_s)

@@ -1,0 +1,565 @@
+"""A rig's delimited text logs into a softtip dataset (``softtip import``).
+
+A mapping, written once as a small TOML file, says how a rig's logs become trials::
+
+    [sensor]                      # the sensor log
+    file = "sensor.csv"           # its name in each trial's folder
+    header = false                # no header row: columns are numbered from 1
+    time = 1                      # the time column, in time_unit (or rate_hz: evenly spaced)
+    chip = "mlx90393"             # or "other": any 3-axis sensor, named and in its own unit
+    unit = "uT"                   # uT, mT, G, T, or counts (the chip's 16-bit words; needs gain_sel, res_xyz)
+    gain_sel = 1                  # the chips' settings: range checks and saturation follow them
+    res_xyz = [2, 2, 2]
+    chips = [[2, 3, 4], [5, 6, 7]]  # each chip's x, y, z columns
+
+    [labels]                      # per-sample targets: in the sensor log, or a log of their own
+    file = "states.csv"           # joined to the sensor log by nearest time, within tolerance_s
+    header = false
+    time = 1
+    missing = -1                  # a value meaning "no reading in this row"
+    tolerance_s = 0.02
+    columns = { fz_N = { column = 5, unit = "g" } }   # grams on a scale, stored in newtons
+
+    [trials]
+    split = "file"                # one source per trial; or "column" (a trial id column), "gap" (gap_s)
+    validation = { last = 1 }     # or { trials = [0, 3] }, or { fraction = 0.2 } (the last trials)
+    baseline = { samples = 20 }   # each trial's first samples are its zero; or { seconds = 1.0 }, or
+                                  # { label = "fz_N", below = 0.05 }: its samples at rest; per = "source":
+                                  # one zero for all the trials of a source
+
+A source is a file (the sensor log, labels in it) or a folder holding the mapping's files. Labels are
+converted to the unit their name ends in (``fz_N``: N) from the unit they were logged in; a label whose
+name states no unit is kept in its logged unit. The dataset's conditions are ``role`` (calibration or
+validation, what ``softtip calibrate`` splits by) and ``source`` (where each trial came from).
+
+Its reader of delimited text is :func:`softtip.data.csvload.read_columns`, for any command that takes such files.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import Field, Strict
+
+from softtip._core.channels import AXES, MAGNETIC
+from softtip._core.config import (Flag, OpenFraction, PositiveInteger, PositiveNumber, Refusal, Text, choice, expect,
+                                  integer, parse, read_toml, schema)
+from softtip._core.units import FORCE_UNITS, MM, UM
+from softtip.data.csvload import TIME_UNITS_IN_S, WHITESPACE, read_columns
+from softtip.data.dataset import DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata, trial_runs
+from softtip.data.splits import CALIBRATION, VALIDATION
+from softtip.sensors.mlx90393 import MLX90393, Hallconf, MLX90393Settings, Resolutions, full_scale_uT, lsb_uT
+
+STANDARD_GRAVITY = 9.80665  # m/s², the conventional value (3rd CGPM, 1901): a scale's grams as force
+COUNTS = "counts"  # an MLX90393's raw 16-bit output words
+WRITTEN = ("role", "source", "saturated")  # the columns an import writes besides channels and the mapping's labels
+# Label units softtip converts between, by quantity: how many of the quantity's first unit one of each is.
+LABEL_UNITS = (
+    {**FORCE_UNITS, "kN": 1e3, "g": STANDARD_GRAVITY * 1e-3, "kg": STANDARD_GRAVITY, "lbf": 4.4482216152605},
+    {"m": 1.0, "mm": MM, "um": UM},
+    {"rad": 1.0, "deg": np.pi / 180},
+)
+
+ColumnRef = Annotated[Annotated[int, Strict()] | Annotated[str, Strict(), Field(min_length=1)],
+                      expect("a column number from 1 (no header) or a header name")]
+Delimiter = Annotated[str, Strict(), Field(min_length=1), expect(f"one character or {WHITESPACE!r}")]
+
+
+@dataclass(frozen=True)
+class _Log:
+    """Where a log is and how its text is laid out."""
+
+    file: Text | None = None
+    header: Flag = True
+    delimiter: Delimiter = ","
+    time: ColumnRef | None = None
+    time_unit: choice(*TIME_UNITS_IN_S) = "s"
+    rate_hz: PositiveNumber | None = None
+
+    def __post_init__(self) -> None:
+        if self.delimiter != WHITESPACE and (len(self.delimiter) != 1 or self.delimiter in "0123456789.-+eE\"\n"):
+            raise Refusal("delimiter", f"expected one character that is not part of a number, or {WHITESPACE!r}")
+        for key, ref in self.columns_named():
+            if isinstance(ref, int) and ref < 1:
+                raise Refusal(key, f"column {ref}: columns are numbered from 1")
+            if isinstance(ref, str) and not self.header:
+                raise Refusal(key, f"column {ref!r} is named, but the file has no header: number it from 1")
+
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        """Every column the log's settings name, each with the key that names it."""
+        return [] if self.time is None else [(("time",), self.time)]
+
+    def columns_used(self) -> list[int | str]:
+        return [ref for _, ref in self.columns_named()]
+
+
+@schema
+class SensorLog(_Log):
+    """The sensor log: each chip's x, y, z columns, what chip it is and in what unit."""
+
+    chips: Annotated[list[list[ColumnRef]], Field(min_length=1),
+                     expect("a list of [x, y, z] columns, one per chip")] = field(default_factory=list)
+    chip: choice("mlx90393", "other") = "mlx90393"
+    unit: Text = "uT"
+    name: Annotated[str, Strict(), Field(pattern=r"^[a-z][a-z0-9]*$"),
+                    expect("a lower-case name (letters, then digits)")] | None = None
+    full_scale: PositiveNumber | None = None
+    gain_sel: integer(0, 7) | None = None
+    res_xyz: Resolutions | None = None
+    hallconf: Hallconf | None = None
+
+    def __post_init__(self) -> None:
+        if not self.chips or any(len(chip) != 3 for chip in self.chips):
+            raise Refusal("chips", "expected a list of [x, y, z] columns, one per chip")
+        super().__post_init__()
+        if (self.time is None) == (self.rate_hz is None):
+            raise Refusal("time", "give the time column or rate_hz (evenly spaced samples), one of them")
+        mlx = self.chip == "mlx90393"
+        if mlx and self.unit not in (*MAGNETIC.units, COUNTS):
+            raise Refusal("unit", f"an MLX90393 reads in {', '.join(MAGNETIC.units)} or {COUNTS}; "
+                                  "another sensor is chip = \"other\"")
+        settings = (self.gain_sel, self.res_xyz)
+        if mlx and self.unit == COUNTS and None in settings:
+            raise Refusal("gain_sel", "raw counts need the chips' gain_sel and res_xyz to be read as a field")
+        if mlx and (self.name is not None or self.full_scale is not None):
+            raise Refusal("name" if self.name is not None else "full_scale",
+                          "an MLX90393's channels and range follow from the chip: give it for chip = \"other\"")
+        if not mlx and (self.name is None or any(value is not None for value in (*settings, self.hallconf))):
+            raise Refusal("name", "chip = \"other\" needs a name for its channels, and takes no MLX90393 settings")
+        if mlx and (self.gain_sel is None) != (self.res_xyz is None):
+            raise Refusal("res_xyz", "give both gain_sel and res_xyz, or neither")
+
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        return [*super().columns_named(), *((("chips", k, a), ref) for k, chip in enumerate(self.chips)
+                                             for a, ref in enumerate(chip))]
+
+    @property
+    def settings(self) -> MLX90393Settings | None:
+        """The declared MLX90393 register settings, if any."""
+        if self.gain_sel is None:
+            return None
+        extra = {} if self.hallconf is None else {"hallconf": self.hallconf}
+        return MLX90393Settings(gain_sel=self.gain_sel, res_xyz=tuple(self.res_xyz), **extra)
+
+    def channel(self, chip: int, axis: str) -> str:
+        if self.chip == "mlx90393":
+            return MAGNETIC.channel_name(chip, axis)
+        return f"{self.name}{chip}_{axis}_{self.unit}"
+
+
+@schema
+class LabelColumn:
+    column: ColumnRef
+    unit: Text
+
+
+@schema
+class LabelLog(_Log):
+    """Per-sample targets: in the sensor log (no file) or a log of their own, joined by nearest time."""
+
+    columns: Annotated[dict[str, LabelColumn], Field(min_length=1),
+                       expect("a table of label = { column, unit }")] = field(default_factory=dict)
+    missing: Annotated[float, Strict(), expect("a number")] | None = None
+    tolerance_s: PositiveNumber | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.columns:
+            raise Refusal("columns", "expected a table of label = { column, unit }")
+        if (self.file is None) != (self.tolerance_s is None):
+            raise Refusal("tolerance_s", "a label log of its own is joined by nearest time within tolerance_s "
+                                         "(and only then)")
+        if self.file is not None and (self.time is None or self.rate_hz is not None):
+            raise Refusal("time", "a label log of its own is joined by time: give its time column (not rate_hz)")
+        if self.file is None and (self.time is not None or self.rate_hz is not None):
+            raise Refusal("time", "labels in the sensor log share its time: give time only with a label file")
+        for name, label in self.columns.items():
+            if not name.isidentifier() or name in (TRIAL, TIME, *WRITTEN) or MAGNETIC.is_channel(name):
+                raise Refusal("columns", f"{name!r}: expected a label name (letters, digits, underscores) "
+                                         "that is not a channel or a column softtip writes")
+            stored_unit(name, label.unit)
+
+    def columns_named(self) -> list[tuple[tuple, int | str]]:
+        return [*super().columns_named(), *((("columns", name, "column"), label.column)
+                                             for name, label in self.columns.items())]
+
+
+@schema
+class Validation:
+    """Which trials validate: the last few, these ids, or the last fraction of them."""
+
+    last: PositiveInteger | None = None
+    trials: Annotated[list[integer(0)], Field(min_length=1), expect("a list of trial numbers")] | None = None
+    fraction: OpenFraction | None = None
+
+    def __post_init__(self) -> None:
+        if sum(value is not None for value in (self.last, self.trials, self.fraction)) != 1:
+            raise Refusal("last", "give one of last, trials and fraction")
+
+    def chosen(self, n_trials: int) -> np.ndarray:
+        """Whether each of ``n_trials`` trials validates; at least one trial is left to calibrate on."""
+        if self.trials is not None:
+            beyond = [trial for trial in self.trials if trial >= n_trials]
+            if beyond:
+                raise DatasetError(f"validation.trials: there is no trial {beyond[0]} "
+                                   f"(the {n_trials} trials are numbered from 0)")
+            chosen = np.isin(np.arange(n_trials), self.trials)
+        else:
+            count = self.last if self.last is not None else int(np.floor(self.fraction * n_trials + 0.5))
+            if count < 1:
+                raise DatasetError(f"validation.fraction = {self.fraction}: none of the {n_trials} trials validates")
+            chosen = np.arange(n_trials) >= n_trials - count
+        if chosen.all():
+            given = next(f"{key} = {value}" for key, value in (("last", self.last), ("trials", self.trials),
+                                                                ("fraction", self.fraction)) if value is not None)
+            raise DatasetError(f"validation.{given}: all {n_trials} trials would validate, none would calibrate")
+        return chosen
+
+
+@schema
+class Baseline:
+    """Each trial's zero: the mean of its first samples, of its first seconds, or of its samples at rest
+    (those whose ``label``, in the unit it is stored in, is below ``below``: the reference says nothing
+    presses); ``per = "source"`` takes one zero per source for all its trials (trials split from one
+    recording at gaps or by a column, which need not start at rest)."""
+
+    samples: PositiveInteger | None = None
+    seconds: PositiveNumber | None = None
+    label: Annotated[str, Strict(), Field(min_length=1), expect("a label's name")] | None = None
+    below: Annotated[float, Strict(), Field(allow_inf_nan=False), expect("a number")] | None = None
+    per: choice("trial", "source") = "trial"
+
+    def __post_init__(self) -> None:
+        if (self.label is None) != (self.below is None):
+            raise Refusal("label", "the rest rule takes a label and the value it is below at rest, both")
+        if sum(value is not None for value in (self.samples, self.seconds, self.label)) != 1:
+            raise Refusal("samples", "give samples, seconds, or label and below: one rule")
+
+
+@schema
+class Trials:
+    split: choice("file", "column", "gap") = "file"
+    column: ColumnRef | None = None
+    gap_s: PositiveNumber | None = None
+    validation: Validation | None = None
+    baseline: Baseline | None = None
+
+    def __post_init__(self) -> None:
+        if (self.split == "column") != (self.column is not None):
+            raise Refusal("column", "the trial column is given with split = \"column\" (and only then)")
+        if (self.split == "gap") != (self.gap_s is not None):
+            raise Refusal("gap_s", "the gap is given with split = \"gap\" (and only then)")
+
+
+@schema
+class ImportMapping:
+    """How a rig's logs become a softtip dataset (see the module notes)."""
+
+    sensor: SensorLog
+    labels: LabelLog | None = None
+    trials: Trials = field(default_factory=Trials)
+    description: Annotated[str, Strict(), expect("a string")] = ""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.trials.column, str) and not self.sensor.header:
+            raise Refusal("trials", f"column {self.trials.column!r} is named, but the sensor log has no header")
+        rest = self.trials.baseline.label if self.trials.baseline is not None else None
+        if rest is not None and (self.labels is None or rest not in self.labels.columns):
+            raise Refusal("trials", f"baseline.label = {rest!r} is not one of the mapping's labels")
+        if self.trials.split == "gap" and self.sensor.time is None:
+            raise Refusal("trials", "split = \"gap\" needs the sensor log's time column")
+
+
+def load_mapping(path: str | os.PathLike) -> ImportMapping:
+    """A mapping file, validated: a mistake is one line naming the file and the key."""
+    return mapping_from(read_toml(path, "import mapping", DatasetError), str(path))
+
+
+def mapping_from(document: Any, source: str) -> ImportMapping:
+    """A mapping from its tables (a parsed file, edited by options), validated; ``source`` names it in errors."""
+    return parse(ImportMapping, document, source, error=DatasetError)
+
+
+def stored_unit(name: str, unit: str) -> str:
+    """The unit label ``name`` is stored in: the unit its name ends in, if softtip converts ``unit`` into it."""
+    named = name.rsplit("_", 1)[-1] if "_" in name else None
+    for family in LABEL_UNITS:
+        if named in family:
+            if unit not in family:
+                raise DatasetError(f"label {name}: its name says {named}, and {unit!r} is not a unit of that "
+                                   f"quantity softtip converts ({', '.join(family)})")
+            return named
+    return unit
+
+
+def _label_factor(name: str, unit: str) -> float:
+    stored = stored_unit(name, unit)
+    family = next((family for family in LABEL_UNITS if stored in family), None)
+    return 1.0 if family is None else family[unit] / family[stored]
+
+
+def _times(log: _Log, values: np.ndarray) -> np.ndarray:
+    """A log's times in seconds from its rows ``values`` (the time column first, if it has one), or
+    evenly spaced at rate_hz."""
+    if log.time is None:
+        return np.arange(len(values)) / log.rate_hz
+    return values[:, 0] * TIME_UNITS_IN_S[log.time_unit]
+
+
+# ---------------------------------------------------------------------------------------------- the import
+
+
+@dataclass(frozen=True)
+class ImportReport:
+    """What an import did, for the command's summary."""
+
+    trials: int
+    samples: int
+    validation_trials: list[int]
+    unlabelled_dropped: int  # sensor rows with no label reading within the tolerance
+    saturated: dict[str, int]  # channel -> samples at the declared sensor's limit
+    join_offset_s: float | None  # the largest |sensor time - label time| of the rows kept
+
+
+def _files(source: Path, mapping: ImportMapping) -> tuple[Path, Path | None]:
+    """The sensor log and the label log (None: labels in the sensor log) of one source."""
+    labels = mapping.labels
+    separate = labels is not None and labels.file is not None
+    if source.is_dir():
+        if mapping.sensor.file is None:
+            raise DatasetError(f"{source}: a folder, but the mapping names no sensor.file to read in it")
+        return source / mapping.sensor.file, (source / labels.file) if separate else None
+    if separate:
+        raise DatasetError(f"{source}: a file, but the labels are in a log of their own ({labels.file}): "
+                           "give the folder holding both")
+    return source, None
+
+
+def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The chips' readings (rows, chips, 3) in the stored unit, and which samples are saturated
+    (None: the sensor's limits are unknown)."""
+    readings = values.reshape(len(values), len(sensor.chips), 3)
+    settings = sensor.settings
+    if sensor.chip == "other":
+        if sensor.full_scale is None:
+            return readings, None
+        beyond = np.abs(readings) > sensor.full_scale
+        if beyond.any():
+            _refuse_beyond(path, sensor, beyond, f"its full scale {sensor.full_scale:g} {sensor.unit}")
+        return readings, np.abs(readings) >= sensor.full_scale
+    if sensor.unit == COUNTS:
+        whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < 1 << 16)
+        if not whole.all():
+            _refuse_beyond(path, sensor, ~whole, "a 16-bit register word (an integer 0..65535)")
+        field_uT, saturated = MLX90393(settings).decode(readings.astype(np.uint16))
+        return field_uT, saturated
+    readings = readings * MAGNETIC.units[sensor.unit]
+    if settings is None:
+        return readings, None
+    limit = full_scale_uT(settings)
+    beyond = np.abs(readings) > limit + lsb_uT(settings)  # a step's rounding in the host's conversion is allowed
+    if beyond.any():
+        _refuse_beyond(path, sensor, beyond, "the MLX90393's range at the declared gain_sel and res_xyz")
+    return readings, np.abs(readings) >= limit - lsb_uT(settings) / 2
+
+
+def _refuse_beyond(path: Path, sensor: SensorLog, where: np.ndarray, what: str) -> None:
+    row, chip, axis = (int(k) for k in np.argwhere(where)[0])
+    raise DatasetError(f"{path}: line {row + (2 if sensor.header else 1)}, column {sensor.chips[chip][axis]} "
+                       f"(chip {chip} {AXES[axis]}): beyond {what}")
+
+
+def _check_time_order(path: Path, log: _Log, time: np.ndarray, ids: np.ndarray, *, strictly: bool) -> None:
+    """Refuses, naming the line, a time that is not a number or that goes back (or, ``strictly``, stays)
+    within a trial."""
+    first = 2 if log.header else 1
+    if not np.all(np.isfinite(time)):
+        raise DatasetError(f"{path}: line {np.flatnonzero(~np.isfinite(time))[0] + first}, column {log.time}: "
+                           "the time is not a finite number")
+    step = np.diff(time)
+    wrong = (step <= 0 if strictly else step < 0) & (ids[1:] == ids[:-1])
+    if wrong.any():
+        raise DatasetError(f"{path}: line {np.flatnonzero(wrong)[0] + 1 + first}, column {log.time}: the time "
+                           f"{'does not increase' if strictly else 'goes back'}; expected a log in time order")
+
+
+def _join(path: Path, labels: LabelLog, sensor_time: np.ndarray, label_time: np.ndarray,
+          label_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sensor rows kept, their labels, |time offset|): each sensor row takes the label row nearest in
+    time whose every label is a reading, if it lies within the tolerance."""
+    _check_time_order(path, labels, label_time, np.zeros(len(label_time), dtype=np.int64), strictly=False)
+    valid = np.all(np.isfinite(label_values), axis=1)
+    if labels.missing is not None:
+        valid &= ~np.any(label_values == labels.missing, axis=1)
+    label_time, label_values = label_time[valid], label_values[valid]
+    if label_time.size == 0:
+        raise DatasetError(f"{path}: no row holds a reading of every label")
+    after = np.clip(np.searchsorted(label_time, sensor_time), 1, max(len(label_time) - 1, 1))
+    before = after - 1
+    after = np.minimum(after, len(label_time) - 1)
+    nearest = np.where(np.abs(label_time[before] - sensor_time) <= np.abs(label_time[after] - sensor_time),
+                       before, after)
+    offset = np.abs(label_time[nearest] - sensor_time)
+    kept = offset <= labels.tolerance_s
+    return kept, label_values[nearest[kept]], offset[kept]
+
+
+@dataclass
+class _Trial:
+    source: str
+    time: np.ndarray
+    readings: np.ndarray  # (rows, chips, 3)
+    labels: np.ndarray  # (rows, labels)
+    saturated: np.ndarray | None
+
+
+def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], int, float | None]:
+    """One source's trials, the sensor rows it dropped for want of a label, the largest join offset."""
+    sensor, labels = mapping.sensor, mapping.labels
+    sensor_file, label_file = _files(source, mapping)
+    own_labels = [] if labels is None or label_file is not None else [label.column for label in labels.columns.values()]
+    split_column = [mapping.trials.column] if mapping.trials.split == "column" else []
+    refs = [*sensor.columns_used(), *own_labels, *split_column]
+    values = read_columns(sensor_file, refs, header=sensor.header, delimiter=sensor.delimiter)
+    if len(values) == 0:
+        raise DatasetError(f"{sensor_file}: no rows")
+    n_time = 0 if sensor.time is None else 1
+    time = _times(sensor, values)
+    readings, saturated = _sensor_values(sensor_file, sensor, values[:, n_time:n_time + 3 * len(sensor.chips)])
+    rest = values[:, n_time + 3 * len(sensor.chips):]
+    own = rest[:, :len(own_labels)]
+    ids = _trial_ids(sensor_file, mapping.trials, time, rest[:, len(own_labels):])
+    _check_time_order(sensor_file, sensor, time, ids, strictly=True)
+    starts, lengths = trial_runs(ids)
+    clock, time = time, time - np.repeat(time[starts], lengths)  # from each trial's first sample, kept or not
+    baseline = mapping.trials.baseline
+    zero_ids = ids if baseline is None or baseline.per == "trial" else np.zeros_like(ids)  # whose zero each row takes
+    if baseline is not None and baseline.label is None:
+        if baseline.samples:
+            zero_starts, zero_lengths = trial_runs(zero_ids)
+            at_zero = np.arange(len(ids)) - np.repeat(zero_starts, zero_lengths) < baseline.samples
+        else:
+            at_zero = (time if baseline.per == "trial" else clock - clock[0]) < baseline.seconds
+        readings = _subtract_zero(sensor_file, baseline, readings, zero_ids, at_zero)
+    dropped, largest = 0, None
+    if labels is None:
+        label_values = np.zeros((len(time), 0))
+    elif label_file is None:
+        label_values = own
+        missing = ~np.all(np.isfinite(own), axis=1)
+        if labels.missing is not None:
+            missing |= np.any(own == labels.missing, axis=1)
+        keep = ~missing
+        dropped = int(missing.sum())
+        time, readings, label_values, ids, zero_ids = time[keep], readings[keep], own[keep], ids[keep], zero_ids[keep]
+        saturated = None if saturated is None else saturated[keep]
+    else:
+        label_refs = [labels.time, *(label.column for label in labels.columns.values())]
+        logged = read_columns(label_file, label_refs, header=labels.header, delimiter=labels.delimiter)
+        keep, label_values, offset = _join(label_file, labels, clock, _times(labels, logged),
+                                           logged[:, 1:])
+        dropped = int((~keep).sum())
+        largest = float(offset.max()) if offset.size else None
+        time, readings, ids, zero_ids = time[keep], readings[keep], ids[keep], zero_ids[keep]
+        saturated = None if saturated is None else saturated[keep]
+    if labels is not None:
+        factors = [_label_factor(name, label.unit) for name, label in labels.columns.items()]
+        label_values = label_values * np.asarray(factors)
+    if not len(ids):
+        raise DatasetError(f"{source}: no sensor row has a label reading within the tolerance")
+    if baseline is not None and baseline.label is not None:
+        at_rest = label_values[:, list(labels.columns).index(baseline.label)] < baseline.below
+        readings = _subtract_zero(sensor_file, baseline, readings, zero_ids, at_rest)
+    trials = []
+    for start, length in zip(*trial_runs(ids), strict=True):
+        rows = slice(start, start + length)
+        trials.append(_Trial(source.name, time[rows], readings[rows], label_values[rows],
+                             None if saturated is None else saturated[rows]))
+    return trials, dropped, largest
+
+
+def _trial_ids(path: Path, trials: Trials, time: np.ndarray, column: np.ndarray) -> np.ndarray:
+    """Each row's trial within its source, numbered from 0 in order."""
+    if trials.split == "file":
+        return np.zeros(len(time), dtype=np.int64)
+    if trials.split == "gap":
+        return np.concatenate([[0], np.cumsum(np.diff(time) > trials.gap_s)]).astype(np.int64)
+    ids = column[:, 0]
+    if not np.all(np.isfinite(ids)):
+        raise DatasetError(f"{path}: trial column {trials.column}: a value is not a number")
+    return np.concatenate([[0], np.cumsum(ids[1:] != ids[:-1])]).astype(np.int64)
+
+
+def _subtract_zero(path: Path, baseline: Baseline, readings: np.ndarray, ids: np.ndarray,
+                   at_zero: np.ndarray) -> np.ndarray:
+    """``readings`` minus, per trial, the mean of its samples ``at_zero`` (the baseline rule's samples)."""
+    starts, lengths = trial_runs(ids)
+    counts = np.add.reduceat(at_zero, starts)
+    rule = next(f"{key} = {value}" for key, value in (("samples", baseline.samples), ("seconds", baseline.seconds),
+                                                       ("label", baseline.label)) if value is not None)
+    if np.any(counts == 0):
+        raise DatasetError(f"{path}: baseline.{rule}: a {baseline.per} has no sample that is at its zero by "
+                           "this rule")
+    if np.any(counts == lengths):
+        raise DatasetError(f"{path}: baseline.{rule} covers every sample of a {baseline.per} of "
+                           f"{lengths[counts == lengths][0]}: a zero must leave samples to measure")
+    zero = np.add.reduceat(readings * at_zero[:, None, None], starts) / counts[:, None, None]
+    return readings - np.repeat(zero, lengths, axis=0)
+
+
+def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) -> tuple[Dataset, ImportReport]:
+    """The dataset of a rig's logs, one or more trials per source (see the module notes), and a report."""
+    if not sources:
+        raise DatasetError("no sources given: expected log files or folders")
+    trials: list[_Trial] = []
+    dropped, offsets = 0, []
+    for source in map(Path, sources):
+        if not source.exists():
+            raise DatasetError(f"{source}: does not exist")
+        found, lost, largest = _read_source(source, mapping)
+        trials += found
+        dropped += lost
+        offsets += [] if largest is None else [largest]
+    sensor, labels = mapping.sensor, mapping.labels
+    n = len(trials)
+    validation = mapping.trials.validation
+    validates = np.zeros(n, dtype=bool) if validation is None else validation.chosen(n)
+    columns: dict[str, Any] = {
+        TRIAL: np.repeat(np.arange(n), [len(trial.time) for trial in trials]),
+        TIME: np.concatenate([trial.time for trial in trials])}
+    readings = np.concatenate([trial.readings for trial in trials])
+    for chip in range(len(sensor.chips)):
+        for a, axis in enumerate(AXES):
+            columns[sensor.channel(chip, axis)] = readings[:, chip, a]
+    label_units = {} if labels is None else {name: stored_unit(name, label.unit)
+                                             for name, label in labels.columns.items()}
+    values = np.concatenate([trial.labels for trial in trials])
+    for k, name in enumerate(label_units):
+        columns[name] = values[:, k]
+    saturation = None if trials[0].saturated is None else np.concatenate([trial.saturated for trial in trials])
+    if saturation is not None:
+        columns["saturated"] = saturation.any(axis=(1, 2))
+        label_units["saturated"] = DIMENSIONLESS
+    columns["role"] = np.repeat(np.where(validates, VALIDATION, CALIBRATION), [len(t.time) for t in trials])
+    columns["source"] = np.repeat([trial.source for trial in trials], [len(t.time) for t in trials])
+    channel_units = {} if sensor.chip == "mlx90393" else {sensor.channel(chip, axis): sensor.unit
+                                                          for chip in range(len(sensor.chips)) for axis in AXES}
+    settings = sensor.settings
+    metadata = DatasetMetadata(
+        description=mapping.description or f"imported from {', '.join(trial.source for trial in trials[:3])}"
+                                           + (" ..." if n > 3 else ""),
+        sensor_settings=None if settings is None else settings.to_dict())
+    dataset = Dataset(columns, label_units, {"role": DIMENSIONLESS, "source": DIMENSIONLESS}, metadata,
+                      channel_units)
+    saturated = {} if saturation is None else {
+        sensor.channel(chip, axis): int(saturation[:, chip, a].sum())
+        for chip in range(len(sensor.chips)) for a, axis in enumerate(AXES)}
+    report = ImportReport(trials=n, samples=len(dataset), validation_trials=[int(k) for k in np.flatnonzero(validates)],
+                          unlabelled_dropped=dropped, saturated=saturated,
+                          join_offset_s=max(offsets) if offsets else None)
+    return dataset, report
