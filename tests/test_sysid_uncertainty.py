@@ -260,7 +260,6 @@ def test_a_near_integrator_fitted_on_a_short_record_is_called_uncertain_not_stab
     assert damped["stability"] == "stable" and damped["warnings"] == []
 
 
-@pytest.mark.slow
 def test_sandwich_intervals_stay_honest_under_coloured_output_noise_where_white_ones_understate():
     """Output noise with a lag-1 autocorrelation of 0.9 (the real record's): over 40 runs the sandwich
     standard deviations match the coefficients' sample spread (measured ratios 0.85-0.97; a sample
