@@ -75,6 +75,7 @@ ACCEPTED = {
     "--delay": {"zero"},  # "0": no delay
     "--full-scale": {"huge"},  # a sensor's rated range is the user's to state; the % of it are then small, not wrong
     "--validate": {"same as input"},  # validating on the estimation data is allowed (and optimistic)
+    "--missing": {"zero", "negative", "huge"},  # any finite number may be a logger's "no reading"
     "--validate-trials": {"zero"},  # trial 0 is a trial like any other
 }
 if os.geteuid() == 0:  # the superuser writes into read-only folders: nothing to refuse

@@ -78,7 +78,8 @@ def test_a_file_without_time_needs_the_sample_time(tmp_path):
 @pytest.mark.parametrize("edit, kwargs, message", [
     (lambda c: c["Fz"].__setitem__(7, np.nan), {}, r"trial 10: column 'Fz', sample 7: nan is not a finite number"),
     (lambda c: c["time_s"].__setitem__(20, c["time_s"][20] + 0.04), {},
-     r"column 'time_s': irregular sample times in trial 10: a step of 0.14 s at row 20"),
+     r"column 'time_s': irregular sample times in trial 10: a step of 0.14 s at row 20, the sample time is 0.1 s "
+     r"\(tolerance 2 %\): resample it onto an even grid \(--resample SECONDS"),
     (lambda c: None, {"ts": 0.05}, r"the sample time given, 0.05 s, does not match the 0.1 s of column 'time_s'"),
     (lambda c: c.__setitem__("trial", np.r_[c["trial"][:140], np.full(10, 10)]), {},
      "the rows of trial 10 are not contiguous"),
@@ -92,6 +93,80 @@ def test_bad_recordings_are_refused_in_one_line_naming_the_file_and_column(tmp_p
     assert str(path) in str(refusal.value) and "\n" not in str(refusal.value)
 
 
+def _daisy(path, columns: dict[str, np.ndarray], header: bool):
+    """A whitespace text file as DaISy publishes them: numbers in columns separated by runs of spaces
+    (and a tab), optionally a header of names."""
+    rows = zip(*columns.values(), strict=True)
+    lines = [*(["\t".join(columns)] if header else []),
+             *("   " + "  \t ".join(f"{v:.16e}" for v in row) for row in rows)]
+    path.write_text("\n".join(lines) + "\n\n")
+    return path
+
+
+@pytest.mark.parametrize("header", [True, False])
+def test_a_whitespace_dat_file_is_read_with_or_without_its_header(tmp_path, header):
+    columns = _table(trials=2)
+    path = _daisy(tmp_path / "record.dat", columns, header)
+    names = None if header else list(columns)
+    recording = read_recording(path, ["Fx_side", "Fz_side"], ["Fz"], names=names, units={"Fz": "N"})
+    assert recording.ts == pytest.approx(TS) and [trial.id for trial in recording.trials] == [10, 11]
+    np.testing.assert_array_equal(recording.trials[1].y[:, 0], columns["Fz"][50:])
+    np.testing.assert_array_equal(recording.trials[0].u[:, 1], columns["Fz_side"][:50])
+    assert recording.output_units == ("N",)
+    if not header:  # positions name the columns of a file without a header
+        by_position = read_recording(path, ["3"], ["5"], time_column="2", trial_column="1")
+        np.testing.assert_array_equal(by_position.trials[0].u[:, 0], columns["Fx_side"][:50])
+
+
+@pytest.mark.parametrize("text, names, message", [
+    ("1 2 3\n4 5\n", None, r"cannot be read as delimited text \(CSV parse error: Expected 3 columns, got 2: 4 5\)"),
+    ("u y\n1 2\n3 x\n", None, r"column 'y', line 3: 'x' is not a number"),
+    ("1 2\n3 4\n", ["u", "y", "z"], r"3 column names given for 2 columns \(its first line: 1 2\)"),
+    ("u y\n1 2\n", ["a", "b"], r"the file names its columns in its first line \(u y\)"),
+    ("u u\n1 2\n", None, r"column 'u' appears more than once"),
+    ("\n\n", None, r"no rows of numbers"),
+    ("u y\n", None, r"cannot be read as delimited text \(Could not skip initial 1 rows"),
+])
+def test_bad_whitespace_files_are_refused_naming_line_and_column(tmp_path, text, names, message):
+    path = tmp_path / "bad.dat"
+    path.write_text(text)
+    with pytest.raises(DatasetError, match=message) as refusal:
+        read_recording(path, ["1"], ["2"], ts=1.0, names=names)
+    assert str(path) in str(refusal.value)
+
+
+def test_resampling_interpolates_each_trial_linearly_and_says_what_it_did(tmp_path):
+    """Irregular stamps of a signal that is linear between them: the resampled values are the line's
+    (scipy's interp1d the reference), each trial from its own first stamp; the gaps are counted."""
+    from scipy.interpolate import interp1d
+
+    rng = np.random.default_rng(3)
+    times = [np.cumsum(np.r_[0.0, rng.uniform(0.02, 0.04, 60), 1.1, rng.uniform(0.02, 0.04, 30)]),
+             5 + np.cumsum(np.r_[0.0, rng.uniform(0.02, 0.04, 40)])]
+    values = [np.sin(t) + t for t in times]
+    columns = {"trial": np.concatenate([np.full(len(t), k) for k, t in enumerate(times)]),
+               "time_s": np.concatenate(times), "u": np.concatenate(values), "y": -np.concatenate(values)}
+    path = _csv(tmp_path / "serial.csv", columns)
+    with pytest.raises(DatasetError, match=r"irregular sample times in trial 0.*resample it onto an even grid"):
+        read_recording(path, ["u"], ["y"])
+    recording = read_recording(path, ["u"], ["y"], resample=0.03)
+    assert recording.ts == 0.03 and len(recording.trials) == 2
+    for trial, t, v in zip(recording.trials, times, values, strict=True):
+        grid = t[0] + 0.03 * np.arange(len(trial))
+        assert grid[-1] <= t[-1] < grid[-1] + 0.03
+        np.testing.assert_allclose(trial.u[:, 0], interp1d(t, v)(grid), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(trial.y[:, 0], -trial.u[:, 0])
+    done = recording.resampled
+    steps = np.concatenate([np.diff(t) for t in times])
+    assert (done.before, done.after) == (len(columns["u"]), recording.n_samples)
+    assert done.longest_step == pytest.approx(1.1) and done.gaps == 1
+    assert done.median_step == pytest.approx(np.median(steps))
+    assert "became" in done.describe() and recording.describe()["resampled"]["gaps_bridged"] == 1
+    columns["time_s"][5] = columns["time_s"][4]
+    with pytest.raises(DatasetError, match=r"time does not increase at row 5 \(trial 0\): cannot resample"):
+        read_recording(_csv(tmp_path / "repeat.csv", columns), ["u"], ["y"], resample=0.03)
+
+
 def test_unknown_columns_and_text_are_refused_naming_them(tmp_path):
     columns = _table()
     path = _csv(tmp_path / "record.csv", columns)
@@ -103,8 +178,12 @@ def test_unknown_columns_and_text_are_refused_naming_them(tmp_path):
     path.write_text("\n".join([*text[:3], ",".join(cells), *text[4:]]) + "\n")
     with pytest.raises(DatasetError, match=r"record.csv: column 'Fz', line 4: 'high' is not a number"):
         read_recording(path, ["Fx_side"], ["Fz"])
-    with pytest.raises(DatasetError, match="expected a .csv or .parquet file"):
-        read_recording(path.rename(tmp_path / "record.txt"), ["Fx_side"], ["Fz"])
+    with pytest.raises(DatasetError, match="record.json: expected a .csv, .parquet, or whitespace-separated "
+                                           ".dat or .txt file"):
+        read_recording(path.rename(tmp_path / "record.json"), ["Fx_side"], ["Fz"])
+    with pytest.raises(DatasetError, match="record.txt: its first line is separated by commas or semicolons, not "
+                                           "whitespace: name the file .csv"):
+        read_recording((tmp_path / "record.json").rename(tmp_path / "record.txt"), ["Fx_side"], ["Fz"])
 
 
 def test_a_constant_input_is_refused_before_identification():
@@ -201,3 +280,25 @@ def test_the_honest_splits_do_not_warn():
         warnings.simplefilter("error")
         split_by_trial(recording, 0.8)
         split_by_time(recording, 0.8)
+
+
+def test_a_loggers_missing_readings_are_dropped_and_a_headerless_csv_is_named(tmp_path):
+    """A CSV without a header (named by ``names``) whose logger writes -1 for "no reading" in every other
+    row: those rows are dropped, so the rest is resampled from the readings alone (np.interp on them the
+    reference); without ``missing`` the -1 stay in as values."""
+    t = 100.0 + np.cumsum(np.full(200, 0.05))
+    force = np.sin(t)
+    force[1::2] = -1.0
+    path = tmp_path / "states.csv"
+    path.write_text("".join(f"{a:.6f},{b:.6f},{c:.6f}\r\n" for a, b, c in zip(t, np.cos(t), force)))
+    recording = read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time",
+                               missing=-1, resample=0.1)
+    grid = t[0] + 0.1 * np.arange(recording.n_samples)
+    np.testing.assert_allclose(recording.trials[0].y[:, 0], np.interp(grid, t[::2], np.round(np.sin(t[::2]), 6)),
+                               atol=1e-12)
+    assert recording.resampled.before == 100
+    kept = read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time", ts=0.05)
+    assert kept.n_samples == 200 and np.sum(kept.trials[0].y == -1) == 100
+    with pytest.raises(DatasetError, match="every row holds the missing value 0.5 in a signal"):
+        path.write_text("1,0.5,0.5\n2,0.5,0.5\n")
+        read_recording(path, ["z"], ["grams"], names=["time", "z", "grams"], time_column="time", missing=0.5)

@@ -300,3 +300,68 @@ def test_kalman_predictor_of_a_fitted_model_beats_simulation_on_coloured_noise()
     simulated = model.evaluate(recording).values["rmse"][0]
     assert one_step == pytest.approx(0.5, rel=0.05)  # the innovations' standard deviation
     assert simulated > 1.3 * one_step
+
+
+def test_fit_warnings_name_a_fit_from_rest_and_a_validation_fit_far_below_the_others():
+    """Fits of 90, 75 and 65 % made exactly (ŷ = y - a (y - ȳ) fits 100 (1 - a) %): a gap of 20 points
+    or more is warned of, naming the record, the output and both figures; 15 points is not."""
+    from softtip.sysid.metrics import MEASURED, score_outputs
+    from softtip.sysid.verdicts import fit_warnings
+
+    y = np.sin(np.linspace(0, 20, 500))[:, None]
+
+    def scores(fit):
+        return score_outputs(y, y - (1 - fit / 100) * (y - y.mean()), ("temperature",), ("degC",), MEASURED)
+
+    assert scores(75.0).values["fit_percent"][0] == pytest.approx(75.0)
+    assert fit_warnings(("temperature",), scores(75.0), scores(90.0), "run.dat") == []
+    [rest] = fit_warnings(("temperature",), scores(65.0), scores(90.0), "run.dat")
+    assert rest.startswith("run.dat: temperature: the fit from rest, 65 %, is 25 points below the fit from each "
+                           "trial's estimated initial state (90 %)")
+    assert fit_warnings(("temperature",), scores(75.0), scores(75.0), "val.dat", scores(90.0)) == []
+    [validation] = fit_warnings(("temperature",), scores(65.0), scores(65.0), "val.dat", scores(90.0))
+    assert validation.startswith("val.dat: temperature: the validation fit, 65 %, is 25 points below the "
+                                 "estimation fit (90 %")
+
+
+def test_the_zero_order_hold_equals_scipys_cont2discrete():
+    """StateSpace.to_discrete (one matrix exponential) against scipy.signal.cont2discrete on a random
+    3-state, 2-input, 2-output system: the same matrices to rounding."""
+    import scipy.signal
+
+    from softtip.sysid.statespace import StateSpace
+
+    rng = np.random.default_rng(11)
+    A, B, C, D = rng.normal(size=(3, 3)) - 2 * np.eye(3), rng.normal(size=(3, 2)), rng.normal(size=(2, 3)), \
+        rng.normal(size=(2, 2))
+    ours = StateSpace(A, B, C, D).to_discrete(0.05)
+    theirs = scipy.signal.cont2discrete((A, B, C, D), 0.05, method="zoh")
+    for mine, reference in zip((ours.A, ours.B, ours.C, ours.D), theirs[:4], strict=True):
+        np.testing.assert_allclose(mine, reference, rtol=1e-12, atol=1e-14)
+
+
+def test_the_estimators_keep_scikit_learns_convention_without_importing_it():
+    """sklearn.base.clone copies them with their parameters; set_params refuses an unknown name; and a
+    fresh interpreter importing the package, the models and the command line loads neither scikit-learn
+    nor scipy's signal, stats or optimize modules (seconds of start-up; a fit loads optimize when it
+    refines)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sklearn.base import clone
+
+    model = TransferFunctionModel(3, 1, detrend="mean", intervals="white")
+    copy = clone(model)
+    assert copy is not model and copy.get_params() == model.get_params()
+    assert repr(model) == "TransferFunctionModel(detrend='mean', intervals='white', n_poles=3, n_zeros=1)"
+    assert StateSpaceModel().set_params(order=4).order == 4
+    with pytest.raises(IdentificationError, match="poles: not a parameter of StateSpaceModel"):
+        StateSpaceModel().set_params(poles=4)
+    source = Path(__file__).parents[1] / "src"
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys, softtip.sysid, softtip.sysid.models, softtip.cli.main; print(sorted({m for m "
+         "in sys.modules if m.split('.')[0] == 'sklearn' or m in ('scipy.signal', 'scipy.stats', 'scipy.optimize')}))"],
+        env={"PYTHONPATH": str(source), "PATH": ""}, capture_output=True, text=True, timeout=120)
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.strip() == "[]"

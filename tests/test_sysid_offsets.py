@@ -228,3 +228,23 @@ def test_output_levels_and_initial_states_estimated_with_the_model_beside_sippy(
     assert sippy_pole[0] == pytest.approx(-0.2, rel=0.01)  # measured -0.2004; ours -0.1990
     state_space = StateSpaceModel(1, detrend="estimate").fit(estimation)
     assert state_space.trend_.output_offset[0] == pytest.approx(consistent, abs=0.005)  # measured 0.0016
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_initial_states_estimated_in_the_fit_without_levels_recover_the_plant_of_a_moving_record(seed):
+    """A record that starts far from rest (x0 = (30, -20)), with no level to estimate: initial_state=
+    "estimate" recovers the plant (python-control's truth) where a fit from rest is pulled off by the
+    transient; the levels stay zero."""
+    u, y = _signals(seed, n=400, x0=np.array([30.0, -20.0]), noise=0.01)
+    moving = Recording.from_arrays(u - 5.0, y - 4.5, TS)
+    estimated = TransferFunctionModel(2, 0, initial_state="estimate").fit(moving)
+    from_rest = TransferFunctionModel(2, 0).fit(moving)
+    # measured 2.41 and 2.45 against 2.4; denominators (2.73, 4.01) and (2.90, 4.01) against (2.8, 4)
+    np.testing.assert_allclose(estimated.tf_.numerators[0][0], NUMERATOR, rtol=0.03)
+    np.testing.assert_allclose(estimated.tf_.denominators[0][0], DENOMINATOR, rtol=0.04)
+    assert abs(from_rest.tf_.numerators[0][0][0] / NUMERATOR[0] - 1) > 0.1  # measured 28 % and 14 % off
+    assert estimated.trend_.output_offset[0] == 0 and estimated.get_params()["initial_state"] == "estimate"
+    poles = np.log(StateSpaceModel(2, initial_state="estimate").fit(moving).system_.poles()) / TS
+    np.testing.assert_allclose(np.abs(poles), 2.0, rtol=0.01)  # |s| = ω = 2 rad/s; measured 2.016, 2.007
+    with pytest.raises(IdentificationError, match="initial_state: expected one of zero, estimate, got 'rest'"):
+        TransferFunctionModel(2, initial_state="rest").fit(moving)

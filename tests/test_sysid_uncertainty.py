@@ -73,9 +73,13 @@ def test_pole_and_frequency_response_spreads_match_monte_carlo(monte_carlo):
 
 def test_the_covariance_equals_scipys_finite_difference_gauss_newton_covariance():
     """Independently: the Jacobian by scipy's finite differences of scipy's ZOH simulation (cont2discrete,
-    dlsim), σ² (JᵀJ)⁻¹ at the same optimum."""
+    dlsim), σ² (JᵀJ)⁻¹ at the same optimum (white intervals), and statsmodels' Newey-West covariance of
+    the residuals on that Jacobian at the lags the model chose (sandwich intervals)."""
+    import statsmodels.api as sm
+
     u, y = _record(0)
-    model = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
+    model = TransferFunctionModel(2, 1, intervals="white").fit(Recording.from_arrays(u, y, TS))
+    sandwich = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
     theta = np.concatenate([model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]])
 
     def residual(parameters):
@@ -86,6 +90,13 @@ def test_the_covariance_equals_scipys_finite_difference_gauss_newton_covariance(
     errors = residual(theta)
     expected = errors @ errors / (len(y) - 4) * np.linalg.inv(jacobian.T @ jacobian)
     np.testing.assert_allclose(model.covariance_[0], expected, rtol=1e-5)  # measured 1.7e-6
+    # at the optimum Jᵀe = 0, so regressing the errors on J leaves them as they are: statsmodels' residuals
+    [lags] = sandwich.covariance_lags_
+    regression = sm.OLS(errors, jacobian).fit(cov_type="HAC", cov_kwds={"maxlags": lags, "use_correction": True})
+    assert lags >= 1 and np.max(np.abs(regression.params)) < 1e-6 * np.max(np.abs(theta))
+    np.testing.assert_allclose(sandwich.covariance_[0], regression.cov_params(), rtol=1e-4)
+    assert sandwich.uncertainty()["method"] == "sandwich" and model.uncertainty()["method"] == "white"
+    assert f"over {lags} lags" in sandwich.uncertainty()["assumption"]
 
 
 def test_the_empirical_transfer_function_follows_python_control_s_response():
@@ -182,3 +193,149 @@ def test_a_covariance_too_large_to_hold_is_not_computed_and_says_why(tmp_path, m
         model.uncertainty()
     loaded = load_model(save_model(tmp_path / "model.npz", model))
     assert loaded.covariance_ is None and isinstance(loaded.bode(), Figure)
+
+
+def test_a_discrete_poles_modulus_spread_is_the_finite_difference_delta_method():
+    """σ(|λ|) from d|λ| = Re(conj λ dλ)/|λ| against central differences of |eig(A + h ∂A/∂θ_p)| taken
+    with numpy's eigenvalues: the same gradient to 1e-6, so the same spread."""
+    u, y = _record(2)
+    model = StateSpaceModel(2, refine=True).fit(Recording.from_arrays(u, y, TS))
+    found = model.uncertainty()
+    A, covariance = model.system_.A, model.covariance_
+    dA = covariance.derivatives[0]
+    h = 1e-7
+    for pole in found["poles"]:
+        value = complex(pole["real"], pole["imag"])
+
+        def modulus(matrix):
+            values = np.linalg.eigvals(matrix)
+            return abs(values[np.argmin(np.abs(values - value))])
+
+        gradient = np.array([(modulus(A + h * d) - modulus(A - h * d)) / (2 * h) for d in dA])
+        expected = np.sqrt(gradient @ covariance.covariance @ gradient)
+        assert pole["modulus_std"] == pytest.approx(expected, rel=1e-5)
+
+
+def test_a_pole_whose_interval_reaches_the_boundary_leaves_stability_uncertain():
+    from softtip.sysid.verdicts import boundary_poles, stability
+
+    def tf(real, real_std):
+        return {"z": 1.96, "confidence": 0.95, "entries": [{"poles": [
+            {"real": -3.0, "imag": 0.0, "real_std": 0.1, "imag_std": 0.0},
+            {"real": real, "imag": 0.0016, "real_std": real_std, "imag_std": 1e-4}]}]}
+
+    # -2.5e-7 ± 1.96 x 2e-7 = -2.5e-7 + 3.92e-7 > 0: reaches the axis; ± 1.96 x 1e-7 does not
+    assert stability(True, tf(-2.5e-7, 2e-7))[0] == "uncertain"
+    assert stability(True, tf(-2.5e-7, 1e-7)) == ("stable", [])
+    assert stability(False, tf(-2.5e-7, 2e-7)) == ("unstable", [])
+    [text] = boundary_poles(tf(-2.5e-7, 2e-7))
+    assert "-2.5e-07+0.0016j rad/s" in text and "± 3.9e-07 on the real part" in text
+    discrete = {"z": 2.0, "confidence": 0.9545, "poles_domain": "discrete",
+                "poles": [{"real": 0.6, "imag": 0.79, "real_std": 0.0, "imag_std": 0.0, "modulus_std": 0.0}]}
+    # |0.6 + 0.79j| = 0.99201: within 1 by 0.00799, reached by 2 x 0.0041 and not by 2 x 0.0039
+    discrete["poles"][0]["modulus_std"] = 0.0041
+    assert stability(True, discrete)[0] == "uncertain"
+    discrete["poles"][0]["modulus_std"] = 0.0039
+    assert stability(True, discrete)[0] == "stable"
+
+
+def test_a_near_integrator_fitted_on_a_short_record_is_called_uncertain_not_stable():
+    """A plant with a pole at -0.002 rad/s seen for 80 s: its interval takes in the axis, and the summary
+    says so (stability "uncertain", with the warning); the well-damped plant of this module stays "stable"."""
+    slow = transfer.TransferFunctionMatrix([[[0.01]]], [[[1.0, 0.002]]])
+    rng = np.random.default_rng(7)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=251), 4)[:1000, None]
+    y = transfer.simulate(slow, u, TS) + 0.01 * rng.normal(size=(1000, 1))
+    summary = TransferFunctionModel(1, 0).fit(Recording.from_arrays(u, y, TS)).summary()
+    [pole] = summary["uncertainty"]["entries"][0]["poles"]
+    reach = summary["uncertainty"]["z"] * pole["real_std"]
+    # measured -0.00023 ± 0.0017 rad/s (the truth -0.002): its poles are all in the left half-plane, and
+    # the interval reaches past 0
+    assert pole["real"] < 0 < pole["real"] + reach
+    assert summary["stable"] and summary["stability"] == "uncertain"
+    assert summary["warnings"] == [f"stability uncertain: pole {pole['real']:.4g}+0j rad/s: its 95 % interval, "
+                                   f"± {reach:.2g} on the real part, reaches the imaginary axis"]
+    u, y = _record(3)
+    damped = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS)).summary()
+    assert damped["stability"] == "stable" and damped["warnings"] == []
+
+
+def test_sandwich_intervals_stay_honest_under_coloured_output_noise_where_white_ones_understate():
+    """Output noise with a lag-1 autocorrelation of 0.9 (the real record's): over 40 runs the sandwich
+    standard deviations match the coefficients' sample spread (measured ratios 0.85-0.97; a sample
+    standard deviation of 40 runs is uncertain by about 11 %), the white ones understate it 2-3 x
+    (measured 0.37-0.54), each from the same fit."""
+    estimates, sandwich, white = [], [], []
+    for seed in range(40):
+        rng = np.random.default_rng(100 + seed)
+        u = np.repeat(rng.choice([-1.0, 1.0], size=251), 4)[:1000, None]
+        noise = scipy.signal.lfilter([1.0], [1.0, -0.9], 0.03 * rng.normal(size=1000))
+        y = transfer.simulate(TRUTH, u, TS) + noise[:, None]
+        model = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
+        estimates.append(np.concatenate([model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]]))
+        sandwich.append(np.sqrt(np.diag(model.covariance_[0])))
+        [assumed], _ = transfer.parameter_covariance(model.tf_, [(u, y)], TS, "white")
+        white.append(np.sqrt(np.diag(assumed)))
+    spread = np.std(estimates, axis=0, ddof=1)
+    assert np.all(np.abs(np.mean(sandwich, axis=0) / spread - 1) < 0.2)
+    assert np.all(np.mean(white, axis=0) / spread < 0.6)
+
+
+def test_step_and_impulse_bands_equal_the_exact_delta_method_of_a_first_order_plant():
+    """G(s) = b / (s + a): under a zero-order hold the step response at t = k ts is exactly
+    (b/a)(1 - e^(-a t)), with ∂/∂a = -(b/a²)(1 - e^(-a t)) + (b/a) t e^(-a t) and ∂/∂b = (1 - e^(-a t))/a;
+    the unit-area pulse's response is the step's first difference over ts. Response and standard
+    deviation (gᵀ C g with the fit's covariance) equal these formulas."""
+    rng = np.random.default_rng(5)
+    first = transfer.TransferFunctionMatrix([[[1.5]]], [[[1.0, 0.8]]])
+    u = np.repeat(rng.choice([-1.0, 1.0], size=201), 5)[:1000, None]
+    y = transfer.simulate(first, u, TS) + 0.05 * rng.normal(size=(1000, 1))
+    model = TransferFunctionModel(1, 0).fit(Recording.from_arrays(u, y, TS))
+    (a,), (b,) = model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]
+    covariance = model.covariance_[0]  # order (a, b)
+    t = np.arange(150) * TS
+    decay = np.exp(-a * t)
+    step = b / a * (1 - decay)
+    gradient = np.array([-b / a**2 * (1 - decay) + b / a * t * decay, (1 - decay) / a])
+    found = model.time_response("step", steps=150)
+    np.testing.assert_allclose(found.time, t)
+    np.testing.assert_allclose(found.response[:, 0, 0], step, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(found.std[:, 0, 0], np.sqrt(np.einsum("pt,pq,qt->t", gradient, covariance, gradient)),
+                               rtol=1e-5, atol=1e-12)
+    pulse = model.time_response("impulse", steps=150)
+    first_difference = np.diff(np.r_[0.0, step]) / TS
+    pulse_gradient = np.diff(np.c_[np.zeros(2), gradient], axis=1) / TS
+    np.testing.assert_allclose(pulse.response[:, 0, 0], first_difference, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(pulse.std[:, 0, 0], np.sqrt(np.einsum("pt,pq,qt->t", pulse_gradient, covariance,
+                                                                     pulse_gradient)), rtol=1e-5, atol=1e-12)
+
+
+def test_a_state_space_step_band_settles_on_the_dc_gains_interval():
+    """The step response's spread, from finite differences of the perturbed systems, ends at the DC
+    gain's, from the analytic gradient of G(1) (two separate computations of one delta method)."""
+    u, y = _record(4)
+    model = StateSpaceModel(2, refine=True).fit(Recording.from_arrays(u, y, TS))
+    found = model.time_response("step", steps=400)
+    [gain] = model.uncertainty()["dc_gains"]
+    assert found.response[-1, 0, 0] == pytest.approx(gain["value"], rel=1e-9)
+    assert found.std[-1, 0, 0] == pytest.approx(gain["std"], rel=1e-4)
+
+
+def test_the_compare_and_response_figures_carry_the_fit_units_and_bands(tmp_path):
+    u, y = _record(6)
+    recording = Recording.from_arrays([u[:500], u[500:]], [y[:500], y[500:]], TS, inputs=["heater"],
+                                      outputs=["plate"], input_units="V", output_units="degC")
+    model = TransferFunctionModel(2, 1).fit(recording)
+    figure = model.compare(recording)
+    [axis] = figure.axes
+    fit = model.evaluate(recording, initial_state="estimate").values["fit_percent"][0]
+    assert axis.get_title() == f"plate: fit {fit:.1f} %" and axis.get_ylabel() == "plate (degC)"
+    assert len(axis.lines) == 3  # measured, simulated, the join of the two trials
+    for kind in ("step", "impulse"):
+        drawn = model.response_figure(kind)
+        [response] = drawn.axes
+        assert response.get_title() == f"{kind}: heater → plate"
+        assert response.get_ylabel() == ("plate (degC/V)" if kind == "step" else "plate (degC/(V·s))")
+        assert len(response.collections) == 1  # the band
+        drawn.savefig(tmp_path / f"{kind}.png")
+    figure.savefig(tmp_path / "compare.png")

@@ -180,6 +180,11 @@ def bench_sysid(
     console.print(f"  SIPPY: {report['sippy']['note']}")
     for name, figures in report["streaming_step_us"].items():
         console.print(f"  step {name:42s} median {figures['median_us']:6.2f} µs   p99 {figures['p99_us']:6.2f} µs")
+    start = report["start"]
+    console.print(f"  start (best of {start['repeats']} processes, load average "
+                  f"{', '.join(f'{v:.2f}' for v in start['load_average'])}): python alone "
+                  f"{start['interpreter_s']:.2f} s, import softtip.sysid {start['import_sysid_s']:.2f} s, sysid --help "
+                  f"{start['help_s']:.2f} s, a 200-sample sysid fit {start['fit_s']:.2f} s")
     for name, met in report["targets_met"].items():
         console.print(f"  target {name} <= {report['targets'][name]:g}: {'met' if met else '[red]missed[/]'}")
     for name, ratio in report["ratios"].items():

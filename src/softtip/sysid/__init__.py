@@ -27,18 +27,57 @@ force sensor's (side-sensor forces in, table-sensor forces out, at 10 Hz):
 - :mod:`~softtip.sysid.files`: :func:`save_model` / :func:`load_model` (npz + JSON).
 """
 
-from softtip.sysid.delays import estimate_delays
-from softtip.sysid.files import load_model, save_model
-from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, rated, score_outputs
-from softtip.sysid.models import StateSpaceModel, TransferFunctionModel, information_criteria, order_table
-from softtip.sysid.recording import Recording, Trial, read_recording
-from softtip.sysid.residuals import ResidualTests, residual_tests
-from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
-from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
-from softtip.sysid.statespace import IdentificationError, StateSpace
-from softtip.sysid.transfer import TransferFunctionMatrix
-from softtip.sysid.trends import Trend, estimate_trend
-from softtip.sysid.uncertainty import empirical_transfer_function
+from importlib import import_module
+from typing import TYPE_CHECKING
+
+# every public name -> the module that defines it, imported on first use (PEP 562): importing the package
+# costs nothing, and a command pays for the stages it uses (scikit-learn, scipy) when it uses them
+_HOMES = {
+    "estimate_delays": "delays",
+    "load_model": "files", "save_model": "files",
+    "MEASURED": "metrics", "FullScale": "metrics", "Scores": "metrics", "fit_percent": "metrics", "rated": "metrics",
+    "score_outputs": "metrics",
+    "StateSpaceModel": "models", "TransferFunctionModel": "models", "information_criteria": "models",
+    "order_table": "models", "validated_order": "models",
+    "Recording": "recording", "Trial": "recording", "read_recording": "recording",
+    "ResidualTests": "residuals", "residual_tests": "residuals",
+    "StreamingSimulator": "simulation", "estimate_initial_state": "simulation", "predict": "simulation",
+    "simulate": "simulation",
+    "split_by_sample": "splits", "split_by_time": "splits", "split_by_trial": "splits",
+    "IdentificationError": "statespace", "StateSpace": "statespace",
+    "TransferFunctionMatrix": "transfer",
+    "Trend": "trends", "estimate_trend": "trends",
+    "empirical_transfer_function": "uncertainty",
+}
+
+if TYPE_CHECKING:
+    from softtip.sysid.delays import estimate_delays
+    from softtip.sysid.files import load_model, save_model
+    from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, rated, score_outputs
+    from softtip.sysid.models import (
+        StateSpaceModel,
+        TransferFunctionModel,
+        information_criteria,
+        order_table,
+        validated_order,
+    )
+    from softtip.sysid.recording import Recording, Trial, read_recording
+    from softtip.sysid.residuals import ResidualTests, residual_tests
+    from softtip.sysid.simulation import StreamingSimulator, estimate_initial_state, predict, simulate
+    from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
+    from softtip.sysid.statespace import IdentificationError, StateSpace
+    from softtip.sysid.transfer import TransferFunctionMatrix
+    from softtip.sysid.trends import Trend, estimate_trend
+    from softtip.sysid.uncertainty import empirical_transfer_function
+
+
+def __getattr__(name: str):
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{_HOMES[name]}"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "MEASURED",
@@ -72,4 +111,5 @@ __all__ = [
     "split_by_sample",
     "split_by_time",
     "split_by_trial",
+    "validated_order",
 ]

@@ -20,13 +20,13 @@ covariance of their parameters (``covariance_``, ``uncertainty()``, ``bode()``; 
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Iterable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Annotated, Any, Optional, Self, Union
 
 import numpy as np
-from sklearn.base import BaseEstimator
 
 from softtip._core.config import Flag, OpenFraction, PositiveInteger, checked, choice, expect, integer
 from softtip._core.threads import single_threaded_blas
@@ -44,6 +44,15 @@ from softtip.sysid.realisation import realise
 from softtip.sysid.recording import Recording
 from softtip.sysid.refine import RefinementReport, StateSpaceCovariance, parameter_covariance, refine
 from softtip.sysid.residuals import ResidualTests, residual_tests
+from softtip.sysid.responses import (
+    TimeResponse,
+    compare_figure,
+    response_figure,
+    response_length,
+    response_spread,
+    time_responses,
+)
+from softtip.sysid.robust import ASSUMPTIONS, COVARIANCES, SANDWICH, WHITE
 from softtip.sysid.simulation import (
     StreamingSimulator,
     estimate_initial_state,
@@ -60,9 +69,11 @@ from softtip.sysid.uncertainty import (
     empirical_transfer_function,
     frequency_band,
     intervals,
+    normal_quantile,
     state_space_bands,
     state_space_intervals,
 )
+from softtip.sysid.verdicts import stability
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -97,7 +108,38 @@ def _require_levels_within_reach(recording: Recording) -> None:
                                           "'linear'; --detrend on the command line)")
 
 
-class IdentifiedModel(BaseEstimator):
+class Estimator:
+    """scikit-learn's estimator convention, without importing scikit-learn (whose import takes seconds,
+    longer than a command's start may): the keyword parameters of ``__init__`` are the estimator's
+    parameters, stored as given; ``get_params``/``set_params`` read and change them as
+    ``sklearn.base.BaseEstimator``'s do, so ``sklearn.base.clone`` copies one."""
+
+    @classmethod
+    def _parameter_names(cls) -> list[str]:
+        return sorted(name for name in inspect.signature(cls.__init__).parameters if name != "self")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The parameters by name (``deep`` as scikit-learn's: no parameter here is an estimator)."""
+        return {name: getattr(self, name) for name in self._parameter_names()}
+
+    def set_params(self, **params) -> Self:
+        """Changes the parameters named; refuses a name that is not one."""
+        names = self._parameter_names()
+        for name, value in params.items():
+            if name not in names:
+                raise IdentificationError(f"{name}: not a parameter of {type(self).__name__} "
+                                          f"(parameters: {', '.join(names)})")
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        signature = inspect.signature(type(self).__init__).parameters
+        defaults = {name: parameter.default for name, parameter in signature.items()}
+        changed = [f"{name}={value!r}" for name, value in self.get_params().items() if value != defaults[name]]
+        return f"{type(self).__name__}({', '.join(changed)})"
+
+
+class IdentifiedModel(Estimator):
     """What both kinds share once fitted: the discrete system ``system_`` at the sample time ``ts_``.
 
     Each kind identifies itself in ``_identify(recording)``, which returns its simulation of the
@@ -118,6 +160,9 @@ class IdentifiedModel(BaseEstimator):
     def _check_common_params(self) -> None:
         if self.detrend not in TREND_KINDS:
             raise IdentificationError(f"detrend: expected one of {', '.join(TREND_KINDS)}, got {self.detrend!r}")
+        if self.initial_state not in INITIAL_STATES:
+            raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, "
+                                      f"got {self.initial_state!r}")
         if self.delay != ESTIMATE:
             resolve(self.delay, np.size(self.delay))
         checked(PositiveInteger, "max_delay", self.max_delay, IdentificationError)
@@ -134,8 +179,9 @@ class IdentifiedModel(BaseEstimator):
         try:
             with single_threaded_blas():
                 core = self._fit_delay_free(shifted, recording.ts)
-                if self.detrend == "estimate":
-                    core, shifted = self._with_estimated_output_levels(core, shifted, recording.ts)
+                if self.detrend == "estimate" or self.initial_state == "estimate":
+                    core, shifted = self._with_estimated_initial_states(core, shifted, recording.ts,
+                                                                        levels=self.detrend == "estimate")
                 if self.estimate_covariance:
                     self._estimate_uncertainty(core, shifted, recording.ts)
                 else:
@@ -146,11 +192,11 @@ class IdentifiedModel(BaseEstimator):
         self.system_ = with_input_delays(core, delays)
         return self._remember(recording, started)
 
-    def _with_estimated_output_levels(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
-                                      ts: float) -> tuple[StateSpace, list[tuple[np.ndarray, np.ndarray]]]:
-        """The output levels and each trial's initial state as parameters, with the model: the simulation
-        error is minimised over the model and over (levels, initial states) in turn, each round from the
-        last. Given the model, the levels and states are one linear least-squares problem (a constant and
+    def _with_estimated_initial_states(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
+                                       ts: float, levels: bool) -> tuple[StateSpace, list[tuple[np.ndarray, np.ndarray]]]:
+        """Each trial's initial state, and with ``levels`` the output levels, as parameters with the model:
+        the simulation error is minimised over the model and over (levels, initial states) in turn, each
+        round from the last. Given the model, the levels and states are one linear least-squares problem (a constant and
         the free responses C Aᵗ); given them, the model is identified on the outputs less the levels and
         the free responses. (The level alone would be confounded with the transient of a record that does
         not start at rest.) It stops when the simulation error falls by less than 1e-6 of itself, or after
@@ -158,6 +204,7 @@ class IdentifiedModel(BaseEstimator):
         lowers the same criterion."""
         deviations = [y for _, y in segments]
         ny = deviations[0].shape[1]
+        nl = ny if levels else 0  # level unknowns
         previous = np.inf
         level = np.zeros(ny)
         for rounds in range(1, _LEVEL_ROUNDS + 1):
@@ -166,14 +213,14 @@ class IdentifiedModel(BaseEstimator):
             rows, targets = [], []
             for k, ((u, y), sim) in enumerate(zip(segments, simulated, strict=True)):
                 N = len(u)
-                block = np.zeros((N, ny, ny + n * len(segments)))
-                block[:, :, :ny] = np.eye(ny)
-                block[:, :, ny + k * n:ny + (k + 1) * n] = free_response(core.A, core.C, N)
+                block = np.zeros((N, ny, nl + n * len(segments)))
+                block[:, :, :nl] = np.eye(ny)[:, :nl]
+                block[:, :, nl + k * n:nl + (k + 1) * n] = free_response(core.A, core.C, N)
                 rows.append(block.reshape(N * ny, -1))
                 targets.append((deviations[k] - sim).ravel())
             solution = np.linalg.lstsq(np.vstack(rows), np.concatenate(targets), rcond=None)[0]
-            level = solution[:ny]
-            states = solution[ny:].reshape(len(segments), n)
+            level = solution[:nl] if levels else np.zeros(ny)
+            states = solution[nl:].reshape(len(segments), n)
             corrected = [y - level - free_response(core.A, core.C, len(y)) @ x0
                          for y, x0 in zip(deviations, states, strict=True)]
             cost = sum(float(np.sum((c - sim) ** 2)) for c, sim in zip(corrected, simulated, strict=True))
@@ -260,9 +307,13 @@ class IdentifiedModel(BaseEstimator):
         return self.covariance_
 
     def _uncertainty_summary(self, confidence: float) -> dict:
-        """The summary's ``confidence`` intervals (None without a covariance) and why there are none."""
-        return {"uncertainty": None if self.covariance_ is None else self.uncertainty(confidence),
-                "uncertainty_note": self.covariance_note_}
+        """The summary's ``confidence`` intervals (None without a covariance) and why there are none, and the
+        stability they leave: "stable", "unstable" or "uncertain" (a pole's interval reaching the boundary),
+        with the warnings that say so."""
+        uncertainty = None if self.covariance_ is None else self.uncertainty(confidence)
+        verdict, warnings = stability(self.is_stable(), uncertainty)
+        return {"uncertainty": uncertainty, "uncertainty_note": self.covariance_note_, "stability": verdict,
+                "warnings": warnings}
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "system_"):
@@ -336,6 +387,33 @@ class IdentifiedModel(BaseEstimator):
         yhat = np.vstack([values[mask] for values, mask in zip(predicted, masks, strict=True)])
         return score_outputs(y, yhat, self.outputs_, self.output_units_, full_scale)
 
+    def compare(self, recording: Recording, initial_state: str = "estimate") -> Figure:
+        """The measured outputs of ``recording`` against the model's simulation from each trial's estimated
+        (or the zero) initial state, one axis per output with its fit % (MATLAB's ``compare``)."""
+        simulated = self.predict(recording, None, initial_state)
+        fits = self.evaluate_predictions(recording, simulated).values["fit_percent"]
+        return compare_figure([trial.y for trial in recording.trials], simulated, self.ts_, self.outputs_,
+                              self.output_units_, fits, recording.source,
+                              "estimated" if initial_state == "estimate" else "zero")
+
+    def time_response(self, kind: str = "step", steps: int | None = None, confidence: float = 0.95) -> TimeResponse:
+        """Each input's ``kind`` response ("step" or "impulse", see :mod:`softtip.sysid.responses`) over
+        ``steps`` samples (default: five time constants of the slowest pole, input delays added), with
+        its standard deviation where the parameter covariance was estimated."""
+        self._check_fitted()
+        z = normal_quantile(confidence)
+        if steps is None:
+            steps = response_length(self.system_) + max(self.delays_)
+        steps = checked(PositiveInteger, "steps", steps, IdentificationError)
+        response = time_responses(self.system_, steps, kind)
+        std = None if self.covariance_ is None else np.sqrt(self._response_variance(steps, kind))
+        return TimeResponse(kind, np.arange(steps) * self.ts_, response, std, z, confidence)
+
+    def response_figure(self, kind: str = "step", confidence: float = 0.95) -> Figure:
+        """:meth:`time_response` plotted, entry by entry, with its ``confidence`` band."""
+        return response_figure(self.time_response(kind, confidence=confidence), (self.inputs_, self.outputs_),
+                               (self.input_units_, self.output_units_))
+
     def score(self, recording: Recording, k: int | None = None) -> float:
         """The mean over outputs of R² (scikit-learn's ``score``), simulated unless ``k`` is given."""
         return self.evaluate(recording, k).mean("r2")
@@ -379,7 +457,8 @@ class IdentifiedModel(BaseEstimator):
                 measured = empirical_transfer_function(trial.u, trial.y, self.ts_)
         response, delays_s, band = self._bode_curves(omega, confidence)
         return bode_figure(response, omega, band=band, confidence=confidence, delays_s=delays_s, measured=measured,
-                           names=(list(self.inputs_), list(self.outputs_)))
+                           names=(list(self.inputs_), list(self.outputs_)),
+                           units=(self.input_units_, self.output_units_))
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         """(response (len(ω), ny, nu), delays not in it (s), band per entry or None) for :meth:`bode`: the
@@ -458,7 +537,9 @@ class StateSpaceModel(IdentifiedModel):
     estimated with the model); ``delay``: input delays in samples, one for all inputs or one per
     input, or "estimate" (searched up to ``max_delay``; :mod:`softtip.sysid.delays`);
     ``estimate_covariance``: False skips the parameter covariance (``covariance_`` None, no intervals
-    or bands), for fits that never read it.
+    or bands), for fits that never read it; ``initial_state``: "zero" (every trial starts at rest) or
+    "estimate" (each trial's initial state estimated with the model, for records that do not start at
+    rest; "estimate" detrending estimates them too).
     """
 
     _PARAMETERS = {"order": ORDER, "method": choice(*METHODS), "domain": choice(*DOMAINS), "refine": Flag,
@@ -469,7 +550,7 @@ class StateSpaceModel(IdentifiedModel):
                  domain: str = "discrete", horizon: int | None = None, max_order: int = MAX_ORDER,
                  enforce_stability: bool = True, max_iterations: int = 20, tolerance: float = 1e-4,
                  detrend: str = "none", delay: int | list[int] | str = 0, max_delay: int = 40,
-                 estimate_covariance: bool = True):
+                 estimate_covariance: bool = True, initial_state: str = "zero"):
         self.order = order
         self.method = method
         self.refine = refine
@@ -483,6 +564,7 @@ class StateSpaceModel(IdentifiedModel):
         self.delay = delay
         self.max_delay = max_delay
         self.estimate_covariance = estimate_covariance
+        self.initial_state = initial_state
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         n = 1 if self.order == AUTO else self.order
@@ -526,6 +608,17 @@ class StateSpaceModel(IdentifiedModel):
         ``confidence`` interval (:func:`softtip.sysid.uncertainty.state_space_intervals`)."""
         return state_space_intervals(without_input_delays(self.system_, self.delays_), self._checked_covariance(),
                                      confidence, continuous=self.domain == "continuous")
+
+    def _response_variance(self, steps: int, kind: str) -> np.ndarray:
+        core = without_input_delays(self.system_, self.delays_)
+        dA, dB, dC, dD = self.covariance_.derivatives
+
+        def perturbed(k: int, h: float) -> StateSpace:
+            return with_input_delays(StateSpace(core.A + h * dA[k], core.B + h * dB[k], core.C + h * dC[k],
+                                                core.D + h * dD[k], core.ts), self.delays_)
+
+        # local coordinates: unit-sized directions
+        return response_spread(perturbed, np.zeros(len(dA)), self.covariance_.covariance, steps, kind)
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         core = without_input_delays(self.system_, self.delays_)
@@ -591,16 +684,20 @@ class TransferFunctionModel(IdentifiedModel):
 
     ``tf_`` is G; ``system_`` its block-diagonal canonical realisation discretised by zero-order
     hold at the recording's sample time (:mod:`softtip.sysid.realisation`), which runs it, behind
-    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend`` and
-    ``estimate_covariance`` as for :class:`StateSpaceModel`.
+    the input delays ``delays_`` (e^{-s d ts}: ``delay`` declared, or "estimate"). ``detrend``,
+    ``estimate_covariance`` and ``initial_state`` as for :class:`StateSpaceModel`; ``intervals``: the
+    coefficients' covariance, "sandwich" (honest for coloured output errors, which an output-error
+    model's usually are; :mod:`softtip.sysid.robust`) or "white" (σ² (JᵀJ)⁻¹, white errors assumed).
     """
 
     _PARAMETERS = {"n_poles": PositiveInteger, "refine": Flag, "enforce_stability": Flag,
+                   "intervals": choice(*COVARIANCES),
                    "max_iterations": PositiveInteger, "estimate_covariance": Flag}
 
     def __init__(self, n_poles: int = 6, n_zeros: int | None = None, *, refine: bool = True,
                  enforce_stability: bool = True, max_iterations: int = 100, detrend: str = "none",
-                 delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True):
+                 delay: int | list[int] | str = 0, max_delay: int = 40, estimate_covariance: bool = True,
+                 initial_state: str = "zero", intervals: str = SANDWICH):
         self.n_poles = n_poles
         self.n_zeros = n_zeros
         self.refine = refine
@@ -610,6 +707,8 @@ class TransferFunctionModel(IdentifiedModel):
         self.delay = delay
         self.max_delay = max_delay
         self.estimate_covariance = estimate_covariance
+        self.initial_state = initial_state
+        self.intervals = intervals
 
     def _parameters_per_output(self, n_inputs: int, n_outputs: int) -> int:
         zeros = self.n_poles - 1 if self.n_zeros is None else self.n_zeros
@@ -636,12 +735,41 @@ class TransferFunctionModel(IdentifiedModel):
 
     def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
                               ts: float) -> None:
-        self.covariance_, self.covariance_note_ = transfer.parameter_covariance(self.tf_, segments, ts), None
+        self.covariance_, self.covariance_lags_ = transfer.parameter_covariance(self.tf_, segments, ts, self.intervals)
+        self.covariance_note_ = None
 
     def uncertainty(self, confidence: float = 0.95) -> dict:
         """Every coefficient, pole and zero with its standard deviation and ``confidence`` interval
         (:func:`softtip.sysid.uncertainty.intervals`)."""
-        return intervals(self.tf_, self._checked_covariance(), confidence)
+        covariance = self._checked_covariance()
+        # from the lags the covariance was made with (a file written before sandwich estimates has none)
+        method = WHITE if None in self.covariance_lags_ else SANDWICH
+        lags = ", ".join(str(lag) for lag in self.covariance_lags_)
+        return intervals(self.tf_, covariance, confidence) | {
+            "method": method, "assumption": ASSUMPTIONS[method].format(lags=lags)}
+
+    def _response_variance(self, steps: int, kind: str) -> np.ndarray:
+        """Each output's coefficients move its row only: the rows' variances, summed."""
+        variance = np.zeros((steps, len(self.outputs_), len(self.inputs_)))
+        for i, covariance in enumerate(self.covariance_):
+            # the row's coefficients in the covariance's order: each entry's denominator after its 1, numerator
+            entries = [(a, b) for a, b in zip(self.tf_.denominators[i], self.tf_.numerators[i], strict=True)]
+            theta = np.concatenate([np.concatenate([a[1:], b]) for a, b in entries])
+            cuts = np.cumsum([0] + [len(a) - 1 + len(b) for a, b in entries])
+
+            def perturbed(k: int, h: float, i: int = i, theta: np.ndarray = theta, cuts: np.ndarray = cuts):
+                moved = theta.copy()
+                moved[k] += h
+                numerators = [list(row) for row in self.tf_.numerators]
+                denominators = [list(row) for row in self.tf_.denominators]
+                for j, (a, _) in enumerate(entries):
+                    part = moved[cuts[j]:cuts[j + 1]]
+                    denominators[i][j] = np.r_[1.0, part[:len(a) - 1]]
+                    numerators[i][j] = part[len(a) - 1:]
+                return with_input_delays(realise(numerators, denominators).to_discrete(self.ts_), self.delays_)
+
+            variance += response_spread(perturbed, theta, covariance, steps, kind)
+        return variance
 
     def _bode_curves(self, omega: np.ndarray, confidence: float):
         band = None if self.covariance_ is None else \
@@ -662,6 +790,7 @@ class TransferFunctionModel(IdentifiedModel):
         for i, covariance in enumerate(self.covariance_ or ()):
             arrays[f"tf/covariance/{i}"] = covariance
         state["report"] = self.report_.to_dict()
+        state["covariance_lags"] = None if self.covariance_ is None else list(self.covariance_lags_)
         return state, arrays
 
     def _restore(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -682,6 +811,7 @@ class TransferFunctionModel(IdentifiedModel):
         self.covariance_ = None
         if "tf/covariance/0" in arrays:
             self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
+            self.covariance_lags_ = list(state.get("covariance_lags") or [None] * ny)
             intervals(self.tf_, self.covariance_)  # checks their shapes
 
     @property
@@ -723,16 +853,16 @@ def information_criteria(errors: np.ndarray, n_parameters: int) -> tuple[float, 
 
 
 def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = None,
-                validation: Recording | None = None, initial_state: str = "zero", **params) -> list[dict]:
+                validation: Recording | None = None, scored_from: str = "zero", **params) -> list[dict]:
     """One fit per order (``kind`` "tf": poles per entry, default 2-8; "ss": states, default 2-12),
     each row with the order, the parameter count, the fit % per output and its mean (on ``validation``
-    when given, else on the estimation data; simulated from the zero or the estimated initial state, as
-    the row says), AIC and BIC (one-step prediction errors on the estimation data; the simulation errors
+    when given, else on the estimation data; simulated from the zero or the estimated initial state,
+    ``scored_from``, as the row says), AIC and BIC (one-step prediction errors on the estimation data; the simulation errors
     of a transfer function, which has no noise model), whether it is stable, and the seconds the fit took."""
     if kind not in KINDS:
         raise IdentificationError(f"kind: expected one of {', '.join(KINDS)}, got {kind!r}")
-    if initial_state not in INITIAL_STATES:
-        raise IdentificationError(f"initial_state: expected one of {', '.join(INITIAL_STATES)}, got {initial_state!r}")
+    if scored_from not in INITIAL_STATES:
+        raise IdentificationError(f"scored_from: expected one of {', '.join(INITIAL_STATES)}, got {scored_from!r}")
     orders = list(DEFAULT_ORDERS[kind] if orders is None else orders)
     if not orders:
         raise IdentificationError("orders: none given")
@@ -750,10 +880,10 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
         seconds = time.perf_counter() - started
         # the fit's simulation of the estimation data scores it there, and is the one-step prediction of a
         # model without a noise model
-        if validation is None and initial_state == "zero":
+        if validation is None and scored_from == "zero":
             scores = model.evaluate_predictions(recording, simulated)
         else:
-            scores = model.evaluate(recording if validation is None else validation, initial_state=initial_state)
+            scores = model.evaluate(recording if validation is None else validation, initial_state=scored_from)
         one_step = simulated if model.system_.K is None else model.predict(recording, 1)
         aic, bic = information_criteria(_errors(recording, one_step), model.n_parameters)
         fits = scores.values["fit_percent"]
@@ -762,3 +892,22 @@ def order_table(recording: Recording, kind: str, orders: Iterable[int] | None = 
                      "initial_state": scores.initial_state, "aic": aic, "bic": bic,
                      "stable": model.is_stable(), "seconds": seconds})
     return rows
+
+
+# a validation fit within this many points of the best is a tie, which the smaller model wins
+_ORDER_TIE = 0.5
+
+
+def validated_order(recording: Recording, validation: Recording, kind: str, orders: Iterable[int] | None = None,
+                    **params) -> tuple[int, list[dict]]:
+    """The order chosen by validation: every order of :func:`order_table` fitted on ``recording`` and
+    scored on ``validation`` from each trial's estimated initial state; the stable one of the best mean
+    fit, a smaller one within ``_ORDER_TIE`` points of it preferred. Returns it and the table's rows."""
+    rows = order_table(recording, kind, orders, validation, "estimate", **params)
+    stable = [row for row in rows if row["stable"]]
+    if not stable:
+        raise IdentificationError(f"{validation.source}: no order of {', '.join(str(row['order']) for row in rows)} "
+                                  "gives a stable model to validate")
+    best = max(row["fit_percent"] for row in stable)
+    return min(row["order"] for row in stable if row["fit_percent"] >= best - _ORDER_TIE), rows
+

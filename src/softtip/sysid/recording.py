@@ -27,7 +27,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-import scipy.signal
 
 from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
@@ -43,8 +42,11 @@ from softtip.data.dataset import (
     require_columns,
     trial_runs,
 )
+from softtip.sysid.textfile import SUFFIXES as WHITESPACE
+from softtip.sysid.textfile import text_columns
 
 DETRENDS = ("none", "mean", "linear")
+READABLE = (".csv", ".parquet", *WHITESPACE)
 # the magnitudes whose squares and sums of squares stay normal doubles; the smallest relative
 # variation that is more than rounding
 MAGNITUDE_RANGE, ROUNDING = (1e-150, 1e150), 1e-12
@@ -67,6 +69,59 @@ class Trial:
 
     def __len__(self) -> int:
         return len(self.u)
+
+
+@dataclass(frozen=True)
+class Resampling:
+    """What resampling onto an even grid did to a recording: ``before`` samples at a median step of
+    ``median_step`` (the longest ``longest_step``; ``gaps`` steps longer than 1.5 sample times, bridged by
+    straight lines) became ``after`` samples every ``ts`` s, linearly interpolated within each trial."""
+
+    ts: float
+    before: int
+    after: int
+    median_step: float
+    longest_step: float
+    gaps: int
+
+    def to_dict(self) -> dict:
+        return {"ts": self.ts, "samples_before": self.before, "samples_after": self.after,
+                "median_step": self.median_step, "longest_step": self.longest_step, "gaps_bridged": self.gaps,
+                "method": "linear interpolation within each trial", "note": self.describe()}
+
+    def describe(self) -> str:
+        return (f"resampled every {self.ts:g} s by linear interpolation within each trial: {self.before} samples "
+                f"at a median step of {self.median_step:g} s (longest {self.longest_step:g} s; {self.gaps} "
+                f"steps longer than {1.5 * self.ts:g} s bridged by straight lines) became {self.after}")
+
+
+def resample(source: str, column: str, trial: np.ndarray, time: np.ndarray, columns: Mapping[str, np.ndarray],
+             ts: float) -> tuple[np.ndarray, dict[str, np.ndarray], Resampling]:
+    """Every column of ``columns`` linearly interpolated, trial by trial, at ``ts`` from each trial's first
+    time stamp to its last: the new trial ids, the new columns and what was done. Times must increase
+    within a trial (a repeated or earlier stamp is refused, naming its row)."""
+    ts = checked(PositiveNumber, f"{source}: resample", ts, DatasetError)
+    starts, lengths = trial_runs(trial)
+    ids, grids, steps = [], [], []
+    for a, n in zip(starts, lengths, strict=True):
+        times = time[a:a + n]
+        step = np.diff(times)
+        if np.any(step <= 0):
+            row = a + 1 + int(np.argmax(step <= 0))
+            raise DatasetError(f"{source}: column {column!r}: time does not increase at row {row} "
+                               f"(trial {trial[a]}): cannot resample")
+        grid = times[0] + ts * np.arange(int(np.floor((times[-1] - times[0]) / ts * (1 + 1e-12))) + 1)
+        grids.append((a, n, grid))
+        ids.append(np.full(len(grid), trial[a]))
+        steps.append(step)
+    values = {name: np.concatenate([np.interp(grid, time[a:a + n], np.asarray(data[a:a + n], dtype=np.float64))
+                                    for a, n, grid in grids]) for name, data in columns.items()}
+    every = np.concatenate(steps)
+    if every.size == 0:
+        raise DatasetError(f"{source}: no trial has two samples: nothing to resample")
+    done = Resampling(float(ts), len(trial), sum(len(grid) for *_, grid in grids), float(np.median(every)),
+                      float(every.max()), int(np.sum(every > 1.5 * ts)))
+    return np.concatenate(ids), values, done
 
 
 def _names(value: Any, count: int, default: str, what: str, source: str) -> tuple[str, ...]:
@@ -112,6 +167,7 @@ class Recording:
     output_units: tuple[str, ...] = ()
     source: str = "arrays"
     detrended: str = "none"
+    resampled: Resampling | None = None
 
     def __post_init__(self):
         source = self.source
@@ -233,7 +289,7 @@ class Recording:
         return {"source": self.source, "ts": self.ts, "inputs": list(self.inputs), "outputs": list(self.outputs),
                 "input_units": list(self.input_units), "output_units": list(self.output_units),
                 "trials": len(self.trials), "samples": self.n_samples, "detrended": self.detrended,
-                "sha256": self.sha256}
+                "resampled": None if self.resampled is None else self.resampled.to_dict(), "sha256": self.sha256}
 
     # -- derived recordings ---------------------------------------------------
 
@@ -251,6 +307,8 @@ class Recording:
         """
         if kind not in ("mean", "linear"):
             raise DatasetError(f"detrend: expected 'mean' or 'linear', got {kind!r}")
+        import scipy.signal  # only here: it takes a third of a second to import
+
         how = "constant" if kind == "mean" else "linear"
         trials = [replace(trial, u=scipy.signal.detrend(trial.u, axis=0, type=how),
                           y=scipy.signal.detrend(trial.y, axis=0, type=how)) for trial in self.trials]
@@ -312,7 +370,8 @@ def sample_time(source: str, column: str, trial: np.ndarray, time: np.ndarray, t
         row = int(np.flatnonzero(same)[np.argmax(off)]) + 1
         raise DatasetError(f"{source}: column {column!r}: irregular sample times in trial {trial[row]}: a step of "
                            f"{steps[np.argmax(off)]:g} s at row {row}, the sample time is {step:g} s "
-                           f"(tolerance {100 * tolerance:g} %)")
+                           f"(tolerance {100 * tolerance:g} %): resample it onto an even grid (--resample SECONDS "
+                           "on the command line, resample= in read_recording), which interpolates linearly")
     if ts is not None and abs(ts - step) > tolerance * step:
         raise DatasetError(f"{source}: the sample time given, {ts:g} s, does not match the {step:g} s of "
                            f"column {column!r}")
@@ -321,14 +380,25 @@ def sample_time(source: str, column: str, trial: np.ndarray, time: np.ndarray, t
 
 def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: Mapping[str, np.ndarray],
               inputs: list[str], outputs: list[str], input_units: Any, output_units: Any, ts: float | None,
-              tolerance: float, time_column: str = TIME) -> Recording:
-    """A recording from per-row columns: trial ids (rows of a trial contiguous), times or None, signals."""
+              tolerance: float, time_column: str = TIME, resample_ts: float | None = None) -> Recording:
+    """A recording from per-row columns: trial ids (rows of a trial contiguous), times or None, signals;
+    resampled at ``resample_ts`` when given."""
     if ts is not None:
         ts = checked(PositiveNumber, f"{source}: ts", ts, DatasetError)
     starts, lengths = trial_runs(trial)
     ids, counts = np.unique(trial[starts], return_counts=True)
     if np.any(counts > 1):
         raise DatasetError(f"{source}: the rows of trial {ids[counts > 1][0]} are not contiguous")
+    resampled = None
+    if resample_ts is not None:
+        if time is None:
+            raise DatasetError(f"{source}: resample: needs a time column (the rows' time stamps)")
+        if ts is not None:
+            raise DatasetError(f"{source}: resample: give the new sample time or ts, not both")
+        trial, columns, resampled = resample(source, time_column, trial, time,
+                                             {name: columns[name] for name in (*inputs, *outputs)}, resample_ts)
+        starts, lengths = trial_runs(trial)
+        time, ts = None, resampled.ts
     if time is None:
         if ts is None:
             raise DatasetError(f"{source}: no time column: give the sample time")
@@ -338,7 +408,8 @@ def _assemble(source: str, trial: np.ndarray, time: np.ndarray | None, columns: 
     y = np.column_stack([np.asarray(columns[name], dtype=np.float64) for name in outputs]) if outputs \
         else np.zeros((len(trial), 0))
     trials = [Trial(u[a:a + n], y[a:a + n], int(trial[a])) for a, n in zip(starts, lengths, strict=True)]
-    return Recording(ts, tuple(inputs), tuple(outputs), tuple(trials), input_units, output_units, source)
+    return Recording(ts, tuple(inputs), tuple(outputs), tuple(trials), input_units, output_units, source,
+                     resampled=resampled)
 
 
 def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
@@ -368,14 +439,25 @@ def _is_dataset_file(path: Path) -> bool:
         return False
 
 
-def file_columns(path: str | os.PathLike) -> list[str]:
-    """The column names of a CSV (``.csv``) or Parquet (``.parquet``) file."""
-    path = Path(path)
+def _suffix(path: Path) -> str:
     if not path.is_file():
         raise DatasetError(f"recording {path} does not exist")
     suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet"):
-        raise DatasetError(f"recording {path}: expected a .csv or .parquet file")
+    if suffix not in READABLE:
+        raise DatasetError(f"recording {path}: expected a .csv, .parquet, or whitespace-separated "
+                           f"{' or '.join(WHITESPACE)} file")
+    return suffix
+
+
+def file_columns(path: str | os.PathLike, names: Sequence[str] | None = None) -> list[str]:
+    """The column names of a CSV (``.csv``), Parquet (``.parquet``) or whitespace-separated (``.dat``,
+    ``.txt``) file; ``names`` those of a text file without a header."""
+    path = Path(path)
+    suffix = _suffix(path)
+    if suffix in WHITESPACE or (suffix == ".csv" and names is not None):
+        return list(text_columns(path, names, None if suffix in WHITESPACE else ","))
+    if names is not None:
+        raise DatasetError(f"{path}: column names are for a text file without a header (.csv, .dat, .txt)")
     try:
         return pacsv.open_csv(path).schema.names if suffix == ".csv" else pq.read_schema(path).names
     except (pa.ArrowException, OSError) as problem:
@@ -385,23 +467,33 @@ def file_columns(path: str | os.PathLike) -> list[str]:
 
 def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequence[str], *,
                    ts: float | None = None, time_column: str | None = None, trial_column: str | None = None,
-                   units: Mapping[str, str] | None = None, time_tolerance: float = 0.02) -> Recording:
-    """The columns ``inputs`` and ``outputs`` of a CSV file (``.csv``) or a Parquet file (``.parquet``).
+                   units: Mapping[str, str] | None = None, time_tolerance: float = 0.02,
+                   names: Sequence[str] | None = None, resample: float | None = None,
+                   missing: float | None = None) -> Recording:
+    """The columns ``inputs`` and ``outputs`` of a CSV file (``.csv``), a Parquet file (``.parquet``) or a
+    whitespace-separated text file (``.dat``, ``.txt``: DaISy's files; ``names`` the columns of one
+    without a header row, else they are named 1, 2 ... by position; a CSV file without a header row is
+    read with ``names`` too).
 
     A softtip dataset file is read as a :class:`~softtip.data.Dataset` (its channels and labels, with
     their units). Any other file is read as plain columns: ``time_column`` (seconds; default ``time_s``
     when present, else ``ts`` must be given) and ``trial_column`` (integer ids, the rows of a trial
     contiguous; default ``trial`` when present, else one trial), ``units`` a mapping of column to unit.
+    ``resample`` (s): irregular time stamps interpolated linearly onto that even grid, trial by trial
+    (what was done is kept as the recording's ``resampled``). ``missing``: the value a logger writes for
+    "no reading" (such as -1): a row holding it in a signal is dropped (then resample).
     """
     path = Path(path)
-    present = file_columns(path)
-    suffix = path.suffix.lower()
+    suffix = _suffix(path)
+    whitespace = text_columns(path, names, None if suffix in WHITESPACE else ",") \
+        if suffix in WHITESPACE or (suffix == ".csv" and names is not None) else None
+    present = list(whitespace) if whitespace is not None else file_columns(path, names)
     if suffix == ".parquet" and _is_dataset_file(path):
-        if time_column is not None or trial_column is not None or units is not None:
-            raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units")
+        if time_column is not None or trial_column is not None or units is not None or resample is not None \
+                or missing is not None:
+            raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units, and is evenly sampled")
         return Recording.from_dataset(Dataset.read(path), inputs, outputs, ts=ts, time_tolerance=time_tolerance,
                                       source=str(path))
-    reader = _csv_columns if suffix == ".csv" else _parquet_columns
     time_name = time_column if time_column is not None else (TIME if TIME in present else None)
     trial_name = trial_column if trial_column is not None else (TRIAL if TRIAL in present else None)
     own = [name for name in (time_name, trial_name) if name is not None]
@@ -410,7 +502,10 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
             raise DatasetError(f"{path}: column {name!r} is the time or trial column, not a signal")
     wanted = list(dict.fromkeys([*own, *inputs, *outputs]))
     require_columns(path, wanted, present)
-    columns = reader(path, wanted)
+    if whitespace is not None:
+        columns = whitespace
+    else:
+        columns = (_csv_columns if suffix == ".csv" else _parquet_columns)(path, wanted)
     if trial_name is None:
         trial = np.zeros(len(columns[wanted[0]]), dtype=np.int64)
     else:
@@ -422,6 +517,12 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     unknown = [name for name in units if name not in (*inputs, *outputs)]
     if unknown:
         raise DatasetError(f"{path}: units: {unknown[0]!r} is not an input or output")
+    if missing is not None:
+        kept = ~np.any([columns[name] == missing for name in (*inputs, *outputs)], axis=0)
+        if not kept.any():
+            raise DatasetError(f"{path}: every row holds the missing value {missing:g} in a signal")
+        columns = {name: columns[name][kept] for name in wanted}
+        trial = trial[kept]
     return _assemble(str(path), trial, None if time_name is None else columns[time_name], columns, list(inputs),
                      list(outputs), [units.get(name, "") for name in inputs], [units.get(name, "") for name in outputs],
-                     ts, time_tolerance, time_name or TIME)
+                     ts, time_tolerance, time_name or TIME, resample)

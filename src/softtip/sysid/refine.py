@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import scipy.optimize
 
 from softtip.sysid.simulation import state_sequence
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -149,6 +148,8 @@ def refine(system: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]], *,
         return start, RefinementReport(False, 0, cost_before, cost_before, False,
                                        "the starting predictor A - KC is unstable: not refined")
     basis = problem.local_coordinates(theta0)
+    import scipy.optimize  # here, not at import: a command that refines nothing need not load it
+
     result = scipy.optimize.least_squares(lambda eta: problem.residuals(theta0 + basis @ eta), np.zeros(basis.shape[1]),
                                           jac=lambda eta: problem.jacobian(theta0 + basis @ eta) @ basis,
                                           method="trf", x_scale="jac", ftol=tolerance, max_nfev=max_iterations)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.stats
+import scipy.special
 
 from softtip.sysid.statespace import IdentificationError
 from softtip.sysid.uncertainty import normal_quantile
@@ -63,11 +63,12 @@ class ResidualTests:
 
     @property
     def whiteness_limit(self) -> float:
-        return float(scipy.stats.chi2.ppf(self.confidence, self.lags))
+        # chi2.ppf(confidence, lags), without importing scipy.stats
+        return float(scipy.special.chdtri(self.lags, 1 - self.confidence))
 
     @property
     def independence_limit(self) -> float:
-        return float(scipy.stats.chi2.ppf(self.confidence, 2 * self.lags + 1))
+        return float(scipy.special.chdtri(2 * self.lags + 1, 1 - self.confidence))
 
     @property
     def white(self) -> np.ndarray:

@@ -6,7 +6,8 @@ carry the gain ``K`` of its innovations form, x[k+1] = A x[k] + B u[k] + K e[k],
 D u[k] + e[k], with the covariance of e: that is its steady-state Kalman predictor.
 
 Zero-order hold: :meth:`StateSpace.to_discrete` is exact for inputs held constant over each
-sample (scipy.signal.cont2discrete); :meth:`StateSpace.to_continuous` inverts it with the matrix
+sample (the matrix exponential of [[A, B], [0, 0]] ts, as scipy.signal.cont2discrete computes it);
+:meth:`StateSpace.to_continuous` inverts it with the matrix
 logarithm of [[Ad, Bd], [0, I]], which exists as a real continuous system only when Ad has no
 eigenvalue on the closed negative real axis.
 """
@@ -17,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from softtip._core.config import PositiveNumber, checked
 
@@ -134,8 +134,12 @@ class StateSpace:
         """The exact zero-order-hold equivalent at sample time ``ts``."""
         self._require(False, "to_discrete")
         ts = checked(PositiveNumber, "ts", ts, IdentificationError)
-        A, B, C, D, _ = scipy.signal.cont2discrete((self.A, self.B, self.C, self.D), ts, method="zoh")
-        return StateSpace(A, B, C, D, ts)
+        n, nu = self.n_states, self.n_inputs
+        # exp of [[A, B], [0, 0]] ts holds [[Ad, Bd], [0, I]] (what scipy.signal.cont2discrete computes)
+        augmented = np.zeros((n + nu, n + nu))
+        augmented[:n, :n], augmented[:n, n:] = self.A, self.B
+        held = scipy.linalg.expm(augmented * ts)
+        return StateSpace(held[:n, :n], held[:n, n:], self.C, self.D, ts)
 
     def to_continuous(self) -> StateSpace:
         """The continuous system whose zero-order-hold equivalent this one is (matrix logarithm)."""

@@ -70,11 +70,12 @@ from dataclasses import dataclass
 from math import comb
 
 import numpy as np
-from scipy import linalg, optimize
+from scipy import linalg
 
 from softtip._core.threads import single_threaded_blas
 from softtip.sysid.metrics import fit_percent
 from softtip.sysid.realisation import companion, output_map
+from softtip.sysid.robust import COVARIANCES, SANDWICH, sandwich_covariance
 from softtip.sysid.statespace import IdentificationError
 
 # SRIVC sweeps without a relative improvement of the simulation error after which an SRIVC problem
@@ -671,23 +672,29 @@ def _simulation_and_sensitivities(row: _Row, inputs, mask, ts) -> tuple[np.ndarr
 
 
 def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np.ndarray, np.ndarray]],
-                         ts: float) -> list[np.ndarray]:
-    """The covariance of each output's coefficients, as the output-error estimate's asymptotic covariance
-    (Ljung 1999, §9.3): σ² (JᵀJ)⁻¹, J the Jacobian of the simulated output with respect to the
-    coefficients at ``tf`` on ``segments`` and σ² the residual variance, sum of squares / (N - p).
+                         ts: float, residuals: str = SANDWICH) -> tuple[list[np.ndarray], list[int | None]]:
+    """The covariance of each output's coefficients, and the lags its middle took (None: white). With
+    ``residuals="white"`` the output-error estimate's asymptotic covariance (Ljung 1999, §9.3):
+    σ² (JᵀJ)⁻¹, J the Jacobian of the simulated output with respect to the coefficients at ``tf`` on
+    ``segments`` and σ² the residual variance, sum of squares / (N - p); with ``"sandwich"`` (the
+    default) the sandwich estimate of :func:`softtip.sysid.robust.sandwich_covariance`, which holds
+    for coloured residuals too.
 
     One matrix per output over the coefficients of its entries in order, entry j: the denominator's
     coefficients after the leading 1, then the numerator's, both in descending powers of s (as
     ``tf`` stores them). (JᵀJ is computed in each entry's own time unit, where it is well
-    conditioned, and carried to seconds by the diagonal scaling between the two.) It holds for white
-    output errors: with coloured ones (the residual whiteness test fails) it understates the spread,
-    as MATLAB's for an output-error model does."""
+    conditioned, and carried to seconds by the diagonal scaling between the two.) The white estimate
+    holds for white output errors: with coloured ones (the residual whiteness test fails) it
+    understates the spread, as MATLAB's for an output-error model does."""
+    if residuals not in COVARIANCES:
+        raise ValueError(f"residuals: expected one of {', '.join(COVARIANCES)}, got {residuals!r}")
     ts = _sample_time(ts)
     inputs, outputs, mask = _segments(segments)
     ny, nu = tf.shape
     if (len(outputs), len(inputs)) != (ny, nu):
         raise ValueError(f"segments: {len(inputs)} inputs and {len(outputs)} outputs, the model has {nu} and {ny}")
-    covariances = []
+    covariances, all_lags = [], []
+    groups = np.nonzero(mask)[0]  # each real sample's trial, trials in order
     for i in range(ny):
         omega = np.array([max(float(np.exp(np.mean(np.log(np.maximum(np.abs(np.roots(a)), 1e-300))))), 1e-300)
                           if len(a) > 1 else 1.0 for a in tf.denominators[i]])
@@ -700,8 +707,12 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
         count, parameters = jacobian.shape
         if count <= parameters:
             raise IdentificationError(f"output {i}: {count} samples for {parameters} coefficients: no covariance")
-        variance = float(residual @ residual) / (count - parameters)
-        covariance = variance * np.linalg.pinv(jacobian.T @ jacobian)
+        if residuals == SANDWICH:
+            covariance, lags = sandwich_covariance(jacobian, residual, groups)
+        else:
+            variance = float(residual @ residual) / (count - parameters)
+            covariance, lags = variance * np.linalg.pinv(jacobian.T @ jacobian), None
+        all_lags.append(lags)
         # the row's ascending coefficients in 1/omega units -> descending in seconds: a_k omega^(n-k)
         factors, order, first = [], [], 0
         for a, b, w in zip(row.a, row.b, omega):
@@ -712,7 +723,7 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
         factor, order = np.concatenate(factors), np.concatenate(order)
         covariance = covariance * np.outer(factor, factor)
         covariances.append(covariance[np.ix_(order, order)])
-    return covariances
+    return covariances, all_lags
 
 
 def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, stable_only: bool):
@@ -731,6 +742,8 @@ def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, sta
                 residual = np.full_like(residual, np.nan)
             last.update(theta=theta.copy(), residual=residual, jacobian=-sensitivities)
         return last
+
+    from scipy import optimize  # here, not at import: a command that fits nothing need not load it
 
     result = optimize.least_squares(lambda theta: evaluate(theta)["residual"], row.parameters(),
                                     jac=lambda theta: evaluate(theta)["jacobian"], method="trf", x_scale="jac",

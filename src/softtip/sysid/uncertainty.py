@@ -19,13 +19,13 @@ input spectral matrix is inverted per frequency).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from statistics import NormalDist
+
 import numpy as np
-import scipy.signal
-import scipy.stats
 
 from softtip.sysid.refine import StateSpaceCovariance
 from softtip.sysid.statespace import IdentificationError, StateSpace
@@ -40,7 +40,7 @@ def normal_quantile(confidence: float) -> float:
     outside (0, 1)."""
     if not 0 < confidence < 1:
         raise IdentificationError(f"confidence: expected a fraction between 0 and 1, got {confidence!r}")
-    return float(scipy.stats.norm.ppf(0.5 + confidence / 2))
+    return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
 def _entry_slices(tf: TransferFunctionMatrix, i: int) -> list[tuple[slice, slice]]:
@@ -152,6 +152,8 @@ def empirical_transfer_function(u: np.ndarray, y: np.ndarray, ts: float, segment
     nu, ny = u.shape[1], y.shape[1]
 
     def cross(a, b):
+        import scipy.signal  # only here: it takes a third of a second to import
+
         return scipy.signal.csd(a, b, fs=1 / ts, nperseg=segment)
 
     frequency = cross(u[:, 0], u[:, 0])[0]
@@ -169,8 +171,9 @@ def empirical_transfer_function(u: np.ndarray, y: np.ndarray, ts: float, segment
 
 def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidence: float = 0.95,
                 delays_s: np.ndarray | None = None, measured: tuple[np.ndarray, np.ndarray] | None = None,
-                names: tuple[list[str], list[str]] | None = None) -> Figure:
-    """Magnitude (dB) and phase (degrees) of every entry of ``response`` (len(ω), ny, nu) against ω (rad/s),
+                names: tuple[list[str], list[str]] | None = None,
+                units: tuple[Sequence[str], Sequence[str]] | None = None) -> Figure:
+    """Magnitude (dB, of the output's ``units`` per the input's when given) and phase (degrees) of every entry of ``response`` (len(ω), ny, nu) against ω (rad/s),
     with the ``confidence`` band of ``band(i, j)`` (a :class:`Band`, see :func:`frequency_band`) when given,
     input delays ``delays_s`` (s) not in the response added to the phase, and ``measured`` (ω, G) points of
     :func:`empirical_transfer_function` beside it."""
@@ -203,13 +206,21 @@ def bode_figure(response: np.ndarray, omega: np.ndarray, *, band=None, confidenc
                 wrapped = model_phase + np.angle(H[:, i, j] * np.exp(-1j * model_phase))
                 phase_axis.semilogx(w, np.degrees(wrapped), ".", markersize=3)
             magnitude_axis.set_title(f"{inputs[j]} → {outputs[i]}")
-            magnitude_axis.set_ylabel("magnitude (dB)")
+            magnitude_axis.set_ylabel(f"magnitude (dB{gain_unit(units, i, j)})")
             phase_axis.set_ylabel("phase (°)")
             phase_axis.set_xlabel("ω (rad/s)")
             magnitude_axis.grid(True, which="both", alpha=0.3)
             phase_axis.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize="small")
     return figure
+
+
+def gain_unit(units: tuple[Sequence[str], Sequence[str]] | None, output: int, input: int) -> str:
+    """The unit of the gain from input ``input`` to output ``output`` for a dB axis (" re 1 V/N"); empty
+    without units."""
+    if units is None or not (units[0][input] or units[1][output]):
+        return ""
+    return f" re 1 {units[1][output] or '1'}/{units[0][input] or '1'}"
 
 
 # ------------------------------------------------------------------------------- state-space models
@@ -265,9 +276,13 @@ def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, 
         derivatives = derivatives / (values * system.ts)
         values = np.log(values.astype(complex)) / system.ts
     order = np.argsort(-np.abs(values), kind="stable")
+    # d|λ| = Re(conj(λ) dλ) / |λ|: how near the unit circle a discrete pole may be
+    modulus = np.real(np.conj(values) * derivatives) / np.abs(values)
     poles = [{"real": float(values[k].real), "imag": float(values[k].imag),
               "real_std": float(_spread(derivatives.real[:, [k]], covariance.covariance)[0]),
-              "imag_std": float(_spread(derivatives.imag[:, [k]], covariance.covariance)[0])} for k in order]
+              "imag_std": float(_spread(derivatives.imag[:, [k]], covariance.covariance)[0])} |
+             ({} if continuous else {"modulus_std": float(_spread(modulus[:, [k]], covariance.covariance)[0])})
+             for k in order]
     response, gradient = _state_space_gradient(system, covariance, np.zeros(1))
     gains = []
     for i in range(system.n_outputs):
@@ -279,4 +294,6 @@ def state_space_intervals(system: StateSpace, covariance: StateSpaceCovariance, 
     return {"confidence": confidence, "z": z, "poles": poles, "poles_domain": "continuous" if continuous else
             "discrete", "dc_gains": gains,
             "method": "prediction-error covariance H⁻¹ (Σ Jᵀ W Λ W J) H⁻¹ in local coordinates; poles and "
-                      "responses to first order"}
+                      "responses to first order",
+            "assumption": "assumes white one-step prediction errors (the Kalman predictor's innovations): the "
+                          "residual whiteness test checks it"}
