@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from softtip.systems.cilia.fit import (
     CHI2_95,
@@ -125,3 +126,38 @@ def test_bad_curves_are_refused_in_one_line():
         fit_curve(MODEL, MeasuredCurve(FORCE, TRUTH.change), start=(-1.0, 2e-4))
     with pytest.raises(CurveError, match="linear_fraction = 1.5"):
         identifiability(MODEL, MeasuredCurve(FORCE, TRUTH.change), linear_fraction=1.5)
+
+
+def test_wald_intervals_use_students_t_with_n_minus_2_degrees_of_freedom():
+    """Five points, two parameters: three degrees of freedom, where t(0.975) is 3.18 (the normal 1.96,
+    t with 2 or 4 degrees of freedom 4.30 and 2.78). The intervals are computed again by hand: the
+    Jacobian of the log parameters by central differences of the model, s² = RSS/(n − 2), s²(JᵀJ)⁻¹."""
+    force = np.array([2e-3, 6e-3, 12e-3, 19e-3, 26e-3])
+    truth = CiliaModel(TRUE_DIE).curve(force, "X")
+    rng = np.random.default_rng(3)
+    curve = MeasuredCurve(force, truth.change + rng.normal(0, 0.01 * np.abs(truth.change).max(), force.size))
+    predictor = CurveModel(MODEL, force, "X")
+    fit = fit_curve(MODEL, curve, cache=predictor)
+    best = np.log([fit.moment, fit.diameter])
+
+    def predict(log_parameters):
+        return predictor.predict(*np.exp(log_parameters))
+
+    step = 1e-4
+    jacobian = np.column_stack([(predict(best + step * unit) - predict(best - step * unit)) / (2 * step)
+                                for unit in np.eye(2)])
+    residual = predict(best) - curve.change
+    variance = residual @ residual / (force.size - 2)
+    covariance = variance * np.linalg.inv(jacobian.T @ jacobian)
+    quantile = 3.182446305284263  # Student's t, 97.5 %, 3 degrees of freedom (statistical tables)
+    assert quantile == pytest.approx(stats.t.ppf(0.975, 3), rel=1e-12)
+    gradient_ratio = np.array([1.0, -4.0])  # log(moment / diameter⁴)
+    for interval, centre, spread in (
+            (fit.interval_moment, best[0], math.sqrt(covariance[0, 0])),
+            (fit.interval_diameter, best[1], math.sqrt(covariance[1, 1])),
+            (fit.interval_ratio, best @ gradient_ratio, math.sqrt(gradient_ratio @ covariance @ gradient_ratio))):
+        low, high = np.log(interval)
+        # the half-widths agree to 0.1 %; a wrong quantile is off by 14 % (t with 4 dof) or more
+        assert (high - low) / 2 == pytest.approx(quantile * spread, rel=1e-3)
+        assert (high + low) / 2 == pytest.approx(centre, abs=1e-9)
+    assert fit.correlation == pytest.approx(covariance[0, 1] / math.sqrt(covariance[0, 0] * covariance[1, 1]), rel=1e-3)
