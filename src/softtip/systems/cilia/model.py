@@ -9,7 +9,8 @@ Load modes (every pillar takes the same share of the force; the five are identic
   tip), which curls the pillar over until its side touches the die; from then on it lies there and the
   rest of the force goes into its side wall (``lying``).
 * balance (:meth:`CiliaModel.balance_curve`): the die lowered onto a flat plate, as the measurement was
-  made: a vertical push with friction at the tips, compression, buckling, lying down.
+  made: a vertical push with friction at the tips, compression, buckling, lying down, and the plate
+  pressing the lying pillars' side walls and folding them further.
 
 The field of each pillar is a chain of ``chain_count`` point dipoles at the midpoints of equal pieces of
 its deformed centre line, along the local tangent, each with 1/K of its moment (as published); the
