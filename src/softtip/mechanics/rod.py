@@ -192,6 +192,14 @@ class RodShapes:
                        force=np.concatenate([self.force, other.force]),
                        saturated=np.concatenate([self.saturated, other.saturated]))
 
+    def turned(self, angle: float) -> RodShapes:
+        """The same shapes in a frame turned by ``angle`` (rad) about the base: every angle less by it (a
+        direction at θ from +z towards +x is at θ − angle in the new frame)."""
+        c, s = math.cos(angle), math.sin(angle)
+        return replace(self, x=self.x * c - self.z * s, z=self.z * c + self.x * s, angles=self.angles - angle,
+                       force=np.stack([self.force[:, 0] * c - self.force[:, 1] * s,
+                                       self.force[:, 1] * c + self.force[:, 0] * s], axis=-1))
+
     def centreline(self, fractions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Points on the deformed centre line at reference arc-length ``fractions`` of the length (K,),
         and the unit tangents there: ((B, K, 2), (B, K, 2)) in the x–z plane.
@@ -374,8 +382,9 @@ def _unstable(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closu
     _, jacobian = _system(d, theta, force, rest, closure, target)
     n = theta.shape[1]
     k, b, c, dd = jacobian[0, :n, :n], jacobian[0, :n, n:], jacobian[0, n:, :n], jacobian[0, n:, n:]
-    stiffness = k - b @ np.linalg.solve(dd, c)
-    values, _ = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
+    with single_threaded_blas():  # one small matrix: a second BLAS thread only slows it down (40 ms against 1 ms)
+        stiffness = k - b @ np.linalg.solve(dd, c)
+        values = np.linalg.eigvalsh(0.5 * (stiffness + stiffness.T))
     return bool(values[0] < -1e-9 * abs(values).max())
 
 
@@ -502,12 +511,17 @@ class PlateContact:
     kinetic) and an initial stress-free bow that makes a straight column choose a side when it buckles:
     a half sine bulging towards +x with its tip above its base, θ(s) = ``imperfection`` cos(π s/L) (its
     slope at the base, rad; the bulge is imperfection × L/π). Both the free column's mode (a lean) and the
-    stuck one's (a bulge) then start towards +x."""
+    stuck one's (a bulge) then start towards +x. ``tilt`` (rad): the base's axis leans from the plate's
+    normal by it (a die not parallel to the plate), towards +x if positive; the rod's frame is the plate's
+    (z along its normal), so the stress-free angles are the bow's plus the tilt."""
 
     friction: float = 0.5
     imperfection: float = 0.01
+    tilt: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.tilt) and abs(self.tilt) < math.pi / 4):
+            raise RodError(f"tilt = {self.tilt!r}: expected an angle in rad, |tilt| < pi/4")
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise RodError(f"friction = {self.friction!r}: expected a number >= 0")
         if not (math.isfinite(self.imperfection) and 0 < abs(self.imperfection) < math.pi / 4):
@@ -534,9 +548,11 @@ class PlatePath:
         return self.shapes.saturated
 
 
-def _bow(rod: Rod, contact: PlateContact) -> NDArray[np.float64]:
-    """(1, N) the stress-free angles of the bowed rod (:class:`PlateContact`)."""
-    return (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
+def _bow(rod: Rod, contact: PlateContact, length: float | None = None) -> NDArray[np.float64]:
+    """(1, N) the stress-free angles of the bowed, tilted rod (:class:`PlateContact`) at the centres of N
+    equal segments of its first ``length`` (m; the whole rod when None)."""
+    centres = (np.arange(rod.segments) + 0.5) / rod.segments * (rod.length if length is None else length)
+    return (contact.imperfection * np.cos(np.pi * centres / rod.length) + contact.tilt)[None, :]
 
 
 def touching_height(rod: Rod, contact: PlateContact = PlateContact()) -> float:
@@ -763,8 +779,7 @@ def _fold_solve(rod: Rod, contact: PlateContact, folded: _Folded, height: float,
 
     def system(theta: NDArray, force: NDArray, free: float) -> tuple[NDArray, NDArray, _Discrete]:
         d = _discretise(_free_part(rod, free))
-        centres = (np.arange(n) + 0.5) * free / n
-        rest = (contact.imperfection * np.cos(np.pi * centres / rod.length))[None, :]  # the bow (_bow) of these sections
+        rest = _bow(rod, contact, free)
         if friction is None:
             closure, target = "pinned", np.array([[folded.anchor + folded.side * (free - rod.length), height]])
         else:
@@ -788,7 +803,8 @@ def _fold_solve(rod: Rod, contact: PlateContact, folded: _Folded, height: float,
         whole[:, n + 2] = column
         whole[n + 2, n - 1] = 1.0
         try:
-            step = np.linalg.solve(whole, -residual)
+            with single_threaded_blas():
+                step = np.linalg.solve(whole, -residual)
         except np.linalg.LinAlgError:
             raise NotConverged("rod: singular Newton system for the rod lying on the plate") from None
         # as in _newton: at most 0.3 rad per angle, and the free length by at most a tenth, per step
