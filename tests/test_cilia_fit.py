@@ -19,9 +19,9 @@ from softtip.systems.cilia.fit import (
     identifiability,
     profiles,
 )
-from softtip.systems.cilia.layout import read_die
+from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import CiliaModel
-from softtip.systems.cilia.resolution import resolution
+from softtip.systems.cilia.resolution import balance_force_budget, resolution
 
 DIE = read_die()
 TRUTH_MOMENT, TRUTH_DIAMETER = 2.5e-6, 215e-6
@@ -161,3 +161,30 @@ def test_wald_intervals_use_students_t_with_n_minus_2_degrees_of_freedom():
         assert (high - low) / 2 == pytest.approx(quantile * spread, rel=1e-3)
         assert (high + low) / 2 == pytest.approx(centre, abs=1e-9)
     assert fit.correlation == pytest.approx(covariance[0, 1] / math.sqrt(covariance[0, 0] * covariance[1, 1]), rel=1e-3)
+
+
+def test_the_balance_tests_force_budget_adds_its_causes_as_computed_by_hand():
+    """A straight 2 mV/mN curve whose plate seated δ askew shifts it by 0.1 mV per mrad: every cause's σ by hand."""
+    force = np.linspace(0.0, 20e-3, 11)
+    slope, per_mrad, delta = 2.0, 0.1e-3 / 1e-3, 1e-3
+    change = slope * force
+    readout = DIE.meander("X").readout
+    rest = 18.7
+    found = balance_force_budget(force, change, rest, readout, (change - per_mrad * delta, change + per_mrad * delta, delta),
+                                 readability=1e-6, seating=2e-3, warm_up=5.0, dwell=2.0, die_area=9e-6)
+    tau = readout.thermal_resistance * 2329.0 * 700.0 * 9e-6 * 0.5e-3  # R_th × ρ c × the die's volume
+    warming = readout.current * rest * readout.thermal_resistance  # I² R R_th with R = V / I
+    drift = rest * readout.sensor.temperature_coefficient * warming * math.exp(-5.0 / tau) * (1 - math.exp(-2.0 / tau))
+    assert np.allclose(found.balance, 1e-6 / math.sqrt(12))
+    assert np.allclose(found.plate, per_mrad * 2e-3 / slope, rtol=1e-12)
+    assert np.allclose(found.meter, readout.noise(rest).total / slope, rtol=1e-12)
+    assert np.allclose(found.drift, drift / slope, rtol=1e-12)
+    total = 3 * np.sqrt(found.balance**2 + found.plate**2 + found.meter**2 + found.drift**2)
+    assert np.allclose(found.minimum_force, total, rtol=1e-12)
+    assert sum(found.shares(4).values()) == pytest.approx(1.0)
+    alone = balance_force_budget(force, change, rest, readout, (change, change, delta), 1e-6, 2e-3, 5.0, 2.0, 9e-6,
+                                 parts=("meter",))
+    assert np.allclose(alone.minimum_force, 3 * readout.noise(rest).total / slope, rtol=1e-12)
+    with pytest.raises(DieError, match=r"parts: expected some of balance, plate, meter, drift, got \['heat'\]"):
+        balance_force_budget(force, change, rest, readout, (change, change, delta), 1e-6, 2e-3, 5.0, 2.0, 9e-6,
+                             parts=("heat",))

@@ -25,7 +25,7 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure():
     progress = Recorder()
     study = run_study(settings, seed=4, progress=progress)
     assert progress.stages == ["fit, profiles and identifiability", "recovery of the twin's truth",
-                               "resolution, balance, layout"]
+                               "resolution, balance, the publication's fit, layout"]
     fit = study.fit
     # the twin's truth (2.8 memu, 200 µm) is found within its 95 % intervals
     assert fit.interval_moment[0] <= 2.8e-6 <= fit.interval_moment[1]
@@ -39,6 +39,16 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure():
     assert study.resolution.minimum_force_at_rest < study.resolution.smallest_step_at_rest
     # the balance test: the pillars buckle (5 × the one-pillar load) before the plate bends them
     assert 0 < study.balance.buckling_force < study.balance.curve.force.max() * 1.01
+    # the publication's model: a cylinder fitted to the twin's cone (200 → 320 µm) reads a diameter between
+    tip_load = study.publication_tip_load.fit
+    assert tip_load is not None and 200e-6 < tip_load.diameter < 320e-6
+    assert [cause.cause for cause in study.moment_gap] == ["none (the twin as declared)", "the cone", "the cone",
+                                                           "non-uniform material", "non-uniform material",
+                                                           "spin-valve heating"]
+    # its own twin read with nothing changed gives the baseline row's ratio again
+    assert study.moment_gap[0].fit.moment == pytest.approx(tip_load.moment, rel=0.05)
+    budget = study.balance.budget
+    assert 0 < budget.minimum_force[budget.best] and budget.force[budget.best] <= 26e-3
     layout = study.layout
     assert layout.moments_by_depth.shape == (2,) and layout.moments_by_scale.shape == (1,)
     # the declared layout (10 µm) gives back the study's own fit

@@ -5,6 +5,7 @@ under a plate, and bad input."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -259,3 +260,18 @@ def test_a_bonded_root_turns_the_rod_less_by_its_flexibility_times_the_moment():
         uniform(base_stiffness=1e-6, bonded_root=True)
     with pytest.raises(RodError, match="poisson_ratio"):
         uniform(poisson_ratio=0.1, bonded_root=True)
+
+
+def test_under_a_plate_the_push_scales_with_youngs_modulus_at_the_same_shapes():
+    """The rod's equations are homogeneous in E at a given geometry (friction is a ratio of forces): a
+    stiffer material of the same shape takes proportionally more push at every gap, lying down included.
+    This is why the lying load, and so the range read on a balance, scales with E."""
+    soft = Rod(length=L, base_diameter=320e-6, tip_diameter=200e-6, youngs_modulus=E,
+               base_stiffness=half_space_rotational_stiffness(E, 0.49, 320e-6), poisson_ratio=0.49)
+    stiff = replace(soft, youngs_modulus=1.5 * E, base_stiffness=1.5 * soft.base_stiffness)
+    contact = PlateContact(friction=0.5, imperfection=0.01)
+    gaps = touching_height(soft, contact) - np.linspace(0.0, 0.5 * L, 41)
+    one, other = lower_plate(soft, gaps, contact), lower_plate(stiff, gaps, contact)
+    assert one.lying.any() and np.array_equal(one.lying, other.lying)
+    assert np.allclose(other.vertical_force, 1.5 * one.vertical_force, rtol=1e-6, atol=1e-12)
+    assert np.allclose(other.shapes.x, one.shapes.x, atol=1e-9 * L)

@@ -72,11 +72,15 @@ class BalanceCurve(ForceCurve):
 @dataclass(frozen=True)
 class BalancePlate:
     """The balance's plate: ``rotation_stiffness`` (N·m/rad) of its turn about the axis across the bend under
-    the die's centre; None: it does not turn."""
+    the die's centre (None: it does not turn under the pushes); ``seated`` (rad) the turn it rests at before
+    the die comes down (a plate seated askew: every base's gap less by its lever times it)."""
 
     rotation_stiffness: float | None = None
+    seated: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.seated) and abs(self.seated) < 0.1):
+            raise DieError(f"seated = {self.seated!r}: expected a turn in rad, |turn| < 0.1")
         k = self.rotation_stiffness
         if k is not None and not (math.isfinite(k) and k > 0):
             raise DieError(f"rotation_stiffness = {k!r}: expected a positive stiffness in N·m/rad, or none")
@@ -132,9 +136,10 @@ def _pillar_gaps(path: PlatePath, unturned: NDArray, lever: NDArray, plate: Bala
     return unturned - lever[None, :] * turns[:, None], turns
 
 
-def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int) -> Dipoles:
+def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int, shares: tuple[float, ...] | None = None) -> Dipoles:
     """(B, P·K) dipoles of every pillar bent to ``shapes`` (one shape per load, the same for all pillars):
-    K = ``count`` per pillar, along the local tangents, 1/K of the pillar's moment each."""
+    K = ``count`` per pillar, along the local tangents, each ``shares`` of the pillar's moment (base first;
+    None: 1/K each, as published)."""
     fractions = (np.arange(count) + 0.5) / count
     points, tangents = shapes.centreline(fractions)  # (B, K, 2) in the bending plane (along, up)
     lift = np.zeros(points.shape[:-1] + (1,))
@@ -142,10 +147,11 @@ def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int) -> Dipoles:
     def to_3d(plane: NDArray) -> NDArray:  # the bending plane is the pillar's x-z plane
         return np.concatenate([plane[..., :1], lift, plane[..., 1:]], axis=-1)
 
-    return chain_dipoles(pillars, to_3d(points), to_3d(tangents))
+    return chain_dipoles(pillars, to_3d(points), to_3d(tangents), shares)
 
 
-def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray) -> Dipoles:
+def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray,
+                  shares: tuple[float, ...] | None = None) -> Dipoles:
     """(B, P·K) dipoles of every pillar whose centre line is at ``points`` (B, K, 3) with unit ``tangents``
     (B, K, 3), given in a pillar's own frame (base at the origin, bending towards +x), turned to the
     pillars' bend azimuth and placed at each base."""
@@ -154,7 +160,7 @@ def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray) -> Dipol
     offsets = np.concatenate([pillars.positions, np.zeros((len(pillars.positions), 1))], axis=-1)  # (P, 3)
     positions = (points @ turn.T)[:, None, :, :] + offsets[None, :, None, :]  # (B, P, K, 3)
     axes = np.broadcast_to((tangents @ turn.T)[:, None], positions.shape)
-    chain = dipole_chain(positions, axes, pillars.moment)
+    chain = dipole_chain(positions, axes, pillars.moment, shares)
     batch = positions.shape[0]
     return Dipoles(chain.positions.reshape(batch, -1, 3), chain.moments.reshape(batch, -1, 3))
 
@@ -173,15 +179,21 @@ def _forces(values: ArrayLike, name: str) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class CiliaModel:
-    """The die's forward model. ``chain_count`` dipoles per pillar; ``mode`` the paper's load reading."""
+    """The die's forward model. ``chain_count`` dipoles per pillar, carrying ``chain_shares`` of its moment
+    (base first; None: equal shares, as published: a uniform magnetisation of a uniform pillar); ``mode``
+    the paper's load reading."""
 
     die: Die
     chain_count: int = 10
     mode: LoadMode = "paper"
+    chain_shares: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.chain_count, int) or self.chain_count < 1:
             raise DieError(f"chain_count = {self.chain_count!r}: expected a positive integer")
+        if self.chain_shares is not None and (len(self.chain_shares) != self.chain_count
+                                              or min(self.chain_shares) < 0 or abs(sum(self.chain_shares) - 1) > 1e-9):
+            raise DieError(f"chain_shares: expected {self.chain_count} shares >= 0 summing to 1")
         if self.mode not in ("paper", "paper-follower"):
             raise DieError(f"mode = {self.mode!r}: expected paper or paper-follower")
 
@@ -201,7 +213,7 @@ class CiliaModel:
         """(B, n) element fields of ``sensor`` per unit of the pillars' moment (T per A·m²): the field is
         linear in the moment, so a fit of the moment rescales these."""
         unit = replace(self.die.pillars, moment=float(np.sign(self.die.pillars.moment)))
-        return element_fields(self.die.meander(sensor), pillar_dipoles(unit, shapes, self.chain_count))
+        return element_fields(self.die.meander(sensor), pillar_dipoles(unit, shapes, self.chain_count, self.chain_shares))
 
     def volts(self, fields: ArrayLike, sensor: str) -> NDArray[np.float64]:
         """Voltage across ``sensor`` whose elements see ``fields`` (B, n)."""
@@ -249,7 +261,7 @@ class CiliaModel:
         rod = pillars.rod
         start = touching_height(rod, contact)
         lever = pillars.positions @ np.array([math.cos(pillars.bend_azimuth), math.sin(pillars.bend_azimuth)])
-        nearer = lever * math.sin(contact.tilt)
+        nearer = lever * (math.sin(contact.tilt) + plate.seated)
         spread = float(nearer.max() - nearer.min())
         if (descent.ndim != 1 or descent.size == 0 or not np.all(np.isfinite(descent)) or np.any(descent < 0)
                 or np.any(np.diff(descent) < 0) or descent[-1] + spread >= start):
@@ -276,9 +288,9 @@ class CiliaModel:
         for sensor in sensors:
             meander = self.die.meander(sensor)
             fields = sum(element_fields(meander, pillar_dipoles(replace(pillars, positions=pillars.positions[p:p + 1]),
-                                                                shapes[p], self.chain_count))
+                                                                shapes[p], self.chain_count, self.chain_shares))
                          for p in range(lever.size))
-            rest = element_fields(meander, pillar_dipoles(pillars, standing, self.chain_count))
+            rest = element_fields(meander, pillar_dipoles(pillars, standing, self.chain_count, self.chain_shares))
             volts = self.volts(np.concatenate([rest, fields]), sensor)
             curves.append(BalanceCurve(sensor, force, volts[1:], volts[1:] - volts[0], lying, shapes[centre],
                                        gaps, rotation, np.stack([s.saturated for s in shapes], axis=1).sum(axis=1)))
