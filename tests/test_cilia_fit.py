@@ -179,6 +179,7 @@ def test_the_balance_tests_force_budget_adds_its_causes_as_computed_by_hand():
     assert np.allclose(found.plate, per_mrad * 2e-3 / slope, rtol=1e-12)
     assert np.allclose(found.meter, readout.noise(rest).total / slope, rtol=1e-12)
     assert np.allclose(found.drift, drift / slope, rtol=1e-12)
+    assert found.time_constant == pytest.approx(tau) and found.warming == pytest.approx(warming)
     total = 3 * np.sqrt(found.balance**2 + found.plate**2 + found.meter**2 + found.drift**2)
     assert np.allclose(found.minimum_force, total, rtol=1e-12)
     assert sum(found.shares(4).values()) == pytest.approx(1.0)

@@ -34,7 +34,7 @@ from softtip.systems.cilia.bench import SENSORS, curve_of, recordings_of
 from softtip.systems.cilia.design import DESIGN_CAPTION, design_table, search_designs
 from softtip.systems.cilia.fit import CurveFit
 from softtip.systems.cilia.layout import MEMU
-from softtip.systems.cilia.resolution import BUDGET_PARTS
+from softtip.systems.cilia.resolution import BUDGET_PARTS, ForceBudget
 from softtip.systems.cilia.roughness import RoughnessStudy, analyse_roughness
 from softtip.systems.cilia.study import (
     CiliaSettings,
@@ -199,19 +199,31 @@ def _minimum_force_tables(study: CiliaStudy) -> list[Table]:
         cells.update({(row, columns[0]): sigma / UN, (row, columns[1]): 100 * shares[row] if row in shares else "off",
                       (row, columns[2]): 3 * sigma / UN})
     per_mrad = float(budget.plate_per_radian[best]) * 1e-3
-    alone = 630 * UN / 3 / per_mrad if per_mrad > 0 else math.inf
+    figure = published_table("cilia-minimum-force").value("X", "minimum force").low * UN
+    alone = figure / 3 / per_mrad if per_mrad > 0 else math.inf
     causes = Table("The minimum force from its causes", "cause", rows, columns, cells, digits=3,
                    caption=f"At {budget.force[best] / MN:.1f} mN on the balance curve, where the voltage changes by "
                            f"{budget.slope[best] * 1e3 * MN:.3g} mV per mN. balance: readability "
                            f"{settings.balance_readability_mg:g} mg (an analytical balance's; chosen). plate: its "
                            f"seating turn scattering by {settings.plate_seating_mrad:g} mrad rms between steps "
-                           f"(chosen, no source): {per_mrad / UN:.0f} µN per mrad here, so {alone * 1e3:.2f} mrad "
-                           "alone would give the published 630 µN. meter: the readout's noise budget on the range "
-                           "holding the sensor's voltage (the HP 34401A counts 1 ppm of its 100 V range, 100 µV, at "
-                           "10 power-line cycles). drift: the spin valves' self-heating still settling, "
-                           f"{settings.warm_up_s:g} s after the current was switched on, over one step.",
+                           f"(chosen, no source): {per_mrad / UN:.0f} µN per mrad here, so {alone:.2f} mrad "
+                           f"alone would give the published {figure / UN:.0f} µN. meter: the readout's noise budget "
+                           "on the range holding the sensor's voltage (the HP 34401A counts 1 ppm of its 100 V range, "
+                           "100 µV, at "
+                           "10 power-line cycles). drift: the spin valves' self-heating "
+                           f"({budget.warming:.2f} K) still settling, {settings.warm_up_s:g} s after the current was "
+                           f"switched on, over one step; the die's time constant is {budget.time_constant:.1f} s "
+                           "(its heat capacity alone: a lower bound), so the drift of a step falls under the "
+                           f"meter's σ after {_settled(budget, study.resolution.noise.total):.0f} s of warm-up.",
                    notes={"plate": "The plate's share follows the chosen scatter; the other three are computed."})
     return [published, causes]
+
+
+def _settled(budget: ForceBudget, sigma: float) -> float:
+    """The warm-up (s) after which one step's self-heating drift falls under ``sigma`` (V)."""
+    tau = budget.time_constant
+    start = budget.drift_per_kelvin * budget.warming * -math.expm1(-budget.dwell / tau) if tau > 0 else 0.0
+    return tau * math.log(start / sigma) if start > sigma else 0.0
 
 
 def _roughness_slope(rough: RoughnessStudy) -> Table:

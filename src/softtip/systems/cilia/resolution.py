@@ -121,6 +121,10 @@ class ForceBudget:
     drift: NDArray[np.float64]
     parts: tuple[str, ...]
     plate_per_radian: NDArray[np.float64]  # (G,) N of force-equivalent per rad of seating turn
+    warming: float  # K: the spin valves' steady self-heating
+    time_constant: float  # s: the die's thermal time constant R_th C_th
+    drift_per_kelvin: float  # V per K of warming still settling within a step (V × TCR)
+    dwell: float  # s per step
 
     def part(self, name: str) -> NDArray[np.float64]:
         return {"balance": self.balance, "plate": self.plate, "meter": self.meter, "drift": self.drift}[name]
@@ -172,4 +176,5 @@ def balance_force_budget(force: NDArray, change: NDArray, rest_volts: float, rea
     balance = np.full_like(force, readability / math.sqrt(12.0))
     return ForceBudget(force=force, slope=slope, balance=balance, plate=np.abs(per_radian) * seating * inverse,
                        meter=noise.total * inverse, drift=abs(drift_volts) * inverse, parts=tuple(parts),
-                       plate_per_radian=np.abs(per_radian) * inverse)
+                       plate_per_radian=np.abs(per_radian) * inverse, warming=warming, time_constant=time_constant,
+                       drift_per_kelvin=abs(rest_volts * readout.sensor.temperature_coefficient), dwell=dwell)
