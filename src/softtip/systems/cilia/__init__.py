@@ -49,8 +49,8 @@ SYSTEM = System(
               "S4: the publication's fit of the pillars' moment and diameter made again on the twin's balance "
               "test, the minimum force from its causes and the measurement range of a GMR cilia sensor",
               # --quick: a coarse protocol (fewer load steps, short brushings on two strips, a coarse design
-              # search, the moment gap's causes left out) on top of the two trials
-              quick={"points": 15, "gap_causes": False, "depths_um": (20.0,), "meander_scales": (1.1,), "brush_length_mm": 6.0,
+              # search, the moment gap's causes and the rig's sweep left out) on top of the two trials
+              quick={"points": 15, "gap_causes": False, "rig_tilts_deg": (), "rig_plate_stiffnesses_uNm": (), "depths_um": (20.0,), "meander_scales": (1.1,), "brush_length_mm": 6.0,
                      "brush_strips": 2, "brush_rates_hz": (2.0, 20.0, 50.0), "brush_speeds_mm_s": (0.5, 2.0), "design_steps": 3,
                      "design_budget": 6, "design_points": 9}),
     ),

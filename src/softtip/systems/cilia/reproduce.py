@@ -39,6 +39,7 @@ from softtip.systems.cilia.roughness import RoughnessStudy, analyse_roughness
 from softtip.systems.cilia.study import (
     CiliaSettings,
     CiliaStudy,
+    RigCase,
     analyse_curves,
     balance_contact,
     balance_descent,
@@ -73,7 +74,8 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                              settings.design_steps, settings.design_budget, settings.design_points,
                              settings.chain_count, seed, progress)
     tables = [_publication_fit_table(study), *_moment_gap_tables(study), _range(study),
-              *_minimum_force_tables(study), _balance_table(study), _roughness_slope(rough), _sampling(rough),
+              *_minimum_force_tables(study), _balance_table(study), *([_rig_table(study)] if study.rig else []),
+              _roughness_slope(rough), _sampling(rough),
               _readout(model, rest), _fit_table(study), _identifiability_table(study), _recovery_table(study),
               _resolution_table(study), _layout_table(study, model.die.depth), *_roughness_tables(rough, settings),
               design_table(designs)]
@@ -224,6 +226,32 @@ def _settled(budget: ForceBudget, sigma: float) -> float:
     tau = budget.time_constant
     start = budget.drift_per_kelvin * budget.warming * -math.expm1(-budget.dwell / tau) if tau > 0 else 0.0
     return tau * math.log(start / sigma) if start > sigma else 0.0
+
+
+def _rig_table(study: CiliaStudy) -> Table:
+    """The balance test under other values of its unknowns (the die's tilt, the plate's turn)."""
+    settings = study.settings
+    balance = study.balance
+    declared = RigCase(math.radians(settings.die_tilt_deg),
+                       None if settings.plate_stiffness_uNm is None else settings.plate_stiffness_uNm * 1e-6,
+                       balance.all_lying_force,
+                       float(np.interp(5 * MN, balance.curve.force, balance.curve.change)),
+                       float(np.abs(balance.curve.rotation).max()))
+    columns = ["every pillar lies (mN)", "voltage change at 5 mN (µV)", "largest plate turn (mrad)"]
+    rows, cells = [], {}
+    for index, case in enumerate((declared, *study.rig)):
+        plate = "fixed" if case.stiffness is None else f"{case.stiffness * 1e6:g} µN·m/rad"
+        row = f"die {math.degrees(case.tilt):g}°, plate {plate}" + (" (declared)" if index == 0 else "")
+        rows.append(row)
+        cells.update({(row, columns[0]): case.all_lying_force / MN if case.all_lying_force else "not reached",
+                      (row, columns[1]): case.change_at_5mN * 1e6 if case.change_at_5mN is not None else "not reached",
+                      (row, columns[2]): case.largest_turn * 1e3})
+    return Table("The balance test's unknowns: the die's tilt and the plate's turn", "rig", rows, columns, cells,
+                 digits=3, caption="The twin's balance test with the die tilted and the plate turning (about the "
+                 "axis across the bend under the die's centre, against the stated stiffness). A tilt makes the "
+                 "pillars bend from the first newton; a plate that turns gives way under the pillars that touch "
+                 "first and takes much of a tilt back. The plate's turn moves the pillars' gaps but is left out of "
+                 "their own inclination, which is rough where the turn is as large as the tilt.")
 
 
 def _roughness_slope(rough: RoughnessStudy) -> Table:
@@ -416,6 +444,9 @@ def _results(study: CiliaStudy, rest: dict[str, float], timings: dict) -> dict:
             "moment_gap": [{"cause": c.cause, "change": c.change, "fit": fit_of(c.fit), "ratio": c.ratio,
                             "refusal": c.refusal} for c in study.moment_gap],
             "minimum_force": _budget_of(study),
+            "rig": [{"tilt_deg": math.degrees(c.tilt), "plate_uNm": None if c.stiffness is None else c.stiffness * 1e6,
+                     "all_lying_mN": _in(c.all_lying_force, MN), "change_at_5mN_uV": _in(c.change_at_5mN, 1e-6),
+                     "largest_turn_mrad": c.largest_turn * 1e3} for c in study.rig],
             "layout": {"depths_um": list(study.layout.depths / UM),
                        "moments_by_depth_memu": list(study.layout.moments_by_depth / MEMU),
                        "scales": list(study.layout.scales),

@@ -103,6 +103,11 @@ class CiliaSettings:
     plate_seating_mrad: NonNegativeNumber = 1.0
     warm_up_s: NonNegativeNumber = 60.0
     gap_causes: Flag = True  # the publication's causes of its moment gap tried on the twin (six fits)
+    # the balance test's unknowns swept: other die tilts (the declared plate), other plates (the first tilt)
+    rig_tilts_deg: Annotated[tuple[number("an angle in degrees from -10 to 10", ge=-10.0, le=10.0), ...],
+                             expect("a list of angles in degrees from -10 to 10")] = (1.0, 3.0)
+    rig_plate_stiffnesses_uNm: Annotated[tuple[PositiveNumber, ...],
+                                         expect("a list of positive stiffnesses in µN·m/rad")] = (100.0,)
     depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
     meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
@@ -192,6 +197,18 @@ class BalanceOutcome:
 
 
 @dataclass(frozen=True)
+class RigCase:
+    """The balance test with other values of its unknowns: the die's ``tilt`` (rad), the plate's
+    ``stiffness`` (N·m/rad, None: fixed), and what they do to the curve."""
+
+    tilt: float
+    stiffness: float | None
+    all_lying_force: float | None  # N
+    change_at_5mN: float | None  # V
+    largest_turn: float  # rad
+
+
+@dataclass(frozen=True)
 class GapCause:
     """One of the publication's causes of its fitted moment being a third of the magnetometer's, tried on
     the twin: the twin changed as ``change`` says, its tip-load curve fitted by the publication's model."""
@@ -232,6 +249,7 @@ class CiliaStudy:
     balance: BalanceOutcome
     publication_tip_load: PublicationFit
     moment_gap: tuple[GapCause, ...]
+    rig: tuple[RigCase, ...]
     layout: LayoutWeight
     figures: CiliaFigures
 
@@ -353,7 +371,8 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
         task.advance(note="balance test")
         tip_load = publication_fit(model, first, "tip load")
         gap = _moment_gap(model, settings) if settings.gap_causes else ()
-        task.advance(note="the publication's fit and the moment gap's causes")
+        rig = _rig_cases(model, settings)
+        task.advance(note="the publication's fit, the moment gap's causes, the rig's unknowns")
         layout = _layout_weight(model, first, fitted, settings)
         task.advance()
     figures = CiliaFigures(curve=_curve_figure(truth, first, fitted, balanced),
@@ -361,7 +380,7 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
                            pillars=_pillars_figure(truth, balanced),
                            profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
     return CiliaStudy(settings, seed, truth, first, fitted, profile_d, profile_m, identified, recovery, resolved,
-                      other, balanced, tip_load, gap, layout, figures)
+                      other, balanced, tip_load, gap, rig, layout, figures)
 
 
 def measure(model: CiliaModel, truth: ForceCurve, repeatability: float, rng: np.random.Generator) -> MeasuredCurve:
@@ -407,6 +426,24 @@ def _budget(model: CiliaModel, curve: BalanceCurve, settings: CiliaSettings, dwe
                                 (low, high, SEATING_STEP), settings.balance_readability_mg * 1e-3 * GRAM_FORCE,
                                 settings.plate_seating_mrad * 1e-3, settings.warm_up_s, dwell,
                                 float(np.prod(model.die.size)), settings.budget_parts)
+
+
+def _rig_cases(model: CiliaModel, settings: CiliaSettings) -> tuple[RigCase, ...]:
+    """The balance test at the other tilts with the declared plate, and on the other plates at the first
+    of those tilts (or the declared one)."""
+    tilted = settings.rig_tilts_deg[0] if settings.rig_tilts_deg else settings.die_tilt_deg
+    cases = ([replace(settings, die_tilt_deg=tilt) for tilt in settings.rig_tilts_deg]
+             + [replace(settings, die_tilt_deg=tilted, plate_stiffness_uNm=k) for k in settings.rig_plate_stiffnesses_uNm])
+    found = []
+    for case in cases:
+        plate = balance_plate(case)
+        curve = model.balance_curve(balance_descent(model, case), balance_contact(case), settings.sensor, plate)
+        every = np.flatnonzero(curve.lying_count >= len(curve.gaps[0]))
+        found.append(RigCase(math.radians(case.die_tilt_deg), plate.rotation_stiffness,
+                             float(curve.force[every[0]]) if every.size else None,
+                             float(np.interp(5 * MN, curve.force, curve.change)) if curve.force.max() >= 5 * MN else None,
+                             float(np.abs(curve.rotation).max())))
+    return tuple(found)
 
 
 def _moment_gap(model: CiliaModel, settings: CiliaSettings) -> tuple[GapCause, ...]:
