@@ -592,41 +592,36 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
     iterations, residual, height = 0, 0.0, float(start[1])
     largest_step, smallest_step = 0.01 * rod.length, 1e-9 * rod.length
     for gap in gaps:
-        if folded is not None:
-            folded, height, used = _fold_to(rod, contact, folded, height, gap, largest_step, smallest_step)
-            iterations += used
-            rows.append(folded.whole_rod(rod))
-            lying.append(True)
-            sliding.append(folded.friction is not None)
-            continue
-        before, step = state, largest_step
-        while height > gap:
-            # plate steps of at most 1 % of the length, halved where Newton fails (the buckled branch turns fast)
-            next_height = max(gap, height - step)
-            try:
-                state, used, final = _plate_step(d, rest, contact, start, state, next_height)
-            except NotConverged:
-                step /= 2
-                if step < smallest_step:
-                    raise
+        if folded is None:
+            before, step = state, largest_step
+            while height > gap:
+                # plate steps of at most 1 % of the length, halved where Newton fails (the buckled branch turns fast)
+                next_height = max(gap, height - step)
+                try:
+                    state, used, final = _plate_step(d, rest, contact, start, state, next_height)
+                except NotConverged:
+                    step /= 2
+                    if step < smallest_step:
+                        raise
+                    continue
+                height, step = next_height, min(2 * step, largest_step)
+                iterations, residual = iterations + used, max(residual, final)
+            if abs(state.theta[0, -1]) < math.pi / 2:
+                shape = _shapes(rod, d, state.theta, state.force, np.zeros(1, dtype=bool), 0, 0.0)
+                rows.append((state.theta, shape.x, shape.z, state.force))
+                lying.append(False)
+                sliding.append(state.sliding)
                 continue
-            height, step = next_height, min(2 * step, largest_step)
-            iterations, residual = iterations + used, max(residual, final)
-        if abs(state.theta[0, -1]) >= math.pi / 2:
             state = _lying_onset(d, rest, before, state, start)
             tip = _chords(d, state.theta, state.force)[0].sum(axis=1)[0]
-            folded = _Folded(rod.length, state.theta, state.force, float(np.sign(state.theta[0, -1])),
-                             float(tip[1]), float(tip[0]), state.friction if state.sliding else None)
-            folded, height, used = _fold_to(rod, contact, folded, folded.height, gap, largest_step, smallest_step)
-            iterations += used
-            rows.append(folded.whole_rod(rod))
-            lying.append(True)
-            sliding.append(folded.friction is not None)
-            continue
-        shape = _shapes(rod, d, state.theta, state.force, np.zeros(1, dtype=bool), 0, 0.0)
-        rows.append((state.theta, shape.x, shape.z, state.force))
-        lying.append(False)
-        sliding.append(state.sliding)
+            height = float(tip[1])
+            folded = _Folded(rod.length, state.theta, state.force, float(np.sign(state.theta[0, -1])), height,
+                             float(tip[0]), state.friction if state.sliding else None)
+        folded, height, used = _fold_to(rod, contact, folded, height, gap, largest_step, smallest_step)
+        iterations += used
+        rows.append(folded.whole_rod(rod))
+        lying.append(True)
+        sliding.append(folded.friction is not None)
     theta_all, x_all, z_all, force_all = (np.concatenate(column) for column in zip(*rows, strict=True))
     shapes = RodShapes(rod=rod, x=x_all, z=z_all, angles=theta_all, force=force_all, saturated=np.array(lying),
                        iterations=iterations, residual=residual)
