@@ -60,7 +60,8 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure():
     assert layout.moments_by_depth.shape == (2,) and layout.moments_by_scale.shape == (1,)
     # the declared layout (10 µm) gives back the study's own fit
     assert layout.moments_by_depth[0] == pytest.approx(fit.moment, rel=1e-6)
-    for figure in (study.figures.curve, study.figures.field_map, study.figures.pillars, study.figures.profiles):
+    for figure in (study.figures.curve, study.figures.balance, study.figures.field_map, study.figures.pillars,
+                   study.figures.profiles):
         assert isinstance(figure, Figure) and figure.axes
 
 

@@ -212,7 +212,7 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     assert outcome.headline.value == pytest.approx(tip_load["moment_memu"])
     # the publication's cylinder fitted to the twin's cone (200 → 320 µm) reads a diameter between the two
     assert 200 < tip_load["diameter_um"] < 320
-    assert len(outcome.figures) == 6 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert len(outcome.figures) == 7 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     assert any("balance" in note for note in outcome.notes)
     budget = outcome.results["minimum_force"]
     assert budget["minimum_force_uN"] == pytest.approx(3 * math.sqrt(sum(v**2 for v in budget["sigma_uN"].values())),

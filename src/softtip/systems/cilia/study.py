@@ -194,6 +194,7 @@ class BalanceOutcome:
     all_lying_force: float | None  # N: when every pillar lies
     publication: PublicationFit
     budget: ForceBudget
+    finer_chain: BalanceCurve  # the same test with CHAIN_CHECK times the dipoles per pillar: the chain's convergence
 
 
 @dataclass(frozen=True)
@@ -228,6 +229,7 @@ class GapCause:
 @dataclass(frozen=True)
 class CiliaFigures:
     curve: Figure
+    balance: Figure
     field_map: Figure
     pillars: Figure
     profiles: Figure
@@ -376,6 +378,7 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
         layout = _layout_weight(model, first, fitted, settings)
         task.advance()
     figures = CiliaFigures(curve=_curve_figure(truth, first, fitted, balanced),
+                           balance=_balance_figure(balanced, balance_measured, resolved.noise.total, settings),
                            field_map=_field_map_figure(model, truth),
                            pillars=_pillars_figure(truth, balanced),
                            profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
@@ -401,11 +404,14 @@ def _balance(model: CiliaModel, curve: BalanceCurve, measured: MeasuredCurve, se
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
     first, every = (np.flatnonzero(curve.lying_count >= count) for count in (1, len(curve.gaps[0])))
     within = measured.part(measured.force <= settings.force_max_mN * MN)  # the range the publication fitted
+    finer = replace(model, chain_count=CHAIN_CHECK * model.chain_count).balance_curve(
+        balance_descent(model, settings), balance_contact(settings), curve.sensor, balance_plate(settings))
     return BalanceOutcome(curve, buckling, float(curve.force[first[0]]) if first.size else None,
                           float(curve.force[every[0]]) if every.size else None,
-                          publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell))
+                          publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer)
 
 
+CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is the published chain enough?
 GAP_POINTS = 13  # load steps of each noise-free curve the moment gap's causes are tried on
 SEATING_STEP = 1e-3  # rad: the plate's seating turn either side for its effect on the voltage
 
@@ -505,6 +511,30 @@ def _curve_figure(truth: ForceCurve, measured: MeasuredCurve, fit: CurveFit, bal
     axes.set_xlabel("force on the die (mN)")
     axes.set_ylabel(f"voltage change, sensor {measured.sensor} (mV)")
     axes.legend(fontsize=8)
+    return figure
+
+
+def _balance_figure(balance: BalanceOutcome, measured: MeasuredCurve, sigma: float, settings: CiliaSettings) -> Figure:
+    """The balance test at its own scale: the twin's curve, its reading, the meter's noise, where the pillars
+    buckle and lie, and what the publication's model fitted to it predicts."""
+    figure = Figure(figsize=(6.4, 4.2), layout="constrained")
+    axes = figure.add_subplot()
+    curve = balance.curve
+    axes.axhspan(-3e6 * sigma, 3e6 * sigma, color="0.9", label="± 3σ of one reading")
+    axes.plot(measured.force / MN, measured.change * 1e6, "o", ms=3, label="read (meter + bench)")
+    axes.plot(curve.force / MN, curve.change * 1e6, "-", lw=1, label="twin")
+    fit = balance.publication.fit
+    if fit is not None:
+        within = measured.force[(measured.force > 0) & (measured.force <= settings.force_max_mN * MN)]
+        axes.plot(within / MN, fit.prediction * 1e6, "--", lw=1.5,
+                  label="the publication's model fitted" + (" (on a bound)" if fit.at_bound else ""))
+    axes.axvline(balance.buckling_force / MN, color="k", ls=":", lw=0.8, label="the pillars buckle")
+    if balance.all_lying_force is not None:
+        axes.axvline(balance.all_lying_force / MN, color="k", ls="--", lw=0.8, label="every pillar lies")
+    axes.axvline(settings.force_max_mN, color="C3", ls="-.", lw=0.8, label="the published range's end")
+    axes.set_xlabel("the balance's reading (mN)")
+    axes.set_ylabel(f"voltage change, sensor {curve.sensor} (µV)")
+    axes.legend(fontsize=7)
     return figure
 
 
