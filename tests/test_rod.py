@@ -275,3 +275,19 @@ def test_under_a_plate_the_push_scales_with_youngs_modulus_at_the_same_shapes():
     assert one.lying.any() and np.array_equal(one.lying, other.lying)
     assert np.allclose(other.vertical_force, 1.5 * one.vertical_force, rtol=1e-6, atol=1e-12)
     assert np.allclose(other.shapes.x, one.shapes.x, atol=1e-9 * L)
+
+
+def test_a_tilted_base_stands_the_rod_askew_and_turning_the_frame_back_stands_it_straight():
+    rod = uniform(diameter=100e-6)
+    tilt, bow = 0.1, 1e-3
+    tilted = lower_plate(rod, [0.99 * touching_height(rod, PlateContact(imperfection=bow, tilt=tilt))],
+                         PlateContact(imperfection=bow, tilt=tilt)).standing
+    straight = lower_plate(rod, [0.99 * touching_height(rod, PlateContact(imperfection=bow))],
+                           PlateContact(imperfection=bow)).standing
+    # unloaded, the tilted rod is the straight one turned by the tilt about its base
+    assert tilted.tip[0, 0] == pytest.approx(math.sin(tilt) * straight.tip[0, 1] + math.cos(tilt) * straight.tip[0, 0])
+    back = tilted.turned(tilt)
+    assert np.allclose(back.x, straight.x, atol=1e-15) and np.allclose(back.z, straight.z, atol=1e-15)
+    assert np.allclose(back.angles, straight.angles, atol=1e-15)
+    with pytest.raises(RodError, match="tilt = 1.0: expected an angle in rad"):
+        PlateContact(tilt=1.0)
