@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
@@ -21,11 +22,12 @@ class Recorder(Progress):
 
 @pytest.mark.slow
 def test_the_study_fits_the_twins_curve_and_reports_every_figure():
-    settings = CiliaSettings(points=16, trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,))
+    settings = CiliaSettings(points=16, trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,), rig_tilts_deg=(1.0,),
+                             rig_plate_stiffnesses_uNm=(100.0,))
     progress = Recorder()
     study = run_study(settings, seed=4, progress=progress)
     assert progress.stages == ["fit, profiles and identifiability", "recovery of the twin's truth",
-                               "resolution, balance, layout"]
+                               "resolution, balance, the publication's fit, layout"]
     fit = study.fit
     # the twin's truth (2.8 memu, 200 µm) is found within its 95 % intervals
     assert fit.interval_moment[0] <= 2.8e-6 <= fit.interval_moment[1]
@@ -39,11 +41,27 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure():
     assert study.resolution.minimum_force_at_rest < study.resolution.smallest_step_at_rest
     # the balance test: the pillars buckle (5 × the one-pillar load) before the plate bends them
     assert 0 < study.balance.buckling_force < study.balance.curve.force.max() * 1.01
+    # the publication's model: a cylinder fitted to the twin's cone (200 → 320 µm) reads a diameter between
+    tip_load = study.publication_tip_load.fit
+    assert tip_load is not None and 200e-6 < tip_load.diameter < 320e-6
+    assert [cause.cause for cause in study.moment_gap] == ["none (the twin as declared)", "the cone", "the cone",
+                                                           "non-uniform material", "non-uniform material",
+                                                           "spin-valve heating"]
+    # its own twin read with nothing changed gives the baseline row's ratio again
+    assert study.moment_gap[0].fit.moment == pytest.approx(tip_load.moment, rel=0.05)
+    budget = study.balance.budget
+    assert 0 < budget.minimum_force[budget.best] and budget.force[budget.best] <= 26e-3
+    # a tilted die bends the pillars from the first newton (measured 871 µV at 5 mN against 3 µV untilted, on
+    # 40 steps); a plate that turns gives way, and a fixed one does not
+    tilted, turning = study.rig
+    assert abs(tilted.change_at_5mN) > 10 * abs(np.interp(5e-3, study.balance.curve.force, study.balance.curve.change))
+    assert tilted.largest_turn == 0 and turning.largest_turn > 0
     layout = study.layout
     assert layout.moments_by_depth.shape == (2,) and layout.moments_by_scale.shape == (1,)
     # the declared layout (10 µm) gives back the study's own fit
     assert layout.moments_by_depth[0] == pytest.approx(fit.moment, rel=1e-6)
-    for figure in (study.figures.curve, study.figures.field_map, study.figures.pillars, study.figures.profiles):
+    for figure in (study.figures.curve, study.figures.balance, study.figures.field_map, study.figures.pillars,
+                   study.figures.profiles):
         assert isinstance(figure, Figure) and figure.axes
 
 

@@ -22,7 +22,8 @@ The closing conditions give the load modes:
 * a force of given size parallel to the tip's top face (a follower, perpendicular to the deformed axis
   at the tip) — :func:`solve_follower_force`;
 * an imposed tip position in x and z (the tip stuck on a plate), or an imposed tip height with a
-  sliding friction force — the steps of :func:`lower_plate`, the die lowered onto a flat plate.
+  sliding friction force — the steps of :func:`lower_plate`, the die lowered onto a flat plate; once the
+  rod lies on the plate, the same with its free length as one more unknown (its end tangent to the plate).
 
 The discretisation is second order in h (midpoint angles, central curvatures). A uniform, unshearable,
 inextensible rod under a dead tip force is Euler's elastica, whose tip position is known exactly through
@@ -153,8 +154,9 @@ class RodShapes:
     """Deformed shapes of one rod under a batch of B loads.
 
     ``x``, ``z`` (B, N + 1): node positions (base first); ``angles`` (B, N): each segment's rotation;
-    ``force`` (B, 2): the tip force (F_x, F_z) in N; ``saturated`` (B,): the rod lies on its side (its
-    shape is the one at the onset, the rest of the load goes into the side wall); ``iterations``,
+    ``force`` (B, 2): the tip force (F_x, F_z) in N; ``saturated`` (B,): the rod lies on its side (under
+    a follower force its shape is the one at the onset, the rest of the load going into the side wall;
+    under a plate the plate folds it further, :func:`lower_plate`); ``iterations``,
     ``residual``: Newton's work and the largest final moment residual relative to EI/L.
     """
 
@@ -189,6 +191,14 @@ class RodShapes:
                        angles=np.concatenate([self.angles, other.angles]),
                        force=np.concatenate([self.force, other.force]),
                        saturated=np.concatenate([self.saturated, other.saturated]))
+
+    def turned(self, angle: float) -> RodShapes:
+        """The same shapes in a frame turned by ``angle`` (rad) about the base: every angle less by it (a
+        direction at θ from +z towards +x is at θ − angle in the new frame)."""
+        c, s = math.cos(angle), math.sin(angle)
+        return replace(self, x=self.x * c - self.z * s, z=self.z * c + self.x * s, angles=self.angles - angle,
+                       force=np.stack([self.force[:, 0] * c - self.force[:, 1] * s,
+                                       self.force[:, 1] * c + self.force[:, 0] * s], axis=-1))
 
     def centreline(self, fractions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Points on the deformed centre line at reference arc-length ``fractions`` of the length (K,),
@@ -372,8 +382,9 @@ def _unstable(d: _Discrete, theta: NDArray, force: NDArray, rest: NDArray, closu
     _, jacobian = _system(d, theta, force, rest, closure, target)
     n = theta.shape[1]
     k, b, c, dd = jacobian[0, :n, :n], jacobian[0, :n, n:], jacobian[0, n:, :n], jacobian[0, n:, n:]
-    stiffness = k - b @ np.linalg.solve(dd, c)
-    values, _ = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
+    with single_threaded_blas():  # one small matrix: a second BLAS thread only slows it down
+        stiffness = k - b @ np.linalg.solve(dd, c)
+        values = np.linalg.eigvalsh(0.5 * (stiffness + stiffness.T))
     return bool(values[0] < -1e-9 * abs(values).max())
 
 
@@ -500,12 +511,17 @@ class PlateContact:
     kinetic) and an initial stress-free bow that makes a straight column choose a side when it buckles:
     a half sine bulging towards +x with its tip above its base, θ(s) = ``imperfection`` cos(π s/L) (its
     slope at the base, rad; the bulge is imperfection × L/π). Both the free column's mode (a lean) and the
-    stuck one's (a bulge) then start towards +x."""
+    stuck one's (a bulge) then start towards +x. ``tilt`` (rad): the base's axis leans from the plate's
+    normal by it (a die not parallel to the plate), towards +x if positive; the rod's frame is the plate's
+    (z along its normal), so the stress-free angles are the bow's plus the tilt."""
 
     friction: float = 0.5
     imperfection: float = 0.01
+    tilt: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.tilt) and abs(self.tilt) < math.pi / 4):
+            raise RodError(f"tilt = {self.tilt!r}: expected an angle in rad, |tilt| < pi/4")
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise RodError(f"friction = {self.friction!r}: expected a number >= 0")
         if not (math.isfinite(self.imperfection) and 0 < abs(self.imperfection) < math.pi / 4):
@@ -516,9 +532,9 @@ class PlateContact:
 class PlatePath:
     """The rod's states as the plate comes down: ``gaps`` (G,) plate height above the base (m),
     ``shapes`` (a batch of G), ``vertical_force`` (G,) the plate's push on the rod (N, > 0), ``sliding``
-    (G,) the tip slides on the plate, ``lying`` (G,) the rod lies on its side (its tip face has turned
-    parallel to the plate: the side wall takes any further load, the shape stays); ``standing`` the
-    unloaded rod with its imperfection, before the plate touches it."""
+    (G,) the tip (or, lying, the part on the plate) slides, ``lying`` (G,) the rod lies on its side (its
+    last section has turned across the plate: the plate presses its side wall and folds it further);
+    ``standing`` the unloaded rod with its imperfection, before the plate touches it."""
 
     gaps: NDArray[np.float64]
     shapes: RodShapes
@@ -532,9 +548,11 @@ class PlatePath:
         return self.shapes.saturated
 
 
-def _bow(rod: Rod, contact: PlateContact) -> NDArray[np.float64]:
-    """(1, N) the stress-free angles of the bowed rod (:class:`PlateContact`)."""
-    return (contact.imperfection * np.cos(np.pi * (np.arange(rod.segments) + 0.5) / rod.segments))[None, :]
+def _bow(rod: Rod, contact: PlateContact, length: float | None = None) -> NDArray[np.float64]:
+    """(1, N) the stress-free angles of the bowed, tilted rod (:class:`PlateContact`) at the centres of N
+    equal segments of its first ``length`` (m; the whole rod when None)."""
+    centres = (np.arange(rod.segments) + 0.5) / rod.segments * (rod.length if length is None else length)
+    return (contact.imperfection * np.cos(np.pi * centres / rod.length) + contact.tilt)[None, :]
 
 
 def touching_height(rod: Rod, contact: PlateContact = PlateContact()) -> float:
@@ -551,7 +569,11 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
     moment at a point contact) while the friction needed stays within ``friction`` × the push, then
     slides against the friction force. Friction makes the path history-dependent, so the gaps are stepped
     in order (each from the previous state). Once the tip face turns parallel to the plate the pillar
-    lies on its side: the shape is held at that onset and the rest of the load goes into the side wall."""
+    lies on its side: from then on the plate presses its side wall, the part from the base to where it
+    meets the plate bends as a rod whose end is tangent to the plate, and the rest lies straight along the
+    plate, stuck where it came down while friction holds it, else sliding outwards (:func:`_fold_solve`).
+    The push rises as the free part shortens (as 1/height² for a uniform rod, Euler's elastica); gaps so
+    small that the free part is no longer longer than wide are refused."""
     gaps = _load_array(gaps, "gaps")
     if not rod.shear_and_stretch:
         raise RodError("rod.shear_and_stretch = False: a plate needs an extensible rod (an inextensible straight "
@@ -563,39 +585,48 @@ def lower_plate(rod: Rod, gaps: ArrayLike, contact: PlateContact = PlateContact(
     if np.any(np.diff(gaps) > 0) or gaps[0] > start[1] * (1 + 1e-12) or gaps[-1] <= 0:
         raise RodError(f"gaps: expected plate heights decreasing from at most {start[1]:.6g} m to above 0")
     state = _PlateState(rest.copy(), np.zeros((1, 2)), sliding=False, friction=0.0)
-    states: list[_PlateState] = []
+    rows: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []  # per gap: angles, x, z (nodes), force
     lying: list[bool] = []
+    sliding: list[bool] = []
+    folded: _Folded | None = None
     iterations, residual, height = 0, 0.0, float(start[1])
     largest_step, smallest_step = 0.01 * rod.length, 1e-9 * rod.length
     for gap in gaps:
-        if lying and lying[-1]:
-            states.append(states[-1])
-            lying.append(True)
-            continue
-        before, step = state, largest_step
-        while height > gap:
-            # plate steps of at most 1 % of the length, halved where Newton fails (the buckled branch turns fast)
-            next_height = max(gap, height - step)
-            try:
-                state, used, final = _plate_step(d, rest, contact, start, state, next_height)
-            except NotConverged:
-                step /= 2
-                if step < smallest_step:
-                    raise
+        if folded is None:
+            before, step = state, largest_step
+            while height > gap:
+                # plate steps of at most 1 % of the length, halved where Newton fails (the buckled branch turns fast)
+                next_height = max(gap, height - step)
+                try:
+                    state, used, final = _plate_step(d, rest, contact, start, state, next_height)
+                except NotConverged:
+                    step /= 2
+                    if step < smallest_step:
+                        raise
+                    continue
+                height, step = next_height, min(2 * step, largest_step)
+                iterations, residual = iterations + used, max(residual, final)
+            if abs(state.theta[0, -1]) < math.pi / 2:
+                shape = _shapes(rod, d, state.theta, state.force, np.zeros(1, dtype=bool), 0, 0.0)
+                rows.append((state.theta, shape.x, shape.z, state.force))
+                lying.append(False)
+                sliding.append(state.sliding)
                 continue
-            height, step = next_height, min(2 * step, largest_step)
-            iterations, residual = iterations + used, max(residual, final)
-        on_side = bool(abs(state.theta[0, -1]) >= math.pi / 2)
-        if on_side:
             state = _lying_onset(d, rest, before, state, start)
-        states.append(state)
-        lying.append(on_side)
-    theta_all = np.concatenate([row.theta for row in states])
-    force_all = np.concatenate([row.force for row in states])
-    lying_all = np.array(lying)
-    shapes = _shapes(rod, d, theta_all, force_all, lying_all, iterations, residual)
+            tip = _chords(d, state.theta, state.force)[0].sum(axis=1)[0]
+            height = float(tip[1])
+            folded = _Folded(rod.length, state.theta, state.force, float(np.sign(state.theta[0, -1])), height,
+                             float(tip[0]), state.friction if state.sliding else None)
+        folded, height, used = _fold_to(rod, contact, folded, height, gap, largest_step, smallest_step)
+        iterations += used
+        rows.append(folded.whole_rod(rod))
+        lying.append(True)
+        sliding.append(folded.friction is not None)
+    theta_all, x_all, z_all, force_all = (np.concatenate(column) for column in zip(*rows, strict=True))
+    shapes = RodShapes(rod=rod, x=x_all, z=z_all, angles=theta_all, force=force_all, saturated=np.array(lying),
+                       iterations=iterations, residual=residual)
     return PlatePath(gaps=gaps, shapes=shapes, standing=standing, vertical_force=-force_all[:, 1],
-                     sliding=np.array([row.sliding for row in states]))
+                     sliding=np.array(sliding))
 
 
 @dataclass(frozen=True)
@@ -655,3 +686,125 @@ def _lying_onset(d: _Discrete, rest: NDArray, before: _PlateState, after: _Plate
     onset = brentq(lambda h: abs(state(h).theta[0, -1]) - math.pi / 2, height(after), height(before),
                    xtol=1e-12, rtol=1e-8)
     return state(onset)
+
+
+# ------------------------------------------------------------------------------------ the rod lying down
+
+
+@dataclass(frozen=True)
+class _Folded:
+    """A rod lying on the plate: its free part, ``free`` (m) of reference length from the base, bends from
+    the base to where it meets the plate tangentially (its last angle ``side`` × π/2); the rest lies
+    straight along the plate. ``theta`` (1, N) and ``force`` (1, 2) are the free part's (N segments of
+    free/N), ``height`` the plate's; ``anchor`` and ``friction``: see :func:`_fold_solve`."""
+
+    free: float
+    theta: NDArray[np.float64]
+    force: NDArray[np.float64]
+    side: float
+    height: float
+    anchor: float  # x where the tip came down (m)
+    friction: float | None  # sliding: F_x = friction × F_z; None while the lying part sticks
+
+    def whole_rod(self, rod: Rod) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """The whole rod's angles (1, N), node x and z (1, N + 1) at its own N equal segments, and the force."""
+        part = _free_part(rod, self.free)
+        shape = _shapes(part, _discretise(part), self.theta, self.force, np.zeros(1, dtype=bool), 0, 0.0)
+        n = rod.segments
+        nodes = np.arange(n + 1) * rod.length / n
+        centres = (np.arange(n) + 0.5) * rod.length / n
+        free_nodes = np.arange(n + 1) * self.free / n
+        free_centres = (np.arange(n) + 0.5) * self.free / n
+        beyond = np.maximum(nodes - self.free, 0.0)  # along the plate, past the touchdown point
+        x = np.interp(nodes, free_nodes, shape.x[0]) + self.side * beyond
+        z = np.interp(nodes, free_nodes, shape.z[0])
+        angles = np.where(centres < self.free, np.interp(centres, free_centres, self.theta[0]),
+                          self.side * math.pi / 2)
+        return angles[None, :], x[None, :], z[None, :], self.force
+
+
+def _free_part(rod: Rod, free: float) -> Rod:
+    """The rod's first ``free`` metres as a rod of its own (N segments)."""
+    if free <= max(rod.base_diameter, float(rod.diameter(free))):
+        raise RodError(f"gaps: the plate has folded the rod flat (its free part {free:.3g} m is no longer "
+                       "longer than wide): expected larger gaps")
+    return replace(rod, length=free, tip_diameter=float(rod.diameter(free)))
+
+
+def _fold_to(rod: Rod, contact: PlateContact, folded: _Folded, height: float, gap: float, largest_step: float,
+             smallest_step: float) -> tuple[_Folded, float, int]:
+    """The lying rod with the plate lowered from ``height`` to ``gap``, in steps halved where Newton fails."""
+    step, iterations = largest_step, 0
+    while height > gap:
+        next_height = max(gap, height - step)
+        try:
+            folded, used = _fold(rod, contact, folded, next_height)
+        except NotConverged:
+            step /= 2
+            if step < smallest_step:
+                raise
+            continue
+        height, step, iterations = next_height, min(2 * step, largest_step), iterations + used
+    return folded, height, iterations
+
+
+def _fold(rod: Rod, contact: PlateContact, folded: _Folded, height: float) -> tuple[_Folded, int]:
+    """The lying rod with the plate at ``height``: its lying part stuck on the plate if friction can hold it,
+    else sliding (and sliding from then on, as :func:`_plate_step`)."""
+    if folded.friction is None:
+        stuck, used = _fold_solve(rod, contact, folded, height, None)
+        needed, push = stuck.force[0, 0], -stuck.force[0, 1]
+        if abs(needed) <= contact.friction * max(push, 0.0):
+            return stuck, used
+        # the lying part slides the way the force that held it points against
+        sliding, more = _fold_solve(rod, contact, folded, height, float(-np.sign(needed) * contact.friction))
+        return sliding, used + more
+    return _fold_solve(rod, contact, folded, height, folded.friction)
+
+
+def _fold_solve(rod: Rod, contact: PlateContact, folded: _Folded, height: float, friction: float | None,
+                tolerance: float = 1e-10, max_iterations: int = 40) -> tuple[_Folded, int]:
+    """The lying rod's equilibrium with the plate at ``height``. Unknowns: the free part's angles, the
+    force where it meets the plate and its length ℓ; equations: its moment balance, its last angle ± π/2
+    (tangent to the plate: the lying part is straight and carries no moment), its end at the plate's height
+    and either stuck (``friction`` None: the material that has come down stays where it landed, so the
+    touchdown point is at anchor ± (ℓ − L)) or sliding with F_x = ``friction`` × F_z. Newton's method; the
+    column in ℓ by central differences."""
+    n = rod.segments
+
+    def system(theta: NDArray, force: NDArray, free: float) -> tuple[NDArray, NDArray, _Discrete]:
+        d = _discretise(_free_part(rod, free))
+        rest = _bow(rod, contact, free)
+        if friction is None:
+            closure, target = "pinned", np.array([[folded.anchor + folded.side * (free - rod.length), height]])
+        else:
+            closure, target = "sliding", np.array([[friction, height]])
+        residual, jacobian = _system(d, theta, force, rest, closure, target)
+        return np.append(residual[0], theta[0, -1] - folded.side * math.pi / 2), jacobian[0], d
+
+    # the start: the last state, its free part shortened with the plate's height (exact for a uniform rod)
+    theta, force = folded.theta.copy(), folded.force.copy()
+    free = folded.free * height / folded.height
+    for iteration in range(1, max_iterations + 1):
+        residual, jacobian, d = system(theta, force, free)
+        scales = (free, free) if friction is None else (d.scale / free, free)
+        size = max(_residual_size(d, residual[None, :n + 2], scales), abs(residual[-1]))
+        if size <= tolerance:
+            return replace(folded, free=free, theta=theta, force=force, height=height, friction=friction), iteration
+        delta = 1e-6 * free
+        column = (system(theta, force, free + delta)[0] - system(theta, force, free - delta)[0]) / (2 * delta)
+        whole = np.zeros((n + 3, n + 3))
+        whole[:n + 2, :n + 2] = jacobian
+        whole[:, n + 2] = column
+        whole[n + 2, n - 1] = 1.0
+        try:
+            with single_threaded_blas():
+                step = np.linalg.solve(whole, -residual)
+        except np.linalg.LinAlgError:
+            raise NotConverged("rod: singular Newton system for the rod lying on the plate") from None
+        # as in _newton: at most 0.3 rad per angle, and the free length by at most a tenth, per step
+        damping = min(1.0, 0.3 / max(np.abs(step[:n]).max(), 1e-300), 0.1 * free / max(abs(step[-1]), 1e-300))
+        theta += damping * step[None, :n]
+        force += damping * step[None, n:n + 2]
+        free += damping * step[-1]
+    raise NotConverged(f"rod: the rod lying on the plate did not converge in {max_iterations} iterations")

@@ -42,9 +42,11 @@ from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
 from softtip.systems.cilia.roughness import Recording, brush_surfaces
 from softtip.systems.cilia.study import (
+    DWELL_S,
     CiliaSettings,
     balance_contact,
     balance_descent,
+    balance_plate,
     die_path,
     measure,
     paper_forces,
@@ -64,7 +66,7 @@ BRUSHING = "brushing"
 class CiliaRealism(RealismTable):
     """The bench beyond the readout's computed noise (the repeatability is the protocol's parameter)."""
 
-    dwell_s: PositiveNumber = 2.0  # per load step: the time axis of the dataset
+    dwell_s: PositiveNumber = DWELL_S  # per load step: the time axis of the dataset
 
 
 @schema(section="viscoelastic")
@@ -123,7 +125,8 @@ def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Cilia
 def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
     """The twin's noise-free curves, per mode: (X, Y)."""
     forces, descent, contact = paper_forces(p), balance_descent(model, p), balance_contact(p)
-    return {"paper": model.curves(forces, SENSORS), "balance": model.balance_curves(descent, contact, SENSORS)}
+    return {"paper": model.curves(forces, SENSORS),
+            "balance": model.balance_curves(descent, contact, SENSORS, balance_plate(p))}
 
 
 def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:

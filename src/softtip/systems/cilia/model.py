@@ -9,7 +9,8 @@ Load modes (every pillar takes the same share of the force; the five are identic
   tip), which curls the pillar over until its side touches the die; from then on it lies there and the
   rest of the force goes into its side wall (``lying``).
 * balance (:meth:`CiliaModel.balance_curve`): the die lowered onto a flat plate, as the measurement was
-  made: a vertical push with friction at the tips, compression, buckling, lying down.
+  made: a vertical push with friction at the tips, compression, buckling, lying down, and the plate
+  pressing the lying pillars' side walls and folding them further.
 
 The field of each pillar is a chain of ``chain_count`` point dipoles at the midpoints of equal pieces of
 its deformed centre line, along the local tangent, each with 1/K of its moment (as published); the
@@ -20,15 +21,18 @@ own. Voltages are across a sensor at constant current; a curve's ``change`` is r
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import brentq
 
 from softtip.magnetics.dipoles import Dipoles, dipole_chain, rectangle_average_in_plane
 from softtip.mechanics.rod import (
     PlateContact,
+    PlatePath,
     RodError,
     RodShapes,
     lower_plate,
@@ -54,9 +58,88 @@ class ForceCurve:
     shapes: RodShapes
 
 
-def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int) -> Dipoles:
+@dataclass(frozen=True)
+class BalanceCurve(ForceCurve):
+    """A balance test's curve (:meth:`CiliaModel.balance_curve`): ``shapes`` are those of the pillar nearest
+    the plate's pivot, ``lying`` every pillar lies; ``gaps`` (G, P) each pillar's plate height over its base
+    (m), ``rotation`` (G,) the plate's turn (rad), ``lying_count`` (G,) the pillars lying."""
+
+    gaps: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    lying_count: NDArray[np.int_]
+
+
+@dataclass(frozen=True)
+class BalancePlate:
+    """The balance's plate: ``rotation_stiffness`` (N·m/rad) of its turn about the axis across the bend under
+    the die's centre (None: it does not turn under the pushes); ``seated`` (rad) the turn it rests at before
+    the die comes down (a plate seated askew: every base's gap less by its lever times it)."""
+
+    rotation_stiffness: float | None = None
+    seated: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.seated) and abs(self.seated) < 0.1):
+            raise DieError(f"seated = {self.seated!r}: expected a turn in rad, |turn| < 0.1")
+        k = self.rotation_stiffness
+        if k is not None and not (math.isfinite(k) and k > 0):
+            raise DieError(f"rotation_stiffness = {k!r}: expected a positive stiffness in N·m/rad, or none")
+
+
+def _push_at(path: PlatePath, gaps: NDArray) -> NDArray[np.float64]:
+    """(B,) one pillar's push (N) at plate heights ``gaps`` (B,) over its base (0 above first contact)."""
+    return np.interp(gaps, path.gaps[::-1], path.vertical_force[::-1])
+
+
+def _shapes_at(path: PlatePath, gaps: NDArray) -> RodShapes:
+    """One pillar's shapes at plate heights ``gaps`` (B,): linear between the table's rows (the table's
+    first row, at first contact, above it); lying where the nearer row lies."""
+    heights = path.gaps[::-1]
+    upper = np.clip(np.searchsorted(heights, gaps), 1, heights.size - 1)
+    weight = np.clip((gaps - heights[upper - 1]) / (heights[upper] - heights[upper - 1]), 0.0, 1.0)[:, None]
+    rows_low, rows_high = path.gaps.size - upper, path.gaps.size - 1 - upper  # the table's own order
+
+    def blend(values: NDArray) -> NDArray:
+        return values[rows_low] * (1 - weight) + values[rows_high] * weight
+
+    shapes = path.shapes
+    return replace(shapes, x=blend(shapes.x), z=blend(shapes.z), angles=blend(shapes.angles),
+                   force=blend(shapes.force), saturated=np.where(weight[:, 0] < 0.5, shapes.saturated[rows_low],
+                                                                 shapes.saturated[rows_high]))
+
+
+def _pillar_gaps(path: PlatePath, unturned: NDArray, lever: NDArray, plate: BalancePlate) -> tuple[NDArray, NDArray]:
+    """Each pillar's gap (G, P) and the plate's turn (G,): ``unturned`` (G, P) the gaps of a plate that does
+    not turn, ``lever`` (P,) each base's lever along the bend."""
+    if plate.rotation_stiffness is None:
+        return unturned, np.zeros(unturned.shape[0])
+    low = path.gaps[-1]
+    tips = path.shapes.x[:, -1]
+
+    def moment_balance(turn: float, row: NDArray) -> float:
+        gaps = row - lever * turn
+        offsets = np.interp(gaps, path.gaps[::-1], tips[::-1])
+        return plate.rotation_stiffness * turn + float(_push_at(path, gaps) @ (lever + offsets))
+
+    turns = np.empty(unturned.shape[0])
+    moving = lever != 0
+    for index, row in enumerate(unturned):
+        # the turns that keep every gap in the table (gaps above first contact need no bound)
+        limits = (row[moving] - low) / lever[moving]
+        upper = float(limits[lever[moving] > 0].min(initial=math.inf))
+        lower = float(-(-limits[lever[moving] < 0]).min(initial=math.inf))
+        upper, lower = min(upper, 0.5), max(lower, -0.5)
+        if moment_balance(lower, row) > 0 or moment_balance(upper, row) < 0:
+            raise DieError(f"plate.rotation_stiffness = {plate.rotation_stiffness:g}: the plate would turn "
+                           "beyond what the pillars' table covers; expected a stiffer plate")
+        turns[index] = brentq(moment_balance, lower, upper, args=(row,), xtol=1e-12, rtol=1e-10)
+    return unturned - lever[None, :] * turns[:, None], turns
+
+
+def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int, shares: tuple[float, ...] | None = None) -> Dipoles:
     """(B, P·K) dipoles of every pillar bent to ``shapes`` (one shape per load, the same for all pillars):
-    K = ``count`` per pillar, along the local tangents, 1/K of the pillar's moment each."""
+    K = ``count`` per pillar, along the local tangents, each ``shares`` of the pillar's moment (base first;
+    None: 1/K each, as published)."""
     fractions = (np.arange(count) + 0.5) / count
     points, tangents = shapes.centreline(fractions)  # (B, K, 2) in the bending plane (along, up)
     lift = np.zeros(points.shape[:-1] + (1,))
@@ -64,10 +147,11 @@ def pillar_dipoles(pillars: Pillars, shapes: RodShapes, count: int) -> Dipoles:
     def to_3d(plane: NDArray) -> NDArray:  # the bending plane is the pillar's x-z plane
         return np.concatenate([plane[..., :1], lift, plane[..., 1:]], axis=-1)
 
-    return chain_dipoles(pillars, to_3d(points), to_3d(tangents))
+    return chain_dipoles(pillars, to_3d(points), to_3d(tangents), shares)
 
 
-def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray) -> Dipoles:
+def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray,
+                  shares: tuple[float, ...] | None = None) -> Dipoles:
     """(B, P·K) dipoles of every pillar whose centre line is at ``points`` (B, K, 3) with unit ``tangents``
     (B, K, 3), given in a pillar's own frame (base at the origin, bending towards +x), turned to the
     pillars' bend azimuth and placed at each base."""
@@ -76,7 +160,7 @@ def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray) -> Dipol
     offsets = np.concatenate([pillars.positions, np.zeros((len(pillars.positions), 1))], axis=-1)  # (P, 3)
     positions = (points @ turn.T)[:, None, :, :] + offsets[None, :, None, :]  # (B, P, K, 3)
     axes = np.broadcast_to((tangents @ turn.T)[:, None], positions.shape)
-    chain = dipole_chain(positions, axes, pillars.moment)
+    chain = dipole_chain(positions, axes, pillars.moment, shares)
     batch = positions.shape[0]
     return Dipoles(chain.positions.reshape(batch, -1, 3), chain.moments.reshape(batch, -1, 3))
 
@@ -95,15 +179,21 @@ def _forces(values: ArrayLike, name: str) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class CiliaModel:
-    """The die's forward model. ``chain_count`` dipoles per pillar; ``mode`` the paper's load reading."""
+    """The die's forward model. ``chain_count`` dipoles per pillar, carrying ``chain_shares`` of its moment
+    (base first; None: equal shares, as published: a uniform magnetisation of a uniform pillar); ``mode``
+    the paper's load reading."""
 
     die: Die
     chain_count: int = 10
     mode: LoadMode = "paper"
+    chain_shares: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.chain_count, int) or self.chain_count < 1:
             raise DieError(f"chain_count = {self.chain_count!r}: expected a positive integer")
+        if self.chain_shares is not None and (len(self.chain_shares) != self.chain_count
+                                              or min(self.chain_shares) < 0 or abs(sum(self.chain_shares) - 1) > 1e-9):
+            raise DieError(f"chain_shares: expected {self.chain_count} shares >= 0 summing to 1")
         if self.mode not in ("paper", "paper-follower"):
             raise DieError(f"mode = {self.mode!r}: expected paper or paper-follower")
 
@@ -123,7 +213,7 @@ class CiliaModel:
         """(B, n) element fields of ``sensor`` per unit of the pillars' moment (T per A·m²): the field is
         linear in the moment, so a fit of the moment rescales these."""
         unit = replace(self.die.pillars, moment=float(np.sign(self.die.pillars.moment)))
-        return element_fields(self.die.meander(sensor), pillar_dipoles(unit, shapes, self.chain_count))
+        return element_fields(self.die.meander(sensor), pillar_dipoles(unit, shapes, self.chain_count, self.chain_shares))
 
     def volts(self, fields: ArrayLike, sensor: str) -> NDArray[np.float64]:
         """Voltage across ``sensor`` whose elements see ``fields`` (B, n)."""
@@ -149,31 +239,62 @@ class CiliaModel:
         """Voltage (V) across ``sensor`` at zero force: its tare."""
         return float(self.curve(np.array([0.0]), sensor).volts[0])
 
-    def balance_curve(self, descent: ArrayLike, contact: PlateContact = PlateContact(),
-                      sensor: str = "X") -> ForceCurve:
+    def balance_curve(self, descent: ArrayLike, contact: PlateContact = PlateContact(), sensor: str = "X",
+                      plate: BalancePlate = BalancePlate()) -> BalanceCurve:
         """The balance test: the die lowered by ``descent`` (G,) m (increasing, from 0) past the height where
-        the plate first touches the pillars; the force is the balance's reading, all pillars together."""
-        return self.balance_curves(descent, contact, (sensor,))[0]
+        the plate first touches a pillar; the force is the balance's reading, all pillars together."""
+        return self.balance_curves(descent, contact, (sensor,), plate)[0]
 
-    def balance_curves(self, descent: ArrayLike, contact: PlateContact,
-                       sensors: tuple[str, ...]) -> tuple[ForceCurve, ...]:
-        """:meth:`balance_curve` of each of ``sensors``: the plate lowered once for all."""
+    def balance_curves(self, descent: ArrayLike, contact: PlateContact, sensors: tuple[str, ...],
+                       plate: BalancePlate = BalancePlate()) -> tuple[BalanceCurve, ...]:
+        """:meth:`balance_curve` of each of ``sensors``: the plate lowered once for all.
+
+        Every pillar follows one rod's path under the plate (:func:`lower_plate`, in the plate's frame, the
+        die's ``contact.tilt`` included), tabulated against the plate's height over its base; the pillars
+        differ in that height. A die tilted by t brings the bases at a lever a along the bend nearer the
+        plate by a sin t; a plate that turns by φ about the axis across the bend under the die's centre
+        moves each base's gap by −a φ, and turns until its stiffness balances the pushes' moment,
+        k φ = −Σ F_i (a_i + u_i) (u the tip's offset along the bend). The turn's own change of the pillars'
+        inclination (φ beside the tilt) is left out of the rod: it is reported (``rotation``) to be judged."""
         descent = np.asarray(descent, dtype=np.float64)
-        rod = self.die.pillars.rod
+        pillars = self.die.pillars
+        rod = pillars.rod
         start = touching_height(rod, contact)
+        lever = pillars.positions @ np.array([math.cos(pillars.bend_azimuth), math.sin(pillars.bend_azimuth)])
+        nearer = lever * (math.sin(contact.tilt) + plate.seated)
+        spread = float(nearer.max() - nearer.min())
         if (descent.ndim != 1 or descent.size == 0 or not np.all(np.isfinite(descent)) or np.any(descent < 0)
-                or np.any(np.diff(descent) < 0) or descent[-1] >= start):
+                or np.any(np.diff(descent) < 0) or descent[-1] + spread >= start):
             raise DieError(f"descent: expected a non-empty 1-D array of increasing distances from 0 to below "
-                           f"{start:.6g} m (the plate then touches the bases)")
+                           f"{start - spread:.6g} m (the plate then touches the bases)")
+        # the table: every gap a pillar may meet, the plate's turn allowed a twentieth of the height more
+        lowest = max(start - descent[-1] - spread - (0.0 if plate.rotation_stiffness is None else 0.05 * rod.length),
+                     0.05 * start)
+        unturned = start - descent[:, None] + nearer.max() - nearer[None, :]
+        # a regular grid and every gap a plate that does not turn meets (so that there the table is exact)
+        grid = np.linspace(start, lowest, max(3, int(math.ceil((start - lowest) / (0.0025 * rod.length))) + 1))
+        table_gaps = np.unique(np.concatenate([grid, unturned[unturned < start]]))[::-1]
         try:
-            path = lower_plate(rod, start - descent, contact)
+            path = lower_plate(rod, table_gaps, contact)
         except RodError as problem:
             raise DieError(f"balance: {problem}") from None
-        both = path.standing.concatenate(path.shapes)  # the tare: the pillars before the plate touches them
-        force = path.vertical_force * self.pillar_count
-        volts = [self._volts(both, sensor) for sensor in sensors]
-        return tuple(ForceCurve(sensor, force, v[1:], v[1:] - v[0], path.lying, path.shapes)
-                     for sensor, v in zip(sensors, volts, strict=True))
+        gaps, rotation = _pillar_gaps(path, unturned, lever, plate)
+        shapes = [_shapes_at(path, gaps[:, p]).turned(contact.tilt) for p in range(lever.size)]
+        force = np.stack([_push_at(path, gaps[:, p]) for p in range(lever.size)], axis=1).sum(axis=1)
+        standing = path.standing.turned(contact.tilt)
+        centre = int(np.argmin(np.abs(lever)))
+        lying = np.all(np.stack([s.saturated for s in shapes], axis=1), axis=1)
+        curves = []
+        for sensor in sensors:
+            meander = self.die.meander(sensor)
+            fields = sum(element_fields(meander, pillar_dipoles(replace(pillars, positions=pillars.positions[p:p + 1]),
+                                                                shapes[p], self.chain_count, self.chain_shares))
+                         for p in range(lever.size))
+            rest = element_fields(meander, pillar_dipoles(pillars, standing, self.chain_count, self.chain_shares))
+            volts = self.volts(np.concatenate([rest, fields]), sensor)
+            curves.append(BalanceCurve(sensor, force, volts[1:], volts[1:] - volts[0], lying, shapes[centre],
+                                       gaps, rotation, np.stack([s.saturated for s in shapes], axis=1).sum(axis=1)))
+        return tuple(curves)
 
     def _volts(self, shapes: RodShapes, sensor: str) -> NDArray[np.float64]:
         return self.volts(abs(self.die.pillars.moment) * self.unit_fields(shapes, sensor), sensor)

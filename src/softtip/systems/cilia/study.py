@@ -1,5 +1,8 @@
-"""The S4 force study: the twin's force–voltage curve, the published fit of moment and diameter, what the
-curve identifies, the smallest resolved force and the range, the balance test, and the layout's weight.
+"""The S4 force study: the twin's force–voltage curves, the publication's fit made again on them (its model,
+a clamped uniform cylinder loaded at its tip, fitted to the balance test as performed and to the tip-load
+curve) and the publication's causes of its moment gap tried on the twin; softtip's own fit of its own
+curve (an identifiability check: what the curve identifies, the recovery of the twin's truth); the smallest
+resolved force and the range; the balance test's minimum force from its causes; the layout's weight.
 
 :func:`run_study` is the entry point: pure analysis returning a typed :class:`CiliaStudy` with matplotlib
 ``Figure`` objects (never pyplot). The "measured" curve is the twin's own: the declared die with a chosen
@@ -23,7 +26,9 @@ from matplotlib.patches import Circle, Rectangle
 from pydantic import Field
 
 from softtip._core.config import (
+    Flag,
     Fraction,
+    NonNegativeNumber,
     OpenFraction,
     PositiveInteger,
     PositiveNumber,
@@ -38,8 +43,8 @@ from softtip._core.config import (
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM, MN, UM
-from softtip.magnetics.dipoles import dipole_field
-from softtip.mechanics.rod import PlateContact
+from softtip.magnetics.dipoles import dipole_field, frustum_shares
+from softtip.mechanics.rod import PlateContact, Rod
 from softtip.sensors.gmr import TESLA_PER_OERSTED
 from softtip.systems.cilia.fit import (
     CHI2_95,
@@ -54,11 +59,19 @@ from softtip.systems.cilia.fit import (
     profiles,
 )
 from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, DieError, pillar_rod, read_die
-from softtip.systems.cilia.model import CiliaModel, ForceCurve, pillar_dipoles
-from softtip.systems.cilia.resolution import Resolution, resolutions
+from softtip.systems.cilia.model import BalanceCurve, BalancePlate, CiliaModel, ForceCurve, pillar_dipoles
+from softtip.systems.cilia.resolution import (
+    BUDGET_PARTS,
+    GRAM_FORCE,
+    ForceBudget,
+    Resolution,
+    balance_force_budget,
+    resolutions,
+)
 from softtip.systems.cilia.roughness import BRUSH_SPACING_MM
 
 SHIPPED = "shipped"  # the die setting that names the declared layout
+DWELL_S = 2.0  # s per load step (chosen: the publication gives no rate); the lab bench's default too
 
 
 @schema(section="cilia", error=DieError)
@@ -80,6 +93,21 @@ class CiliaSettings:
     chain_count: PositiveInteger = 10
     friction: number("a number >= 0", ge=0.0) = 0.5
     imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
+    # the balance test as performed (softtip.systems.cilia.model.CiliaModel.balance_curve)
+    die_tilt_deg: number("an angle in degrees from -10 to 10", ge=-10.0, le=10.0) = 0.0
+    plate_stiffness_uNm: PositiveNumber | None = None  # the plate's turn, µN·m per rad; unset: it does not turn
+    # the smallest force the balance test resolves (softtip.systems.cilia.resolution.balance_force_budget)
+    budget_parts: Annotated[tuple[choice(*BUDGET_PARTS), ...], Field(min_length=1),
+                            expect(f"a non-empty list of {', '.join(BUDGET_PARTS)}")] = BUDGET_PARTS
+    balance_readability_mg: PositiveNumber = 0.1
+    plate_seating_mrad: NonNegativeNumber = 1.0
+    warm_up_s: NonNegativeNumber = 60.0
+    gap_causes: Flag = True  # the publication's causes of its moment gap tried on the twin (six fits)
+    # the balance test's unknowns swept: other die tilts (the declared plate), other plates (the first tilt)
+    rig_tilts_deg: Annotated[tuple[number("an angle in degrees from -10 to 10", ge=-10.0, le=10.0), ...],
+                             expect("a list of angles in degrees from -10 to 10")] = (1.0, 3.0)
+    rig_plate_stiffnesses_uNm: Annotated[tuple[PositiveNumber, ...],
+                                         expect("a list of positive stiffnesses in µN·m/rad")] = (100.0,)
     depths_um: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
                          expect("a non-empty list of positive depths")] = (5.0, 10.0, 20.0)
     meander_scales: Annotated[tuple[PositiveNumber, ...], Field(min_length=1),
@@ -147,18 +175,61 @@ class LayoutWeight:
 
 
 @dataclass(frozen=True)
-class BalanceOutcome:
-    """The balance test (die lowered onto a plate) and the paper-mode fit of its curve, if one converges."""
+class PublicationFit:
+    """The publication's own fit (:func:`publication_model`: a clamped uniform cylinder loaded at its tip,
+    height and modulus held, moment and diameter free) of one curve: ``fit``, or why none converged."""
 
-    curve: ForceCurve
-    buckling_force: float  # N, all pillars: the largest push before the first sliding or lying step
+    curve: str
     fit: CurveFit | None
     refusal: str
 
 
 @dataclass(frozen=True)
+class BalanceOutcome:
+    """The balance test as performed (die lowered onto a plate) and the publication's fit of its curve."""
+
+    curve: BalanceCurve
+    buckling_force: float  # N, all pillars: where the pillars' tips have turned past their rest (buckled)
+    first_lying_force: float | None  # N: the balance's reading when the first pillar lies on its side
+    all_lying_force: float | None  # N: when every pillar lies
+    publication: PublicationFit
+    budget: ForceBudget
+    finer_chain: BalanceCurve  # the same test with CHAIN_CHECK times the dipoles per pillar: the chain's convergence
+
+
+@dataclass(frozen=True)
+class RigCase:
+    """The balance test with other values of its unknowns: the die's ``tilt`` (rad), the plate's
+    ``stiffness`` (N·m/rad, None: fixed), and what they do to the curve."""
+
+    tilt: float
+    stiffness: float | None
+    all_lying_force: float | None  # N
+    change_at_5mN: float | None  # V
+    largest_turn: float  # rad
+
+
+@dataclass(frozen=True)
+class GapCause:
+    """One of the publication's causes of its fitted moment being a third of the magnetometer's, tried on
+    the twin: the twin changed as ``change`` says, its tip-load curve fitted by the publication's model."""
+
+    cause: str
+    change: str
+    truth_moment: float
+    fit: CurveFit | None
+    refusal: str
+
+    @property
+    def ratio(self) -> float | None:
+        """The twin's moment over the publication model's fitted one (the publication's gap is about 3)."""
+        return None if self.fit is None else self.truth_moment / self.fit.moment
+
+
+@dataclass(frozen=True)
 class CiliaFigures:
     curve: Figure
+    balance: Figure
     field_map: Figure
     pillars: Figure
     profiles: Figure
@@ -178,6 +249,9 @@ class CiliaStudy:
     resolution: Resolution
     other_sensor: Resolution
     balance: BalanceOutcome
+    publication_tip_load: PublicationFit
+    moment_gap: tuple[GapCause, ...]
+    rig: tuple[RigCase, ...]
     layout: LayoutWeight
     figures: CiliaFigures
 
@@ -218,7 +292,39 @@ def balance_descent(model: CiliaModel, settings: CiliaSettings) -> np.ndarray:
 
 
 def balance_contact(settings: CiliaSettings) -> PlateContact:
-    return PlateContact(settings.friction, math.radians(settings.imperfection_deg))
+    return PlateContact(settings.friction, math.radians(settings.imperfection_deg), math.radians(settings.die_tilt_deg))
+
+
+def balance_plate(settings: CiliaSettings, seated: float = 0.0) -> BalancePlate:
+    """The balance's plate of ``settings``, seated at a turn of ``seated`` (rad)."""
+    stiffness = settings.plate_stiffness_uNm
+    return BalancePlate(None if stiffness is None else stiffness * 1e-6, seated)
+
+
+PUBLISHED_HEIGHT, PUBLISHED_MODULUS = 1e-3, 1e6  # m, Pa: what the publication held in its fit
+
+
+def publication_model(model: CiliaModel) -> CiliaModel:
+    """The publication's model of ``model``'s die: each pillar a uniform cylinder 1 mm tall of E = 1 MPa,
+    clamped at its base (no compliant film, no bonded-root correction), loaded at its tip perpendicular to
+    its axis, its moment shared equally by the chain's dipoles; the diameter (the die's tip diameter here)
+    and the moment are what a fit sets."""
+    pillars = model.die.pillars
+    rod = pillars.rod
+    cylinder = Rod(length=PUBLISHED_HEIGHT, base_diameter=rod.tip_diameter, tip_diameter=rod.tip_diameter,
+                   youngs_modulus=PUBLISHED_MODULUS, poisson_ratio=rod.poisson_ratio, segments=rod.segments)
+    return CiliaModel(model.die.with_pillars(replace(pillars, rod=cylinder)), chain_count=model.chain_count)
+
+
+def publication_fit(model: CiliaModel, curve: MeasuredCurve, name: str) -> PublicationFit:
+    """The publication's fit of ``curve`` (its forces above zero), from the twin's own moment and diameter."""
+    pillars = model.die.pillars
+    try:
+        fit = fit_curve(publication_model(model), curve.part(curve.force > 0),
+                        start=(abs(pillars.moment), pillars.rod.tip_diameter))
+        return PublicationFit(name, fit, "")
+    except (NotConverged, CurveError) as problem:  # the report says why the model cannot fit this curve
+        return PublicationFit(name, None, f"{type(problem).__name__}: {problem}")
 
 
 def run_study(settings: CiliaSettings, seed: int, progress: Progress = SILENT) -> CiliaStudy:
@@ -228,14 +334,15 @@ def run_study(settings: CiliaSettings, seed: int, progress: Progress = SILENT) -
     rng = np.random.default_rng(seed)
     truth = model.curve(paper_forces(settings), settings.sensor)
     measured = [measure(model, truth, settings.repeatability, rng) for _ in range(settings.trials)]
-    balance = model.balance_curve(balance_descent(model, settings), balance_contact(settings), settings.sensor)
+    balance = model.balance_curve(balance_descent(model, settings), balance_contact(settings), settings.sensor,
+                                  balance_plate(settings))
     return analyse_curves(settings, seed, model, truth, measured, balance,
                           measure(model, balance, settings.repeatability, rng), progress)
 
 
 def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth: ForceCurve,
-                   measured: list[MeasuredCurve], balance: ForceCurve, balance_measured: MeasuredCurve,
-                   progress: Progress = SILENT) -> CiliaStudy:
+                   measured: list[MeasuredCurve], balance: BalanceCurve, balance_measured: MeasuredCurve,
+                   progress: Progress = SILENT, dwell: float = DWELL_S) -> CiliaStudy:
     """The force study of measured curves of ``model``'s twin: the first paper-mode curve fitted in full
     (profiles, identifiability, layout weight), every one fitted for the recovery of the twin's truth,
     and the paper-mode fit of the balance test's curve."""
@@ -258,20 +365,25 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
             task.advance()
     recovery = Recovery(abs(model.die.pillars.moment), model.die.pillars.rod.tip_diameter, np.array(trials_m),
                         np.array(trials_d))
-    with progress.task("resolution, balance, layout", total=3) as task:
+    with progress.task("resolution, balance, the publication's fit, layout", total=5) as task:
         resolved, other = resolutions(model, (first.sensor, "Y" if first.sensor == "X" else "X"),
                                       1.5 * settings.force_max_mN * MN)
         task.advance()
-        balanced = _balance(model, balance, balance_measured, settings)
-        task.advance()
+        balanced = _balance(model, balance, balance_measured, settings, dwell)
+        task.advance(note="balance test")
+        tip_load = publication_fit(model, first, "tip load")
+        gap = _moment_gap(model, settings) if settings.gap_causes else ()
+        rig = _rig_cases(model, settings)
+        task.advance(note="the publication's fit, the moment gap's causes, the rig's unknowns")
         layout = _layout_weight(model, first, fitted, settings)
         task.advance()
     figures = CiliaFigures(curve=_curve_figure(truth, first, fitted, balanced),
+                           balance=_balance_figure(balanced, balance_measured, resolved.noise.total, settings),
                            field_map=_field_map_figure(model, truth),
                            pillars=_pillars_figure(truth, balanced),
                            profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
     return CiliaStudy(settings, seed, truth, first, fitted, profile_d, profile_m, identified, recovery, resolved,
-                      other, balanced, layout, figures)
+                      other, balanced, tip_load, gap, rig, layout, figures)
 
 
 def measure(model: CiliaModel, truth: ForceCurve, repeatability: float, rng: np.random.Generator) -> MeasuredCurve:
@@ -285,17 +397,92 @@ def measure(model: CiliaModel, truth: ForceCurve, repeatability: float, rng: np.
     return MeasuredCurve(truth.force, readings + rng.normal(0.0, scatter, readings.shape), truth.sensor)
 
 
-def _balance(model: CiliaModel, curve: ForceCurve, measured: MeasuredCurve, settings: CiliaSettings) -> BalanceOutcome:
+def _balance(model: CiliaModel, curve: BalanceCurve, measured: MeasuredCurve, settings: CiliaSettings,
+             dwell: float) -> BalanceOutcome:
     tilt = math.radians(settings.imperfection_deg)
     buckled = np.flatnonzero(np.abs(curve.shapes.tip_angle) > 2 * tilt + 0.05)
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
-    pressed = measured.force > 0
-    try:
-        fit = fit_curve(model, measured.part(pressed))
-        refusal = ""
-    except (NotConverged, CurveError) as problem:  # the report says why the paper model cannot fit this curve
-        fit, refusal = None, f"{type(problem).__name__}: {problem}"
-    return BalanceOutcome(curve, buckling, fit, refusal)
+    first, every = (np.flatnonzero(curve.lying_count >= count) for count in (1, len(curve.gaps[0])))
+    within = measured.part(measured.force <= settings.force_max_mN * MN)  # the range the publication fitted
+    finer = replace(model, chain_count=CHAIN_CHECK * model.chain_count).balance_curve(
+        balance_descent(model, settings), balance_contact(settings), curve.sensor, balance_plate(settings))
+    return BalanceOutcome(curve, buckling, float(curve.force[first[0]]) if first.size else None,
+                          float(curve.force[every[0]]) if every.size else None,
+                          publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer)
+
+
+CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is the published chain enough?
+GAP_POINTS = 13  # load steps of each noise-free curve the moment gap's causes are tried on
+SEATING_STEP = 1e-3  # rad: the plate's seating turn either side for its effect on the voltage
+
+
+def _budget(model: CiliaModel, curve: BalanceCurve, settings: CiliaSettings, dwell: float) -> ForceBudget:
+    """The balance test's force budget along its curve: the steps up to the stated range while the force
+    rises (the budget needs the force increasing; a turning plate can make it dip)."""
+    descent = balance_descent(model, settings)
+    rising = np.concatenate([[True], np.diff(curve.force) > 0]) & (curve.force <= settings.force_max_mN * MN)
+    keep = np.flatnonzero(np.cumprod(rising))
+    seated = [model.balance_curve(descent, balance_contact(settings), curve.sensor, balance_plate(settings, turn))
+              for turn in (-SEATING_STEP, SEATING_STEP)]
+    force = curve.force[keep]
+    low, high = (np.interp(force, other.force[np.argsort(other.force)], other.change[np.argsort(other.force)])
+                 for other in seated)
+    readout = model.die.meander(curve.sensor).readout
+    return balance_force_budget(force, curve.change[keep], float(curve.volts[0] - curve.change[0]), readout,
+                                (low, high, SEATING_STEP), settings.balance_readability_mg * 1e-3 * GRAM_FORCE,
+                                settings.plate_seating_mrad * 1e-3, settings.warm_up_s, dwell,
+                                float(np.prod(model.die.size)), settings.budget_parts)
+
+
+def _rig_cases(model: CiliaModel, settings: CiliaSettings) -> tuple[RigCase, ...]:
+    """The balance test at the other tilts with the declared plate, and on the other plates at the first
+    of those tilts (or the declared one)."""
+    tilted = settings.rig_tilts_deg[0] if settings.rig_tilts_deg else settings.die_tilt_deg
+    cases = ([replace(settings, die_tilt_deg=tilt) for tilt in settings.rig_tilts_deg]
+             + [replace(settings, die_tilt_deg=tilted, plate_stiffness_uNm=k) for k in settings.rig_plate_stiffnesses_uNm])
+    found = []
+    for case in cases:
+        plate = balance_plate(case)
+        curve = model.balance_curve(balance_descent(model, case), balance_contact(case), settings.sensor, plate)
+        every = np.flatnonzero(curve.lying_count >= len(curve.gaps[0]))
+        found.append(RigCase(math.radians(case.die_tilt_deg), plate.rotation_stiffness,
+                             float(curve.force[every[0]]) if every.size else None,
+                             float(np.interp(5 * MN, curve.force, curve.change)) if curve.force.max() >= 5 * MN else None,
+                             float(np.abs(curve.rotation).max())))
+    return tuple(found)
+
+
+def _moment_gap(model: CiliaModel, settings: CiliaSettings) -> tuple[GapCause, ...]:
+    """The publication's causes of its 3 × moment gap that the twin can test: its tip-load curve (noise-free,
+    :data:`GAP_POINTS` steps over the range) with each cause on or off, fitted by the publication's model."""
+    forces = paper_forces(replace(settings, points=GAP_POINTS))
+    pillars = model.die.pillars
+    rod = pillars.rod
+    count = model.chain_count
+    mean = 0.5 * (rod.tip_diameter + rod.base_diameter)
+    uniform = replace(model, die=model.die.with_pillars(replace(pillars, rod=pillar_rod(rod, mean, mean))))
+    rising = tuple(float(v) for v in (2 * np.arange(count) + 1) / count**2)  # ∝ height: particles settled to the tip
+    heated = model.die.meanders
+    hot = replace(model, die=replace(model.die, meanders=tuple(
+        replace(m, readout=replace(m.readout, thermal_resistance=100 * m.readout.thermal_resistance)) for m in heated)))
+    variants = [
+        ("none (the twin as declared)", "a cone 200 → 320 µm on a film of its own material, uniform material, "
+         "self-heating at 100 µA", model),
+        ("the cone", f"a uniform cylinder of the cone's mean diameter ({mean / UM:.0f} µm)", uniform),
+        ("the cone", "the cone magnetised uniformly: each dipole its slice's share of the volume",
+         replace(model, chain_shares=tuple(float(v) for v in frustum_shares(rod.base_diameter, rod.tip_diameter, count)))),
+        ("non-uniform material", "the moment rising linearly from base to tip (particles settled to the tip)",
+         replace(model, chain_shares=rising)),
+        ("non-uniform material", "the moment falling linearly from base to tip (settled to the base)",
+         replace(model, chain_shares=rising[::-1])),
+        ("spin-valve heating", "the die's thermal resistance × 100 (its warming 100 times the computed)", hot),
+    ]
+    causes = []
+    for cause, change, twin in variants:
+        curve = twin.curve(forces, settings.sensor)
+        found = publication_fit(model, MeasuredCurve(curve.force, curve.change, curve.sensor), cause)
+        causes.append(GapCause(cause, change, abs(pillars.moment), found.fit, found.refusal))
+    return tuple(causes)
 
 
 def _layout_weight(model: CiliaModel, measured: MeasuredCurve, fitted: CurveFit, settings: CiliaSettings) -> LayoutWeight:
@@ -319,11 +506,35 @@ def _curve_figure(truth: ForceCurve, measured: MeasuredCurve, fit: CurveFit, bal
     axes.plot(measured.force / MN, measured.change * 1e3, "o", ms=3, label="measured (twin + readout + bench)")
     axes.plot(truth.force / MN, truth.change * 1e3, "-", lw=1, label="truth (paper mode)")
     axes.plot(measured.force / MN, fit.prediction * 1e3, "--", lw=1.5,
-              label=f"fit: {fit.moment / MEMU:.3f} memu, {fit.diameter / UM:.1f} µm")
+              label=f"softtip's own fit (identifiability): {fit.moment / MEMU:.3f} memu, {fit.diameter / UM:.1f} µm")
     axes.plot(balance.curve.force / MN, balance.curve.change * 1e3, "-", lw=1, label="balance mode (plate)")
     axes.set_xlabel("force on the die (mN)")
     axes.set_ylabel(f"voltage change, sensor {measured.sensor} (mV)")
     axes.legend(fontsize=8)
+    return figure
+
+
+def _balance_figure(balance: BalanceOutcome, measured: MeasuredCurve, sigma: float, settings: CiliaSettings) -> Figure:
+    """The balance test at its own scale: the twin's curve, its reading, the meter's noise, where the pillars
+    buckle and lie, and what the publication's model fitted to it predicts."""
+    figure = Figure(figsize=(6.4, 4.2), layout="constrained")
+    axes = figure.add_subplot()
+    curve = balance.curve
+    axes.axhspan(-3e6 * sigma, 3e6 * sigma, color="0.9", label="± 3σ of one reading")
+    axes.plot(measured.force / MN, measured.change * 1e6, "o", ms=3, label="read (meter + bench)")
+    axes.plot(curve.force / MN, curve.change * 1e6, "-", lw=1, label="twin")
+    fit = balance.publication.fit
+    if fit is not None:
+        within = measured.force[(measured.force > 0) & (measured.force <= settings.force_max_mN * MN)]
+        axes.plot(within / MN, fit.prediction * 1e6, "--", lw=1.5,
+                  label="the publication's model fitted" + (" (on a bound)" if fit.at_bound else ""))
+    axes.axvline(balance.buckling_force / MN, color="k", ls=":", lw=0.8, label="the pillars buckle")
+    if balance.all_lying_force is not None:
+        axes.axvline(balance.all_lying_force / MN, color="k", ls="--", lw=0.8, label="every pillar lies")
+    axes.axvline(settings.force_max_mN, color="C3", ls="-.", lw=0.8, label="the published range's end")
+    axes.set_xlabel("the balance's reading (mN)")
+    axes.set_ylabel(f"voltage change, sensor {curve.sensor} (µV)")
+    axes.legend(fontsize=7)
     return figure
 
 
