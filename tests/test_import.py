@@ -349,7 +349,7 @@ def test_an_imported_dataset_feeds_sysid(tmp_path):
                                  "-y", "plate0_x_V", "--kind", "tf", "--order", "1", "-o", str(tmp_path / "p.npz"),
                                  "--json"])
     assert fitted.exit_code == 0, fitted.output
-    model = json.loads(fitted.output)["model"]
+    model = json.loads(fitted.stdout)["model"]
     assert model["ts"] == pytest.approx(0.1) and model["input_units"] == ["V"]
     np.testing.assert_allclose(model["discrete_poles"][0], [0.8, 0.0], atol=1e-6)
 
