@@ -4,6 +4,7 @@ program), fingertip files, and the commands that take them."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -150,9 +151,9 @@ def test_a_c_program_renders_from_the_exported_header_as_softtip_does(tmp_path):
 
 def test_a_fingertip_file_gives_the_fingertip_it_describes(tmp_path):
     path = tmp_path / "finger.toml"
-    path.write_text('[fingertip]\nname = "human 3 again"\nradius_mm = 10.0\n')
-    # a cast of 10 mm: the shipped human cast of that size, contact law and all
-    assert load_fingertip(path).contact == TEST_FINGERTIPS[-1].contact
+    path.write_text('[fingertip]\nname = "human 3 again"\nradius_mm = 10.0\nshape = "ellipsoid"\n')
+    # an ellipsoidal cast of 10 mm: the shipped human cast of that size, shape, contact law and all
+    assert load_fingertip(path) == dataclasses.replace(TEST_FINGERTIPS[-1], name="human 3 again")
     path.write_text('[fingertip]\nname = "pulp"\nradius_mm = 8.0\nlaw = "exponential"\n'
                     'stiffness_N_per_m = 400\nstiffening_per_m = 1500\ncore_offset_mm = [0, 0, 1.5]\n'
                     'mounting = "nail"\n')
@@ -191,7 +192,7 @@ def test_bad_fingertip_files_are_refused_in_one_line(tmp_path, text, words):
 
 def test_render_takes_a_fingertip_file_and_a_recorded_table(tmp_path):
     finger = tmp_path / "finger.toml"
-    finger.write_text('[fingertip]\nname = "my 10 mm finger"\nradius_mm = 10.0\n')
+    finger.write_text('[fingertip]\nname = "my 10 mm finger"\nradius_mm = 10.0\nshape = "ellipsoid"\n')
     table = tmp_path / "fs.csv"
     exported = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "fs.h"), "--csv", str(table),
                                    "--fs-levels", "9", "--json"])
@@ -208,6 +209,11 @@ def test_render_takes_a_fingertip_file_and_a_recorded_table(tmp_path):
                                   "--method", "geometric", "--table", str(table), "--json"])
     again = json.loads(shipped.stdout)
     assert rendered["median_error_N"] == again["median_error_N"] and rendered["p90_error_N"] == again["p90_error_N"]
+    # the device model presses the file's shape: a 10 mm sphere, which B takes alike, feels another force
+    finger.write_text('[fingertip]\nname = "my 10 mm sphere"\nradius_mm = 10.0\n')
+    sphere = runner.invoke(app, ["haptics", "render", "--duration", "0.3", "--fast", "--fingertip", str(finger),
+                                 "--method", "geometric", "--table", str(table), "--json"])
+    assert json.loads(sphere.stdout)["median_error_N"] != again["median_error_N"]
 
 
 def test_exported_table_is_the_personalised_one_for_the_geometric_method(tmp_path):

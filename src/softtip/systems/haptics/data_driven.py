@@ -103,6 +103,8 @@ class VariantComparison:
         for k, (variant, offset) in enumerate(zip(DATA_DRIVEN_VARIANTS, (-0.2, 0.2), strict=True)):
             axis.bar(where + offset, [row[1 + k] for row in rows], 0.4, label=f"A, {variant}")
         axis.set_xticks(where, [row[0].replace(" (", "\n(") for row in rows], fontsize=8)
+        # logarithmic: the fingertip the device presses at its floor (about 2 N) would flatten the others' 0.03-0.1 N
+        axis.set_yscale("log")
         axis.set_ylabel("median |F_target − F_rendered| (N)")
         axis.set_title(f"Personalisation A: raw 6-D DS wrenches (torque / {self.torque_length * 1e3:g} mm) "
                        "against 3-D forces in the device's axes", fontsize=9)

@@ -276,6 +276,7 @@ def curves_figure(points: tuple[CurvePoint, ...]) -> Figure:
         values = [point.value for point in mine]
         for m, method in enumerate(METHODS):
             axis.plot(values, [point.median_error[m] for point in mine], marker="o", label=method)
+        axis.set_xticks(values, [f"{value:g}" for value in values])
         axis.set_xlabel(CURVE_LABELS[setting])
         axis.set_yscale("log")
         axis.grid(alpha=0.3)
