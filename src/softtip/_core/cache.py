@@ -171,10 +171,10 @@ def read_file_entry(path: Path, key: str, kind: str, load: Callable[[Path], Load
     entry = read_entry(_entry_of_file(path), key, kind)
     if entry is None or not _regular(path):
         return None
-    if _sha256(path) != entry[0].get("file_sha256"):
-        _warn(path, "not the file its entry recorded (checksum mismatch)")
-        return None
     try:
+        if _sha256(path) != entry[0].get("file_sha256"):
+            _warn(path, "not the file its entry recorded (checksum mismatch)")
+            return None
         return load(path)
     except (ValueError, OSError) as problem:
         _warn(path, f"cannot be loaded ({str(problem).replace(str(path), '').lstrip(': ')})")
