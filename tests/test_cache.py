@@ -3,6 +3,7 @@ the source of the code that made each entry, and trusting no entry it has not ve
 
 from __future__ import annotations
 
+import errno
 import os
 import pwd
 import subprocess
@@ -167,6 +168,18 @@ def test_a_folder_fifo_or_link_in_place_of_an_entry_is_a_miss_never_followed(tmp
     one_warning(capsys, path, "a symbolic link, not a regular file")
     assert write_entry(path, "k1", "thing", {}, ARRAYS)  # the link replaced, its target untouched
     assert not path.is_symlink() and read_entry(target, "k1-elsewhere", "thing") is not None
+
+
+def test_a_cache_that_cannot_take_an_entry_is_one_warning_not_a_failure(tmp_path, monkeypatch, capsys):
+    def full_disk(descriptor):  # the disk fills as the written entry is flushed
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    path = tmp_path / "entries" / "k1.npz"
+    monkeypatch.setattr(os, "fsync", full_disk)
+    assert not write_entry(path, "k1", "thing", {}, ARRAYS)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and "could not be stored (No space left on device)" in lines[0]
+    assert list(path.parent.iterdir()) == []  # nothing half-written left behind
 
 
 FILL = """

@@ -16,6 +16,7 @@ its bytes are kept in an entry beside it (:func:`read_file_entry`, :func:`write_
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import importlib.util
 import json
@@ -160,7 +161,11 @@ def _entry_of_file(path: Path) -> Path:
 
 
 def _sha256(path: Path) -> str:
-    with open(path, "rb") as handle:
+    """SHA-256 of the regular file ``path``; opened without following a link or waiting on a FIFO, so a
+    file swapped since it was looked at cannot block the reader."""
+    with open(os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK), "rb") as handle:
+        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
         return hashlib.file_digest(handle, "sha256").hexdigest()
 
 
