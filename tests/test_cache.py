@@ -270,3 +270,25 @@ def test_a_mesh_of_another_key_or_damaged_is_rebuilt(tmp_path, monkeypatch, caps
     np.testing.assert_array_equal(mesh_design(design, 3 * MM).tets, fresh.tets)
     one_warning(capsys, path, "")
     assert read_entry(path, mesh_key(design, 3 * MM, 10), "mesh") is not None  # stored again, whole
+
+
+@pytest.mark.slow  # three identifications of the wearable model (some 4 s each)
+def test_a_damaged_cached_live_model_or_stream_is_rebuilt_and_served_again(monkeypatch, tmp_path, capsys):
+    from softtip.systems.wearable.live import wearable_live_setup
+
+    monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path))
+    fresh = wearable_live_setup()
+    stream = next((tmp_path / "models").glob("wearable-stream-*.npz"))
+    for damaged in (fresh.model, stream):  # the identified model's file, then the stream's entry
+        content = bytearray(damaged.read_bytes())
+        content[len(content) // 3] ^= 0x04
+        damaged.write_bytes(bytes(content))
+        capsys.readouterr()
+        rebuilt = wearable_live_setup()
+        one_warning(capsys, damaged, "checksum mismatch")
+        np.testing.assert_array_equal(rebuilt.readings, fresh.readings)
+        assert rebuilt.validation == fresh.validation
+    served = wearable_live_setup()  # stored again: a hit, no warning
+    assert capsys.readouterr().err == ""
+    np.testing.assert_array_equal(served.system.simulate(served.readings[:50, 0, :]),
+                                  fresh.system.simulate(fresh.readings[:50, 0, :]))

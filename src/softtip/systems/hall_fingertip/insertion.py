@@ -3,6 +3,7 @@ simulated arm for one case (S1 §3)."""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +34,9 @@ def trained_model_files(protocol: Protocol, progress: Progress = SILENT) -> tupl
         models = inverter_models(dataset, protocol.seed)
     channels = list(dataset.channels)
     for path, name, model, target, unit in zip(paths, names, models, ("state", "normal_force_N"), ("1", "N")):
-        write_file_entry(path, key, name, lambda file: save_model(
-            file, model, input_channels=channels, input_units=["uT"] * len(channels), target_names=[target],
-            target_units=[unit]))
+        write_file_entry(path, key, name, functools.partial(
+            save_model, model=model, input_channels=channels, input_units=["uT"] * len(channels),
+            target_names=[target], target_units=[unit]))
     return paths
 
 

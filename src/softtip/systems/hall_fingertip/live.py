@@ -11,6 +11,7 @@ from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stre
 from softtip.systems.hall_fingertip.scenarios import TwinScenario, insertion_scenario as compute_insertion
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
+
 def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
     """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed)``)
     and cached."""

@@ -67,9 +67,9 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     path, stream_path = trained_model_path(protocol, "wearable-force"), trained_model_path(protocol, "wearable-stream")
     key = protocol_key(protocol)
     # computed before by this code for this protocol: kept in the cache
-    entry, system = read_entry(stream_path, key, "wearable stream"), read_file_entry(path, key, "wearable-force",
-                                                                                      load_system)
-    if entry is not None and system is not None:
+    entry = read_entry(stream_path, key, "wearable stream")
+    system = None if entry is None else read_file_entry(path, key, "wearable-force", load_system)
+    if system is not None:
         metadata, arrays = entry
         return WearableStream(system, path, arrays["readings"], arrays["trial_starts"], arrays["force_N"],
                               metadata["rate_hz"], metadata["validation"])
