@@ -4,6 +4,7 @@ the source of the code that made each entry, and trusting no entry it has not ve
 from __future__ import annotations
 
 import errno
+import json
 import os
 import pwd
 import subprocess
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 import softtip.mechanics.mesh
 import softtip.optimize.cache
@@ -20,6 +22,7 @@ import softtip.lab.protocols
 from softtip._core.cache import (CacheEntryError, artefact_key, cache_dir, code_hash, read_entry, read_file_entry,
                                  write_entry, write_file_entry)
 from softtip.calibration import PolynomialFit, load_model, save_model
+from softtip.cli.main import app
 from softtip.design.model import MM, load_design
 from softtip.mechanics.mesh import mesh_design, mesh_key
 from softtip.lab import load_protocol
@@ -270,6 +273,22 @@ def test_a_mesh_of_another_key_or_damaged_is_rebuilt(tmp_path, monkeypatch, caps
     np.testing.assert_array_equal(mesh_design(design, 3 * MM).tets, fresh.tets)
     one_warning(capsys, path, "")
     assert read_entry(path, mesh_key(design, 3 * MM, 10), "mesh") is not None  # stored again, whole
+
+
+def test_simulate_rebuilds_a_damaged_mesh_entry_without_a_traceback(monkeypatch, tmp_path):
+    # as found by hand: a cut mesh entry raised zipfile.BadZipFile on every later run
+    monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path))
+    args = ["simulate", "--design", "cylindrical-B", "--mesh-size", "3", "--friction", "none", "--json"]
+    first = CliRunner().invoke(app, args)
+    entry = next((tmp_path / "meshes").glob("*.npz"))
+    entry.write_bytes(entry.read_bytes()[:-300])
+    again = CliRunner().invoke(app, args)
+    assert (first.exit_code, again.exit_code) == (0, 0) and again.exception is None, again.output
+    lines = again.stderr.splitlines()
+    assert len(lines) == 1 and str(entry) in lines[0] and "BadZipFile" in lines[0], lines
+    fresh, rebuilt = (json.loads(result.stdout) for result in (first, again))
+    assert {k: v for k, v in rebuilt.items() if k != "timings_s"} == {k: v for k, v in fresh.items()
+                                                                        if k != "timings_s"}
 
 
 @pytest.mark.slow  # three identifications of the wearable model (some 4 s each)
