@@ -226,12 +226,12 @@ def test_a_second_run_computes_nothing_and_a_partial_cache_only_the_rest(tmp_pat
     cache = FEResultCache(tmp_path / "fe")
     first = run_study(study, InProcessExecutor(), cache)
     assert (first.fe_runs, first.cache_hits, len(count_fe_runs)) == (3, 0, 3)
-    files = sorted(cache.root.glob("*.json"))
-    assert len(files) == 3 and all("result" in json.loads(f.read_text()) for f in files)  # JSON, not pickle
+    files = sorted(cache.root.glob("*.npz"))
+    assert len(files) == 3 and all(f.read_bytes().startswith(b"PK") for f in files)  # npz + JSON, not pickle
 
     again = run_study(study, InProcessExecutor(), cache)
     assert (again.fe_runs, again.cache_hits, len(count_fe_runs)) == (0, 3, 3)
-    assert [r.objective for r in again.records] == [r.objective for r in first.records]  # exact: JSON round-trips
+    assert [r.objective for r in again.records] == [r.objective for r in first.records]  # exact: arrays as computed
     assert all(r.cached for r in again.records)
 
     # a killed sweep: one result never written, one half-written
@@ -242,6 +242,30 @@ def test_a_second_run_computes_nothing_and_a_partial_cache_only_the_rest(tmp_pat
     resumed = run_study(study, InProcessExecutor(), cache)
     assert (resumed.fe_runs, resumed.cache_hits) == (2, 1) and count_fe_runs[3:] == [9.0, 10.0]
     assert [r.objective for r in resumed.records] == [r.objective for r in first.records]
+
+
+def test_a_changed_digit_or_another_designs_result_is_never_served(tmp_path, count_fe_runs, capsys):
+    # as found by hand: one digit changed in a cached FE result was served to optimize as a hit
+    study = study_from_dict(small_study([9.0, 10.0]))
+    cache = FEResultCache(tmp_path / "fe")
+    first = run_study(study, InProcessExecutor(), cache)
+    nine, ten = (cache.path(cache_key(study.design.with_params(**{"cavity.radius_mm": r}).spec,
+                                      study.objective.simulations[0])) for r in (9.0, 10.0))
+    with np.load(ten, allow_pickle=False) as entry:  # rewritten with one value's 4th digit changed
+        arrays = dict(entry)
+    arrays["field_change_T"][0, 2] *= 1.001
+    changed = tmp_path / "changed.npz"
+    np.savez(changed, **arrays)
+    ten.replace(nine)  # the 10 mm design's valid result under the 9 mm design's key
+    changed.replace(ten)
+    capsys.readouterr()
+    again = run_study(study, InProcessExecutor(), cache)
+    assert (again.fe_runs, again.cache_hits, count_fe_runs[2:]) == (2, 0, [9.0, 10.0])
+    assert [r.objective for r in again.records] == [r.objective for r in first.records]
+    warnings = capsys.readouterr().err.splitlines()
+    assert len(warnings) == 2 and str(nine) in warnings[0] and "made for another FE result" in warnings[0]
+    assert str(ten) in warnings[1] and "checksum mismatch" in warnings[1]
+    assert run_study(study, InProcessExecutor(), cache).cache_hits == 2  # stored again, and served
 
 
 def test_cache_key_follows_the_physics_not_the_spelling():
@@ -301,7 +325,7 @@ def test_a_design_whose_fe_run_fails_is_recorded_and_not_cached(tmp_path, monkey
     failed = result.records[1]
     assert failed.status == "failed" and failed.reason == "RuntimeError: solver diverged"
     assert result.records[0].status == "ok" and result.best is result.records[0]
-    assert len(list(cache.root.glob("*.json"))) == 1
+    assert len(list(cache.root.glob("*.npz"))) == 1
 
 
 # --------------------------------------------------------------------------- objectives are pluggable

@@ -8,6 +8,7 @@
 - :mod:`~softtip._core.network`: the run-time of the tanh networks (calibration models, reduced twin);
 - :mod:`~softtip._core.signals`: signal metrics shared by the physics and the calibration metrics;
 - :mod:`~softtip._core.errors`: errors of computations that did not converge;
-- :mod:`~softtip._core.cache`: the on-disk cache and keys tied to the code that made an entry;
+- :mod:`~softtip._core.cache`: the on-disk cache, keys tied to the code that made an entry, and entries
+  verified on every read (a damaged or misplaced one is a miss);
 - :mod:`~softtip._core.threads`: a named daemon thread that runs until it is asked to stop.
 """

@@ -30,8 +30,8 @@ def bench_twin(
     skip_neo_hookean: bool = typer.Option(False, "--skip-neo-hookean", help="Leave out the 3 mm neo-Hookean push."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Time the twin: mesh, 1 mm board push with contact (vs one fixed-area linear solve),
-    neo-Hookean 3 mm push, and magnetics + sensor readings per second (vs magpylib)."""
+    """Time the twin: mesh (built, and read from the cache), 1 mm board push with contact (vs one
+    fixed-area linear solve), neo-Hookean 3 mm push, and magnetics + sensor readings per second (vs magpylib)."""
     from softtip.bench.twin import bench_twin as run
     from softtip.cli.twin import check_mesh_work
     from softtip.design.model import load_design

@@ -172,10 +172,14 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
     return dataset, timings
 
 
+def protocol_key(protocol: Protocol) -> str:
+    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design and the source
+    of the whole package (the trials run through nearly every subpackage)."""
+    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec}, code_hash("softtip"),
+                        length=16)
+
+
 def trained_model_path(protocol: Protocol, name: str, suffix: str = ".npz") -> Path:
-    """Where an artefact made from ``protocol``'s trials (a trained model, a live scenario) is cached:
-    keyed by the protocol, its design and the source of the whole package (the trials run through
-    nearly every subpackage)."""
-    key = artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec}, code_hash("softtip"),
-                       length=16)
-    return cache_dir() / "models" / f"{name}-{key}{suffix}"
+    """Where an artefact made from ``protocol``'s trials (a trained model, a live scenario) is cached,
+    under its :func:`protocol_key`."""
+    return cache_dir() / "models" / f"{name}-{protocol_key(protocol)}{suffix}"

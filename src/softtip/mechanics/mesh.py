@@ -12,18 +12,15 @@ rigid-body constraints). Boundary triangles are grouped by role:
 
 from __future__ import annotations
 
-import json
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash
-from softtip._core.files import atomic_write
+from softtip._core.cache import artefact_key, cache_dir, code_hash, read_entry, write_entry
 from softtip._core.units import MM
 from softtip.design.model import Design
 
@@ -86,25 +83,17 @@ def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 
         raise ValueError(f"contact_layer = {contact_layer!r}: expected (depth, element size) in metres, both > 0")
     key = mesh_key(design, size, curvature_points, contact_layer)
     path = cache_dir() / "meshes" / f"{key}.npz"
-    if use_cache and path.exists():
-        try:
-            return _load(path, key)
-        except (OSError, ValueError, KeyError):
-            path.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
+    entry = read_entry(path, key, "mesh") if use_cache else None
+    if entry is not None:
+        metadata, arrays = entry
+        return TetMesh(points=arrays["points"], tets=arrays["tets"],
+                       boundaries={name: arrays[f"boundary_{name}"] for name in metadata["boundaries"]}, key=key)
     mesh = _build(design, size, curvature_points, key, contact_layer)
     if use_cache:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        arrays = {"points": mesh.points, "tets": mesh.tets, "names": np.array(json.dumps(sorted(mesh.boundaries))),
-                  **{f"boundary_{name}": tris for name, tris in mesh.boundaries.items()}}
-        atomic_write(path, lambda handle: np.savez(handle, **arrays))
+        write_entry(path, key, "mesh", {"boundaries": sorted(mesh.boundaries)},
+                    {"points": mesh.points, "tets": mesh.tets,
+                     **{f"boundary_{name}": tris for name, tris in mesh.boundaries.items()}})
     return mesh
-
-
-def _load(path: Path, key: str) -> TetMesh:
-    with np.load(path, allow_pickle=False) as data:
-        names = json.loads(str(data["names"]))
-        return TetMesh(points=data["points"], tets=data["tets"],
-                       boundaries={name: data[f"boundary_{name}"] for name in names}, key=key)
 
 
 def _build(design: Design, size: float, curvature_points: int, key: str,

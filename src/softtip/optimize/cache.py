@@ -1,4 +1,4 @@
-"""On-disk cache of finite-element results, one JSON file per (design, simulation).
+"""On-disk cache of finite-element results, one entry per (design, simulation).
 
 The key is a hash of everything that determines a result: the design's
 TOML-level spec (its name and description excluded: they do not change the
@@ -6,20 +6,19 @@ physics), the simulation (load case, friction, model, mesh size) and the source
 of the code that computes it (the twin and the packages it runs on), so a
 result of other code is never reused.
 
-Entries are written atomically (:func:`~softtip._core.files.atomic_write`),
-so a sweep killed at any moment leaves only complete entries, and a re-run
-computes only what is missing. An entry that cannot be read is
-removed and recomputed, never trusted. Nothing is pickled.
+Entries are the cache's (:func:`~softtip._core.cache.write_entry`): written
+atomically, so a sweep killed at any moment leaves only complete entries and a
+re-run computes only what is missing; checksummed and holding their key, so a
+damaged entry, or another design's result under this one's name, is recomputed,
+never trusted. The arrays are stored exactly as computed; nothing is pickled.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash
-from softtip._core.files import atomic_write
+from softtip._core.cache import artefact_key, cache_dir, code_hash, read_entry, write_entry
 from softtip.optimize.runs import FEResult, Simulation
 
 _NOT_PHYSICS = ("name", "description")
@@ -50,27 +49,22 @@ class FEResultCache:
         self.root = Path(root) if root is not None else cache_dir() / "fe"
 
     def path(self, key: str) -> Path:
-        return self.root / f"{key}.json"
+        return self.root / f"{key}.npz"
 
     def get(self, design_spec: dict[str, Any], simulation: Simulation) -> FEResult | None:
         key = cache_key(design_spec, simulation)
-        path = self.path(key)
-        try:
-            entry = json.loads(path.read_text())
-            if entry["key"] != key:
-                raise ValueError("entry stored under the wrong key")
-            return FEResult.from_dict(entry["result"])
-        except FileNotFoundError:
+        entry = read_entry(self.path(key), key, "FE result")
+        if entry is None:
             return None
-        except (OSError, ValueError, KeyError, TypeError):
-            path.unlink(missing_ok=True)  # damaged: recompute rather than trust it
-            return None
+        metadata, arrays = entry
+        return FEResult(**{k: arrays[k] for k in FEResult.ARRAY_FIELDS},
+                        **{k: metadata["counts"][k] for k in FEResult.COUNT_FIELDS})
 
     def put(self, design_spec: dict[str, Any], simulation: Simulation, result: FEResult,
             seconds: float | None = None) -> Path:
         key = cache_key(design_spec, simulation)
         path = self.path(key)
-        entry = {"key": key, "design": design_spec,
-                 "simulation": simulation.to_dict(), "seconds": seconds, "result": result.to_dict()}
-        self.root.mkdir(parents=True, exist_ok=True)
-        return atomic_write(path, json.dumps(entry))
+        metadata = {"design": design_spec, "simulation": simulation.to_dict(), "seconds": seconds,
+                    "counts": {k: int(getattr(result, k)) for k in FEResult.COUNT_FIELDS}}
+        write_entry(path, key, "FE result", metadata, {k: getattr(result, k) for k in FEResult.ARRAY_FIELDS})
+        return path

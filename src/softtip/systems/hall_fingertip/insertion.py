@@ -3,15 +3,17 @@ simulated arm for one case (S1 §3)."""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
+from softtip._core.cache import read_file_entry, write_file_entry
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM
 from softtip.calibration import load_model, save_model
 from softtip.lab import Protocol, load_protocol, run_protocol
-from softtip.lab.protocols import trained_model_path
+from softtip.lab.protocols import protocol_key, trained_model_path
 from softtip.systems.hall_fingertip.insertion_world import InsertionWorld, SimulatedArm
 from softtip.systems.hall_fingertip.controller import InsertionController
 from softtip.systems.hall_fingertip.studies import inverter_models
@@ -23,18 +25,18 @@ TARGET_DEPTH = 0.6 * MM  # the target pose: the lid seated, its clips flexed by 
 def trained_model_files(protocol: Protocol, progress: Progress = SILENT) -> tuple[Path, Path]:
     """The inverter's state and force networks as softtip model files, trained once per protocol and
     code, and kept in the cache."""
-    paths = trained_model_path(protocol, "inverter-state"), trained_model_path(protocol, "inverter-force")
-    if all(p.is_file() for p in paths):
+    names = ("inverter-state", "inverter-force")
+    paths, key = tuple(trained_model_path(protocol, name) for name in names), protocol_key(protocol)
+    if all(read_file_entry(path, key, name, load_model) is not None for path, name in zip(paths, names)):
         return paths
     dataset, _ = run_protocol(protocol, progress)
     with progress.task("training the contact-state and force networks on the inverter protocol"):
-        classifier, regressor = inverter_models(dataset, protocol.seed)
-    paths[0].parent.mkdir(parents=True, exist_ok=True)
+        models = inverter_models(dataset, protocol.seed)
     channels = list(dataset.channels)
-    save_model(paths[0], classifier, input_channels=channels, input_units=["uT"] * len(channels),
-               target_names=["state"], target_units=["1"])
-    save_model(paths[1], regressor, input_channels=channels, input_units=["uT"] * len(channels),
-               target_names=["normal_force_N"], target_units=["N"])
+    for path, name, model, target, unit in zip(paths, names, models, ("state", "normal_force_N"), ("1", "N")):
+        write_file_entry(path, key, name, functools.partial(
+            save_model, model=model, input_channels=channels, input_units=["uT"] * len(channels),
+            target_names=[target], target_units=[unit]))
     return paths
 
 

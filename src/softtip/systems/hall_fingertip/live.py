@@ -3,31 +3,27 @@ on two, each with the models trained on its protocol - computed once and kept in
 
 from __future__ import annotations
 
-from softtip._core.archive import ModelFileError, read_archive, write_archive
+from softtip._core.cache import read_entry, write_entry
 from softtip._core.progress import SILENT, Progress
 from softtip.lab import Protocol, load_protocol
-from softtip.lab.protocols import trained_model_path
+from softtip.lab.protocols import protocol_key, trained_model_path
 from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stream
 from softtip.systems.hall_fingertip.scenarios import TwinScenario, insertion_scenario as compute_insertion
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
-
-SCENARIO_FORMAT, SCENARIO_VERSION = "softtip-twin-scenario", 1
 
 
 def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
     """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed)``)
     and cached."""
-    path = trained_model_path(protocol, f"scenario-{name}")
-    try:
-        _, arrays = read_archive(path, SCENARIO_FORMAT, SCENARIO_VERSION, "scenario", ModelFileError)
+    path, key, kind = trained_model_path(protocol, f"scenario-{name}"), protocol_key(protocol), f"{name} scenario"
+    entry = read_entry(path, key, kind)
+    if entry is not None:
+        arrays = entry[1]
         return TwinScenario(times_s=arrays["times_s"], field_uT=arrays["field_uT"], force_N=arrays["force_N"])
-    except ModelFileError:  # absent, or unreadable: computed again
-        pass
     with progress.task(f"computing the twin's {name} scenario (kept in the cache)"):
         scenario = compute(protocol, protocol.seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_archive(path, {"format": SCENARIO_FORMAT, "schema_version": SCENARIO_VERSION},
-                  {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
+    write_entry(path, key, kind, {},
+                {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
     return scenario
 
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.archive import ModelFileError, read_archive, write_archive
+from softtip._core.cache import read_entry, read_file_entry, write_entry, write_file_entry
 from softtip._core.progress import SILENT, Progress
 from softtip.hardware import PacedSource
 from softtip.lab import load_protocol, run_protocol
-from softtip.lab.protocols import trained_model_path
+from softtip.lab.protocols import protocol_key, trained_model_path
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.factory import live_sinks
@@ -29,7 +29,6 @@ FORCES = ("fx_N", "fy_N", "fz_N")
 
 WEARABLE_INPUTS = FORCE.channel_names(1)
 WEARABLE_CALIBRATION_RUNS = 3  # seatings of the ring the model is identified on; one more is streamed
-STREAM_FORMAT, STREAM_VERSION = "softtip-wearable-stream", 1
 
 
 @dataclass(frozen=True)
@@ -66,12 +65,14 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     protocol = load_protocol("wearable").changed(seed=seed, participants=1, runs=WEARABLE_CALIBRATION_RUNS + 1,
                                                  contacts=["flat"])
     path, stream_path = trained_model_path(protocol, "wearable-force"), trained_model_path(protocol, "wearable-stream")
-    try:  # computed before by this code for this protocol: kept in the cache
-        metadata, arrays = read_archive(stream_path, STREAM_FORMAT, STREAM_VERSION, "live stream", ModelFileError)
-        return WearableStream(load_system(path), path, arrays["readings"], arrays["trial_starts"], arrays["force_N"],
+    key = protocol_key(protocol)
+    # computed before by this code for this protocol: kept in the cache
+    entry = read_entry(stream_path, key, "wearable stream")
+    system = None if entry is None else read_file_entry(path, key, "wearable-force", load_system)
+    if system is not None:
+        metadata, arrays = entry
+        return WearableStream(system, path, arrays["readings"], arrays["trial_starts"], arrays["force_N"],
                               metadata["rate_hz"], metadata["validation"])
-    except ModelFileError:
-        pass
     dataset, _ = run_protocol(protocol, progress)
     live = dataset.column("run") == WEARABLE_CALIBRATION_RUNS
     calibration = Recording.from_dataset(dataset.select(rows=~live), WEARABLE_INPUTS, FORCES,
@@ -80,17 +81,15 @@ def wearable_live_setup(seed: int | None = None, progress: Progress = SILENT) ->
     with progress.task(f"identification: a 3 x 3 transfer function of order 6 on {calibration.n_samples} samples"):
         model = TransferFunctionModel(6).fit(calibration)
     scores = model.evaluate(Recording.from_dataset(streamed, WEARABLE_INPUTS, FORCES, source="wearable live run"))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    save_system(path, model)
+    write_file_entry(path, key, "wearable-force", lambda file: save_system(file, model))
     # what the chip read: each trial's tare added back to its tared readings
     readings = np.column_stack([streamed.column(name) + streamed.column(f"side_tare_{name.removeprefix('side_')}")
                                 for name in WEARABLE_INPUTS])
     starts = np.flatnonzero(np.r_[True, streamed.groups[1:] != streamed.groups[:-1]])
     stream = WearableStream(model, path, readings[:, None, :], starts, streamed.y(list(FORCES)),
                             protocol.parameters.rate_hz, scores.to_dict())
-    write_archive(stream_path, {"format": STREAM_FORMAT, "schema_version": STREAM_VERSION, "rate_hz": stream.rate_hz,
-                                "validation": stream.validation},
-                  {"readings": stream.readings, "trial_starts": stream.trial_starts, "force_N": stream.force_N})
+    write_entry(stream_path, key, "wearable stream", {"rate_hz": stream.rate_hz, "validation": stream.validation},
+                {"readings": stream.readings, "trial_starts": stream.trial_starts, "force_N": stream.force_N})
     return stream
 
 
