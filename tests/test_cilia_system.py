@@ -34,6 +34,7 @@ COARSE = """
     meander_scales = [0.9]
     brush_length_mm = 6.0
     brush_strips = 2
+    brush_bridge = true
     brush_speeds_mm_s = [0.5, 2.0]
     brush_rates_hz = [2.0, 50.0]
     design_steps = 3
@@ -142,11 +143,11 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
 
     app = typer.Typer()
     app.command()(user_errors(roughness_cilia))
-    ran = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--json"])
+    ran = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "1", "--seed", "0", "--json"])
     assert ran.exit_code == 0, ran.output
     report = json.loads(ran.output)
     assert report["recordings"] == 28 and np.allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-12)
-    assert report["accuracy_by_strip"] == study.classification.by_recording
+    assert report["classification"]["accuracy_by_strip"] == study.classification.by_strip
     refused = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "3"])
     assert refused.exit_code == 2 and "cilia.parquet: recordings: no brushing of silicon at 3 mm/s" in refused.output
 
@@ -208,8 +209,11 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     assert 5 < outcome.results["minimum_force_3sigma_uN"]["X"] < 50
     assert outcome.results["minimum_force_3sigma_uN"]["Y"] > 26e3
     rough = outcome.results["roughness"]
-    assert np.all(np.diff(rough["ac_rms_uV"]) > 0) and rough["slope_uV_per_um"] > 0
-    assert rough["accuracy_by_strip"] > 0.5  # chance 0.25
+    assert np.all(np.diff(rough["ac_rms_uV"]) > 0) and rough["slope_through_origin_uV_per_um"]["slope"] > 0
+    assert rough["classification"]["accuracy_by_strip"] > 0.5  # chance 0.25
+    # the published slope beside both fits of both readouts (this protocol reads through a bridge)
+    slopes = [row for row, column in verdicts if "line with intercept" in row or "through the origin" in row]
+    assert len(slopes) == 4 and rough["other_readout"]["floor_uV"] > 10 * rough["floor_uV"]
     assert any(table.title.startswith("Roughness missed") for table in outcome.tables)
     design = outcome.results["design_search"]
     assert [r["range_mN"] for r in design["ranges"]] == [13.0, 26.0, 39.0]

@@ -22,16 +22,23 @@ noise bandwidth of 1/(2 T_int)):
 * Johnson noise of the sensor, 4 k_B T R per Hz at the warmed temperature;
 * 1/f noise after Hooge, S_V(f) = α_H V² / (N_c f), N_c the free carriers in the meander's metal, integrated
   from 1/(record length) to the bandwidth;
-* the voltmeter's own noise (ppm of its range) and its resolution (ppm of its range; the reading is
-  quantised to it: LSB²/12). A 6½-digit meter on the range holding ~18 V (the 100 V range) resolves 100 µV
-  at 10 power-line cycles (Keysight Truevolt 34461A: 1 ppm of range); an offset voltage subtracted before
-  the meter (a bridge with a matched reference resistor) lets it read the change on a low range.
+* the voltmeter's own noise and its resolution (the reading is quantised to it: LSB²/12), both in ppm of
+  the range the voltage needs, set by the integration time. The default meter is the publication's, the HP
+  34401A on DC volts (ranges 0.1–1000 V, 20 % overrange; HP 34401A User's Guide, "Integration Time":
+  resolution 100, 10, 3, 1 and 0.3 ppm of full scale at 0.02, 0.2, 1, 10 and 100 power-line cycles; its
+  operating characteristics: 1000, 300, 50, 5 and 0.5 readings/s at 50 Hz, and an additional noise error of
+  0.01 %, 0.001 %, 0.001 %, 0 and 0 % of range plus 20 µV on DC volts below 10 cycles, as HP specifies the
+  6½-digit multi-slope III converter in its E1412A data sheet). softtip reads that noise error, a bound, as
+  the rms of one reading: the pessimistic reading of the datasheet. On the ~18 V a meander reads the meter is
+  on its 100 V range: 100 µV steps at 10 cycles, 300 µV at 1 cycle (50 readings/s). An offset voltage
+  subtracted before the meter (a bridge with a matched reference resistor; softtip's addition, off unless
+  asked) lets it read the change on a low range.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,6 +52,7 @@ from softtip._core.config import (
     PositiveNumber,
     Refusal,
     Text,
+    choice,
     number,
     schema,
 )
@@ -117,22 +125,30 @@ def published_spin_valve(name: str, elements: int, magnetoresistance: float, ohm
                            field_high=high_oersted * TESLA_PER_OERSTED, **options)
 
 
+# HP 34401A on DC volts, by integration time in power-line cycles: (resolution, ppm of range; readings per
+# second at 50 Hz mains; additional noise, ppm of range) - the module notes give the sources
+HP34401A_INTEGRATIONS = {0.02: (100.0, 1000.0, 100.0), 0.2: (10.0, 300.0, 10.0), 1.0: (3.0, 50.0, 10.0),
+                         10.0: (1.0, 5.0, 0.0), 100.0: (0.3, 0.5, 0.0)}
+HP34401A_FAST_NOISE = 20e-6  # V, added below 10 power-line cycles on DC volts
+
+
 @schema(section="voltmeter", error=SensorError)
 class Voltmeter:
-    """A bench multimeter on DC volts: its ranges (V, ascending; each reads to ``overrange`` × itself),
-    the resolution and rms noise of a reading in ppm of the range, and its integration time (s).
-    Defaults: a 6½-digit meter at 10 power-line cycles of 50 Hz (Keysight Truevolt 34461A: resolution
-    1 ppm of range at 10 PLC; Keithley 2015: rms noise < 1.5 µV on its 10 V range at 10 PLC)."""
+    """The HP 34401A on DC volts (module notes) at ``cycles`` power-line cycles of integration (one of
+    :data:`HP34401A_INTEGRATIONS`; its power-on 10 by default) on ``line_hz`` mains: its ranges (V,
+    ascending; each reads to ``overrange`` × itself)."""
 
     ranges: Numbers = (0.1, 1.0, 10.0, 100.0, 1000.0)
     overrange: number("a number >= 1", ge=1.0) = 1.2
-    resolution_ppm: PositiveNumber = 1.0
-    noise_ppm: NonNegativeNumber = 0.15
-    integration_time: PositiveNumber = 0.2
+    cycles: PositiveNumber = 10.0
+    line_hz: choice(50.0, 60.0, expected="50 or 60 (Hz)") = 50.0
 
     def __post_init__(self) -> None:
         if any(r <= 0 for r in self.ranges) or list(self.ranges) != sorted(self.ranges):
             raise Refusal("ranges", "expected positive ranges in ascending order")
+        if self.cycles not in HP34401A_INTEGRATIONS:
+            raise Refusal("cycles", f"expected one of the meter's integration times: "
+                                    f"{', '.join(f'{c:g}' for c in sorted(HP34401A_INTEGRATIONS))} power-line cycles")
 
     def range_for(self, volts: float) -> float:
         """The smallest range that reads ``volts``; a voltage beyond the largest is refused."""
@@ -142,9 +158,42 @@ class Voltmeter:
         raise SensorError(f"voltage {volts:.6g} V: beyond the voltmeter's largest range ({self.ranges[-1]:g} V)")
 
     @property
+    def resolution_ppm(self) -> float:
+        return HP34401A_INTEGRATIONS[self.cycles][0]
+
+    @property
+    def readings_per_second(self) -> float:
+        """Readings/s: one per integration from one cycle up, the datasheet's figure below."""
+        return self.line_hz / self.cycles if self.cycles >= 1 else HP34401A_INTEGRATIONS[self.cycles][1]
+
+    @property
+    def noise_ppm(self) -> float:
+        return HP34401A_INTEGRATIONS[self.cycles][2]
+
+    @property
+    def added_noise(self) -> float:
+        """V rms added to every reading whatever the range (below 10 cycles)."""
+        return HP34401A_FAST_NOISE if self.cycles < 10 else 0.0
+
+    @property
+    def integration_time(self) -> float:
+        """Seconds one reading integrates over."""
+        return self.cycles / self.line_hz
+
+    @property
     def bandwidth(self) -> float:
         """Equivalent noise bandwidth (Hz) of one reading: 1/(2 T_int) for a boxcar integration."""
         return 1.0 / (2.0 * self.integration_time)
+
+    def at_rate(self, rate: float) -> Voltmeter:
+        """The meter set to the longest integration that still gives ``rate`` readings per second; a rate
+        beyond its fastest is refused."""
+        settings = [replace(self, cycles=cycles) for cycles in HP34401A_INTEGRATIONS]
+        fitting = [meter for meter in settings if meter.readings_per_second >= rate * (1 - 1e-9)]
+        if not (math.isfinite(rate) and rate > 0) or not fitting:
+            raise SensorError(f"rate = {rate!r}: expected a positive number of readings/s up to the meter's "
+                              f"{max(meter.readings_per_second for meter in settings):g}")
+        return max(fitting, key=lambda meter: meter.cycles)
 
 
 @dataclass(frozen=True)
@@ -206,8 +255,8 @@ class ConstantCurrentReadout:
         flicker2 = self.sensor.hooge * volts**2 / self.sensor.carriers * math.log(max(band / lowest, 1.0))
         meter_range = self.voltmeter.range_for(volts - self.offset)
         resolution = self.voltmeter.resolution_ppm * 1e-6 * meter_range
-        return NoiseBudget(johnson=johnson, flicker=math.sqrt(flicker2),
-                           meter=self.voltmeter.noise_ppm * 1e-6 * meter_range,
+        meter = math.hypot(self.voltmeter.noise_ppm * 1e-6 * meter_range, self.voltmeter.added_noise)
+        return NoiseBudget(johnson=johnson, flicker=math.sqrt(flicker2), meter=meter,
                            quantisation=resolution / math.sqrt(12.0), range_volts=meter_range, resolution=resolution)
 
     def read(self, volts: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:

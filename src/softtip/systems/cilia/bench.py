@@ -11,14 +11,14 @@ tip diameter and, where given, height and Young's modulus (:func:`softtip.system
 Then the brushings (:mod:`softtip.systems.cilia.roughness`): the die held ``brush_engagement_um`` past first
 contact and moved over ``brush_strips`` strips of each of the four surfaces, every strip at
 ``brush_speed_mm_s`` and at every one of ``brush_speeds_mm_s``, at ``brush_rate_hz``, and the first strip at ``brush_speed_mm_s`` at every one of
-``brush_rates_hz``: one trial (one recording) each, both sensors through their bridges (the rest voltage
-taken off before the meter).
+``brush_rates_hz``: one trial (one recording) each, both sensors read as published (the meter across the
+sensor) or, with ``brush_bridge``, through a bridge (the rest voltage taken off before the meter).
 
-Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare, or from its bridge's
-reference in a brushing). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
+Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare; in a brushing, from its
+rest voltage). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
 the balance's vertical reading in balance mode and under the surface in a brushing). Conditions: ``mode``
 (paper, balance, brushing), ``repeat`` (the loading's repeat; in a brushing, which strip of the surface),
-``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the bridges' reference: the rest voltage),
+``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the rest voltage),
 ``surface`` (none in a loading), ``roughness_um`` (the surface's rms roughness), ``speed_mm_s`` (the
 stage's speed; 0 in a loading) and ``rate_hz`` (readings per second).
 """
@@ -149,7 +149,7 @@ def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Datas
     rests = [model.rest_volts(sensor) for sensor in SENSORS]
     for brushing in brush_surfaces(model, balance_contact(p), p.brush_engagement_um * UM, p.brush_length_mm * MM,
                                    p.brush_speed_mm_s * MM, p.brush_rate_hz, tuple(v * MM for v in p.brush_speeds_mm_s),
-                                   tuple(p.brush_rates_hz), p.brush_strips, rng):
+                                   tuple(p.brush_rates_hz), p.brush_strips, rng, p.brush_bridge):
         recording = brushing.recording
         writer.add({"time_s": np.arange(recording.readings.size) / recording.rate, "gmr_x_V": recording.readings,
                     "gmr_y_V": brushing.readings_y, "force_N": brushing.force},
@@ -198,3 +198,70 @@ def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]
                                     int(conditions["repeat"][index]), float(conditions["speed_mm_s"][index]) * MM,
                                     float(conditions["rate_hz"][index]), np.array(readings[trials == trial])))
     return recordings
+
+
+BRUSHING_COLUMNS = ("surface", "roughness_um", "speed_mm_s", "rate_hz")  # and optionally "strip"
+
+
+def recordings_from_csv(path: Path, channel: str) -> list[Recording]:
+    """The brushings of a CSV table, one row per reading: the columns ``surface`` (a name), ``roughness_um``
+    (its rms roughness, µm; 0 for the flat one), ``speed_mm_s``, ``rate_hz``, optionally ``strip`` (which
+    strip of the surface; 0 when absent), and ``channel`` (the reading, V). A recording is a run of
+    consecutive rows with the same surface, strip, speed and rate."""
+    from softtip.data.csvload import parse_numbers, read_csv_table
+    from softtip.data.dataset import require_columns
+
+    numeric = [*BRUSHING_COLUMNS[1:], channel]
+    table = read_csv_table(path, numeric)
+    require_columns(path, [*BRUSHING_COLUMNS, channel], table.column_names)
+    if "strip" in table.column_names:
+        numeric.append("strip")
+        table = read_csv_table(path, numeric)
+    if table.num_rows == 0:
+        raise DieError(f"{path}: no readings")
+    values = {name: parse_numbers(path, name, table.column(name)) for name in numeric}
+    surface = np.array([str(v) for v in table.column("surface").to_pylist()])
+    strip = values.get("strip", np.zeros(table.num_rows))
+    if not (np.all(np.isfinite(values[channel])) and np.all(strip >= 0) and np.all(strip == np.round(strip))):
+        raise DieError(f"{path}: expected finite readings in {channel!r} and whole strip numbers >= 0")
+    for name in ("speed_mm_s", "rate_hz"):
+        if not np.all(values[name] > 0):
+            raise DieError(f"{path}: column {name!r}: expected positive numbers")
+    if not np.all(values["roughness_um"] >= 0):
+        raise DieError(f"{path}: column 'roughness_um': expected roughnesses >= 0 um")
+    keys = list(zip(surface, strip, values["speed_mm_s"], values["rate_hz"], values["roughness_um"]))
+    starts = [0] + [row for row in range(1, len(keys)) if keys[row] != keys[row - 1]] + [len(keys)]
+    recordings = []
+    for start, end in zip(starts[:-1], starts[1:]):
+        name, number, speed, rate, roughness = keys[start]
+        recordings.append(Recording(str(name), float(roughness) * UM, int(number), float(speed) * MM, float(rate),
+                                    values[channel][start:end]))
+    return recordings
+
+
+FORCE_UNITS = {"N": 1.0, "mN": 1e-3, "g": 9.80665e-3}  # a balance reads grams: times standard gravity
+
+
+def curve_from_csv(path: Path, force_column: str, voltage_column: str, force_unit: str, sensor: str,
+                   tare: bool) -> MeasuredCurve:
+    """A measured force–voltage curve from a CSV table: ``force_column`` in ``force_unit`` (N, mN or g, a
+    balance's mass) and ``voltage_column`` (V), the change from the unloaded reading, or with ``tare`` the
+    sensor's voltage, from which the mean of the rows at zero force is taken."""
+    from softtip.data.csvload import parse_numbers, read_csv_table
+    from softtip.data.dataset import require_columns
+
+    if force_unit not in FORCE_UNITS:
+        raise DieError(f"force unit {force_unit!r}: expected one of {', '.join(FORCE_UNITS)}")
+    table = read_csv_table(path, [force_column, voltage_column])
+    require_columns(path, [force_column, voltage_column], table.column_names)
+    force = parse_numbers(path, force_column, table.column(force_column)) * FORCE_UNITS[force_unit]
+    volts = parse_numbers(path, voltage_column, table.column(voltage_column))
+    if tare:
+        unloaded = force == 0
+        if not unloaded.any():
+            raise DieError(f"{path}: no row at zero force in {force_column!r} to tare {voltage_column!r} by")
+        volts = volts - volts[unloaded].mean()
+    try:
+        return MeasuredCurve(force, volts, sensor)
+    except DieError as problem:
+        raise DieError(f"{path}: {problem}") from None

@@ -149,6 +149,14 @@ class Pillars:
         return replace(self, rod=pillar_rod(self.rod, tip_diameter, ratio * tip_diameter))
 
 
+def uniform_clamped(die: Die) -> Die:
+    """``die`` with the publication's model of its pillars: uniform cylinders of the tip diameter (the fit's
+    free diameter) bonded to a rigid die, as its FE clamps them; height, modulus and moment kept."""
+    pillars = die.pillars
+    rod = replace(pillars.rod, base_diameter=pillars.rod.tip_diameter, base_stiffness=None, bonded_root=True)
+    return die.with_pillars(replace(pillars, rod=rod))
+
+
 def pillar_rod(template: Rod, tip_diameter: float, base_diameter: float) -> Rod:
     """``template`` with new diameters; a compliant base's stiffness follows the base
     (a half-space of the rod's material)."""
