@@ -19,6 +19,7 @@ from softtip.systems.cilia.design import (
     SPACE,
     PillarDesign,
     design_model,
+    design_table,
     evaluate,
     magnetisation_limit,
     published_design,
@@ -134,6 +135,27 @@ def test_the_command_searches_and_writes_the_tradeoff_curve(tmp_path):
     report = json.loads(result.output)
     assert report["steps"] == 3 and report["seed"] == 2 and report["ranges"][0]["evaluations"] == 4
     assert report["ranges"][0]["published"]["pillars"] == 5 and plot.read_bytes().startswith(b"\x89PNG")
+
+
+def test_each_ranges_best_lies_on_the_tradeoff_curve_and_says_whether_it_beats_the_published():
+    # the default seed is reproduce's (1); two ranges, the second's search evaluating designs the first did not
+    result = CliRunner().invoke(design_app(), ["--coarse", "--range-mn", "13", "--range-mn", "26", "--budget", "3",
+                                               "--points", "9", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["seed"] == 1
+    found = search_designs(DIE, (13 * 1e-3, 26 * 1e-3), steps=3, budget=3, points=9, seed=1)  # as the command
+    for search, entry in zip(found.ranges, report["ranges"]):
+        # the best of every evaluated design at this range, computed again from the evaluations themselves
+        every = min(e.over(search.force_range) for e in found.evaluated)
+        assert search.best.over(search.force_range) == every == found.envelope(np.array([search.force_range]))[0]
+        assert entry["best"]["worst_minimum_force_uN"] == pytest.approx(every / 1e-6, rel=1e-12)
+        published = found.published.over(search.force_range)
+        assert entry["beats_published"] == (every < published) == search.beats(found.published)
+    text = CliRunner().invoke(design_app(), ["--coarse", "--range-mn", "13", "--budget", "3", "--points", "9"])
+    assert text.exit_code == 0 and "verdict: the best design found " in text.output
+    table = design_table(found)
+    assert len(table.notes) == 2 and all(note.startswith(("beats", "does not beat")) for note in table.notes.values())
 
 
 @pytest.mark.parametrize("options, message", [

@@ -270,6 +270,19 @@ def test_bench_refuses_a_broken_die_and_an_output_it_may_not_write(tmp_path):
     assert existing.read_text() == "{}"
 
 
+def test_the_bench_says_what_each_figure_is_and_gives_a_verdict():
+    ran = CliRunner().invoke(bench_app(), ["--loads", "5", "--repeats", "1"])
+    assert ran.exit_code == 0, ran.output
+    lines = ran.output.splitlines()
+    timed = [line for line in lines if line.startswith(("force-voltage curve, 5 loads: ", "fit of moment"))]
+    assert len(timed) == 2 and all(("(target 0.3 s: " in line or "(target 5 s: " in line) for line in timed)
+    assert sum("times the baseline's time" in line for line in lines) == 2 and "ratio" not in ran.output
+    met = ["MISSED" not in line for line in timed]
+    assert lines[-1] == ("verdict: every target met" if all(met) else
+                         f"verdict: {met.count(False)} of 2 targets missed: " + "; ".join(
+                             line.split(":")[0] for line, ok in zip(timed, met) if not ok))
+
+
 def test_the_command_line_finds_the_system_and_times_it(environment, tmp_path):
     ran = subprocess.run([sys.executable, "-m", "softtip", "bench", "cilia", "--loads", "10", "--repeats", "1",
                           "--save", "bench.json", "--json"], env=environment, cwd=tmp_path, capture_output=True,
