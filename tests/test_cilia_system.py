@@ -78,6 +78,27 @@ def broken_die(tmp_path: Path) -> Path:
     return path
 
 
+def y_only_die(tmp_path: Path) -> Path:
+    """The shipped die with its X meander taken out: one sensor direction."""
+    text = SHIPPED_DIE.read_text()
+    start, end = text.index("[sensors.X]"), text.index("[sensors.Y]")
+    path = tmp_path / "y-only.toml"
+    path.write_text(text[:start] + text[end:])
+    return path
+
+
+def test_a_die_with_one_sensor_direction_runs_the_protocol_and_the_bench(tmp_path):
+    die = y_only_die(tmp_path)
+    assert [m.name for m in read_die(die).meanders] == ["Y"]
+    dataset, _ = run_protocol(load_protocol(coarse(tmp_path, points=5, die=f'"{die}"')))
+    assert list(dataset.channels) == ["gmr_y_V"] and "tare_y_V" in dataset.conditions and "tare_x_V" not in dataset.conditions
+    brushing = dataset.select(rows=dataset.column("mode") == "brushing")
+    assert len(brushing.trials) == 28 and np.all(np.isfinite(brushing.column("gmr_y_V")))
+    ran = CliRunner().invoke(bench_app(), ["--die", str(die), "--loads", "5", "--repeats", "1", "--json"])
+    assert ran.exit_code == 0, ran.output
+    assert json.loads(ran.output)["sensor"] == "Y"
+
+
 def test_the_record_is_light_and_names_every_part():
     loaded = subprocess.run([sys.executable, "-c", "import sys, softtip.systems.cilia as c; "
                              "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'scipy', "
@@ -202,7 +223,7 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     # the readout's resistance at rest against the spec's ≈ 183 and 169 kΩ (measured 187 and 172)
     assert verdicts[("X", "resistance")] == verdicts[("Y", "resistance")] == "within"
     assert ("X", "upper end") in verdicts
-    assert len(outcome.figures) == 6 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
+    assert len(outcome.figures) == 7 and all(figure.png.startswith(b"\x89PNG") for figure in outcome.figures)
     assert outcome.headline.value == pytest.approx(fit["moment_memu"])
     assert any("balance" in note for note in outcome.notes)
     # a minimum force of the X sensor of tens of µN (3σ of a 100 µV count over ≈ 5.7 V/N), Y beyond reach
@@ -215,6 +236,8 @@ def test_reproduce_fits_the_dataset_and_sets_it_beside_the_published_figures(tmp
     slopes = [row for row, column in verdicts if "line with intercept" in row or "through the origin" in row]
     assert len(slopes) == 4 and rough["other_readout"]["floor_uV"] > 10 * rough["floor_uV"]
     assert any(table.title.startswith("Roughness missed") for table in outcome.tables)
+    continuous = outcome.results["chain_against_continuous"]
+    assert continuous["force_mN"] == [1.0, 8.0, 26.0] and all(gap > 0 for gap in continuous["gap"])
     design = outcome.results["design_search"]
     assert [r["range_mN"] for r in design["ranges"]] == [13.0, 26.0, 39.0]
     assert all(r["evaluations"] == 4 and r["published"]["pillars"] == 5 for r in design["ranges"])

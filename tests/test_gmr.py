@@ -4,6 +4,7 @@ hand-computed noise."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -41,6 +42,17 @@ def test_sensitivity_linear_range_and_saturation_per_element():
     # each element saturates on its own: half the meander in a huge field, half at the low end
     mixed = np.where(np.arange(444) < 222, 1.0, -1.0)
     assert X.resistance(mixed) == pytest.approx(X.minimum_resistance * 1.025)
+
+
+def test_each_area_element_saturates_before_the_meander_averages_them_by_area():
+    # two area elements, 1 and 3 units of spin-valve area: the first far above the range, the other far below
+    sensor = replace(X, area_weights=[1.0, 3.0])
+    assert sensor.area_elements == 2
+    assert sensor.resistance(np.array([1.0, -1.0])) == pytest.approx(X.minimum_resistance * (1 + 0.05 * 1 / 4))
+    # the area-weighted mean field, -0.5 T, saturated after averaging would read the bottom of the range
+    assert X.resistance(np.full(444, -0.5)) == pytest.approx(X.minimum_resistance)
+    with pytest.raises(SensorError, match=r"spin_valve.area_weights = .*: expected positive areas"):
+        replace(X, area_weights=[1.0, 0.0])
 
 
 def test_self_heating_is_the_fixed_point_of_the_power_balance():
@@ -114,7 +126,7 @@ def test_bad_input_is_refused_in_one_line():
         published_spin_valve("X", 444, 0.05, 146.6, 37.5, -25.0)
     with pytest.raises(SensorError, match=r"spin_valve.magnetoresistance = 1.5"):
         published_spin_valve("X", 444, 1.5, 146.6, -25.0, 37.5)
-    with pytest.raises(SensorError, match=r"field: expected the field of 444 elements"):
+    with pytest.raises(SensorError, match=r"field: expected the field of 444 area elements"):
         X.resistance(np.zeros(10))
     with pytest.raises(SensorError, match="field: expected finite numbers"):
         X.resistance(np.full(444, np.nan))

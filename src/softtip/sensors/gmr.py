@@ -1,14 +1,17 @@
 """Spin-valve (giant magnetoresistance) sensors read at constant current by a voltmeter.
 
 A sensor is a meander of ``elements`` spin valves in series. Each element's free layer turns with the
-in-plane field along the sensing axis, averaged over its own area; pinned across its easy axis, it answers
-as a Stoner–Wohlfarth particle along its hard axis: linearly between two saturation fields and flat beyond
-(E. C. Stoner, E. P. Wohlfarth, Phil. Trans. R. Soc. A 240, 1948). Its linear range is set by anisotropy
-and interlayer (Néel) coupling, which shifts it off zero:
+local in-plane field along the sensing axis; pinned across its easy axis, it answers as a Stoner–Wohlfarth
+particle along its hard axis: linearly between two saturation fields and flat beyond (E. C. Stoner,
+E. P. Wohlfarth, Phil. Trans. R. Soc. A 240, 1948). Its linear range is set by anisotropy and interlayer
+(Néel) coupling, which shifts it off zero. The field is given averaged over area elements of the meander
+(each element, or pieces of the meander small beside the field's variation), each saturating on its own
+before the meander's resistance averages them by the spin valves' area in each (a strip whose end sits in
+a saturating field near a magnet is not the clipped mean of its field):
 
-    R_e(B) = (R_min / n) [1 + MR · clip((B − B_low) / (B_high − B_low), 0, 1)],
+    R = R_min [1 + MR · Σ_k a_k clip((B_k − B_low) / (B_high − B_low), 0, 1) / Σ_k a_k],
 
-so a sensor whose elements all see B has the sensitivity S = R_min MR / (B_high − B_low) (Ω/T) and
+so a sensor whose area elements all see B has the sensitivity S = R_min MR / (B_high − B_low) (Ω/T) and
 R_min = S (B_high − B_low) / MR. The published figures (S4: MR 5 % and 4.4 %, 146.6 and 118.8 Ω/Oe,
 −25 .. +37.5 Oe) give R_min ≈ 183 kΩ and 169 kΩ. In air B = μ₀H, so 1 Oe of H is 1e-4 T of B
 (:data:`TESLA_PER_OERSTED`); the library works in tesla.
@@ -71,7 +74,8 @@ class SpinValveSensor:
 
     ``sensitivity``: Ω/T of the whole sensor; ``field_low``/``field_high``: the linear range, T;
     ``element_length``/``element_width``/``thickness``: one element's strip and its metal stack (m), for
-    the carriers of 1/f noise; ``hooge``: the Hooge parameter; ``carrier_density``: free carriers per m³.
+    the carriers of 1/f noise; ``hooge``: the Hooge parameter; ``carrier_density``: free carriers per m³;
+    ``area_weights``: the spin valves' area in each area element the field is given over (:meth:`resistance`).
     """
 
     name: Text
@@ -87,10 +91,13 @@ class SpinValveSensor:
     thickness: PositiveNumber = 40e-9
     hooge: NonNegativeNumber = 2e-3
     carrier_density: PositiveNumber = 8.5e28  # copper's, the spin valve's spacer and most of its metal
+    area_weights: Numbers | None = None  # the spin valves' area in each area element; None: one per element
 
     def __post_init__(self) -> None:
         if self.field_high <= self.field_low:
             raise Refusal("field_high", f"expected a field above field_low ({self.field_low} T)")
+        if self.area_weights is not None and any(w <= 0 for w in self.area_weights):
+            raise Refusal("area_weights", "expected positive areas")
 
     @property
     def minimum_resistance(self) -> float:
@@ -101,20 +108,29 @@ class SpinValveSensor:
     def carriers(self) -> float:
         return self.carrier_density * self.elements * self.element_length * self.element_width * self.thickness
 
+    @property
+    def area_elements(self) -> int:
+        return self.elements if self.area_weights is None else len(self.area_weights)
+
     def resistance(self, field: ArrayLike, warming: ArrayLike = 0.0) -> NDArray[np.float64]:
-        """(...) resistance (Ω) of the meander whose elements see the in-plane fields ``field`` (..., n)
-        along the sensing axis (T, each averaged over its element), ``warming`` K above the reference."""
+        """(...) resistance (Ω) of the meander whose area elements see the in-plane fields ``field`` (..., m)
+        along the sensing axis (T, each averaged over its element; m = :attr:`area_elements`), ``warming`` K
+        above the reference. Each area element's free layers turn with its own field and saturate on their
+        own before the meander's resistance averages them by area: a strip half in a saturating field is not
+        read as the clipped mean of its field."""
         field = np.asarray(field, dtype=np.float64)
-        if field.shape[-1:] != (self.elements,):
-            raise SensorError(f"field: expected the field of {self.elements} elements on the last axis, "
+        if field.shape[-1:] != (self.area_elements,):
+            raise SensorError(f"field: expected the field of {self.area_elements} area elements on the last axis, "
                               f"got shape {field.shape}")
         if not np.all(np.isfinite(field)):
             raise SensorError("field: expected finite numbers")
         warming = np.asarray(warming, dtype=np.float64)
         turned = np.clip((field - self.field_low) / (self.field_high - self.field_low), 0.0, 1.0)
+        share = (turned.mean(axis=-1) if self.area_weights is None else
+                 turned @ np.asarray(self.area_weights) / math.fsum(self.area_weights))
         mr = self.magnetoresistance * (1.0 + self.magnetoresistance_temperature_coefficient * warming)
         base = self.minimum_resistance * (1.0 + self.temperature_coefficient * warming)
-        return base * (1.0 + mr * turned.mean(axis=-1))
+        return base * (1.0 + mr * share)
 
 
 def published_spin_valve(name: str, elements: int, magnetoresistance: float, ohm_per_oersted: float,

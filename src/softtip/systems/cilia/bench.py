@@ -15,7 +15,7 @@ contact and moved over ``brush_strips`` strips of each of the four surfaces, eve
 sensor) or, with ``brush_bridge``, through a bridge (the rest voltage taken off before the meter).
 
 Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare; in a brushing, from its
-rest voltage). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
+rest voltage; a die with one sensor direction records its own only). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
 the balance's vertical reading in balance mode and under the surface in a brushing). Conditions: ``mode``
 (paper, balance, brushing), ``repeat`` (the loading's repeat; in a brushing, which strip of the surface),
 ``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the rest voltage),
@@ -52,10 +52,18 @@ from softtip.systems.cilia.study import (
 )
 
 SENSORS = ("X", "Y")
-CHANNELS = {"gmr_x_V": "V", "gmr_y_V": "V"}
 LABELS = {"force_N": "N"}
-CONDITIONS = {"mode": "1", "repeat": "1", "tare_x_V": "V", "tare_y_V": "V", "surface": "1", "roughness_um": "um",
-              "speed_mm_s": "mm/s", "rate_hz": "Hz"}
+CONDITIONS = {"mode": "1", "repeat": "1", "surface": "1", "roughness_um": "um", "speed_mm_s": "mm/s", "rate_hz": "Hz"}
+
+
+def channel(sensor: str) -> str:
+    """The dataset channel of ``sensor``'s voltage."""
+    return f"gmr_{sensor.lower()}_V"
+
+
+def tare(sensor: str) -> str:
+    """The dataset condition of ``sensor``'s tare."""
+    return f"tare_{sensor.lower()}_V"
 MODES = ("paper", "balance")
 BRUSHING = "brushing"
 
@@ -120,42 +128,44 @@ def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Cilia
         f"{protocol.design.name}")
 
 
-def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
-    """The twin's noise-free curves, per mode: (X, Y)."""
+def _curves(model: CiliaModel, p: CiliaSettings, sensors: tuple[str, ...]) -> dict[str, tuple[ForceCurve, ...]]:
+    """The twin's noise-free curves, per mode: one per sensor."""
     forces, descent, contact = paper_forces(p), balance_descent(model, p), balance_contact(p)
-    return {"paper": model.curves(forces, SENSORS), "balance": model.balance_curves(descent, contact, SENSORS)}
+    return {"paper": model.curves(forces, sensors), "balance": model.balance_curves(descent, contact, sensors)}
 
 
 def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:
-    """``trials`` repeats of the paper-mode and the balance-mode curve, both sensors read at every step;
-    then the brushings of the four surfaces."""
+    """``trials`` repeats of the paper-mode and the balance-mode curve, every sensor of the die read at every
+    step; then the brushings of the four surfaces."""
     model, rng = bench.model, bench.rng
-    writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
-        description="GMR cilia die: voltage change of both sensors against the force on the die, and brushings "
+    sensors = tuple(m.name for m in model.die.meanders)
+    writer = TrialWriter({channel(s): "V" for s in sensors}, LABELS, CONDITIONS | {tare(s): "V" for s in sensors},
+                         DatasetMetadata(
+        description="GMR cilia die: voltage change of each sensor against the force on the die, and brushings "
                     "across four surfaces",
         design={"die_file": record.get("die_file", ""), "moment_memu": p.truth_moment_memu,
                 "tip_diameter_um": p.truth_diameter_um},
-        sensor_settings={"current_A": model.die.meander("X").readout.current}, protocol=record, seed=seed))
-    curves = _curves(model, p)
+        sensor_settings={"current_A": model.die.meanders[0].readout.current}, protocol=record, seed=seed))
+    curves = _curves(model, p, sensors)
     loading = {"surface": "none", "roughness_um": 0.0, "speed_mm_s": 0.0, "rate_hz": bench.rate_hz}
     for repeat in range(p.trials):
         for mode in MODES:
             truth = curves[mode]
             measured = [measure(model, curve, p.repeatability, rng) for curve in truth]
-            rests = [curve.volts[0] - curve.change[0] for curve in truth]
             writer.add({"time_s": np.arange(truth[0].force.size) * bench.realism.dwell_s,
-                        "gmr_x_V": measured[0].change, "gmr_y_V": measured[1].change, "force_N": truth[0].force},
-                       {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1], **loading})
-    rests = [model.rest_volts(sensor) for sensor in SENSORS]
+                        **{channel(s): m.change for s, m in zip(sensors, measured)}, "force_N": truth[0].force},
+                       {"mode": mode, "repeat": repeat, **loading,
+                        **{tare(s): curve.volts[0] - curve.change[0] for s, curve in zip(sensors, truth)}})
+    rests = {tare(s): model.rest_volts(s) for s in sensors}
     for brushing in brush_surfaces(model, balance_contact(p), p.brush_engagement_um * UM, p.brush_length_mm * MM,
                                    p.brush_speed_mm_s * MM, p.brush_rate_hz, tuple(v * MM for v in p.brush_speeds_mm_s),
                                    tuple(p.brush_rates_hz), p.brush_strips, rng, p.brush_bridge):
         recording = brushing.recording
-        writer.add({"time_s": np.arange(recording.readings.size) / recording.rate, "gmr_x_V": recording.readings,
-                    "gmr_y_V": brushing.readings_y, "force_N": brushing.force},
-                   {"mode": BRUSHING, "repeat": recording.strip, "tare_x_V": rests[0], "tare_y_V": rests[1],
-                    "surface": recording.surface, "roughness_um": recording.roughness / UM,
-                    "speed_mm_s": recording.speed / MM, "rate_hz": recording.rate})
+        writer.add({"time_s": np.arange(recording.readings.size) / recording.rate,
+                    **{channel(s): r for s, r in zip(sensors, brushing.readings)}, "force_N": brushing.force},
+                   {"mode": BRUSHING, "repeat": recording.strip, **rests, "surface": recording.surface,
+                    "roughness_um": recording.roughness / UM, "speed_mm_s": recording.speed / MM,
+                    "rate_hz": recording.rate})
     return writer.to_dataset()
 
 
@@ -174,7 +184,7 @@ def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredC
     if not rows.any():
         raise DieError(f"dataset: no {mode} curve of repeat {repeat}")
     part = dataset.select(rows=rows)
-    return MeasuredCurve(part.column("force_N"), part.column(f"gmr_{sensor.lower()}_V"), sensor)
+    return MeasuredCurve(part.column("force_N"), part.column(channel(sensor)), sensor)
 
 
 def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]:

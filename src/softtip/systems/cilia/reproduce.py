@@ -29,6 +29,7 @@ from softtip.report.tables import Table, paper_table
 from softtip.sensors.gmr import TESLA_PER_OERSTED
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.systems.cilia.bench import SENSORS, curve_of, recordings_of
+from softtip.systems.cilia.continuous import chain_against_stack, continuous_table
 from softtip.systems.cilia.design import DESIGN_CAPTION, design_table, search_designs
 from softtip.systems.cilia.fit import CurveFit
 from softtip.systems.cilia.layout import MEMU
@@ -68,12 +69,14 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         brushing = roughness_report(rough, other, settings.brush_bridge, settings.brush_speed_mm_s,
                                     settings.brush_rate_hz, settings.brush_engagement_um, settings.brush_strips,
                                     settings.brush_length_mm)
+    with progress.task("the dipole chain against continuous cones"):
+        continuous = chain_against_stack(model, np.array([1.0, 8.0, settings.force_max_mN]) * MN, "X")
     designs = search_designs(model.die, tuple(r * MN for r in settings.design_ranges_mN), settings.sensor,
                              settings.design_steps, settings.design_budget, settings.design_points,
                              settings.chain_count, seed, progress)
     tables = [_published_parameters(study), _range(study), _spin_valves(model), _readout(model, rest),
               _fit_table(study), _identifiability_table(study), _recovery_table(study), _resolution_table(study),
-              _balance_table(study), _layout_table(study, model.die.depth), *brushing.tables,
+              _balance_table(study), _layout_table(study, model.die.depth), *brushing.tables, continuous_table(continuous),
               design_table(designs)]
     figures = [Figure.of("Voltage change against force", "The measured curve (the twin read through the meter and "
                          "the bench), its truth, the paper-mode fit, and the balance test's curve: the pillars "
@@ -88,10 +91,14 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                Figure.of("Roughness", "The AC rms of the voltage against the surfaces' rms roughness, against "
                          "the sampling rate and against the stage speed: a reading integrates over its interval, "
                          "so a slow rate or a fast stage averages the grains away.", brushing.figure),
+               Figure.of("The dipole chain against continuous cones", "The X sensor's voltage change in paper mode "
+                         "from the published dipole chain and from the pillars as stacks of uniformly magnetised "
+                         "cylinders (dotted: the chain's gap).", continuous.figure()),
                Figure.of("Design search: the smallest force against the range", DESIGN_CAPTION, designs.figure)]
     headline = Headline.of(tables[0], MOMENT, "value", "fitted moment per pillar", unit="memu")
     results = _results(study, rest, timings) | {"roughness": rough.to_dict() | {"other_readout": other.to_dict()},
-                                                "design_search": designs.to_dict()}
+                                                "design_search": designs.to_dict(),
+                                                "chain_against_continuous": continuous.to_dict()}
     return StudyOutcome(results, tables, figures, headline, _notes(study) + brushing.notes)
 
 

@@ -315,11 +315,11 @@ def classify(recordings: list[Recording], window: int, rate: float, seed: int) -
 
 @dataclass(frozen=True)
 class Brushing:
-    """One brushing as the lab records it: the :class:`Recording` of sensor X, sensor Y's readings (V) and
-    the vertical force on the surface (N, averaged over each reading)."""
+    """One brushing as the lab records it: the :class:`Recording` of the die's first sensor, every sensor's
+    readings (V, in the die's order) and the vertical force on the surface (N, averaged over each reading)."""
 
     recording: Recording
-    readings_y: NDArray[np.float64]
+    readings: tuple[NDArray[np.float64], ...]
     force: NDArray[np.float64]
 
 
@@ -328,9 +328,9 @@ def brush_surfaces(model: CiliaModel, contact: PlateContact, engagement: float, 
                    rng: np.random.Generator, bridge: bool = False) -> list[Brushing]:
     """The four surfaces brushed ``engagement`` (m) past first contact over ``length`` (m), ``strips``
     strips of each: every strip at ``speed`` and at every one of ``speeds`` (m/s), at ``rate`` (Hz), and the
-    first strip at ``speed`` at every one of ``rates`` (each recording once); read as published, or with
-    ``bridge`` through a bridge."""
-    brushes = dict(zip(("X", "Y"), Brush.each(model, ("X", "Y"), contact), strict=True))
+    first strip at ``speed`` at every one of ``rates`` (each recording once), by every sensor of the die;
+    read as published, or with ``bridge`` through a bridge."""
+    brushes = Brush.each(model, tuple(m.name for m in model.die.meanders), contact)
     plan = dict.fromkeys([(strip, s, rate) for strip in range(strips) for s in (speed, *speeds)]
                          + [(0, speed, r) for r in rates])
     brushings = []
@@ -338,10 +338,9 @@ def brush_surfaces(model: CiliaModel, contact: PlateContact, engagement: float, 
         profiles = [surface_profile(rms, max(rms, 2 * SPACING), length, SPACING, rng) for _ in range(strips)]
         for strip, s, r in plan:
             heights = profiles[strip]
-            x, y = (read_brushing(brushes[sensor], heights, SPACING, engagement, s, r, rng, bridge)
-                    for sensor in ("X", "Y"))
-            force = _per_reading(brushes["X"].load(heights, SPACING, engagement), SPACING, s, r)
-            brushings.append(Brushing(Recording(name, rms, strip, s, r, x), y, force))
+            readings = tuple(read_brushing(brush, heights, SPACING, engagement, s, r, rng, bridge) for brush in brushes)
+            force = _per_reading(brushes[0].load(heights, SPACING, engagement), SPACING, s, r)
+            brushings.append(Brushing(Recording(name, rms, strip, s, r, readings[0]), readings, force))
     return brushings
 
 
