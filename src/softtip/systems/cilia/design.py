@@ -319,7 +319,7 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
 
 def tradeoff_figure(search: DesignSearch) -> Figure:
     """The smallest figure of merit against the stated range: the envelope of every evaluated design, the
-    best design of each search, and the published design's own curve."""
+    best design for each stated range (on the envelope), and the published design's own curve."""
     figure = Figure(figsize=(6.4, 4.2), layout="constrained")
     axes = figure.add_subplot()
     grid = np.linspace(search.ranges[0].force_range * 0.25, search.ranges[-1].force_range, 60)
@@ -330,7 +330,7 @@ def tradeoff_figure(search: DesignSearch) -> Figure:
         if found.best is not None:
             design = found.best.design
             axes.semilogy(found.force_range / MN, found.best.over(found.force_range) / UN, "o", ms=7,
-                          label=f"search for {found.force_range / MN:g} mN: {len(design.positions)} pillar(s), "
+                          label=f"best for 0-{found.force_range / MN:g} mN: {len(design.positions)} pillar(s), "
                                 f"{design.tip_diameter_um:g} µm, {design.height_mm:g} mm",
                           color=f"C{index + 2}")
     axes.set_xlabel("stated force range, 0 to (mN)")

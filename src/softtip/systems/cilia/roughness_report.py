@@ -134,10 +134,15 @@ def _classifier_tables(study: RoughnessStudy) -> list[Table]:
     return [accuracy, *confusions]
 
 
-def _line(axes, fit: LineFit | None, x: np.ndarray, style: str, label: str, color: str) -> None:
-    if fit is not None:
-        axes.plot(x / UM, (fit.slope * x + fit.intercept) * 1e6, style, color=color, lw=1,
-                  label=f"{label}: {fit.slope * UM / 1e-6:.3g} µV/µm")
+def _lines(axes, levels: RoughnessStudy, x: np.ndarray, name: str, color: str) -> None:
+    """Both fits over ``x`` (m) in the plot's AC-rms space: the line with intercept as it is, the fit through
+    the origin above the floor added back to the floor in quadrature."""
+    for fit, style, label in ((levels.published_fit, "-", "line"), (levels.origin_fit, ":", "origin")):
+        if fit is None:
+            continue
+        values = fit.slope * x + fit.intercept if label == "line" else np.hypot(levels.floor, fit.slope * x)
+        axes.plot(x / UM, values * 1e6, style, color=color, lw=1,
+                  label=f"{name}, {label}: {fit.slope * UM / 1e-6:.3g} µV/µm")
 
 
 def roughness_figure(study: RoughnessStudy, other: RoughnessStudy, bridge: bool) -> Figure:
@@ -150,23 +155,23 @@ def roughness_figure(study: RoughnessStudy, other: RoughnessStudy, bridge: bool)
         color = f"C{index}"
         name = "bridge" if with_bridge else "as published"
         left.plot(levels.roughness / UM, levels.total_rms * 1e6, "o", color=color, label=f"AC rms, {name}")
-        _line(left, levels.published_fit, x, "-", f"{name}, line", color)
-        _line(left, levels.origin_fit, x, ":", f"{name}, origin", color)
+        _lines(left, levels, x, name, color)
     published = published_table("cilia-roughness").value(SLOPE, "value").centre
     left.plot(x / UM, study.floor * 1e6 + published * x / UM, "k--", lw=1,
               label=f"published slope {published:g} µV/µm, from the floor")
     left.set_xlabel("rms roughness (µm)")
     left.set_ylabel("AC rms of sensor X (µV)")
     left.legend(fontsize=6)
-    for name, row in zip(study.surfaces, study.rms_by_rate):
-        right.loglog(study.rates, row * 1e6, "o-", label=name)
+    # linear in the AC rms: a quantised reading that never changes has an AC rms of 0
+    for axes, values, rows, label in ((right, study.rates, study.rms_by_rate, "readings per second"),
+                                      (fast, study.speeds / MM, study.rms_by_speed, "stage speed (mm/s)")):
+        for name, row in zip(study.surfaces, rows):
+            axes.semilogx(values, row * 1e6, "o-", label=name)
+        axes.set_xticks(values, [f"{v:g}" for v in values], minor=False)
+        axes.minorticks_off()
+        axes.set_xlabel(label)
+        axes.set_ylabel(f"AC rms (µV), {READOUTS[bridge].split(' (')[0]}")
     right.axvline(20, color="k", ls=":", lw=0.8, label="20 readings/s")
-    right.set_xlabel("readings per second")
-    right.set_ylabel("AC rms (µV)")
     right.legend(fontsize=7)
-    for name, row in zip(study.surfaces, study.rms_by_speed):
-        fast.loglog(study.speeds / MM, row * 1e6, "o-", label=name)
-    fast.set_xlabel("stage speed (mm/s)")
-    fast.set_ylabel("AC rms (µV)")
     fast.legend(fontsize=7)
     return figure
