@@ -184,3 +184,39 @@ def test_the_analysis_refuses_recordings_without_a_flat_surface_or_a_nominal_run
         analyse_roughness(flat + rough, 2e-3, 50.0, 0)
     with pytest.raises(DieError, match="found none"):
         analyse_roughness([], 1e-3, 50.0, 0)
+
+
+def test_the_command_reads_a_csv_at_one_speed_as_the_publication_recorded(tmp_path):
+    import json
+
+    import typer
+    from typer.testing import CliRunner
+
+    from softtip.cli.common import user_errors
+    from softtip.systems.cilia.commands import roughness_cilia
+
+    brushings = brush_surfaces(MODEL, PlateContact(0.5, math.radians(0.5)), 150e-6, 6e-3, 1e-3, 5.0, (), (), 2,
+                               np.random.default_rng(8), bridge=True)
+    recordings = [b.recording for b in brushings]
+    # one row per reading, a recording a run of rows
+    rows = ["surface,roughness_um,speed_mm_s,rate_hz,strip,volts"]
+    for r in recordings:
+        rows += [f"{r.surface},{r.roughness / 1e-6:.6g},{r.speed / 1e-3:g},{r.rate:g},{r.strip},{v:.15g}" for v in r.readings]
+    table = tmp_path / "brushings.csv"
+    table.write_text("\n".join(rows) + "\n")
+    app = typer.Typer()
+    app.command()(user_errors(roughness_cilia))
+    ran = CliRunner().invoke(app, [str(table), "--channel", "volts", "--seed", "0", "--json"])
+    assert ran.exit_code == 0, ran.output
+    report = json.loads(ran.output)
+    study = analyse_roughness(recordings, 1e-3, 5.0, seed=0)
+    assert report["speed_mm_s"] == 1.0 and report["rate_hz"] == 5.0 and report["recordings"] == 8
+    np.testing.assert_allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-9)
+    # 1 V/m is 1 µV/µm
+    assert report["slope_as_published_uV_per_um"]["slope"] == pytest.approx(study.published_fit.slope, rel=1e-9)
+    # one speed: validated by strip only, and the report says why not at a held-out speed
+    assert report["classification"]["accuracy_at_held_speed"] is None and report["classification"]["not_validated"]
+    missing = tmp_path / "no-rate.csv"
+    missing.write_text("surface,roughness_um,speed_mm_s,volts\nsilicon,0,1,0.0\n")
+    refused = CliRunner().invoke(app, [str(missing), "--channel", "volts"])
+    assert refused.exit_code == 2 and "no-rate.csv: no column 'rate_hz'" in refused.output

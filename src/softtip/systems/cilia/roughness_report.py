@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from softtip._core.units import MM, UM
 from softtip.published import published_table
 from softtip.report.tables import Table, paper_table
-from softtip.systems.cilia.roughness import LineFit, RoughnessStudy
+from softtip.systems.cilia.roughness import RoughnessStudy
 
 SLOPE = "slope (µV/µm)"
 READOUTS = {False: "the meter across the sensor (as published)", True: "through a bridge (softtip's addition)"}
@@ -57,7 +57,8 @@ def _slope_cells(study: RoughnessStudy, label: str) -> tuple[dict, dict]:
         row = f"{label}: {name}"
         low, high = (v * UM / 1e-6 for v in fit.slope_interval)
         rows[row] = fit.slope * UM / 1e-6
-        notes[row] = f"{how}; 95 % interval {low:.3g} to {high:.3g} µV/µm (Student's t, {fit.dof} degrees of freedom)"
+        notes[row] = (f"{how}; 95 % interval {low:.3g} to {high:.3g} µV/µm (Student's t, {fit.dof} degrees of "
+                      f"freedom); this readout's floor (silicon): {study.floor * 1e6:.3g} µV")
     return rows, notes
 
 
