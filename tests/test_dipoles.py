@@ -6,7 +6,7 @@ from __future__ import annotations
 import magpylib as magpy
 import numpy as np
 import pytest
-from scipy.integrate import dblquad
+from scipy.integrate import dblquad, quad
 from scipy.spatial.transform import Rotation
 
 from softtip.magnetics.dipoles import (
@@ -86,13 +86,32 @@ def pillar_chain(bend: float, count: int, volume_shares: bool) -> Dipoles:
     return dipole_chain(points, tangents, MOMENT, frustum_shares(BASE, TIP, count) if volume_shares else None)
 
 
+def test_frustum_shares_are_each_pieces_volume_by_quadrature():
+    # each piece's volume ∫ π d(z)²/4 dz over its height, by adaptive quadrature, over the whole frustum's
+    count = 7
+    edges = np.linspace(0.0, 1e-3, count + 1)
+
+    def area(z: float) -> float:
+        return np.pi / 4 * (BASE + (TIP - BASE) * z / 1e-3) ** 2
+
+    pieces = np.array([quad(area, a, b, epsabs=0, epsrel=1e-13)[0] for a, b in zip(edges[:-1], edges[1:])])
+    np.testing.assert_allclose(frustum_shares(BASE, TIP, count), pieces / pieces.sum(), rtol=1e-12)
+    # a cylinder's pieces share alike; the shares of pieces add up to the share of their union
+    np.testing.assert_allclose(frustum_shares(TIP, TIP, 5), np.full(5, 0.2), rtol=1e-14)
+    np.testing.assert_allclose(frustum_shares(BASE, TIP, 2), frustum_shares(BASE, TIP, 4).reshape(2, 2).sum(axis=1),
+                               rtol=1e-14)
+
+
 def cylinder_stack(bend: float, count: int = 120) -> magpy.Collection:
     """The conical pillar as ``count`` uniformly magnetised magpylib cylinders along the arc."""
     points, tangents = arc_centreline(bend, count)
     fractions = (np.arange(count) + 0.5) / count
     diameters = BASE + (TIP - BASE) * fractions
     height = 1e-3 / count
-    moments = MOMENT * frustum_shares(BASE, TIP, count)
+    # uniform magnetisation: the frustum's moment over its volume π h (D² + Dd + d²)/12, each cylinder its share
+    # by its own volume (the reference does not use frustum_shares)
+    magnetisation = MOMENT / (np.pi * 1e-3 / 12 * (BASE**2 + BASE * TIP + TIP**2))
+    moments = magnetisation * np.pi * diameters**2 / 4 * (1e-3 / count)
     stack = magpy.Collection()
     for point, tangent, diameter, moment in zip(points, tangents, diameters, moments):
         polarisation = 4e-7 * np.pi * moment / (np.pi * diameter**2 / 4 * height)  # J = μ₀ m / V

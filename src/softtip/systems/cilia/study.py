@@ -118,6 +118,7 @@ class CiliaSettings:
     brush_rate_hz: PositiveNumber = 50.0
     brush_length_mm: PositiveNumber = 20.0
     brush_strips: integer(2, 50) = 3  # realisations of each surface
+    brush_bridge: Flag = False  # the publication's readout has none; a bridge is softtip's addition
     brush_speeds_mm_s: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
                                  expect("a list of at least two positive speeds")] = (0.5, 1.0, 2.0, 5.0, 10.0)
     brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
