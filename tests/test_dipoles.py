@@ -49,6 +49,23 @@ def test_rectangle_average_is_exact_against_adaptive_quadrature():
             assert average[r, axis] == pytest.approx(integral / RECTANGLES.area[r], rel=1e-10)
 
 
+def test_rectangles_sharing_their_edges_are_exact_against_adaptive_quadrature():
+    """Strips' runs cut along their length (a meander's area elements: 3 x 4 cells with gaps between the runs,
+    30 distinct corners for 12 cells) take the kernel's shared-corner path; each cell against quadrature."""
+    runs = np.array([[-3e-4, -1.2e-4], [-1e-4, 8e-5], [1e-4, 2.8e-4]])
+    cuts = np.linspace(-2e-4, 2e-4, 5)
+    x = np.repeat(runs, 4, axis=0)
+    y = np.tile(np.column_stack([cuts[:-1], cuts[1:]]), (3, 1))
+    cells = Rectangles(x=x, y=y, z=-1e-5)
+    average = rectangle_average_in_plane(cells, POSITIONS, MOMENTS)
+    for r in range(len(cells)):
+        for axis in range(2):
+            integral, _ = dblquad(
+                lambda y, x: dipole_field(np.array([[x, y, cells.z]]), POSITIONS, MOMENTS)[0, axis],
+                cells.x[r, 0], cells.x[r, 1], cells.y[r, 0], cells.y[r, 1], epsabs=0, epsrel=1e-11)
+            assert average[r, axis] == pytest.approx(integral / cells.area[r], rel=1e-9)
+
+
 def test_a_fine_grid_converges_to_the_exact_average_at_second_order():
     rectangle = Rectangles(x=np.array([[-3e-4, 2e-4]]), y=np.array([[-2e-4, 3e-4]]), z=-1e-5)
     exact = rectangle_average_in_plane(rectangle, POSITIONS, MOMENTS)[0]
