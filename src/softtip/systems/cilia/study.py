@@ -559,7 +559,7 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
         axes = figure.add_subplot(1, 2, index + 1)
         image = axes.pcolormesh(xs / 1e-3, ys / 1e-3, field[index].reshape(grid_x.shape), cmap="RdBu_r", norm=norm,
                                 shading="auto")
-        for (x0, x1), (y0, y1) in _bank_outlines(meander.elements.x, meander.elements.y, meander.axis):
+        for (x0, x1), (y0, y1) in _bank_outlines(meander.strips.x, meander.strips.y, meander.axis):
             axes.add_patch(Rectangle((x0 / 1e-3, y0 / 1e-3), (x1 - x0) / 1e-3, (y1 - y0) / 1e-3, fill=False, lw=0.8))
         for x, y in die.pillars.positions:
             axes.add_patch(Circle((x / 1e-3, y / 1e-3), die.pillars.rod.base_diameter / 2 / 1e-3, fill=False,
