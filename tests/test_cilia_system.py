@@ -189,6 +189,7 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     ("plate_seating_mrad = -1.0", r"plate_seating_mrad = -1.0"),
     ("rig_tilts_deg = [20.0]", r"rig_tilts_deg"),
     ("gap_causes = 1", r"gap_causes = 1: expected true or false"),
+    ("balance_chain_count = 0", r"balance_chain_count = 0"),
     ("brush_length_mm = 2.001", r"brush_length_mm = 2.001: expected a stroke longer than the pillars' spread"),
 ])
 def test_bad_protocol_settings_are_refused_when_read(tmp_path, setting, message):

@@ -91,6 +91,7 @@ class CiliaSettings:
     # repeated loadings of the twin: the first is the study's curve; every one is fitted for the recovery
     trials: integer(1, 200) = 6
     chain_count: PositiveInteger = 10
+    balance_chain_count: PositiveInteger = 40  # the balance test's: its buckled roots need more than the published 10
     friction: number("a number >= 0", ge=0.0) = 0.5
     imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
     # the balance test as performed (softtip.systems.cilia.model.CiliaModel.balance_curve)
@@ -278,7 +279,8 @@ def twin_model(settings: CiliaSettings) -> CiliaModel:
     pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter))
     truth = replace(pillars.with_diameter(settings.truth_diameter_um * UM),
                     moment=math.copysign(settings.truth_moment_memu * MEMU, pillars.moment))
-    return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count)
+    return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count,
+                      balance_chain_count=settings.balance_chain_count)
 
 
 def paper_forces(settings: CiliaSettings) -> np.ndarray:
@@ -405,14 +407,14 @@ def _balance(model: CiliaModel, curve: BalanceCurve, measured: MeasuredCurve, se
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
     first, every = (np.flatnonzero(curve.lying_count >= count) for count in (1, len(curve.gaps[0])))
     within = measured.part(measured.force <= settings.force_max_mN * MN)  # the range the publication fitted
-    finer = replace(model, chain_count=CHAIN_CHECK * model.chain_count).balance_curve(
+    finer = replace(model, balance_chain_count=CHAIN_CHECK * settings.balance_chain_count).balance_curve(
         balance_descent(model, settings), balance_contact(settings), curve.sensor, balance_plate(settings))
     return BalanceOutcome(curve, buckling, float(curve.force[first[0]]) if first.size else None,
                           float(curve.force[every[0]]) if every.size else None,
                           publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer)
 
 
-CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is the published chain enough?
+CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is its chain enough?
 GAP_POINTS = 13  # load steps of each noise-free curve the moment gap's causes are tried on
 SEATING_STEP = 1e-3  # rad: the plate's seating turn either side for its effect on the voltage
 
