@@ -250,7 +250,7 @@ def _chain_note(study: CiliaStudy) -> str:
     rows = np.searchsorted(curve.force, budget.force)
     slope = np.gradient(finer.change[rows], budget.force)[budget.best]
     count = study.settings.balance_chain_count
-    return (f"With {CHAIN_CHECK * count} dipoles a pillar the slope here is {slope / budget.slope[budget.best]:.2g} "
+    return (f"With {CHAIN_CHECK * count} dipoles a pillar the slope here is {slope / budget.slope[budget.best]:.3f} "
             f"times the {count}-dipole one the budget divides by, and every voltage-side share scales inversely.")
 
 
