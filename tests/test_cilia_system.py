@@ -270,8 +270,8 @@ def test_quick_runs_a_coarse_protocol():
     results = report.outcome.results
     assert results["design_search"]["steps"] == 3 and results["roughness"]["recordings"] == 4 * (2 * 3 + 2)
     assert report.provenance["quick (smoke run)"] == "yes: fewer trials than the study, a coarse protocol"
-    # measured 38 s (28 s of CPU) at a load average of 4 on two cores and 71 s at 6: 8 times the field's work
-    # since each meander is read as 25 µm area elements, and the dipole chain checked against continuous cones
+    # measured 57 s (32 s of CPU) at a load average of 6 on two cores, 117 s beside two other slow runs: the
+    # meanders' 25 µm area elements, the balance test's 40 dipoles and the continuous cones' check
     assert report.seconds < 120
 
 
