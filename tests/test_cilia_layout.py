@@ -26,20 +26,30 @@ def test_the_shipped_die_matches_the_spec():
         (1e-3, 200e-6, 320e-6, 1e6))
     assert die.pillars.moment == pytest.approx(2.8e-6)  # 2.8 memu per pillar, 1 emu = 1e-3 A·m²
     x, y = die.meander("X"), die.meander("Y")
-    assert (len(x.elements), len(y.elements)) == (444, 416)
+    assert (len(x.strips), len(y.strips)) == (444, 416)
     assert (x.axis, y.axis) == (0, 1)
     assert x.readout.sensor.minimum_resistance == pytest.approx(183.25e3)
     assert y.readout.sensor.minimum_resistance == pytest.approx(168.75e3)
     assert x.readout.current == pytest.approx(100e-6)
     # strips inside the die, apart from each other, in the plane 10 µm below the bases
     for meander in die.meanders:
-        assert meander.elements.z == pytest.approx(-10e-6)
-        x0, x1 = meander.elements.x.T
-        y0, y1 = meander.elements.y.T
-        overlap = ((x0[:, None] < x1[None]) & (x0[None] < x1[:, None]) & (y0[:, None] < y1[None])
-                   & (y0[None] < y1[:, None]))
-        assert overlap.sum() == len(meander.elements)  # each strip overlaps itself only
-        assert np.all(np.abs(meander.elements.x) <= 1.5e-3) and np.all(np.abs(meander.elements.y) <= 1.5e-3)
+        for rectangles in (meander.strips, meander.elements):
+            assert rectangles.z == pytest.approx(-10e-6)
+            x0, x1 = rectangles.x.T
+            y0, y1 = rectangles.y.T
+            overlap = ((x0[:, None] < x1[None]) & (x0[None] < x1[:, None]) & (y0[:, None] < y1[None])
+                       & (y0[None] < y1[:, None]))
+            assert overlap.sum() == len(rectangles)  # each strip (each area element) overlaps itself only
+            assert np.all(np.abs(rectangles.x) <= 1.5e-3) and np.all(np.abs(rectangles.y) <= 1.5e-3)
+        # the area elements hold every strip's area once: their weights add up to the strips' area, and each
+        # holds the strips' area inside it
+        weights = np.array(meander.readout.sensor.area_weights)
+        assert weights.sum() == pytest.approx(meander.strips.area.sum(), rel=1e-12)
+        inside = [np.sum(np.clip(np.minimum(meander.strips.x[:, 1], ex1) - np.maximum(meander.strips.x[:, 0], ex0), 0, None)
+                         * np.clip(np.minimum(meander.strips.y[:, 1], ey1) - np.maximum(meander.strips.y[:, 0], ey0), 0,
+                                   None))
+                  for (ex0, ex1), (ey0, ey1) in zip(meander.elements.x, meander.elements.y)]
+        np.testing.assert_allclose(weights, inside, rtol=1e-9)
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -78,3 +88,34 @@ def test_missing_or_broken_files_are_refused(tmp_path):
         read_die(tmp_path / "none.toml")
     with pytest.raises(DieError, match="not valid TOML"):
         read_die(write(tmp_path, "[die\n"))
+
+
+def test_saturation_per_area_element_against_a_point_by_point_reference():
+    """The meander read point by point (every 5 µm along each strip's centre line, each point saturating on
+    its own: the free layer's local response; 10 µm spacing gives the same to 1e-5) is the reference, at 8 mN
+    in paper mode; the die's ~25 µm area elements come within 0.5 % of its voltage change (measured 0.1 %;
+    50 µm ones: 0.6 %), where saturating each strip's mean field, as a whole-strip element does, is 14.2 %
+    over."""
+    from dataclasses import replace
+
+    from softtip.magnetics.dipoles import dipole_field
+    from softtip.systems.cilia.model import CiliaModel, element_fields, pillar_dipoles
+
+    die = read_die()
+    model = CiliaModel(die)
+    meander = die.meander("X")
+    shapes = model.shapes(np.array([0.0, 8e-3]))
+    dipoles = pillar_dipoles(die.pillars, shapes, model.chain_count)
+    strips = meander.strips
+    along = (np.arange(180) + 0.5) / 180
+    ys = strips.y[:, :1] + (strips.y[:, 1:] - strips.y[:, :1]) * along[None, :]
+    points = np.column_stack([np.repeat(strips.x.mean(axis=1), 180), ys.ravel(), np.full(ys.size, strips.z)])
+    field = dipole_field(points, dipoles.positions, dipoles.moments)[..., 0]  # (loads, points)
+    by_point = replace(meander.readout, sensor=replace(meander.readout.sensor, elements=points.shape[0],
+                                                       area_weights=None))
+    reference = np.diff(by_point.voltage(field))[0]
+    modelled = np.diff(model.volts(element_fields(meander, dipoles), "X"))[0]
+    whole = replace(meander.readout, sensor=replace(meander.readout.sensor, area_weights=None))
+    strip_means = whole.voltage(element_fields(replace(meander, elements=strips), dipoles))
+    assert modelled == pytest.approx(reference, rel=0.005)
+    assert abs(np.diff(strip_means)[0] / reference - 1) > 0.1

@@ -91,7 +91,7 @@ def test_the_balance_test_buckles_the_pillars_before_bending_them():
     assert np.all(np.diff(curve.force[:3]) > 0)
     # straight compression hardly changes the field: the first micro-newtons change it by < 1 µV per µN
     noise = DIE.meander("X").readout.noise(18.7).total
-    assert abs(curve.change[1]) < 0.05 * abs(curve.change[-1]) + noise
+    assert abs(curve.change[1]) < 1.0 * curve.force[1] + noise  # 1 V/N: 1 µV per µN
     assert np.any(np.abs(curve.shapes.tip_angle) > 0.3)
 
 
@@ -176,3 +176,22 @@ def test_the_tip_load_curve_converges_in_the_chains_dipoles():
     forces = np.array([5e-3, 26e-3])
     coarse, fine = (CiliaModel(DIE, chain_count=count).curve(forces, "X").change for count in (10, 160))
     assert np.allclose(coarse, fine, rtol=0.02)
+
+
+@pytest.mark.slow
+def test_the_balance_tests_chain_converges_by_40_dipoles_not_at_the_published_10():
+    """The balance test read with 10, 40 and 160 equal dipoles a pillar (20 steps of the shipped plan): 40 and
+    160 agree, the published 10 do not (their points sit too far apart over the roots' area elements)."""
+    from softtip.systems.cilia.study import CiliaSettings, balance_contact, balance_plate
+
+    model = CiliaModel(read_die())
+    settings = CiliaSettings()
+    descent = np.linspace(0.0, 0.7 * model.die.pillars.rod.length, 20)
+    change = {count: replace(model, chain_count=count).balance_curve(descent, balance_contact(settings), "X",
+                                                                     balance_plate(settings)).change
+              for count in (10, 40, 160)}
+    scale = np.abs(change[160]).max()
+    gaps = {count: np.abs(change[count] - change[160]).max() / scale for count in (10, 40)}
+    # measured: 40 within 2.5 % of the curve's largest change, 10 off by 92 %
+    assert gaps[40] < 0.04
+    assert gaps[10] > 0.5

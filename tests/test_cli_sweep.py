@@ -137,6 +137,8 @@ def inputs(tmp_path_factory):
                               {"mode": "brushing", "surface": surface, "roughness_um": roughness, "repeat": strip,
                                "speed_mm_s": speed, "rate_hz": 50.0})
     brushings.write(tmp / "brushing.parquet")
+    force = np.linspace(0.0, 26e-3, 9)
+    (tmp / "curve.csv").write_text("force_N,voltage_V\n" + "".join(f"{f},{-0.5 * f}\n" for f in force))
     u = rng.normal(size=300)
     y = np.convolve(u, [0.0, 0.5, 0.25], mode="full")[:300]
     (tmp / "recording.csv").write_text("time_s,u,y\n" + "".join(f"{k * 0.01},{a},{b}\n" for k, (a, b) in
@@ -171,7 +173,8 @@ def inputs(tmp_path_factory):
         "sysid predict": ([str(tmp / "sysid.npz")], ["--data", csv], "recording.csv", "data"),
         "recording repair": ([str(tmp / "recording.mcap")], [], "recording.mcap", "recording"),
         "live": ([], ["--emulate"], None, None),
-        "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "dataset"),
+        "cilia roughness": ([str(tmp / "brushing.parquet")], [], "brushing.parquet", "data"),
+        "cilia fit": ([str(tmp / "curve.csv")], [], "curve.csv", "curve"),
         "haptics table export": ([str(tmp / "new" / "table.h")], [], None, None),
         "import": (logs, ["-m", str(tmp / "import.toml"), "-o", str(tmp / "work" / "imported.parquet")], "import.toml",
                    "mapping"),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import magpylib as magpy
 import numpy as np
 import pytest
-from scipy.integrate import dblquad
+from scipy.integrate import dblquad, quad
 from scipy.spatial.transform import Rotation
 
 from softtip.magnetics.dipoles import (
@@ -49,6 +49,23 @@ def test_rectangle_average_is_exact_against_adaptive_quadrature():
             assert average[r, axis] == pytest.approx(integral / RECTANGLES.area[r], rel=1e-10)
 
 
+def test_rectangles_sharing_their_edges_are_exact_against_adaptive_quadrature():
+    """Strips' runs cut along their length (a meander's area elements: 3 x 4 cells with gaps between the runs,
+    30 distinct corners for 12 cells) take the kernel's shared-corner path; each cell against quadrature."""
+    runs = np.array([[-3e-4, -1.2e-4], [-1e-4, 8e-5], [1e-4, 2.8e-4]])
+    cuts = np.linspace(-2e-4, 2e-4, 5)
+    x = np.repeat(runs, 4, axis=0)
+    y = np.tile(np.column_stack([cuts[:-1], cuts[1:]]), (3, 1))
+    cells = Rectangles(x=x, y=y, z=-1e-5)
+    average = rectangle_average_in_plane(cells, POSITIONS, MOMENTS)
+    for r in range(len(cells)):
+        for axis in range(2):
+            integral, _ = dblquad(
+                lambda y, x: dipole_field(np.array([[x, y, cells.z]]), POSITIONS, MOMENTS)[0, axis],
+                cells.x[r, 0], cells.x[r, 1], cells.y[r, 0], cells.y[r, 1], epsabs=0, epsrel=1e-11)
+            assert average[r, axis] == pytest.approx(integral / cells.area[r], rel=1e-9)
+
+
 def test_a_fine_grid_converges_to_the_exact_average_at_second_order():
     rectangle = Rectangles(x=np.array([[-3e-4, 2e-4]]), y=np.array([[-2e-4, 3e-4]]), z=-1e-5)
     exact = rectangle_average_in_plane(rectangle, POSITIONS, MOMENTS)[0]
@@ -86,13 +103,32 @@ def pillar_chain(bend: float, count: int, volume_shares: bool) -> Dipoles:
     return dipole_chain(points, tangents, MOMENT, frustum_shares(BASE, TIP, count) if volume_shares else None)
 
 
+def test_frustum_shares_are_each_pieces_volume_by_quadrature():
+    # each piece's volume ∫ π d(z)²/4 dz over its height, by adaptive quadrature, over the whole frustum's
+    count = 7
+    edges = np.linspace(0.0, 1e-3, count + 1)
+
+    def area(z: float) -> float:
+        return np.pi / 4 * (BASE + (TIP - BASE) * z / 1e-3) ** 2
+
+    pieces = np.array([quad(area, a, b, epsabs=0, epsrel=1e-13)[0] for a, b in zip(edges[:-1], edges[1:])])
+    np.testing.assert_allclose(frustum_shares(BASE, TIP, count), pieces / pieces.sum(), rtol=1e-12)
+    # a cylinder's pieces share alike; the shares of pieces add up to the share of their union
+    np.testing.assert_allclose(frustum_shares(TIP, TIP, 5), np.full(5, 0.2), rtol=1e-14)
+    np.testing.assert_allclose(frustum_shares(BASE, TIP, 2), frustum_shares(BASE, TIP, 4).reshape(2, 2).sum(axis=1),
+                               rtol=1e-14)
+
+
 def cylinder_stack(bend: float, count: int = 120) -> magpy.Collection:
     """The conical pillar as ``count`` uniformly magnetised magpylib cylinders along the arc."""
     points, tangents = arc_centreline(bend, count)
     fractions = (np.arange(count) + 0.5) / count
     diameters = BASE + (TIP - BASE) * fractions
     height = 1e-3 / count
-    moments = MOMENT * frustum_shares(BASE, TIP, count)
+    # uniform magnetisation: the frustum's moment over its volume π h (D² + Dd + d²)/12, each cylinder its share
+    # by its own volume (the reference does not use frustum_shares)
+    magnetisation = MOMENT / (np.pi * 1e-3 / 12 * (BASE**2 + BASE * TIP + TIP**2))
+    moments = magnetisation * np.pi * diameters**2 / 4 * (1e-3 / count)
     stack = magpy.Collection()
     for point, tangent, diameter, moment in zip(points, tangents, diameters, moments):
         polarisation = 4e-7 * np.pi * moment / (np.pi * diameter**2 / 4 * height)  # J = μ₀ m / V

@@ -175,18 +175,42 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
     flat_moments = moments.reshape(-1, 3)
     count = len(rectangles)
     out = np.zeros((flat_positions.shape[0], count, len(axes)))
-    chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
-    edges = (rectangles.x, rectangles.y)
-    for start in range(0, flat_positions.shape[0], chunk):
-        p = flat_positions[start:start + chunk, None, :]
-        m = flat_moments[start:start + chunk, None, :]
-        offsets = [edges[axis][None, :, :] - p[..., axis:axis + 1] for axis in (0, 1)]  # (d, R, 2) each
-        height = rectangles.z - p[..., 2:3]
-        for column, axis in enumerate(axes):
-            # B_axis: the potential along the two edges across ``axis``, integrated along the other
-            other = 1 - axis
-            along = _edge_integral(offsets[axis], offsets[other][..., 0:1], offsets[other][..., 1:2], height,
-                                   m[..., axis:axis + 1], m[..., other:other + 1], m[..., 2:3])
-            out[start:start + chunk, :, column] = along[..., 1] - along[..., 0]
+    xs, x_index = np.unique(rectangles.x, return_inverse=True)
+    ys, y_index = np.unique(rectangles.y, return_inverse=True)
+    (x_low, x_high), (y_low, y_high) = x_index.reshape(-1, 2).T, y_index.reshape(-1, 2).T
+    # rectangles that share their edges (a meander's area elements: runs of strips cut along their length)
+    # have far fewer distinct corners than 4 each: the potential's line integral is then taken once per corner
+    corners = xs.size * ys.size
+    if corners < 4 * count:
+        chunk = max(1, _PAIRS_PER_CHUNK // corners)
+        for start in range(0, flat_positions.shape[0], chunk):
+            p = flat_positions[start:start + chunk, :, None, None]  # (d, 3, 1, 1)
+            m = flat_moments[start:start + chunk, :, None, None]
+            dx, dy = xs[:, None] - p[:, 0], ys[None, :] - p[:, 1]  # (d, X, 1), (d, 1, Y)
+            height = rectangles.z - p[:, 2]
+            root = np.sqrt(dx * dx + dy * dy + height * height)  # (d, X, Y): each corner's distance
+            for column, axis in enumerate(axes):
+                # the primitive of ∫ φ d(along) at each corner (module notes), across = the edges across ``axis``
+                across, along = (dx, dy) if axis == 0 else (dy, dx)
+                rho2 = across * across + height * height
+                axial = m[:, axis] * across + m[:, 2] * height
+                primitive = (axial * along / rho2 - m[:, 1 - axis]) / root
+                # either axis: (upper edge across − lower edge across) of (upper end − lower end) along it
+                out[start:start + chunk, :, column] = (primitive[:, x_high, y_high] - primitive[:, x_high, y_low]
+                                                       - primitive[:, x_low, y_high] + primitive[:, x_low, y_low])
+    else:
+        chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
+        edges = (rectangles.x, rectangles.y)
+        for start in range(0, flat_positions.shape[0], chunk):
+            p = flat_positions[start:start + chunk, None, :]
+            m = flat_moments[start:start + chunk, None, :]
+            offsets = [edges[axis][None, :, :] - p[..., axis:axis + 1] for axis in (0, 1)]  # (d, R, 2) each
+            height = rectangles.z - p[..., 2:3]
+            for column, axis in enumerate(axes):
+                # B_axis: the potential along the two edges across ``axis``, integrated along the other
+                other = 1 - axis
+                along = _edge_integral(offsets[axis], offsets[other][..., 0:1], offsets[other][..., 1:2], height,
+                                       m[..., axis:axis + 1], m[..., other:other + 1], m[..., 2:3])
+                out[start:start + chunk, :, column] = along[..., 1] - along[..., 0]
     out *= -_MU0_OVER_4PI / rectangles.area[None, :, None]
     return out.reshape(*positions.shape[:-1], count, len(axes)).sum(axis=-3)

@@ -11,14 +11,14 @@ tip diameter and, where given, height and Young's modulus (:func:`softtip.system
 Then the brushings (:mod:`softtip.systems.cilia.roughness`): the die held ``brush_engagement_um`` past first
 contact and moved over ``brush_strips`` strips of each of the four surfaces, every strip at
 ``brush_speed_mm_s`` and at every one of ``brush_speeds_mm_s``, at ``brush_rate_hz``, and the first strip at ``brush_speed_mm_s`` at every one of
-``brush_rates_hz``: one trial (one recording) each, both sensors through their bridges (the rest voltage
-taken off before the meter).
+``brush_rates_hz``: one trial (one recording) each, both sensors read as published (the meter across the
+sensor) or, with ``brush_bridge``, through a bridge (the rest voltage taken off before the meter).
 
-Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare, or from its bridge's
-reference in a brushing). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
+Channels: ``gmr_x_V``, ``gmr_y_V`` (each sensor's voltage change from its tare; in a brushing, from its
+rest voltage; a die with one sensor direction records its own only). Label: ``force_N`` (the total force on the die: the load applied in paper mode,
 the balance's vertical reading in balance mode and under the surface in a brushing). Conditions: ``mode``
 (paper, balance, brushing), ``repeat`` (the loading's repeat; in a brushing, which strip of the surface),
-``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the bridges' reference: the rest voltage),
+``tare_x_V``, ``tare_y_V`` (the tare readings; in a brushing, the rest voltage),
 ``surface`` (none in a loading), ``roughness_um`` (the surface's rms roughness), ``speed_mm_s`` (the
 stage's speed; 0 in a loading) and ``rate_hz`` (readings per second).
 """
@@ -54,10 +54,18 @@ from softtip.systems.cilia.study import (
 )
 
 SENSORS = ("X", "Y")
-CHANNELS = {"gmr_x_V": "V", "gmr_y_V": "V"}
 LABELS = {"force_N": "N"}
-CONDITIONS = {"mode": "1", "repeat": "1", "tare_x_V": "V", "tare_y_V": "V", "surface": "1", "roughness_um": "um",
-              "speed_mm_s": "mm/s", "rate_hz": "Hz"}
+CONDITIONS = {"mode": "1", "repeat": "1", "surface": "1", "roughness_um": "um", "speed_mm_s": "mm/s", "rate_hz": "Hz"}
+
+
+def channel(sensor: str) -> str:
+    """The dataset channel of ``sensor``'s voltage."""
+    return f"gmr_{sensor.lower()}_V"
+
+
+def tare(sensor: str) -> str:
+    """The dataset condition of ``sensor``'s tare."""
+    return f"tare_{sensor.lower()}_V"
 MODES = ("paper", "balance")
 BRUSHING = "brushing"
 
@@ -122,43 +130,45 @@ def _setup(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Cilia
         f"{protocol.design.name}")
 
 
-def _curves(model: CiliaModel, p: CiliaSettings) -> dict[str, tuple[ForceCurve, ForceCurve]]:
-    """The twin's noise-free curves, per mode: (X, Y)."""
+def _curves(model: CiliaModel, p: CiliaSettings, sensors: tuple[str, ...]) -> dict[str, tuple[ForceCurve, ...]]:
+    """The twin's noise-free curves, per mode: one per sensor."""
     forces, descent, contact = paper_forces(p), balance_descent(model, p), balance_contact(p)
-    return {"paper": model.curves(forces, SENSORS),
-            "balance": model.balance_curves(descent, contact, SENSORS, balance_plate(p))}
+    return {"paper": model.curves(forces, sensors),
+            "balance": model.balance_curves(descent, contact, sensors, balance_plate(p))}
 
 
 def cilia(bench: CiliaBench, p: CiliaSettings, seed: int, record: dict) -> Dataset:
-    """``trials`` repeats of the paper-mode and the balance-mode curve, both sensors read at every step;
-    then the brushings of the four surfaces."""
+    """``trials`` repeats of the paper-mode and the balance-mode curve, every sensor of the die read at every
+    step; then the brushings of the four surfaces."""
     model, rng = bench.model, bench.rng
-    writer = TrialWriter(CHANNELS, LABELS, CONDITIONS, DatasetMetadata(
-        description="GMR cilia die: voltage change of both sensors against the force on the die, and brushings "
+    sensors = tuple(m.name for m in model.die.meanders)
+    writer = TrialWriter({channel(s): "V" for s in sensors}, LABELS, CONDITIONS | {tare(s): "V" for s in sensors},
+                         DatasetMetadata(
+        description="GMR cilia die: voltage change of each sensor against the force on the die, and brushings "
                     "across four surfaces",
         design={"die_file": record.get("die_file", ""), "moment_memu": p.truth_moment_memu,
                 "tip_diameter_um": p.truth_diameter_um},
-        sensor_settings={"current_A": model.die.meander("X").readout.current}, protocol=record, seed=seed))
-    curves = _curves(model, p)
+        sensor_settings={"current_A": model.die.meanders[0].readout.current}, protocol=record, seed=seed))
+    curves = _curves(model, p, sensors)
     loading = {"surface": "none", "roughness_um": 0.0, "speed_mm_s": 0.0, "rate_hz": bench.rate_hz}
     for repeat in range(p.trials):
         for mode in MODES:
             truth = curves[mode]
             measured = [measure(model, curve, p.repeatability, rng) for curve in truth]
-            rests = [curve.volts[0] - curve.change[0] for curve in truth]
             writer.add({"time_s": np.arange(truth[0].force.size) * bench.realism.dwell_s,
-                        "gmr_x_V": measured[0].change, "gmr_y_V": measured[1].change, "force_N": truth[0].force},
-                       {"mode": mode, "repeat": repeat, "tare_x_V": rests[0], "tare_y_V": rests[1], **loading})
-    rests = [model.rest_volts(sensor) for sensor in SENSORS]
+                        **{channel(s): m.change for s, m in zip(sensors, measured)}, "force_N": truth[0].force},
+                       {"mode": mode, "repeat": repeat, **loading,
+                        **{tare(s): curve.volts[0] - curve.change[0] for s, curve in zip(sensors, truth)}})
+    rests = {tare(s): model.rest_volts(s) for s in sensors}
     for brushing in brush_surfaces(model, balance_contact(p), p.brush_engagement_um * UM, p.brush_length_mm * MM,
                                    p.brush_speed_mm_s * MM, p.brush_rate_hz, tuple(v * MM for v in p.brush_speeds_mm_s),
-                                   tuple(p.brush_rates_hz), p.brush_strips, rng):
+                                   tuple(p.brush_rates_hz), p.brush_strips, rng, p.brush_bridge):
         recording = brushing.recording
-        writer.add({"time_s": np.arange(recording.readings.size) / recording.rate, "gmr_x_V": recording.readings,
-                    "gmr_y_V": brushing.readings_y, "force_N": brushing.force},
-                   {"mode": BRUSHING, "repeat": recording.strip, "tare_x_V": rests[0], "tare_y_V": rests[1],
-                    "surface": recording.surface, "roughness_um": recording.roughness / UM,
-                    "speed_mm_s": recording.speed / MM, "rate_hz": recording.rate})
+        writer.add({"time_s": np.arange(recording.readings.size) / recording.rate,
+                    **{channel(s): r for s, r in zip(sensors, brushing.readings)}, "force_N": brushing.force},
+                   {"mode": BRUSHING, "repeat": recording.strip, **rests, "surface": recording.surface,
+                    "roughness_um": recording.roughness / UM, "speed_mm_s": recording.speed / MM,
+                    "rate_hz": recording.rate})
     return writer.to_dataset()
 
 
@@ -177,7 +187,7 @@ def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredC
     if not rows.any():
         raise DieError(f"dataset: no {mode} curve of repeat {repeat}")
     part = dataset.select(rows=rows)
-    return MeasuredCurve(part.column("force_N"), part.column(f"gmr_{sensor.lower()}_V"), sensor)
+    return MeasuredCurve(part.column("force_N"), part.column(channel(sensor)), sensor)
 
 
 def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]:
@@ -201,3 +211,70 @@ def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]
                                     int(conditions["repeat"][index]), float(conditions["speed_mm_s"][index]) * MM,
                                     float(conditions["rate_hz"][index]), np.array(readings[trials == trial])))
     return recordings
+
+
+BRUSHING_COLUMNS = ("surface", "roughness_um", "speed_mm_s", "rate_hz")  # and optionally "strip"
+
+
+def recordings_from_csv(path: Path, channel: str) -> list[Recording]:
+    """The brushings of a CSV table, one row per reading: the columns ``surface`` (a name), ``roughness_um``
+    (its rms roughness, µm; 0 for the flat one), ``speed_mm_s``, ``rate_hz``, optionally ``strip`` (which
+    strip of the surface; 0 when absent), and ``channel`` (the reading, V). A recording is a run of
+    consecutive rows with the same surface, strip, speed and rate."""
+    from softtip.data.csvload import parse_numbers, read_csv_table
+    from softtip.data.dataset import require_columns
+
+    numeric = [*BRUSHING_COLUMNS[1:], channel]
+    table = read_csv_table(path, numeric)
+    require_columns(path, [*BRUSHING_COLUMNS, channel], table.column_names)
+    if "strip" in table.column_names:
+        numeric.append("strip")
+        table = read_csv_table(path, numeric)
+    if table.num_rows == 0:
+        raise DieError(f"{path}: no readings")
+    values = {name: parse_numbers(path, name, table.column(name)) for name in numeric}
+    surface = np.array([str(v) for v in table.column("surface").to_pylist()])
+    strip = values.get("strip", np.zeros(table.num_rows))
+    if not (np.all(np.isfinite(values[channel])) and np.all(strip >= 0) and np.all(strip == np.round(strip))):
+        raise DieError(f"{path}: expected finite readings in {channel!r} and whole strip numbers >= 0")
+    for name in ("speed_mm_s", "rate_hz"):
+        if not np.all(values[name] > 0):
+            raise DieError(f"{path}: column {name!r}: expected positive numbers")
+    if not np.all(values["roughness_um"] >= 0):
+        raise DieError(f"{path}: column 'roughness_um': expected roughnesses >= 0 um")
+    keys = list(zip(surface, strip, values["speed_mm_s"], values["rate_hz"], values["roughness_um"]))
+    starts = [0] + [row for row in range(1, len(keys)) if keys[row] != keys[row - 1]] + [len(keys)]
+    recordings = []
+    for start, end in zip(starts[:-1], starts[1:]):
+        name, number, speed, rate, roughness = keys[start]
+        recordings.append(Recording(str(name), float(roughness) * UM, int(number), float(speed) * MM, float(rate),
+                                    values[channel][start:end]))
+    return recordings
+
+
+FORCE_UNITS = {"N": 1.0, "mN": 1e-3, "g": 9.80665e-3}  # a balance reads grams: times standard gravity
+
+
+def curve_from_csv(path: Path, force_column: str, voltage_column: str, force_unit: str, sensor: str,
+                   tare: bool) -> MeasuredCurve:
+    """A measured force–voltage curve from a CSV table: ``force_column`` in ``force_unit`` (N, mN or g, a
+    balance's mass) and ``voltage_column`` (V), the change from the unloaded reading, or with ``tare`` the
+    sensor's voltage, from which the mean of the rows at zero force is taken."""
+    from softtip.data.csvload import parse_numbers, read_csv_table
+    from softtip.data.dataset import require_columns
+
+    if force_unit not in FORCE_UNITS:
+        raise DieError(f"force unit {force_unit!r}: expected one of {', '.join(FORCE_UNITS)}")
+    table = read_csv_table(path, [force_column, voltage_column])
+    require_columns(path, [force_column, voltage_column], table.column_names)
+    force = parse_numbers(path, force_column, table.column(force_column)) * FORCE_UNITS[force_unit]
+    volts = parse_numbers(path, voltage_column, table.column(voltage_column))
+    if tare:
+        unloaded = force == 0
+        if not unloaded.any():
+            raise DieError(f"{path}: no row at zero force in {force_column!r} to tare {voltage_column!r} by")
+        volts = volts - volts[unloaded].mean()
+    try:
+        return MeasuredCurve(force, volts, sensor)
+    except DieError as problem:
+        raise DieError(f"{path}: {problem}") from None

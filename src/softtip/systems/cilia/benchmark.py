@@ -49,8 +49,8 @@ def _entry(seconds: float, baseline: str, baseline_seconds: float, target: float
 
 
 def _fe_curve(model: CiliaModel, force_max: float, loads: int, repeats: int) -> tuple[float, float, float, int, int]:
-    """The FE reference curve of the X sensor (mesh, solve, the slices' centre line as the dipole chain, the
-    readout) beside the rod's curve of the same loads, both bonded to a rigid base (the rod with the bonded
+    """The FE reference curve of the die's first sensor (mesh, solve, the slices' centre line as the dipole
+    chain, the readout) beside the rod's curve of the same loads, both bonded to a rigid base (the rod with the bonded
     root's end effect, :func:`softtip.mechanics.rod.bonded_root_flexibility`); their largest relative gap
     in the voltage change."""
     from softtip.mechanics.pillar_fe import PillarFE
@@ -59,15 +59,15 @@ def _fe_curve(model: CiliaModel, force_max: float, loads: int, repeats: int) -> 
     rod = replace(pillars.rod, base_stiffness=None)
     bonded = replace(model, die=model.die.with_pillars(replace(pillars, rod=replace(rod, bonded_root=True))))
     forces = np.linspace(force_max / loads, force_max, loads)
-    meander = model.die.meander("X")
+    meander = model.die.meanders[0]
     start = time.perf_counter()
     solid = PillarFE(rod, size=FE_MESH_SIZE, slices=model.chain_count)
     solution = solid.solve(np.concatenate([[0.0], forces / model.pillar_count]), steps_per_force=2, tolerance=1e-7)
     points, tangents = solid.centreline(solution)
     volts = meander.readout.voltage(element_fields(meander, chain_dipoles(pillars, points, tangents)))
     fe_s = time.perf_counter() - start
-    rod_s = fastest(lambda: bonded.curve(forces), repeats)
-    change = bonded.curve(forces).change
+    rod_s = fastest(lambda: bonded.curve(forces, meander.name), repeats)
+    change = bonded.curve(forces, meander.name).change
     gap = float(np.max(np.abs((volts[1:] - volts[0]) / change - 1)))
     return fe_s, rod_s, gap, solid.unknowns, solution.iterations
 
@@ -80,12 +80,13 @@ def bench_cilia(loads: int, force_max: float, repeats: int, die: Path | None, fe
     forces = np.linspace(force_max / loads, force_max, loads)
     timings, notes = {}, []
     with progress.task("cilia: curve, fit" + (", FE" if fe else ""), total=3 if fe else 2) as task:
-        curve_s = fastest(lambda: model.curve(forces), repeats)
+        sensor = model.die.meanders[0].name  # the die file's first sensor
+        curve_s = fastest(lambda: model.curve(forces, sensor), repeats)
         loop_s = fastest(lambda: [solve_tip_force(rod, [[f / pillars, 0.0]]) for f in forces], repeats)
         timings[f"force-voltage curve, {loads} loads"] = _entry(
             curve_s, f"a Python loop of the same {loads} rod solves (mechanics only)", loop_s, CURVE_TARGET_S)
         task.advance()
-        truth = model.curve(forces)
+        truth = model.curve(forces, sensor)
         measured = measure(model, truth, 0.01, np.random.default_rng(seed))
         found = {}
 
@@ -119,6 +120,6 @@ def bench_cilia(loads: int, force_max: float, repeats: int, die: Path | None, fe
             notes.append(f"FE reference curve not timed: pass --fe (a mesh of ~{FE_MESH_SIZE / 1e-6:.0f} µm "
                          "tetrahedra, tens of seconds per load on two cores).")
             task.advance()
-    return {"die": str(die) if die else "shipped", "loads": loads, "force_max_N": force_max, "repeats": repeats,
-            "cpus": os.cpu_count(), "timings": timings, "notes": notes,
+    return {"die": str(die) if die else "shipped", "sensor": sensor, "loads": loads, "force_max_N": force_max,
+            "repeats": repeats, "cpus": os.cpu_count(), "timings": timings, "notes": notes,
             "all_targets_met": all(t["meets_target"] in (True, None) for t in timings.values())}

@@ -5,10 +5,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from softtip.cli.common import check_output, console, fail, progress_for
+from softtip.cli.common import check_input, check_output, console, fail, progress_for
+
+if TYPE_CHECKING:
+    from softtip.systems.cilia.roughness import Recording
 
 
 MAX_FORCE_MN = 1000.0
@@ -27,7 +31,7 @@ def bench_cilia(
     fe_loads: int = typer.Option(6, "--fe-loads", help="Load steps of the FE reference curve."),
     save: Path = typer.Option(None, "--save", help="Also write the report as JSON to this file."),
     force: bool = typer.Option(False, "--force", help="Overwrite --save's file."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the measured curve the fit is timed on."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the measured curve the fit is timed on."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Time one force-voltage curve (rod + dipole field + readout) beside a plain loop of the same rod
@@ -58,12 +62,21 @@ def bench_cilia(
     if json_output:
         print(json.dumps(report, indent=2))
         return
+    missed = []
     for name, figures in report["timings"].items():
-        console.print(f"{name:44s} {figures['seconds']:8.3f} s   baseline {figures['baseline']}: "
-                      f"{figures['baseline_seconds']:8.3f} s   ratio {figures['ratio']:6.2f}   "
-                      f"target {figures['target_seconds'] if figures['target_seconds'] else '-'} s")
+        target = figures["target_seconds"]
+        verdict = "no target" if target is None else f"target {target:g} s: " + (
+            "met" if figures["meets_target"] else "MISSED")
+        if figures["meets_target"] is False:
+            missed.append(name)
+        console.print(f"{name}: {figures['seconds']:.3f} s ({verdict})", markup=False)
+        console.print(f"  baseline, {figures['baseline']}: {figures['baseline_seconds']:.3f} s; {name.split(',')[0]} "
+                      f"takes {figures['ratio']:.3g} times the baseline's time", markup=False)
     for note in report["notes"]:
-        console.print(note)
+        console.print(note, markup=False)
+    console.print("verdict: " + ("every target met" if not missed else
+                                 f"{len(missed)} of {len(report['timings'])} targets missed: {'; '.join(missed)}"),
+                  markup=False)
 
 
 @app.command("design")
@@ -80,7 +93,7 @@ def design_cilia(
     plot: Path = typer.Option(None, "--plot", help="Write the trade-off curve to this image file (.png, .svg, .pdf)."),
     save: Path = typer.Option(None, "--save", help="Also write the result as JSON to this file."),
     force: bool = typer.Option(False, "--force", help="Overwrite --plot's and --save's files."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the search."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the search (1: the one softtip reproduce cilia uses)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Search pillar diameter, taper, height, moment, placement and number of pillars on the same die for the
@@ -141,49 +154,151 @@ def design_cilia(
                           f"mm, {design['moment_memu']:g} memu: largest minimum force "
                           + ("- (ambiguous)" if worst is None else f"{worst:.1f} uN")
                           + f", at rest {design['minimum_force_at_rest_uN']:.1f} uN")
+        console.print(f"0-{entry['range_mN']:g} mN  verdict: the best design found "
+                      + ("beats the published one" if entry["beats_published"] else
+                         f"does NOT beat the published one (its search: {entry['evaluations']} evaluations)"))
+
+
+@app.command("fit")
+def fit_cilia(
+    curve: Path = typer.Argument(..., help="A measured force-voltage curve: a CSV table with a force and a voltage "
+                                 "column."),
+    force_column: str = typer.Option("force_N", "--force-column", help="The force column."),
+    force_unit: str = typer.Option("N", "--force-unit", help="Its unit: N, mN or g (a balance's reading, times "
+                                   "standard gravity)."),
+    voltage_column: str = typer.Option("voltage_V", "--voltage-column", help="The voltage column (V): the change "
+                                       "from the unloaded reading, or with --tare the sensor's voltage."),
+    tare: bool = typer.Option(False, "--tare", help="Subtract the mean voltage of the rows at zero force."),
+    sensor: str = typer.Option("X", "--sensor", help="The sensor the curve was read from."),
+    die: Path = typer.Option(None, "--die", help="Die file (default: the shipped, declared layout): the pillars' "
+                             "height, modulus, taper and base, the layout and the readout."),
+    plot: Path = typer.Option(None, "--plot", help="Write the curve and both fits to this image file (.png, .svg, .pdf)."),
+    force: bool = typer.Option(False, "--force", help="Overwrite --plot's file."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Fit the pillars' moment and diameter to a measured curve with both models: the publication's (uniform
+    cylinders clamped to the die, loaded at the tip, height and modulus held) and softtip's (the die file's
+    tapered pillars on their base), each with 95 % intervals (Student's t), the parameters' correlation and
+    the residuals' rms."""
+    if curve.suffix.lower() != ".csv":
+        fail(f"curve = {curve}: expected a CSV table (.csv)")
+    check_input(curve, "curve")
+    from softtip.systems.cilia.bench import FORCE_UNITS
+
+    if force_unit not in FORCE_UNITS:
+        fail(f"--force-unit = {force_unit!r}: expected one of {', '.join(FORCE_UNITS)}")
+    if sensor not in ("X", "Y"):
+        fail(f"--sensor = {sensor!r}: expected X or Y")
+    if plot is not None:
+        if plot.suffix.lower() not in (".png", ".svg", ".pdf"):
+            fail(f"--plot = {plot}: expected a .png, .svg or .pdf file")
+        plot = check_output(plot, "--plot", inputs=[curve, *([die] if die else [])], force=force)
+    from softtip.systems.cilia.bench import curve_from_csv
+    from softtip.systems.cilia.measured import fit_both
+
+    measured = curve_from_csv(curve, force_column, voltage_column, force_unit, sensor, tare)
+    found = fit_both(die, measured, progress_for(json_output))
+    report = {"curve": str(curve), "sensor": sensor, "points": int(measured.force.size), **found.to_dict()}
+    if plot is not None:
+        found.figure().savefig(plot, dpi=120)
+        report["plot"] = str(plot)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    for name, entry in report["fits"].items():
+        console.print(f"{name}: moment {entry['moment_memu']:.3g} memu ({entry['moment_interval_memu'][0]:.3g}-"
+                      f"{entry['moment_interval_memu'][1]:.3g}), diameter {entry['diameter_um']:.1f} um "
+                      f"({entry['diameter_interval_um'][0]:.1f}-{entry['diameter_interval_um'][1]:.1f}), correlation "
+                      f"{entry['correlation']:+.3f}, residual rms {entry['residual_rms_uV']:.3g} uV"
+                      + ("; a parameter ended on its bound: the curve does not hold it" if entry["at_bound"] else ""),
+                      markup=False)
 
 
 @app.command("roughness")
 def roughness_cilia(
-    dataset: Path = typer.Argument(..., help="A dataset (.parquet) with brushing trials: softtip lab run cilia's, or "
-                                   "a measured one with the same conditions."),
-    speed_mm_s: float = typer.Option(1.0, "--speed-mm-s", help="The stage speed of the level and the rate curve (mm/s)."),
-    rate_hz: float = typer.Option(50.0, "--rate-hz", help="The sampling rate of the level and the classifier (/s)."),
-    channel: str = typer.Option("gmr_x_V", "--channel", help="The channel read."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the classifier."),
+    data: Path = typer.Argument(..., help="Brushings: a dataset (.parquet: softtip lab run cilia's, or a measured one "
+                                "with the same conditions) or a CSV table, one row per reading, with the columns "
+                                "surface, roughness_um, speed_mm_s, rate_hz, the --channel and optionally strip."),
+    speed_mm_s: float = typer.Option(None, "--speed-mm-s", help="The stage speed of the level and the rate curve "
+                                     "(mm/s; default: the speed and rate brushed most often)."),
+    rate_hz: float = typer.Option(None, "--rate-hz", help="The sampling rate of the level, the speed curve and the "
+                                  "classifier (/s; default: the rate brushed most often at the speed)."),
+    channel: str = typer.Option("gmr_x_V", "--channel", help="The channel (column) read, V."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the classifier."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The roughness study of a dataset's brushings: the AC rms against the surfaces' roughness (with the flat
-    surface's floor removed, and its slope), against the sampling rate, and a classifier of the surfaces
-    validated by strip and at a held-out stage speed."""
+    """The roughness study of brushings at any number of speeds, rates, strips and surfaces (one flat): the AC
+    rms (less its linear trend) against the surfaces' roughness, its slope fitted as published (a line with
+    intercept) and through the origin above the flat surface's floor, each with 95 % intervals; the AC rms
+    against the sampling rate and the stage speed; and a classifier of the surfaces, validated by strip and
+    at a held-out speed where the recordings allow it (the report says which could not be)."""
     for option, value in (("--speed-mm-s", speed_mm_s), ("--rate-hz", rate_hz)):
-        if not (math.isfinite(value) and 0 < value <= 1e6):
+        if value is not None and not (math.isfinite(value) and 0 < value <= 1e6):
             fail(f"{option} = {value}: expected a positive number")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
-    from softtip.data import Dataset
-    from softtip.systems.cilia.bench import recordings_of
+    if data.suffix.lower() not in (".parquet", ".csv"):
+        fail(f"data = {data}: expected a dataset (.parquet) or a CSV table (.csv)")
+    check_input(data, "data")
+    from softtip.systems.cilia.bench import recordings_from_csv, recordings_of
     from softtip.systems.cilia.layout import DieError
     from softtip.systems.cilia.roughness import analyse_roughness
 
-    data = Dataset.read(dataset)
-    if channel not in data.channels:
-        fail(f"--channel = {channel!r}: expected one of {dataset}'s channels: {', '.join(data.channels)}")
     try:
-        recordings = recordings_of(data, channel)
+        if data.suffix.lower() == ".csv":
+            recordings = recordings_from_csv(data, channel)
+        else:
+            from softtip.data import Dataset
+
+            dataset = Dataset.read(data)
+            if channel not in dataset.channels:
+                fail(f"--channel = {channel!r}: expected one of {data}'s channels: {', '.join(dataset.channels)}")
+            recordings = recordings_of(dataset, channel)
+        speed, rate = _most_brushed(recordings, None if speed_mm_s is None else speed_mm_s * 1e-3, rate_hz)
         with progress_for(json_output).task("roughness: the brushings, the classifier"):
-            study = analyse_roughness(recordings, speed_mm_s * 1e-3, rate_hz, seed)
-    except DieError as problem:  # the dataset holds no study of these settings: say which file
-        fail(f"{dataset}: {problem}")
-    c = study.classification
-    report = {"dataset": str(dataset), "channel": channel, **study.to_dict()}
+            study = analyse_roughness(recordings, speed, rate, seed)
+    except DieError as problem:  # the file holds no study of these settings: say which file
+        fail(f"{data}: {problem}")
+    report = {"data": str(data), "channel": channel, "speed_mm_s": speed * 1e3, "rate_hz": rate, **study.to_dict()}
     if json_output:
         print(json.dumps(report, indent=2))
         return
+    console.print(f"{report['recordings']} recordings; level at {speed * 1e3:g} mm/s and {rate:g} readings/s",
+                  markup=False)
     for name, roughness, total, above in zip(study.surfaces, report["roughness_um"], report["ac_rms_uV"],
                                              report["above_floor_uV"]):
         console.print(f"{name:10s} {roughness:8.2f} um rms   AC rms {total:9.3f} uV   above the floor {above:9.3f} uV",
                       markup=False)
-    console.print(f"slope {report['slope_uV_per_um']:.3f} uV per um, floor {report['floor_uV']:.3f} uV; "
-                  f"accuracy {c.by_recording:.3f} by strip, {c.at_held_speed:.3f} at the held-out "
-                  f"{report['held_speed_mm_s']:g} mm/s ({c.windows} windows)", markup=False)
+    for label, fit in (("slope, a line with intercept (as published)", report["slope_as_published_uV_per_um"]),
+                       ("slope through the origin, above the floor", report["slope_through_origin_uV_per_um"])):
+        if fit is None:
+            console.print(f"{label}: - (needs the flat surface and two rough ones)", markup=False)
+        else:
+            low, high = fit["slope_interval"]
+            console.print(f"{label}: {fit['slope']:.3f} uV per um (95 %: {low:.3f} to {high:.3f}, "
+                          f"{fit['degrees_of_freedom']} degrees of freedom)", markup=False)
+    c = study.classification
+    if c is None:
+        console.print(f"classifier: not trained ({study.unclassified})", markup=False)
+        return
+    shown = [f"{c.by_strip:.3f} by strip" if c.by_strip is not None else "",
+             f"{c.at_held_speed:.3f} at the held-out {c.held_speed * 1e3:g} mm/s" if c.at_held_speed is not None else ""]
+    console.print(f"classifier accuracy: {', '.join(v for v in shown if v)} ({c.windows} windows; chance "
+                  f"{1 / len(c.surfaces):.2f})" + (f"; not validated {'; '.join(c.missing)}" if c.missing else ""),
+                  markup=False)
+
+
+def _most_brushed(recordings: list[Recording], speed: float | None, rate: float | None) -> tuple[float, float]:
+    """The (speed m/s, rate /s) of the level: as given, else the pair brushed most often (ties: the slower
+    speed, the faster rate); a speed or rate never brushed is left for the study to refuse."""
+    if not recordings:
+        return speed or 0.0, rate or 0.0
+    counts: dict[tuple[float, float], int] = {}
+    for recording in recordings:
+        if (speed is None or math.isclose(recording.speed, speed, rel_tol=1e-9)) and (
+                rate is None or math.isclose(recording.rate, rate, rel_tol=1e-9)):
+            key = (recording.speed, recording.rate)
+            counts[key] = counts.get(key, 0) + 1
+    if not counts:
+        return speed if speed is not None else recordings[0].speed, rate if rate is not None else recordings[0].rate
+    return min(counts, key=lambda key: (-counts[key], key[0], -key[1]))

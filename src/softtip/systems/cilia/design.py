@@ -25,9 +25,10 @@ composite cannot carry are refused before the search, with the reason (the die f
 (:class:`softtip.optimize.bayes.BayesianSearch`: Gaussian-process expected improvement on the discrete
 candidate grid, :mod:`softtip.optimize.space` for the grid), run once per stated range on log10 of the
 figure of merit, smallest range first; each range's search is told every design the earlier ones
-evaluated (a design's curve gives its figure at every range), and its best is the best of all designs
-evaluated so far. The trade-off curve is the lower envelope of every evaluated design's figure against
-the range.
+evaluated (a design's curve gives its figure at every range). The trade-off curve is the lower envelope of
+every evaluated design's figure against the range; each range's best is the best at that range of every
+design evaluated (a later range's search may find a better one for an earlier range), so it lies on that
+curve, and the report says whether it beats the published design.
 """
 
 from __future__ import annotations
@@ -189,13 +190,17 @@ def evaluate(die: Die, design: PillarDesign, sensor: str, force_top: float, poin
 
 @dataclass(frozen=True)
 class RangeSearch:
-    """The search for one stated range: the best design found (None: none has a figure), the evaluations
-    asked for, and why the search stopped."""
+    """The search for one stated range: the best design found for it among every design evaluated (None:
+    none has a figure), the evaluations its own search asked for, and why that search stopped."""
 
     force_range: float
     best: Evaluation | None
     evaluations: int
     stop_reason: str
+
+    def beats(self, reference: Evaluation) -> bool:
+        """The best design found resolves a smaller force over this range than ``reference``."""
+        return self.best is not None and self.best.over(self.force_range) < reference.over(self.force_range)
 
 
 @dataclass(frozen=True)
@@ -231,6 +236,7 @@ class DesignSearch:
                 "not_converged": self.not_converged,
                 "seconds": self.seconds,
                 "ranges": [{"range_mN": s.force_range / MN, "evaluations": s.evaluations, "stop": s.stop_reason,
+                            "beats_published": s.beats(self.published),
                             "best": None if s.best is None else figures(s.best, s.force_range),
                             "published": figures(self.published, s.force_range)} for s in self.ranges],
                 "tradeoff": {"range_mN": (grid / MN).tolist(),
@@ -297,10 +303,14 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
                     search.tell(index, -math.log10(figure) if math.isfinite(figure) else None)
                     best = min(asked.values(), key=lambda e: figure_of(e, force_range))
                     task.advance(note="best " + (f"{best.over(force_range) / UN:.3g} µN" if best else "-"))
-        best = min(asked.values(), key=lambda e: figure_of(e, force_range))
-        searches.append(RangeSearch(force_range, best if math.isfinite(figure_of(best, force_range)) else None,
-                                    len(search.asked), search.stop_reason))
+        searches.append(RangeSearch(force_range, None, len(search.asked), search.stop_reason))
     evaluations = tuple(e for e in known.values() if e is not None)
+    # each range's best among every design evaluated, the later ranges' included: what the trade-off curve
+    # draws, so no range's best sits above it
+    for index, found in enumerate(searches):
+        best = min(evaluations, key=lambda e: e.over(found.force_range), default=None)
+        if best is not None and math.isfinite(best.over(found.force_range)):
+            searches[index] = replace(found, best=best)
     outcome = DesignSearch(sensor, tuple(searches), evaluations, len(known) - len(evaluations), published,
                            len(candidates) + sum(refused.values()), refused, steps, seed, 0.0, Figure())
     figure = tradeoff_figure(outcome)
@@ -309,7 +319,7 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
 
 def tradeoff_figure(search: DesignSearch) -> Figure:
     """The smallest figure of merit against the stated range: the envelope of every evaluated design, the
-    best design of each search, and the published design's own curve."""
+    best design for each stated range (on the envelope), and the published design's own curve."""
     figure = Figure(figsize=(6.4, 4.2), layout="constrained")
     axes = figure.add_subplot()
     grid = np.linspace(search.ranges[0].force_range * 0.25, search.ranges[-1].force_range, 60)
@@ -320,7 +330,7 @@ def tradeoff_figure(search: DesignSearch) -> Figure:
         if found.best is not None:
             design = found.best.design
             axes.semilogy(found.force_range / MN, found.best.over(found.force_range) / UN, "o", ms=7,
-                          label=f"search for {found.force_range / MN:g} mN: {len(design.positions)} pillar(s), "
+                          label=f"best for 0-{found.force_range / MN:g} mN: {len(design.positions)} pillar(s), "
                                 f"{design.tip_diameter_um:g} µm, {design.height_mm:g} mm",
                           color=f"C{index + 2}")
     axes.set_xlabel("stated force range, 0 to (mN)")
@@ -339,12 +349,16 @@ DESIGN_COLUMNS = ("pillars", "tip diameter (µm)", "taper", "height (mm)", "mome
 
 
 def design_table(search: DesignSearch) -> Table:
-    """The best design of each range's search beside the published design at the same range."""
-    rows, cells = [], {}
+    """The best design found for each range beside the published design at the same range, and whether it
+    beats it."""
+    rows, cells, notes = [], {}, {}
     for found in search.ranges:
         for who, evaluation in (("best found", found.best), ("published", search.published)):
             row = f"0–{found.force_range / MN:g} mN: {who}"
             rows.append(row)
+            if who == "best found":
+                notes[row] = ("beats the published design" if found.beats(search.published) else
+                              "does not beat the published design: the search found nothing better in its budget")
             if evaluation is None:
                 continue
             design, worst = evaluation.design, evaluation.over(found.force_range)
@@ -356,7 +370,7 @@ def design_table(search: DesignSearch) -> Table:
     refused = ", ".join(f"{count} {reason}" for reason, count in search.refused.items()) or "none"
     stops = "; ".join(f"{s.force_range / MN:g} mN: {s.evaluations} evaluations, {s.stop_reason}" for s in search.ranges)
     return Table("Design search on the same die (softtip's addition)", "range and design", rows, list(DESIGN_COLUMNS),
-                 cells, digits=3,
+                 cells, digits=3, notes=notes,
                  caption=f"Sensor {search.sensor}; {search.candidates} candidates ({search.steps} values per "
                          f"parameter, 4 placements); refused before the search: {refused}. Gaussian-process "
                          f"expected improvement (softtip.optimize), seed {search.seed}: {stops}. "

@@ -99,6 +99,7 @@ class SensorTable:
     axis: choice("x", "y")
     element_width_um: PositiveNumber
     banks: Annotated[list[BankTable], Field(min_length=1), expect("a non-empty list of banks")]
+    area_element_um: PositiveNumber = 50.0  # the pieces of a bank that saturate on their own: about this wide, at most this long
 
     def __post_init__(self) -> None:
         _interval(self.linear_range_Oe, "linear_range_Oe")
@@ -149,6 +150,14 @@ class Pillars:
         return replace(self, rod=pillar_rod(self.rod, tip_diameter, ratio * tip_diameter))
 
 
+def uniform_clamped(die: Die) -> Die:
+    """``die`` with the publication's model of its pillars: uniform cylinders of the tip diameter (the fit's
+    free diameter) bonded to a rigid die, as its FE clamps them; height, modulus and moment kept."""
+    pillars = die.pillars
+    rod = replace(pillars.rod, base_diameter=pillars.rod.tip_diameter, base_stiffness=None, bonded_root=True)
+    return die.with_pillars(replace(pillars, rod=rod))
+
+
 def pillar_rod(template: Rod, tip_diameter: float, base_diameter: float) -> Rod:
     """``template`` with new diameters; a compliant base's stiffness follows the base
     (a half-space of the rod's material)."""
@@ -165,11 +174,14 @@ def _half_space_stiffness(rod: Rod, base_diameter: float) -> float:
 
 @dataclass(frozen=True)
 class Meander:
-    """One sensor: its spin valves' rectangles in the sensing plane (R = elements), the in-plane axis
-    each senses (0: x, 1: y) and its constant-current readout."""
+    """One sensor: its spin valves' rectangles in the sensing plane (``strips``, one per spin valve), the
+    area elements its banks are divided into (``elements``: each saturates on its own; the readout's sensor
+    holds the spin valves' area in each), the in-plane axis each senses (0: x, 1: y) and its
+    constant-current readout."""
 
     name: str
     axis: int
+    strips: Rectangles
     elements: Rectangles
     readout: ConstantCurrentReadout
 
@@ -207,8 +219,9 @@ class Die:
     def _with_elements(self, depth: float, scale: float) -> Die:
         if not (math.isfinite(depth) and depth > 0 and math.isfinite(scale) and scale > 0):
             raise DieError(f"{self.source}: expected a depth and a scale > 0, got {depth!r} and {scale!r}")
-        meanders = tuple(Meander(m.name, m.axis, Rectangles(scale * m.elements.x, scale * m.elements.y, -depth),
-                                 m.readout) for m in self.meanders)
+        meanders = tuple(Meander(m.name, m.axis, Rectangles(scale * m.strips.x, scale * m.strips.y, -depth),
+                                 Rectangles(scale * m.elements.x, scale * m.elements.y, -depth), m.readout)
+                         for m in self.meanders)
         return Die(self.size, self.active_area, depth, self.pillars, meanders, self.source)
 
 
@@ -222,6 +235,27 @@ def _strips(bank: BankTable, axis: str, width: float) -> tuple[np.ndarray, np.nd
     narrow = np.column_stack([centres - width / 2, centres + width / 2])
     wide = np.tile(y if axis == "x" else x, (bank.elements, 1))
     return (narrow, wide) if axis == "x" else (wide, narrow)
+
+
+def area_elements(x: np.ndarray, y: np.ndarray, axis: str, size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The area elements of one bank of strips (``x``, ``y`` (n, 2), evenly spread across the sensing
+    ``axis``, each spanning the bank along the other): runs of neighbouring strips about ``size`` (m) wide,
+    each cut into pieces at most ``size`` long. Their rectangles (x, y) and the strips' area in each."""
+    across, along = (x, y) if axis == "x" else (y, x)
+    count = across.shape[0]
+    pitch = (across[-1, 0] - across[0, 0]) / (count - 1) if count > 1 else size
+    per_cell = max(1, round(size / pitch))
+    starts = np.arange(0, count, per_cell)
+    runs = np.column_stack([across[starts, 0], across[np.minimum(starts + per_cell, count) - 1, 1]])
+    strips_in = np.minimum(starts + per_cell, count) - starts
+    length = along[0, 1] - along[0, 0]
+    pieces = max(1, math.ceil(length / size - 1e-9))
+    cuts = along[0, 0] + length * np.linspace(0.0, 1.0, pieces + 1)
+    spans = np.column_stack([cuts[:-1], cuts[1:]])
+    cell_across = np.repeat(runs, pieces, axis=0)
+    cell_along = np.tile(spans, (len(starts), 1))
+    area = np.repeat(strips_in * (across[0, 1] - across[0, 0]) * length / pieces, pieces)
+    return (cell_across, cell_along, area) if axis == "x" else (cell_along, cell_across, area)
 
 
 def placement_problem(positions: np.ndarray, base_diameter: float, size: np.ndarray) -> str:
@@ -258,19 +292,22 @@ def build_die(table: DieFile, source: str) -> Die:
     meanders = []
     for name, sensor in table.sensors.items():
         width = sensor.element_width_um * UM
-        xs, ys = zip(*(_strips(bank, sensor.axis, width) for bank in sensor.banks))
-        x, y = np.concatenate(xs), np.concatenate(ys)
+        banks = [_strips(bank, sensor.axis, width) for bank in sensor.banks]
+        x, y = (np.concatenate(parts) for parts in zip(*banks))
+        cells = [area_elements(bx, by, sensor.axis, sensor.area_element_um * UM) for bx, by in banks]
+        cell_x, cell_y, weights = (np.concatenate(parts) for parts in zip(*cells))
         if np.any(np.abs(x) > size[0] / 2) or np.any(np.abs(y) > size[1] / 2):
             raise DieError(f"{source}: sensors.{name}.banks: a bank leaves the die")
         length = float(np.mean(x[:, 1] - x[:, 0]) if sensor.axis == "y" else np.mean(y[:, 1] - y[:, 0]))
         valve: SpinValveSensor = published_spin_valve(
             name, sensor.elements, sensor.magnetoresistance, sensor.sensitivity_ohm_per_Oe,
-            *sensor.linear_range_Oe, element_length=length, element_width=width)
+            *sensor.linear_range_Oe, element_length=length, element_width=width, area_weights=weights.tolist())
         readout = ConstantCurrentReadout(sensor=valve, current=table.readout.current_uA * UM,
                                          thermal_resistance=table.readout.thermal_resistance_K_per_W,
                                          offset=table.readout.offset_V)
-        meanders.append(Meander(name, 0 if sensor.axis == "x" else 1,
-                                Rectangles(x, y, -die.sensing_depth_um * UM), readout))
+        depth = -die.sensing_depth_um * UM
+        meanders.append(Meander(name, 0 if sensor.axis == "x" else 1, Rectangles(x, y, depth),
+                                Rectangles(cell_x, cell_y, depth), readout))
     return Die(size, area, die.sensing_depth_um * UM, column, tuple(meanders), source)
 
 

@@ -181,16 +181,21 @@ def _forces(values: ArrayLike, name: str) -> NDArray[np.float64]:
 class CiliaModel:
     """The die's forward model. ``chain_count`` dipoles per pillar, carrying ``chain_shares`` of its moment
     (base first; None: equal shares, as published: a uniform magnetisation of a uniform pillar); ``mode``
-    the paper's load reading."""
+    the paper's load reading; ``balance_chain_count`` the equal dipoles per pillar of the balance test (None:
+    ``chain_count``), whose buckled and lying roots need more than a tip-loaded pillar."""
 
     die: Die
     chain_count: int = 10
     mode: LoadMode = "paper"
     chain_shares: tuple[float, ...] | None = None
+    balance_chain_count: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.chain_count, int) or self.chain_count < 1:
             raise DieError(f"chain_count = {self.chain_count!r}: expected a positive integer")
+        if self.balance_chain_count is not None and (not isinstance(self.balance_chain_count, int)
+                                                     or self.balance_chain_count < 1):
+            raise DieError(f"balance_chain_count = {self.balance_chain_count!r}: expected a positive integer or None")
         if self.chain_shares is not None and (len(self.chain_shares) != self.chain_count
                                               or min(self.chain_shares) < 0 or abs(sum(self.chain_shares) - 1) > 1e-9):
             raise DieError(f"chain_shares: expected {self.chain_count} shares >= 0 summing to 1")
@@ -284,13 +289,15 @@ class CiliaModel:
         standing = path.standing.turned(contact.tilt)
         centre = int(np.argmin(np.abs(lever)))
         lying = np.all(np.stack([s.saturated for s in shapes], axis=1), axis=1)
+        count, shares = ((self.chain_count, self.chain_shares) if self.balance_chain_count is None
+                         else (self.balance_chain_count, None))
         curves = []
         for sensor in sensors:
             meander = self.die.meander(sensor)
             fields = sum(element_fields(meander, pillar_dipoles(replace(pillars, positions=pillars.positions[p:p + 1]),
-                                                                shapes[p], self.chain_count, self.chain_shares))
+                                                                shapes[p], count, shares))
                          for p in range(lever.size))
-            rest = element_fields(meander, pillar_dipoles(pillars, standing, self.chain_count, self.chain_shares))
+            rest = element_fields(meander, pillar_dipoles(pillars, standing, count, shares))
             volts = self.volts(np.concatenate([rest, fields]), sensor)
             curves.append(BalanceCurve(sensor, force, volts[1:], volts[1:] - volts[0], lying, shapes[centre],
                                        gaps, rotation, np.stack([s.saturated for s in shapes], axis=1).sum(axis=1)))

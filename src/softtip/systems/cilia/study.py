@@ -91,6 +91,7 @@ class CiliaSettings:
     # repeated loadings of the twin: the first is the study's curve; every one is fitted for the recovery
     trials: integer(1, 200) = 6
     chain_count: PositiveInteger = 10
+    balance_chain_count: PositiveInteger = 40  # the balance test's: its buckled roots need more than the published 10
     friction: number("a number >= 0", ge=0.0) = 0.5
     imperfection_deg: number("a root slope in degrees, 0 < slope < 45", gt=0.0, lt=45.0) = 0.5  # the bow (PlateContact)
     # the balance test as performed (softtip.systems.cilia.model.CiliaModel.balance_curve)
@@ -118,6 +119,7 @@ class CiliaSettings:
     brush_rate_hz: PositiveNumber = 50.0
     brush_length_mm: PositiveNumber = 20.0
     brush_strips: integer(2, 50) = 3  # realisations of each surface
+    brush_bridge: Flag = False  # the publication's readout has none; a bridge is softtip's addition
     brush_speeds_mm_s: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
                                  expect("a list of at least two positive speeds")] = (0.5, 1.0, 2.0, 5.0, 10.0)
     brush_rates_hz: Annotated[tuple[PositiveNumber, ...], Field(min_length=2),
@@ -277,7 +279,8 @@ def twin_model(settings: CiliaSettings) -> CiliaModel:
     pillars = replace(pillars, rod=pillar_rod(template, rod.tip_diameter, rod.base_diameter))
     truth = replace(pillars.with_diameter(settings.truth_diameter_um * UM),
                     moment=math.copysign(settings.truth_moment_memu * MEMU, pillars.moment))
-    return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count)
+    return CiliaModel(die.with_pillars(truth), chain_count=settings.chain_count,
+                      balance_chain_count=settings.balance_chain_count)
 
 
 def paper_forces(settings: CiliaSettings) -> np.ndarray:
@@ -404,14 +407,14 @@ def _balance(model: CiliaModel, curve: BalanceCurve, measured: MeasuredCurve, se
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
     first, every = (np.flatnonzero(curve.lying_count >= count) for count in (1, len(curve.gaps[0])))
     within = measured.part(measured.force <= settings.force_max_mN * MN)  # the range the publication fitted
-    finer = replace(model, chain_count=CHAIN_CHECK * model.chain_count).balance_curve(
+    finer = replace(model, balance_chain_count=CHAIN_CHECK * settings.balance_chain_count).balance_curve(
         balance_descent(model, settings), balance_contact(settings), curve.sensor, balance_plate(settings))
     return BalanceOutcome(curve, buckling, float(curve.force[first[0]]) if first.size else None,
                           float(curve.force[every[0]]) if every.size else None,
                           publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer)
 
 
-CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is the published chain enough?
+CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is its chain enough?
 GAP_POINTS = 13  # load steps of each noise-free curve the moment gap's causes are tried on
 SEATING_STEP = 1e-3  # rad: the plate's seating turn either side for its effect on the voltage
 
@@ -558,7 +561,7 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
         axes = figure.add_subplot(1, 2, index + 1)
         image = axes.pcolormesh(xs / 1e-3, ys / 1e-3, field[index].reshape(grid_x.shape), cmap="RdBu_r", norm=norm,
                                 shading="auto")
-        for (x0, x1), (y0, y1) in _bank_outlines(meander.elements.x, meander.elements.y, meander.axis):
+        for (x0, x1), (y0, y1) in _bank_outlines(meander.strips.x, meander.strips.y, meander.axis):
             axes.add_patch(Rectangle((x0 / 1e-3, y0 / 1e-3), (x1 - x0) / 1e-3, (y1 - y0) / 1e-3, fill=False, lw=0.8))
         for x, y in die.pillars.positions:
             axes.add_patch(Circle((x / 1e-3, y / 1e-3), die.pillars.rod.base_diameter / 2 / 1e-3, fill=False,
