@@ -109,6 +109,32 @@ def test_a_claim_is_exclusive_across_processes_and_dies_with_its_holder(tmp_path
     assert path.read_bytes() == b"mine"
 
 
+RACE = """
+import sys, time
+from softtip._core.files import OutputClaimed, claim
+while time.time() < float(sys.argv[2]):  # every racer starts at one moment
+    pass
+try:
+    with claim(sys.argv[1]) as path:
+        path.write_bytes(sys.argv[3].encode())
+        time.sleep(1.0)
+    print("wrote")
+except OutputClaimed:
+    print("refused")
+"""
+
+
+def test_of_writers_racing_for_one_file_exactly_one_writes(tmp_path):
+    path = tmp_path / "s.mcap"
+    start = time.time() + 2.0  # after the interpreters have started
+    racers = [subprocess.Popen([sys.executable, "-c", RACE, str(path), str(start), f"racer {k}"],
+                               stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+              for k in range(4)]
+    said = sorted(racer.communicate(timeout=60)[0].decode().strip() for racer in racers)
+    assert said == ["refused", "refused", "refused", "wrote"]
+    assert path.read_text() in {f"racer {k}" for k in range(4)}
+
+
 def test_a_claim_is_exclusive_within_a_process_and_removes_only_what_it_made_and_nothing_wrote(tmp_path):
     path = tmp_path / "s.mcap"
     with claim(path):
@@ -184,6 +210,20 @@ def test_simulate_never_writes_over_its_design_file_even_with_force(tmp_path):
     refused(run("simulate", "--design", design, "--deformed-mesh", design, "--force"), "--deformed-mesh",
             "is the input")
     assert digest(design) == before
+
+
+def test_a_reduced_twin_is_saved_only_to_an_npz_file_that_is_not_an_input(tmp_path):
+    from softtip.design.model import shipped_design_path
+
+    saved = tmp_path / "rom.npz"
+    saved.write_bytes(b"an earlier reduced twin")
+    refused(run("bench", "rom", "--save", tmp_path / "rom"), "--save", "expected a file name ending in .npz")
+    refused(run("bench", "rom", "--save", saved), f"--save = {saved}", "--force")
+    design = tmp_path / "mine.npz"
+    shutil.copy(shipped_design_path("cylindrical-A"), design)
+    before = digest(design)
+    refused(run("bench", "rom", "--design", design, "--save", design, "--force"), "--save", "is the input")
+    assert saved.read_bytes() == b"an earlier reduced twin" and digest(design) == before
 
 
 def test_reports_in_an_output_folder_are_replaced_only_with_force(tmp_path, monkeypatch):
