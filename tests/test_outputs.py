@@ -66,10 +66,10 @@ def test_a_really_full_disk_leaves_the_old_file_and_names_it(tiny_disk):
 
 def test_a_really_full_disk_under_a_plot_is_one_line_naming_it(recording_csv, tiny_disk):
     bode = tiny_disk / "bode.png"
-    bode.write_bytes(b"\x89PNG old" * 5000)  # 40 KiB: a new Bode plot (some 60 KiB) cannot fit beside it
+    bode.write_bytes(b"\x89PNG old" * 6000)  # 48 of the 64 KiB: the new Bode plot (some 30 KiB) cannot fit beside it
     line = refused(run(*FIT, "--data", recording_csv, "--bode", bode, "--force"), str(bode), "no space left")
     assert line == f"error: {bode}: no space left on the device"
-    assert bode.read_bytes() == b"\x89PNG old" * 5000
+    assert bode.read_bytes() == b"\x89PNG old" * 6000
 
 
 # --------------------------------------------------------------------------
