@@ -201,6 +201,21 @@ def test_a_protocol_s_design_file_is_an_input_even_with_force(tmp_path):
     assert digest(design) == before
 
 
+def test_a_haptics_protocol_s_device_file_is_an_input_even_with_force(tmp_path):
+    from softtip.lab.protocols import shipped_protocol_path
+    from softtip.systems.haptics.bench import DEVICE_FILE
+
+    device = tmp_path / "my-device.toml"
+    shutil.copy(DEVICE_FILE, device)
+    text = shipped_protocol_path("haptics").read_text()
+    assert 'device = "shipped"' in text
+    protocol = tmp_path / "p.toml"
+    protocol.write_text(text.replace('device = "shipped"', 'device = "my-device.toml"'))
+    before = digest(device)
+    refused(run("lab", "run", protocol, "-o", device, "--force"), f"--output = {device}", "is the input")
+    assert digest(device) == before
+
+
 def test_simulate_never_writes_over_its_design_file_even_with_force(tmp_path):
     from softtip.design.model import shipped_design_path
 
