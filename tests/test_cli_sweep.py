@@ -1,7 +1,9 @@
 """Every command and option of ``softtip``, found by walking the command tree (so a system's commands are
 swept the day they are registered), given bad values: NaN, ±inf, zero, negative, absurdly large, the
-wrong type, hostile text, and for paths a missing or read-only folder, a directory, an existing file and
-the command's own input.
+wrong type, hostile text, and for paths a missing or read-only folder, a directory, an existing file, the
+command's own input (with --force too: a file a protocol or an option names is never an output), a folder
+holding an earlier run's outputs, a recording another process is writing, and two outputs of one command
+on one path.
 
 Each must be refused as a user error: exit code 2, one line naming the option (or the file), no
 traceback, within a few seconds, and no file that existed before changed. ``ACCEPTED`` lists, with the
@@ -10,9 +12,11 @@ reason, the bad-looking values a command legitimately takes.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
+import re
 import shutil
 import signal
 import stat
@@ -28,6 +32,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from softtip._core.files import claim
 from softtip.cli.main import app
 
 DATA = Path(__file__).parent / "data"
@@ -61,7 +66,9 @@ INTEGER = [Bad("zero", "0"), Bad("negative", "-1"), Bad("huge", "1000000000000")
 TEXT = [Bad("hostile text", "[bold]x[/bold]"), Bad("hostile text", "\x1b[2Jx"), Bad("hostile text", "")]
 PATH = [Bad("missing folder", "{tmp}/missing/out.dat"), Bad("directory", "{tmp}/folder"),
         Bad("read-only folder", "{tmp}/read-only/out.dat"), Bad("existing file", "{tmp}/existing.dat"),
-        Bad("same as input", "{input}")]
+        Bad("same as input", "{input}"), Bad("same as input, forced", "{input}")]
+EARLIER_RUN = Bad("earlier outputs", "{tmp}/outputs")  # a folder of outputs: what an earlier run wrote there
+CLAIMED = Bad("claimed", "{tmp}/new/claimed.mcap")  # a file written in place: another process is writing it
 
 # Bad-looking values that are good ones, by option (every command), with the reason.
 ACCEPTED = {
@@ -74,7 +81,7 @@ ACCEPTED = {
     "--max-delay": {"zero"},  # no delay searched
     "--delay": {"zero"},  # "0": no delay
     "--full-scale": {"huge"},  # a sensor's rated range is the user's to state; the % of it are then small, not wrong
-    "--validate": {"same as input"},  # validating on the estimation data is allowed (and optimistic)
+    "--validate": {"same as input", "same as input, forced"},  # validating on the estimation data is allowed
     "--missing": {"zero", "negative", "huge"},  # any finite number may be a logger's "no reading"
     "--validate-trials": {"zero"},  # trial 0 is a trial like any other
 }
@@ -82,6 +89,10 @@ if os.geteuid() == 0:  # the superuser writes into read-only folders: nothing to
     PATH = [bad for bad in PATH if bad.kind != "read-only folder"]
 # Options whose value is a folder of outputs: a directory is what they take, and a missing one is made.
 FOLDERS = {("reproduce", "--output"), ("optimize", "--output")}
+# Options naming a file written in place as it streams: claimed exclusively while it is written.
+IN_PLACE = {"--record"}
+# What earlier runs of every command left in a folder of outputs.
+EARLIER_OUTPUTS = ("index.html", "pushing.html", "pushing.json", "results.csv", "results.json", "objective.png")
 
 
 def option_name(param) -> str:
@@ -106,6 +117,8 @@ def bad_values(words: tuple[str, ...], param) -> list[Bad]:
     elif annotation is Path:
         folder = (" ".join(words), option_name(param)) in FOLDERS
         values = [bad for bad in PATH if not (folder and bad.kind in ("directory", "missing folder"))]
+        values += [EARLIER_RUN] if folder else []
+        values += [CLAIMED] if option_name(param) in IN_PLACE else []
     else:
         values = TEXT
     accepted = ACCEPTED.get(option_name(param), set())
@@ -167,7 +180,8 @@ def inputs(tmp_path_factory):
         "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
         "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
         "recalibrate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
-        "lab run": (["pushing"], [], None, None),
+        "lab run": ([str(tmp / "protocol.toml")], [], "design.toml", "protocol"),  # the design file it names
+        "simulate": ([], ["--design", str(tmp / "design.npz")], "design.npz", "design"),  # named like an output
         "sysid fit": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss", "--order", "2"], "recording.csv", "data"),
         "sysid orders": ([], ["--data", csv, "-u", "u", "-y", "y", "--kind", "ss"], "recording.csv", "data"),
         "sysid predict": ([str(tmp / "sysid.npz")], ["--data", csv], "recording.csv", "data"),
@@ -181,6 +195,17 @@ def inputs(tmp_path_factory):
     }
     (tmp / "new").mkdir()
     (tmp / "work").mkdir()  # the current folder of every run: default outputs land here
+    (tmp / "outputs").mkdir()
+    for name in EARLIER_OUTPUTS:
+        (tmp / "outputs" / name).write_text("an earlier run's")
+    from softtip.design.model import shipped_design_path
+    from softtip.lab.protocols import shipped_protocol_path
+
+    for name in ("design.toml", "design.npz"):
+        shutil.copy(shipped_design_path("cylindrical-A"), tmp / name)
+    pushing = shipped_protocol_path("pushing").read_text()
+    assert 'design = "cylindrical-A"' in pushing
+    (tmp / "protocol.toml").write_text(pushing.replace('design = "cylindrical-A"', 'design = "design.toml"'))
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(tmp / "work")
         yield tmp, bases
@@ -212,31 +237,58 @@ def invoke(args: list[str], seconds: float = SECONDS):
 def judge(words: tuple[str, ...], param, bad: Bad, inputs) -> tuple[str, str]:
     """What ``softtip WORDS`` did with ``bad`` for ``param``: ("refused", line) or (the failure class, output)."""
     tmp, bases = inputs
-    arguments, options, source, reader = bases.get(" ".join(words), ([], [], None, None))
-    if bad.kind == "same as input" and (source is None or param.name == reader):
+    _, _, source, reader = bases.get(" ".join(words), ([], [], None, None))
+    if bad.kind.startswith("same as input") and (source is None or param.name == reader):
         return "refused", "(no input to name)"
     value = bad.text.format(tmp=tmp, input=tmp / (source or ""))
-    option = option_name(param)
-    arguments, options = list(arguments), list(options)
-    if param.param_type_name == "argument":
-        position = [p.name for p in command_of(words).params if p.param_type_name == "argument"].index(param.name)
-        arguments[position:position + 1] = [value]
-        given = []
-    else:
+    forced = bad.kind in ("same as input, forced", "claimed")  # the refusal must not be the file's existence
+    args = with_values(words, [(param, value)], forced, inputs)
+    named = [option_name(param), *param.opts, option_name(param).lstrip("-").replace("-", " "),
+             *(files for files in (value, Path(value).name) if len(files) > 1)]
+    named += [repr(value)[1:-1]] if len(value) > 1 else []  # as an error shows it: escaped
+    named += [source] if source else []  # the file the value was looked for in
+    try:
+        named += [f"{float(value):g}", str(float(value))]
+    except ValueError:
+        pass
+    return outcome(args, named, inputs, claimed=Path(value) if bad.kind == "claimed" else None)
+
+
+def with_values(words: tuple[str, ...], given: list[tuple[object, str]], forced: bool, inputs) -> list[str]:
+    """``softtip WORDS`` with its base arguments and each (param, value) of ``given`` in place of the base's,
+    and --force if ``forced`` and the command has it."""
+    _, bases = inputs
+    arguments, options, _, _ = bases.get(" ".join(words), ([], [], None, None))
+    arguments, options, extra = list(arguments), list(options), []
+    command = command_of(words)
+    for param, value in given:
+        if param.param_type_name == "argument":
+            position = [p.name for p in command.params if p.param_type_name == "argument"].index(param.name)
+            arguments[position:position + 1] = [value]
+            continue
         for decl in param.opts:  # a required option of the base is replaced, not repeated
             if decl in options:
                 at = options.index(decl)
                 del options[at:at + 2]
-        given = [option, *[value] * max(param.nargs, 1)]
-    args = [*words, *arguments, *options, *given]
+        extra += [option_name(param), *[value] * max(param.nargs, 1)]
+    if forced and any("--force" in p.opts for p in command.params):
+        extra.append("--force")
+    return [*words, *arguments, *options, *extra]
+
+
+def outcome(args: list[str], named: list[str], inputs, claimed: Path | None = None) -> tuple[str, str]:
+    """Run ``softtip ARGS`` (with ``claimed`` held by another writer) on fresh scratch folders: ("refused",
+    its line) if it was refused in one line naming one of ``named``, else (the failure class, output)."""
+    tmp, _ = inputs
     for scratch in ("new", "work"):  # what earlier runs wrote is not there before this one
         for path in (tmp / scratch).iterdir():
             shutil.rmtree(path) if path.is_dir() else path.unlink()
-    before = fingerprint(tmp)
-    result, hung = invoke(args)
+    with claim(claimed) if claimed is not None else contextlib.nullcontext():
+        before = fingerprint(tmp)
+        result, hung = invoke(args)
+        after = fingerprint(tmp)
     if hung:
         return "hang", ""
-    after = fingerprint(tmp)
     output = result.output
     if any(before[path] != after.get(path) for path in before):
         return "changed a file", output
@@ -247,14 +299,6 @@ def judge(words: tuple[str, ...], param, bad: Bad, inputs) -> tuple[str, str]:
     lines = output.strip().splitlines()
     if result.exit_code != 2 or len(lines) != 1:
         return "garbled", output
-    named = [option, *param.opts, option.lstrip("-").replace("-", " "), *(files for files in (value, Path(value).name)
-                                                                            if len(files) > 1)]
-    named += [repr(value)[1:-1]] if len(value) > 1 else []  # as an error shows it: escaped
-    named += [source] if source else []  # the file the value was looked for in
-    try:
-        named += [f"{float(value):g}", str(float(value))]
-    except ValueError:
-        pass
     if not any(name in lines[0] for name in named):
         return "unnamed", lines[0]
     return "refused", lines[0]
@@ -266,6 +310,42 @@ def command_of(words: tuple[str, ...]):
 
 CASES = [(words, param.name, bad) for words, command in commands() for param in command.params
          for bad in bad_values(words, param)]
+
+
+def paths_of(command) -> list:
+    """The parameters of ``command`` that take a file or folder."""
+    def annotation(param):
+        described = param.type_descriptor
+        return typing.get_args(described.annotation)[0] if described.is_list else described.annotation
+
+    return [param for param in command.params if hasattr(param, "type_descriptor") and annotation(param) is Path]
+
+
+SUFFIX = re.compile(r"\.(png|npz|parquet|csv|json|mcap|h)\b")
+
+
+def suffix_of(param) -> str:
+    """The file name ending a parameter's help asks for (its outputs are refused with any other)."""
+    found = SUFFIX.search(getattr(param, "help", None) or "")
+    return found.group(0) if found else ".dat"
+
+
+PAIR_CASES = [(words, first.name, second.name) for words, command in commands()
+              for k, second in enumerate(paths_of(command)) for first in paths_of(command)[:k]]
+
+
+@pytest.mark.parametrize(("words", "first", "second"), PAIR_CASES,
+                         ids=[f"{' '.join(w)} {a} {b}" for w, a, b in PAIR_CASES])
+def test_two_paths_of_one_command_on_one_file_are_refused(inputs, words, first, second):
+    """Every two file options of every command given one new file, with --force: two outputs would keep
+    one silently, an output and an input would read what is being replaced."""
+    tmp, _ = inputs
+    params = {p.name: p for p in command_of(words).params}
+    value = str(tmp / "new" / f"same{suffix_of(params[second])}")
+    args = with_values(words, [(params[first], value), (params[second], value)], True, inputs)
+    verdict, said = outcome(args, [*params[first].opts, *params[second].opts, value, first.upper(), second.upper()],
+                            inputs)
+    assert verdict == "refused", f"softtip {' '.join(args)}: {verdict}: {said}"
 
 
 def test_every_command_with_required_parameters_has_a_base(inputs):
@@ -280,6 +360,19 @@ def test_every_command_with_required_parameters_has_a_base(inputs):
           suppress_health_check=list(HealthCheck))
 @given(case=st.sampled_from(CASES))
 def test_a_bad_value_is_refused_in_one_line_before_any_work(inputs, case):
+    words, name, bad = case
+    param = next(p for p in command_of(words).params if p.name == name)
+    verdict, said = judge(words, param, bad, inputs)
+    assert verdict == "refused", f"softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {verdict}: {said}"
+
+
+# The output layer's classes, every case of them (the sweep above samples): the command's input given as an
+# output with --force, a folder of an earlier run's outputs, a recording another process is writing.
+OUTPUT_CASES = [case for case in CASES if case[2].kind in ("same as input, forced", "earlier outputs", "claimed")]
+
+
+@pytest.mark.parametrize("case", OUTPUT_CASES, ids=[f"{' '.join(w)} {n} {b.kind}" for w, n, b in OUTPUT_CASES])
+def test_no_input_earlier_output_or_claimed_recording_is_written(inputs, case):
     words, name, bad = case
     param = next(p for p in command_of(words).params if p.name == name)
     verdict, said = judge(words, param, bad, inputs)

@@ -431,11 +431,11 @@ def test_cli_json_contract_and_resume(tmp_path, monkeypatch):
     assert (tmp_path / "out" / "objective.png").read_bytes()[:4] == b"\x89PNG"
     assert json.loads((tmp_path / "out" / "results.json").read_text())["best"] == report["best"]
 
-    again = json.loads(runner.invoke(app, args).stdout)
+    again = json.loads(runner.invoke(app, [*args, "--force"]).stdout)  # the results of the first run replaced
     assert (again["evaluations"]["fe_runs"], again["evaluations"]["cache_hits"]) == (0, 2)
     assert again["best"] == report["best"]
 
-    table = runner.invoke(app, args[:-3] + ["--output", str(tmp_path / "out")])  # the human-readable form
+    table = runner.invoke(app, args[:-3] + ["--output", str(tmp_path / "out"), "--force"])  # the human-readable form
     assert table.exit_code == 0 and "0 FE runs computed, 2 from the cache, 2 infeasible" in table.stdout
     assert "infeasible: 12.5, 4.5: cylindrical-A: cavity.radius_mm = 12.5" in " ".join(table.stdout.split())
 

@@ -1,11 +1,20 @@
-"""Writing files atomically: a reader never sees half a file, and a failed write leaves the old one."""
+"""Every file softtip writes: replaced atomically (a reader never sees half a file, and a failed write
+leaves the old one), and claimed exclusively where two processes could write it at once."""
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import os
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import BinaryIO, Callable
+from typing import Any, BinaryIO, Callable
+
+
+class OutputClaimed(OSError):
+    """An output another process is writing."""
 
 
 def atomic_write(path: str | os.PathLike, content: bytes | str | Callable[[BinaryIO], object], *,
@@ -16,7 +25,8 @@ def atomic_write(path: str | os.PathLike, content: bytes | str | Callable[[Binar
     (``numpy.savez``, ``pyarrow.parquet.write_table``, ``Figure.savefig`` ...). It is written to a new
     file beside ``path``, flushed and synced to disk, and only then renamed over ``path``
     (``os.replace``: atomic), so a crash leaves either the old file or the new one. If writing fails,
-    the new file is removed and ``path`` is untouched.
+    the new file is removed and ``path`` is untouched; an error of the device (a full disk) is raised
+    naming ``path``, not the temporary file or nothing.
     """
     path = Path(path)
     temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
@@ -29,7 +39,49 @@ def atomic_write(path: str | os.PathLike, content: bytes | str | Callable[[Binar
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temporary, path)
+    except OSError as error:
+        temporary.unlink(missing_ok=True)
+        if error.errno is not None and error.filename in (None, str(temporary), temporary):
+            raise OSError(error.errno, os.strerror(error.errno), str(path)) from error
+        raise
     except BaseException:
         temporary.unlink(missing_ok=True)
         raise
     return path
+
+
+def save_figure(figure: Any, path: str | os.PathLike, **options: Any) -> Path:
+    """A matplotlib figure saved atomically to ``path``, in the format its suffix names (PNG without one);
+    ``options`` go to ``Figure.savefig`` (``dpi`` ...)."""
+    path = Path(path)
+    return atomic_write(path, lambda handle: figure.savefig(handle, format=path.suffix[1:].lower() or "png",
+                                                            **options))
+
+
+@contextlib.contextmanager
+def claim(path: str | os.PathLike) -> Iterator[Path]:
+    """Hold ``path`` as this process's output until the block ends: a second claim of the same file, from
+    any process, raises :class:`OutputClaimed` (a file written in place, as a recording is, would
+    otherwise be two writers' bytes interleaved).
+
+    The claim is an exclusive ``flock`` on the file itself, created empty if missing; the kernel drops it
+    when the process ends, however it ends, so no stale lock outlives a killed writer. A file the claim
+    created and nothing wrote is removed at the end.
+    """
+    path = Path(path)
+    try:
+        descriptor, created = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), True
+    except FileExistsError:
+        descriptor, created = os.open(path, os.O_WRONLY), False
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputClaimed(errno.EBUSY, "another process is writing it", str(path)) from None
+        try:
+            yield path
+        finally:
+            if created and path.is_file() and path.stat().st_size == 0:
+                path.unlink(missing_ok=True)
+    finally:
+        os.close(descriptor)

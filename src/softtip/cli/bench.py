@@ -50,7 +50,7 @@ def bench_rom(
     design: str = typer.Option(reference_design("bench"), help="Design to reduce."),
     samples: int = typer.Option(None, help="Exact contact samples to fit the interpolator on (default: 8000)."),
     holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
-    save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this path."),
+    save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this .npz file."),
     force: bool = FORCE,
     contact_layer_mm: float = typer.Option(None, "--contact-layer-mm",
                                            help="Element size (mm) in the layer indenters reach (default: 1.5 mm)."),
@@ -64,7 +64,9 @@ def bench_rom(
     check_number(samples, "--samples", minimum=50, maximum=1_000_000)
     check_number(holdout, "--holdout", minimum=2, maximum=10_000)
     if save is not None:
-        check_output(save, "--save", force=force)
+        if save.suffix.lower() != ".npz":  # the reduced twin's file is written as NAME.npz whatever was typed
+            fail(f"--save {save}: expected a file name ending in .npz")
+        check_output(save, "--save", [design] if Path(design).is_file() else [], force=force)
     if contact_layer_mm is not None and not 0.2 <= contact_layer_mm <= 1.5:
         fail(f"--contact-layer-mm = {contact_layer_mm}: expected an element size of 0.2 to 1.5 mm")
     report = run(design, samples, holdout, save=str(save) if save else None, contact_layer_mm=contact_layer_mm,

@@ -30,6 +30,7 @@ from typer._click.exceptions import NoArgsIsHelpError, UsageError
 from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
+from softtip._core.files import OutputClaimed, claim
 from softtip._core.progress import SILENT, Progress, RichProgress
 from softtip._core.systems import load
 
@@ -124,11 +125,48 @@ def check_output(path: str | os.PathLike, option: str, inputs: Iterable[str | os
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputPathError(f"{named}: folder {folder} is read-only (files cannot be created there)")
     for source in map(Path, inputs):
-        if path.resolve() == source.resolve() or (path.exists() and source.exists() and path.samefile(source)):
+        if _same_file(path, source):
             raise OutputPathError(f"{named}: is the input {source}; the output must be another file")
     if path.exists() and not force:
         raise OutputPathError(f"{named}: the file exists (pass --force to replace it)")
     return path
+
+
+def _same_file(path: Path, other: Path) -> bool:
+    """Whether two paths name one file however written: resolved paths, hard and symbolic links."""
+    return path.resolve() == other.resolve() or (path.exists() and other.exists() and path.samefile(other))
+
+
+def check_outputs(outputs: Iterable[tuple[str, str | os.PathLike | None]],
+                  inputs: Iterable[str | os.PathLike] = (), *, force: bool = False) -> None:
+    """:func:`check_output` for each of a command's outputs given as (option, path or None: not asked
+    for), and two of them on one file refused: one would silently replace the other."""
+    inputs = list(inputs)
+    given: list[tuple[str, Path]] = []
+    for option, path in outputs:
+        if path is None:
+            continue
+        path = check_output(path, option, inputs, force=force)
+        for other, earlier in given:
+            if _same_file(path, earlier):
+                raise OutputPathError(f"{option} = {path}: is also {other}'s output; each output needs a file "
+                                      "of its own")
+        given.append((option, path))
+
+
+@contextlib.contextmanager
+def claimed(path: str | os.PathLike | None, option: str):
+    """The block run with ``path`` (None: no output) claimed for this process (:func:`softtip._core.files.claim`):
+    another softtip writing the same file is refused in one line naming ``option``."""
+    if path is None:
+        yield
+        return
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(claim(path))
+        except OutputClaimed:
+            raise OutputPathError(f"{option} = {path}: another process is writing this file") from None
+        yield
 
 
 def check_number(value: float | None, option: str, *, minimum: float | None = None, above: float | None = None,
@@ -258,15 +296,22 @@ def _one_line_usage_errors():
         fail(error.format_message() + where)
 
 
-def check_output_folder(path: str | os.PathLike, option: str) -> Path:
+def check_output_folder(path: str | os.PathLike, option: str, files: Iterable[str] = (), *,
+                        force: bool = False) -> Path:
     """``path`` if a command may write its files into it (existing or to be made), checked before the work:
-    not a file, and its nearest existing folder writable."""
+    not a file, its nearest existing folder writable, and none of ``files`` (the names the command
+    writes there) already in it unless ``force``."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputPathError(f"{option} = {path}: is a file, expected a folder for the outputs")
     existing = next(folder for folder in (path, *path.parents) if folder.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
         raise OutputPathError(f"{option} = {path}: {existing} is not a writable folder")
+    for name in files:
+        if (path / name).is_dir():
+            raise OutputPathError(f"{option} = {path}: {name} in it is a directory, expected a file to write")
+        if (path / name).exists() and not force:
+            raise OutputPathError(f"{option} = {path}: {name} exists in it (pass --force to replace it)")
     return path
 
 
@@ -289,8 +334,9 @@ def demo_report(run: str, seed: int, duration: float | None, record: Path | None
     check_number(seed, "--seed", minimum=0)
     if record is not None:
         check_output(record, "--record", force=force)
-    report = load(run)(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
-                       progress=progress_for(json_output))
+    with claimed(record, "--record"):
+        report = load(run)(seed=seed, duration_s=duration, dashboard=not json_output, record=record,
+                           progress=progress_for(json_output))
     if json_output:
         print(json.dumps(report, indent=2, default=float))
         return None

@@ -41,7 +41,7 @@ def lab_run(
         fail(f"--seed = {seed}: expected an integer >= 0")
     loaded = load_protocol(protocol).changed(seed=seed)
     target = check_output(output or Path(f"{loaded.name}.parquet"), "--output",
-                          [protocol] if Path(protocol).is_file() else [], force=force)
+                          [*([protocol] if Path(protocol).is_file() else []), *loaded.files], force=force)
     dataset, timings = run_protocol(loaded, progress_for(json_output), large=force)
     path = dataset.write(target)
     summary = {"protocol": loaded.name, "design": loaded.design.name, "seed": loaded.seed, "dataset": str(path),
@@ -60,13 +60,14 @@ def reproduce(
     quick: bool = typer.Option(False, "--quick",
                                help="Two trials per condition and each study's coarse protocol: a smoke run, "
                                     "not the study."),
+    force: bool = typer.Option(False, "--force", help="Replace the reports and index.html that --output holds."),
     json_output: bool = typer.Option(False, "--json", help="Print each study's results beside the published figures as JSON."),
 ) -> None:
     """Run published studies end to end (experiments on the twin -> models -> metrics); write one
     self-contained HTML report per study, the publication's tables beside softtip's, and index.html."""
     import sys
 
-    from softtip.studies.reproduce import reproduce_study, write_index
+    from softtip.studies.reproduce import INDEX_FILE, report_files, reproduce_study, write_index
 
     names = STUDY_NAMES if studies == ["all"] else tuple(dict.fromkeys(studies))
     unknown = [name for name in names if name not in STUDY_NAMES]
@@ -74,7 +75,8 @@ def reproduce(
         fail(f"STUDIES = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
-    check_output_folder(output, "--output")
+    check_output_folder(output, "--output", [*(file for name in names for file in report_files(name)), INDEX_FILE],
+                        force=force)
     command = "softtip " + " ".join(sys.argv[1:])
     everything = {}
     progress = progress_for(json_output)

@@ -11,7 +11,8 @@ from pathlib import Path
 import typer
 
 from softtip._core.systems import names, owner
-from softtip.cli.common import FORCE, LONGEST_S, check_input, check_number, check_output, console, fail, progress_for
+from softtip.cli.common import (FORCE, LONGEST_S, check_input, check_number, check_output, claimed, console, fail,
+                                progress_for)
 
 STARTED = time.perf_counter()  # when the command line was loaded: the start a user waits from
 SCENARIOS = tuple(names("scenario"))
@@ -99,34 +100,37 @@ def live(
         from softtip.hardware.reskin import RESKIN_CHIPS, ReSkinStream
 
         source = ReSkinStream(port, chips or RESKIN_CHIPS, name=board_format.value)
-    if emulate:
-        if scenario not in SCENARIOS:
-            fail(f"--scenario = {scenario!r}: expected one of {', '.join(SCENARIOS)}")
+    # claimed before any scenario is computed: a second live recording to the same file stops here
+    with claimed(record, "--record"):
+        if emulate:
+            if scenario not in SCENARIOS:
+                fail(f"--scenario = {scenario!r}: expected one of {', '.join(SCENARIOS)}")
 
-        def check_stream(scenario_chips: int, scenario_rate_hz: float | None) -> None:
-            if chips not in (None, scenario_chips):
-                fail(f"--chips = {chips}: the {scenario} scenario streams {scenario_chips}")
-            if scenario_rate_hz is not None and rate not in (None, scenario_rate_hz):
-                fail(f"--rate = {rate}: the {scenario} scenario streams at {scenario_rate_hz:g} Hz")
+            def check_stream(scenario_chips: int, scenario_rate_hz: float | None) -> None:
+                if chips not in (None, scenario_chips):
+                    fail(f"--chips = {chips}: the {scenario} scenario streams {scenario_chips}")
+                if scenario_rate_hz is not None and rate not in (None, scenario_rate_hz):
+                    fail(f"--rate = {rate}: the {scenario} scenario streams at {scenario_rate_hz:g} Hz")
 
-        stream = load(owner("scenario", scenario).scenarios[scenario])(progress_for(json_output), check_stream)
-        check_stream(stream.chips, stream.rate_hz)  # what it streams, whether or not it said so first
-        source, chips, settings, emulator_source = stream.source, stream.chips, stream.settings, stream.emulator_source
-        model, frames = model or list(stream.models), baseline_frames or stream.baseline_frames
-    first_frame = []
+            stream = load(owner("scenario", scenario).scenarios[scenario])(progress_for(json_output), check_stream)
+            check_stream(stream.chips, stream.rate_hz)  # what it streams, whether or not it said so first
+            source, chips, settings = stream.source, stream.chips, stream.settings
+            emulator_source = stream.emulator_source
+            model, frames = model or list(stream.models), baseline_frames or stream.baseline_frames
+        first_frame = []
 
-    def note_first_frame(frame) -> None:
-        if not first_frame:
-            first_frame.append(time.perf_counter() - STARTED)
+        def note_first_frame(frame) -> None:
+            if not first_frame:
+                first_frame.append(time.perf_counter() - STARTED)
 
-    summary = run_live(source, model,
-                       live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
-                       duration, rate_hz=rate or 50, chips=chips, settings=settings, baseline_frames=frames,
-                       drift_time_constant_s=drift_tau, rest_s=rezero_at_rest, rest_band=rest_band,
-                       emulator_source=emulator_source, callbacks=[note_first_frame])
-    summary["first_frame_s"] = first_frame[0] if first_frame else None
-    if json_output:
-        print(json.dumps(summary, indent=2, default=float))
+        summary = run_live(source, model,
+                           live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
+                           duration, rate_hz=rate or 50, chips=chips, settings=settings, baseline_frames=frames,
+                           drift_time_constant_s=drift_tau, rest_s=rezero_at_rest, rest_band=rest_band,
+                           emulator_source=emulator_source, callbacks=[note_first_frame])
+        summary["first_frame_s"] = first_frame[0] if first_frame else None
+        if json_output:
+            print(json.dumps(summary, indent=2, default=float))
 
 
 def convert(

@@ -21,22 +21,24 @@ def optimize(
     workers: int = typer.Option(2, "--workers", help="Local worker processes (1: in this process)."),
     output: Path = typer.Option(None, "--output", help="Directory for results.csv, results.json and "
                                                        "objective.png (default: the study's output)."),
+    force: bool = typer.Option(False, "--force", help="Replace the results the output folder holds."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Sweep or search design parameters on the physics twin; FE results are cached, so a killed
     study resumes where it stopped."""
     from softtip.optimize.config import load_study
     from softtip.optimize.executors import make_executor
-    from softtip.optimize.report import write_outputs
+    from softtip.optimize.report import OUTPUT_FILES, write_outputs
     from softtip.optimize.study import run_study
 
     if scheduler is not None and not scheduler.strip():
         fail("--scheduler = '': expected the address of a Dask scheduler, e.g. tcp://HOST:8786")
     check_number(workers, "--workers", minimum=1, maximum=max(4 * (os.cpu_count() or 1), 8))
     if output is not None:
-        check_output_folder(output, "--output")
+        check_output_folder(output, "--output", OUTPUT_FILES.values(), force=force)
     study = load_study(check_input(config, "--config"))
-    directory = check_output_folder(output if output is not None else study.output, "--output")
+    directory = check_output_folder(output if output is not None else study.output, "--output",
+                                    OUTPUT_FILES.values(), force=force)
     with make_executor(scheduler, workers) as executor:
         result = run_study(study, executor, progress=progress_for(json_output))
     files = write_outputs(result, directory)

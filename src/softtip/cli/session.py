@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from softtip.cli.common import FORCE, check_input, check_number, check_output, console, errors, fail, printable
+from softtip.cli.common import FORCE, check_input, check_number, check_outputs, console, errors, fail, printable
 
 MAX_PRESSES = 20  # more is a calibration, not a session correction
 
@@ -53,11 +53,7 @@ def recalibrate(
     check_input(dataset, "DATASET")
     if plot is not None and plot.suffix.lower() != ".png":
         fail(f"--plot {plot}: expected a file name ending in .png")
-    for option, path in (("--output", output), ("--plot", plot)):
-        if path is not None:
-            check_output(path, option, [model_file, dataset], force=force)
-    if output is not None and plot is not None and output.resolve() == plot.resolve():
-        fail(f"--plot {plot}: the same file as --output")
+    check_outputs([("--output", output), ("--plot", plot)], [model_file, dataset], force=force)
     estimator, meta = load_model(model_file)
     if hasattr(estimator, "predict_proba"):
         fail(f"MODEL_FILE = {model_file}: a classifier; a session is re-calibrated for a regression model")
@@ -109,7 +105,7 @@ def recalibrate(
 def _plot_curve(curve, targets: list[str], units: list[str], path: Path) -> Path:
     from matplotlib.figure import Figure
 
-    from softtip._core.files import atomic_write
+    from softtip._core.files import save_figure
 
     figure = Figure(figsize=(5.5, 3.6), layout="constrained")
     axes = figure.add_subplot()
@@ -123,5 +119,4 @@ def _plot_curve(curve, targets: list[str], units: list[str], path: Path) -> Path
     axes.set_yscale("log")  # predicting zero is often ten times worse than any re-calibration
     axes.legend(fontsize="small")
     axes.set_title(f"A saved model on a new session ({curve.scored_rows} rows scored)", fontsize="medium")
-    atomic_write(path, lambda handle: figure.savefig(handle, format="png", dpi=120))
-    return path
+    return save_figure(figure, path, dpi=120)

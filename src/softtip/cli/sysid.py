@@ -13,7 +13,8 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from softtip.cli.common import FORCE, check_distinct, check_number, check_output, console, errors, fail
+from softtip._core.files import atomic_write, save_figure
+from softtip.cli.common import FORCE, check_distinct, check_number, check_output, check_outputs, console, errors, fail
 
 
 class Kind(str, Enum):
@@ -395,12 +396,7 @@ def sysid_fit(
         if path is not None and path.suffix.lower() not in FIGURE_SUFFIXES:
             fail(f"{option} {path}: expected a .png, .pdf or .svg file")
     sources = [data] + ([validate] if validate is not None else [])
-    for option, path in (("--model", model_file), *figures):
-        if path is not None:
-            check_output(path, option, sources, force=force)
-    written = [path for _, path in (("--model", model_file), *figures) if path is not None]
-    if len({path.resolve() for path in written}) < len(written):
-        fail("--model, --bode, --residuals, --compare, --step, --impulse: two outputs name the same file")
+    check_outputs([("--model", model_file), *figures], sources, force=force)
     inputs, outputs = _names(input), _names(output)
     _distinct(inputs, "--input")
     _distinct(outputs, "--output")
@@ -447,19 +443,19 @@ def sysid_fit(
     if model_file is not None:
         result["saved"] = str(save_model(model_file, estimator))
     if bode is not None:
-        estimator.bode(confidence=confidence, recording=checked).savefig(bode)
+        save_figure(estimator.bode(confidence=confidence, recording=checked), bode)
         result["bode"] = str(bode)
     if residuals is not None:
         if tests is None:
             fail(f"--residuals: {checked.n_samples} samples are too few for residual tests")
-        tests.figure().savefig(residuals)
+        save_figure(tests.figure(), residuals)
         result["residuals"] = str(residuals)
     if compare is not None:
-        estimator.compare(checked).savefig(compare)
+        save_figure(estimator.compare(checked), compare)
         result["compare"] = str(compare)
     for name, path in (("step", step), ("impulse", impulse)):
         if path is not None:
-            estimator.response_figure(name, confidence).savefig(path)
+            save_figure(estimator.response_figure(name, confidence), path)
             result[name] = str(path)
     if json_output:
         print(json.dumps(result, indent=2))
@@ -635,8 +631,6 @@ def _write_predictions(path: Path, recording, predicted, outputs, model_file: Pa
     import numpy as np
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    from softtip._core.files import atomic_write
 
     columns = {"trial": np.concatenate([np.full(len(trial), trial.id) for trial in recording.trials]),
                "time_s": np.concatenate([recording.time(k) for k in range(len(recording.trials))])}

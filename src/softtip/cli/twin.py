@@ -13,7 +13,7 @@ from rich.table import Table
 from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
-from softtip.cli.common import check_number, check_output, console, fail, progress_for
+from softtip.cli.common import check_number, check_outputs, console, fail, progress_for
 from softtip._core.systems import reference_design
 
 
@@ -110,9 +110,8 @@ def simulate(
         fail(f"--plot {plot}: expected a file name ending in .png")
     if deformed_mesh is not None and deformed_mesh.suffix.lower() != ".npz":
         fail(f"--deformed-mesh {deformed_mesh}: expected a file name ending in .npz")
-    for option, path in (("--plot", plot), ("--deformed-mesh", deformed_mesh)):
-        if path is not None:
-            check_output(path, option, force=force)
+    check_outputs([("--plot", plot), ("--deformed-mesh", deformed_mesh)],
+                  [design] if Path(design).is_file() else [], force=force)
     fingertip = load_design(design)
     if depth >= fingertip.height / MM:
         fail(f"--depth = {depth} mm: deeper than the {fingertip.name} body is tall ({fingertip.height / MM:g} mm)")

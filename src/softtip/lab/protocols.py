@@ -104,6 +104,7 @@ class Protocol:
     realism: Any
     viscoelastic: Any
     bench: BenchKind = field(repr=False, compare=False)
+    files: tuple[Path, ...] = field(default=(), repr=False, compare=False)  # what the protocol file names
 
     def changed(self, seed: int | None = None, **parameters: Any) -> Protocol:
         """A copy with another ``seed`` and these ``[parameters]``, validated as a file's are."""
@@ -133,7 +134,25 @@ def protocol_from_dict(table: dict, source: str, base: Path | None = None) -> Pr
     top = parse(bench.protocol_file, table, source)
     parameters = parse(bench.parameters[top.protocol], top.parameters, source, "parameters")
     return Protocol(name=top.protocol, design=bench.device(top, parameters, source, base), seed=top.seed,
-                    parameters=parameters, realism=top.realism, viscoelastic=top.viscoelastic, bench=bench)
+                    parameters=parameters, realism=top.realism, viscoelastic=top.viscoelastic, bench=bench,
+                    files=named_files(table, base))
+
+
+def named_files(table: Any, base: Path | None) -> tuple[Path, ...]:
+    """Every existing file a protocol's table names, in any key, as its bench would look for it: beside
+    the protocol file (``base``) or from the working folder. They are the run's inputs, so no output of
+    the run may replace them, whichever bench reads which key."""
+    if isinstance(table, dict):
+        return tuple(dict.fromkeys(path for value in table.values() for path in named_files(value, base)))
+    if isinstance(table, list):
+        return tuple(dict.fromkeys(path for value in table for path in named_files(value, base)))
+    if not isinstance(table, str) or not table or "\0" in table:
+        return ()
+    candidates = [Path(table)] + ([base / table] if base is not None else [])
+    try:
+        return tuple(path for path in candidates if path.is_file())
+    except OSError:  # a name too long to be a path is not one
+        return ()
 
 
 def load_protocol(path: str | Path) -> Protocol:

@@ -9,15 +9,17 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.files import atomic_write
+from softtip._core.files import atomic_write, save_figure
 from softtip.optimize.study import OK, StudyResult
+
+
+OUTPUT_FILES = {"csv": "results.csv", "json": "results.json", "plot": "objective.png"}
 
 
 def write_outputs(result: StudyResult, directory: Path) -> dict[str, str]:
     """Write ``results.csv``, ``results.json`` and ``objective.png`` into ``directory``; return their paths."""
     directory.mkdir(parents=True, exist_ok=True)
-    paths = {"csv": directory / "results.csv", "json": directory / "results.json",
-             "plot": directory / "objective.png"}
+    paths = {key: directory / name for key, name in OUTPUT_FILES.items()}
     atomic_write(paths["csv"], _csv_text(result))
     atomic_write(paths["json"], json.dumps(result.to_json(), indent=2))
     plot_objective(result, paths["plot"])
@@ -90,8 +92,7 @@ def plot_objective(result: StudyResult, path: Path) -> Path:
         axes.set_ylabel(py.name)
     axes.set_title(title, fontsize=10)
     figure.tight_layout()
-    atomic_write(path, lambda handle: figure.savefig(handle, format=path.suffix[1:] or "png", dpi=120))
-    return path
+    return save_figure(figure, path, dpi=120)
 
 
 def _edges(values: list[float]) -> np.ndarray:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.files import atomic_write
+from softtip._core.files import save_figure
 from softtip._core.units import MM
 from softtip.mechanics.indenters import Board, Sphere
 
@@ -95,7 +95,5 @@ def plot_section(result, mesh, path: str | Path) -> Path:
     ax.set_ylabel("z (mm)")
     ax.set_title(f"{design.name}: {type(indenter).__name__.lower()} {result.load.depth / MM:.2f} mm, "
                  f"{result.model}; Fz = {result.force[2]:.3f} N")
-    path = Path(path)
     fig.tight_layout()
-    atomic_write(path, lambda handle: fig.savefig(handle, format=path.suffix[1:] or "png", dpi=150))
-    return path
+    return save_figure(fig, path, dpi=150)

@@ -131,10 +131,15 @@ class StudyReport:
 
     def write(self, directory: str | Path) -> Path:
         """``NAME.html`` (the report) and ``NAME.json`` (what the index reads) in ``directory``."""
-        directory = Path(directory)
-        path = self.report().write(directory / f"{self.name}.html")
-        atomic_write(directory / f"{self.name}.json", json.dumps(self.to_json(path.name), indent=2))
+        html, results = report_files(self.name)
+        path = self.report().write(Path(directory) / html)
+        atomic_write(Path(directory) / results, json.dumps(self.to_json(path.name), indent=2))
         return path
+
+
+def report_files(name: str) -> tuple[str, str]:
+    """The files study ``name``'s report writes in its folder: its HTML and the JSON the index reads."""
+    return f"{name}.html", f"{name}.json"
 
 
 def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path: str | Path | None = None,
@@ -165,6 +170,9 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
     return StudyReport(study, outcome, table, provenance, seconds)
 
 
+INDEX_FILE = "index.html"
+
+
 def write_index(directory: str | Path) -> Path:
     """``index.html`` of every study report (``*.json``) in ``directory``, in the registry's order."""
     directory = Path(directory)
@@ -177,4 +185,4 @@ def write_index(directory: str | Path) -> Path:
         if isinstance(entry, dict) and entry.get("format") == REPORT_FORMAT and entry.get("study") in order:
             entries.append(entry)
     entries.sort(key=lambda e: order.index(e["study"]))
-    return index_report(entries).write(directory / "index.html")
+    return index_report(entries).write(directory / INDEX_FILE)

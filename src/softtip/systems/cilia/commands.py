@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from softtip.cli.common import check_input, check_output, console, fail, progress_for
+from softtip._core.files import atomic_write, save_figure
+from softtip.cli.common import check_input, check_output, check_outputs, console, fail, progress_for
 
 if TYPE_CHECKING:
     from softtip.systems.cilia.roughness import Recording
@@ -58,7 +59,7 @@ def bench_cilia(
         read_die(die)  # a die file that cannot be built is refused before any timing
     report = run(loads, force_max_mn * 1e-3, repeats, die, fe, fe_loads, seed, progress_for(json_output))
     if save is not None:
-        save.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        atomic_write(save, json.dumps(report, indent=2))
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -113,12 +114,9 @@ def design_cilia(
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
     inputs = [die] if die else ()
-    if plot is not None:
-        if plot.suffix.lower() not in (".png", ".svg", ".pdf"):
-            fail(f"--plot = {plot}: expected a .png, .svg or .pdf file")
-        plot = check_output(plot, "--plot", inputs=inputs, force=force)
-    if save is not None:
-        save = check_output(save, "--save", inputs=[*inputs, *([plot] if plot else [])], force=force)
+    if plot is not None and plot.suffix.lower() not in (".png", ".svg", ".pdf"):
+        fail(f"--plot = {plot}: expected a .png, .svg or .pdf file")
+    check_outputs([("--plot", plot), ("--save", save)], inputs, force=force)
     from softtip.systems.cilia.design import search_designs
     from softtip.systems.cilia.layout import read_die
     from softtip.systems.cilia.study import CiliaSettings
@@ -132,10 +130,10 @@ def design_cilia(
                            settings["points"], seed=seed, progress=progress_for(json_output))
     report = found.to_dict()
     if plot is not None:
-        found.figure.savefig(plot, dpi=120)
+        save_figure(found.figure, plot, dpi=120)
         report["plot"] = str(plot)
     if save is not None:
-        save.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        atomic_write(save, json.dumps(report, indent=2))
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -200,7 +198,7 @@ def fit_cilia(
     found = fit_both(die, measured, progress_for(json_output))
     report = {"curve": str(curve), "sensor": sensor, "points": int(measured.force.size), **found.to_dict()}
     if plot is not None:
-        found.figure().savefig(plot, dpi=120)
+        save_figure(found.figure(), plot, dpi=120)
         report["plot"] = str(plot)
     if json_output:
         print(json.dumps(report, indent=2))

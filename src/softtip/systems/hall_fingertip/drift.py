@@ -122,7 +122,7 @@ def plot_drift(study: DriftStudy, path) -> None:
     """Each cause's change of the readings and force error, and the correction's error against presses."""
     from matplotlib.figure import Figure
 
-    from softtip._core.files import atomic_write
+    from softtip._core.files import save_figure
 
     figure = Figure(figsize=(14, 4.2), layout="constrained")
     change, error, curve = figure.subplots(1, 3, width_ratios=(1.2, 1, 1))
@@ -152,4 +152,4 @@ def plot_drift(study: DriftStudy, path) -> None:
     curve.set_ylim(bottom=0)
     curve.legend(fontsize="small", loc="center right")
     curve.set_title("Every cause at once, re-calibrated", fontsize="medium")
-    atomic_write(path, lambda handle: figure.savefig(handle, format="png", dpi=110))
+    save_figure(figure, path, dpi=110)

@@ -11,7 +11,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from softtip.cli.common import check_output, console, fail, progress_for
+from softtip._core.files import atomic_write
+from softtip.cli.common import check_output, check_outputs, claimed, console, fail, progress_for
 
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
@@ -232,22 +233,24 @@ def render(
     recorded = table.renderer() if table else None
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
     rng = np.random.default_rng(seed)
-    # the port is the last check: opened before any work, released whatever happens next
-    servos = (SimulatedDevice(device, finger, LOOP_RATE_HZ, rng) if port is None
-              else SerialDevice(port, device, baud, "--port", "--baud"))
-    try:
-        sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
-        renderer, out_of_reach = _renderer(device, recorded, fs_levels, rng, method, finger, progress_for(json_output))
-        if wanted is None:
-            wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
-    except BaseException:
-        servos.close()
-        raise
-    source = str(table_file) if table_file else f"simulated FS table, {fs_levels}³"
-    summary = render_stream(device, renderer, servos, wanted, sinks, metadata={
-        "fingertip": finger.name, "method": method, "table": source, "seed": seed,
-        "sensation": str(sensation) if sensation else "synthetic", "device": port or "simulated"},
-        paced=realtime).to_dict()
+    with claimed(record, "--record"):  # a second render recording to the same file is refused
+        # the port is the last check: opened before any work, released whatever happens next
+        servos = (SimulatedDevice(device, finger, LOOP_RATE_HZ, rng) if port is None
+                  else SerialDevice(port, device, baud, "--port", "--baud"))
+        try:
+            sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
+            renderer, out_of_reach = _renderer(device, recorded, fs_levels, rng, method, finger,
+                                               progress_for(json_output))
+            if wanted is None:
+                wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
+        except BaseException:
+            servos.close()
+            raise
+        source = str(table_file) if table_file else f"simulated FS table, {fs_levels}³"
+        summary = render_stream(device, renderer, servos, wanted, sinks, metadata={
+            "fingertip": finger.name, "method": method, "table": source, "seed": seed,
+            "sensation": str(sensation) if sensation else "synthetic", "device": port or "simulated"},
+            paced=realtime).to_dict()
     summary |= {"fingertip": finger.name, "method": method, "table": source,
                 "table_entries_out_of_reach": out_of_reach, "device": port or "simulated",
                 "record": str(record) if record else None}
@@ -292,11 +295,9 @@ def export_table(
     inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]
     if header.suffix != ".h":
         fail(f"header = {header}: expected a C header file name ending in .h")
-    header = check_output(header, "header", inputs, force=force)
-    if csv_file is not None:
-        if csv_file.suffix.lower() != ".csv":
-            fail(f"--csv = {csv_file}: expected a file name ending in .csv")
-        csv_file = check_output(csv_file, "--csv", [*inputs, header], force=force)
+    if csv_file is not None and csv_file.suffix.lower() != ".csv":
+        fail(f"--csv = {csv_file}: expected a file name ending in .csv")
+    check_outputs([("header", header), ("--csv", csv_file)], inputs, force=force)
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
     table = read_table(table_file, device) if table_file else None
@@ -305,7 +306,7 @@ def export_table(
     source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
     provenance = (f"{source} on {device.device.name}, {method}"
                   + (f" for {finger.name}" if method == "geometric" else ""))
-    header.write_text(c_header(renderer, "SOFTTIP_HAPTICS_TABLE_H", provenance.replace("*/", "* /")))
+    atomic_write(header, c_header(renderer, "SOFTTIP_HAPTICS_TABLE_H", provenance.replace("*/", "* /")))
     if csv_file is not None:
         write_table_csv(csv_file, renderer)
     summary = {"header": str(header), "csv": str(csv_file) if csv_file else None, "entries": len(renderer.features_),

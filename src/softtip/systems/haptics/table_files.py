@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.files import atomic_write
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.live import table_columns
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, TableError
@@ -139,7 +140,7 @@ def write_table_csv(path: str | Path, renderer: NearestNeighbourRenderer) -> Non
         raise ValueError("renderer: a table for firmware searches forces only (no torque length)")
     header = ",".join(FORCES + MOTORS_RAD)
     rows = np.hstack([renderer.features_, renderer.motor_inputs_])
-    Path(path).write_text(header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+    atomic_write(path, header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
 
 
 def _c_float(value: float) -> str:
