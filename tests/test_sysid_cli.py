@@ -417,4 +417,4 @@ def test_fit_draws_the_compare_plot_and_the_step_and_impulse_responses(tmp_path)
         assert report[name] == str(file) and file.stat().st_size > 10_000
     same = run("sysid", "fit", "--data", path, "-u", "uEst", "-y", "yEst", "--kind", "tf", "--order", "1", "--ts", TS,
                "--step", tmp_path / "one.png", "--impulse", tmp_path / "one.png")
-    assert same.exit_code == 2 and "two outputs name the same file" in same.output
+    assert same.exit_code == 2 and "is also --step's output" in same.output
