@@ -212,7 +212,7 @@ class McapRecorder:
 def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salvage:
     """Writes to ``output`` every complete message, schema, channel, metadata record and attachment of
     the recording ``path`` (:func:`~softtip.realtime.recording.reader.scan_recording`: up to a torn
-    tail, past a damaged chunk), in chunks with the summary and index an indexed reader needs and a
+    tail, past a damaged chunk, resynchronising past a damaged length field), in chunks with the summary and index an indexed reader needs and a
     CRC of the whole data section, and returns what was salvaged. ``output`` is replaced only once it is complete."""
     path, output = Path(path), Path(output)
     if not path.is_file():
