@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 
 from softtip.cli.main import app
 from softtip.realtime.recording import convert
+from softtip.realtime.recording.format import RecordingError
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
 HANG_GUARD_S = 60.0
@@ -234,8 +235,54 @@ def test_a_recording_carries_a_crc_of_its_data_section(tmp_path):
     content[index.offset + index.length - 3] ^= 0x04
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(content))
+    with pytest.raises(RecordingError, match="damaged.mcap: the data section fails its CRC though every record"):
+        convert(damaged)
+
+
+def test_a_flipped_byte_in_a_topic_name_is_refused_not_converted_without_its_labels(tmp_path):
+    whole = tmp_path / "whole.mcap"
+    recorder = McapRecorder(whole, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
+    recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
+                                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
+                                           baseline_version=0, estimates=np.array([0.01 * k]), state=None)
+                           for k in range(200)])
+    recorder.close()
+    assert convert(whole).dataset.labels == {"Fz": "N"}  # from the wrench topic
+    content = bytearray(whole.read_bytes())
+    topic = content.index(b"/fingertip/wrench")  # the channel record in the data section (before the summary's)
+    content[topic + len(b"/fingertip/wrenc")] ^= 0x01  # "wrenci": the force labels' topic misnamed
+    damaged = tmp_path / "topic.mcap"
+    damaged.write_bytes(bytes(content))
+    # mcap's own reader reads the misnamed topic as it stands: nothing in it says the labels are gone
+    with damaged.open("rb") as stream:
+        assert "/fingertip/wrenci" in {channel.topic for _, channel, _ in NonSeekingReader(stream).iter_messages()}
+    converted = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "topic.parquet")])
+    assert converted.exit_code == 2 and not (tmp_path / "topic.parquet").exists()
+    assert converted.output.strip().splitlines() == [
+        f"error: {damaged}: the data section fails its CRC though every record in it parses: a schema, channel or "
+        "metadata record (topic names, units, labels) was altered"]
+    repaired = CliRunner().invoke(app, ["recording", "repair", str(damaged)])
+    assert repaired.exit_code == 2 and not damaged.with_suffix(".repaired.mcap").exists()
+    assert "fails its CRC though every record in it parses" in repaired.output
+
+
+def test_convert_says_on_stderr_that_it_converted_a_damaged_recording(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    damaged_chunk = chunks_of(whole)[3]
+    content = bytearray(whole.read_bytes())
+    content[damaged_chunk.chunk_start_offset + damaged_chunk.chunk_length - 5] ^= 0x20
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    result = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "d.parquet"), "--json"])
+    assert result.exit_code == 0, result.output
     salvage = convert(damaged).salvage
-    assert salvage.data_crc_ok is False and salvage.damaged_records == 0
+    assert result.stderr.strip() == (
+        f"warning: {damaged} is damaged: converted the {salvage.messages} messages salvaged "
+        f"({damaged_chunk.chunk_length} bytes lost, 1 damaged records skipped, 0 resynchronised; the summary says "
+        "which times)")
+    assert json.loads(result.stdout)["damaged_records"] == 1
+    clean = CliRunner().invoke(app, ["convert", str(whole), str(tmp_path / "w.parquet")])
+    assert clean.exit_code == 0 and clean.stderr == ""
 
 
 # --------------------------------------------------------------------------

@@ -113,6 +113,14 @@ class Salvage:
         self.messages += 1
         self.first_ns = message.log_time if self.first_ns is None else min(message.log_time, self.first_ns)
 
+    def refuse_unexplained_damage(self, source: str | os.PathLike) -> None:
+        """Raises RecordingError when the data section fails its CRC and no damaged or resynchronised
+        record explains it: then a record without a CRC of its own (a schema, a channel, the metadata)
+        was altered, and a topic or label read from it may be misnamed with nothing to show it."""
+        if self.data_crc_ok is False and not (self.damaged_records or self.resynchronised):
+            raise RecordingError(f"{source}: the data section fails its CRC though every record in it parses: a "
+                                 "schema, channel or metadata record (topic names, units, labels) was altered")
+
     def report(self) -> dict:
         """The salvage as JSON values; times in s from the first complete message."""
         origin = self.first_ns or 0
