@@ -5,22 +5,29 @@ every complete message; a torn or damaged file converts with a report of what wa
 
 from __future__ import annotations
 
+import io
 import json
 import signal
+import struct
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.records import Chunk, ChunkIndex, Message, MessageIndex
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
 from softtip.realtime.recording import convert
 from softtip.realtime.recording.format import RecordingError
+from softtip.realtime.recording.reader import MAGIC
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
 HANG_GUARD_S = 60.0
@@ -100,6 +107,7 @@ def test_a_live_recording_stopped_by_a_signal_is_finished_as_on_ctrl_c(tmp_path,
     assert chip_sequences(messages) == list(range(frames))
     assert summary.statistics.message_count == len(messages) == frames + 1  # and the one baseline
     assert streamed_messages(path) == (messages, None)
+    assert check_as_the_specification_defines(path) == len(messages)
 
 
 def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
@@ -111,6 +119,7 @@ def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
     assert streamed_messages(path) == (messages, None)
     assert len(messages) > 20 and summary.statistics.message_count == len(messages)
     assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
+    assert check_as_the_specification_defines(path) == len(messages)
     salvage = convert(path).salvage
     assert not salvage.truncated and salvage.data_crc_ok is True and salvage.bytes_lost == 0
 
@@ -209,7 +218,7 @@ def test_a_recording_torn_during_a_flush_is_repaired_with_every_complete_message
     repaired = tmp_path / "repaired.mcap"
     salvage = repair_recording(torn, repaired)
     summary, messages = indexed_messages(repaired)
-    assert messages == complete
+    assert messages == complete and check_as_the_specification_defines(repaired) == len(complete)
     assert summary.statistics.message_count == salvage.messages == len(complete)
     assert salvage.truncated and salvage.damaged_records + salvage.bytes_lost > 0
     np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(torn).dataset.X())
@@ -359,3 +368,120 @@ def test_every_damaged_length_byte_of_every_record_is_repaired_whole(tmp_path):
                         or repaired.channels != summary.channels):
                     not_whole.append((offset, opcode, byte, mask))
     assert not_whole == []
+
+
+# --------------------------------------------------------------------------
+# The file as the MCAP specification defines it, checked where mcap's reader does not look
+# --------------------------------------------------------------------------
+
+FOOTER_BYTES = 9 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+
+
+def records_between(content: bytes, start: int, stop: int) -> list[tuple[int, int, bytes]]:
+    """(offset, opcode, body) of the records from ``start`` to ``stop``, which must hold whole records."""
+    found, offset = [], start
+    while offset < stop:
+        opcode, length = struct.unpack_from("<BQ", content, offset)
+        found.append((offset, opcode, content[offset + 9:offset + 9 + length]))
+        offset += 9 + length
+    assert offset == stop, f"the records from {start} run past {stop} to {offset}"
+    return found
+
+
+def check_as_the_specification_defines(path: Path) -> int:
+    """Checks ``path`` against the MCAP specification and returns the messages its index reaches:
+    the footer's summary CRC is the CRC32 of every byte from the summary's start up to the end of the
+    footer's summary_offset_start; every chunk index's chunk_length is the chunk record's (opcode and
+    length included), its message_index_length that of the message index records after the chunk,
+    its message_index_offsets each at a message index record of that channel, and every entry of
+    those at a message record of that channel and log time in the decompressed chunk, every message
+    indexed once; the DataEnd CRC is the CRC32 of the data section before it."""
+    content = path.read_bytes()
+    footer = len(content) - 8 - FOOTER_BYTES
+    assert content[-8:] == MAGIC and content[footer] == 0x02
+    summary_start, offset_start, summary_crc = struct.unpack_from("<QQI", content, footer + 9)
+    chunk_indexes = [ChunkIndex.read(ReadDataStream(io.BytesIO(body)))
+                     for _, opcode, body in records_between(content, summary_start, footer) if opcode == 0x08]
+    assert chunk_indexes, f"{path}: no chunk index"
+    indexed = 0
+    for index in chunk_indexes:
+        opcode, length = struct.unpack_from("<BQ", content, index.chunk_start_offset)
+        assert opcode == 0x06 and index.chunk_length == 9 + length, f"chunk index length {index.chunk_length}"
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(content[index.chunk_start_offset + 9:
+                                                                index.chunk_start_offset + 9 + length])))
+        records = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size) \
+            if chunk.compression == "zstd" else chunk.data
+        assert zlib.crc32(records) == chunk.uncompressed_crc and len(records) == index.uncompressed_size
+        messages = {offset: Message.read(ReadDataStream(io.BytesIO(body)), len(body))
+                    for offset, opcode, body in records_between(records, 0, len(records)) if opcode == 0x05}
+        index_start = index.chunk_start_offset + index.chunk_length
+        message_indexes = records_between(content, index_start, index_start + index.message_index_length)
+        assert sorted(index.message_index_offsets.values()) == [offset for offset, _, _ in message_indexes], \
+            "message index offsets"
+        reached = []
+        for channel, offset in index.message_index_offsets.items():
+            (_, opcode, body), = [record for record in message_indexes if record[0] == offset]
+            message_index = MessageIndex.read(ReadDataStream(io.BytesIO(body)))
+            assert opcode == 0x07 and message_index.channel_id == channel, "message index channel"
+            for log_time, message_offset in message_index.records:
+                message = messages.get(message_offset)
+                assert message is not None and (message.channel_id, message.log_time) == (channel, log_time), \
+                    f"a message index entry at {message_offset} reaches no message of channel {channel}"
+                reached.append(message_offset)
+        assert sorted(reached) == sorted(messages), "messages not indexed once each"
+        indexed += len(reached)
+    assert summary_crc == zlib.crc32(content[summary_start:footer + 9 + 16]), "summary CRC"
+    data_end = summary_start - 9 - 4
+    assert content[data_end] == 0x0F
+    assert struct.unpack_from("<I", content, data_end + 9)[0] == zlib.crc32(content[:data_end]), "data section CRC"
+    return indexed
+
+
+def test_recordings_are_written_as_the_mcap_specification_defines(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, messages = indexed_messages(whole)
+    assert check_as_the_specification_defines(whole) == len(messages) == 601
+    repaired = tmp_path / "repaired.mcap"  # written by mcap's own writer on repair
+    repair_recording(whole, repaired)
+    assert check_as_the_specification_defines(repaired) == len(messages)
+
+
+def rewritten_record(content: bytes, offset: int, body: bytes) -> bytes:
+    """``content`` with the record at ``offset`` given ``body`` (its length field made to match)."""
+    opcode, length = struct.unpack_from("<BQ", content, offset)
+    return content[:offset] + struct.pack("<BQ", opcode, len(body)) + body + content[offset + 9 + length:]
+
+
+@pytest.mark.parametrize("fault", ["summary CRC over the summary without its offsets",
+                                   "message index offsets one record late",
+                                   "chunk index lengths that include the message indexes"])
+def test_the_specification_check_finds_what_mcaps_reader_passes(tmp_path, fault):
+    whole = recorded(tmp_path / "whole.mcap", frames=100)
+    content = whole.read_bytes()
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start, offset_start, _ = struct.unpack_from("<QQI", content, footer + 9)
+    if fault.startswith("summary CRC"):
+        wrong = zlib.crc32(content[summary_start:offset_start])
+        content = content[:footer + 25] + struct.pack("<I", wrong) + content[footer + 29:]
+        expected = "summary CRC"
+    elif fault.startswith("message index"):
+        offset, _, body = next(record for record in records_between(content, 8, summary_start - 13)
+                               if record[1] == 0x07)
+        message_index = MessageIndex.read(ReadDataStream(io.BytesIO(body)))
+        late = b"".join(struct.pack("<QQ", log_time, message_offset + 31)
+                        for log_time, message_offset in message_index.records)  # 31: a message past
+        content = rewritten_record(content, offset, body[:2] + struct.pack("<I", len(late)) + late)
+        expected = "reaches no message"
+    else:
+        offset, _, body = next(record for record in records_between(content, summary_start, footer)
+                               if record[1] == 0x08)
+        chunk_index = ChunkIndex.read(ReadDataStream(io.BytesIO(body)))
+        body = body[:24] + struct.pack("<Q", chunk_index.chunk_length + chunk_index.message_index_length) + body[32:]
+        content = content[:offset + 9] + body + content[offset + 9 + len(body):]
+        expected = "chunk index length"
+    damaged = tmp_path / "fault.mcap"
+    damaged.write_bytes(content)
+    with damaged.open("rb") as stream:
+        assert len(list(make_reader(stream).iter_messages())) == 101  # mcap's reader passes it
+    with pytest.raises(AssertionError, match=expected):
+        check_as_the_specification_defines(damaged)
