@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import signal
 import struct
 import subprocess
@@ -485,3 +486,59 @@ def test_the_specification_check_finds_what_mcaps_reader_passes(tmp_path, fault)
         assert len(list(make_reader(stream).iter_messages())) == 101  # mcap's reader passes it
     with pytest.raises(AssertionError, match=expected):
         check_as_the_specification_defines(damaged)
+
+
+# --------------------------------------------------------------------------
+# Children and signals
+# --------------------------------------------------------------------------
+
+# An emulated fingertip in its child process, as ``softtip live --emulate`` runs it; Ctrl-C stops it
+# as the session does, by the pipe, and prints how many frames the child's log holds.
+EMULATED = """
+import time
+from softtip.hardware import EmulatorProcess, PressCycle
+emulator = EmulatorProcess(PressCycle(2), rate_hz=50, chips=2).start()
+print(emulator._process.pid, flush=True)
+try:
+    time.sleep(HANG_GUARD_S)
+except KeyboardInterrupt:
+    print(len(emulator.close().seq), flush=True)
+""".replace("HANG_GUARD_S", str(HANG_GUARD_S))
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, not yet reaped by whoever adopted it, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def emulated_until(stop) -> tuple[int, str, str]:
+    """Runs the emulator's host in a session of its own, calls ``stop(host)`` once the child is up,
+    and returns the child's pid and what the host and child printed by the time both ended."""
+    host = subprocess.Popen([sys.executable, "-c", EMULATED], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        child = int(host.stdout.readline())
+        stop(host)
+        stdout, stderr = host.communicate(timeout=HANG_GUARD_S)  # until the child, sharing the pipes, ends too
+    finally:
+        if host.poll() is None:
+            host.kill()
+            host.communicate()
+    return child, stdout, stderr
+
+
+def test_the_emulator_child_of_a_killed_session_ends_quietly():
+    child, _, stderr = emulated_until(lambda host: host.send_signal(signal.SIGKILL))
+    assert stderr == ""  # no EOFError traceback from the child
+    assert not running(child)
+
+
+def test_ctrl_c_reaches_the_emulator_child_and_the_session_still_stops_it_by_the_pipe():
+    child, stdout, stderr = emulated_until(lambda host: (time.sleep(0.5), os.killpg(host.pid, signal.SIGINT)))
+    # the child's log came back (no client read a frame: an empty one): it left the terminal's Ctrl-C to
+    # its host, which stopped it by the pipe
+    assert stderr == "" and stdout.strip() == "0"
+    assert not running(child)
