@@ -5,6 +5,7 @@ every complete message; a torn or damaged file converts with a report of what wa
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -542,3 +543,43 @@ def test_ctrl_c_reaches_the_emulator_child_and_the_session_still_stops_it_by_the
     # its host, which stopped it by the pipe
     assert stderr == "" and stdout.strip() == "0"
     assert not running(child)
+
+
+def test_a_disk_that_fills_mid_recording_ends_in_one_line_with_the_sealed_tail_intact(tmp_path, monkeypatch, capfd):
+    from softtip._core.channels import MAGNETIC
+    from softtip.hardware import PacedSource
+    from softtip.realtime.session import run_live
+    from softtip.realtime.sinks.recorder import RecorderSink
+
+    path = tmp_path / "full.mcap"
+    capacity = 12_000  # bytes the disk has for the file
+    written_whole = os.pwrite
+    refused = []
+
+    def full_disk(fd: int, data: bytes, offset: int) -> int:
+        """As the kernel writes to a full disk: what fits, then ENOSPC."""
+        room = capacity - offset
+        if len(data) <= room:
+            return written_whole(fd, data, offset)
+        refused.append(offset)
+        if room > 0:
+            return written_whole(fd, data[:room], offset)  # the old tail is overwritten in part: torn
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "pwrite", full_disk)
+    t = np.arange(400) / 200.0
+    source = PacedSource(np.stack([np.sin(t), np.cos(t), t], axis=1)[:, None, :], 200.0, reading=MAGNETIC,
+                         name="paced")
+    sink = RecorderSink(path, flush_interval_s=0.05, chunk_size=1024)
+    with pytest.raises(RecordingError) as stopped:
+        run_live(source, [], [sink], 3.0, baseline_frames=1)
+    assert str(stopped.value) == (f"recording {path} stopped early: the recording's write failed (No space left on "
+                                  f"device: {capacity - refused[0]} of ") + str(stopped.value).split(" of ")[1]
+    assert str(stopped.value).endswith("bytes written); the file holds every message up to the last flush, sealed")
+    assert len(refused) == 1 and capfd.readouterr().err == ""  # no traceback: the one line is the caller's to print
+    monkeypatch.undo()
+    # the tail of the last flush is back in place: the file opens in the indexed reader as it stands
+    summary, messages = indexed_messages(path)
+    assert streamed_messages(path) == (messages, None) and path.stat().st_size <= capacity
+    assert check_as_the_specification_defines(path) == len(messages) > 20
+    assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
