@@ -234,17 +234,20 @@ def _scan(content: np.ndarray, salvage: Salvage) -> Iterator[McapRecord]:
             if found is None and not fits:
                 if opcode == Opcode.CHUNK:
                     salvage._lose_chunk(content[position + _RECORD_HEAD.size:size].tobytes())
-                salvage.reason = (
-                    f"a record of opcode 0x{opcode:02x} claims {length} bytes, more than the file holds"
-                    if length > size else f"the file ends {end - size} bytes short of a record (opcode 0x{opcode:02x})"
-                    if end > size else f"no record follows the record of opcode 0x{opcode:02x} at byte {position}")
+                if length > size:
+                    salvage.reason = f"a record of opcode 0x{opcode:02x} claims {length} bytes, more than the file holds"
+                elif end > size:
+                    salvage.reason = f"the file ends {end - size} bytes short of a record (opcode 0x{opcode:02x})"
+                else:
+                    salvage.reason = f"no record follows the record of opcode 0x{opcode:02x} at byte {position}"
                 return
             if found is not None:
                 implied = [] if in_summary else _records(opcode, content[position + _RECORD_HEAD.size:found].tobytes())
                 if implied is not None:  # whole with the length the next record implies
                     salvage.resynchronised += 1
-                    records = implied
-                end = found if implied is not None or not fits else end
+                    records, end = implied, found
+                elif not fits:
+                    end = found  # lost up to the next record
             if records is None:
                 salvage._lose(opcode, content[position + _RECORD_HEAD.size:end].tobytes())
                 position = end
