@@ -5,6 +5,7 @@ every complete message; a torn or damaged file converts with a report of what wa
 
 from __future__ import annotations
 
+import collections
 import errno
 import io
 import json
@@ -23,7 +24,7 @@ import pytest
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, make_reader
-from mcap.records import Chunk, ChunkIndex, Message, MessageIndex
+from mcap.records import Chunk, ChunkIndex, Message, MessageIndex, Statistics
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
@@ -397,14 +398,19 @@ def check_as_the_specification_defines(path: Path) -> int:
     length included), its message_index_length that of the message index records after the chunk,
     its message_index_offsets each at a message index record of that channel, and every entry of
     those at a message record of that channel and log time in the decompressed chunk, every message
-    indexed once; the DataEnd CRC is the CRC32 of the data section before it."""
+    indexed once, each chunk's times those of its messages; the statistics count the messages, chunks,
+    schemas, channels, metadata and attachments it holds; the DataEnd CRC is the CRC32 of the data
+    section before it."""
     content = path.read_bytes()
     footer = len(content) - 8 - FOOTER_BYTES
     assert content[-8:] == MAGIC and content[footer] == 0x02
     summary_start, offset_start, summary_crc = struct.unpack_from("<QQI", content, footer + 9)
-    chunk_indexes = [ChunkIndex.read(ReadDataStream(io.BytesIO(body)))
-                     for _, opcode, body in records_between(content, summary_start, footer) if opcode == 0x08]
+    summary = records_between(content, summary_start, footer)
+    chunk_indexes = [ChunkIndex.read(ReadDataStream(io.BytesIO(body))) for _, opcode, body in summary if opcode == 0x08]
     assert chunk_indexes, f"{path}: no chunk index"
+    (statistics,) = [Statistics.read(ReadDataStream(io.BytesIO(body))) for _, opcode, body in summary if opcode == 0x0B]
+    counted = collections.Counter(opcode for _, opcode, _ in summary)
+    every: list[Message] = []
     indexed = 0
     for index in chunk_indexes:
         opcode, length = struct.unpack_from("<BQ", content, index.chunk_start_offset)
@@ -431,7 +437,17 @@ def check_as_the_specification_defines(path: Path) -> int:
                     f"a message index entry at {message_offset} reaches no message of channel {channel}"
                 reached.append(message_offset)
         assert sorted(reached) == sorted(messages), "messages not indexed once each"
+        assert (index.message_start_time, index.message_end_time) == (
+            min(m.log_time for m in messages.values()), max(m.log_time for m in messages.values())), "chunk times"
         indexed += len(reached)
+        every += messages.values()
+    # the statistics count what the file holds
+    assert (statistics.message_count, statistics.chunk_count) == (len(every), len(chunk_indexes)), "statistics"
+    assert statistics.channel_message_counts == collections.Counter(m.channel_id for m in every), "statistics"
+    assert (statistics.message_start_time, statistics.message_end_time) == (
+        min(m.log_time for m in every), max(m.log_time for m in every)), "statistics"
+    assert (statistics.schema_count, statistics.channel_count, statistics.metadata_count,
+            statistics.attachment_count) == (counted[0x03], counted[0x04], counted[0x0D], counted[0x0A]), "statistics"
     assert summary_crc == zlib.crc32(content[summary_start:footer + 9 + 16]), "summary CRC"
     data_end = summary_start - 9 - 4
     assert content[data_end] == 0x0F
