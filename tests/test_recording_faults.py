@@ -31,6 +31,7 @@ from softtip.cli.main import app
 from softtip.realtime.recording import convert
 from softtip.realtime.recording.format import RecordingError
 from softtip.realtime.recording.reader import MAGIC
+from softtip.realtime.recording.sealed import SealedMcapWriter
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
 HANG_GUARD_S = 60.0
@@ -462,6 +463,34 @@ def test_recordings_are_written_as_the_mcap_specification_defines(tmp_path):
     repaired = tmp_path / "repaired.mcap"  # written by mcap's own writer on repair
     repair_recording(whole, repaired)
     assert check_as_the_specification_defines(repaired) == len(messages)
+
+
+def test_an_attachment_is_sealed_and_indexed_as_mcaps_reader_reads_it(tmp_path):
+    path = tmp_path / "attached.mcap"
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, chunk_size=1024, compression="none")
+        writer.start(profile="ros2", library="test")
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        writer.add_attachment(3, 4, "calibration.toml", "application/toml", b"gain = 2.5\n")
+        writer.flush()  # sealed as it stands: what a killed recorder leaves
+        assert check_as_the_specification_defines(path) == 1
+        writer.finish()
+    assert check_as_the_specification_defines(path) == 1
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        (attachment,) = list(reader.iter_attachments())
+        (index,) = reader.get_summary().attachment_indexes
+    assert (attachment.create_time, attachment.log_time, attachment.name, attachment.media_type, attachment.data) == (
+        3, 4, "calibration.toml", "application/toml", b"gain = 2.5\n")
+    assert (index.create_time, index.log_time, index.data_size, index.name, index.media_type) == (
+        3, 4, 11, "calibration.toml", "application/toml")
+    # the index's offset and length frame the attachment record itself
+    content = path.read_bytes()
+    assert content[index.offset] == 0x09 and int.from_bytes(content[index.offset + 1:index.offset + 9],
+                                                            "little") + 9 == index.length
+    with pytest.raises(RecordingError, match="finished"):
+        writer.flush()
 
 
 def rewritten_record(content: bytes, offset: int, body: bytes) -> bytes:
