@@ -628,3 +628,35 @@ def test_a_disk_that_fills_mid_recording_ends_in_one_line_with_the_sealed_tail_i
     assert streamed_messages(path) == (messages, None) and path.stat().st_size <= capacity
     assert check_as_the_specification_defines(path) == len(messages) > 20
     assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
+
+
+def test_a_tail_that_cannot_be_put_back_is_said_so_and_repair_mends_it(tmp_path, monkeypatch):
+    path = tmp_path / "gone.mcap"
+    recorder = McapRecorder(path, 1, chunk_size=1024)
+    frame = lambda k: SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,  # noqa: E731
+                                      reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
+                                      baseline_version=0, estimates=None, state=None)
+    recorder.write_frames([frame(k) for k in range(100)])
+    recorder.flush()
+    _, flushed = indexed_messages(path)
+    written_whole = os.pwrite
+
+    def failing_disk(fd: int, data: bytes, offset: int) -> int:
+        """A disk that takes a part of the next write and then nothing (an I/O error)."""
+        monkeypatch.setattr(os, "pwrite", lambda *_: (_ for _ in ()).throw(OSError(errno.EIO, "Input/output error")))
+        return written_whole(fd, data[:len(data) // 2], offset)
+
+    monkeypatch.setattr(os, "pwrite", failing_disk)
+    recorder.write_frames([frame(k) for k in range(100, 200)])
+    with pytest.raises(RecordingError, match=r"^the recording's write failed \(No space left on device: \d+ of \d+ "
+                                             r"bytes written\); its tail could not be put back \(Input/output error\): "
+                                             r"softtip recording repair mends it$"):
+        recorder.flush()
+    recorder.write_frames([frame(200)])
+    with pytest.raises(RecordingError, match="stopped at an earlier failed write"):
+        recorder.flush()
+    recorder.close()  # writes nothing more
+    monkeypatch.undo()
+    salvage = repair_recording(path, tmp_path / "mended.mcap")
+    # every message of the last flush is still there, before the torn tail
+    assert indexed_messages(tmp_path / "mended.mcap")[1][:len(flushed)] == flushed and salvage.truncated
