@@ -133,14 +133,17 @@ def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
 # --------------------------------------------------------------------------
 
 
+def hall_frame(k: int) -> SimpleNamespace:
+    """Frame ``k`` of one Hall chip at 100 frames/s, with a baseline."""
+    return SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000, reading=np.full((1, 3), 1e-6 * k),
+                           baseline=np.zeros((1, 3)), baseline_version=0, estimates=None, state=None)
+
+
 def recorded(path: Path, frames: int = 600, per_flush: int = 25) -> Path:
     """A complete recording of one Hall chip, a chunk closed every ``per_flush`` frames."""
     recorder = McapRecorder(path, 1, chunk_size=1024)
-    stamps = 1_700_000_000_000_000_000 + np.arange(frames) * 10_000_000  # 100 frames/s
     for start in range(0, frames, per_flush):
-        recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=int(stamps[k]), reading=np.full((1, 3), 1e-6 * k),
-                                               baseline=np.zeros((1, 3)), baseline_version=0, estimates=None,
-                                               state=None) for k in range(start, min(start + per_flush, frames))])
+        recorder.write_frames([hall_frame(k) for k in range(start, min(start + per_flush, frames))])
         recorder.flush()
     recorder.close()
     return path
@@ -198,13 +201,10 @@ def torn_between(before: bytes, after: bytes, cut: int) -> bytes:
 def test_a_recording_torn_during_a_flush_is_repaired_with_every_complete_message(tmp_path):
     path = tmp_path / "torn.mcap"
     recorder = McapRecorder(path, 1, chunk_size=100_000)
-    frame = lambda k: SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,  # noqa: E731
-                                      reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
-                                      baseline_version=0, estimates=None, state=None)
-    recorder.write_frames([frame(k) for k in range(300)])
+    recorder.write_frames([hall_frame(k) for k in range(300)])
     recorder.flush()
     before = path.read_bytes()
-    recorder.write_frames([frame(k) for k in range(300, 900)])
+    recorder.write_frames([hall_frame(k) for k in range(300, 900)])
     recorder.flush()
     after = path.read_bytes()
     recorder.close()
@@ -633,10 +633,7 @@ def test_a_disk_that_fills_mid_recording_ends_in_one_line_with_the_sealed_tail_i
 def test_a_tail_that_cannot_be_put_back_is_said_so_and_repair_mends_it(tmp_path, monkeypatch):
     path = tmp_path / "gone.mcap"
     recorder = McapRecorder(path, 1, chunk_size=1024)
-    frame = lambda k: SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,  # noqa: E731
-                                      reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
-                                      baseline_version=0, estimates=None, state=None)
-    recorder.write_frames([frame(k) for k in range(100)])
+    recorder.write_frames([hall_frame(k) for k in range(100)])
     recorder.flush()
     _, flushed = indexed_messages(path)
     written_whole = os.pwrite
@@ -647,12 +644,12 @@ def test_a_tail_that_cannot_be_put_back_is_said_so_and_repair_mends_it(tmp_path,
         return written_whole(fd, data[:len(data) // 2], offset)
 
     monkeypatch.setattr(os, "pwrite", failing_disk)
-    recorder.write_frames([frame(k) for k in range(100, 200)])
+    recorder.write_frames([hall_frame(k) for k in range(100, 200)])
     with pytest.raises(RecordingError, match=r"^the recording's write failed \(No space left on device: \d+ of \d+ "
                                              r"bytes written\); its tail could not be put back \(Input/output error\): "
                                              r"softtip recording repair mends it$"):
         recorder.flush()
-    recorder.write_frames([frame(200)])
+    recorder.write_frames([hall_frame(200)])
     with pytest.raises(RecordingError, match="stopped at an earlier failed write"):
         recorder.flush()
     recorder.close()  # writes nothing more
