@@ -59,7 +59,8 @@ _CONTENT = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channe
 _RECORDS = {**_CONTENT, Opcode.MESSAGE: Message, Opcode.CHUNK: Chunk, Opcode.MESSAGE_INDEX: MessageIndex,
             Opcode.CHUNK_INDEX: ChunkIndex, Opcode.ATTACHMENT_INDEX: AttachmentIndex, Opcode.STATISTICS: Statistics,
             Opcode.METADATA_INDEX: MetadataIndex, Opcode.SUMMARY_OFFSET: SummaryOffset, Opcode.DATA_END: DataEnd}
-_OPCODES = np.array([*_RECORDS, Opcode.FOOTER], dtype=np.uint8)
+_OPCODE_SET = frozenset([*_RECORDS, Opcode.FOOTER])
+_OPCODES = np.array(sorted(_OPCODE_SET), dtype=np.uint8)
 
 
 @dataclass
@@ -178,19 +179,20 @@ def _heads_plausible(content: np.ndarray, at: np.ndarray, *, whole: bool) -> np.
     return plausible
 
 
-def _next_record(content: np.ndarray, start: int) -> int | None:
-    """The first offset at or after ``start`` where a whole record begins that parses (see
-    :func:`_records`) and is followed by a plausible record's head, or None."""
-    size = len(content)
-    candidates = start + np.flatnonzero(np.isin(content[start:size - _RECORD_HEAD.size + 1], _OPCODES))
-    candidates = candidates[_heads_plausible(content, candidates, whole=True)]
+def _next_record(content: bytes | mmap.mmap, start: int) -> int | None:
+    """The first offset at or after ``start`` into the file's bytes ``content`` where a whole record
+    begins that parses (see :func:`_records`) and is followed by a plausible record's head, or None."""
+    array = np.frombuffer(content, dtype=np.uint8)
+    size = len(array)
+    candidates = start + np.flatnonzero(np.isin(array[start:size - _RECORD_HEAD.size + 1], _OPCODES))
+    candidates = candidates[_heads_plausible(array, candidates, whole=True)]
     if not len(candidates):
         return None
-    lengths = sliding_window_view(content, 8)[candidates + 1].copy().view("<u8").ravel().astype(np.int64)
+    lengths = sliding_window_view(array, 8)[candidates + 1].copy().view("<u8").ravel().astype(np.int64)
     ends = candidates + _RECORD_HEAD.size + lengths
-    chained = _heads_plausible(content, ends, whole=False)
+    chained = _heads_plausible(array, ends, whole=False)
     for offset, end in zip(candidates[chained].tolist(), ends[chained].tolist(), strict=True):
-        if _records(int(content[offset]), content[offset + _RECORD_HEAD.size:end].tobytes()) is not None:
+        if _records(content[offset], content[offset + _RECORD_HEAD.size:end]) is not None:
             return offset
     return None
 
@@ -208,11 +210,17 @@ def scan_recording(stream: BinaryIO, salvage: Salvage, source: str | os.PathLike
     """
     if stream.read(len(MAGIC)) != MAGIC:
         raise RecordingError(f"{source} is not an MCAP file")
-    # the array keeps the map open while it is read, and closes it when the scan lets go of it
-    yield from _scan(np.frombuffer(mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ), dtype=np.uint8), salvage)
+    # closed when the scan lets go of it (a close here would fail while an array of it is alive)
+    yield from _scan(mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ), salvage)
 
 
-def _scan(content: np.ndarray, salvage: Salvage) -> Iterator[McapRecord]:
+def _crc_of(content: mmap.mmap, stop: int) -> int:
+    """The CRC32 of the file's first ``stop`` bytes, read in place."""
+    with memoryview(content) as view, view[:stop] as head:
+        return zlib.crc32(head)
+
+
+def _scan(content: mmap.mmap, salvage: Salvage) -> Iterator[McapRecord]:
     size = len(content)
     salvage.bytes_read = position = len(MAGIC)
     in_summary = False
@@ -220,20 +228,21 @@ def _scan(content: np.ndarray, salvage: Salvage) -> Iterator[McapRecord]:
         if size - position < _RECORD_HEAD.size:
             salvage.reason = "the file ends between records" if position == size else "the file ends in a record's head"
             return
-        opcode, length = _RECORD_HEAD.unpack(content[position:position + _RECORD_HEAD.size].tobytes())
+        opcode, length = _RECORD_HEAD.unpack(content[position:position + _RECORD_HEAD.size])
         end = position + _RECORD_HEAD.size + length
         if opcode == Opcode.FOOTER and end <= size:
             salvage.truncated = False
             salvage.bytes_read = size - salvage._damaged_bytes  # the summary: indexes of the data
             return
-        fits = bool(end <= size and _heads_plausible(content, np.array([end]), whole=False)[0])
-        records = (_records(opcode, content[position + _RECORD_HEAD.size:end].tobytes()) if fits and not in_summary
+        # whether the record ends where another begins (or the file does, or too close for a head)
+        fits = end <= size and (end + _RECORD_HEAD.size > size or content[end] in _OPCODE_SET)
+        records = (_records(opcode, content[position + _RECORD_HEAD.size:end]) if fits and not in_summary
                    else [] if fits else None)
         if records is None:  # a damaged record, or a damaged length: find where the next record begins
             found = _next_record(content, position + 1)
             if found is None and not fits:
                 if opcode == Opcode.CHUNK:
-                    salvage._lose_chunk(content[position + _RECORD_HEAD.size:size].tobytes())
+                    salvage._lose_chunk(content[position + _RECORD_HEAD.size:size])
                 if length > size:
                     salvage.reason = f"a record of opcode 0x{opcode:02x} claims {length} bytes, more than the file holds"
                 elif end > size:
@@ -242,19 +251,19 @@ def _scan(content: np.ndarray, salvage: Salvage) -> Iterator[McapRecord]:
                     salvage.reason = f"no record follows the record of opcode 0x{opcode:02x} at byte {position}"
                 return
             if found is not None:
-                implied = [] if in_summary else _records(opcode, content[position + _RECORD_HEAD.size:found].tobytes())
+                implied = [] if in_summary else _records(opcode, content[position + _RECORD_HEAD.size:found])
                 if implied is not None:  # whole with the length the next record implies
                     salvage.resynchronised += 1
                     records, end = implied, found
                 elif not fits:
                     end = found  # lost up to the next record
             if records is None:
-                salvage._lose(opcode, content[position + _RECORD_HEAD.size:end].tobytes())
+                salvage._lose(opcode, content[position + _RECORD_HEAD.size:end])
                 position = end
                 continue
         if opcode == Opcode.DATA_END and not in_summary:
-            stated = int.from_bytes(content[position + _RECORD_HEAD.size:end][:4].tobytes(), "little")
-            salvage.data_crc_ok = None if stated == 0 else stated == zlib.crc32(content[:position])
+            stated = int.from_bytes(content[position + _RECORD_HEAD.size:end][:4], "little")
+            salvage.data_crc_ok = None if stated == 0 else stated == _crc_of(content, position)
             in_summary = True  # the summary repeats schemas and channels and indexes the data: nothing new
         for record in records:
             if isinstance(record, Message):
