@@ -12,7 +12,9 @@ A process killed between two flushes (SIGKILL, the out-of-memory killer) therefo
 that ``mcap``'s indexed reader, Foxglove and ``ros2 bag`` open with every message up to the last
 flush; the messages since then were only in memory. Only a kill during the write itself (about a
 millisecond per flush) can tear the tail, which
-:func:`~softtip.realtime.recording.writer.repair_recording` mends. The price is the summary written
+:func:`~softtip.realtime.recording.writer.repair_recording` mends. A write the disk refuses or
+cuts short (a full disk) puts the previous tail back where it stood, in space the file already
+holds, and nothing more is written: the file stays sealed at the last flush. The price is the summary written
 again at every flush: it grows by one chunk index per flush (about 150 bytes), and its records are
 kept serialised: a flush took 0.7 ms at the start of a recording of two chips at 500 frames/s
 flushed twice a second, and 6 ms an hour into it.
