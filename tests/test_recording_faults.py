@@ -135,8 +135,9 @@ def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
 
 def hall_frame(k: int) -> SimpleNamespace:
     """Frame ``k`` of one Hall chip at 100 frames/s, with a baseline."""
-    return SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000, reading=np.full((1, 3), 1e-6 * k),
-                           baseline=np.zeros((1, 3)), baseline_version=0, estimates=None, state=None)
+    return SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
+                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)), baseline_version=0,
+                           estimates=None, state=None)
 
 
 def recorded(path: Path, frames: int = 600, per_flush: int = 25) -> Path:

@@ -244,7 +244,8 @@ def _scan(content: mmap.mmap, salvage: Salvage) -> Iterator[McapRecord]:
                 if opcode == Opcode.CHUNK:
                     salvage._lose_chunk(content[position + _RECORD_HEAD.size:size])
                 if length > size:
-                    salvage.reason = f"a record of opcode 0x{opcode:02x} claims {length} bytes, more than the file holds"
+                    salvage.reason = (f"a record of opcode 0x{opcode:02x} claims {length} bytes, "
+                                      "more than the file holds")
                 elif end > size:
                     salvage.reason = f"the file ends {end - size} bytes short of a record (opcode 0x{opcode:02x})"
                 else:
