@@ -3,6 +3,7 @@ naming the file; a model file whose metadata was edited and its checksum recompu
 
 from __future__ import annotations
 
+import hashlib
 import json
 import warnings
 from pathlib import Path
@@ -194,3 +195,33 @@ def test_edited_and_rehashed_model_metadata_no_longer_loads(tmp_path, training, 
     with pytest.raises(ModelFileError, match=message) as refusal:
         load_model(path)
     assert str(path) in str(refusal.value) and "\n" not in str(refusal.value)
+
+
+def test_the_model_checksum_covers_each_arrays_shape():
+    metadata, weights = {"format": "softtip-model"}, np.arange(6.0)
+    # the reference, by hand: canonical metadata, then name NUL dtype NUL shape NUL and the bytes
+    reference = hashlib.sha256(b'{"format":"softtip-model"}' + b"w\0<f8\0(6,)\0" + weights.tobytes()).hexdigest()
+    assert archive_digest(metadata, {"w": weights}) == reference
+    # the same bytes in another shape: only the shape term tells them apart
+    assert archive_digest(metadata, {"w": weights.reshape(2, 3)}) != reference
+    assert archive_digest(metadata, {"w": weights.reshape(2, 3)}) == hashlib.sha256(
+        b'{"format":"softtip-model"}' + b"w\0<f8\0(2, 3)\0" + weights.tobytes()).hexdigest()
+
+
+def test_a_dataset_whose_metadata_is_rewritten_as_compact_json_is_refused(tmp_path):
+    # compact JSON moves the checksum's entry out of the place the seal looks for: that is a refusal,
+    # not a file taken as sealed
+    path = small_dataset().write(tmp_path / "trials.parquet")
+    document = json.loads(pq.read_schema(path).metadata[b"softtip"])
+    document["description"] = "another dataset"
+    compact = json.dumps(document, separators=(",", ":")).encode()
+    assert b'"sha256":"' in compact
+    pq.write_table(pq.read_table(path).replace_schema_metadata({b"softtip": compact}), path)
+    with pytest.raises(DatasetError, match=r"trials.parquet: checksum mismatch: the file was altered or damaged"):
+        Dataset.read(path)
+    # as it was, value unchanged but compact: refused too (the checksum's place is part of the seal)
+    document["description"] = small_dataset().metadata.description
+    pq.write_table(pq.read_table(path).replace_schema_metadata(
+        {b"softtip": json.dumps(document, separators=(",", ":")).encode()}), path)
+    with pytest.raises(DatasetError, match="checksum mismatch"):
+        Dataset.read(path)

@@ -5,21 +5,33 @@ every complete message; a torn or damaged file converts with a report of what wa
 
 from __future__ import annotations
 
+import collections
+import errno
+import io
 import json
+import os
 import signal
+import struct
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.records import Chunk, ChunkIndex, Message, MessageIndex, Statistics
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
 from softtip.realtime.recording import convert
+from softtip.realtime.recording.format import RecordingError
+from softtip.realtime.recording.reader import MAGIC
+from softtip.realtime.recording.sealed import SealedMcapWriter
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
 HANG_GUARD_S = 60.0
@@ -99,6 +111,7 @@ def test_a_live_recording_stopped_by_a_signal_is_finished_as_on_ctrl_c(tmp_path,
     assert chip_sequences(messages) == list(range(frames))
     assert summary.statistics.message_count == len(messages) == frames + 1  # and the one baseline
     assert streamed_messages(path) == (messages, None)
+    assert check_as_the_specification_defines(path) == len(messages)
 
 
 def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
@@ -110,6 +123,7 @@ def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
     assert streamed_messages(path) == (messages, None)
     assert len(messages) > 20 and summary.statistics.message_count == len(messages)
     assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
+    assert check_as_the_specification_defines(path) == len(messages)
     salvage = convert(path).salvage
     assert not salvage.truncated and salvage.data_crc_ok is True and salvage.bytes_lost == 0
 
@@ -119,14 +133,18 @@ def test_a_killed_recording_opens_in_the_indexed_reader_as_it_is(tmp_path):
 # --------------------------------------------------------------------------
 
 
+def hall_frame(k: int) -> SimpleNamespace:
+    """Frame ``k`` of one Hall chip at 100 frames/s, with a baseline."""
+    return SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
+                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)), baseline_version=0,
+                           estimates=None, state=None)
+
+
 def recorded(path: Path, frames: int = 600, per_flush: int = 25) -> Path:
     """A complete recording of one Hall chip, a chunk closed every ``per_flush`` frames."""
     recorder = McapRecorder(path, 1, chunk_size=1024)
-    stamps = 1_700_000_000_000_000_000 + np.arange(frames) * 10_000_000  # 100 frames/s
     for start in range(0, frames, per_flush):
-        recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=int(stamps[k]), reading=np.full((1, 3), 1e-6 * k),
-                                               baseline=np.zeros((1, 3)), baseline_version=0, estimates=None,
-                                               state=None) for k in range(start, min(start + per_flush, frames))])
+        recorder.write_frames([hall_frame(k) for k in range(start, min(start + per_flush, frames))])
         recorder.flush()
     recorder.close()
     return path
@@ -184,13 +202,10 @@ def torn_between(before: bytes, after: bytes, cut: int) -> bytes:
 def test_a_recording_torn_during_a_flush_is_repaired_with_every_complete_message(tmp_path):
     path = tmp_path / "torn.mcap"
     recorder = McapRecorder(path, 1, chunk_size=100_000)
-    frame = lambda k: SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,  # noqa: E731
-                                      reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
-                                      baseline_version=0, estimates=None, state=None)
-    recorder.write_frames([frame(k) for k in range(300)])
+    recorder.write_frames([hall_frame(k) for k in range(300)])
     recorder.flush()
     before = path.read_bytes()
-    recorder.write_frames([frame(k) for k in range(300, 900)])
+    recorder.write_frames([hall_frame(k) for k in range(300, 900)])
     recorder.flush()
     after = path.read_bytes()
     recorder.close()
@@ -208,7 +223,7 @@ def test_a_recording_torn_during_a_flush_is_repaired_with_every_complete_message
     repaired = tmp_path / "repaired.mcap"
     salvage = repair_recording(torn, repaired)
     summary, messages = indexed_messages(repaired)
-    assert messages == complete
+    assert messages == complete and check_as_the_specification_defines(repaired) == len(complete)
     assert summary.statistics.message_count == salvage.messages == len(complete)
     assert salvage.truncated and salvage.damaged_records + salvage.bytes_lost > 0
     np.testing.assert_array_equal(convert(repaired).dataset.X(), convert(torn).dataset.X())
@@ -234,5 +249,412 @@ def test_a_recording_carries_a_crc_of_its_data_section(tmp_path):
     content[index.offset + index.length - 3] ^= 0x04
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(content))
+    with pytest.raises(RecordingError, match="damaged.mcap: the data section fails its CRC though every record"):
+        convert(damaged)
+
+
+def test_a_flipped_byte_in_a_topic_name_is_refused_not_converted_without_its_labels(tmp_path):
+    whole = tmp_path / "whole.mcap"
+    recorder = McapRecorder(whole, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
+    recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
+                                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
+                                           baseline_version=0, estimates=np.array([0.01 * k]), state=None)
+                           for k in range(200)])
+    recorder.close()
+    assert convert(whole).dataset.labels == {"Fz": "N"}  # from the wrench topic
+    content = bytearray(whole.read_bytes())
+    topic = content.index(b"/fingertip/wrench")  # the channel record in the data section (before the summary's)
+    content[topic + len(b"/fingertip/wrenc")] ^= 0x01  # "wrenci": the force labels' topic misnamed
+    damaged = tmp_path / "topic.mcap"
+    damaged.write_bytes(bytes(content))
+    # mcap's own reader reads the misnamed topic as it stands: nothing in it says the labels are gone
+    with damaged.open("rb") as stream:
+        assert "/fingertip/wrenci" in {channel.topic for _, channel, _ in NonSeekingReader(stream).iter_messages()}
+    converted = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "topic.parquet")])
+    assert converted.exit_code == 2 and not (tmp_path / "topic.parquet").exists()
+    assert converted.output.strip().splitlines() == [
+        f"error: {damaged}: the data section fails its CRC though every record in it parses: a schema, channel or "
+        "metadata record (topic names, units, labels) was altered"]
+    repaired = CliRunner().invoke(app, ["recording", "repair", str(damaged)])
+    assert repaired.exit_code == 2 and not damaged.with_suffix(".repaired.mcap").exists()
+    assert "fails its CRC though every record in it parses" in repaired.output
+
+
+def test_convert_says_on_stderr_that_it_converted_a_damaged_recording(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    damaged_chunk = chunks_of(whole)[3]
+    content = bytearray(whole.read_bytes())
+    content[damaged_chunk.chunk_start_offset + damaged_chunk.chunk_length - 5] ^= 0x20
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    result = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "d.parquet"), "--json"])
+    assert result.exit_code == 0, result.output
     salvage = convert(damaged).salvage
-    assert salvage.data_crc_ok is False and salvage.damaged_records == 0
+    assert result.stderr.strip() == (
+        f"warning: {damaged} is damaged: converted the {salvage.messages} messages salvaged "
+        f"({damaged_chunk.chunk_length} bytes lost, 1 damaged records skipped, 0 resynchronised; the summary says "
+        "which times)")
+    assert json.loads(result.stdout)["damaged_records"] == 1
+    clean = CliRunner().invoke(app, ["convert", str(whole), str(tmp_path / "w.parquet")])
+    assert clean.exit_code == 0 and clean.stderr == ""
+
+
+# --------------------------------------------------------------------------
+# Damaged length fields: the scan resynchronises on the next record
+# --------------------------------------------------------------------------
+
+
+def data_section_heads(content: bytes) -> list[tuple[int, int]]:
+    """(offset, opcode) of every record of an intact file's data section, walked by the length fields."""
+    heads, offset = [], 8
+    while content[offset] != 0x0F:  # DataEnd
+        heads.append((offset, content[offset]))
+        offset += 9 + int.from_bytes(content[offset + 1:offset + 9], "little")
+    return heads
+
+
+@pytest.mark.parametrize(("byte", "mask"), [(1, 0x01), (2, 0x40), (8, 0x80)],
+                         ids=["one-byte-longer-or-shorter", "inside-the-file", "past-the-file"])
+def test_a_damaged_record_length_is_repaired_with_every_message(tmp_path, byte, mask):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, intact = indexed_messages(whole)
+    damaged_chunk = chunks_of(whole)[len(chunks_of(whole)) // 2]
+    content = bytearray(whole.read_bytes())
+    content[damaged_chunk.chunk_start_offset + byte] ^= mask  # a byte of the chunk's length field
+    damaged = tmp_path / "damaged-length.mcap"
+    damaged.write_bytes(bytes(content))
+    # the reference: mcap's own stream reader stops at the damaged record (reading a chunk by its own
+    # fields, it passes over a length one byte off)
+    streamed, tail = streamed_messages(damaged)
+    assert (tail is None) == (byte == 1) and (len(streamed) < len(intact)) == (byte != 1)
+    result = CliRunner().invoke(app, ["recording", "repair", str(damaged), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    repaired = Path(report["output"])
+    # the chunk is read with the length the next record implies, and its own CRC holds: nothing is lost
+    assert indexed_messages(repaired)[1] == intact and report["messages_read"] == len(intact) == 601
+    assert report["resynchronised"] == 1 and report["damaged_records"] == 0 and report["bytes_lost"] == 0
+    assert report["data_crc_ok"] is False  # the damaged byte is still damaged, and said so
+
+
+def test_a_damaged_message_and_a_damaged_length_cost_only_their_own_chunk(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, intact = indexed_messages(whole)
+    chunks = chunks_of(whole)
+    content = bytearray(whole.read_bytes())
+    content[chunks[2].chunk_start_offset + chunks[2].chunk_length - 5] ^= 0x20  # its compressed messages
+    content[chunks[2].chunk_start_offset + 3] ^= 0x10  # and its length
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = repair_recording(damaged, tmp_path / "repaired.mcap")
+    in_chunk = [m for m in intact if chunks[2].message_start_time <= m[1] <= chunks[2].message_end_time]
+    assert indexed_messages(tmp_path / "repaired.mcap")[1] == [m for m in intact if m not in in_chunk]
+    assert salvage.damaged_records == 1 and salvage.messages == len(intact) - len(in_chunk)
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == (chunks[2].message_start_time, chunks[2].message_end_time)
+
+
+@pytest.mark.slow
+def test_every_damaged_length_byte_of_every_record_is_repaired_whole(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=100)
+    summary, intact = indexed_messages(whole)
+    content = whole.read_bytes()
+    heads = data_section_heads(content)
+    assert {opcode for _, opcode in heads} == {0x01, 0x03, 0x04, 0x06, 0x07, 0x0C}  # header .. metadata
+    not_whole = []
+    for offset, opcode in heads:
+        for byte in range(1, 9):
+            for mask in (0x01, 0x80, 0xFF):
+                damaged = bytearray(content)
+                damaged[offset + byte] ^= mask
+                (tmp_path / "damaged.mcap").write_bytes(bytes(damaged))
+                salvage = repair_recording(tmp_path / "damaged.mcap", tmp_path / "repaired.mcap")
+                repaired, messages = indexed_messages(tmp_path / "repaired.mcap")
+                if (messages != intact or salvage.resynchronised != 1 or repaired.schemas != summary.schemas
+                        or repaired.channels != summary.channels):
+                    not_whole.append((offset, opcode, byte, mask))
+    assert not_whole == []
+
+
+# --------------------------------------------------------------------------
+# The file as the MCAP specification defines it, checked where mcap's reader does not look
+# --------------------------------------------------------------------------
+
+FOOTER_BYTES = 9 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+
+
+def records_between(content: bytes, start: int, stop: int) -> list[tuple[int, int, bytes]]:
+    """(offset, opcode, body) of the records from ``start`` to ``stop``, which must hold whole records."""
+    found, offset = [], start
+    while offset < stop:
+        opcode, length = struct.unpack_from("<BQ", content, offset)
+        found.append((offset, opcode, content[offset + 9:offset + 9 + length]))
+        offset += 9 + length
+    assert offset == stop, f"the records from {start} run past {stop} to {offset}"
+    return found
+
+
+def check_as_the_specification_defines(path: Path) -> int:
+    """Checks ``path`` against the MCAP specification and returns the messages its index reaches:
+    the footer's summary CRC is the CRC32 of every byte from the summary's start up to the end of the
+    footer's summary_offset_start; every chunk index's chunk_length is the chunk record's (opcode and
+    length included), its message_index_length that of the message index records after the chunk,
+    its message_index_offsets each at a message index record of that channel, and every entry of
+    those at a message record of that channel and log time in the decompressed chunk, every message
+    indexed once, each chunk's times those of its messages; the statistics count the messages, chunks,
+    schemas, channels, metadata and attachments it holds; the DataEnd CRC is the CRC32 of the data
+    section before it."""
+    content = path.read_bytes()
+    footer = len(content) - 8 - FOOTER_BYTES
+    assert content[-8:] == MAGIC and content[footer] == 0x02
+    summary_start, offset_start, summary_crc = struct.unpack_from("<QQI", content, footer + 9)
+    summary = records_between(content, summary_start, footer)
+    chunk_indexes = [ChunkIndex.read(ReadDataStream(io.BytesIO(body))) for _, opcode, body in summary if opcode == 0x08]
+    assert chunk_indexes, f"{path}: no chunk index"
+    (statistics,) = [Statistics.read(ReadDataStream(io.BytesIO(body))) for _, opcode, body in summary if opcode == 0x0B]
+    counted = collections.Counter(opcode for _, opcode, _ in summary)
+    every: list[Message] = []
+    indexed = 0
+    for index in chunk_indexes:
+        opcode, length = struct.unpack_from("<BQ", content, index.chunk_start_offset)
+        assert opcode == 0x06 and index.chunk_length == 9 + length, f"chunk index length {index.chunk_length}"
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(content[index.chunk_start_offset + 9:
+                                                                index.chunk_start_offset + 9 + length])))
+        records = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size) \
+            if chunk.compression == "zstd" else chunk.data
+        assert zlib.crc32(records) == chunk.uncompressed_crc and len(records) == index.uncompressed_size
+        messages = {offset: Message.read(ReadDataStream(io.BytesIO(body)), len(body))
+                    for offset, opcode, body in records_between(records, 0, len(records)) if opcode == 0x05}
+        index_start = index.chunk_start_offset + index.chunk_length
+        message_indexes = records_between(content, index_start, index_start + index.message_index_length)
+        assert sorted(index.message_index_offsets.values()) == [offset for offset, _, _ in message_indexes], \
+            "message index offsets"
+        reached = []
+        for channel, offset in index.message_index_offsets.items():
+            (_, opcode, body), = [record for record in message_indexes if record[0] == offset]
+            message_index = MessageIndex.read(ReadDataStream(io.BytesIO(body)))
+            assert opcode == 0x07 and message_index.channel_id == channel, "message index channel"
+            for log_time, message_offset in message_index.records:
+                message = messages.get(message_offset)
+                assert message is not None and (message.channel_id, message.log_time) == (channel, log_time), \
+                    f"a message index entry at {message_offset} reaches no message of channel {channel}"
+                reached.append(message_offset)
+        assert sorted(reached) == sorted(messages), "messages not indexed once each"
+        assert (index.message_start_time, index.message_end_time) == (
+            min(m.log_time for m in messages.values()), max(m.log_time for m in messages.values())), "chunk times"
+        indexed += len(reached)
+        every += messages.values()
+    # the statistics count what the file holds
+    assert (statistics.message_count, statistics.chunk_count) == (len(every), len(chunk_indexes)), "statistics"
+    assert statistics.channel_message_counts == collections.Counter(m.channel_id for m in every), "statistics"
+    assert (statistics.message_start_time, statistics.message_end_time) == (
+        min(m.log_time for m in every), max(m.log_time for m in every)), "statistics"
+    assert (statistics.schema_count, statistics.channel_count, statistics.metadata_count,
+            statistics.attachment_count) == (counted[0x03], counted[0x04], counted[0x0D], counted[0x0A]), "statistics"
+    assert summary_crc == zlib.crc32(content[summary_start:footer + 9 + 16]), "summary CRC"
+    data_end = summary_start - 9 - 4
+    assert content[data_end] == 0x0F
+    assert struct.unpack_from("<I", content, data_end + 9)[0] == zlib.crc32(content[:data_end]), "data section CRC"
+    return indexed
+
+
+def test_recordings_are_written_as_the_mcap_specification_defines(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, messages = indexed_messages(whole)
+    assert check_as_the_specification_defines(whole) == len(messages) == 601
+    repaired = tmp_path / "repaired.mcap"  # written by mcap's own writer on repair
+    repair_recording(whole, repaired)
+    assert check_as_the_specification_defines(repaired) == len(messages)
+
+
+def test_an_attachment_is_sealed_and_indexed_as_mcaps_reader_reads_it(tmp_path):
+    path = tmp_path / "attached.mcap"
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, chunk_size=1024, compression="none")
+        writer.start(profile="ros2", library="test")
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        writer.add_attachment(3, 4, "calibration.toml", "application/toml", b"gain = 2.5\n")
+        writer.flush()  # sealed as it stands: what a killed recorder leaves
+        assert check_as_the_specification_defines(path) == 1
+        writer.finish()
+    assert check_as_the_specification_defines(path) == 1
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        (attachment,) = list(reader.iter_attachments())
+        (index,) = reader.get_summary().attachment_indexes
+    assert (attachment.create_time, attachment.log_time, attachment.name, attachment.media_type, attachment.data) == (
+        3, 4, "calibration.toml", "application/toml", b"gain = 2.5\n")
+    assert (index.create_time, index.log_time, index.data_size, index.name, index.media_type) == (
+        3, 4, 11, "calibration.toml", "application/toml")
+    # the index's offset and length frame the attachment record itself
+    content = path.read_bytes()
+    assert content[index.offset] == 0x09 and int.from_bytes(content[index.offset + 1:index.offset + 9],
+                                                            "little") + 9 == index.length
+    with pytest.raises(RecordingError, match="finished"):
+        writer.flush()
+
+
+def rewritten_record(content: bytes, offset: int, body: bytes) -> bytes:
+    """``content`` with the record at ``offset`` given ``body`` (its length field made to match)."""
+    opcode, length = struct.unpack_from("<BQ", content, offset)
+    return content[:offset] + struct.pack("<BQ", opcode, len(body)) + body + content[offset + 9 + length:]
+
+
+@pytest.mark.parametrize("fault", ["summary CRC over the summary without its offsets",
+                                   "message index offsets one record late",
+                                   "chunk index lengths that include the message indexes"])
+def test_the_specification_check_finds_what_mcaps_reader_passes(tmp_path, fault):
+    whole = recorded(tmp_path / "whole.mcap", frames=100)
+    content = whole.read_bytes()
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start, offset_start, _ = struct.unpack_from("<QQI", content, footer + 9)
+    if fault.startswith("summary CRC"):
+        wrong = zlib.crc32(content[summary_start:offset_start])
+        content = content[:footer + 25] + struct.pack("<I", wrong) + content[footer + 29:]
+        expected = "summary CRC"
+    elif fault.startswith("message index"):
+        offset, _, body = next(record for record in records_between(content, 8, summary_start - 13)
+                               if record[1] == 0x07)
+        message_index = MessageIndex.read(ReadDataStream(io.BytesIO(body)))
+        late = b"".join(struct.pack("<QQ", log_time, message_offset + 31)
+                        for log_time, message_offset in message_index.records)  # 31: a message past
+        content = rewritten_record(content, offset, body[:2] + struct.pack("<I", len(late)) + late)
+        expected = "reaches no message"
+    else:
+        offset, _, body = next(record for record in records_between(content, summary_start, footer)
+                               if record[1] == 0x08)
+        chunk_index = ChunkIndex.read(ReadDataStream(io.BytesIO(body)))
+        body = body[:24] + struct.pack("<Q", chunk_index.chunk_length + chunk_index.message_index_length) + body[32:]
+        content = content[:offset + 9] + body + content[offset + 9 + len(body):]
+        expected = "chunk index length"
+    damaged = tmp_path / "fault.mcap"
+    damaged.write_bytes(content)
+    with damaged.open("rb") as stream:
+        assert len(list(make_reader(stream).iter_messages())) == 101  # mcap's reader passes it
+    with pytest.raises(AssertionError, match=expected):
+        check_as_the_specification_defines(damaged)
+
+
+# --------------------------------------------------------------------------
+# Children and signals
+# --------------------------------------------------------------------------
+
+# An emulated fingertip in its child process, as ``softtip live --emulate`` runs it; Ctrl-C stops it
+# as the session does, by the pipe, and prints how many frames the child's log holds.
+EMULATED = """
+import time
+from softtip.hardware import EmulatorProcess, PressCycle
+emulator = EmulatorProcess(PressCycle(2), rate_hz=50, chips=2).start()
+print(emulator._process.pid, flush=True)
+try:
+    time.sleep(HANG_GUARD_S)
+except KeyboardInterrupt:
+    print(len(emulator.close().seq), flush=True)
+""".replace("HANG_GUARD_S", str(HANG_GUARD_S))
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, not yet reaped by whoever adopted it, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def emulated_until(stop) -> tuple[int, str, str]:
+    """Runs the emulator's host in a session of its own, calls ``stop(host)`` once the child is up,
+    and returns the child's pid and what the host and child printed by the time both ended."""
+    host = subprocess.Popen([sys.executable, "-c", EMULATED], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        child = int(host.stdout.readline())
+        stop(host)
+        stdout, stderr = host.communicate(timeout=HANG_GUARD_S)  # until the child, sharing the pipes, ends too
+    finally:
+        if host.poll() is None:
+            host.kill()
+            host.communicate()
+    return child, stdout, stderr
+
+
+def test_the_emulator_child_of_a_killed_session_ends_quietly():
+    child, _, stderr = emulated_until(lambda host: host.send_signal(signal.SIGKILL))
+    assert stderr == ""  # no EOFError traceback from the child
+    assert not running(child)
+
+
+def test_ctrl_c_reaches_the_emulator_child_and_the_session_still_stops_it_by_the_pipe():
+    child, stdout, stderr = emulated_until(lambda host: (time.sleep(0.5), os.killpg(host.pid, signal.SIGINT)))
+    # the child's log came back (no client read a frame: an empty one): it left the terminal's Ctrl-C to
+    # its host, which stopped it by the pipe
+    assert stderr == "" and stdout.strip() == "0"
+    assert not running(child)
+
+
+def test_a_disk_that_fills_mid_recording_ends_in_one_line_with_the_sealed_tail_intact(tmp_path, monkeypatch, capfd):
+    from softtip._core.channels import MAGNETIC
+    from softtip.hardware import PacedSource
+    from softtip.realtime.session import run_live
+    from softtip.realtime.sinks.recorder import RecorderSink
+
+    path = tmp_path / "full.mcap"
+    capacity = 12_000  # bytes the disk has for the file
+    written_whole = os.pwrite
+    refused = []
+
+    def full_disk(fd: int, data: bytes, offset: int) -> int:
+        """As the kernel writes to a full disk: what fits, then ENOSPC."""
+        room = capacity - offset
+        if len(data) <= room:
+            return written_whole(fd, data, offset)
+        refused.append(offset)
+        if room > 0:
+            return written_whole(fd, data[:room], offset)  # the old tail is overwritten in part: torn
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "pwrite", full_disk)
+    t = np.arange(400) / 200.0
+    source = PacedSource(np.stack([np.sin(t), np.cos(t), t], axis=1)[:, None, :], 200.0, reading=MAGNETIC,
+                         name="paced")
+    sink = RecorderSink(path, flush_interval_s=0.05, chunk_size=1024)
+    with pytest.raises(RecordingError) as stopped:
+        run_live(source, [], [sink], 3.0, baseline_frames=1)
+    assert str(stopped.value) == (f"recording {path} stopped early: the recording's write failed (No space left on "
+                                  f"device: {capacity - refused[0]} of ") + str(stopped.value).split(" of ")[1]
+    assert str(stopped.value).endswith("bytes written); the file holds every message up to the last flush, sealed")
+    assert len(refused) == 1 and capfd.readouterr().err == ""  # no traceback: the one line is the caller's to print
+    monkeypatch.undo()
+    # the tail of the last flush is back in place: the file opens in the indexed reader as it stands
+    summary, messages = indexed_messages(path)
+    assert streamed_messages(path) == (messages, None) and path.stat().st_size <= capacity
+    assert check_as_the_specification_defines(path) == len(messages) > 20
+    assert chip_sequences(messages) == list(range(len(messages) - 1))  # frames 0.. with none missing
+
+
+def test_a_tail_that_cannot_be_put_back_is_said_so_and_repair_mends_it(tmp_path, monkeypatch):
+    path = tmp_path / "gone.mcap"
+    recorder = McapRecorder(path, 1, chunk_size=1024)
+    recorder.write_frames([hall_frame(k) for k in range(100)])
+    recorder.flush()
+    _, flushed = indexed_messages(path)
+    written_whole = os.pwrite
+
+    def failing_disk(fd: int, data: bytes, offset: int) -> int:
+        """A disk that takes a part of the next write and then nothing (an I/O error)."""
+        monkeypatch.setattr(os, "pwrite", lambda *_: (_ for _ in ()).throw(OSError(errno.EIO, "Input/output error")))
+        return written_whole(fd, data[:len(data) // 2], offset)
+
+    monkeypatch.setattr(os, "pwrite", failing_disk)
+    recorder.write_frames([hall_frame(k) for k in range(100, 200)])
+    with pytest.raises(RecordingError, match=r"^the recording's write failed \(No space left on device: \d+ of \d+ "
+                                             r"bytes written\); its tail could not be put back \(Input/output error\): "
+                                             r"softtip recording repair mends it$"):
+        recorder.flush()
+    recorder.write_frames([hall_frame(200)])
+    with pytest.raises(RecordingError, match="stopped at an earlier failed write"):
+        recorder.flush()
+    recorder.close()  # writes nothing more
+    monkeypatch.undo()
+    salvage = repair_recording(path, tmp_path / "mended.mcap")
+    # every message of the last flush is still there, before the torn tail
+    assert indexed_messages(tmp_path / "mended.mcap")[1][:len(flushed)] == flushed and salvage.truncated

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import struct
 import warnings
 
 import numpy as np
@@ -216,6 +218,18 @@ def test_the_hash_covers_the_arrays_and_nothing_else():
     assert first.sha256 == Recording.from_arrays(u.copy(), y.copy(), TS, source="b.csv").sha256
     y[3] = 1.0000001
     assert Recording.from_arrays(u, y, TS).sha256 != first.sha256
+
+
+def test_the_hash_covers_the_sample_time_it_documents():
+    u, y = np.arange(20.0).reshape(10, 2), np.ones((10, 1))
+    recording = Recording.from_arrays(u, y, TS)
+    # the reference, by hand: the sample time as a float64, then per trial and role name NUL dtype NUL
+    # shape NUL and the C-order bytes
+    reference = hashlib.sha256(struct.pack("<d", TS))
+    for name, array in (("000000/u", u), ("000000/y", y)):
+        reference.update(f"{name}\0<f8\0{array.shape}\0".encode() + array.astype("<f8").tobytes())
+    assert recording.sha256 == reference.hexdigest()
+    assert Recording.from_arrays(u, y, 2 * TS).sha256 != recording.sha256
 
 
 # ---------------------------------------------------------------------------------------------- splits

@@ -11,8 +11,8 @@ from pathlib import Path
 import typer
 
 from softtip._core.systems import names, owner
-from softtip.cli.common import (FORCE, LONGEST_S, check_input, check_number, check_output, claimed, console, fail,
-                                progress_for)
+from softtip.cli.common import (FORCE, LONGEST_S, check_input, check_number, check_output, claimed, console, errors,
+                                fail, printable, progress_for)
 
 STARTED = time.perf_counter()  # when the command line was loaded: the start a user waits from
 SCENARIOS = tuple(names("scenario"))
@@ -148,6 +148,12 @@ def convert(
     check_output(output, "OUTPUT", [recording], force=force)
     result = convert_recording(recording, output, gap_s=gap)
     dataset = result.dataset
+    salvage = result.salvage
+    if salvage.truncated or salvage.damaged_records or salvage.resynchronised or salvage.data_crc_ok is False:
+        errors.print(printable(f"warning: {recording} is damaged: converted the {salvage.messages} messages salvaged "
+                               f"({salvage.bytes_lost} bytes lost, {salvage.damaged_records} damaged records skipped, "
+                               f"{salvage.resynchronised} resynchronised; the summary says which times)"),
+                     markup=False, highlight=False, soft_wrap=True)
     summary = {"dataset": str(output), "trials": len(dataset.trials), "samples": int(len(dataset.groups)),
                "channels": list(dataset.channels), "labels": list(dataset.labels), **result.salvage.report()}
     if json_output:

@@ -7,9 +7,11 @@ its interpreter lock; :class:`PressCycle` is a picklable field source of repeate
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import resource
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Self
@@ -70,15 +72,23 @@ class EmulatorLog:
 
 
 def _serve_emulator(connection, source, rate_hz: int, chips: int, settings, faults, seed) -> None:
-    """Child process: run an Emulator until told to stop, then send its log back."""
+    """Child process: run an Emulator until told to stop, then send its log back. A parent that is
+    gone (killed) ends it quietly; Ctrl-C, sent to the terminal's whole process group, is the
+    parent's to handle: it stops the child by the pipe."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         emulator = Emulator(source, rate_hz=rate_hz, chips=chips, settings=settings, faults=faults, seed=seed)
         emulator.start()
     except Exception as error:
         connection.send(("error", f"{type(error).__name__}: {error}"))
         return
-    connection.send(("port", emulator.port))
-    connection.recv()
+    try:
+        connection.send(("port", emulator.port))
+        connection.recv()
+    except (EOFError, OSError):  # the parent died: nobody to report to
+        with contextlib.suppress(RuntimeError):  # a failure of its source: nobody to report that to either
+            emulator.close()
+        return
     try:
         emulator.close()
         error = None

@@ -190,8 +190,9 @@ class Pipeline:
             try:
                 sink.close()
             except Exception as error:
-                logger.exception("closing sink %s failed", type(sink).__name__)
                 errors.append(error)
+        for error in errors[1:]:  # the first is raised; these would be lost
+            logger.error("closing a sink failed too: %s", error)
         if errors:
             raise errors[0]
 

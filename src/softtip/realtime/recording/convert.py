@@ -17,7 +17,8 @@ and ``contact_state`` from ``{prefix}/contact_state``. Stamped labels are matche
 by header stamp, the others by log time; a frame without a label value gets NaN (or an
 empty state). A recording cut short by a killed process converts up to its last chunk, one with
 a damaged chunk without that chunk's messages; the conversion's ``salvage`` says what was read and
-what was lost.
+what was lost. A recording whose data section fails its CRC with no damaged record to explain it
+(a flipped byte in a topic name, a unit, a label) is refused: what it would misname cannot be told.
 """
 
 from __future__ import annotations
@@ -206,6 +207,7 @@ def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None
     if gap_s is not None:
         checked(PositiveNumber, "gap_s", gap_s)
     recording = read_recording(mcap_path)
+    recording.salvage.refuse_unexplained_damage(recording.path)
     prefix, reading_topics, reading = _reading_topics(recording, prefix)
     stamps, log_times, fields, incomplete = _frames(recording, reading_topics, reading)
     chips = len(reading_topics)

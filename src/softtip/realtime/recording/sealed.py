@@ -12,7 +12,9 @@ A process killed between two flushes (SIGKILL, the out-of-memory killer) therefo
 that ``mcap``'s indexed reader, Foxglove and ``ros2 bag`` open with every message up to the last
 flush; the messages since then were only in memory. Only a kill during the write itself (about a
 millisecond per flush) can tear the tail, which
-:func:`~softtip.realtime.recording.writer.repair_recording` mends. The price is the summary written
+:func:`~softtip.realtime.recording.writer.repair_recording` mends. A write the disk refuses or
+cuts short (a full disk) puts the previous tail back where it stood, in space the file already
+holds, and nothing more is written: the file stays sealed at the last flush. The price is the summary written
 again at every flush: it grows by one chunk index per flush (about 150 bytes), and its records are
 kept serialised: a flush took 0.7 ms at the start of a recording of two chips at 500 frames/s
 flushed twice a second, and 6 ms an hour into it.
@@ -25,6 +27,7 @@ the format allows them and every reader looks for them.
 
 from __future__ import annotations
 
+import errno
 import os
 import struct
 import zlib
@@ -94,6 +97,8 @@ class SealedMcapWriter:
                                       chunk_count=0, message_count=0, message_end_time=0, message_start_time=0,
                                       metadata_count=0, schema_count=0)
         self._finished = False
+        self._failed: str | None = None  # why a write failed: nothing more is written
+        self._sealed_tail = b""  # the tail the last flush wrote, put back if a later write fails
 
     # ---------------------------------------------------------------- records
 
@@ -209,18 +214,39 @@ class SealedMcapWriter:
         data = self._pending.end()
         if not data and self._end:
             return  # nothing new: the file is sealed as it is
+        if self._failed is not None:
+            raise RecordingError(f"the recording stopped at an earlier failed write ({self._failed})")
         end = self._end + len(data)
         data_crc = zlib.crc32(data, self._data_crc)
-        blob = data + self._tail(end, data_crc)
-        written = os.pwrite(self._fd, blob, self._end)
-        if written != len(blob):
-            raise RecordingError(f"the recording's write was cut short: {written} of {len(blob)} bytes")
-        self._end, self._data_crc = end, data_crc
-        if fsync:
-            os.fsync(self._fd)
+        tail = self._tail(end, data_crc)
+        try:
+            written = os.pwrite(self._fd, data + tail, self._end)
+            if written != len(data) + len(tail):  # a full disk: the kernel writes what fits, then refuses
+                raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)}: {written} of {len(data) + len(tail)} bytes "
+                              "written")
+            if fsync:
+                os.fsync(self._fd)
+        except OSError as error:
+            self._failed = error.strerror or str(error)
+            raise RecordingError(f"the recording's write failed ({self._failed}); "
+                                 f"{self._seal_again()}") from None
+        self._end, self._data_crc, self._sealed_tail = end, data_crc, tail
+
+    def _seal_again(self) -> str:
+        """Puts the tail of the last flush back over what a failed write left, where its bytes stood
+        (space the file holds already), and cuts the file after it; says what the file holds."""
+        try:
+            if os.pwrite(self._fd, self._sealed_tail, self._end) != len(self._sealed_tail):
+                raise OSError(errno.EIO, "the tail was not written whole")
+            os.ftruncate(self._fd, self._end + len(self._sealed_tail))
+        except OSError as error:
+            return f"its tail could not be put back ({error.strerror or error}): softtip recording repair mends it"
+        return ("the file holds every message up to the last flush, sealed" if self._sealed_tail
+                else "nothing had been written")
 
     def finish(self) -> None:
-        """Writes what is pending, sealed as after every flush; nothing more can be written."""
-        if not self._finished:
+        """Writes what is pending, sealed as after every flush; nothing more can be written. After a
+        failed write the file stays as the failure left it (sealed at the last flush)."""
+        if not self._finished and self._failed is None:
             self.flush()
-            self._finished = True
+        self._finished = True

@@ -212,8 +212,11 @@ class McapRecorder:
 def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salvage:
     """Writes to ``output`` every complete message, schema, channel, metadata record and attachment of
     the recording ``path`` (:func:`~softtip.realtime.recording.reader.scan_recording`: up to a torn
-    tail, past a damaged chunk), in chunks with the summary and index an indexed reader needs and a
-    CRC of the whole data section, and returns what was salvaged. ``output`` is replaced only once it is complete."""
+    tail, past a damaged chunk, resynchronising past a damaged length field), in chunks with the
+    summary and index an indexed reader needs and a CRC of the whole data section, and returns what
+    was salvaged. ``output`` is replaced only once it is complete.
+    A recording whose data section fails its CRC with no damaged record to explain it is refused
+    (:meth:`~softtip.realtime.recording.reader.Salvage.refuse_unexplained_damage`)."""
     path, output = Path(path), Path(output)
     if not path.is_file():
         raise RecordingError(f"recording {path} does not exist")
@@ -248,6 +251,7 @@ def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salv
                                           record.data)
         if not started:
             raise RecordingError(f"{path}: nothing to salvage ({salvage.reason})")
+        salvage.refuse_unexplained_damage(path)  # a new CRC would vouch for the altered record
         writer.finish()
 
     atomic_write(output, rewrite)

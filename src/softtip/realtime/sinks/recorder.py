@@ -8,7 +8,6 @@ it to the file, so a killed process loses at most that interval.
 from __future__ import annotations
 
 import collections
-import logging
 import os
 from pathlib import Path
 
@@ -18,8 +17,6 @@ from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import DEFAULT_PREFIX, RecordingError, magnetic_covariance_T2
 from softtip.realtime.recording.writer import McapRecorder
 from softtip.realtime.sinks.base import Sink
-
-logger = logging.getLogger(__name__)
 
 
 class RecorderSink(Sink):
@@ -65,18 +62,18 @@ class RecorderSink(Sink):
         try:
             while not self._writer.closing.wait(self.flush_interval_s):
                 self._write_queued()
-        except Exception as error:  # the stream goes on; close() reports the failure
-            logger.exception("recording to %s failed", self.path)
+        except Exception as error:  # the stream goes on; close() reports the failure in one line
             self.error = error
 
     def close(self) -> None:
         """Writes what is queued, then the summary and footer."""
         if not self._writer.stop():
             return
-        try:
-            if self.error is None:
+        if self.error is None:
+            try:
                 self._write_queued()
-        finally:
-            self.recorder.close()
+            except Exception as error:  # reported below, once the file is closed
+                self.error = error
+        self.recorder.close()
         if self.error is not None:
             raise RecordingError(f"recording {self.path} stopped early: {self.error}") from self.error
