@@ -72,9 +72,11 @@ def test_the_rod_agrees_with_the_solid_at_the_tip_the_root_and_on_the_die():
     np.testing.assert_allclose(sideways, [[0.886, 0.953], [0.918, 0.989]], atol=0.005)
     np.testing.assert_allclose(solid_points[:, :2, 2] - rod_points[:, :2, 2], [[0.15e-6, 0.8e-6], [1.5e-6, 7.1e-6]],
                                atol=0.2e-6)
-    # the signal the die sees, the bar: within 5 % (measured 2.1 % and 1.3 %)
+    # the signal the die sees, the bar: within 5 %. Measured 2.9 % and 4.1 % with the meanders read per
+    # area element, each saturating on its own (2.1 % and 1.3 % when each strip's mean field was saturated)
     ratio = voltage_change(solid_points, solid_tangents) / voltage_change(rod_points, rod_tangents)
-    assert np.all(np.abs(ratio - 1) < 0.025)
+    assert np.all(np.abs(ratio - 1) < 0.05)
+    assert ratio == pytest.approx([1.029, 1.041], abs=0.003)
 
 
 def test_bad_input_is_refused():
