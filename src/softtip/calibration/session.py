@@ -2,9 +2,9 @@
 
 Between sessions a magnetic skin's readings change scale: the magnets' remanence falls with
 temperature (NdFeB about -0.12 %/K), a chip's sensitivity drifts, the elastomer creeps and ages, and
-iron nearby bends the field. On a real 2x2 MLX90393 array the sensitivity changed 2-3.5x between an
-afternoon and an evening, and every model trained on one session did worse on the other than
-predicting zero. A new session is therefore
+iron nearby bends the field. On a real 2x2 array of 3-axis Hall chips the sensitivity changed
+2-3.5x between an afternoon and an evening, and every model trained on one session did worse on the
+other than predicting zero. A new session is therefore
 
 1. **re-zeroed at rest**: its readings are changes from its own rest (the dataset's baseline, or the
    live baseline taken at rest), which takes out every offset;

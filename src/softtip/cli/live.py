@@ -20,7 +20,7 @@ SCENARIO_HELP = "; ".join(f"{name} ({owner('scenario', name).name})" for name in
 Scenario = Enum("Scenario", {name: name for name in SCENARIOS}, type=str)  # the choices shown in the help
 MAX_RATE_HZ = 10_000  # frames per second the pipeline is specified for (a frame of 4 chips in 100 µs)
 MAX_CHIPS = 64  # chips on one board's bus
-MAX_REST_BAND = 1e6  # above any reading's full scale (the MLX90393's widest is about 1.4e5 µT)
+MAX_REST_BAND = 1e6  # above any reading's full scale (the widest Hall chip's is about 1.4e5 µT)
 
 
 class BoardFormat(str, Enum):
