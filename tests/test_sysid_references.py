@@ -36,15 +36,16 @@ def fitted():
     return TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
 
 
-def _central(function, theta: np.ndarray) -> np.ndarray:
-    """∂ function / ∂ theta_k by central differences, stacked along the first axis."""
+def _central(function, theta: np.ndarray, difference=np.subtract) -> np.ndarray:
+    """∂ function / ∂ theta_k by central differences, stacked along the first axis; ``difference`` of the
+    values at θ + h and θ - h (a phase's: the angle of their ratio)."""
     rows = []
     for k in range(len(theta)):
         h = H * max(abs(theta[k]), 1.0)
         up, down = theta.copy(), theta.copy()
         up[k] += h
         down[k] -= h
-        rows.append((function(up) - function(down)) / (2 * h))
+        rows.append(difference(function(up), function(down)) / (2 * h))
     return np.array(rows)
 
 
@@ -60,14 +61,7 @@ def test_the_bands_phase_and_magnitude_spreads_are_the_delta_method_of_g(fitted)
         return np.polyval(parameters[2:], 1j * omega) / np.polyval(np.r_[1.0, parameters[:2]], 1j * omega)
 
     magnitude = _central(lambda p: np.abs(response(p)), theta)
-    phase = []
-    for k in range(len(theta)):
-        h = H * max(abs(theta[k]), 1.0)
-        up, down = theta.copy(), theta.copy()
-        up[k] += h
-        down[k] -= h
-        phase.append(np.angle(response(up) / response(down)) / (2 * h))
-    phase = np.array(phase)
+    phase = _central(response, theta, difference=lambda up, down: np.angle(up / down))
     covariance = fitted.covariance_[0]
     np.testing.assert_allclose(band.magnitude_std, np.sqrt(np.einsum("kw,kl,lw->w", magnitude, covariance, magnitude)),
                                rtol=1e-5)
