@@ -183,7 +183,7 @@ def test_convert_skips_a_damaged_chunk_and_says_so(tmp_path):
     content[damaged.chunk_start_offset + damaged.chunk_length - 5] ^= 0x20  # inside its compressed records
     broken = tmp_path / "damaged.mcap"
     broken.write_bytes(bytes(content))
-    conversion = convert(broken)
+    conversion = convert(broken, salvage=True)
     salvage = conversion.salvage
     _, every = indexed_messages(whole)
     in_damaged = [m for m in every if damaged.message_start_time <= m[1] <= damaged.message_end_time]
@@ -280,6 +280,39 @@ def test_a_flipped_byte_in_a_topic_name_is_refused_not_converted_without_its_lab
     assert "fails its CRC though every record in it parses" in repaired.output
 
 
+def test_a_topic_name_flipped_beside_a_damaged_chunk_is_refused_unless_salvaged(tmp_path):
+    whole = tmp_path / "whole.mcap"
+    recorder = McapRecorder(whole, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
+    recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
+                                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
+                                           baseline_version=0, estimates=np.array([0.01 * k]), state=None)
+                           for k in range(200)])
+    recorder.close()
+    damaged_chunk = chunks_of(whole)[3]
+    content = bytearray(whole.read_bytes())
+    content[damaged_chunk.chunk_start_offset + damaged_chunk.chunk_length - 5] ^= 0x20
+    content[content.index(b"/fingertip/wrench") + len(b"/fingertip/wrenc")] ^= 0x01  # "wrenci"
+    damaged = tmp_path / "both.mcap"
+    damaged.write_bytes(bytes(content))
+    # the damaged chunk explains the failed CRC as well as the topic name would: nothing tells them apart
+    salvage = convert(damaged, salvage=True).salvage
+    assert salvage.damaged_records == 1 and salvage.data_crc_ok is False
+    refused = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "both.parquet")])
+    assert refused.exit_code == 2 and not (tmp_path / "both.parquet").exists()
+    assert refused.output.strip().splitlines() == [
+        f"error: {damaged}: the data section fails its CRC beside 1 damaged and 0 resynchronised records, and a "
+        "topic name, unit or label outside them may be altered too: refused unless salvaged (--salvage)"]
+    salvaged = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "both.parquet"), "--salvage", "--json"])
+    assert salvaged.exit_code == 0 and salvaged.stderr.startswith(f"warning: {damaged} is damaged")
+    assert json.loads(salvaged.stdout)["damaged_records"] == 1
+    # the chunk alone (the topic name intact) is refused all the same: the CRC cannot say which it is
+    content[content.index(b"/fingertip/wrenci") + len(b"/fingertip/wrenc")] ^= 0x01
+    damaged.write_bytes(bytes(content))
+    with pytest.raises(RecordingError, match="fails its CRC beside 1 damaged"):
+        convert(damaged)
+    assert convert(damaged, salvage=True).dataset.labels == {"Fz": "N"}
+
+
 def test_convert_says_on_stderr_that_it_converted_a_damaged_recording(tmp_path):
     whole = recorded(tmp_path / "whole.mcap")
     damaged_chunk = chunks_of(whole)[3]
@@ -287,9 +320,9 @@ def test_convert_says_on_stderr_that_it_converted_a_damaged_recording(tmp_path):
     content[damaged_chunk.chunk_start_offset + damaged_chunk.chunk_length - 5] ^= 0x20
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(content))
-    result = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "d.parquet"), "--json"])
+    result = CliRunner().invoke(app, ["convert", str(damaged), str(tmp_path / "d.parquet"), "--json", "--salvage"])
     assert result.exit_code == 0, result.output
-    salvage = convert(damaged).salvage
+    salvage = convert(damaged, salvage=True).salvage
     assert result.stderr.strip() == (
         f"warning: {damaged} is damaged: converted the {salvage.messages} messages salvaged "
         f"({damaged_chunk.chunk_length} bytes lost, 1 damaged records skipped, 0 resynchronised; the summary says "

@@ -138,6 +138,8 @@ def convert(
     output: Path = typer.Argument(..., help="Dataset to write (.parquet)."),
     gap: float = typer.Option(1.0, "--gap", help="A gap longer than this (s) starts a new trial."),
     force: bool = FORCE,
+    salvage: bool = typer.Option(False, "--salvage", help="Convert what parses of a recording whose data section "
+                                 "fails its CRC beside damaged records (a name outside them may be altered too)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Turn a live recording into the calibration tools' trial dataset (changes in the chips' unit, labels)."""
@@ -146,7 +148,7 @@ def convert(
     check_number(gap, "--gap", above=0, maximum=LONGEST_S, unit="s")
     check_input(recording, "RECORDING")
     check_output(output, "OUTPUT", [recording], force=force)
-    result = convert_recording(recording, output, gap_s=gap)
+    result = convert_recording(recording, output, gap_s=gap, salvage=salvage)
     dataset = result.dataset
     salvage = result.salvage
     if salvage.truncated or salvage.damaged_records or salvage.resynchronised or salvage.data_crc_ok is False:

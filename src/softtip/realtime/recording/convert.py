@@ -19,6 +19,10 @@ empty state). A recording cut short by a killed process converts up to its last 
 a damaged chunk without that chunk's messages; the conversion's ``salvage`` says what was read and
 what was lost. A recording whose data section fails its CRC with no damaged record to explain it
 (a flipped byte in a topic name, a unit, a label) is refused: what it would misname cannot be told.
+One whose CRC fails beside a damaged chunk or length is refused too unless ``salvage`` is asked: the
+CRC cannot tell whether the damage stops there or also reached a record outside the chunks, which
+no CRC of its own covers (a topic name flipped beside a damaged chunk would convert without its
+labels); salvaged, what parses converts and ``salvage`` says what was lost.
 """
 
 from __future__ import annotations
@@ -202,12 +206,18 @@ def _labels(recording: Recording, prefix: str, stamps: np.ndarray,
 
 def convert(mcap_path: str | os.PathLike, parquet_path: str | os.PathLike | None = None, *,
             gap_s: float | None = 1.0, baseline_frames: int = 50, prefix: str | None = None,
-            description: str | None = None) -> Conversion:
-    """Convert an MCAP recording to a dataset (module notes); written to ``parquet_path`` if given."""
+            description: str | None = None, salvage: bool = False) -> Conversion:
+    """Convert an MCAP recording to a dataset (module notes); written to ``parquet_path`` if given.
+    With ``salvage``, a recording whose data section fails its CRC beside damaged records converts."""
     if gap_s is not None:
         checked(PositiveNumber, "gap_s", gap_s)
     recording = read_recording(mcap_path)
     recording.salvage.refuse_unexplained_damage(recording.path)
+    if recording.salvage.data_crc_ok is False and not salvage:
+        raise RecordingError(f"{recording.path}: the data section fails its CRC beside "
+                             f"{recording.salvage.damaged_records} damaged and {recording.salvage.resynchronised} "
+                             "resynchronised records, and a topic name, unit or label outside them may be altered "
+                             "too: refused unless salvaged (--salvage)")
     prefix, reading_topics, reading = _reading_topics(recording, prefix)
     stamps, log_times, fields, incomplete = _frames(recording, reading_topics, reading)
     chips = len(reading_topics)
