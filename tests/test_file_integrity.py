@@ -15,7 +15,14 @@ import pytest
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 
-from softtip._core.archive import ModelFileError, archive_digest, canonical_json, write_archive
+from softtip._core.archive import (
+    ModelFileError,
+    archive_digest,
+    archive_format,
+    canonical_json,
+    read_archive,
+    write_archive,
+)
 from softtip.calibration import LMNetwork, PolynomialFit, load_model, save_model
 from softtip.data.dataset import Dataset, DatasetError, UnverifiedDatasetWarning
 
@@ -206,6 +213,50 @@ def test_the_model_checksum_covers_each_arrays_shape():
     assert archive_digest(metadata, {"w": weights.reshape(2, 3)}) != reference
     assert archive_digest(metadata, {"w": weights.reshape(2, 3)}) == hashlib.sha256(
         b'{"format":"softtip-model"}' + b"w\0<f8\0(2, 3)\0" + weights.tobytes()).hexdigest()
+
+
+def test_canonical_json_sorts_keys_at_every_level_and_refuses_nan():
+    # by hand: sorted keys at every level, no spaces
+    assert canonical_json({"b": 1, "a": {"d": [1.5, "x"], "c": None}}) == b'{"a":{"c":null,"d":[1.5,"x"]},"b":1}'
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        canonical_json({"gain": float("nan")})
+
+
+def test_read_archive_refuses_object_arrays_and_a_metadata_entry_that_is_not_one_text(tmp_path):
+    metadata = {"format": "softtip-model", "schema_version": 1}
+    stated = metadata | {"sha256": archive_digest(metadata, {})}
+    path = tmp_path / "model.npz"  # as numpy alone writes an archive: no seal, its content checksum right
+    np.savez(path, metadata=np.array(canonical_json(stated).decode()), w=np.array([1.0, "a"], dtype=object))
+    # an object array is pickled: never unpickled, refused for what numpy says
+    with pytest.raises(ModelFileError, match=r"model.npz is truncated or unreadable \(ValueError: Object arrays "
+                                             r"cannot be loaded when allow_pickle=False\)"):
+        read_archive(path, "softtip-model", 1, "model", ModelFileError)
+    # the metadata as a list of one text rather than one text
+    np.savez(path, metadata=np.array([canonical_json(stated).decode()]))
+    with pytest.raises(ModelFileError, match=r"model.npz is not a softtip model file \(no metadata entry\)"):
+        read_archive(path, "softtip-model", 1, "model", ModelFileError)
+    np.savez(path, metadata=np.array(canonical_json(stated).decode()))  # the same text as one: it reads
+    assert read_archive(path, "softtip-model", 1, "model", ModelFileError) == (stated, {})
+
+
+def test_archive_format_names_the_format_of_a_readable_archive_and_nothing_else(tmp_path):
+    written = write_archive(tmp_path / "model.npz", {"format": "softtip-model", "schema_version": 1},
+                            {"w": np.arange(3.0)})
+    assert archive_format(written) == "softtip-model"
+    other = tmp_path / "other.npz"
+    np.savez(other, metadata=np.array('{"format": "made-by-numpy"}'))  # no checksum, no seal: read all the same
+    assert archive_format(other) == "made-by-numpy"
+    # the same text pickled as an object array: never unpickled, so no format
+    np.savez(other, metadata=np.array('{"format": "made-by-numpy"}', dtype=object))
+    assert archive_format(other) is None
+    for metadata in ("[1, 2]", "{}", "not JSON"):  # not an object, no format, no JSON
+        np.savez(other, metadata=np.array(metadata))
+        assert archive_format(other) is None, metadata
+    np.savez(other, w=np.zeros(2))  # no metadata entry
+    assert archive_format(other) is None
+    for content in (b"not an archive", written.read_bytes()[:200]):  # not a zip; cut inside its first entry
+        other.write_bytes(content)
+        assert archive_format(other) is None
 
 
 def test_a_dataset_whose_metadata_is_rewritten_as_compact_json_is_refused(tmp_path):

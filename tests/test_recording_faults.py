@@ -30,7 +30,7 @@ from typer.testing import CliRunner
 from softtip.cli.main import app
 from softtip.realtime.recording import convert
 from softtip.realtime.recording.format import RecordingError
-from softtip.realtime.recording.reader import MAGIC
+from softtip.realtime.recording.reader import MAGIC, Salvage, _heads_plausible, _next_record, read_recording
 from softtip.realtime.recording.sealed import SealedMcapWriter
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
@@ -691,3 +691,188 @@ def test_a_tail_that_cannot_be_put_back_is_said_so_and_repair_mends_it(tmp_path,
     salvage = repair_recording(path, tmp_path / "mended.mcap")
     # every message of the last flush is still there, before the torn tail
     assert indexed_messages(tmp_path / "mended.mcap")[1][:len(flushed)] == flushed and salvage.truncated
+
+
+# --------------------------------------------------------------------------
+# What a scan says it lost, and what the sealed writer says when a write fails, on small files
+# --------------------------------------------------------------------------
+
+
+def chunked(path: Path, chunk_times: list[range]) -> list:
+    """A recording of one channel, one chunk of uncompressed messages per range of log times (ns), in
+    that order; returns the chunk indexes in file order."""
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, compression="none")
+        writer.start()
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        for times in chunk_times:
+            for log_time in times:
+                writer.add_message(channel, log_time, b'{"n": %d}' % log_time, log_time)
+            writer.flush()  # closes the chunk
+        writer.finish()
+    return chunks_of(path)
+
+
+def with_damaged_chunks(path: Path, chunks: list) -> Path:
+    """``path`` with a byte of the last message of each of ``chunks`` flipped (its CRC then fails)."""
+    content = bytearray(path.read_bytes())
+    for chunk in chunks:
+        content[chunk.chunk_start_offset + chunk.chunk_length - 3] ^= 0x01
+    damaged = path.with_name("damaged.mcap")
+    damaged.write_bytes(bytes(content))
+    return damaged
+
+
+def test_two_damaged_chunks_are_both_counted_with_the_times_their_headers_state(tmp_path):
+    times = [range(100, 200, 10), range(500, 600, 10), range(1000, 1100, 10)]
+    chunks = chunked(tmp_path / "ordered.mcap", times)
+    salvage = read_recording(with_damaged_chunks(tmp_path / "ordered.mcap", [chunks[0], chunks[2]])).salvage
+    assert salvage.damaged_records == 2 and salvage.messages == 10
+    assert salvage.bytes_lost == chunks[0].chunk_length + chunks[2].chunk_length
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == (100, 1090)
+    # time going backwards (a restarted device): the range still spans both lost chunks
+    chunks = chunked(tmp_path / "backwards.mcap", times[::-1])
+    salvage = read_recording(with_damaged_chunks(tmp_path / "backwards.mcap", [chunks[0], chunks[2]])).salvage
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == (100, 1090) and salvage.damaged_records == 2
+
+
+@pytest.mark.parametrize(("kept", "lost_times"), [(16, (500, 590)), (15, (None, None))],
+                         ids=["both-times-kept", "one-byte-short"])
+def test_a_file_cut_inside_a_chunk_header_states_the_lost_times_only_when_both_are_there(tmp_path, kept, lost_times):
+    chunks = chunked(tmp_path / "whole.mcap", [range(100, 200, 10), range(500, 600, 10)])
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((tmp_path / "whole.mcap").read_bytes()[:chunks[1].chunk_start_offset + 9 + kept])
+    salvage = read_recording(cut).salvage
+    assert salvage.truncated and salvage.messages == 10
+    assert (salvage.lost_from_ns, salvage.lost_to_ns) == lost_times
+
+
+def test_the_salvage_report_gives_the_lost_times_in_microseconds_from_the_first_message():
+    # by hand: (lost - first) ns, in s rounded to 6 decimals; from 0 when no message was read
+    assert Salvage(100, first_ns=None, lost_from_ns=501, lost_to_ns=1_234_567).report()["time_lost_s"] == [
+        0.000001, 0.001235]
+    assert Salvage(100, first_ns=1_000, lost_from_ns=1_501, lost_to_ns=1_235_567).report()["time_lost_s"] == [
+        0.000001, 0.001235]
+    assert Salvage(100).report()["time_lost_s"] is None
+    # every field, under its name; the tail's reason only when there is one
+    salvage = Salvage(1000, bytes_read=900, messages=7, reason="the file ends in a record's head", damaged_records=1,
+                      lost_from_ns=1_501, lost_to_ns=1_235_567, first_ns=1_000, data_crc_ok=False, resynchronised=2)
+    assert salvage.report() == {"messages_read": 7, "truncated": True, "bytes_lost": 100, "damaged_records": 1,
+                                "time_lost_s": [0.000001, 0.001235], "data_crc_ok": False, "resynchronised": 2,
+                                "tail": "the file ends in a record's head"}
+    assert "tail" not in Salvage(1000, truncated=False).report()
+
+
+def test_every_attachment_and_metadata_record_is_indexed_and_counted(tmp_path):
+    path = tmp_path / "two.mcap"
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, compression="none")
+        writer.start(profile="ros2", library="test")
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        for k in range(2):
+            writer.add_attachment(3 + k, 4 + k, f"a{k}.toml", "application/toml", b"gain = %d\n" % k)
+            writer.add_metadata(f"m{k}", {"k": str(k)})
+        writer.finish()
+    assert check_as_the_specification_defines(path) == 1
+    with path.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert [index.name for index in summary.attachment_indexes] == ["a0.toml", "a1.toml"]
+    assert [index.name for index in summary.metadata_indexes] == ["m0", "m1"]
+    assert (summary.statistics.attachment_count, summary.statistics.metadata_count) == (2, 2)
+
+
+def test_a_failed_first_write_says_that_nothing_had_been_written(tmp_path, monkeypatch):
+    written_whole = os.pwrite
+
+    def full_disk(fd: int, data: bytes, offset: int) -> int:
+        if data:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return written_whole(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", full_disk)
+    path = tmp_path / "first.mcap"
+    with path.open("wb") as stream, pytest.raises(RecordingError) as failed:
+        SealedMcapWriter(stream).start()
+    assert str(failed.value) == "the recording's write failed (No space left on device); nothing had been written"
+    assert path.stat().st_size == 0
+
+
+def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
+    path = tmp_path / "short.mcap"
+    written_whole = os.pwrite
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, compression="none")
+        writer.start()
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        writer.flush()
+        # from now on the disk takes half of every write
+        monkeypatch.setattr(os, "pwrite", lambda fd, data, offset: written_whole(fd, data[:len(data) // 2], offset))
+        writer.add_message(channel, 6, b'{"n": 2}', 6)
+        with pytest.raises(RecordingError, match=r"; its tail could not be put back \(the tail was not written "
+                                                 r"whole\): softtip recording repair mends it$"):
+            writer.flush()
+
+
+def test_where_a_record_head_is_plausible_by_hand():
+    # 21 bytes: a message record (opcode 0x05) of 3 body bytes, then one of none that ends the file exactly
+    content = np.frombuffer(struct.pack("<BQ3sBQ", 0x05, 3, b"abc", 0x05, 0), dtype=np.uint8)
+    at = np.array([0, 2, 12, 13, 21, 22])
+    # 0, 12: heads of records that fit; 2: byte 0x00, no opcode; 13, 21: too close to the end for a head
+    # (a torn tail: plausible unless whole records are asked for); 22: past the end
+    np.testing.assert_array_equal(_heads_plausible(content, at, whole=False), [1, 0, 1, 1, 1, 0])
+    np.testing.assert_array_equal(_heads_plausible(content, at, whole=True), [1, 0, 1, 0, 0, 0])
+    # lengths that run one byte past the end: heads, but not of whole records
+    longer = np.frombuffer(struct.pack("<BQ3sBQ", 0x05, 13, b"abc", 0x05, 1), dtype=np.uint8)
+    np.testing.assert_array_equal(_heads_plausible(longer, np.array([0, 2, 12]), whole=False), [1, 0, 1])
+    np.testing.assert_array_equal(_heads_plausible(longer, np.array([0, 2, 12]), whole=True), [0, 0, 0])
+    exact = np.frombuffer(struct.pack("<BQ3sBQ", 0x05, 12, b"abc", 0x05, 0), dtype=np.uint8)
+    np.testing.assert_array_equal(_heads_plausible(exact, np.array([0]), whole=True), [1])
+    # no opcode, though the 8 bytes after it would make a length that fits
+    padded = np.concatenate([content, np.zeros(9, np.uint8)])
+    np.testing.assert_array_equal(_heads_plausible(padded, np.array([12, 13]), whole=True), [1, 0])
+
+
+def test_resynchronising_finds_a_record_whose_head_ends_the_file():
+    # by hand: five bytes of no record, then a head of opcode 0x02 (the footer's, whose body a scan does
+    # not read) and length 0 that ends the file exactly
+    content = b"\x00" * 5 + struct.pack("<BQ", 0x02, 0)
+    assert _next_record(content, 0) == 5
+    assert _next_record(content, 6) is None
+    assert _next_record(content[:-1], 0) is None  # one byte short of a head
+
+
+def test_how_a_cut_or_damaged_tail_ends_is_said_word_for_word(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=100)
+    content = whole.read_bytes()
+    chunk = chunks_of(whole)[1]
+    start, end = chunk.chunk_start_offset, chunk.chunk_start_offset + chunk.chunk_length
+
+    def tail(data: bytes) -> str:
+        (tmp_path / "tail.mcap").write_bytes(data)
+        return read_recording(tmp_path / "tail.mcap").salvage.reason
+
+    assert tail(content[:start]) == "the file ends between records"
+    assert tail(content[:start + 4]) == "the file ends in a record's head"
+    assert tail(content[:start + 100]) == f"the file ends {chunk.chunk_length - 100} bytes short of a record (opcode 0x06)"
+    claimed = bytearray(content[:start + 100])
+    claimed[start + 6] = 0x01  # the length's sixth byte: 2**40 more
+    assert tail(bytes(claimed)) == (f"a record of opcode 0x06 claims {chunk.chunk_length - 9 + 2**40} bytes, more "
+                                    "than the file holds")
+    assert tail(content[:end] + bytes(20)) == f"no record follows the record of opcode 0x06 at byte {start}"
+
+
+def test_a_file_that_is_no_recording_is_refused_in_one_line(tmp_path):
+    missing = tmp_path / "missing.mcap"
+    with pytest.raises(RecordingError) as refused:
+        read_recording(missing)
+    assert str(refused.value) == f"recording {missing} does not exist"
+    for content, why in [(b"hello, world", None), (MAGIC, "the file ends between records"),
+                         (MAGIC + b"\x01\x02", "the file ends in a record's head")]:
+        path = tmp_path / "short.mcap"
+        path.write_bytes(content)
+        with pytest.raises(RecordingError) as refused:
+            read_recording(path)
+        assert str(refused.value) == (f"{path} is not an MCAP file" if why is None else
+                                      f"{path}: unreadable MCAP file ({why})")

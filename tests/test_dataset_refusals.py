@@ -1,0 +1,205 @@
+"""Every refusal of the dataset module, word for word: a one-line message names the parameter, column or
+trial at fault and what was expected (the reference: the message as the module's notes state it,
+written out by hand); and the baseline subtraction and access helpers against hand-computed values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softtip.data import Dataset, DatasetError, DatasetMetadata, TrialWriter, concat
+from softtip.data.dataset import require_columns, subtract_trial_baseline
+
+
+def small() -> Dataset:
+    return Dataset({"trial": [3, 3, 8], "time_s": [0.0, 0.1, 0.0], "s0_bz_uT": [1.0, 2.0, 3.0],
+                    "s0_bx_uT": [4.0, 5.0, 6.0], "fz_N": [0.1, 0.2, 0.3], "state": ["a", "b", "c"],
+                    "phi_deg": [10, 10, 20]},
+                   labels={"fz_N": "N", "state": "1"}, conditions={"phi_deg": "deg"})
+
+
+def bare() -> Dataset:
+    return Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]})
+
+
+CASES = {
+    "baseline of zero samples": (lambda: subtract_trial_baseline(np.zeros((2, 1)), np.zeros(2, int), 0),
+                                 "baseline: expected a number of samples >= 1, got 0"),
+    "baseline of True samples": (lambda: subtract_trial_baseline(np.zeros((2, 1)), np.zeros(2, int), True),
+                                 "baseline: expected a number of samples >= 1, got True"),
+    "baseline of 2.5 samples": (lambda: subtract_trial_baseline(np.zeros((5, 1)), np.zeros(5, int), 2.5),
+                                "baseline: expected a number of samples >= 1, got 2.5"),
+    "baseline longer than a trial": (lambda: subtract_trial_baseline(np.zeros((5, 1)), np.array([0, 0, 0, 7, 7]), 3),
+                                     "trial 7 has 2 samples, fewer than the 3 of its baseline"),
+    "no such column": (lambda: small().column("nope"),
+                       "no column 'nope' (columns: trial, time_s, s0_bx_uT, s0_bz_uT, fz_N, state, phi_deg)"),
+    "X of no channels": (lambda: small().X([]), "X: no channels asked for"),
+    "X of a label": (lambda: small().X(["fz_N"]),
+                     "X: 'fz_N' is not a channel of this dataset (channels: s0_bx_uT, s0_bz_uT)"),
+    "y of nothing": (lambda: small().y([]), "y: no labels asked for"),
+    "y of text among numbers": (lambda: small().y(["fz_N", "state"]), "y: state holds <U1 values; ask for it alone"),
+    "y of an unknown name": (lambda: small().y("nope"),
+                             "y: 'nope' is not a label or condition (labels: fz_N, state; conditions: phi_deg)"),
+    "y of a channel": (lambda: bare().y(["s0_bz_uT"]),
+                       "y: 's0_bz_uT' is not a label or condition (labels: none; conditions: none)"),
+    "select of both": (lambda: small().select([0], trials=[3]), "select: give either rows or trials"),
+    "select of neither": (lambda: small().select(), "select: give either rows or trials"),
+    "select of a short mask": (lambda: small().select(np.array([True, False])),
+                               "select: a row mask needs 3 entries, got shape (2,)"),
+    "select past the end": (lambda: small().select(np.array([0, 3])),
+                            "select: row indices must be in [0, 3), got 0..3"),
+    "select before the start": (lambda: small().select(np.array([-1, 2])),
+                                "select: row indices must be in [0, 3), got -1..2"),
+    "select by floats": (lambda: small().select(np.array([0.0])),
+                         "select: rows must be a boolean mask or 1-D integer indices, got float64"),
+    "select by 2-D indices": (lambda: small().select(np.array([[0]])),
+                              "select: rows must be a boolean mask or 1-D integer indices, got int64"),
+    "a 2-D column": (lambda: Dataset({"trial": [0], "time_s": [[0.0]], "s0_bz_uT": [1.0]}),
+                     "column time_s: expected a 1-D array, got shape (1, 1)"),
+    "text trial ids": (lambda: Dataset({"trial": ["a"], "time_s": [0.0], "s0_bz_uT": [1.0]}),
+                       "column trial: expected integer trial ids, got <U1"),
+    "text channel": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": ["x"]}),
+                     "column s0_bz_uT: expected numbers, got <U1"),
+    "complex label": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "z": [1j]},
+                                      labels={"z": "1"}),
+                      "column z: dtype complex128 cannot be stored (expected bool, integer, float32, float64 or string)"),
+    "float16 label": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0],
+                                       "z": np.zeros(1, np.float16)}, labels={"z": "1"}),
+                      "column z: dtype float16 cannot be stored (expected bool, integer, float32, float64 or string)"),
+    "labels not a mapping": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]}, labels=["z"]),
+                             "labels: expected a mapping of name to unit, got list"),
+    "a label not an identifier": (lambda: TrialWriter(1, {"f z": "N"}),
+                                  "labels: 'f z' is not a valid column name (letters, digits, underscores)"),
+    "a condition named time_s": (lambda: TrialWriter(1, None, {"time_s": "s"}),
+                                 "conditions: 'time_s' is reserved for the trial id, the time or a channel"),
+    "a label named as a channel": (lambda: TrialWriter(1, {"s0_bx_uT": "uT"}),
+                                   "labels: 's0_bx_uT' is reserved for the trial id, the time or a channel"),
+    "a unit of spaces": (lambda: TrialWriter(1, None, {"phi": "  "}),
+                         'conditions: phi has no unit (give a unit string; "1" if dimensionless)'),
+    "a magnetic channel in mT": (lambda: TrialWriter({"s0_bx_uT": "mT"}),
+                                 "channels: s0_bx_uT [mT] is a magnetic channel, in uT"),
+    "design not a dict": (lambda: DatasetMetadata(design=[1]),
+                          "metadata design: expected a JSON object (a dict), got list"),
+    "protocol with NaN": (lambda: DatasetMetadata(protocol={"gain": float("nan")}),
+                          "metadata protocol: not representable as JSON (Out of range float values are not JSON "
+                          "compliant)"),
+    "creation time not ISO": (lambda: DatasetMetadata(created_utc="yesterday"),
+                              "metadata created_utc: expected an ISO 8601 time, got 'yesterday'"),
+    "a channel also a label": (lambda: Dataset({"trial": [0], "time_s": [0.0], "f": [1.0]}, labels={"f": "N"},
+                                               channel_units={"f": "N"}),
+                               "f is declared both as a channel and as a label or condition"),
+    "metadata not DatasetMetadata": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                     metadata={"description": "x"}),
+                                     "metadata: expected a DatasetMetadata, got dict"),
+    "no trial column": (lambda: Dataset({"time_s": [0.0], "s0_bz_uT": [1.0]}), "missing column trial"),
+    "no time column": (lambda: Dataset({"trial": [0], "s0_bz_uT": [1.0]}), "missing column time_s"),
+    "no channel": (lambda: Dataset({"trial": [0], "time_s": [0.0]}),
+                   "no channel columns (expected names like s0_bx_uT, or channels declared with units)"),
+    "an undeclared column": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "f": [1.0]}),
+                             "column 'f' is neither a channel (s<k>_b<x|y|z>_uT, or declared with its unit) nor a "
+                             "declared label or condition"),
+    "a declared label missing": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                 labels={"f": "N"}),
+                                 "missing column f (declared as a label)"),
+    "a declared channel missing": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                   channel_units={"f": "N"}),
+                                   "missing column f (declared as a channel)"),
+    "a declared condition missing": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                     conditions={"f": "N"}),
+                                     "missing column f (declared as a condition)"),
+    "a NaN channel": (lambda: Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0, np.nan]}),
+                      "column s0_bz_uT: row 1 is not finite"),
+    "columns of two lengths": (lambda: Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0]}),
+                               "columns differ in length: trial has 2 rows, s0_bz_uT has 1"),
+    "time standing still": (lambda: Dataset({"trial": [5, 5, 5], "time_s": [0.0, 1.0, 1.0], "s0_bz_uT": np.zeros(3)}),
+                            "column time_s: time does not increase within trial 5 at row 2"),
+    "an infinite time": (lambda: Dataset({"trial": [5, 5], "time_s": [0.0, np.inf], "s0_bz_uT": np.zeros(2)}),
+                         "column time_s: row 1 is not finite"),
+    "a condition that changes": (lambda: Dataset({"trial": [1, 1, 2, 2], "time_s": [0.0, 1.0, 0.0, 1.0],
+                                                  "s0_bz_uT": np.zeros(4), "c": [1.0, 1.0, np.nan, 2.0]},
+                                                 conditions={"c": "1"}),
+                                 "condition c changes within trial 2: conditions are constant over a trial"),
+    "text in a unit": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "c": ["x"]},
+                                       conditions={"c": "mm"}),
+                       'column c holds text but is declared in mm: text columns are categories, declared with unit "1"'),
+    "concat of nothing": (lambda: concat([]), "concat: no datasets given"),
+    "concat of other conditions": (lambda: concat(
+        [small(), Dataset({"trial": [9], "time_s": [0.0], "s0_bz_uT": [1.0], "s0_bx_uT": [1.0], "fz_N": [0.1],
+                           "state": ["a"], "phi_deg": [1.0]}, {"fz_N": "N", "state": "1"}, {"phi_deg": "mm"})]),
+        "concat: dataset 1 has conditions {'phi_deg': 'mm'}, dataset 0 has {'phi_deg': 'deg'}"),
+    "concat of other channels": (lambda: concat([bare(), Dataset({"trial": [9], "time_s": [0.0], "s0_bx_uT": [1.0]})]),
+                                 "concat: dataset 1 has channels {'s0_bx_uT': 'uT'}, dataset 0 has {'s0_bz_uT': 'uT'}"),
+    "concat of another design": (lambda: concat([bare(), Dataset({"trial": [9], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                                 metadata=DatasetMetadata(design={"name": "B"}))]),
+                                 "concat: dataset 1 has a different design from dataset 0"),
+    "concat of other sensor settings": (lambda: concat([bare(), Dataset(
+        {"trial": [9], "time_s": [0.0], "s0_bz_uT": [1.0]}, metadata=DatasetMetadata(sensor_settings={"gain": 1}))]),
+        "concat: dataset 1 has a different sensor settings from dataset 0"),
+    "concat of text and numbers": (lambda: concat([
+        Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "c": [1.0]}, conditions={"c": "1"}),
+        Dataset({"trial": [1], "time_s": [0.0], "s0_bz_uT": [1.0], "c": ["x"]}, conditions={"c": "1"})]),
+        "concat: column c holds string values in dataset 1 and numeric values in dataset 0"),
+    "concat of booleans and numbers": (lambda: concat([
+        Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "c": [1]}, conditions={"c": "1"}),
+        Dataset({"trial": [1], "time_s": [0.0], "s0_bz_uT": [1.0], "c": [True]}, conditions={"c": "1"})]),
+        "concat: column c holds boolean values in dataset 1 and numeric values in dataset 0"),
+    "concat of one trial twice": (lambda: concat([bare(), bare()]),
+                                  "concat: trial 0 occurs in more than one dataset (pass renumber_trials=True to number "
+                                  "the trials afresh)"),
+    "a writer of no channels": (lambda: TrialWriter([]), "channels: expected distinct channel names, at least one"),
+    "a writer of one channel twice": (lambda: TrialWriter(["s0_bx_uT", "s0_bx_uT"]),
+                                      "channels: expected distinct channel names, at least one"),
+    "a writer of a channel not a name": (lambda: TrialWriter([3]),
+                                         "channels: 3 is not a channel name (s<k>_b<x|y|z>_uT)"),
+    "a trial id of True": (lambda: TrialWriter(1).add({}, trial=True), "trial: expected an integer id, got True"),
+    "a trial id of 1.0": (lambda: TrialWriter(1).add({}, trial=1.0), "trial: expected an integer id, got 1.0"),
+    "a trial of no samples": (lambda: TrialWriter(1).add({"time_s": [], "s0_bx_uT": [], "s0_by_uT": [],
+                                                          "s0_bz_uT": []}),
+                              "trial 0: no samples"),
+    "a trial lacking two columns": (lambda: TrialWriter(1).add({"time_s": [0.0], "s0_bx_uT": [0.0]}),
+                                    "trial 0: samples lack s0_by_uT, s0_bz_uT"),
+    "a trial holding two more": (lambda: TrialWriter(1).add({"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0],
+                                                             "s0_bz_uT": [0.0], "b": [0.0], "a": [0.0]}),
+                                 "trial 0: samples hold undeclared a, b"),
+    "a trial's condition of two values": (lambda: TrialWriter(1, None, {"c": "1"}).add(
+        {"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0], "s0_bz_uT": [0.0]}, {"c": [1, 2]}, trial=4),
+        "trial 4: condition c must be one value, got shape (2,)"),
+    "a trial of a NaN time": (lambda: TrialWriter(1).add({"time_s": [np.nan], "s0_bx_uT": [0.0], "s0_by_uT": [0.0],
+                                                          "s0_bz_uT": [0.0]}, trial=2),
+                              "trial 2: column time_s: row 0 is not finite"),
+    "a writer of no trials": (lambda: TrialWriter(1).to_dataset(), "no trials were added"),
+    "a column missing from a file": (lambda: require_columns("run.csv", ["a"], ["b", "c"]),
+                                     "run.csv: no column 'a' (columns: b, c)"),
+    "a column twice in a file": (lambda: require_columns("run.csv", ["b"], ["b", "c", "b"]),
+                                 "run.csv: column 'b' appears more than once"),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_each_refusal_is_one_line_word_for_word(case):
+    call, message = CASES[case]
+    with pytest.raises(DatasetError) as refusal:
+        call()
+    assert str(refusal.value) == message
+
+
+def test_the_trial_baseline_is_the_mean_of_each_trials_first_rows():
+    values = np.array([[1.0, 10.0], [3.0, 20.0], [5.0, 60.0], [2.0, 4.0], [4.0, 8.0]])
+    trial = np.array([0, 0, 0, 1, 1])
+    # by hand: trial 0's first two rows average (2, 15), trial 1's (3, 6)
+    np.testing.assert_array_equal(subtract_trial_baseline(values, trial, 2),
+                                  [[-1.0, -5.0], [1.0, 5.0], [3.0, 45.0], [-1.0, -2.0], [1.0, 2.0]])
+    # one sample: each trial's first row
+    np.testing.assert_array_equal(subtract_trial_baseline(values, trial, 1),
+                                  [[0.0, 0.0], [2.0, 10.0], [4.0, 50.0], [0.0, 0.0], [2.0, 4.0]])
+    np.testing.assert_array_equal(subtract_trial_baseline(values, trial, np.int64(1)),
+                                  subtract_trial_baseline(values, trial, 1))
+
+
+def test_a_column_given_exactly_once_is_found():
+    require_columns("run.csv", ["b", "c"], ["c", "b"])  # no refusal
+
+
+def test_repr_counts_samples_and_trials_and_names_the_columns():
+    assert repr(small()) == ("Dataset(3 samples, 2 trials, channels ['s0_bx_uT', 's0_bz_uT'], labels {'fz_N': 'N', "
+                             "'state': '1'}, conditions {'phi_deg': 'deg'})")
