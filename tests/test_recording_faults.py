@@ -30,7 +30,14 @@ from typer.testing import CliRunner
 from softtip.cli.main import app
 from softtip.realtime.recording import convert
 from softtip.realtime.recording.format import RecordingError
-from softtip.realtime.recording.reader import MAGIC, Salvage, _heads_plausible, _next_record, read_recording
+from softtip.realtime.recording.reader import (
+    MAGIC,
+    Salvage,
+    TopicMessages,
+    _heads_plausible,
+    _next_record,
+    read_recording,
+)
 from softtip.realtime.recording.sealed import SealedMcapWriter
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
 
@@ -841,6 +848,11 @@ def test_resynchronising_finds_a_record_whose_head_ends_the_file():
     assert _next_record(content, 0) == 5
     assert _next_record(content, 6) is None
     assert _next_record(content[:-1], 0) is None  # one byte short of a head
+    # followed by a torn head rather than a whole record: found all the same (a torn tail)
+    assert _next_record(content + b"\x05\x01", 0) == 5
+    # a message head of length 2 chained to the next head, whose body does not parse as a message: passed over
+    content = b"\x00" * 3 + struct.pack("<BQ2sBQ", 0x05, 2, b"zz", 0x02, 0)
+    assert _next_record(content, 0) == 14
 
 
 def test_how_a_cut_or_damaged_tail_ends_is_said_word_for_word(tmp_path):
@@ -876,3 +888,15 @@ def test_a_file_that_is_no_recording_is_refused_in_one_line(tmp_path):
             read_recording(path)
         assert str(refused.value) == (f"{path} is not an MCAP file" if why is None else
                                       f"{path}: unreadable MCAP file ({why})")
+
+
+def test_a_topic_that_does_not_decode_says_why_word_for_word():
+    with pytest.raises(RecordingError) as refused:
+        TopicMessages("/t", "", "", {}, None, data=[b"x"]).decoded()
+    assert str(refused.value) == "topic /t: schemaless messages of no schema are not ROS 2 messages with a ros2msg schema"
+    with pytest.raises(RecordingError) as refused:
+        TopicMessages("/t", "note", "json", {}, None, data=[b"x"]).decoded()
+    assert str(refused.value) == "topic /t: json messages of note are not ROS 2 messages with a ros2msg schema"
+    with pytest.raises(RecordingError) as refused:
+        TopicMessages("/t", "note", "cdr", {}, lambda message: message[9], data=[b"x"]).decoded()
+    assert str(refused.value) == "topic /t: a message does not decode as note (IndexError: index out of range)"

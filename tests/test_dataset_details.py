@@ -1,6 +1,7 @@
 """Every refusal of the dataset module, word for word: a one-line message names the parameter, column or
 trial at fault and what was expected (the reference: the message as the module's notes state it,
-written out by hand); and the baseline subtraction and access helpers against hand-computed values."""
+written out by hand); and the baseline subtraction, the access helpers and the metadata of joined
+datasets against hand-computed values."""
 
 from __future__ import annotations
 
@@ -203,3 +204,20 @@ def test_a_column_given_exactly_once_is_found():
 def test_repr_counts_samples_and_trials_and_names_the_columns():
     assert repr(small()) == ("Dataset(3 samples, 2 trials, channels ['s0_bx_uT', 's0_bz_uT'], labels {'fz_N': 'N', "
                              "'state': '1'}, conditions {'phi_deg': 'deg'})")
+
+
+def test_joined_datasets_keep_the_metadata_they_share_and_list_what_differs():
+    design, settings = {"name": "B", "p": [1, 2]}, {"gain_sel": 7}
+
+    def part(trial: int, protocol: dict, seed: int, description: str) -> Dataset:
+        return Dataset({"trial": [trial], "time_s": [0.0], "s0_bz_uT": [1.0]}, metadata=DatasetMetadata(
+            description=description, design=design, sensor_settings=settings, protocol=protocol, seed=seed,
+            softtip_version="0.9", created_utc="2025-01-02T03:04:05Z"))
+
+    same = concat([part(0, {"grasp_mm": 4}, 11, "a"), part(1, {"grasp_mm": 4}, 11, "a")]).metadata
+    assert same == DatasetMetadata(description="a", design=design, sensor_settings=settings,
+                                   protocol={"grasp_mm": 4}, seed=11, softtip_version="0.9",
+                                   created_utc="2025-01-02T03:04:05Z")
+    other = concat([part(0, {"grasp_mm": 4}, 11, "a"), part(1, {"grasp_mm": 5}, 12, "b")]).metadata
+    assert (other.description, other.design, other.sensor_settings, other.protocol, other.seed) == (
+        "a; b", design, settings, {"concatenated": [{"grasp_mm": 4}, {"grasp_mm": 5}]}, None)
