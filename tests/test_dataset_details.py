@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from softtip import __version__
 from softtip.data import Dataset, DatasetError, DatasetMetadata, TrialWriter, concat
 from softtip.data.dataset import require_columns, subtract_trial_baseline
 
@@ -221,3 +222,10 @@ def test_joined_datasets_keep_the_metadata_they_share_and_list_what_differs():
     other = concat([part(0, {"grasp_mm": 4}, 11, "a"), part(1, {"grasp_mm": 5}, 12, "b")]).metadata
     assert (other.description, other.design, other.sensor_settings, other.protocol, other.seed) == (
         "a; b", design, settings, {"concatenated": [{"grasp_mm": 4}, {"grasp_mm": 5}]}, None)
+    assert (other.softtip_version, other.created_utc) == ("0.9", "2025-01-02T03:04:05Z")  # the same in both
+    later = part(1, {"grasp_mm": 4}, 11, "a")
+    object.__setattr__(later.metadata, "created_utc", "2025-06-07T08:09:10Z")
+    joined = concat([part(0, {"grasp_mm": 4}, 11, "a"), later]).metadata
+    # two creation times: the joined dataset is made now, by this softtip
+    assert joined.softtip_version == __version__ and joined.created_utc not in (
+        "2025-01-02T03:04:05Z", "2025-06-07T08:09:10Z")

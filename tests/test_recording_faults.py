@@ -900,3 +900,18 @@ def test_a_topic_that_does_not_decode_says_why_word_for_word():
     with pytest.raises(RecordingError) as refused:
         TopicMessages("/t", "note", "cdr", {}, lambda message: message[9], data=[b"x"]).decoded()
     assert str(refused.value) == "topic /t: a message does not decode as note (IndexError: index out of range)"
+
+
+def test_a_ros2_schema_that_does_not_parse_is_refused_naming_the_topic(tmp_path):
+    path = tmp_path / "bad-schema.mcap"
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream)
+        writer.start()
+        schema = writer.register_schema("pkg/msg/Bad", "ros2msg", b"this is not ! a message definition")
+        writer.add_message(writer.register_channel("/bad", "cdr", schema), 1, b"\x00\x01\x00\x00", 1)
+        writer.finish()
+    with pytest.raises(RecordingError) as refused:
+        read_recording(path)
+    # the parser's own words: "this" is read as a type name, which must begin with a capital
+    assert str(refused.value).startswith(f"{path}: topic /bad: schema pkg/msg/Bad does not parse (InvalidResourceName: "
+                                         "'this' is an invalid message name.")
