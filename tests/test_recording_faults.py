@@ -915,3 +915,29 @@ def test_a_ros2_schema_that_does_not_parse_is_refused_naming_the_topic(tmp_path)
     # the parser's own words: "this" is read as a type name, which must begin with a capital
     assert str(refused.value).startswith(f"{path}: topic /bad: schema pkg/msg/Bad does not parse (InvalidResourceName: "
                                          "'this' is an invalid message name.")
+
+
+def test_the_sealed_writer_refuses_what_the_format_cannot_hold_word_for_word(tmp_path):
+    with (tmp_path / "refusals.mcap").open("wb") as stream:
+        with pytest.raises(RecordingError) as refused:
+            SealedMcapWriter(stream, compression="lz4")
+        assert str(refused.value) == "compression = 'lz4': expected one of zstd, none"
+        writer = SealedMcapWriter(stream)
+        writer.start()
+        for schema_id in (-1, 1):  # ids count up from 1 as schemas are registered; 0 is no schema
+            with pytest.raises(RecordingError) as refused:
+                writer.register_channel("/t", "json", schema_id)
+            assert str(refused.value) == f"channel '/t': schema {schema_id} was never registered"
+        assert writer.register_channel("/plain", "json", 0) == 1
+        schema = writer.register_schema("note", "jsonschema", b"{}")
+        assert (schema, writer.register_channel("/t", "json", schema)) == (1, 2)
+        for channel in (0, 3):
+            with pytest.raises(RecordingError) as refused:
+                writer.add_message(channel, 1, b"{}", 1)
+            assert str(refused.value) == f"a message on channel {channel}, which was never registered"
+        writer.add_message(2, 1, b"{}", 1)
+        writer.finish()
+        with pytest.raises(RecordingError) as refused:
+            writer.flush()
+        assert str(refused.value) == "the recording is finished: nothing more can be written"
+    assert check_as_the_specification_defines(tmp_path / "refusals.mcap") == 1
