@@ -163,6 +163,10 @@ CASES = {
     "a trial holding two more": (lambda: TrialWriter(1).add({"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0],
                                                              "s0_bz_uT": [0.0], "b": [0.0], "a": [0.0]}),
                                  "trial 0: samples hold undeclared a, b"),
+    "a trial holding a number as a name": (lambda: TrialWriter(1).add({"time_s": [0.0], "s0_bx_uT": [0.0],
+                                                                        "s0_by_uT": [0.0], "s0_bz_uT": [0.0],
+                                                                        "b": [0.0], 3: [0.0]}),
+                                           "trial 0: samples hold undeclared 3, b"),
     "a trial's condition of two values": (lambda: TrialWriter(1, None, {"c": "1"}).add(
         {"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0], "s0_bz_uT": [0.0]}, {"c": [1, 2]}, trial=4),
         "trial 4: condition c must be one value, got shape (2,)"),

@@ -941,3 +941,21 @@ def test_the_sealed_writer_refuses_what_the_format_cannot_hold_word_for_word(tmp
             writer.flush()
         assert str(refused.value) == "the recording is finished: nothing more can be written"
     assert check_as_the_specification_defines(tmp_path / "refusals.mcap") == 1
+
+
+def test_messages_are_read_by_topic_with_their_sequences_and_a_message_on_no_channel_is_refused(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    streamed, _ = streamed_messages(whole)  # the reference: mcap's own stream reader
+    recording = read_recording(whole)
+    for name, topic in recording.topics.items():
+        assert topic.topic == name
+        assert topic.sequences == [sequence for t, _, sequence, _ in streamed if t == name]
+        assert topic.log_times == [log_time for t, log_time, _, _ in streamed if t == name]
+    content = bytearray(whole.read_bytes())
+    # the chip's channel record (id u16, schema id u16, then the topic's length u32 and its text) given id 9
+    content[content.index(b"/fingertip/chip0/field") - 8] = 9
+    renumbered = tmp_path / "renumbered.mcap"
+    renumbered.write_bytes(bytes(content))
+    with pytest.raises(RecordingError) as refused:
+        read_recording(renumbered)
+    assert str(refused.value) == f"{renumbered}: a message on unknown channel 1"
