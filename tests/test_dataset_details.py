@@ -5,7 +5,12 @@ datasets against hand-computed values."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
 from softtip import __version__
@@ -233,3 +238,79 @@ def test_joined_datasets_keep_the_metadata_they_share_and_list_what_differs():
     # two creation times: the joined dataset is made now, by this softtip
     assert joined.softtip_version == __version__ and joined.created_utc not in (
         "2025-01-02T03:04:05Z", "2025-06-07T08:09:10Z")
+
+
+def written(tmp_path: Path) -> Path:
+    return small().write(tmp_path / "trials.parquet")
+
+
+def with_document(path: Path, edit) -> Path:
+    """``path`` rewritten by pyarrow with its metadata document edited by ``edit`` (a dict -> dict or bytes)."""
+    document = edit(json.loads(pq.read_schema(path).metadata[b"softtip"]))
+    raw = document if isinstance(document, bytes) else json.dumps(document).encode()
+    pq.write_table(pq.read_table(path).replace_schema_metadata({b"softtip": raw}), path)
+    return path
+
+
+def with_table(path: Path, edit) -> Path:
+    table = pq.read_table(path)
+    pq.write_table(edit(table).replace_schema_metadata(table.schema.metadata), path)
+    return path
+
+
+FILE_CASES = {
+    "metadata not JSON": (lambda d: b"{not json", "the softtip metadata is not valid JSON"),
+    "metadata a list": (lambda d: [1], "not a softtip dataset (format None, expected 'softtip-dataset')"),
+    "another format": (lambda d: d | {"format": "other"},
+                       "not a softtip dataset (format 'other', expected 'softtip-dataset')"),
+    "another version": (lambda d: d | {"schema_version": 2},
+                        "schema version 2 is not supported (this softtip reads version 1)"),
+    "no seed field": (lambda d: {k: v for k, v in d.items() if k != "seed"}, "metadata field 'seed' is missing"),
+    "a field more": (lambda d: d | {"colour": "red"}, "unknown metadata field 'colour'"),
+    "channels not a list": (lambda d: d | {"channels": {"s0_bz_uT": "uT"}},
+                            "metadata channels: expected a list of {name, unit} objects"),
+    "a label with a key more": (lambda d: d | {"labels": [{"name": "fz_N", "unit": "N", "scale": 1}]},
+                                "metadata labels: expected a list of {name, unit} objects"),
+    "a condition named by a number": (lambda d: d | {"conditions": [{"name": 3, "unit": "deg"}]},
+                                      "metadata conditions: expected a list of {name, unit} objects"),
+    "a magnetic channel in mT": (lambda d: d | {"channels": [{"name": "s0_bx_uT", "unit": "mT"},
+                                                             {"name": "s0_bz_uT", "unit": "uT"}]},
+                                 "metadata channels: s0_bx_uT [mT] is a magnetic channel, in uT"),
+    "a checksum not text": (lambda d: d | {"sha256": 5}, "metadata sha256: expected a hex digest, got 5"),
+    "a checksum too short": (lambda d: d | {"sha256": "abc"},
+                             "checksum mismatch: the file was altered or damaged after it was written"),
+    "a label declared with no column": (lambda d: d | {"labels": [*d["labels"], {"name": "fx_N", "unit": "N"}]},
+                                        "missing column fx_N"),
+}
+
+
+@pytest.mark.parametrize("case", FILE_CASES)
+def test_each_refusal_of_a_file_names_it_word_for_word(tmp_path, case):
+    edit, message = FILE_CASES[case]
+    path = with_document(written(tmp_path), edit)
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: {message}"
+
+
+def test_a_files_columns_must_be_those_it_declares_once_each_without_gaps(tmp_path):
+    path = with_table(written(tmp_path), lambda table: table.append_column("extra", pa.array([0.0, 0.0, 0.0])))
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: column 'extra' is not declared in the metadata"
+    path = with_table(written(tmp_path), lambda table: table.append_column("fz_N", table.column("fz_N")))
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: duplicate column names"
+    path = with_table(written(tmp_path), lambda table: table.set_column(0, "trial", pa.array([3, None, 8])))
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: column trial: missing value at row 1"
+    path = with_table(written(tmp_path), lambda table: table.drop_columns(["s0_bx_uT"]))
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: missing column s0_bx_uT"
+    with pytest.raises(DatasetError) as refusal:
+        small().write(tmp_path / "missing" / "trials.parquet")
+    assert str(refusal.value) == (f"dataset file {tmp_path / 'missing' / 'trials.parquet'}: directory "
+                                  f"{tmp_path / 'missing'} does not exist")
