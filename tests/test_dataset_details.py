@@ -314,3 +314,14 @@ def test_a_files_columns_must_be_those_it_declares_once_each_without_gaps(tmp_pa
         small().write(tmp_path / "missing" / "trials.parquet")
     assert str(refusal.value) == (f"dataset file {tmp_path / 'missing' / 'trials.parquet'}: directory "
                                   f"{tmp_path / 'missing'} does not exist")
+
+
+def test_a_trial_writer_declares_its_channels_with_units_and_keeps_its_metadata():
+    assert TrialWriter(1).channel_units == {"s0_bx_uT": "uT", "s0_by_uT": "uT", "s0_bz_uT": "uT"}
+    assert TrialWriter(["s1_bz_uT"]).channel_units == {"s1_bz_uT": "uT"}
+    assert TrialWriter({"side_fz_N": "N"}).channel_units == {"side_fz_N": "N"}
+    metadata = DatasetMetadata(description="two presses", seed=4)
+    writer = TrialWriter(1, metadata=metadata)
+    writer.add({"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0], "s0_bz_uT": [0.0]})
+    assert writer.to_dataset().metadata == metadata
+    assert TrialWriter(1).metadata.description == ""
