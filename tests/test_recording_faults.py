@@ -755,9 +755,11 @@ def test_a_file_cut_inside_a_chunk_header_states_the_lost_times_only_when_both_a
 
 
 def test_the_salvage_report_gives_the_lost_times_in_microseconds_from_the_first_message():
-    # by hand: (lost - first) ns, in s rounded to 6 decimals; from 0 when no message was read
-    assert Salvage(100, first_ns=None, lost_from_ns=501, lost_to_ns=1_234_567).report()["time_lost_s"] == [
+    # by hand: (lost - first) ns, in s rounded to 6 decimals; from 0 when no message was read (500 ns
+    # times 1e-9 is a hair above half a microsecond in binary: 1 µs, where 499 ns is 0)
+    assert Salvage(100, first_ns=None, lost_from_ns=500, lost_to_ns=1_234_567).report()["time_lost_s"] == [
         0.000001, 0.001235]
+    assert Salvage(100, lost_from_ns=499, lost_to_ns=499).report()["time_lost_s"] == [0.0, 0.0]
     assert Salvage(100, first_ns=1_000, lost_from_ns=1_501, lost_to_ns=1_235_567).report()["time_lost_s"] == [
         0.000001, 0.001235]
     assert Salvage(100).report()["time_lost_s"] is None
