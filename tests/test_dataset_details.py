@@ -153,6 +153,10 @@ CASES = {
     "concat of one trial twice": (lambda: concat([bare(), bare()]),
                                   "concat: trial 0 occurs in more than one dataset (pass renumber_trials=True to number "
                                   "the trials afresh)"),
+    "concat of a trial twice, not the first": (lambda: concat([
+        Dataset({"trial": [1, 4], "time_s": [0.0, 0.0], "s0_bz_uT": [1.0, 1.0]}),
+        Dataset({"trial": [4], "time_s": [0.0], "s0_bz_uT": [1.0]})]),
+        "concat: trial 4 occurs in more than one dataset (pass renumber_trials=True to number the trials afresh)"),
     "a writer of no channels": (lambda: TrialWriter([]), "channels: expected distinct channel names, at least one"),
     "a writer of one channel twice": (lambda: TrialWriter(["s0_bx_uT", "s0_bx_uT"]),
                                       "channels: expected distinct channel names, at least one"),
@@ -325,3 +329,16 @@ def test_a_trial_writer_declares_its_channels_with_units_and_keeps_its_metadata(
     writer.add({"time_s": [0.0], "s0_bx_uT": [0.0], "s0_by_uT": [0.0], "s0_bz_uT": [0.0]})
     assert writer.to_dataset().metadata == metadata
     assert TrialWriter(1).metadata.description == ""
+
+
+def test_select_takes_one_trial_any_iterable_of_trials_and_indices_from_zero():
+    dataset = small()
+    np.testing.assert_array_equal(dataset.select(trials=8).column("s0_bz_uT"), [3.0])
+    np.testing.assert_array_equal(dataset.select(trials=iter([3])).column("s0_bz_uT"), [1.0, 2.0])
+    np.testing.assert_array_equal(dataset.select(np.array([0, 2])).column("s0_bz_uT"), [1.0, 3.0])
+    assert len(dataset.select(np.array([], dtype=int))) == 0
+
+
+def test_three_datasets_renumbered_count_their_trials_in_order():
+    joined = concat([small(), small(), small().select(trials=[8])], renumber_trials=True)
+    np.testing.assert_array_equal(joined.groups, [0, 0, 1, 2, 2, 3, 4])

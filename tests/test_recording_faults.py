@@ -822,6 +822,9 @@ def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
         with pytest.raises(RecordingError, match=r"; its tail could not be put back \(the tail was not written "
                                                  r"whole\): softtip recording repair mends it$"):
             writer.flush()
+        left = path.read_bytes()
+        writer.finish()  # after a failed write: nothing more is written, and no second error
+    assert path.read_bytes() == left
 
 
 def test_where_a_record_head_is_plausible_by_hand():
@@ -943,6 +946,8 @@ def test_the_sealed_writer_refuses_what_the_format_cannot_hold_word_for_word(tmp
             writer.flush()
         assert str(refused.value) == "the recording is finished: nothing more can be written"
     assert check_as_the_specification_defines(tmp_path / "refusals.mcap") == 1
+    # a message given no sequence number has 0, as mcap's own writer gives it
+    assert read_recording(tmp_path / "refusals.mcap").topics["/t"].sequences == [0]
 
 
 def test_messages_are_read_by_topic_with_their_sequences_and_a_message_on_no_channel_is_refused(tmp_path):
