@@ -15,7 +15,7 @@ import pytest
 
 from softtip import __version__
 from softtip.data import Dataset, DatasetError, DatasetMetadata, TrialWriter, concat
-from softtip.data.dataset import require_columns, subtract_trial_baseline
+from softtip.data.dataset import column_to_numpy, first_line, require_columns, subtract_trial_baseline
 
 
 def small() -> Dataset:
@@ -342,3 +342,20 @@ def test_select_takes_one_trial_any_iterable_of_trials_and_indices_from_zero():
 def test_three_datasets_renumbered_count_their_trials_in_order():
     joined = concat([small(), small(), small().select(trials=[8])], renumber_trials=True)
     np.testing.assert_array_equal(joined.groups, [0, 0, 1, 2, 2, 3, 4])
+
+
+def test_an_arrow_column_to_numpy_by_hand():
+    np.testing.assert_array_equal(column_to_numpy("s", pa.array(["a", "b", "a"]).dictionary_encode()), ["a", "b", "a"])
+    np.testing.assert_array_equal(column_to_numpy("f", pa.array([1.0, None])), [1.0, np.nan])  # NaN where missing
+    with pytest.raises(DatasetError) as refusal:
+        column_to_numpy("i", pa.array([1, None]))
+    assert str(refusal.value) == "column i: missing value at row 1"
+    with pytest.raises(DatasetError) as refusal:
+        column_to_numpy("i", pa.chunked_array([[1, 2], [None]]), row_word="sample", first_row=10)
+    assert str(refusal.value) == "column i: missing value at sample 12"
+
+
+def test_first_line_of_an_error_or_its_type_when_it_says_nothing():
+    assert first_line(ValueError("one\ntwo")) == "one"
+    assert first_line(ValueError("  \n ")) == "ValueError"
+    assert first_line(KeyError()) == "KeyError"

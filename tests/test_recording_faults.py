@@ -24,6 +24,7 @@ import pytest
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import Writer
 from mcap.records import Chunk, ChunkIndex, Message, MessageIndex, Statistics
 from typer.testing import CliRunner
 
@@ -946,8 +947,44 @@ def test_the_sealed_writer_refuses_what_the_format_cannot_hold_word_for_word(tmp
             writer.flush()
         assert str(refused.value) == "the recording is finished: nothing more can be written"
     assert check_as_the_specification_defines(tmp_path / "refusals.mcap") == 1
-    # a message given no sequence number has 0, as mcap's own writer gives it
-    assert read_recording(tmp_path / "refusals.mcap").topics["/t"].sequences == [0]
+    # a message given no sequence number has 0, as mcap's own writer gives it; a channel of no schema has
+    # no schema name; the schemas by name, as text
+    recording = read_recording(tmp_path / "refusals.mcap")
+    assert recording.topics["/t"].sequences == [0] and recording.topics["/plain"].schema_name == ""
+    assert recording.schemas == {"note": "{}"}
+
+
+def test_the_sealed_writer_closes_a_chunk_once_it_holds_chunk_size_bytes(tmp_path):
+    path = tmp_path / "chunks.mcap"
+    with path.open("wb") as stream:
+        # a message record of 2 data bytes: opcode 1, length 8, channel 2, sequence 4, two times 8 each: 33
+        writer = SealedMcapWriter(stream, chunk_size=33, compression="none")
+        writer.start()
+        channel = writer.register_channel("/t", "json", writer.register_schema("note", "jsonschema", b"\xff{}"))
+        for log_time in (1, 2, 3):
+            writer.add_message(channel, log_time, b"{}", log_time)
+        writer.finish()
+    assert [chunk.uncompressed_size for chunk in chunks_of(path)] == [33, 33, 33]
+    assert read_recording(path).schemas == {"note": "\ufffd{}"}  # a byte that is no UTF-8, replaced
+
+
+def test_a_recording_of_no_message_states_what_mcaps_own_writer_states(tmp_path):
+    path = tmp_path / "empty.mcap"
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream)
+        writer.start()
+        writer.finish()
+    reference = tmp_path / "reference.mcap"
+    with reference.open("wb") as stream:
+        mcap_writer = Writer(stream)
+        mcap_writer.start()
+        mcap_writer.finish()
+    with path.open("rb") as stream, reference.open("rb") as other:
+        ours, theirs = make_reader(stream), make_reader(other)
+        assert (ours.get_header().profile, ours.get_header().library) == ("", "")
+        statistics, expected = ours.get_summary().statistics, theirs.get_summary().statistics
+    assert (statistics.message_count, statistics.message_start_time, statistics.message_end_time) == (
+        expected.message_count, expected.message_start_time, expected.message_end_time) == (0, 0, 0)
 
 
 def test_messages_are_read_by_topic_with_their_sequences_and_a_message_on_no_channel_is_refused(tmp_path):
