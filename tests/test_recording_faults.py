@@ -1003,3 +1003,19 @@ def test_messages_are_read_by_topic_with_their_sequences_and_a_message_on_no_cha
     with pytest.raises(RecordingError) as refused:
         read_recording(renumbered)
     assert str(refused.value) == f"{renumbered}: a message on unknown channel 1"
+
+
+def test_messages_outside_chunks_are_read_as_mcaps_own_reader_reads_them(tmp_path):
+    path = tmp_path / "unchunked.mcap"
+    with path.open("wb") as stream:  # the reference writer, as some writers do: no chunks
+        writer = Writer(stream, use_chunking=False)
+        writer.start()
+        channel = writer.register_channel("/t", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        for log_time in (5, 6, 7):
+            writer.add_message(channel, log_time, b'{"n": %d}' % log_time, log_time, sequence=log_time - 4)
+        writer.finish()
+    streamed, tail = streamed_messages(path)
+    recording = read_recording(path)
+    assert tail is None and recording.salvage.messages == 3 and recording.salvage.damaged_records == 0
+    topic = recording.topics["/t"]
+    assert [("/t", t, s, d) for t, s, d in zip(topic.log_times, topic.sequences, topic.data, strict=True)] == streamed
