@@ -37,7 +37,9 @@ from softtip.realtime.recording.reader import (
     TopicMessages,
     _heads_plausible,
     _next_record,
+    _records,
     read_recording,
+    scan_recording,
 )
 from softtip.realtime.recording.sealed import SealedMcapWriter
 from softtip.realtime.recording.writer import McapRecorder, repair_recording
@@ -492,6 +494,18 @@ def check_as_the_specification_defines(path: Path) -> int:
     assert (statistics.schema_count, statistics.channel_count, statistics.metadata_count,
             statistics.attachment_count) == (counted[0x03], counted[0x04], counted[0x0D], counted[0x0A]), "statistics"
     assert summary_crc == zlib.crc32(content[summary_start:footer + 9 + 16]), "summary CRC"
+    # the summary offsets: one per group of records of one opcode, framing exactly that group, in order
+    # (mcap's own writer also writes one of length 0 for a group it has nothing for)
+    groups, start = [], summary_start
+    for offset, opcode, body in summary:
+        if opcode == 0x0E:
+            group_opcode, group_start, group_length = struct.unpack_from("<BQQ", body)
+            framed = {op for _, op, _ in records_between(content, group_start, group_start + group_length)}
+            assert group_start == start and framed == ({group_opcode} if group_length else set()), "summary offsets"
+            groups += [group_opcode] if group_length else []
+            start = group_start + group_length
+    assert start == offset_start and groups == list(dict.fromkeys(
+        opcode for _, opcode, _ in summary if opcode != 0x0E)), "summary offsets"
     data_end = summary_start - 9 - 4
     assert content[data_end] == 0x0F
     assert struct.unpack_from("<I", content, data_end + 9)[0] == zlib.crc32(content[:data_end]), "data section CRC"
@@ -1019,3 +1033,33 @@ def test_messages_outside_chunks_are_read_as_mcaps_own_reader_reads_them(tmp_pat
     assert tail is None and recording.salvage.messages == 3 and recording.salvage.damaged_records == 0
     topic = recording.topics["/t"]
     assert [("/t", t, s, d) for t, s, d in zip(topic.log_times, topic.sequences, topic.data, strict=True)] == streamed
+
+
+def test_a_flush_waits_for_the_disk_only_when_asked(tmp_path, monkeypatch):
+    synced = []
+    monkeypatch.setattr(os, "fsync", synced.append)
+    with (tmp_path / "synced.mcap").open("wb") as stream:
+        writer = SealedMcapWriter(stream)
+        writer.start()
+        assert synced == []
+        writer.register_schema("note", "jsonschema", b"{}")
+        writer.flush(fsync=True)
+        assert synced == [stream.fileno()]
+
+
+def test_a_scan_yields_the_content_records_and_parses_each_body_whole(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    with whole.open("rb") as stream:
+        kinds = {type(record).__name__ for record in scan_recording(stream, Salvage(whole.stat().st_size), whole)}
+    assert kinds == {"Header", "Schema", "Channel", "Message", "Metadata"}  # no index, statistics or DataEnd
+    # a header record's body (two empty strings) parses; with a byte more it is not a header
+    assert [type(record).__name__ for record in _records(0x01, bytes(8))] == ["Header"]
+    assert _records(0x01, bytes(9)) is None
+
+
+def test_a_record_head_that_ends_the_file_is_read(tmp_path):
+    # by hand: the magic, a header record (two empty strings), and a footer's head of length 0 that ends the file
+    path = tmp_path / "tiny.mcap"
+    path.write_bytes(MAGIC + struct.pack("<BQ", 0x01, 8) + bytes(8) + struct.pack("<BQ", 0x02, 0))
+    recording = read_recording(path)
+    assert not recording.truncated and recording.truncation == "" and recording.topics == {}
