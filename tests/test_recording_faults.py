@@ -10,6 +10,7 @@ import errno
 import io
 import json
 import os
+import re
 import signal
 import struct
 import subprocess
@@ -820,6 +821,12 @@ def test_a_failed_first_write_says_that_nothing_had_been_written(tmp_path, monke
         SealedMcapWriter(stream).start()
     assert str(failed.value) == "the recording's write failed (No space left on device); nothing had been written"
     assert path.stat().st_size == 0
+    # an error of the system's that carries words but no error number: said in its words
+    monkeypatch.setattr(os, "pwrite", lambda fd, data, offset: (_ for _ in ()).throw(OSError("disk gone")) if data
+                        else written_whole(fd, data, offset))
+    with path.open("wb") as stream, pytest.raises(RecordingError) as failed:
+        SealedMcapWriter(stream).start()
+    assert str(failed.value) == "the recording's write failed (disk gone); nothing had been written"
 
 
 def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
@@ -835,8 +842,11 @@ def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
         monkeypatch.setattr(os, "pwrite", lambda fd, data, offset: written_whole(fd, data[:len(data) // 2], offset))
         writer.add_message(channel, 6, b'{"n": 2}', 6)
         with pytest.raises(RecordingError, match=r"; its tail could not be put back \(the tail was not written "
-                                                 r"whole\): softtip recording repair mends it$"):
+                                                 r"whole\): softtip recording repair mends it$") as failed:
             writer.flush()
+        # the disk took half of the write: the message counts what it took of the whole
+        written, whole = map(int, re.search(r"device: (\d+) of (\d+) bytes written", str(failed.value)).groups())
+        assert written == whole // 2 and whole > 100
         left = path.read_bytes()
         writer.finish()  # after a failed write: nothing more is written, and no second error
     assert path.read_bytes() == left
