@@ -16,6 +16,7 @@ figures in ``published.toml``.
 from __future__ import annotations
 
 import importlib
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import metadata, resources
@@ -29,6 +30,11 @@ ENTRY_POINT_GROUP = "softtip.systems"
 
 class NotRegistered(LookupError, ValueError):
     """A name no registered system has."""
+
+
+class SystemSkipped(UserWarning):
+    """An installed system that failed to load, or whose names clash with a registered system's: left
+    out, so that every other system works."""
 
 
 @dataclass(frozen=True)
@@ -99,7 +105,7 @@ class System:
 
 
 _REGISTERED: dict[str, System] = {}
-_entry_points_read = False
+_entry_points = "unread"  # "reading" while they load: a plug-in that registers itself on import reads none again
 
 # the names that must be unique over all systems, and how to list them from a record
 _UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for study in s.studies],
@@ -109,9 +115,13 @@ _UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for
 
 def register(system: System) -> System:
     """Adds ``system`` to the registry; a name it shares with a registered system is refused."""
+    _read_entry_points()
+    return _add(system)
+
+
+def _add(system: object) -> System:
     if not isinstance(system, System):
         raise TypeError(f"a softtip system must be a System record, got {type(system).__name__}")
-    _read_entry_points()
     if system.name in _REGISTERED and _REGISTERED[system.name] is not system:
         raise ValueError(f"system {system.name!r} is registered twice")
     for what, names in _UNIQUE.items():
@@ -128,19 +138,48 @@ def unregister(name: str) -> None:
     _REGISTERED.pop(name, None)
 
 
+def _package(entry: metadata.EntryPoint) -> str:
+    """The installed package (distribution) that declares an entry point, as a user would install it."""
+    return entry.dist.name if entry.dist is not None else entry.module.partition(".")[0]
+
+
+def _skip(entry: metadata.EntryPoint, error: Exception) -> None:
+    reason = str(error).strip().splitlines()
+    warnings.warn(f"softtip system {entry.name!r} of package {_package(entry)!r} skipped: {type(error).__name__}"
+                  + (f": {reason[0]}" if reason else ""), SystemSkipped, stacklevel=4)
+
+
+def _registration_order(loaded: tuple[metadata.EntryPoint, object]) -> tuple:
+    entry, system = loaded
+    if _package(entry) == "softtip" and isinstance(system, System):
+        return (0, system.label, system.name)
+    return (1, _package(entry), entry.name)
+
+
 def _read_entry_points() -> None:
-    global _entry_points_read
-    if _entry_points_read:
+    """Registers every installed system: softtip's own first, in the order the specification numbers
+    them, then the others by package, so that a name an installed package shares with softtip's is
+    that package's to lose. A system that fails to load or clashes is skipped with a warning."""
+    global _entry_points
+    if _entry_points != "unread":
         return
-    _entry_points_read = True
-    loaded = []
-    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            loaded.append(entry.load())
-        except Exception as error:  # a broken plug-in must not take the toolkit down with it
-            raise RuntimeError(f"softtip system {entry.name!r} ({entry.value}) failed to load: {error}") from error
-    for system in sorted(loaded, key=lambda s: (s.label, s.name)):  # as the specification numbers them
-        register(system)
+    _entry_points = "reading"
+    try:
+        loaded = []
+        for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            try:  # a broken plug-in must not take the toolkit down with it
+                loaded.append((entry, entry.load()))
+            except Exception as error:
+                _skip(entry, error)
+        for entry, system in sorted(loaded, key=_registration_order):
+            try:
+                _add(system)
+            except (TypeError, ValueError) as error:
+                _skip(entry, error)
+        _entry_points = "read"
+    finally:
+        if _entry_points == "reading":  # interrupted: read them again next time rather than not at all
+            _entry_points = "unread"
 
 
 def systems() -> dict[str, System]:

@@ -8,16 +8,28 @@ Each command lives in the module of its stage (:mod:`.twin`, :mod:`.importing`, 
 from __future__ import annotations
 
 import sys
+import warnings
 
 import typer
 
 from softtip import __version__
-from softtip._core.systems import load, systems
-from softtip.cli import bench, importing, lab, live, optimize, recording, session, sysid, twin
-from softtip.cli.common import Toolkit, console
+from softtip._core.systems import SystemSkipped, load, systems
+from softtip.cli.common import Toolkit, console, errors, printable
+
+# read before any command module asks: an installed system skipped is one line, not a traceback
+with warnings.catch_warnings(record=True) as _caught:
+    warnings.simplefilter("always", SystemSkipped)
+    _registered = tuple(systems().values())
+for _warning in _caught:
+    if issubclass(_warning.category, SystemSkipped):
+        errors.print(f"warning: {printable(_warning.message)}", markup=False, highlight=False, soft_wrap=True)
+    else:
+        warnings.warn_explicit(_warning.message, _warning.category, _warning.filename, _warning.lineno)
+
+from softtip.cli import bench, importing, lab, live, optimize, recording, session, sysid, twin  # noqa: E402
 
 app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-time estimates.\n\nSystems: " + "; ".join(
-    f"{system.name} ({system.label}): {system.title}" for system in systems().values()),
+    f"{system.name} ({system.label}): {system.title}" for system in _registered),
     no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False, cls=Toolkit)
 
 
@@ -42,7 +54,6 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
     app.command()(command)
 app.command("import")(importing.import_logs)
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
-_registered = systems().values()
 _main_demo = next((load(system.main_demo) for system in _registered if system.main_demo), None)
 _group("demo", "Demonstrations on the built-in simulated sensors."
        + (f"\n\nPlain softtip demo: {' '.join(_main_demo.__doc__.split())}" if _main_demo else ""),
