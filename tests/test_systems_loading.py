@@ -1,6 +1,7 @@
-"""Installed systems that fail: a plug-in that does not import, is not a record, or claims a name
-softtip's own systems have is skipped with one warning naming its package; everything else works,
-and the toolkit's four systems never vanish."""
+"""Installed systems beside softtip's own: a plug-in that does not import, is not a record, or claims a
+name softtip's own systems have is skipped with one warning naming its package, everything else works
+and the toolkit's four systems never vanish; a plug-in's offered defaults are taken only when the
+user's settings choose it, whatever its label."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import sys
 import pytest
 
 from softtip._core import systems as registry
+from softtip._core.config import ConfigError
 
 BUILT_IN = ["hall-fingertip", "wearable", "haptics", "cilia"]  # as the specification numbers them, S1-S4
 
@@ -23,11 +25,31 @@ COPYCAT = {"__init__.py": '''
     SYSTEM = System(name="copycat", title="A copy", label="A0", package=__name__,
                     studies=(Study("pushing", "pushing", "copycat:nothing", "a copy"),))
 '''}
+# labelled to sort first, offering every default there is
+FIRST = {"__init__.py": '''
+    from softtip._core.systems import System
+
+    SYSTEM = System(name="first", title="A plug-in labelled first", label="A1", package=__name__,
+                    scenarios={"its-own": "first:scenario"},
+                    defaults={"simulate": "its-design", "scenario": "its-own", "demo": "first:demo"})
+
+    def demo():
+        """Its own demo."""
+'''}
+OFFERING_A_STRANGER = {"__init__.py": '''
+    from softtip._core.systems import System
+
+    SYSTEM = System(name="stranger", title="A default of no use", label="T8", package=__name__,
+                    defaults={"colour": "red"})
+'''}
 FINE = {"__init__.py": '''
     from softtip._core.systems import System
 
     SYSTEM = System(name="fine", title="A plug-in that loads", label="T9", package=__name__)
 '''}
+
+PLUG_INS = {"brokentip": BROKEN, "recordless": NOT_A_RECORD, "copycat": COPYCAT, "first": FIRST,
+            "stranger": OFFERING_A_STRANGER, "fine": FINE}
 
 
 @pytest.fixture
@@ -39,12 +61,12 @@ def unread_registry(monkeypatch):
 
 @pytest.fixture
 def site(tmp_path, monkeypatch, install_package):
-    """Four plug-ins installed on the path: broken, not a record, a clash, and one that works."""
-    for name, files in {"brokentip": BROKEN, "recordless": NOT_A_RECORD, "copycat": COPYCAT, "fine": FINE}.items():
+    """The plug-ins installed on the path."""
+    for name, files in PLUG_INS.items():
         install_package(tmp_path, name, files, f"{name} = {name}:SYSTEM")
     monkeypatch.syspath_prepend(str(tmp_path))
     yield tmp_path
-    for name in ("brokentip", "recordless", "copycat", "fine"):
+    for name in PLUG_INS:
         sys.modules.pop(name, None)
 
 
@@ -56,8 +78,10 @@ def test_a_failing_or_clashing_plug_in_is_skipped_with_a_warning_naming_its_pack
         "softtip system 'copycat' of package 'copycat' skipped: ValueError: system 'copycat': study 'pushing' is "
         "also system 'hall-fingertip''s",
         "softtip system 'recordless' of package 'recordless' skipped: TypeError: a softtip system must be a System "
-        "record, got dict"]
-    assert list(first) == [*BUILT_IN, "fine"]  # softtip's own first, whatever a plug-in's label
+        "record, got dict",
+        "softtip system 'stranger' of package 'stranger' skipped: ValueError: system 'stranger': defaults.colour: "
+        "expected one of simulate, bench, scenario, demo"]
+    assert list(first) == [*BUILT_IN, "fine", "first"]  # softtip's own first, then by package, whatever the label
     assert registry.owner("study", "pushing").name == "hall-fingertip"
     assert list(registry.systems()) == list(first)  # read once: the second call neither warns nor loses any
 
@@ -69,5 +93,49 @@ def test_the_command_line_runs_beside_a_broken_plug_in_and_says_so_in_one_line(s
     assert ran.returncode == 0, ran.stderr
     assert "pushing" in ran.stdout
     lines = ran.stderr.splitlines()
-    assert len(lines) == 3 and all(line.startswith("warning: softtip system ") for line in lines), ran.stderr
+    assert len(lines) == 4 and all(line.startswith("warning: softtip system ") for line in lines), ran.stderr
     assert "'brokentip' of package 'brokentip' skipped: ImportError: needs a driver this machine lacks" in lines[0]
+
+
+def test_a_plug_in_labelled_first_changes_no_default_until_the_user_chooses_it(unread_registry, site, tmp_path,
+                                                                                monkeypatch):
+    settings = tmp_path / "config.toml"
+    monkeypatch.setenv("SOFTTIP_CONFIG", str(settings))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "nothing here"))
+    with pytest.warns(registry.SystemSkipped):
+        registry.systems()
+    with pytest.raises(ConfigError, match="softtip settings file .*config.toml does not exist"):
+        registry.default("simulate")  # named by SOFTTIP_CONFIG: missing is a mistake, not silence
+    monkeypatch.delenv("SOFTTIP_CONFIG")
+    softtip_own = {"simulate": "cylindrical-A", "bench": "cylindrical-D", "scenario": "push",
+                   "demo": "softtip.systems.hall_fingertip.commands:demo"}
+    assert {use: registry.default(use) for use in registry.DEFAULT_USES} == softtip_own
+
+    (tmp_path / "nothing here" / "softtip").mkdir(parents=True)
+    (tmp_path / "nothing here" / "softtip" / "config.toml").write_text('[defaults]\nsystem = "first"\n')
+    assert {use: registry.default(use) for use in registry.DEFAULT_USES} == {
+        "simulate": "its-design", "bench": "cylindrical-D", "scenario": "its-own", "demo": "first:demo"}
+
+    (tmp_path / "nothing here" / "softtip" / "config.toml").write_text('[defaults]\nsystem = "gone"\n')
+    with pytest.raises(ConfigError, match=r"config.toml: defaults.system = 'gone': expected a registered system: "
+                                          r"hall-fingertip, wearable, haptics, cilia, fine, first$"):
+        registry.default("scenario")
+
+
+def test_the_command_line_takes_softtip_s_defaults_beside_a_plug_in_and_refuses_bad_settings(site, tmp_path):
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), *sys.path]),
+                   "XDG_CONFIG_HOME": str(tmp_path / "no settings")}
+    help_text = subprocess.run([sys.executable, "-m", "softtip", "live", "--help"], env=environment,
+                               capture_output=True, text=True, timeout=120).stdout
+    assert "[default: push]" in help_text and "its-own (first)" in help_text
+    settings = tmp_path / "settings.toml"
+    settings.write_text('[defaults]\nsystem = "first"\n')
+    chosen = subprocess.run([sys.executable, "-m", "softtip", "live", "--help"], capture_output=True, text=True,
+                            env={**environment, "SOFTTIP_CONFIG": str(settings)}, timeout=120)
+    assert "[default: its-own]" in chosen.stdout, chosen.stderr
+    settings.write_text('[defaults]\nsystems = "first"\n')
+    refused = subprocess.run([sys.executable, "-m", "softtip", "designs"], capture_output=True, text=True,
+                             env={**environment, "SOFTTIP_CONFIG": str(settings)}, timeout=120)
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.splitlines()[-1] == (f"error: {settings}: defaults.systems: unknown key (expected one of "
+                                               "system)")

@@ -62,8 +62,7 @@ class System:
     ``protocols``: protocol name -> the bench kind it runs on (its file is ``protocols/NAME.toml``);
     ``scenarios``: ``softtip live --emulate --scenario NAME`` -> ``"module:function"``,
     ``function(progress, check)`` returning a :class:`softtip.realtime.scenario.LiveScenario` (see
-    that module for ``check``); ``demos``: ``softtip demo NAME`` -> a command
-    function (``main_demo``: the one plain ``softtip demo`` runs, if the system has it);
+    that module for ``check``); ``demos``: ``softtip demo NAME`` -> a command function;
     ``bench_commands``: ``softtip bench NAME``; ``commands``: command groups of its own (a Typer app).
     """
 
@@ -78,9 +77,9 @@ class System:
     studies: tuple[Study, ...] = ()
     scenarios: Mapping[str, str] = field(default_factory=dict)
     demos: Mapping[str, str] = field(default_factory=dict)
-    main_demo: str | None = None
-    # the shipped designs the toolkit's commands default to, by use: "simulate", "bench"
-    reference_designs: Mapping[str, str] = field(default_factory=dict)
+    # what it offers as the toolkit's defaults, by use (DEFAULT_USES); taken when it is softtip's own
+    # or the user's settings choose it (softtip._core.user)
+    defaults: Mapping[str, str] = field(default_factory=dict)
     bench_commands: Mapping[str, str] = field(default_factory=dict)
     commands: Mapping[str, str] = field(default_factory=dict)
 
@@ -104,6 +103,12 @@ class System:
         return path if path.is_file() else None
 
 
+# what a system may offer as a default (System.defaults), and what each use takes
+DEFAULT_USES = {"simulate": "a shipped design of its own (softtip simulate --design)",
+                "bench": "a shipped design of its own (softtip bench twin --design)",
+                "scenario": "one of its scenarios (softtip live --emulate --scenario)",
+                "demo": '"module:function", the command plain softtip demo runs'}
+
 _REGISTERED: dict[str, System] = {}
 _entry_points = "unread"  # "reading" while they load: a plug-in that registers itself on import reads none again
 
@@ -122,6 +127,12 @@ def register(system: System) -> System:
 def _add(system: object) -> System:
     if not isinstance(system, System):
         raise TypeError(f"a softtip system must be a System record, got {type(system).__name__}")
+    if unknown := set(system.defaults) - set(DEFAULT_USES):
+        raise ValueError(f"system {system.name!r}: defaults.{sorted(unknown)[0]}: expected one of "
+                         f"{', '.join(DEFAULT_USES)}")
+    if "scenario" in system.defaults and system.defaults["scenario"] not in system.scenarios:
+        raise ValueError(f"system {system.name!r}: defaults.scenario = {system.defaults['scenario']!r}: expected "
+                         f"{DEFAULT_USES['scenario']}")
     if system.name in _REGISTERED and _REGISTERED[system.name] is not system:
         raise ValueError(f"system {system.name!r} is registered twice")
     for what, names in _UNIQUE.items():
@@ -149,9 +160,14 @@ def _skip(entry: metadata.EntryPoint, error: Exception) -> None:
                   + (f": {reason[0]}" if reason else ""), SystemSkipped, stacklevel=4)
 
 
+def is_own(system: System) -> bool:
+    """Whether ``system`` is one of softtip's own (a package inside softtip)."""
+    return system.package.partition(".")[0] == "softtip"
+
+
 def _registration_order(loaded: tuple[metadata.EntryPoint, object]) -> tuple:
     entry, system = loaded
-    if _package(entry) == "softtip" and isinstance(system, System):
+    if isinstance(system, System) and is_own(system):
         return (0, system.label, system.name)
     return (1, _package(entry), entry.name)
 
@@ -219,11 +235,18 @@ def study(name: str) -> Study:
     return registered[name]
 
 
-def reference_design(use: str) -> str | None:
-    """The shipped design the first registered system that names one gives for ``use`` ("simulate",
-    "bench"): what the toolkit's commands default to."""
-    return next((system.reference_designs[use] for system in systems().values() if use in system.reference_designs),
-                None)
+def default(use: str) -> str | None:
+    """What the toolkit's commands default to for ``use`` (one of :data:`DEFAULT_USES`): the offer of
+    the system the user's settings choose, else of softtip's own systems (the first that offers one).
+    An installed system's offer is never taken unless chosen, whatever its label or package."""
+    from softtip._core.user import chosen_system
+
+    if use not in DEFAULT_USES:
+        raise ValueError(f"default {use!r}: expected one of {', '.join(DEFAULT_USES)}")
+    registered = systems()
+    chosen = chosen_system(list(registered))
+    candidates = ([registered[chosen]] if chosen else []) + [s for s in registered.values() if is_own(s)]
+    return next((system.defaults[use] for system in candidates if use in system.defaults), None)
 
 
 def studies() -> dict[str, Study]:

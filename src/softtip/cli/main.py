@@ -13,7 +13,8 @@ import warnings
 import typer
 
 from softtip import __version__
-from softtip._core.systems import SystemSkipped, load, systems
+from softtip._core.systems import SystemSkipped, default, load, systems
+from softtip._core.user import chosen_system
 from softtip.cli.common import Toolkit, console, errors, printable
 
 # read before any command module asks: an installed system skipped is one line, not a traceback
@@ -25,6 +26,11 @@ for _warning in _caught:
         errors.print(f"warning: {printable(_warning.message)}", markup=False, highlight=False, soft_wrap=True)
     else:
         warnings.warn_explicit(_warning.message, _warning.category, _warning.filename, _warning.lineno)
+try:  # the user's settings choose the commands' defaults: a mistake in them stops every command at once
+    chosen_system([system.name for system in _registered])
+except ValueError as _error:
+    errors.print(f"error: {printable(_error)}", markup=False, highlight=False, soft_wrap=True)
+    sys.exit(2)
 
 from softtip.cli import bench, importing, lab, live, optimize, recording, session, sysid, twin  # noqa: E402
 
@@ -54,7 +60,7 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
     app.command()(command)
 app.command("import")(importing.import_logs)
 _group("lab", "The virtual lab: the published experiments on the twin, as datasets.", {"run": lab.lab_run})
-_main_demo = next((load(system.main_demo) for system in _registered if system.main_demo), None)
+_main_demo = load(_reference) if (_reference := default("demo")) else None
 _group("demo", "Demonstrations on the built-in simulated sensors."
        + (f"\n\nPlain softtip demo: {' '.join(_main_demo.__doc__.split())}" if _main_demo else ""),
        {name: load(reference) for system in _registered for name, reference in system.demos.items()},

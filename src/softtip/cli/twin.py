@@ -14,7 +14,7 @@ from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
 from softtip.cli.common import check_number, check_outputs, console, fail, progress_for
-from softtip._core.systems import reference_design
+from softtip._core.systems import default
 
 
 class IndenterKind(str, Enum):
@@ -65,7 +65,7 @@ def designs(json_output: bool = typer.Option(False, "--json", help="Print JSON."
 
 
 def simulate(
-    design: str = typer.Option(reference_design("simulate"), help="Shipped design name or path to a design TOML file."),
+    design: str = typer.Option(default("simulate"), help="Shipped design name or path to a design TOML file."),
     indenter: IndenterKind = typer.Option(IndenterKind.board, help="Rigid indenter."),
     depth: float = typer.Option(1.0, help="Normal travel after first touch (mm)."),
     angle: float = typer.Option(0.0, help="Board angle about the vertical axis (degrees)."),
