@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -139,3 +140,77 @@ def test_the_command_line_takes_softtip_s_defaults_beside_a_plug_in_and_refuses_
     assert refused.returncode == 2 and refused.stdout == ""
     assert refused.stderr.splitlines()[-1] == (f"error: {settings}: defaults.systems: unknown key (expected one of "
                                                "system)")
+
+
+SLOW_TO_IMPORT = {
+    "__init__.py": '''
+        from softtip._core.systems import Study, System
+
+        SYSTEM = System(name="slowtip", title="A plug-in whose every module takes 3 s to import", label="T7",
+                        package=__name__, scenarios={"slow": "slowtip.heavy:scenario"},
+                        studies=(Study("slow", "slow", "slowtip.heavy:analysis", "T7: nothing"),),
+                        demos={"slow": "slowtip.heavy:demo"}, bench_commands={"slow": "slowtip.heavy:bench"},
+                        commands={"slowtip": "slowtip.heavy:app"})
+    ''',
+    "heavy.py": '''
+        import time
+
+        import typer
+
+        time.sleep(3.0)  # a model loaded on import
+        app = typer.Typer(help="Its commands.", no_args_is_help=True)
+
+        @app.command("hello")
+        def hello() -> None:
+            """Say hello."""
+
+        def demo() -> None:
+            """Its demo."""
+
+        def bench() -> None:
+            """Its benchmark."""
+    ''',
+}
+
+
+# softtip --help in a fresh interpreter, then the modules it imported (entry points and "module:attribute"
+# references are imported by importlib, which -X importtime does not list)
+HELP_THEN_MODULES = """
+import sys
+from softtip.cli.main import app
+try:
+    app(["--help"], prog_name="softtip")
+except SystemExit:
+    pass
+sys.stderr.write("\\n".join(sys.modules))
+"""
+
+
+def _help_and_its_modules(environment: dict) -> tuple[float, set[str]]:
+    """Seconds ``softtip --help`` takes in a fresh interpreter, and the modules it imports."""
+    started = time.perf_counter()
+    ran = subprocess.run([sys.executable, "-c", HELP_THEN_MODULES], env=environment, capture_output=True, text=True,
+                         timeout=120)
+    seconds = time.perf_counter() - started
+    assert "Usage: softtip" in ran.stdout, ran.stderr
+    return seconds, set(ran.stderr.splitlines())
+
+
+def test_help_imports_no_demo_study_scenario_or_command_group(tmp_path, install_package):
+    install_package(tmp_path, "slowtip", SLOW_TO_IMPORT, "slowtip = slowtip:SYSTEM")
+    alone = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    beside = {**alone, "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}
+    baseline, toolkit_modules = _help_and_its_modules(alone)
+    with_plug_in, modules = _help_and_its_modules(beside)
+    assert "slowtip" in modules and "slowtip.heavy" not in modules  # its record only
+    # no system's bench, demo, command group, benchmark, study or scenario, and no numerical library
+    references = [reference for system in registry.systems().values()
+                  for named in (system.benches, system.demos, system.commands, system.bench_commands, system.scenarios)
+                  for reference in named.values()]
+    references += [study.analysis for study in registry.studies().values()] + [registry.default("demo")]
+    assert len(references) > 20 and not {reference.partition(":")[0] for reference in references} & modules
+    assert not {"numpy", "scipy", "pydantic", "softtip.cli.bench"} & modules
+    assert with_plug_in < baseline + 1.0, (with_plug_in, baseline)  # its 3 s import not paid
+    listed = subprocess.run([sys.executable, "-m", "softtip", "demo", "--help"], env=beside, capture_output=True,
+                            text=True, timeout=120)
+    assert listed.returncode == 0 and "Its demo." in listed.stdout, listed.stderr  # imported when used

@@ -15,9 +15,10 @@ import numbers
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 AXES = ("x", "y", "z")
 
@@ -85,6 +86,8 @@ class Reading:
 
     def columns(self, values: Any) -> dict[str, np.ndarray]:
         """Named channel columns from readings of shape (n_samples, n_sensors, 3) in this unit."""
+        import numpy as np  # here, not at the top: the command line lists the readings without numpy
+
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
             raise ValueError(f"readings: expected shape (n_samples, n_sensors, 3), got {values.shape}")

@@ -7,11 +7,14 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
 from softtip._core.systems import names, studies
+
+if TYPE_CHECKING:
+    import numpy as np
 from softtip.cli.common import (FORCE, check_distinct, check_number, check_output, check_output_folder, console, errors,
                                 fail, printable, progress_for)
 
@@ -127,6 +130,8 @@ def calibrate(
     The network's early stopping holds out whole trials or blocks of trials (--early-stopping); with --baseline,
     scikit-learn references are scored beside it; a validation set outside the calibration range is warned of.
     """
+    import numpy as np
+
     from softtip.calibration import save_model
     from softtip.calibration.validation import CalibrationRange, stopping_groups
     from softtip.data import Dataset
@@ -363,6 +368,8 @@ def _check_readings(data, dataset: Path) -> None:
     """Magnetic readings (changes from a baseline, µT) within what an MLX90393 can output: a change between
     two readings in range is at most twice the range, at the dataset's sensor settings or, without them,
     at the chip's widest (GAIN_SEL 0, RES 3)."""
+    import numpy as np
+
     from softtip._core.channels import MAGNETIC
     from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
 
@@ -390,6 +397,8 @@ def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
 
 
 def _targets(data, target: list[str], kind: str) -> np.ndarray:
+    import numpy as np
+
     if kind == "classifier":
         return data.column(target[0])
     columns = [np.asarray(data.column(t), dtype=float) for t in target]
@@ -397,6 +406,8 @@ def _targets(data, target: list[str], kind: str) -> np.ndarray:
 
 
 def _score(estimator, kind: str, X: np.ndarray, y: np.ndarray, target: tuple[str, ...] | list[str]) -> dict:
+    import numpy as np
+
     from softtip import metrics
     from softtip.calibration.validation import regression_scores
 

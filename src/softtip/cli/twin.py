@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
+import math
 from enum import Enum
 from pathlib import Path
 
-import numpy as np
 import typer
 from rich.table import Table
 
@@ -89,6 +89,8 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
+    import numpy as np
+
     from softtip.design.model import load_design
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import make_indenter
@@ -150,10 +152,10 @@ def check_mesh_work(design, mesh_size_mm: float, force: bool) -> None:
     tetrahedron of edge ``mesh_size`` (a³ / (6 √2)): an upper bound, some 2.3 times gmsh's count."""
     height_mm = design.height / MM
     body = design.spec["body"]
-    footprint_mm2 = (np.pi * body["diameter_mm"] ** 2 / 4 if "diameter_mm" in body
+    footprint_mm2 = (math.pi * body["diameter_mm"] ** 2 / 4 if "diameter_mm" in body
                      else body["width_mm"] * body["length_mm"])
     volume_mm3 = footprint_mm2 * height_mm  # the cavity left in: an upper bound of the work
-    elements = volume_mm3 / (mesh_size_mm**3 / (6 * np.sqrt(2)))
+    elements = volume_mm3 / (mesh_size_mm**3 / (6 * math.sqrt(2)))
     if elements > MAX_ELEMENTS and not force:
         fail(f"--mesh-size = {mesh_size_mm} mm: some {elements:.2g} tetrahedra for the {volume_mm3:.3g} mm³ body, "
              f"over the {MAX_ELEMENTS:.0e} solved without --force")
