@@ -57,6 +57,7 @@ PLUG_INS = {"brokentip": BROKEN, "recordless": NOT_A_RECORD, "copycat": COPYCAT,
 def unread_registry(monkeypatch):
     """The registry as a new process finds it: nothing registered, the entry points not yet read."""
     monkeypatch.setattr(registry, "_REGISTERED", {})
+    monkeypatch.setattr(registry, "_INSTALLED_BY", {})
     monkeypatch.setattr(registry, "_entry_points", "unread")
 
 
@@ -214,3 +215,32 @@ def test_help_imports_no_demo_study_scenario_or_command_group(tmp_path, install_
     listed = subprocess.run([sys.executable, "-m", "softtip", "demo", "--help"], env=beside, capture_output=True,
                             text=True, timeout=120)
     assert listed.returncode == 0 and "Its demo." in listed.stdout, listed.stderr  # imported when used
+
+
+def test_an_edited_or_upgraded_plug_in_gets_new_keys_for_its_cached_artefacts(unread_registry, tmp_path, monkeypatch,
+                                                                               install_package, request):
+    from test_systems import PACKAGE  # the spring of a lab's own, with its protocol
+
+    from softtip.lab.protocols import load_protocol, protocol_key
+
+    install_package(tmp_path, "springtip", PACKAGE, "springtip = springtip:SYSTEM")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    request.addfinalizer(lambda: [sys.modules.pop(name, None) for name in ("springtip", "springtip.bench")])
+    protocol = load_protocol("spring-push")
+    assert registry.provenance(registry.systems()["springtip"]) == {"package": "springtip",
+                                                                    "installed": "springtip 0.1"}
+    first = protocol_key(protocol)
+    assert protocol_key(load_protocol("spring-push")) == first  # the same inputs and code, the same key
+
+    model = tmp_path / "springtip" / "bench.py"
+    model.write_text(model.read_text().replace("read[:, 0, 2] = depth", "read[:, 0, 2] = 1.01 * depth"))
+    edited = protocol_key(protocol)
+    assert edited != first
+
+    (tmp_path / "springtip-0.1.dist-info").rename(tmp_path / "springtip-0.2.dist-info")
+    (tmp_path / "springtip-0.2.dist-info" / "METADATA").write_text("Metadata-Version: 2.1\nName: springtip\n"
+                                                                   "Version: 0.2\n")
+    monkeypatch.setattr(registry, "_REGISTERED", {})
+    monkeypatch.setattr(registry, "_entry_points", "unread")
+    assert registry.provenance(registry.systems()["springtip"])["installed"] == "springtip 0.2"
+    assert protocol_key(protocol) not in (first, edited)

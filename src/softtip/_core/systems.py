@@ -110,6 +110,7 @@ DEFAULT_USES = {"simulate": "a shipped design of its own (softtip simulate --des
                 "demo": '"module:function", the command plain softtip demo runs'}
 
 _REGISTERED: dict[str, System] = {}
+_INSTALLED_BY: dict[str, str] = {}  # system name -> "distribution version" of the package that declared it
 _entry_points = "unread"  # "reading" while they load: a plug-in that registers itself on import reads none again
 
 # the names that must be unique over all systems, and how to list them from a record
@@ -192,6 +193,9 @@ def _read_entry_points() -> None:
                 _add(system)
             except (TypeError, ValueError) as error:
                 _skip(entry, error)
+            else:
+                if entry.dist is not None:
+                    _INSTALLED_BY[system.name] = f"{entry.dist.name} {entry.dist.version}"
         _entry_points = "read"
     finally:
         if _entry_points == "reading":  # interrupted: read them again next time rather than not at all
@@ -202,6 +206,13 @@ def systems() -> dict[str, System]:
     """Every registered system, by name, in the order they registered."""
     _read_entry_points()
     return dict(_REGISTERED)
+
+
+def provenance(system: System) -> dict[str, str | None]:
+    """Where a system's code comes from, for the keys of its cached artefacts: its top-level package
+    (whose source the key hashes beside softtip's) and the installed distribution that declared it, with
+    its version (None for a record registered at run time)."""
+    return {"package": system.package.partition(".")[0], "installed": _INSTALLED_BY.get(system.name)}
 
 
 def load(reference: str) -> Any:
@@ -257,3 +268,4 @@ def studies() -> dict[str, Study]:
 def readings() -> tuple[Reading, ...]:
     """The readings the registered systems stream, beyond the toolkit's own."""
     return tuple(reading for system in systems().values() for reading in system.readings)
+
