@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import importlib
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib import metadata, resources
 from importlib.resources.abc import Traversable
 from typing import Any
 
-from softtip._core.channels import Reading
+from softtip._core.channels import MAGNETIC, Reading
 
 ENTRY_POINT_GROUP = "softtip.systems"
 
@@ -269,3 +269,22 @@ def readings() -> tuple[Reading, ...]:
     """The readings the registered systems stream, beyond the toolkit's own."""
     return tuple(reading for system in systems().values() for reading in system.readings)
 
+
+def known_readings() -> tuple[Reading, ...]:
+    """The toolkit's reading and every registered system's."""
+    return (MAGNETIC, *readings())
+
+
+def reading_of(channels: Iterable[str]) -> Reading:
+    """The reading whose channels ``channels`` all are."""
+    channels = list(channels)
+    READINGS = known_readings()
+    for reading in READINGS:
+        if channels and all(reading.is_channel(name) for name in channels):
+            return reading
+    strangers = [name for name in channels if not any(r.is_channel(name) for r in READINGS)]
+    if strangers or not channels:
+        raise ValueError(f"input channel {strangers[0] if strangers else None!r}: expected a channel name like "
+                         + " or ".join(r.channel_name(0, "x") for r in READINGS))
+    raise ValueError(f"input channels {channels}: expected channels of one sensor kind, not "
+                     + " and ".join(r.quantity for r in READINGS if any(r.is_channel(n) for n in channels)))
