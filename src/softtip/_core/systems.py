@@ -82,6 +82,8 @@ class System:
     defaults: Mapping[str, str] = field(default_factory=dict)
     bench_commands: Mapping[str, str] = field(default_factory=dict)
     commands: Mapping[str, str] = field(default_factory=dict)
+    # the chips it reads: name -> "module:attribute" of a softtip.sensors.registry.SensorKind
+    sensors: Mapping[str, str] = field(default_factory=dict)
 
     def files(self) -> Traversable:
         return resources.files(self.package)
@@ -116,7 +118,8 @@ _entry_points = "unread"  # "reading" while they load: a plug-in that registers 
 # the names that must be unique over all systems, and how to list them from a record
 _UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for study in s.studies],
            "scenario": lambda s: s.scenarios, "demo": lambda s: s.demos, "bench": lambda s: s.bench_commands,
-           "command": lambda s: s.commands, "reading": lambda s: [r.quantity for r in s.readings]}
+           "command": lambda s: s.commands, "reading": lambda s: [r.quantity for r in s.readings],
+           "sensor": lambda s: s.sensors}
 
 
 def register(system: System) -> System:

@@ -205,7 +205,7 @@ def sensor_summary(sensor) -> dict:
     from softtip.sensors import conversion_time_s, lsb_uT, max_output_rate_hz, noise_rms_uT
 
     settings = sensor.settings
-    return {"chip": "MLX90393", "settings": settings.to_dict(),
+    return {"chip": type(sensor).__name__, "settings": settings.to_dict(),
             "lsb_uT": [float(v) for v in lsb_uT(settings)], "noise_rms_uT": [float(v) for v in noise_rms_uT(settings)],
             "conversion_time_ms": conversion_time_s(settings) * 1e3, "max_rate_hz": max_output_rate_hz(settings)}
 
@@ -232,7 +232,7 @@ def print_result(report: dict) -> None:
     console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
     console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
     chip = report["sensor_model"]
-    console.print(f"MLX90393: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
+    console.print(f"{chip['chip']}: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
                   f"{chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
     for key, label in (("plot", "section plot"), ("deformed_mesh", "deformed mesh")):
         if key in report:

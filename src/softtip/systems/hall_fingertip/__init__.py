@@ -38,6 +38,7 @@ SYSTEM = System(
                "insertion": "softtip.systems.hall_fingertip.live:insertion_scenario"},
     demos={"insertion": "softtip.systems.hall_fingertip.commands:demo_insertion"},
     commands={"fingertip": "softtip.systems.hall_fingertip.commands:app"},
+    sensors={"mlx90393": "softtip.sensors.mlx90393:SENSOR"},
     defaults={"simulate": "cylindrical-A", "bench": "cylindrical-D", "scenario": "push",
               "demo": "softtip.systems.hall_fingertip.commands:demo"},
 )
