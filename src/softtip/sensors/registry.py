@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from softtip._core.channels import Reading
-from softtip._core.systems import NotRegistered, known_readings, load, systems
+from softtip._core.systems import System, known_readings, load, owner, systems
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*")
 
@@ -71,23 +71,20 @@ class SensorKind:
 
 def sensor_kinds() -> dict[str, SensorKind]:
     """Every sensor the registered systems declare, by name (their modules imported now)."""
-    kinds = {}
-    for system in systems().values():
-        for name, reference in system.sensors.items():
-            kind = load(reference)
-            if not isinstance(kind, SensorKind) or kind.name != name:
-                raise TypeError(f"system {system.name!r}: sensors.{name} = {reference!r}: expected a SensorKind "
-                                f"named {name!r}")
-            kinds[name] = kind
-    return kinds
+    return {name: _declared(system, name) for system in systems().values() for name in system.sensors}
 
 
 def sensor_kind(name: str) -> SensorKind:
     """The registered sensor ``name``; another name is refused with the registered ones."""
-    kinds = sensor_kinds()
-    if name not in kinds:
-        raise NotRegistered(f"sensor {name!r}: expected one of {', '.join(kinds) or '(none registered)'}")
-    return kinds[name]
+    return _declared(owner("sensor", name), name)
+
+
+def _declared(system: System, name: str) -> SensorKind:
+    kind = load(system.sensors[name])
+    if not isinstance(kind, SensorKind) or kind.name != name:
+        raise TypeError(f"system {system.name!r}: sensors.{name} = {system.sensors[name]!r}: expected a SensorKind "
+                        f"named {name!r}")
+    return kind
 
 
 def check_changes(columns: Mapping[str, np.ndarray], stated: Mapping[str, Any] | None, source: str) -> None:
