@@ -179,6 +179,7 @@ def inputs(tmp_path_factory):
                     "recording"),
         "optimize": ([], ["--config", str(tmp / "study.toml")], "study.toml", "config"),
         "reproduce": (["pushing"], [], None, None),
+        "check-system": (["wearable"], [], None, None),
         "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
         "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
         "recalibrate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),

@@ -33,7 +33,7 @@ except ValueError as _error:
     errors.print(f"error: {printable(_error)}", markup=False, highlight=False, soft_wrap=True)
     sys.exit(2)
 
-from softtip.cli import importing, lab, live, optimize, recording, session, sysid, twin  # noqa: E402
+from softtip.cli import importing, lab, live, optimize, plugin, recording, session, sysid, twin  # noqa: E402
 
 DEMO_HELP = "Demonstrations on the built-in simulated sensors."
 BENCH_HELP = "Benchmarks measured on this machine (ratios against baselines of the same run)."
@@ -94,6 +94,7 @@ for command in (twin.designs, twin.simulate, live.live, live.convert, optimize.o
                 lab.calibrate, lab.evaluate, session.recalibrate):
     app.command()(command)
 app.command("import")(importing.import_logs)
+app.command("check-system")(plugin.check_system)
 app.add_typer(_typer_group("The virtual lab: the published experiments on the twin, as datasets.",
                            {"run": lab.lab_run}), name="lab")
 app.add_typer(_typer_group("System identification: transfer-function and state-space models from recordings.",
