@@ -1,10 +1,10 @@
 """Sensor channels: one axis of one 3-axis sensor, named after what the sensor reads.
 
 A :class:`Reading` is what a stream's 3-axis sensors read, in one unit, and how their channels
-are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip
-(MLX90393), in µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register
-their own (:class:`softtip._core.systems.System`), e.g. a force chip's in N; the registry knows
-every reading (``known_readings``, ``reading_of``), this module none but its own.
+are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip, in
+µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register their own
+(:class:`softtip._core.systems.System`), e.g. a force chip's in N; the registry knows every reading
+(``known_readings``, ``reading_of``), this module none but its own.
 
 Channels are stored sensor by sensor, x, y, z within each (the order of a reading of shape
 (sensors, 3) flattened). The module-level functions name magnetic channels, the datasets' default.
