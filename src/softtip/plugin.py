@@ -23,7 +23,8 @@ import typer
 from softtip._core.channels import Reading
 from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
 from softtip._core.progress import SILENT, Progress
-from softtip._core.systems import DEFAULT_USES, Study, System, known_readings, load, reading_of, systems
+from softtip._core.systems import (DEFAULT_USES, Study, System, failure_line, known_readings, load, reading_of,
+                                   systems)
 from softtip.data import DatasetMetadata, TrialWriter
 from softtip.data.splits import CALIBRATION, VALIDATION
 from softtip.hardware import PacedSource
@@ -103,7 +104,7 @@ def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -
         try:
             target = load(reference)
         except Exception as error:  # any failure to import is the plug-in's to fix: reported, not raised
-            broken.append(f"{record}: {key} = {reference!r}: cannot be loaded ({type(error).__name__}: {error})")
+            broken.append(f"{record}: {key} = {reference!r}: cannot be loaded ({failure_line(error)})")
             continue
         if kind is not None and not isinstance(target, kind):
             broken.append(f"{record}: {key} = {reference!r}: expected a {kind.__name__}, got {type(target).__name__}")
@@ -127,8 +128,7 @@ def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -
         try:
             report = reproduce_study(study.name, quick=True, progress=progress)
         except Exception as error:  # the study's analysis is the plug-in's code: its failure is a finding
-            broken.append(f"{record}: study {study.name!r}: its quick reproduction failed ({type(error).__name__}: "
-                          f"{error})")
+            broken.append(f"{record}: study {study.name!r}: its quick reproduction failed ({failure_line(error)})")
             continue
         if not isinstance(report.outcome, StudyOutcome):
             broken.append(f"{record}: studies.{study.name}.analysis: expected a StudyOutcome, got "
@@ -166,7 +166,7 @@ def _check_protocol(system: System, record: str, name: str, bench: str, progress
     try:
         dataset, _ = run_protocol(protocol.changed(**quick_cuts(protocol)), progress)
     except Exception as error:  # the runner is the plug-in's code: its failure is a finding
-        return [f"{path}: its quick run failed ({type(error).__name__}: {error})"]
+        return [f"{path}: its quick run failed ({failure_line(error)})"]
     try:
         reading_of(dataset.channels)
     except ValueError as error:
@@ -182,7 +182,7 @@ def _check_scenario(record: str, name: str, scenario: Scenario, progress: Progre
     try:
         stream = scenario(progress, lambda chips, rate_hz: asked.append((chips, rate_hz)))
     except Exception as error:  # the scenario is the plug-in's code: its failure is a finding
-        return [f"{record}: scenarios.{name}: failed ({type(error).__name__}: {error})"]
+        return [f"{record}: scenarios.{name}: failed ({failure_line(error)})"]
     if not isinstance(stream, LiveScenario):
         return [f"{record}: scenarios.{name}: expected a LiveScenario, got {type(stream).__name__}"]
     broken = [] if asked else [f"{record}: scenarios.{name}: never called check(chips, rate_hz) before its work"]

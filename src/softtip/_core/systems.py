@@ -158,10 +158,15 @@ def _package(entry: metadata.EntryPoint) -> str:
     return entry.dist.name if entry.dist is not None else entry.module.partition(".")[0]
 
 
-def _skip(entry: metadata.EntryPoint, error: Exception) -> None:
+def failure_line(error: BaseException) -> str:
+    """What a system's code raised, on one line: its type and the first line of its message."""
     reason = str(error).strip().splitlines()
-    warnings.warn(f"softtip system {entry.name!r} of package {_package(entry)!r} skipped: {type(error).__name__}"
-                  + (f": {reason[0]}" if reason else ""), SystemSkipped, stacklevel=4)
+    return type(error).__name__ + (f": {reason[0]}" if reason else "")
+
+
+def _skip(entry: metadata.EntryPoint, error: Exception) -> None:
+    warnings.warn(f"softtip system {entry.name!r} of package {_package(entry)!r} skipped: {failure_line(error)}",
+                  SystemSkipped, stacklevel=4)
 
 
 def is_own(system: System) -> bool:
