@@ -23,8 +23,7 @@ import typer
 from softtip._core.channels import Reading
 from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
 from softtip._core.progress import SILENT, Progress
-from softtip._core.systems import (DEFAULT_USES, Study, System, failure_line, known_readings, load, reading_of,
-                                   systems)
+from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
 from softtip.data import DatasetMetadata, TrialWriter
 from softtip.data.splits import CALIBRATION, VALIDATION
 from softtip.hardware import PacedSource
@@ -93,7 +92,7 @@ def _references(system: System) -> list[tuple[str, str, type | None]]:
 def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -> list[str]:
     """Every rule the registered system ``name`` breaks, one line each (none: it holds). Resolves every
     reference of its record, loads and runs each shipped protocol at its quick size and checks its
-    dataset (channels of a known reading, roles), runs each live scenario and, with ``studies``, each
+    dataset's roles, runs each live scenario and, with ``studies``, each
     study's quick reproduction (its report)."""
     system = systems().get(name)
     if system is None:
@@ -167,10 +166,6 @@ def _check_protocol(system: System, record: str, name: str, bench: str, progress
         dataset, _ = run_protocol(protocol.changed(**quick_cuts(protocol)), progress)
     except Exception as error:  # the runner is the plug-in's code: its failure is a finding
         return [f"{path}: its quick run failed ({failure_line(error)})"]
-    try:
-        reading_of(dataset.channels)
-    except ValueError as error:
-        broken.append(f"{path}: its dataset's {error} (a registered Reading's)")
     strangers = sorted(set(map(str, dataset.column("role"))) - set(ROLES)) if "role" in dataset.conditions else []
     if strangers:
         broken.append(f"{path}: its dataset's role {strangers[0]!r}: expected {' or '.join(ROLES)}")

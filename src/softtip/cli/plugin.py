@@ -16,7 +16,7 @@ def check_system(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Check a registered system as softtip uses it: every reference of its record, each shipped protocol
-    run at its quick size (its readings and roles), each live scenario and each study's quick report.
+    run at its quick size (its dataset's roles), each live scenario and each study's quick report.
     Prints every broken rule in one line naming the file or the record's key; exit code 1 if any."""
     from softtip._core.systems import systems
     from softtip.plugin import check_system as check
