@@ -64,3 +64,22 @@ def coarse_protocol(tmp_path_factory):
         return path
 
     return write
+
+
+@pytest.fixture(scope="session")
+def install_package():
+    """Writes a package of a lab's own on a folder beside its dist-info, as pip would install it:
+    ``install(root, name, files, systems)`` with ``files`` its modules' text by path within the package
+    and ``systems`` its ``softtip.systems`` entry points ("name = module:attribute" lines)."""
+
+    def install(root, name: str, files: dict[str, str], systems: str, version: str = "0.1") -> None:
+        for path, text in files.items():
+            target = root / name / path
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(textwrap.dedent(text).lstrip())
+        info = root / f"{name}-{version}.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n")
+        (info / "entry_points.txt").write_text(f"[softtip.systems]\n{textwrap.dedent(systems).strip()}\n")
+
+    return install

@@ -46,7 +46,9 @@ class TookTooLong(BaseException):
 def commands(command=None, words: tuple[str, ...] = ()):
     """Every runnable command of the application as (its words, the command)."""
     command = typer.main.get_command(app) if command is None else command
-    subcommands = getattr(command, "commands", None) or {}
+    # through get_command, which builds the groups the command line imports only when used
+    subcommands = {name: command.get_command(None, name) for name in command.list_commands(None)} \
+        if hasattr(command, "list_commands") else {}
     if words and command.callback is not None and (not subcommands or getattr(command, "invoke_without_command", False)):
         yield words, command
     for name, sub in subcommands.items():
@@ -177,6 +179,7 @@ def inputs(tmp_path_factory):
                     "recording"),
         "optimize": ([], ["--config", str(tmp / "study.toml")], "study.toml", "config"),
         "reproduce": (["pushing"], [], None, None),
+        "check-system": (["wearable"], [], None, None),
         "calibrate": ([str(dataset)], ["-t", "fz_N"], "dataset.parquet", "dataset"),
         "evaluate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),
         "recalibrate": ([str(tmp / "model.npz"), str(dataset)], [], "dataset.parquet", "dataset"),

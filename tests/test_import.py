@@ -233,7 +233,7 @@ def test_a_reading_beyond_the_declared_range_is_refused_and_one_at_its_limit_fla
     dataset, _ = import_logs([path], _mapping(mapping))
     assert list(dataset.column("saturated")) == [True, False]
     _counts_log(path, [(100.0, 0, 0), (6000.0, 0, 0)])
-    with pytest.raises(DatasetError, match=r"field.csv: line 2, column 2 \(chip 0 x\): beyond the MLX90393's range"):
+    with pytest.raises(DatasetError, match=r"field.csv: line 2, column 2 \(chip 0 x\): beyond the mlx90393's range at the declared gain_sel and res_xyz"):
         import_logs([path], _mapping(mapping))
     # the same reading at the widest setting (GAIN_SEL 0, RES 0: 32767 x 0.751 µT) is in range
     widest = {"sensor": {**mapping["sensor"], "gain_sel": 0}}
@@ -258,7 +258,10 @@ def test_another_sensor_is_imported_in_its_own_unit(tmp_path):
     ({"sensor": {"chips": [["bx", 3, 4]]}},
      r"sensor.chips\[0\]\[0\] = 'bx': column 'bx' is named, but the file has no header"),
     ({"sensor": {"time": 0}}, r"sensor.time = 0: column 0: columns are numbered from 1"),
-    ({"sensor": {"unit": "V"}}, "sensor.unit = 'V': an MLX90393 reads in"),
+    ({"sensor": {"unit": "V", "chip": None}}, "sensor.unit = 'V': no registered sensor reads in V: name it as chip"),
+    ({"sensor": {"unit": "V", "chip": "mlx90393"}}, "sensor.unit = 'V': the mlx90393 reads in uT, .* or counts"),
+    ({"sensor": {"chip": "tmag5273"}}, "sensor.chip = 'tmag5273': sensor 'tmag5273': expected one of mlx90393 or "
+                                       "\"other\""),
     ({"sensor": {"unit": "counts", "gain_sel": None}}, "raw counts need the chips' gain_sel and res_xyz"),
     ({"sensor": {"delimiter": "."}}, "delimiter.*not part of a number"),
     ({"labels": {"tolerance_s": None}}, "tolerance_s"),

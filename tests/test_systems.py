@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -144,17 +143,10 @@ PACKAGE = {
 
 
 @pytest.fixture(scope="module")
-def springtip(tmp_path_factory) -> dict:
+def springtip(tmp_path_factory, install_package) -> dict:
     """The package and its dist-info on a folder; the environment a command needs to find it."""
     root = tmp_path_factory.mktemp("site")
-    for name, text in PACKAGE.items():
-        path = root / "springtip" / name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(textwrap.dedent(text).lstrip())
-    info = root / "springtip-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: springtip\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("[softtip.systems]\nspringtip = springtip:SYSTEM\n")
+    install_package(root, "springtip", PACKAGE, "springtip = springtip:SYSTEM")
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
 
 

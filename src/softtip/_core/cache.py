@@ -29,6 +29,7 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 
 from softtip._core.archive import read_archive, write_archive
+from softtip._core.user import user_folder
 
 ENTRY_FORMAT, ENTRY_VERSION = "softtip-cache-entry", 1
 Loaded = TypeVar("Loaded")
@@ -47,21 +48,7 @@ def cache_dir() -> Path:
     chosen = os.environ.get("SOFTTIP_CACHE_DIR")
     if chosen:
         return Path(chosen)
-    xdg = os.environ.get("XDG_CACHE_HOME", "")
-    if os.path.isabs(xdg):
-        return Path(xdg) / "softtip"
-    home = os.environ.get("HOME", "")
-    if not os.path.isabs(home):
-        try:
-            import pwd
-
-            home = pwd.getpwuid(os.getuid()).pw_dir
-        except (ImportError, KeyError):  # no password database, or a user id without an entry (containers)
-            home = ""
-    if not os.path.isabs(home) or Path(home) == Path(home).parent:
-        raise CacheEntryError(f"HOME = {os.environ.get('HOME', '')!r}: no home folder to keep the cache in; "
-                              "set SOFTTIP_CACHE_DIR (or XDG_CACHE_HOME) to a folder")
-    return Path(home) / ".cache" / "softtip"
+    return user_folder("XDG_CACHE_HOME", ".cache", CacheEntryError, "SOFTTIP_CACHE_DIR")
 
 
 def code_hash(*modules: str) -> str:

@@ -1,9 +1,10 @@
 """Sensor channels: one axis of one 3-axis sensor, named after what the sensor reads.
 
 A :class:`Reading` is what a stream's 3-axis sensors read, in one unit, and how their channels
-are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip
-(MLX90393), in µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register
-their own (:class:`softtip._core.systems.System`), e.g. a force chip's in N.
+are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip, in
+µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register their own
+(:class:`softtip._core.systems.System`), e.g. a force chip's in N; the registry knows every reading
+(``known_readings``, ``reading_of``), this module none but its own.
 
 Channels are stored sensor by sensor, x, y, z within each (the order of a reading of shape
 (sensors, 3) flattened). The module-level functions name magnetic channels, the datasets' default.
@@ -13,11 +14,11 @@ from __future__ import annotations
 
 import numbers
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 AXES = ("x", "y", "z")
 
@@ -85,6 +86,8 @@ class Reading:
 
     def columns(self, values: Any) -> dict[str, np.ndarray]:
         """Named channel columns from readings of shape (n_samples, n_sensors, 3) in this unit."""
+        import numpy as np  # here, not at the top: the command line lists the readings without numpy
+
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 3 or values.shape[2] != 3 or values.shape[1] < 1:
             raise ValueError(f"readings: expected shape (n_samples, n_sensors, 3), got {values.shape}")
@@ -107,25 +110,3 @@ channel_names = MAGNETIC.channel_names
 is_channel = MAGNETIC.is_channel
 channel_order = MAGNETIC.channel_order
 channel_columns = MAGNETIC.columns
-
-
-def known_readings() -> tuple[Reading, ...]:
-    """The toolkit's reading and every registered system's."""
-    from softtip._core.systems import readings  # the registry reads its records' readings from here
-
-    return (MAGNETIC, *readings())
-
-
-def reading_of(channels: Iterable[str]) -> Reading:
-    """The reading whose channels ``channels`` all are."""
-    channels = list(channels)
-    READINGS = known_readings()
-    for reading in READINGS:
-        if channels and all(reading.is_channel(name) for name in channels):
-            return reading
-    strangers = [name for name in channels if not any(r.is_channel(name) for r in READINGS)]
-    if strangers or not channels:
-        raise ValueError(f"input channel {strangers[0] if strangers else None!r}: expected a channel name like "
-                         + " or ".join(r.channel_name(0, "x") for r in READINGS))
-    raise ValueError(f"input channels {channels}: expected channels of one sensor kind, not "
-                     + " and ".join(r.quantity for r in READINGS if any(r.is_channel(n) for n in channels)))

@@ -38,7 +38,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from softtip._core.channels import reading_of
+from softtip._core.systems import reading_of
 from softtip._core.errors import NotConverged
 
 GROUPINGS = ("chip", "channel", "common")

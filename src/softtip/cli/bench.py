@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from softtip.cli.common import FORCE, LONGEST_S, check_number, check_output, console, fail, progress_for
-from softtip._core.systems import reference_design
+from softtip._core.systems import default
 
 
 MAX_BATCH = 10_000_000  # samples or poses in one batch: some 1 GB of float64 field per sensor and magnet
@@ -24,7 +24,7 @@ class RomFriction(str, Enum):  # contact on footprint cells adds Coulomb's law
 
 
 def bench_twin(
-    design: str = typer.Option(reference_design("bench"), help="Design to benchmark."),
+    design: str = typer.Option(default("bench"), help="Design to benchmark."),
     mesh_size: float = typer.Option(1.0, "--mesh-size", help="Mesh size (mm)."),
     poses: int = typer.Option(200_000, help="Batch size of magnet poses for the magnetics + sensor stage."),
     skip_neo_hookean: bool = typer.Option(False, "--skip-neo-hookean", help="Leave out the 3 mm neo-Hookean push."),
@@ -47,7 +47,7 @@ def bench_twin(
 
 
 def bench_rom(
-    design: str = typer.Option(reference_design("bench"), help="Design to reduce."),
+    design: str = typer.Option(default("bench"), help="Design to reduce."),
     samples: int = typer.Option(None, help="Exact contact samples to fit the interpolator on (default: 8000)."),
     holdout: int = typer.Option(12, help="Held-out finite-element solves for the error report."),
     save: Path = typer.Option(None, help="Save the reduced twin (npz + json) to this .npz file."),

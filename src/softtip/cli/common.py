@@ -254,14 +254,32 @@ def commands_of(command, path: tuple[str, ...] = ()):
         yield from commands_of(sub, (*path, name))
 
 
+class Deferred(TyperGroup):
+    """A command group imported when it is used, not when the command line loads (a system's commands,
+    its demos, its benchmarks): the root's help lists it by ``summary``; :meth:`Toolkit.get_command`
+    replaces it with the group ``build`` returns the first time a command line names it."""
+
+    def __init__(self, name: str, summary: str, build: typing.Callable[[], TyperGroup]):
+        super().__init__(name=name, help=summary)
+        self.build = build
+
+
 class Toolkit(TyperGroup):
     """The root command: every command below it, whichever system registered it, refuses non-finite
     numbers and turns user errors into one line; a usage error (an unknown option, a value of the wrong
-    type) is one line too; help reads as text."""
+    type) is one line too; help reads as text. ``deferred``: its groups built when used."""
+
+    deferred: tuple[Deferred, ...] = ()
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        for _, command in commands_of(self):
+        self._listing = False
+        self._make_ours(self)
+        for group in self.deferred:
+            self.commands[group.name] = group
+
+    def _make_ours(self, root) -> None:
+        for _, command in commands_of(root):
             command.help = _paragraphs(command.help)
             for param in command.params:
                 if param.metavar is not None or not hasattr(param, "type_descriptor"):
@@ -275,6 +293,20 @@ class Toolkit(TyperGroup):
             command.get_help_option = _flag_help(command.get_help_option)
             if command.callback is not None and command is not self:
                 command.callback = _checked(user_errors(command.callback), command)
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if isinstance(command, Deferred) and not self._listing:
+            command = self.commands[cmd_name] = command.build()
+            self._make_ours(command)
+        return command
+
+    def format_help(self, ctx, formatter):
+        self._listing = True  # the root's help lists deferred groups by their summary, importing none
+        try:
+            return super().format_help(ctx, formatter)
+        finally:
+            self._listing = False
 
     def parse_args(self, ctx, args):
         with _one_line_usage_errors():

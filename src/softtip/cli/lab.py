@@ -7,11 +7,14 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
 from softtip._core.systems import names, studies
+
+if TYPE_CHECKING:
+    import numpy as np
 from softtip.cli.common import (FORCE, check_distinct, check_number, check_output, check_output_folder, console, errors,
                                 fail, printable, progress_for)
 
@@ -127,10 +130,13 @@ def calibrate(
     The network's early stopping holds out whole trials or blocks of trials (--early-stopping); with --baseline,
     scikit-learn references are scored beside it; a validation set outside the calibration range is warned of.
     """
+    import numpy as np
+
     from softtip.calibration import save_model
     from softtip.calibration.validation import CalibrationRange, stopping_groups
     from softtip.data import Dataset
     from softtip.data.splits import by_role
+    from softtip.sensors.registry import check_changes
 
     if model not in MODEL_KINDS:
         fail(f"--model = {model!r}: expected one of {', '.join(MODEL_KINDS)}")
@@ -155,7 +161,7 @@ def calibrate(
     if unknown:
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
     _check_label_units(data, dataset, target)
-    _check_readings(data, dataset)
+    check_changes(data.columns, data.metadata.sensor_settings, str(dataset))
     X, y = data.X(), _targets(data, target, model)
     keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
     calibration, _ = by_role(data)
@@ -339,6 +345,8 @@ NAMED_UNITS = ("N", "mN", "m", "mm", "deg", "rad", "s", "Pa", "kPa", "T", "mT", 
 def check_model_data(meta, data, dataset: Path) -> None:
     """A dataset a saved model (``meta``: its metadata) can be scored on: the model's input channels
     and targets, labels in the units their names state, readings within the chip's range."""
+    from softtip.sensors.registry import check_changes
+
     missing = [c for c in meta.input_channels if c not in data.channels]
     if missing:
         fail(f"{dataset}: lacks the model's input channel {missing[0]!r}")
@@ -346,7 +354,7 @@ def check_model_data(meta, data, dataset: Path) -> None:
     if absent:
         fail(f"{dataset}: lacks the model's target {absent[0]!r}")
     _check_label_units(data, dataset, list(meta.target_names))
-    _check_readings(data, dataset)
+    check_changes(data.columns, data.metadata.sensor_settings, str(dataset))
 
 
 def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
@@ -357,26 +365,6 @@ def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
         declared = data.labels[name]
         if named in NAMED_UNITS and declared != named:
             fail(f"{dataset}: label {name!r} is declared in {declared!r}, but its name says {named!r}")
-
-
-def _check_readings(data, dataset: Path) -> None:
-    """Magnetic readings (changes from a baseline, µT) within what an MLX90393 can output: a change between
-    two readings in range is at most twice the range, at the dataset's sensor settings or, without them,
-    at the chip's widest (GAIN_SEL 0, RES 3)."""
-    from softtip._core.channels import MAGNETIC
-    from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT
-
-    stated = data.metadata.sensor_settings
-    settings = MLX90393Settings.from_dict(stated) if stated else MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3))
-    where = "the dataset's sensor settings" if stated else "its widest setting"
-    limit = 2 * full_scale_uT(settings)
-    for channel in filter(MAGNETIC.is_channel, data.channels):
-        values = data.columns[channel]
-        largest = float(np.nanmax(np.abs(values))) if len(values) else 0.0
-        bound = limit[MAGNETIC.channel_order(channel)[1]]
-        if not largest <= bound:
-            fail(f"{dataset}: channel {channel} reaches {largest:.4g} µT, beyond twice the MLX90393's "
-                 f"{bound / 2:.4g} µT range at {where}")
 
 
 def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
@@ -390,6 +378,8 @@ def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
 
 
 def _targets(data, target: list[str], kind: str) -> np.ndarray:
+    import numpy as np
+
     if kind == "classifier":
         return data.column(target[0])
     columns = [np.asarray(data.column(t), dtype=float) for t in target]
@@ -397,6 +387,8 @@ def _targets(data, target: list[str], kind: str) -> np.ndarray:
 
 
 def _score(estimator, kind: str, X: np.ndarray, y: np.ndarray, target: tuple[str, ...] | list[str]) -> dict:
+    import numpy as np
+
     from softtip import metrics
     from softtip.calibration.validation import regression_scores
 

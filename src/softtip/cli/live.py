@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from softtip._core.systems import names, owner
+from softtip._core.systems import default, names, owner
 from softtip.cli.common import (FORCE, LONGEST_S, check_input, check_number, check_output, claimed, console, errors,
                                 fail, printable, progress_for)
 
@@ -42,7 +42,7 @@ def live(
                                                          "(with --emulate, default: the scenario's own)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated sensor replaying a registered system's "
                                                          "scenario instead of a port."),
-    scenario: Scenario = typer.Option(SCENARIOS[0] if SCENARIOS else None, "--scenario",
+    scenario: Scenario = typer.Option(default("scenario"), "--scenario",
                                  help=f"With --emulate, one of: {SCENARIO_HELP}."),
     chips: int = typer.Option(None, "--chips", help="Chips on the board (default: as it reports)."),
     rate: int = typer.Option(None, "--rate", help="Frames per second (default 50; a paced sensor: its own)."),

@@ -6,7 +6,6 @@ import json
 from enum import Enum
 from pathlib import Path
 
-import numpy as np
 import typer
 
 from softtip.cli.common import FORCE, check_input, check_number, check_outputs, console, errors, fail, printable
@@ -42,6 +41,8 @@ def recalibrate(
     """Carry a saved model over to a new session: its readings re-zeroed at rest, each chip's gain
     re-fitted from the first presses of a known or measured load, the model kept. Prints the error on
     the rest of the session after 0, 1, ... presses, beside predicting zero."""
+    import numpy as np
+
     from softtip.calibration import load_model, save_model
     from softtip.calibration.session import SessionGains, gain_groups, session_curve
     from softtip.cli.lab import check_model_data
@@ -103,6 +104,7 @@ def recalibrate(
 
 
 def _plot_curve(curve, targets: list[str], units: list[str], path: Path) -> Path:
+    import numpy as np
     from matplotlib.figure import Figure
 
     from softtip._core.files import save_figure

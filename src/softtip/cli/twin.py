@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
+import math
 from enum import Enum
 from pathlib import Path
 
-import numpy as np
 import typer
 from rich.table import Table
 
@@ -14,7 +14,7 @@ from softtip import __version__
 from softtip._core.files import atomic_write
 from softtip._core.units import MM, UT_PER_T
 from softtip.cli.common import check_number, check_outputs, console, fail, progress_for
-from softtip._core.systems import reference_design
+from softtip._core.systems import default
 
 
 class IndenterKind(str, Enum):
@@ -65,7 +65,7 @@ def designs(json_output: bool = typer.Option(False, "--json", help="Print JSON."
 
 
 def simulate(
-    design: str = typer.Option(reference_design("simulate"), help="Shipped design name or path to a design TOML file."),
+    design: str = typer.Option(default("simulate"), help="Shipped design name or path to a design TOML file."),
     indenter: IndenterKind = typer.Option(IndenterKind.board, help="Rigid indenter."),
     depth: float = typer.Option(1.0, help="Normal travel after first touch (mm)."),
     angle: float = typer.Option(0.0, help="Board angle about the vertical axis (degrees)."),
@@ -89,6 +89,8 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Run one load case on the physics twin and print magnet poses, sensor readings and force."""
+    import numpy as np
+
     from softtip.design.model import load_design
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import make_indenter
@@ -150,10 +152,10 @@ def check_mesh_work(design, mesh_size_mm: float, force: bool) -> None:
     tetrahedron of edge ``mesh_size`` (a³ / (6 √2)): an upper bound, some 2.3 times gmsh's count."""
     height_mm = design.height / MM
     body = design.spec["body"]
-    footprint_mm2 = (np.pi * body["diameter_mm"] ** 2 / 4 if "diameter_mm" in body
+    footprint_mm2 = (math.pi * body["diameter_mm"] ** 2 / 4 if "diameter_mm" in body
                      else body["width_mm"] * body["length_mm"])
     volume_mm3 = footprint_mm2 * height_mm  # the cavity left in: an upper bound of the work
-    elements = volume_mm3 / (mesh_size_mm**3 / (6 * np.sqrt(2)))
+    elements = volume_mm3 / (mesh_size_mm**3 / (6 * math.sqrt(2)))
     if elements > MAX_ELEMENTS and not force:
         fail(f"--mesh-size = {mesh_size_mm} mm: some {elements:.2g} tetrahedra for the {volume_mm3:.3g} mm³ body, "
              f"over the {MAX_ELEMENTS:.0e} solved without --force")
@@ -203,7 +205,7 @@ def sensor_summary(sensor) -> dict:
     from softtip.sensors import conversion_time_s, lsb_uT, max_output_rate_hz, noise_rms_uT
 
     settings = sensor.settings
-    return {"chip": "MLX90393", "settings": settings.to_dict(),
+    return {"chip": type(sensor).__name__, "settings": settings.to_dict(),
             "lsb_uT": [float(v) for v in lsb_uT(settings)], "noise_rms_uT": [float(v) for v in noise_rms_uT(settings)],
             "conversion_time_ms": conversion_time_s(settings) * 1e3, "max_rate_hz": max_output_rate_hz(settings)}
 
@@ -230,7 +232,7 @@ def print_result(report: dict) -> None:
     console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
     console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
     chip = report["sensor_model"]
-    console.print(f"MLX90393: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
+    console.print(f"{chip['chip']}: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
                   f"{chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
     for key, label in (("plot", "section plot"), ("deformed_mesh", "deformed mesh")):
         if key in report:

@@ -6,8 +6,9 @@ A mapping, written once as a small TOML file, says how a rig's logs become trial
     file = "sensor.csv"           # its name in each trial's folder
     header = false                # no header row: columns are numbered from 1
     time = 1                      # the time column, in time_unit (or rate_hz: evenly spaced)
-    chip = "mlx90393"             # or "other": any 3-axis sensor, named and in its own unit
     unit = "uT"                   # uT, mT, G, T, or counts (the chip's 16-bit words; needs gain_sel, res_xyz)
+                                  # chip: a registered sensor (default: the one that reads in unit), or
+                                  # "other": any 3-axis sensor, named and in its own unit
     gain_sel = 1                  # the chips' settings: range checks and saturation follow them
     res_xyz = [2, 2, 2]
     chips = [[2, 3, 4], [5, 6, 7]]  # each chip's x, y, z columns
@@ -47,16 +48,18 @@ import numpy as np
 from pydantic import Field, Strict
 
 from softtip._core.channels import AXES, MAGNETIC
+from softtip._core.systems import NotRegistered
 from softtip._core.config import (Flag, OpenFraction, PositiveInteger, PositiveNumber, Refusal, Text, choice, expect,
                                   integer, parse, read_toml, schema)
 from softtip._core.units import FORCE_UNITS, MM, UM
 from softtip.data.csvload import TIME_UNITS_IN_S, WHITESPACE, read_columns
 from softtip.data.dataset import DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata, trial_runs
 from softtip.data.splits import CALIBRATION, VALIDATION
-from softtip.sensors.mlx90393 import MLX90393, Hallconf, MLX90393Settings, Resolutions, full_scale_uT, lsb_uT
+from softtip.sensors.mlx90393 import Hallconf, Resolutions
+from softtip.sensors.registry import SensorKind, sensor_kind, sensor_kinds
 
 STANDARD_GRAVITY = 9.80665  # m/s², the conventional value (3rd CGPM, 1901): a scale's grams as force
-COUNTS = "counts"  # an MLX90393's raw 16-bit output words
+OTHER = "other"  # a sensor no system registered: named, in its own unit, its full scale given
 WRITTEN = ("role", "source", "saturated")  # the columns an import writes besides channels and the mapping's labels
 # Label units softtip converts between, by quantity: how many of the quantity's first unit one of each is.
 LABEL_UNITS = (
@@ -104,7 +107,7 @@ class SensorLog(_Log):
 
     chips: Annotated[list[list[ColumnRef]], Field(min_length=1),
                      expect("a list of [x, y, z] columns, one per chip")] = field(default_factory=list)
-    chip: choice("mlx90393", "other") = "mlx90393"
+    chip: Text | None = None
     unit: Text = "uT"
     name: Annotated[str, Strict(), Field(pattern=r"^[a-z][a-z0-9]*$"),
                     expect("a lower-case name (letters, then digits)")] | None = None
@@ -119,19 +122,22 @@ class SensorLog(_Log):
         super().__post_init__()
         if (self.time is None) == (self.rate_hz is None):
             raise Refusal("time", "give the time column or rate_hz (evenly spaced samples), one of them")
-        mlx = self.chip == "mlx90393"
-        if mlx and self.unit not in (*MAGNETIC.units, COUNTS):
-            raise Refusal("unit", f"an MLX90393 reads in {', '.join(MAGNETIC.units)} or {COUNTS}; "
-                                  "another sensor is chip = \"other\"")
         settings = (self.gain_sel, self.res_xyz)
-        if mlx and self.unit == COUNTS and None in settings:
-            raise Refusal("gain_sel", "raw counts need the chips' gain_sel and res_xyz to be read as a field")
-        if mlx and (self.name is not None or self.full_scale is not None):
+        if self.chip == OTHER:
+            if self.name is None or any(value is not None for value in (*settings, self.hallconf)):
+                raise Refusal("name", "chip = \"other\" needs a name for its channels, and takes no chip settings")
+            return
+        kind = self.kind
+        if self.unit not in (*kind.reading.units, kind.raw_unit):
+            raise Refusal("unit", f"the {kind.name} reads in {', '.join(kind.reading.units)} or {kind.raw_unit}; "
+                                  "another sensor is chip = \"other\"")
+        if self.unit == kind.raw_unit and None in settings:
+            raise Refusal("gain_sel", f"raw {kind.raw_unit} need the chips' gain_sel and res_xyz to be read as "
+                                      f"{kind.reading.quantity}")
+        if self.name is not None or self.full_scale is not None:
             raise Refusal("name" if self.name is not None else "full_scale",
-                          "an MLX90393's channels and range follow from the chip: give it for chip = \"other\"")
-        if not mlx and (self.name is None or any(value is not None for value in (*settings, self.hallconf))):
-            raise Refusal("name", "chip = \"other\" needs a name for its channels, and takes no MLX90393 settings")
-        if mlx and (self.gain_sel is None) != (self.res_xyz is None):
+                          f"the {kind.name}'s channels and range follow from the chip: give it for chip = \"other\"")
+        if (self.gain_sel is None) != (self.res_xyz is None):
             raise Refusal("res_xyz", "give both gain_sel and res_xyz, or neither")
 
     def columns_named(self) -> list[tuple[tuple, int | str]]:
@@ -139,16 +145,30 @@ class SensorLog(_Log):
                                              for a, ref in enumerate(chip))]
 
     @property
-    def settings(self) -> MLX90393Settings | None:
-        """The declared MLX90393 register settings, if any."""
-        if self.gain_sel is None:
+    def kind(self) -> SensorKind:
+        """The registered sensor: the one named, or the one that reads in the log's unit."""
+        if self.chip is not None:
+            try:
+                return sensor_kind(self.chip)
+            except NotRegistered as problem:
+                raise Refusal("chip", f"{problem} or \"other\"") from None
+        reading_in = [kind for kind in sensor_kinds().values() if self.unit in (*kind.reading.units, kind.raw_unit)]
+        if len(reading_in) != 1:
+            raise Refusal("unit", f"{'several registered sensors read' if reading_in else 'no registered sensor reads'} "
+                                  f"in {self.unit}: name it as chip (or chip = \"other\")")
+        return reading_in[0]
+
+    @property
+    def settings(self) -> Any:
+        """The chips' declared settings, in the registered sensor's schema, if any."""
+        if self.chip == OTHER or self.gain_sel is None:
             return None
         extra = {} if self.hallconf is None else {"hallconf": self.hallconf}
-        return MLX90393Settings(gain_sel=self.gain_sel, res_xyz=tuple(self.res_xyz), **extra)
+        return self.kind.settings_from({"gain_sel": self.gain_sel, "res_xyz": list(self.res_xyz), **extra})
 
     def channel(self, chip: int, axis: str) -> str:
-        if self.chip == "mlx90393":
-            return MAGNETIC.channel_name(chip, axis)
+        if self.chip != OTHER:
+            return self.kind.reading.channel_name(chip, axis)
         return f"{self.name}{chip}_{axis}_{self.unit}"
 
 
@@ -345,27 +365,26 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
     (None: the sensor's limits are unknown)."""
     readings = values.reshape(len(values), len(sensor.chips), 3)
     settings = sensor.settings
-    if sensor.chip == "other":
+    if sensor.chip == OTHER:
         if sensor.full_scale is None:
             return readings, None
         beyond = np.abs(readings) > sensor.full_scale
         if beyond.any():
             _refuse_beyond(path, sensor, beyond, f"its full scale {sensor.full_scale:g} {sensor.unit}")
         return readings, np.abs(readings) >= sensor.full_scale
-    if sensor.unit == COUNTS:
+    kind = sensor.kind
+    if sensor.unit == kind.raw_unit:
         whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < 1 << 16)
         if not whole.all():
             _refuse_beyond(path, sensor, ~whole, "a 16-bit register word (an integer 0..65535)")
-        field_uT, saturated = MLX90393(settings).decode(readings.astype(np.uint16))
-        return field_uT, saturated
-    readings = readings * MAGNETIC.units[sensor.unit]
+        return kind.decode(settings, readings.astype(np.uint16))
+    readings = readings * kind.reading.units[sensor.unit]
     if settings is None:
         return readings, None
-    limit = full_scale_uT(settings)
-    beyond = np.abs(readings) > limit + lsb_uT(settings)  # a step's rounding in the host's conversion is allowed
+    beyond = kind.beyond(readings, settings)  # a step's rounding in the host's conversion is allowed
     if beyond.any():
-        _refuse_beyond(path, sensor, beyond, "the MLX90393's range at the declared gain_sel and res_xyz")
-    return readings, np.abs(readings) >= limit - lsb_uT(settings) / 2
+        _refuse_beyond(path, sensor, beyond, f"the {kind.name}'s range at the declared gain_sel and res_xyz")
+    return readings, kind.saturated(readings, settings)
 
 
 def _refuse_beyond(path: Path, sensor: SensorLog, where: np.ndarray, what: str) -> None:
@@ -547,8 +566,8 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
         label_units["saturated"] = DIMENSIONLESS
     columns["role"] = np.repeat(np.where(validates, VALIDATION, CALIBRATION), [len(t.time) for t in trials])
     columns["source"] = np.repeat([trial.source for trial in trials], [len(t.time) for t in trials])
-    channel_units = {} if sensor.chip == "mlx90393" else {sensor.channel(chip, axis): sensor.unit
-                                                          for chip in range(len(sensor.chips)) for axis in AXES}
+    channel_units = {} if sensor.chip != OTHER else {sensor.channel(chip, axis): sensor.unit
+                                                     for chip in range(len(sensor.chips)) for axis in AXES}
     settings = sensor.settings
     metadata = DatasetMetadata(
         description=mapping.description or f"imported from {', '.join(trial.source for trial in trials[:3])}"

@@ -22,7 +22,7 @@ from threadpoolctl import threadpool_limits
 from softtip._core.cache import artefact_key, cache_dir, code_hash
 from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
-from softtip._core.systems import NotRegistered, load, names, owner
+from softtip._core.systems import NotRegistered, load, names, owner, provenance
 from softtip.data import Dataset
 
 ProtocolName = Text  # the registry knows the names: protocol_from_dict refuses any other
@@ -192,10 +192,13 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
 
 
 def protocol_key(protocol: Protocol) -> str:
-    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design and the source
-    of the whole package (the trials run through nearly every subpackage)."""
-    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec}, code_hash("softtip"),
-                        length=16)
+    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design, the source
+    of the whole of softtip (the trials run through nearly every subpackage) and the package of the
+    system that owns the protocol, its source and installed version (a lab's own, edited or upgraded,
+    gets new artefacts)."""
+    system = provenance(owner("protocol", protocol.name))
+    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec, "system": system},
+                        code_hash("softtip", system["package"]), length=16)
 
 
 def trained_model_path(protocol: Protocol, name: str, suffix: str = ".npz") -> Path:

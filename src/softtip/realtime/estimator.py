@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from softtip._core.archive import archive_format
-from softtip._core.channels import reading_of
+from softtip._core.systems import reading_of
 
 
 class Estimator:

@@ -25,6 +25,7 @@ from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import Flag, Refusal, choice, expect, from_numpy, integer, parse, schema
 from softtip._core.units import UT_PER_T
 from softtip.sensors.contract import Acquisition
+from softtip.sensors.registry import SensorKind
 
 # --------------------------------------------------------------------------
 # Datasheet facts
@@ -350,3 +351,9 @@ class MLX90393:
 def _check_last_axis(name: str, array: np.ndarray) -> None:
     if array.ndim == 0 or array.shape[-1] != 3:
         raise ValueError(f"{name} has shape {array.shape}: expected (..., 3) for x, y, z")
+
+
+# as the toolkit's checks know it (softtip.sensors.registry), declared by the systems that use it
+SENSOR = SensorKind("mlx90393", MAGNETIC, 3, MLX90393Settings, widest=MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3)),
+                    full_scale=full_scale_uT, step=lsb_uT,
+                    decode=lambda settings, words: MLX90393(settings).decode(words), raw_unit="counts")

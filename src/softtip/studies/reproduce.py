@@ -142,15 +142,21 @@ def report_files(name: str) -> tuple[str, str]:
     return f"{name}.html", f"{name}.json"
 
 
+def quick_cuts(protocol: Protocol, study: Study | None = None) -> dict[str, object]:
+    """The parameters a smoke run of ``protocol`` changes: every trial count cut to its minimum, and
+    what ``study``'s ``quick`` names."""
+    parameters = asdict(protocol.parameters)
+    cuts = {key: count for key, count in QUICK_TRIALS.items() if parameters.get(key, 0) > count}
+    return cuts | {key: value for key, value in (study.quick if study else {}).items() if parameters.get(key) != value}
+
+
 def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path: str | Path | None = None,
                     progress: Progress = SILENT, command: str | None = None) -> StudyReport:
     """Run study ``name`` on its shipped protocol or on ``protocol_path``; ``quick`` cuts every trial
     count to a minimum and sets what the study's ``quick`` names (a smoke run, not the study)."""
     study = registered_study(name)
     protocol = load_protocol(protocol_path or study.protocol).changed(seed=seed, **study.sets)
-    parameters = asdict(protocol.parameters)
-    cuts = {key: count for key, count in QUICK_TRIALS.items() if quick and parameters.get(key, 0) > count}
-    cuts |= {key: value for key, value in study.quick.items() if quick and parameters.get(key) != value}
+    cuts = quick_cuts(protocol, study) if quick else {}
     protocol, quick_keys = protocol.changed(**cuts), set(cuts)
     started = datetime.now(timezone.utc)
     start = time.perf_counter()

@@ -36,8 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.channels import Reading, known_readings
+from softtip._core.channels import Reading
 from softtip._core.config import PositiveNumber, checked
+from softtip._core.systems import known_readings
 from softtip.data.dataset import (
     DIMENSIONLESS,
     TIME,

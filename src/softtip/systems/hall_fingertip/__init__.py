@@ -37,7 +37,8 @@ SYSTEM = System(
     scenarios={"push": "softtip.systems.hall_fingertip.live:push_scenario",
                "insertion": "softtip.systems.hall_fingertip.live:insertion_scenario"},
     demos={"insertion": "softtip.systems.hall_fingertip.commands:demo_insertion"},
-    main_demo="softtip.systems.hall_fingertip.commands:demo",
     commands={"fingertip": "softtip.systems.hall_fingertip.commands:app"},
-    reference_designs={"simulate": "cylindrical-A", "bench": "cylindrical-D"},
+    sensors={"mlx90393": "softtip.sensors.mlx90393:SENSOR"},
+    defaults={"simulate": "cylindrical-A", "bench": "cylindrical-D", "scenario": "push",
+              "demo": "softtip.systems.hall_fingertip.commands:demo"},
 )

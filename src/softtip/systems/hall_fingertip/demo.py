@@ -11,49 +11,18 @@
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 
-from softtip._core.cache import read_file_entry, write_file_entry
-from softtip._core.progress import SILENT, Progress
 from softtip import metrics
-from softtip.calibration import LMNetwork, load_model, save_model
-from softtip.lab import load_protocol, run_protocol
-from softtip.data.splits import by_role
-from softtip.systems.hall_fingertip.live import cached_scenario
-from softtip.systems.hall_fingertip.scenarios import pushing_scenario
+from softtip._core.progress import SILENT, Progress
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
-from softtip.lab.protocols import protocol_key, trained_model_path
+from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model
+from softtip.systems.hall_fingertip.live import cached_scenario
+from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
-FORCES = ("fx_N", "fy_N", "fz_N")
 DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
-
-
-def calibrate_force_model(seed: int, progress: Progress = SILENT, reuse: bool = False) -> tuple[Path, dict, object]:
-    """Run the force calibration on the twin and fit the network (``reuse``: take the model saved by an
-    earlier run of this protocol and code, if there is one, with the validation it saved)."""
-    protocol = load_protocol("force3").changed(seed=seed)
-    path, key = trained_model_path(protocol, "demo-force"), protocol_key(protocol)
-    cached = read_file_entry(path, key, "demo-force", load_model) if reuse else None
-    if cached is not None:
-        return path, {"validation": cached[1].extra["validation"], "cached": True}, protocol
-    dataset, timings = run_protocol(protocol, progress)
-    X = dataset.X()
-    y = np.column_stack([dataset.column(k) for k in FORCES])
-    contact = np.abs(y).max(axis=1) > 0.05
-    calibration, validation = by_role(dataset)
-    train, test = contact & calibration, contact & validation
-    with progress.task(f"calibration: a 3-10-3 network on {int(train.sum())} samples of {len(dataset.trials)} trials"):
-        model = LMNetwork((10,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
-    estimate = model.predict(X[test])
-    validation = {k: {"mean_abs_error_N": float(metrics.mean_abs_error(y[test, i], estimate[:, i])),
-                      "r2": float(metrics.r2(y[test, i], estimate[:, i]))} for i, k in enumerate(FORCES)}
-    write_file_entry(path, key, "demo-force", lambda target: save_model(
-        target, model, input_channels=list(dataset.channels), input_units=["uT"] * len(dataset.channels),
-        target_names=list(FORCES), target_units=["N"] * 3, extra={"validation": validation}))
-    return path, {"validation": validation, "timings_s": timings}, protocol
 
 
 def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, dashboard: bool = True,

@@ -9,6 +9,7 @@ from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import protocol_key, trained_model_path
 from softtip.realtime.scenario import LiveScenario, StreamCheck, accept_any_stream
 from softtip.systems.hall_fingertip.scenarios import TwinScenario, insertion_scenario as compute_insertion
+from softtip.systems.hall_fingertip.force_model import calibrate_force_model
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
 
@@ -30,8 +31,6 @@ def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress =
 def push_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
     """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop, with the
     3-axis force network trained on the force-calibration protocol."""
-    from softtip.systems.hall_fingertip.demo import calibrate_force_model
-
     protocol = load_protocol("force3")
     check(len(protocol.design.sensor_positions), None)
     scenario = cached_scenario(protocol, "push", pushing_scenario, progress)

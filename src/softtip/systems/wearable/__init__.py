@@ -24,4 +24,5 @@ SYSTEM = System(
     ),
     scenarios={"wearable": "softtip.systems.wearable.live:wearable_scenario"},
     demos={"wearable": "softtip.systems.wearable.commands:demo_wearable"},
+    defaults={"scenario": "wearable"},
 )

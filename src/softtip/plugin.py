@@ -1,0 +1,187 @@
+"""What a system of a lab's own needs from softtip, in one public module, and the checker of a
+registered system (as scikit-learn's ``check_estimator`` and Gymnasium's ``env_checker`` are).
+
+A system is a package that defines one :class:`System` and declares it as an entry point of the group
+``softtip.systems`` (docs/architecture.md, "How to add a system"). Everything it hands the toolkit is
+named here, by what the toolkit does with it: the interfaces below are the rules the toolkit relies on,
+and :func:`check_system` (``softtip check-system NAME``) finds every one a system breaks, one line each,
+naming the file or the record's key and what was expected.
+
+Importing this module loads the toolkit's stages; a system's ``__init__`` imports only
+:class:`System`, :class:`Study` and :class:`Reading` (from here or the registry), so that listing the
+systems stays light.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import typer
+
+from softtip._core.channels import Reading
+from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
+from softtip._core.progress import SILENT, Progress
+from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
+from softtip.data import DatasetMetadata, TrialWriter
+from softtip.data.splits import CALIBRATION, VALIDATION
+from softtip.hardware import PacedSource
+from softtip.lab import BenchKind, run_protocol
+from softtip.lab.bench import SeededBench
+from softtip.lab.protocols import Protocol as LabProtocol
+from softtip.lab.protocols import load_protocol, protocol_file_schema
+from softtip.mechanics.viscoelastic import PronySeries
+from softtip.published import published_table, published_tables
+from softtip.realtime.scenario import LiveScenario
+from softtip.report.tables import Table
+from softtip.sensors.registry import SensorKind
+from softtip.studies.outcome import Headline, StudyOutcome
+from softtip.studies.reproduce import quick_cuts, reproduce_study
+
+__all__ = [
+    "Analysis", "BenchKind", "DatasetMetadata", "Device", "Headline", "LiveScenario", "NonNegativeNumber",
+    "PacedSource", "PositiveNumber", "PronySeries", "Reading", "RealismTable", "Scenario", "SeededBench",
+    "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter", "check_system", "integer",
+    "protocol_file_schema", "published_table", "run_protocol", "schema",
+]
+
+ROLES = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it
+
+
+@runtime_checkable
+class Device(Protocol):
+    """What a bench's ``device(...)`` returns: the protocol's ``design``, named in reports and keys."""
+
+    name: str
+    spec: dict
+
+
+@runtime_checkable
+class RealismTable(Protocol):
+    """A protocol file's ``[realism]`` table, recorded in every dataset's metadata; its bench's
+    ``realism_sources`` names the source of every key."""
+
+    def to_dict(self) -> dict: ...
+
+
+class Analysis(Protocol):
+    """A study's analysis (``Study.analysis``): the protocol's dataset into the publication's figures."""
+
+    def __call__(self, protocol: LabProtocol, seed: int, progress: Progress) -> StudyOutcome: ...
+
+
+class Scenario(Protocol):
+    """A live scenario (``System.scenarios``): it calls ``check(chips, rate_hz)`` before any long work."""
+
+    def __call__(self, progress: Progress, check: Any) -> LiveScenario: ...
+
+
+def _references(system: System) -> list[tuple[str, str, type | None]]:
+    """Every ``"module:attribute"`` of the record: (its key in the record, the reference, what it must be)."""
+    named = [(f"benches.{k}", v, BenchKind) for k, v in system.benches.items()]
+    named += [(f"scenarios.{k}", v, None) for k, v in system.scenarios.items()]
+    named += [(f"demos.{k}", v, None) for k, v in system.demos.items()]
+    named += [(f"bench_commands.{k}", v, None) for k, v in system.bench_commands.items()]
+    named += [(f"commands.{k}", v, typer.Typer) for k, v in system.commands.items()]
+    named += [(f"sensors.{k}", v, SensorKind) for k, v in system.sensors.items()]
+    named += [(f"studies.{s.name}.analysis", s.analysis, None) for s in system.studies]
+    return named + [("defaults.demo", system.defaults["demo"], None)] if "demo" in system.defaults else named
+
+
+def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -> list[str]:
+    """Every rule the registered system ``name`` breaks, one line each (none: it holds). Resolves every
+    reference of its record, loads and runs each shipped protocol at its quick size and checks its
+    dataset's roles, runs each live scenario and, with ``studies``, each
+    study's quick reproduction (its report)."""
+    system = systems().get(name)
+    if system is None:
+        raise ValueError(f"system {name!r}: expected one of {', '.join(systems())}")
+    record = f"{system.package} (System {system.name!r})"
+    broken = []
+    for key, reference, kind in _references(system):
+        try:
+            target = load(reference)
+        except Exception as error:  # any failure to import is the plug-in's to fix: reported, not raised
+            broken.append(f"{record}: {key} = {reference!r}: cannot be loaded ({failure_line(error)})")
+            continue
+        if kind is not None and not isinstance(target, kind):
+            broken.append(f"{record}: {key} = {reference!r}: expected a {kind.__name__}, got {type(target).__name__}")
+        elif kind is None and not callable(target):
+            broken.append(f"{record}: {key} = {reference!r}: expected a function, got {type(target).__name__}")
+    for use in ("simulate", "bench"):
+        if use in system.defaults and system.defaults[use] not in system.designs():
+            broken.append(f"{record}: defaults.{use} = {system.defaults[use]!r}: expected {DEFAULT_USES[use]}")
+    if broken:  # the protocols and scenarios run through these references
+        return broken
+    for protocol_name, bench in system.protocols.items():
+        broken += _check_protocol(system, record, protocol_name, bench, progress)
+    for scenario_name, reference in system.scenarios.items():
+        broken += _check_scenario(record, scenario_name, load(reference), progress)
+    if system.studies:
+        try:
+            published_tables()
+        except ValueError as error:
+            broken.append(str(error))
+    for study in system.studies if studies and not broken else ():
+        try:
+            report = reproduce_study(study.name, quick=True, progress=progress)
+        except Exception as error:  # the study's analysis is the plug-in's code: its failure is a finding
+            broken.append(f"{record}: study {study.name!r}: its quick reproduction failed ({failure_line(error)})")
+            continue
+        if not isinstance(report.outcome, StudyOutcome):
+            broken.append(f"{record}: studies.{study.name}.analysis: expected a StudyOutcome, got "
+                          f"{type(report.outcome).__name__}")
+    return broken
+
+
+def _check_protocol(system: System, record: str, name: str, bench: str, progress: Progress) -> list[str]:
+    if bench not in system.benches:
+        return [f"{record}: protocols.{name} = {bench!r}: expected one of its benches ({', '.join(system.benches)})"]
+    path = Path(str(system.protocol_file(name)))
+    if not path.is_file():
+        return [f"{path}: missing: expected the protocol file of {name!r} in the package's protocols/ folder"]
+    kind = load(system.benches[bench])
+    missing = [what for what, table in (("parameters", kind.parameters), ("runners", kind.runners)) if name not in table]
+    if missing:
+        return [f"{record}: bench {bench!r}: {missing[0]} has nothing for protocol {name!r}"]
+    try:
+        protocol = load_protocol(path)
+    except ValueError as error:
+        return [str(error)]
+    broken = []
+    if not isinstance(protocol.design, Device):
+        broken.append(f"{record}: bench {bench!r}: device(...) returned {type(protocol.design).__name__}, expected "
+                      "an object with .name and .spec")
+    if not isinstance(protocol.realism, RealismTable):
+        broken.append(f"{record}: bench {bench!r}: its [realism] schema has no to_dict()")
+        return broken
+    for table, sources, what in ((protocol.realism.to_dict(), kind.realism_sources, "realism_sources"),
+                                 (asdict(protocol.viscoelastic), kind.viscoelastic_sources, "viscoelastic_sources")):
+        if unnamed := [key for key in table if key not in sources]:
+            broken.append(f"{record}: bench {bench!r}: {what} names no source for {unnamed[0]!r}")
+    if broken:
+        return broken
+    try:
+        dataset, _ = run_protocol(protocol.changed(**quick_cuts(protocol)), progress)
+    except Exception as error:  # the runner is the plug-in's code: its failure is a finding
+        return [f"{path}: its quick run failed ({failure_line(error)})"]
+    strangers = sorted(set(map(str, dataset.column("role"))) - set(ROLES)) if "role" in dataset.conditions else []
+    if strangers:
+        broken.append(f"{path}: its dataset's role {strangers[0]!r}: expected {' or '.join(ROLES)}")
+    return broken
+
+
+def _check_scenario(record: str, name: str, scenario: Scenario, progress: Progress) -> list[str]:
+    asked = []
+    try:
+        stream = scenario(progress, lambda chips, rate_hz: asked.append((chips, rate_hz)))
+    except Exception as error:  # the scenario is the plug-in's code: its failure is a finding
+        return [f"{record}: scenarios.{name}: failed ({failure_line(error)})"]
+    if not isinstance(stream, LiveScenario):
+        return [f"{record}: scenarios.{name}: expected a LiveScenario, got {type(stream).__name__}"]
+    broken = [] if asked else [f"{record}: scenarios.{name}: never called check(chips, rate_hz) before its work"]
+    if isinstance(stream.source, PacedSource) and stream.source.reading not in known_readings():
+        broken.append(f"{record}: scenarios.{name}: streams {stream.source.reading.quantity}, expected a reading "
+                      "of a registered system")
+    return broken

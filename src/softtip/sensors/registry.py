@@ -1,0 +1,120 @@
+"""The chips a dataset, a rig's log or a live stream may come from, each registered by name: what it
+reads and on how many axes, its range and output step at its settings, when a value is saturated, its
+settings schema and how its raw output words decode.
+
+The toolkit names no chip: a system declares the sensors it uses (``System.sensors``: name ->
+``"module:attribute"`` of a :class:`SensorKind`, imported when a check needs it), and every range and
+saturation check asks the registered sensor at the settings a dataset or a log declares.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from softtip._core.channels import Reading
+from softtip._core.systems import System, known_readings, load, owner, systems
+
+_NAME = re.compile(r"[a-z][a-z0-9_-]*")
+
+
+@dataclass(frozen=True)
+class SensorKind:
+    """One chip as the toolkit checks its output.
+
+    ``settings``: its settings schema (``settings.from_dict(table)`` refuses what is not its settings in
+    one line, ``.to_dict()`` records them); ``widest``: the settings of its widest range, what values
+    without declared settings are checked against; ``full_scale(settings)``: the largest magnitude per
+    axis it outputs unclipped, ``step(settings)``: its output step per axis, both in the reading's unit;
+    ``decode(settings, words)``: its raw output words (..., axes) as (values in the reading's unit,
+    saturated), with ``raw_unit`` what a log calls those words ("counts"); a chip that outputs values
+    has neither.
+    """
+
+    name: str
+    reading: Reading
+    axes: int
+    settings: type
+    widest: Any
+    full_scale: Callable[[Any], np.ndarray]
+    step: Callable[[Any], np.ndarray]
+    decode: Callable[[Any, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+    raw_unit: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
+            raise ValueError(f"sensor name {self.name!r}: expected a lower-case name (letters, digits, - or _)")
+        if isinstance(self.axes, bool) or self.axes not in (1, 2, 3):
+            raise ValueError(f"sensor {self.name!r}: axes = {self.axes!r}: expected 1, 2 or 3")
+        if (self.decode is None) != (self.raw_unit is None):
+            raise ValueError(f"sensor {self.name!r}: give decode and raw_unit together, or neither")
+        if not isinstance(self.widest, self.settings):
+            raise ValueError(f"sensor {self.name!r}: widest: expected {self.settings.__name__} settings")
+
+    def settings_from(self, table: Mapping[str, Any]) -> Any:
+        """Its settings from a recorded mapping; anything else is refused in one line."""
+        return self.settings.from_dict(table)
+
+    def saturated(self, values: np.ndarray, settings: Any) -> np.ndarray:
+        """Where values (..., 3) in the reading's unit are at its clip: within half a step of the full
+        scale (a host's conversion rounds to the step)."""
+        return np.abs(values) >= self.full_scale(settings) - self.step(settings) / 2
+
+    def beyond(self, values: np.ndarray, settings: Any) -> np.ndarray:
+        """Where values (..., 3) are more than a step beyond what it outputs: not its readings."""
+        return np.abs(values) > self.full_scale(settings) + self.step(settings)
+
+
+def sensor_kinds() -> dict[str, SensorKind]:
+    """Every sensor the registered systems declare, by name (their modules imported now)."""
+    return {name: _declared(system, name) for system in systems().values() for name in system.sensors}
+
+
+def sensor_kind(name: str) -> SensorKind:
+    """The registered sensor ``name``; another name is refused with the registered ones."""
+    return _declared(owner("sensor", name), name)
+
+
+def _declared(system: System, name: str) -> SensorKind:
+    kind = load(system.sensors[name])
+    if not isinstance(kind, SensorKind) or kind.name != name:
+        raise TypeError(f"system {system.name!r}: sensors.{name} = {system.sensors[name]!r}: expected a SensorKind "
+                        f"named {name!r}")
+    return kind
+
+
+def check_changes(columns: Mapping[str, np.ndarray], stated: Mapping[str, Any] | None, source: str) -> None:
+    """Refuses changes from a baseline that no registered sensor of their reading can output: a change
+    between two readings in range is at most twice the range, at the ``stated`` settings (a sensor
+    whose schema refuses them is not the one that made the data) or, without them, at its widest. A
+    reading no registered sensor reads is not checked."""
+    kinds = sensor_kinds().values()
+    for reading in known_readings():
+        channels = [name for name in columns if reading.is_channel(name)]
+        candidates = [kind for kind in kinds if kind.reading == reading]
+        if not channels or not candidates:
+            continue
+        ranges, refusals = [], []
+        for kind in candidates:
+            try:
+                settings = kind.widest if not stated else kind.settings_from(stated)
+            except ValueError as refusal:
+                refusals.append(f"{kind.name}: {refusal}")
+                continue
+            ranges.append((kind, settings, kind.full_scale(settings)))
+        if not ranges:
+            raise ValueError(f"{source}: its sensor settings are not those of a sensor reading "
+                             f"{reading.quantity} ({'; '.join(refusals)})")
+        where = "the dataset's sensor settings" if stated else "its widest setting"
+        for channel in channels:
+            axis = reading.channel_order(channel)[1]
+            kind, _, full_scale = max(ranges, key=lambda candidate: candidate[2][axis])
+            values = np.asarray(columns[channel], dtype=float)
+            largest = float(np.nanmax(np.abs(values))) if len(values) else 0.0
+            if not largest <= 2 * full_scale[axis]:
+                raise ValueError(f"{source}: channel {channel} reaches {largest:.4g} {reading.unit}, beyond twice "
+                                 f"the {kind.name}'s {full_scale[axis]:.4g} {reading.unit} range at {where}")

@@ -1,0 +1,43 @@
+"""The 3-axis force network trained on the twin's force-calibration protocol (design D): what the main
+demo saves and scores, and what the ``push`` live scenario estimates with; kept in the cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from softtip import metrics
+from softtip._core.cache import read_file_entry, write_file_entry
+from softtip._core.progress import SILENT, Progress
+from softtip.calibration import LMNetwork, load_model, save_model
+from softtip.data.splits import by_role
+from softtip.lab import load_protocol, run_protocol
+from softtip.lab.protocols import protocol_key, trained_model_path
+
+FORCES = ("fx_N", "fy_N", "fz_N")
+
+
+def calibrate_force_model(seed: int, progress: Progress = SILENT, reuse: bool = False) -> tuple[Path, dict, object]:
+    """Run the force calibration on the twin and fit the network (``reuse``: take the model saved by an
+    earlier run of this protocol and code, if there is one, with the validation it saved)."""
+    protocol = load_protocol("force3").changed(seed=seed)
+    path, key = trained_model_path(protocol, "demo-force"), protocol_key(protocol)
+    cached = read_file_entry(path, key, "demo-force", load_model) if reuse else None
+    if cached is not None:
+        return path, {"validation": cached[1].extra["validation"], "cached": True}, protocol
+    dataset, timings = run_protocol(protocol, progress)
+    X = dataset.X()
+    y = np.column_stack([dataset.column(k) for k in FORCES])
+    contact = np.abs(y).max(axis=1) > 0.05
+    calibration, validation = by_role(dataset)
+    train, test = contact & calibration, contact & validation
+    with progress.task(f"calibration: a 3-10-3 network on {int(train.sum())} samples of {len(dataset.trials)} trials"):
+        model = LMNetwork((10,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    estimate = model.predict(X[test])
+    validation = {k: {"mean_abs_error_N": float(metrics.mean_abs_error(y[test, i], estimate[:, i])),
+                      "r2": float(metrics.r2(y[test, i], estimate[:, i]))} for i, k in enumerate(FORCES)}
+    write_file_entry(path, key, "demo-force", lambda target: save_model(
+        target, model, input_channels=list(dataset.channels), input_units=["uT"] * len(dataset.channels),
+        target_names=list(FORCES), target_units=["N"] * 3, extra={"validation": validation}))
+    return path, {"validation": validation, "timings_s": timings}, protocol

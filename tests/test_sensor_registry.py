@@ -1,0 +1,90 @@
+"""Sensors registered by name, as the toolkit's range checks know them: a system declares the chips it
+reads, and a dataset's readings are checked against the registered sensor at the settings it states
+(the MLX90393's figures against its datasheet, rev. 006, tables 17 and 21, computed by hand)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from softtip._core.systems import NotRegistered, owner
+from softtip.sensors.registry import SensorKind, check_changes, sensor_kind
+
+# GAIN_SEL 0, RES 3 (the widest): 6.009 µT/LSB on x, y and 9.680 on z, ±11000 counts (RES 3's span)
+WIDEST_UT = np.array([6.009, 6.009, 9.680]) * 11000
+# GAIN_SEL 7, RES 0: 0.150 and 0.242 µT/LSB, a signed 16-bit word (largest 32767)
+FINEST_SETTINGS = {"gain_sel": 7, "res_xyz": [0, 0, 0]}
+FINEST_UT = np.array([0.150, 0.150, 0.242]) * 32767
+
+
+def test_the_fingertip_declares_the_hall_chip_the_checks_ask():
+    hall = sensor_kind("mlx90393")
+    assert owner("sensor", "mlx90393").name == "hall-fingertip"
+    assert (hall.axes, hall.raw_unit, hall.reading.unit) == (3, "counts", "uT")
+    np.testing.assert_allclose(hall.full_scale(hall.widest), WIDEST_UT, rtol=1e-12)
+    np.testing.assert_allclose(hall.full_scale(hall.settings_from(FINEST_SETTINGS)), FINEST_UT, rtol=1e-12)
+    # the decoder: RES 0 words are two's complement, 0xFFFF is -1 count
+    values, saturated = hall.decode(hall.settings_from(FINEST_SETTINGS), np.array([[1, 0xFFFF, 32767]], np.uint16))
+    np.testing.assert_allclose(values, [[0.150, -0.150, FINEST_UT[2]]], rtol=1e-12)
+    assert saturated.tolist() == [[False, False, True]]
+    with pytest.raises(NotRegistered, match=r"^sensor 'tmag5273': expected one of mlx90393$"):
+        sensor_kind("tmag5273")
+
+
+def test_a_sensor_record_refuses_what_it_cannot_be():
+    hall = sensor_kind("mlx90393")
+    fields = dict(reading=hall.reading, settings=hall.settings, widest=hall.widest, full_scale=hall.full_scale,
+                  step=hall.step)
+    with pytest.raises(ValueError, match=r"sensor 'flat': axes = 4: expected 1, 2 or 3"):
+        SensorKind("flat", axes=4, **fields)
+    with pytest.raises(ValueError, match=r"sensor 'half': give decode and raw_unit together, or neither"):
+        SensorKind("half", axes=3, raw_unit="counts", **fields)
+    with pytest.raises(ValueError, match=r"sensor name 'Hall chip': expected a lower-case name"):
+        SensorKind("Hall chip", axes=3, **fields)
+
+
+@pytest.mark.parametrize(("stated", "full_scale", "where"), [(None, WIDEST_UT, "its widest setting"),
+                                                              (FINEST_SETTINGS, FINEST_UT, "the dataset's sensor settings")])
+def test_changes_beyond_twice_the_registered_range_are_refused(stated, full_scale, where):
+    inside = {"s0_bx_uT": np.array([0.0, 1.999 * full_scale[0]]), "s0_bz_uT": np.array([-1.999 * full_scale[2]])}
+    check_changes(inside, stated, "d.parquet")
+    beyond = {**inside, "s1_bz_uT": np.array([0.0, 2.001 * full_scale[2]])}
+    with pytest.raises(ValueError, match="^" + re.escape(
+            f"d.parquet: channel s1_bz_uT reaches {2.001 * full_scale[2]:.4g} uT, beyond twice the mlx90393's "
+            f"{full_scale[2]:.4g} uT range at {where}") + "$"):
+        check_changes(beyond, stated, "d.parquet")
+
+
+def test_another_chip_s_settings_are_not_read_as_the_hall_chip_s():
+    """Issue 37: a force chip's settings beside force channels are no Hall chip's to check; beside Hall
+    channels they are refused, naming the sensor whose settings they are not."""
+    wearable_settings = {"chip": {"range_N": 5.0}, "table": {"range_N": 50.0}}
+    check_changes({"side_fz_N": np.array([0.0, 4.0])}, wearable_settings, "force.parquet")
+    with pytest.raises(ValueError, match=r"^hall.parquet: its sensor settings are not those of a sensor reading "
+                                         r"flux density \(mlx90393: sensor.chip: unknown key"):
+        check_changes({"s0_bx_uT": np.array([1.0])}, wearable_settings, "hall.parquet")
+
+
+@pytest.mark.slow  # two commands in fresh interpreters, the protocol's trials: about 20 s on 2 busy cores
+def test_a_wearable_dataset_from_lab_run_is_calibrated(tmp_path):
+    """Issue 37 end to end: lab run of the wearable's protocol, then calibrate."""
+    protocol = tmp_path / "wearable.toml"
+    protocol.write_text('protocol = "wearable"\nseed = 2\n[parameters]\nparticipants = 2\nruns = 2\n')
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+
+    def softtip(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "softtip", *args], cwd=tmp_path, env=environment,
+                              capture_output=True, text=True, timeout=300)
+
+    ran = softtip("lab", "run", str(protocol), "-o", "wearable.parquet", "--json")
+    assert ran.returncode == 0, ran.stderr
+    calibrated = softtip("calibrate", "wearable.parquet", "-t", "fz_N", "--model", "polynomial", "-o", "force.npz",
+                         "--json")
+    assert calibrated.returncode == 0, calibrated.stderr
+    assert json.loads(calibrated.stdout)["model"] == "force.npz" and (tmp_path / "force.npz").is_file()
