@@ -57,6 +57,7 @@ from softtip.data.dataset import (
     Dataset,
     DatasetError,
     DatasetMetadata,
+    arrow_numbers,
     column_to_numpy,
     first_line,
     require_columns,
@@ -139,7 +140,7 @@ def parse_numbers(path: Path, csv_name: str, column: pa.ChunkedArray, *, first_l
     counted from ``first_line``, the line of the first row: 2 below a header)."""
     text = pc.utf8_trim_whitespace(column)
     try:
-        return pc.cast(text, pa.float64()).to_numpy(zero_copy_only=False)
+        return arrow_numbers(pc.cast(text, pa.float64()))
     except pa.ArrowInvalid:
         for line, cell in enumerate(text.to_pylist(), start=first_line):
             try:

@@ -419,7 +419,8 @@ def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
 
 def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     try:
-        table = pq.read_table(path, columns=wanted)
+        with pq.ParquetFile(path) as parquet:  # not read_table: it loads pyarrow.dataset, and with it pandas
+            table = parquet.read(columns=wanted)
     except (pa.ArrowException, OSError) as problem:
         raise DatasetError(f"{path}: unreadable Parquet data ({first_line(problem)})") from None
     values = {}
