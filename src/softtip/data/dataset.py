@@ -54,7 +54,7 @@ from pydantic import Strict
 from softtip import __version__
 from softtip._core.channels import CHANNEL_UNIT, channel_names, channel_order, is_channel
 from softtip._core.config import ConfigError, Text, Whole, checked, expect
-from softtip._core.files import atomic_write
+from softtip._core.files import atomic_write, not_a_file
 
 FORMAT = "softtip-dataset"
 SCHEMA_VERSION = 1
@@ -414,6 +414,21 @@ class Dataset:
             raise DatasetError(f"no column {name!r} (columns: {', '.join(self.columns)})")
         return self.columns[name]
 
+    def require_finite(self, names: Sequence[str]) -> None:
+        """Refuses, naming the column, the first row and its trial, a NaN or infinite value in the numeric
+        columns ``names``: what no fit or score can take (channels are finite in every dataset; a label may
+        be missing, NaN)."""
+        for name in names:
+            values = self.column(name)
+            if values.dtype.kind != "f":
+                continue
+            bad = np.flatnonzero(~np.isfinite(values))
+            if bad.size:
+                row = int(bad[0])
+                raise DatasetError(f"column {name}: row {row} (trial {int(self.groups[row])}) is {values[row]}, and "
+                                   f"{bad.size} rows in all are not finite: expected finite values to fit or score on "
+                                   "(drop those rows or trials)")
+
     def X(self, channels: Sequence[str] | None = None) -> np.ndarray:
         """The channels as an (n_samples, n_channels) float64 array, all of them in storage order by default."""
         names = self.channels if channels is None else tuple(channels)
@@ -507,8 +522,9 @@ class Dataset:
     def read(cls, path: str | os.PathLike) -> Dataset:
         """Reads a dataset file, refusing anything that is not a valid softtip dataset with one line."""
         path = Path(path)
-        if not path.is_file():
-            raise DatasetError(f"dataset file {path} does not exist")
+        problem = not_a_file(path)
+        if problem:
+            raise DatasetError(f"dataset file {path} {problem}")
         content = path.read_bytes()  # read once: what is verified is what is parsed
         try:
             schema = pq.read_schema(pa.BufferReader(content))

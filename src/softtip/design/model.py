@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -415,7 +416,7 @@ def shipped_design_path(name: str) -> Path:
 def load_design(name_or_path: str | Path) -> Design:
     """A shipped design by name (a registered system's ``designs/NAME.toml``) or a TOML file by path."""
     path = Path(name_or_path)
-    shipped = not path.suffix
+    shipped = not path.suffix and not os.path.lexists(path)  # a device or FIFO is named like a design
     if shipped:
         path = shipped_design_path(str(name_or_path))
     spec = read_toml(path, "design", DesignError)

@@ -30,6 +30,7 @@ import pyarrow.parquet as pq
 
 from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
+from softtip._core.files import not_a_file
 from softtip.data.csvload import parse_numbers, read_csv_table
 from softtip.data.dataset import (
     METADATA_KEY,
@@ -441,8 +442,9 @@ def _is_dataset_file(path: Path) -> bool:
 
 
 def _suffix(path: Path) -> str:
-    if not path.is_file():
-        raise DatasetError(f"recording {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise DatasetError(f"recording {path} {problem}")
     suffix = path.suffix.lower()
     if suffix not in READABLE:
         raise DatasetError(f"recording {path}: expected a .csv, .parquet, or whitespace-separated "
