@@ -452,6 +452,63 @@ def test_a_value_that_is_not_finite_is_refused_naming_file_and_column(inputs, co
     assert NOT_FINITE[source] in said and ("nan" in said.lower() or "inf" in said or "finite" in said), said
 
 
+# A design or die file whose values only a physical check refuses, for every option that reads one (and a
+# protocol naming one): refused when read, naming the file and the key, not after the work.
+PHYSICS_CASES = [(words, param.name, kind) for words, command in commands() for param in command.params
+                 if param.name in ("design", "die") for kind in (("die modulus", "inverted") if param.name == "die"
+                                                                   else ("modulus", "surface field"))]
+PHYSICS_CASES += [(("lab", "run"), "protocol", kind) for kind in ("modulus", "surface field", "inverted", "die modulus")]
+
+
+def _physically_wrong(tmp: Path, kind: str) -> tuple[Path, str]:
+    """A design (or die) file wrong in one physical value ``kind``, and the key its refusal names."""
+    from softtip.design.model import shipped_design_path
+    from softtip.systems.cilia.layout import SHIPPED_DIE
+
+    folder = tmp / "physics"
+    folder.mkdir(exist_ok=True)
+    if kind in ("inverted", "die modulus"):
+        path = folder / f"{kind.replace(' ', '-')}.toml"
+        old, new, key = (("tip_diameter_um = 200.0", "tip_diameter_um = 400.0", "pillars.tip_diameter_um")
+                         if kind == "inverted" else
+                         ("youngs_modulus_MPa = 1.0 ", "youngs_modulus_MPa = 1e300 ", "pillars.youngs_modulus_MPa"))
+        path.write_text(SHIPPED_DIE.read_text().replace(old, new))
+        return path, key
+    design = shipped_design_path("cylindrical-A").read_text()
+    if kind == "modulus":
+        path, key = folder / "stiff.toml", "body.youngs_modulus_Pa"
+        design = design.replace("youngs_modulus_Pa = 0.59e6", "youngs_modulus_Pa = 1e300")
+    else:
+        path, key = folder / "field.toml", "magnets.surface_field_T"
+        design = design.replace("polarization_T = 1.2", "surface_field_T = 2.0")
+    path.write_text(design)
+    return path, key
+
+
+@pytest.mark.parametrize("case", PHYSICS_CASES, ids=[f"{' '.join(w)} {n} {k}" for w, n, k in PHYSICS_CASES])
+def test_a_physically_impossible_design_is_refused_when_read(inputs, case):
+    tmp, _ = inputs
+    words, name, kind = case
+    param = next(p for p in command_of(words).params if p.name == name)
+    bad, key = _physically_wrong(tmp, kind)
+    if name == "protocol":
+        from softtip.lab.protocols import shipped_protocol_path
+
+        die = kind in ("inverted", "die modulus")
+        shipped = shipped_protocol_path("cilia" if die else "pushing").read_text()
+        named = shipped.replace('die = "shipped"', f'die = "{bad}"') if die else \
+            shipped.replace('design = "cylindrical-A"', f'design = "{bad}"')
+        assert named != shipped
+        value = tmp / "physics" / f"protocol-{kind.replace(' ', '-')}.toml"
+        value.write_text(named)
+    else:
+        value = bad
+    args = with_values(words, [(param, str(value))], False, inputs)
+    verdict, said = outcome(args, [str(bad)], inputs)
+    assert verdict == "refused", f"softtip {' '.join(args)}: {verdict}: {said}"
+    assert key in said, said
+
+
 # A researcher's own files, each wrong in one way, for every option that reads one: (file name, content)
 GARBAGE = b"\x00\x1b[2J not a file of any kind \xff" * 8
 BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None),
