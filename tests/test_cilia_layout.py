@@ -73,6 +73,13 @@ def write(tmp_path: Path, text: str) -> Path:
      r"sensors.X.linear_range_Oe = \[37.5, -25.0\]: expected \[low, high\] with low < high"),
     ("active_area_mm = [2.0, 2.0]", "active_area_mm = [4.0, 2.0]", r"die.active_area_mm = \[4.0, 2.0\]: expected an area within the die"),
     ("sensing_depth_um = 10.0", "sensing_depth_um = 10.0\ncolour = 1", r"die.colour: unknown key"),
+    ("tip_diameter_um = 200.0", "tip_diameter_um = 400.0",
+     r"pillars.tip_diameter_um = 400.0: a tip wider than its base \(320 um\)"),
+    ("height_mm = 1.0", "height_mm = 0.3", r"pillars.base_diameter_um = 320.0: pillars wider than they are high \(300 um\)"),
+    ("youngs_modulus_MPa = 1.0 ", "youngs_modulus_MPa = 1e300 ",
+     r"pillars.youngs_modulus_MPa = 1e\+300: expected 0.001 <= E <= 100 MPa"),
+    # a frustum of 1 mm, 200 and 320 um: pi h (a^2 + a b + b^2) / 12 = 5.404e-11 m^3, times 1.6 T / mu_0 = 68.8 memu
+    ("moment_memu = 2.8", "moment_memu = 70", r"pillars.moment_memu = 70: more than a pillar of solid NdFeB holds \(68.8 memu"),
 ])
 def test_an_impossible_die_is_refused_in_one_line(tmp_path, old, new, message):
     assert old in SHIPPED

@@ -191,6 +191,9 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     ("gap_causes = 1", r"gap_causes = 1: expected true or false"),
     ("balance_chain_count = 0", r"balance_chain_count = 0"),
     ("brush_length_mm = 2.001", r"brush_length_mm = 2.001: expected a stroke longer than the pillars' spread"),
+    ("truth_diameter_um = 700.0", r"parameters.truth_diameter_um = 700: pillars wider than they are high \(1000 um\)"),
+    ("truth_moment_memu = 70.0", r"parameters.truth_moment_memu = 70: more than a pillar of solid NdFeB holds"),
+    ("youngs_modulus_MPa = 1e300", r"youngs_modulus_MPa = 1e\+300: expected 0.001 <= E <= 100 MPa"),
 ])
 def test_bad_protocol_settings_are_refused_when_read(tmp_path, setting, message):
     path = coarse(tmp_path)

@@ -69,6 +69,9 @@ TEXT = [Bad("hostile text", "[bold]x[/bold]"), Bad("hostile text", "\x1b[2Jx"), 
 PATH = [Bad("missing folder", "{tmp}/missing/out.dat"), Bad("directory", "{tmp}/folder"),
         Bad("read-only folder", "{tmp}/read-only/out.dat"), Bad("existing file", "{tmp}/existing.dat"),
         Bad("same as input", "{input}"), Bad("same as input, forced", "{input}")]
+# Paths that exist but are no regular file: named for what they are, never opened (a FIFO would block for ever)
+NOT_REGULAR = [Bad("character device", "/dev/zero"), Bad("FIFO", "{tmp}/fifo")]
+PATH += NOT_REGULAR
 EARLIER_RUN = Bad("earlier outputs", "{tmp}/outputs")  # a folder of outputs: what an earlier run wrote there
 CLAIMED = Bad("claimed", "{tmp}/new/claimed.mcap")  # a file written in place: another process is writing it
 
@@ -169,6 +172,8 @@ def inputs(tmp_path_factory):
         made = runner.invoke(app, args)
         assert made.exit_code == 0, made.output
     (tmp / "folder").mkdir()
+    os.mkfifo(tmp / "fifo")
+    _not_finite_copies(tmp, rng)
     (tmp / "read-only").mkdir()
     (tmp / "read-only").chmod(stat.S_IRUSR | stat.S_IXUSR)
     (tmp / "existing.dat").write_bytes(b"\x00\x1b[2J not a file of any kind \xff" * 8)
@@ -213,6 +218,27 @@ def inputs(tmp_path_factory):
         patch.chdir(tmp / "work")
         yield tmp, bases
     (tmp / "read-only").chmod(stat.S_IRWXU)
+
+
+def _not_finite_copies(tmp: Path, rng) -> None:
+    """A copy of each input that holds numbers to fit or score on, one value in it NaN or infinite
+    (``nan-<name>``): a dataset's label, a recording's output, a curve's voltage."""
+    from softtip.data import DatasetMetadata, TrialWriter, channel_columns
+
+    writer = TrialWriter(1, labels={"fz_N": "N"}, conditions={"role": "1"}, metadata=DatasetMetadata(seed=0))
+    for trial in range(6):
+        force = np.linspace(0, rng.uniform(2, 4), 30)
+        field = np.stack([np.column_stack([3 * force, -2 * force, 50 * force])], axis=1)
+        force[[7, 9]] = [np.nan, np.inf] if trial == 3 else force[[7, 9]]
+        writer.add({"time_s": np.arange(30) / 20, **channel_columns(field), "fz_N": force},
+                   {"role": "calibration" if trial < 4 else "validation"})
+    writer.write(tmp / "nan-dataset.parquet")
+    lines = (tmp / "recording.csv").read_text().splitlines()
+    lines[40] = lines[40].rsplit(",", 1)[0] + ",nan"
+    (tmp / "nan-recording.csv").write_text("\n".join(lines) + "\n")
+    force = np.linspace(0.0, 26e-3, 9)
+    (tmp / "nan-curve.csv").write_text("force_N,voltage_V\n" + "".join(f"{f},{'inf' if k == 4 else -0.5 * f}\n"
+                                                                       for k, f in enumerate(force)))
 
 
 def fingerprint(folder: Path) -> dict[str, str]:
@@ -327,10 +353,14 @@ def paths_of(command) -> list:
 SUFFIX = re.compile(r"\.(png|npz|parquet|csv|json|mcap|h)\b")
 
 
+# The file name ending of parameters whose help names none
+SUFFIXES = {"plot": ".png", "curve": ".csv"}
+
+
 def suffix_of(param) -> str:
     """The file name ending a parameter's help asks for (its outputs are refused with any other)."""
     found = SUFFIX.search(getattr(param, "help", None) or "")
-    return found.group(0) if found else ".dat"
+    return found.group(0) if found else SUFFIXES.get(param.name, ".dat")
 
 
 PAIR_CASES = [(words, first.name, second.name) for words, command in commands()
@@ -380,6 +410,106 @@ def test_no_input_earlier_output_or_claimed_recording_is_written(inputs, case):
     param = next(p for p in command_of(words).params if p.name == name)
     verdict, said = judge(words, param, bad, inputs)
     assert verdict == "refused", f"softtip {' '.join(words)} {option_name(param)} {bad.text!r}: {verdict}: {said}"
+
+
+# Every path option given what exists but is no regular file, under the name the option asks for (the sweep
+# above samples them under any name): refused naming the file and what it is, at once; an output path that
+# exists is refused as existing, and a folder option refuses any file.
+NOT_REGULAR_CASES = [(words, param.name, bad) for words, command in commands() for param in paths_of(command)
+                     for bad in NOT_REGULAR]
+
+
+@pytest.mark.parametrize("case", NOT_REGULAR_CASES, ids=[f"{' '.join(w)} {n} {b.kind}" for w, n, b in NOT_REGULAR_CASES])
+def test_a_device_or_fifo_is_refused_for_what_it_is(inputs, case):
+    tmp, _ = inputs
+    words, name, bad = case
+    param = next(p for p in command_of(words).params if p.name == name)
+    folder = tmp / "irregular"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{bad.kind.split()[-1]}-{name}{suffix_of(param)}"
+    if not path.exists():
+        os.mkfifo(path) if bad.kind == "FIFO" else path.symlink_to("/dev/zero")
+    args = with_values(words, [(param, str(path))], False, inputs)
+    verdict, said = outcome(args, [str(path), path.name, option_name(param)], inputs)
+    assert verdict == "refused", f"softtip {' '.join(args)}: {verdict}: {said}"
+    assert f"is a {bad.kind}" in said or "exists" in said or "expected a folder" in said, said
+
+
+# The column each input's copy with a value that is not finite names (see _not_finite_copies).
+NOT_FINITE = {"dataset.parquet": "fz_N", "recording.csv": "'y'", "curve.csv": "curve"}
+NOT_FINITE_CASES = ["calibrate", "evaluate", "recalibrate", "sysid fit", "sysid orders", "sysid predict",
+                    "cilia fit"]
+
+
+@pytest.mark.parametrize("command", NOT_FINITE_CASES)
+def test_a_value_that_is_not_finite_is_refused_naming_file_and_column(inputs, command):
+    """What a fit or a score would stop on deep inside (scikit-learn's "Input y contains NaN" names neither
+    file nor label) is refused before the work, naming the file and the column."""
+    tmp, bases = inputs
+    words = tuple(command.split())
+    _, _, source, reader = bases[command]
+    param = next(p for p in command_of(words).params if p.name == reader)
+    bad = tmp / f"nan-{source}"
+    verdict, said = outcome(with_values(words, [(param, str(bad))], False, inputs), [str(bad)], inputs)
+    assert verdict == "refused", f"softtip {command} {bad.name}: {verdict}: {said}"
+    assert NOT_FINITE[source] in said and ("nan" in said.lower() or "inf" in said or "finite" in said), said
+
+
+# A design or die file whose values only a physical check refuses, for every option that reads one (and a
+# protocol naming one): refused when read, naming the file and the key, not after the work.
+PHYSICS_CASES = [(words, param.name, kind) for words, command in commands() for param in command.params
+                 if param.name in ("design", "die") for kind in (("die modulus", "inverted") if param.name == "die"
+                                                                   else ("modulus", "surface field"))]
+PHYSICS_CASES += [(("lab", "run"), "protocol", kind) for kind in ("modulus", "surface field", "inverted", "die modulus")]
+
+
+def _physically_wrong(tmp: Path, kind: str) -> tuple[Path, str]:
+    """A design (or die) file wrong in one physical value ``kind``, and the key its refusal names."""
+    from softtip.design.model import shipped_design_path
+    from softtip.systems.cilia.layout import SHIPPED_DIE
+
+    folder = tmp / "physics"
+    folder.mkdir(exist_ok=True)
+    if kind in ("inverted", "die modulus"):
+        path = folder / f"{kind.replace(' ', '-')}.toml"
+        old, new, key = (("tip_diameter_um = 200.0", "tip_diameter_um = 400.0", "pillars.tip_diameter_um")
+                         if kind == "inverted" else
+                         ("youngs_modulus_MPa = 1.0 ", "youngs_modulus_MPa = 1e300 ", "pillars.youngs_modulus_MPa"))
+        path.write_text(SHIPPED_DIE.read_text().replace(old, new))
+        return path, key
+    design = shipped_design_path("cylindrical-A").read_text()
+    if kind == "modulus":
+        path, key = folder / "stiff.toml", "body.youngs_modulus_Pa"
+        design = design.replace("youngs_modulus_Pa = 0.59e6", "youngs_modulus_Pa = 1e300")
+    else:
+        path, key = folder / "field.toml", "magnets.surface_field_T"
+        design = design.replace("polarization_T = 1.2", "surface_field_T = 2.0")
+    path.write_text(design)
+    return path, key
+
+
+@pytest.mark.parametrize("case", PHYSICS_CASES, ids=[f"{' '.join(w)} {n} {k}" for w, n, k in PHYSICS_CASES])
+def test_a_physically_impossible_design_is_refused_when_read(inputs, case):
+    tmp, _ = inputs
+    words, name, kind = case
+    param = next(p for p in command_of(words).params if p.name == name)
+    bad, key = _physically_wrong(tmp, kind)
+    if name == "protocol":
+        from softtip.lab.protocols import shipped_protocol_path
+
+        die = kind in ("inverted", "die modulus")
+        shipped = shipped_protocol_path("cilia" if die else "pushing").read_text()
+        named = shipped.replace('die = "shipped"', f'die = "{bad}"') if die else \
+            shipped.replace('design = "cylindrical-A"', f'design = "{bad}"')
+        assert named != shipped
+        value = tmp / "physics" / f"protocol-{kind.replace(' ', '-')}.toml"
+        value.write_text(named)
+    else:
+        value = bad
+    args = with_values(words, [(param, str(value))], False, inputs)
+    verdict, said = outcome(args, [str(bad)], inputs)
+    assert verdict == "refused", f"softtip {' '.join(args)}: {verdict}: {said}"
+    assert key in said, said
 
 
 # A researcher's own files, each wrong in one way, for every option that reads one: (file name, content)

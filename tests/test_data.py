@@ -607,3 +607,23 @@ def test_csv_refusals_name_the_file_and_column(tmp_path, text, changes, message)
     with pytest.raises(DatasetError, match=message) as refusal:
         read_csv_recording(path, MAPPING, **{**CSV_OPTIONS, **changes})
     assert "\n" not in str(refusal.value)
+
+
+@pytest.mark.parametrize("kind", [pa.float64(), pa.float32(), pa.int64(), pa.int16(), pa.uint8(), pa.bool_()])
+def test_arrow_numbers_equal_arrows_own_conversion_across_chunks_offsets_and_nulls(kind):
+    """The buffer reader gives what pyarrow's to_numpy gives: two chunks, the second sliced (a non-zero
+    offset into its buffers, not a multiple of 8 bits), with a null in a float column read as NaN."""
+    from softtip.data.dataset import arrow_numbers
+
+    values = [1, 0, 3, 4, 5, 0, 7, 8, 9, 10, 11, 1]
+    if pa.types.is_boolean(kind):
+        values = [bool(v % 2) for v in values]
+    with_null = values[:9] + [None] + values[10:] if pa.types.is_floating(kind) else values
+    column = pa.chunked_array([pa.array(values[:3], kind), pa.array(with_null, kind).slice(5)])
+    found = arrow_numbers(column)
+    expected = column.to_numpy()
+    assert found.dtype == expected.dtype and found.flags.writeable
+    np.testing.assert_array_equal(found, expected)
+    if pa.types.is_floating(kind):
+        assert np.flatnonzero(np.isnan(found)).tolist() == [3 + 4]
+    assert arrow_numbers(pa.chunked_array([], kind)).shape == (0,)

@@ -91,6 +91,11 @@ def test_surface_field_conversion_reproduces_that_field_at_the_face():
         ("rectangular", "magnets.pitch_y_mm", 38.0, "side surface"),
         ("rectangular", "cavity.width_mm", 36.0, "smaller than the body"),
         ("rectangular", "magnets.depth_mm", 5.0, "cut into the cavity"),
+        ("cylindrical-A", "body.youngs_modulus_Pa", 1e300, "expected 1e3 <= E <= 1e8 Pa"),
+        ("cylindrical-A", "body.youngs_modulus_Pa", 10.0, "expected 1e3 <= E <= 1e8 Pa"),
+        ("cylindrical-A", "body.density_kg_m3", 1e9, "expected 100 <= rho <= 20000 kg/m3"),
+        # J = 2 B L^-1 sqrt(R^2 + L^2) = 2 * 0.9 T * sqrt(2^2 + 2^2) / 2 = 2.55 T for the 4 x 2 mm magnets
+        ("rectangular", "magnets.surface_field_T", 0.9, "a polarisation of 2.55 T: expected at most 1.6 T"),
     ],
 )
 def test_impossible_designs_are_refused_with_one_line_naming_the_parameter(name, dotted, value, message):

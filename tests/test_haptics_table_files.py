@@ -269,7 +269,7 @@ def test_a_protocol_takes_fingertip_files_and_a_recorded_fs_table(tmp_path):
     ({"fingertip_files": ["missing.toml"]}, "missing.toml"),
     ({"fingertip_files": ["same.toml"]}, "fingertip_files = .*'human 3 \\(10 mm\\)' is used twice"),
     ({"fs_table": "plain.csv"}, "plain.csv: the study's personalisation A needs the DS's readings"),
-    ({"fs_table": "missing.csv"}, "missing.csv: no such file"),
+    ({"fs_table": "missing.csv"}, "missing.csv does not exist"),
     ({"fs_table": "small.csv"}, "small.csv: n_neighbours = 8: the table has only 2 distinct entries"),
 ])
 def test_bad_researcher_files_in_a_protocol_are_refused_in_one_line(tmp_path, top, words):

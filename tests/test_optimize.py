@@ -441,7 +441,7 @@ def test_cli_json_contract_and_resume(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--config", "missing.toml"], "--config = missing.toml: does not exist, expected a file"),
+    (["--config", "missing.toml"], "--config = missing.toml: does not exist"),
     (["--scheduler", "localhost"], "--scheduler localhost: expected an address"),
     (["--workers", "0"], "--workers = 0: expected a number >= 1 and <= 8"),
 ])

@@ -52,6 +52,29 @@ def test_a_plain_file_is_read_trial_by_trial_with_its_sample_time(tmp_path, writ
     np.testing.assert_allclose(recording.time(0), np.arange(50) * TS)
 
 
+@pytest.mark.parametrize("writer, suffix", [(_csv, ".csv"), (_parquet, ".parquet")])
+def test_reading_a_recording_loads_no_pandas(tmp_path, writer, suffix):
+    """Arrow's own to_numpy and pq.read_table import pandas, half a second of a command's start: a fresh
+    interpreter reads a recording (and a softtip dataset) without it, to the same numbers."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = writer(tmp_path / f"rec{suffix}", _table())
+    dataset = TrialWriter(1, {"Fz": "N"}, metadata=DatasetMetadata(description="pandas-free"))
+    dataset.add({"time_s": np.arange(4) * TS, **channel_columns(np.zeros((4, 1, 3))), "Fz": [0.0, 1.0, np.nan, 3.0]})
+    dataset.write(tmp_path / "set.parquet")
+    program = ("import sys; from softtip.sysid.recording import read_recording; from softtip.data import Dataset; "
+               f"r = read_recording({str(path)!r}, ['Fx_side', 'Fz_side'], ['Fz'], trial_column='trial'); "
+               f"d = Dataset.read({str(tmp_path / 'set.parquet')!r}); "
+               "print(repr(float(r.trials[1].u[3, 1])), d.columns['Fz'].tolist(), 'pandas' in sys.modules)")
+    source = Path(__file__).parents[1] / "src"
+    found = subprocess.run([sys.executable, "-c", program], env={"PYTHONPATH": str(source), "PATH": ""},
+                           capture_output=True, text=True, timeout=120)
+    assert found.returncode == 0, found.stderr
+    assert found.stdout.split() == [repr(float(_table()["Fz_side"][53])), "[0.0,", "1.0,", "nan,", "3.0]", "False"]
+
+
 def test_a_softtip_dataset_gives_its_channels_and_labels_with_their_units(tmp_path):
     rng = np.random.default_rng(1)
     writer = TrialWriter(1, labels={"fz_N": "N"}, metadata=DatasetMetadata(seed=0))

@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from softtip.sysid import Recording, StateSpaceModel, TransferFunctionModel, load_model, save_model, transfer
 from softtip.sysid.statespace import IdentificationError
 from softtip.sysid.residuals import residual_tests
+from softtip.sysid.robust import sandwich_covariance
 from softtip.sysid.uncertainty import empirical_transfer_function, frequency_band
 
 TS = 0.08
@@ -90,13 +91,29 @@ def test_the_covariance_equals_scipys_finite_difference_gauss_newton_covariance(
     errors = residual(theta)
     expected = errors @ errors / (len(y) - 4) * np.linalg.inv(jacobian.T @ jacobian)
     np.testing.assert_allclose(model.covariance_[0], expected, rtol=1e-5)  # measured 1.7e-6
-    # at the optimum Jᵀe = 0, so regressing the errors on J leaves them as they are: statsmodels' residuals
-    [lags] = sandwich.covariance_lags_
-    regression = sm.OLS(errors, jacobian).fit(cov_type="HAC", cov_kwds={"maxlags": lags, "use_correction": True})
-    assert lags >= 1 and np.max(np.abs(regression.params)) < 1e-6 * np.max(np.abs(theta))
-    np.testing.assert_allclose(sandwich.covariance_[0], regression.cov_params(), rtol=1e-4)
+    # prewhitened (Andrews-Monahan): statsmodels' VAR(1) of the scores without a constant, its Newey-West
+    # middle of the innovations at the lags the model chose, recoloured by (I - A)⁻¹
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+    from statsmodels.tsa.api import VAR
+
+    scores = jacobian * errors[:, None]
+    whitening = VAR(scores).fit(1, trend="n").coefs[0]
+    innovations = np.vstack([scores[:1], scores[1:] - scores[:-1] @ whitening.T])
+    [lags], [prewhitened] = sandwich.covariance_lags_, sandwich.covariance_prewhitened_
+    recolouring = np.linalg.inv(np.eye(4) - whitening)
+    bread = np.linalg.inv(jacobian.T @ jacobian)
+    expected = bread @ recolouring @ S_hac_simple(innovations, lags) @ recolouring.T @ bread * len(y) / (len(y) - 4)
+    assert prewhitened and lags >= 1
+    np.testing.assert_allclose(sandwich.covariance_[0], expected, rtol=1e-4)
     assert sandwich.uncertainty()["method"] == "sandwich" and model.uncertainty()["method"] == "white"
     assert f"over {lags} lags" in sandwich.uncertainty()["assumption"]
+    assert sandwich.uncertainty()["assumption"].endswith("prewhitened by a VAR(1) (Andrews-Monahan): yes")
+    # unwhitened: at the optimum Jᵀe = 0, so regressing the errors on J leaves them as they are: statsmodels'
+    # HAC covariance of that regression at the same lags
+    regression = sm.OLS(errors, jacobian).fit(cov_type="HAC", cov_kwds={"maxlags": lags, "use_correction": True})
+    assert np.max(np.abs(regression.params)) < 1e-6 * np.max(np.abs(theta))
+    plain, _, _ = sandwich_covariance(jacobian, errors, np.zeros(len(y), dtype=int), lags, prewhiten=False)
+    np.testing.assert_allclose(plain, regression.cov_params(), rtol=1e-4)
 
 
 def test_the_empirical_transfer_function_follows_python_control_s_response():
@@ -274,7 +291,7 @@ def test_sandwich_intervals_stay_honest_under_coloured_output_noise_where_white_
         model = TransferFunctionModel(2, 1).fit(Recording.from_arrays(u, y, TS))
         estimates.append(np.concatenate([model.tf_.denominators[0][0][1:], model.tf_.numerators[0][0]]))
         sandwich.append(np.sqrt(np.diag(model.covariance_[0])))
-        [assumed], _ = transfer.parameter_covariance(model.tf_, [(u, y)], TS, "white")
+        [assumed], _, _ = transfer.parameter_covariance(model.tf_, [(u, y)], TS, "white")
         white.append(np.sqrt(np.diag(assumed)))
     spread = np.std(estimates, axis=0, ddof=1)
     assert np.all(np.abs(np.mean(sandwich, axis=0) / spread - 1) < 0.2)
@@ -339,3 +356,75 @@ def test_the_compare_and_response_figures_carry_the_fit_units_and_bands(tmp_path
         assert len(response.collections) == 1  # the band
         drawn.savefig(tmp_path / f"{kind}.png")
     figure.savefig(tmp_path / "compare.png")
+
+
+def _coverage(rho: float, runs: int, count: int, prewhiten: bool, seed: int = 7) -> float:
+    """Monte Carlo coverage of the slope's 95 % sandwich interval in y = x + e, x and e independent AR(1)
+    series at ``rho`` (the scores x e are then persistent as a slow rig's are): the share of ``runs`` whose
+    interval holds the true slope."""
+    rng = np.random.default_rng(seed)
+    held = 0
+    for _ in range(runs):
+        x, e = (scipy.signal.lfilter([1.0], [1.0, -rho], rng.normal(size=count)) for _ in range(2))
+        design = np.column_stack([x, np.ones(count)])
+        slope, level = np.linalg.lstsq(design, x + e, rcond=None)[0]
+        covariance, _, _ = sandwich_covariance(design, x + e - design @ [slope, level], np.zeros(count, dtype=int),
+                                               prewhiten=prewhiten)
+        held += abs(slope - 1.0) < 1.96 * np.sqrt(covariance[0, 0])
+    return held / runs
+
+
+def test_prewhitening_keeps_the_coverage_near_95_percent_where_the_bartlett_weights_alone_fall_short():
+    """Known coverage: 400 regressions at lag-1 autocorrelations of 0.5 and 0.95 (1,000 samples). The
+    prewhitened intervals hold the truth in 94.25 and 92.5 % of them (measured; a share of 400 runs is
+    uncertain by about 1.2 points), the Bartlett weights alone in 92.5 and 89 % of the same runs: they cut
+    the long tail of persistent scores' autocovariances."""
+    mild, persistent = _coverage(0.5, 400, 1000, True), _coverage(0.95, 400, 1000, True)
+    assert 0.925 <= mild <= 0.97 and 0.9 <= persistent <= 0.97, (mild, persistent)
+    assert _coverage(0.95, 400, 1000, False) <= persistent - 0.02
+
+
+def test_scores_with_a_unit_root_are_not_recoloured_and_the_method_says_so():
+    """Scores growing by 5 % a sample: their VAR(1) is 1.05 exactly, (I - A)⁻¹ would flip the sign of the
+    long-run variance, so the Bartlett middle of the scores as they are is used (the same covariance as
+    without prewhitening) and reported as not prewhitened."""
+    count = 200
+    jacobian, residual = np.ones((count, 1)), 1.05 ** np.arange(count)
+    groups = np.zeros(count, dtype=int)
+    found, lags, prewhitened = sandwich_covariance(jacobian, residual, groups)
+    plain, plain_lags, _ = sandwich_covariance(jacobian, residual, groups, prewhiten=False)
+    assert not prewhitened and lags == plain_lags
+    np.testing.assert_array_equal(found, plain)
+
+
+@pytest.mark.slow
+def test_the_eflesh_records_sandwich_spread_beside_a_moving_block_bootstrap():
+    """The real record of the README's walk-through (eFlesh, MIT licence; examples/data/eflesh-normal),
+    order 1 from the probe's depth to the scale's grams: residual blocks of 50 samples redrawn onto the
+    fitted simulation and refitted 100 times. The bootstrap's spread of the pole is about half the
+    prewhitened sandwich's (measured 0.50 with 150 refits; 0.44-0.54 for blocks of 20 to 100 samples),
+    where the unwhitened sandwich was 1.6-1.7 x narrower than it: the residuals follow the stage's pressing
+    rhythm, which a VAR(1) recolours generously. Held to 0.3-0.75 so that either direction of drift shows."""
+    from pathlib import Path
+
+    from softtip.sysid.recording import read_recording
+
+    record = read_recording(Path(__file__).parents[1] / "examples/data/eflesh-normal/20250401_014340_probe/states.csv",
+                            ["z"], ["grams"], names=["time", "x", "y", "z", "grams"], time_column="time", missing=-1,
+                            resample=0.2)
+    model = TransferFunctionModel(1, detrend="mean").fit(record)
+    assert model.covariance_prewhitened_ == [True]
+    sandwich = np.sqrt(model.covariance_[0][0, 0])
+    u, y = record.trials[0].u, record.trials[0].y
+    simulated = model.simulate(record)[0]
+    residual = y - simulated
+    rng = np.random.default_rng(0)
+    block, poles = 50, []
+    for _ in range(100):
+        starts = rng.integers(0, len(y) - block + 1, size=len(y) // block + 1)
+        drawn = np.concatenate([residual[s:s + block] for s in starts])[:len(y)]
+        refit = TransferFunctionModel(1, detrend="mean", estimate_covariance=False).fit(
+            Recording.from_arrays(u, simulated + drawn - drawn.mean(axis=0), record.ts))
+        poles.append(refit.tf_.denominators[0][0][1])
+    ratio = np.std(poles, ddof=1) / sandwich
+    assert 0.3 < ratio < 0.75, ratio

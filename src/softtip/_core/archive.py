@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softtip._core.files import atomic_write
+from softtip._core.files import atomic_write, not_a_file
 
 ZIP_MAGIC = b"PK\x03\x04"
 SEAL_PREFIX = b"softtip-sha256:"
@@ -102,8 +102,9 @@ def read_archive(path: Path, format_name: str, schema_version: int, what: str,
     without a JSON metadata entry of that format, one of another schema version, and one whose
     checksum does not match its content.
     """
-    if not path.is_file():
-        raise error(f"{what} file {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise error(f"{what} file {path} {problem}")
     content = path.read_bytes()
     if not content.startswith(ZIP_MAGIC):
         raise error(f"{path} is not a softtip {what} file (not an npz archive)")

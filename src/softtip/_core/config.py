@@ -34,6 +34,8 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import numpy as np
+
+from softtip._core.files import not_a_file
 from pydantic import BeforeValidator, ConfigDict, Field, InstanceOf, Strict, TypeAdapter, ValidationError, WrapValidator
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 from pydantic_core import ArgsKwargs, PydanticCustomError
@@ -50,8 +52,9 @@ def read_toml(path: str | Path, what: str, error: type[ConfigError] = ConfigErro
     """The table in the TOML file ``path``, a ``what`` file ("design", "study" ...); a missing or
     unreadable file, bytes that are not UTF-8 and text that is not TOML raise ``error`` naming the file."""
     path = Path(path)
-    if not path.is_file():
-        raise error(f"{what} file {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise error(f"{what} file {path} {problem}")
     try:
         return tomllib.loads(path.read_bytes().decode("utf-8"))
     except OSError as problem:

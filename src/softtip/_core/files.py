@@ -7,10 +7,32 @@ import contextlib
 import errno
 import fcntl
 import os
+import stat
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO, Callable
+
+
+# What a path that is not a regular file is, as its mode says: such a path given as an input is refused by
+# name before it is opened (a FIFO would block the reader for ever, /dev/zero would fill the memory).
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def not_a_file(path: str | os.PathLike) -> str | None:
+    """What keeps ``path`` from being read as an input file, in words ("does not exist", "is a FIFO (named
+    pipe), expected a regular file" ...), or None for a regular file (a link followed)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "is a link to nothing" if os.path.islink(path) else "does not exist"
+    except OSError as error:
+        return f"cannot be read ({error.strerror})"
+    if stat.S_ISREG(mode):
+        return None
+    kind = next((name for test, name in _KINDS if test(mode)), "not a regular file")
+    return f"is {kind}, expected a regular file"
 
 
 class OutputClaimed(OSError):

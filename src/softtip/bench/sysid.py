@@ -254,8 +254,11 @@ def _run_seconds(arguments: list[str], repeats: int) -> float:
 def start_times(repeats: int = 3) -> dict:
     """Seconds, each the best of ``repeats`` fresh processes, of: the interpreter alone (the baseline),
     ``import softtip.sysid``, ``softtip sysid --help``, and a whole ``softtip sysid fit`` of a 200-sample
-    record (state space, order 2: the fit itself takes milliseconds, the rest is starting); with the load
-    average they were measured under."""
+    record, CSV and Parquet (state space, order 2: the fit itself takes milliseconds, the rest is starting);
+    with the load average they were measured under."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     rng = np.random.default_rng(0)
     u = rng.normal(size=200)
     y = np.convolve(u, [0.0, 0.5, 0.25])[:200]
@@ -263,12 +266,15 @@ def start_times(repeats: int = 3) -> dict:
         record = Path(folder) / "record.csv"
         record.write_text("time_s,u,y\n" + "".join(f"{0.01 * k:.2f},{a:.6f},{b:.6f}\n"
                                                       for k, (a, b) in enumerate(zip(u, y))))
+        pq.write_table(pa.table({"time_s": 0.01 * np.arange(200), "u": u, "y": y}), Path(folder) / "record.parquet")
         command = ["-m", "softtip", "sysid"]
+        fit = ["-u", "u", "-y", "y", "--kind", "ss", "--order", "2"]
         return {"interpreter_s": _run_seconds(["-c", "pass"], repeats),
                 "import_sysid_s": _run_seconds(["-c", "import softtip.sysid"], repeats),
                 "help_s": _run_seconds([*command, "--help"], repeats),
-                "fit_s": _run_seconds([*command, "fit", "--data", str(record), "-u", "u", "-y", "y", "--kind", "ss",
-                                       "--order", "2"], repeats),
+                "fit_s": _run_seconds([*command, "fit", "--data", str(record), *fit], repeats),
+                "fit_parquet_s": _run_seconds([*command, "fit", "--data", str(record.with_suffix(".parquet")), *fit],
+                                              repeats),
                 "load_average": list(os.getloadavg()), "repeats": repeats}
 
 
@@ -330,7 +336,8 @@ def bench_sysid(calls: int = 20_000, seed: int = 0) -> dict:
         "streaming_p99_us": max(ours["p99_us"], streaming["transfer_function_order_6"]["p99_us"],
                                 streaming["live_estimator_transfer_function_order_6"]["p99_us"])
         <= TARGETS["streaming_p99_us"],
-        "start_s": max(results["start"]["help_s"], results["start"]["fit_s"]) <= TARGETS["start_s"],
+        "start_s": max(results["start"]["help_s"], results["start"]["fit_s"], results["start"]["fit_parquet_s"])
+        <= TARGETS["start_s"],
     }
     results["ratios"] = {
         "nfoursid_time_over_state_space": nfoursid["seconds"] / ss_seconds,

@@ -186,7 +186,8 @@ def bench_sysid(
     console.print(f"  start (best of {start['repeats']} processes, load average "
                   f"{', '.join(f'{v:.2f}' for v in start['load_average'])}): python alone "
                   f"{start['interpreter_s']:.2f} s, import softtip.sysid {start['import_sysid_s']:.2f} s, sysid --help "
-                  f"{start['help_s']:.2f} s, a 200-sample sysid fit {start['fit_s']:.2f} s")
+                  f"{start['help_s']:.2f} s, a 200-sample sysid fit {start['fit_s']:.2f} s (CSV), "
+                  f"{start['fit_parquet_s']:.2f} s (Parquet)")
     for name, met in report["targets_met"].items():
         console.print(f"  target {name} <= {report['targets'][name]:g}: {'met' if met else '[red]missed[/]'}")
     for name, ratio in report["ratios"].items():

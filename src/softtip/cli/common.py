@@ -30,7 +30,7 @@ from typer._click.exceptions import NoArgsIsHelpError, UsageError
 from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
-from softtip._core.files import OutputClaimed, claim
+from softtip._core.files import OutputClaimed, claim, not_a_file
 from softtip._core.progress import SILENT, Progress, RichProgress
 from softtip._core.systems import load
 
@@ -378,9 +378,9 @@ def demo_report(run: str, seed: int, duration: float | None, record: Path | None
 def check_input(path: str | os.PathLike, option: str) -> Path:
     """``path`` if it is a readable file, checked before the work that comes before reading it."""
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{option} = {path}: {'is a directory' if path.is_dir() else 'does not exist'}, "
-                         "expected a file")
+    problem = not_a_file(path)
+    if problem:
+        raise ValueError(f"{option} = {path}: {problem}")
     if not os.access(path, os.R_OK):
         raise ValueError(f"{option} = {path}: permission denied")
     return path

@@ -162,6 +162,7 @@ def calibrate(
         fail(f"--target {unknown[0]!r}: {dataset} has labels {', '.join(data.labels)}")
     _check_label_units(data, dataset, target)
     check_changes(data.columns, data.metadata.sensor_settings, str(dataset))
+    _check_finite(data, dataset, target)
     X, y = data.X(), _targets(data, target, model)
     keep = np.ones(len(X), dtype=bool) if min_force is None else (np.asarray(y if y.ndim == 1 else y[:, 0], float) > min_force)
     calibration, _ = by_role(data)
@@ -355,6 +356,18 @@ def check_model_data(meta, data, dataset: Path) -> None:
         fail(f"{dataset}: lacks the model's target {absent[0]!r}")
     _check_label_units(data, dataset, list(meta.target_names))
     check_changes(data.columns, data.metadata.sensor_settings, str(dataset))
+    _check_finite(data, dataset, list(meta.target_names))
+
+
+def _check_finite(data, dataset: Path, targets: list[str]) -> None:
+    """Every target value finite, refused by file and column before any fit (scikit-learn's own refusal
+    names neither)."""
+    from softtip.data import DatasetError
+
+    try:
+        data.require_finite(targets)
+    except DatasetError as problem:
+        fail(f"{dataset}: {problem}")
 
 
 def _check_label_units(data, dataset: Path, targets: list[str]) -> None:

@@ -49,6 +49,7 @@ from pydantic import Field, Strict
 
 from softtip._core.channels import MAGNETIC, is_channel
 from softtip._core.config import choice, expect, integer, number, parse, read_toml, schema
+from softtip._core.files import not_a_file
 
 from softtip.data.dataset import (
     DIMENSIONLESS,
@@ -57,6 +58,7 @@ from softtip.data.dataset import (
     Dataset,
     DatasetError,
     DatasetMetadata,
+    arrow_numbers,
     column_to_numpy,
     first_line,
     require_columns,
@@ -139,7 +141,7 @@ def parse_numbers(path: Path, csv_name: str, column: pa.ChunkedArray, *, first_l
     counted from ``first_line``, the line of the first row: 2 below a header)."""
     text = pc.utf8_trim_whitespace(column)
     try:
-        return pc.cast(text, pa.float64()).to_numpy(zero_copy_only=False)
+        return arrow_numbers(pc.cast(text, pa.float64()))
     except pa.ArrowInvalid:
         for line, cell in enumerate(text.to_pylist(), start=first_line):
             try:
@@ -211,8 +213,9 @@ def read_csv_table(path: Path, numeric: Sequence[str], *, delimiter: str = ",",
 
 
 def _read_table(path: Path, layout: _Layout) -> pa.Table:
-    if not path.is_file():
-        raise DatasetError(f"recording {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise DatasetError(f"recording {path} {problem}")
     table = read_csv_table(path, layout.numeric, delimiter=layout.options.delimiter)
     require_columns(path, [*layout.columns, *layout.numeric], table.column_names)
     return table
@@ -292,8 +295,9 @@ def read_columns(path: str | os.PathLike, columns: Sequence[int | str], *, heade
     spaces and tabs, as in DaISy's and MATLAB's ``.dat`` files). A missing column, a row of the wrong
     length or a cell that is not a number is one line naming the file, the column and the line."""
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"{path}: {'is a folder, expected a file' if path.is_dir() else 'does not exist'}")
+    problem = not_a_file(path)
+    if problem:
+        raise DatasetError(f"{path}: {problem}")
     try:
         content = path.read_bytes()
     except OSError as problem:

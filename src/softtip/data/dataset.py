@@ -54,7 +54,7 @@ from pydantic import Strict
 from softtip import __version__
 from softtip._core.channels import CHANNEL_UNIT, channel_names, channel_order, is_channel
 from softtip._core.config import ConfigError, Text, Whole, checked, expect
-from softtip._core.files import atomic_write
+from softtip._core.files import atomic_write, not_a_file
 
 FORMAT = "softtip-dataset"
 SCHEMA_VERSION = 1
@@ -178,6 +178,34 @@ def _value_column(name: str, values: Any) -> np.ndarray:
                        "(expected bool, integer, float32, float64 or string)")
 
 
+def _bits(buffer: pa.Buffer, offset: int, count: int) -> np.ndarray:
+    """``count`` bits of an Arrow bitmap from bit ``offset`` on, as booleans (Arrow packs them least
+    significant first)."""
+    return np.unpackbits(np.frombuffer(buffer, dtype=np.uint8), bitorder="little")[offset:offset + count].astype(bool)
+
+
+def arrow_numbers(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
+    """A boolean, integer or floating Arrow column as a new numpy array, read from its buffers, missing
+    values NaN (a float column's) or left as stored (others'). Arrow's own ``to_numpy`` imports pandas, half
+    a second of a command's start."""
+    array = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    kind = array.type
+    validity, values = array.buffers()[:2]
+    if pa.types.is_boolean(kind):
+        numbers = _bits(values, array.offset, len(array)) if len(array) else np.zeros(0, dtype=bool)
+    elif pa.types.is_integer(kind) or pa.types.is_floating(kind):
+        code = "f" if pa.types.is_floating(kind) else "i" if pa.types.is_signed_integer(kind) else "u"
+        dtype = np.dtype(f"{code}{kind.bit_width // 8}")  # Arrow keeps the host's byte order
+        numbers = np.frombuffer(values, dtype=dtype, count=len(array), offset=array.offset * dtype.itemsize) \
+            if len(array) else np.zeros(0, dtype=dtype)
+        numbers = numbers.copy()
+        if array.null_count and pa.types.is_floating(kind):
+            numbers[~_bits(validity, array.offset, len(array))] = np.nan
+    else:
+        raise TypeError(f"arrow_numbers: expected a boolean, integer or floating column, got {kind}")
+    return numbers
+
+
 def column_to_numpy(name: str, column: pa.ChunkedArray | pa.Array, *, row_word: str = "row",
                     first_row: int = 0) -> np.ndarray:
     """An Arrow column as a numpy array; missing values are NaN in float columns and refused elsewhere.
@@ -187,10 +215,12 @@ def column_to_numpy(name: str, column: pa.ChunkedArray | pa.Array, *, row_word: 
     if pa.types.is_dictionary(column.type):
         column = column.cast(column.type.value_type)
     if column.null_count and not pa.types.is_floating(column.type):
-        row = int(np.flatnonzero(pc.is_null(column).to_numpy(zero_copy_only=False))[0])
+        row = int(np.flatnonzero(arrow_numbers(pc.is_null(column)))[0])
         raise DatasetError(f"column {name}: missing value at {row_word} {first_row + row}")
     if pa.types.is_string(column.type) or pa.types.is_large_string(column.type):
         return column.to_numpy(zero_copy_only=False).astype(str)
+    if pa.types.is_boolean(column.type) or pa.types.is_integer(column.type) or pa.types.is_floating(column.type):
+        return arrow_numbers(column)
     return np.asarray(column.to_numpy(zero_copy_only=False))
 
 
@@ -384,6 +414,21 @@ class Dataset:
             raise DatasetError(f"no column {name!r} (columns: {', '.join(self.columns)})")
         return self.columns[name]
 
+    def require_finite(self, names: Sequence[str]) -> None:
+        """Refuses, naming the column, the first row and its trial, a NaN or infinite value in the numeric
+        columns ``names``: what no fit or score can take (channels are finite in every dataset; a label may
+        be missing, NaN)."""
+        for name in names:
+            values = self.column(name)
+            if values.dtype.kind != "f":
+                continue
+            bad = np.flatnonzero(~np.isfinite(values))
+            if bad.size:
+                row = int(bad[0])
+                raise DatasetError(f"column {name}: row {row} (trial {int(self.groups[row])}) is {values[row]}, and "
+                                   f"{bad.size} rows in all are not finite: expected finite values to fit or score on "
+                                   "(drop those rows or trials)")
+
     def X(self, channels: Sequence[str] | None = None) -> np.ndarray:
         """The channels as an (n_samples, n_channels) float64 array, all of them in storage order by default."""
         names = self.channels if channels is None else tuple(channels)
@@ -477,8 +522,9 @@ class Dataset:
     def read(cls, path: str | os.PathLike) -> Dataset:
         """Reads a dataset file, refusing anything that is not a valid softtip dataset with one line."""
         path = Path(path)
-        if not path.is_file():
-            raise DatasetError(f"dataset file {path} does not exist")
+        problem = not_a_file(path)
+        if problem:
+            raise DatasetError(f"dataset file {path} {problem}")
         content = path.read_bytes()  # read once: what is verified is what is parsed
         try:
             schema = pq.read_schema(pa.BufferReader(content))
@@ -505,7 +551,7 @@ class Dataset:
         if len(set(schema.names)) != len(schema.names):
             raise DatasetError("duplicate column names")
         try:
-            table = pq.read_table(pa.BufferReader(content), page_checksum_verification=True)
+            table = pq.ParquetFile(pa.BufferReader(content), page_checksum_verification=True).read()
         except (pa.ArrowException, OSError, UnicodeDecodeError) as problem:  # names of a damaged file may not decode
             raise DatasetError(f"unreadable Parquet data ({first_line(problem)})") from None
         columns = {name: column_to_numpy(name, table.column(name)) for name in declared}

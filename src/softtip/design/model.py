@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -113,8 +114,14 @@ def _not_zero(value: float) -> float:
 
 
 PoissonRatio = number("0 < nu < 0.5 (a compressible elastic solid)", gt=0, lt=0.5)
-_REMANENCE = "0 < |J| <= 1.6 T (NdFeB remanence)"
-Polarization = Annotated[number(_REMANENCE, ge=-1.6, le=1.6), AfterValidator(_not_zero), expect(_REMANENCE)]
+# A soft body's modulus: from the softest gels (a few kPa) to the hardest rubbers (Shore 90A, tens of MPa). Beyond
+# either end the body is no soft fingertip: the contact laws and the FE's load steps are made for the range between.
+ElastomerModulus = number("1e3 <= E <= 1e8 Pa (a soft elastomer: from gels to the hardest rubbers)", ge=1e3, le=1e8)
+# From foams to the densest filled silicones and beyond (tungsten-filled rubbers reach 11,000 kg/m3).
+Density = number("100 <= rho <= 20000 kg/m3 (a solid: from foams to metal-filled rubbers)", ge=100, le=2e4)
+STRONGEST_NDFEB_T = 1.6  # the remanence of the strongest sintered NdFeB: no magnet is polarised more
+_REMANENCE = f"0 < |J| <= {STRONGEST_NDFEB_T} T (NdFeB remanence)"
+Polarization = Annotated[number(_REMANENCE, ge=-STRONGEST_NDFEB_T, le=STRONGEST_NDFEB_T), AfterValidator(_not_zero), expect(_REMANENCE)]
 Points = Annotated[list[tuple[Real, Real, Real]], Field(min_length=1), expect("a list of [x, y, z] in mm")]
 
 
@@ -122,9 +129,9 @@ Points = Annotated[list[tuple[Real, Real, Real]], Field(min_length=1), expect("a
 class _BodyMaterial:
     _: KW_ONLY
     fillet_mm: NonNegativeNumber = 0.0
-    youngs_modulus_Pa: PositiveNumber = 0.59e6
+    youngs_modulus_Pa: ElastomerModulus = 0.59e6
     poisson_ratio: PoissonRatio = 0.48
-    density_kg_m3: PositiveNumber = 1120.0
+    density_kg_m3: Density = 1120.0
 
     @property
     def material(self) -> Material:
@@ -143,6 +150,10 @@ class _Magnets:
     def __post_init__(self):
         if self.polarization_T is not None and self.surface_field_T is not None:
             raise Refusal("surface_field_T", "give magnets.polarization_T or magnets.surface_field_T, not both")
+        if self.surface_field_T is not None and self.polarization > STRONGEST_NDFEB_T:
+            raise Refusal("surface_field_T", f"a field at the face of {self.diameter_mm} x {self.height_mm} mm magnets "
+                          f"that needs a polarisation of {self.polarization:.3g} T: expected at most {STRONGEST_NDFEB_T} T "
+                          "(NdFeB remanence)")
 
     @property
     def polarization(self) -> float:
@@ -415,7 +426,7 @@ def shipped_design_path(name: str) -> Path:
 def load_design(name_or_path: str | Path) -> Design:
     """A shipped design by name (a registered system's ``designs/NAME.toml``) or a TOML file by path."""
     path = Path(name_or_path)
-    shipped = not path.suffix
+    shipped = not path.suffix and not os.path.lexists(path)  # a device or FIFO is named like a design
     if shipped:
         path = shipped_design_path(str(name_or_path))
     spec = read_toml(path, "design", DesignError)

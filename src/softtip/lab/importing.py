@@ -51,6 +51,7 @@ from softtip._core.channels import AXES, MAGNETIC
 from softtip._core.systems import NotRegistered
 from softtip._core.config import (Flag, OpenFraction, PositiveInteger, PositiveNumber, Refusal, Text, choice, expect,
                                   integer, parse, read_toml, schema)
+from softtip._core.files import not_a_file
 from softtip._core.units import FORCE_UNITS, MM, UM
 from softtip.data.csvload import TIME_UNITS_IN_S, WHITESPACE, read_columns
 from softtip.data.dataset import DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata, trial_runs
@@ -538,8 +539,9 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
     trials: list[_Trial] = []
     dropped, offsets = 0, []
     for source in map(Path, sources):
-        if not source.exists():
-            raise DatasetError(f"{source}: does not exist")
+        problem = None if source.is_dir() else not_a_file(source)
+        if problem:
+            raise DatasetError(f"{source}: {problem}")
         found, lost, largest = _read_source(source, mapping)
         trials += found
         dropped += lost

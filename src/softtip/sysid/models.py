@@ -52,7 +52,7 @@ from softtip.sysid.responses import (
     response_spread,
     time_responses,
 )
-from softtip.sysid.robust import ASSUMPTIONS, COVARIANCES, SANDWICH, WHITE
+from softtip.sysid.robust import COVARIANCES, SANDWICH, WHITE, WHITE_ASSUMPTION, sandwich_assumption
 from softtip.sysid.simulation import (
     StreamingSimulator,
     estimate_initial_state,
@@ -735,7 +735,8 @@ class TransferFunctionModel(IdentifiedModel):
 
     def _estimate_uncertainty(self, core: StateSpace, segments: list[tuple[np.ndarray, np.ndarray]],
                               ts: float) -> None:
-        self.covariance_, self.covariance_lags_ = transfer.parameter_covariance(self.tf_, segments, ts, self.intervals)
+        self.covariance_, self.covariance_lags_, self.covariance_prewhitened_ = transfer.parameter_covariance(
+            self.tf_, segments, ts, self.intervals)
         self.covariance_note_ = None
 
     def uncertainty(self, confidence: float = 0.95) -> dict:
@@ -743,10 +744,13 @@ class TransferFunctionModel(IdentifiedModel):
         (:func:`softtip.sysid.uncertainty.intervals`)."""
         covariance = self._checked_covariance()
         # from the lags the covariance was made with (a file written before sandwich estimates has none)
-        method = WHITE if None in self.covariance_lags_ else SANDWICH
-        lags = ", ".join(str(lag) for lag in self.covariance_lags_)
-        return intervals(self.tf_, covariance, confidence) | {
-            "method": method, "assumption": ASSUMPTIONS[method].format(lags=lags)}
+        if None in self.covariance_lags_:
+            method, assumption = WHITE, WHITE_ASSUMPTION
+        else:
+            method = SANDWICH
+            assumption = sandwich_assumption(", ".join(str(lag) for lag in self.covariance_lags_),
+                                             ", ".join("yes" if done else "no" for done in self.covariance_prewhitened_))
+        return intervals(self.tf_, covariance, confidence) | {"method": method, "assumption": assumption}
 
     def _response_variance(self, steps: int, kind: str) -> np.ndarray:
         """Each output's coefficients move its row only: the rows' variances, summed."""
@@ -791,6 +795,7 @@ class TransferFunctionModel(IdentifiedModel):
             arrays[f"tf/covariance/{i}"] = covariance
         state["report"] = self.report_.to_dict()
         state["covariance_lags"] = None if self.covariance_ is None else list(self.covariance_lags_)
+        state["covariance_prewhitened"] = None if self.covariance_ is None else list(self.covariance_prewhitened_)
         return state, arrays
 
     def _restore(self, state: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -812,6 +817,8 @@ class TransferFunctionModel(IdentifiedModel):
         if "tf/covariance/0" in arrays:
             self.covariance_ = [arrays[f"tf/covariance/{i}"] for i in range(ny)]
             self.covariance_lags_ = list(state.get("covariance_lags") or [None] * ny)
+            # a file written before prewhitening has none
+            self.covariance_prewhitened_ = [bool(done) for done in state.get("covariance_prewhitened") or [False] * ny]
             intervals(self.tf_, self.covariance_)  # checks their shapes
 
     @property

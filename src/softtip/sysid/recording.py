@@ -30,6 +30,7 @@ import pyarrow.parquet as pq
 
 from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
+from softtip._core.files import not_a_file
 from softtip.data.csvload import parse_numbers, read_csv_table
 from softtip.data.dataset import (
     METADATA_KEY,
@@ -419,7 +420,8 @@ def _csv_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
 
 def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     try:
-        table = pq.read_table(path, columns=wanted)
+        with pq.ParquetFile(path) as parquet:  # not read_table: it loads pyarrow.dataset, and with it pandas
+            table = parquet.read(columns=wanted)
     except (pa.ArrowException, OSError) as problem:
         raise DatasetError(f"{path}: unreadable Parquet data ({first_line(problem)})") from None
     values = {}
@@ -440,8 +442,9 @@ def _is_dataset_file(path: Path) -> bool:
 
 
 def _suffix(path: Path) -> str:
-    if not path.is_file():
-        raise DatasetError(f"recording {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise DatasetError(f"recording {path} {problem}")
     suffix = path.suffix.lower()
     if suffix not in READABLE:
         raise DatasetError(f"recording {path}: expected a .csv, .parquet, or whitespace-separated "

@@ -672,8 +672,10 @@ def _simulation_and_sensitivities(row: _Row, inputs, mask, ts) -> tuple[np.ndarr
 
 
 def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np.ndarray, np.ndarray]],
-                         ts: float, residuals: str = SANDWICH) -> tuple[list[np.ndarray], list[int | None]]:
-    """The covariance of each output's coefficients, and the lags its middle took (None: white). With
+                         ts: float, residuals: str = SANDWICH
+                         ) -> tuple[list[np.ndarray], list[int | None], list[bool]]:
+    """The covariance of each output's coefficients, the lags its middle took (None: white) and whether its
+    scores were prewhitened. With
     ``residuals="white"`` the output-error estimate's asymptotic covariance (Ljung 1999, §9.3):
     σ² (JᵀJ)⁻¹, J the Jacobian of the simulated output with respect to the coefficients at ``tf`` on
     ``segments`` and σ² the residual variance, sum of squares / (N - p); with ``"sandwich"`` (the
@@ -693,7 +695,7 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
     ny, nu = tf.shape
     if (len(outputs), len(inputs)) != (ny, nu):
         raise ValueError(f"segments: {len(inputs)} inputs and {len(outputs)} outputs, the model has {nu} and {ny}")
-    covariances, all_lags = [], []
+    covariances, all_lags, all_prewhitened = [], [], []
     groups = np.nonzero(mask)[0]  # each real sample's trial, trials in order
     for i in range(ny):
         omega = np.array([max(float(np.exp(np.mean(np.log(np.maximum(np.abs(np.roots(a)), 1e-300))))), 1e-300)
@@ -708,11 +710,12 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
         if count <= parameters:
             raise IdentificationError(f"output {i}: {count} samples for {parameters} coefficients: no covariance")
         if residuals == SANDWICH:
-            covariance, lags = sandwich_covariance(jacobian, residual, groups)
+            covariance, lags, prewhitened = sandwich_covariance(jacobian, residual, groups)
         else:
             variance = float(residual @ residual) / (count - parameters)
-            covariance, lags = variance * np.linalg.pinv(jacobian.T @ jacobian), None
+            covariance, lags, prewhitened = variance * np.linalg.pinv(jacobian.T @ jacobian), None, False
         all_lags.append(lags)
+        all_prewhitened.append(prewhitened)
         # the row's ascending coefficients in 1/omega units -> descending in seconds: a_k omega^(n-k)
         factors, order, first = [], [], 0
         for a, b, w in zip(row.a, row.b, omega):
@@ -723,7 +726,7 @@ def parameter_covariance(tf: TransferFunctionMatrix, segments: Sequence[tuple[np
         factor, order = np.concatenate(factors), np.concatenate(order)
         covariance = covariance * np.outer(factor, factor)
         covariances.append(covariance[np.ix_(order, order)])
-    return covariances, all_lags
+    return covariances, all_lags, all_prewhitened
 
 
 def _refined(row: _Row, inputs, target, mask, ts, max_iterations, tolerance, stable_only: bool):

@@ -47,6 +47,7 @@ from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 from numpy.lib.stride_tricks import sliding_window_view
 
+from softtip._core.files import not_a_file
 from softtip.realtime.recording.format import RecordingError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -337,8 +338,9 @@ def read_recording(path: str | os.PathLike) -> Recording:
     so that a file whose writer was killed reads up to its last complete chunk (``truncated`` is then
     set) and a damaged chunk costs only its own messages."""
     path = Path(path)
-    if not path.is_file():
-        raise RecordingError(f"recording {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise RecordingError(f"recording {path} {problem}")
     factory = DecoderFactory()
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}

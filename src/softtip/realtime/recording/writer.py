@@ -30,7 +30,7 @@ from mcap.well_known import Profile
 from softtip import __version__
 from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import PositiveInteger, checked, integer
-from softtip._core.files import atomic_write
+from softtip._core.files import atomic_write, not_a_file
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
     FLOAT64_MULTI_ARRAY,
@@ -218,8 +218,9 @@ def repair_recording(path: str | os.PathLike, output: str | os.PathLike) -> Salv
     A recording whose data section fails its CRC with no damaged record to explain it is refused
     (:meth:`~softtip.realtime.recording.reader.Salvage.refuse_unexplained_damage`)."""
     path, output = Path(path), Path(output)
-    if not path.is_file():
-        raise RecordingError(f"recording {path} does not exist")
+    problem = not_a_file(path)
+    if problem:
+        raise RecordingError(f"recording {path} {problem}")
     salvage = Salvage(path.stat().st_size)
 
     def rewrite(handle) -> None:

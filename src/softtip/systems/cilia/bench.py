@@ -38,7 +38,7 @@ from softtip.lab.bench import RealismTable, SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.cilia.fit import MeasuredCurve
-from softtip.systems.cilia.layout import DieError, read_die
+from softtip.systems.cilia.layout import MEMU, DieError, pillar_problem, placement_problem, read_die
 from softtip.systems.cilia.model import CiliaModel, ForceCurve
 from softtip.systems.cilia.roughness import Recording, brush_surfaces
 from softtip.systems.cilia.study import (
@@ -113,6 +113,18 @@ def _device(file: CiliaProtocolFile, parameters: CiliaSettings, source: str, bas
     if parameters.brush_engagement_um * UM >= 0.7 * height:  # the balance-mode response reaches 70 % of the height
         raise DieError(f"{source}: parameters.brush_engagement_um = {parameters.brush_engagement_um:g}: expected "
                        f"less than 70 % of the pillars' height ({0.7 * height / UM:g} um)")
+    # the twin's pillars: the die's with the protocol's truth (tip diameter, taper kept, moment) and height
+    rod = die.pillars.rod
+    tip = parameters.truth_diameter_um * UM
+    base = rod.base_diameter / rod.tip_diameter * tip
+    problem = pillar_problem(height, tip, base, parameters.truth_moment_memu * MEMU)
+    if problem:
+        key = {"moment_memu": "truth_moment_memu"}.get(problem[0], "truth_diameter_um")
+        raise DieError(f"{source}: parameters.{key} = {getattr(parameters, key):g}: {problem[1]}")
+    placed = placement_problem(die.pillars.positions, base, die.size)
+    if placed:
+        raise DieError(f"{source}: parameters.truth_diameter_um = {parameters.truth_diameter_um:g}: the base it gives "
+                       f"({base / UM:g} um, the die's taper kept): {placed}")
     spread = float(np.ptp(die.pillars.positions[:, 0]))
     if parameters.brush_length_mm * MM <= spread + 4 * UM:
         raise DieError(f"{source}: parameters.brush_length_mm = {parameters.brush_length_mm:g}: expected a stroke "

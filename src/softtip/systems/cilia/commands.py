@@ -52,11 +52,12 @@ def bench_cilia(
     if save is not None:
         save = check_output(save, "--save", inputs=[die] if die else (), force=force)
     # the options are checked before the model's modules load (they take seconds on a busy machine)
-    from softtip.systems.cilia.benchmark import bench_cilia as run
     from softtip.systems.cilia.layout import read_die
 
     if die is not None:
-        read_die(die)  # a die file that cannot be built is refused before any timing
+        read_die(die)  # a die file that cannot be built is refused before any timing, and the timed modules load
+    from softtip.systems.cilia.benchmark import bench_cilia as run
+
     report = run(loads, force_max_mn * 1e-3, repeats, die, fe, fe_loads, seed, progress_for(json_output))
     if save is not None:
         atomic_write(save, json.dumps(report, indent=2))
@@ -117,15 +118,17 @@ def design_cilia(
     if plot is not None and plot.suffix.lower() not in (".png", ".svg", ".pdf"):
         fail(f"--plot = {plot}: expected a .png, .svg or .pdf file")
     check_outputs([("--plot", plot), ("--save", save)], inputs, force=force)
-    from softtip.systems.cilia.design import search_designs
     from softtip.systems.cilia.layout import read_die
+
+    # a die file that cannot be built is refused here, before the search's modules load
+    layout = read_die(die) if die is not None else read_die()
+    from softtip.systems.cilia.design import search_designs
     from softtip.systems.cilia.study import CiliaSettings
 
     study = CiliaSettings()  # the defaults: the cilia protocol's search
     full = {"steps": study.design_steps, "budget": study.design_budget, "points": study.design_points}
     settings = {key: (value if value is not None else (COARSE if coarse else full)[key]) for key, value in chosen.items()}
     ranges = ranges or study.design_ranges_mN
-    layout = read_die(die) if die is not None else read_die()  # a die file that cannot be built is refused here
     found = search_designs(layout, tuple(r * 1e-3 for r in ranges), sensor, settings["steps"], settings["budget"],
                            settings["points"], seed=seed, progress=progress_for(json_output))
     report = found.to_dict()
@@ -181,6 +184,10 @@ def fit_cilia(
     if curve.suffix.lower() != ".csv":
         fail(f"curve = {curve}: expected a CSV table (.csv)")
     check_input(curve, "curve")
+    if die is not None:
+        from softtip.systems.cilia.layout import read_die
+
+        read_die(die)  # a die file that cannot be built is refused before the fit's modules load
     from softtip.systems.cilia.bench import FORCE_UNITS
 
     if force_unit not in FORCE_UNITS:

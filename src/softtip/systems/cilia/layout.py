@@ -15,6 +15,7 @@ from typing import Annotated
 
 import numpy as np
 from pydantic import Field
+from scipy.constants import mu_0
 
 from softtip._core.config import (
     ConfigError,
@@ -31,6 +32,7 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.units import MM, UM
+from softtip.design.model import STRONGEST_NDFEB_T
 from softtip.magnetics.dipoles import Rectangles
 from softtip.mechanics.rod import Rod, half_space_rotational_stiffness
 from softtip.sensors.gmr import ConstantCurrentReadout, SpinValveSensor, published_spin_valve
@@ -47,6 +49,10 @@ Pair = Annotated[list[Real], Field(min_length=2, max_length=2), expect("a pair o
 PositivePair = Annotated[list[Annotated[Real, Field(gt=0)]], Field(min_length=2, max_length=2),
                          expect("a pair of positive numbers")]
 Points = Annotated[list[Pair], Field(min_length=1), expect("a non-empty list of [x, y] pairs")]
+
+
+# a soft magnetic composite: PDMS and its NdFeB-filled blends lie within 0.1-10 MPa
+PillarModulus = number("0.001 <= E <= 100 MPa (a soft elastomer)", ge=1e-3, le=100.0)
 
 
 def _interval(pair: list[float], key: str) -> None:
@@ -71,12 +77,35 @@ class PillarsTable:
     height_mm: PositiveNumber
     tip_diameter_um: PositiveNumber
     base_diameter_um: PositiveNumber
-    youngs_modulus_MPa: PositiveNumber
+    youngs_modulus_MPa: PillarModulus
     poisson_ratio: number("a number from 0 to 0.5", ge=0.0, le=0.5)
     moment_memu: PositiveNumber
     magnetisation: choice("up", "down")
     base: choice("half-space", "clamped")
     bend_azimuth_deg: Number = 0.0
+
+    def __post_init__(self) -> None:
+        problem = pillar_problem(self.height_mm * MM, self.tip_diameter_um * UM, self.base_diameter_um * UM,
+                                 self.moment_memu * MEMU)
+        if problem:
+            raise Refusal(*problem)
+
+
+def pillar_problem(height: float, tip: float, base: float, moment: float) -> tuple[str, str] | None:
+    """What keeps a pillar (height, tip and base diameters in m, moment in A·m²) from being one softtip
+    models: (the die file's key at fault, why), or None."""
+    if tip > base:
+        return "tip_diameter_um", (f"a tip wider than its base ({base / UM:g} um): expected pillars that narrow from "
+                                   "base to tip, as moulded ones do")
+    if base > height:
+        return "base_diameter_um", (f"pillars wider than they are high ({height / UM:g} um): expected a base no "
+                                    "wider than the height (a pillar bends as a rod)")
+    # the moment of a pillar made wholly of the strongest NdFeB: no composite holds more
+    most = STRONGEST_NDFEB_T / mu_0 * math.pi * height * (tip**2 + tip * base + base**2) / 12
+    if abs(moment) > most:
+        return "moment_memu", (f"more than a pillar of solid NdFeB holds ({most / MEMU:.3g} memu at "
+                               f"{STRONGEST_NDFEB_T} T): expected a moment within that")
+    return None
 
 
 @schema

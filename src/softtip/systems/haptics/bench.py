@@ -29,6 +29,7 @@ from pydantic import Field
 
 from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
                                   schema)
+from softtip._core.files import not_a_file
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
@@ -198,8 +199,9 @@ def device_from_file(path: str | Path) -> HapticsDevice:
     """A device file (``"shipped"``: softtip's own), refused in one line if it is missing or breaks the
     kinematics."""
     path = DEVICE_FILE if str(path) == "shipped" else Path(path)
-    if not path.is_file():
-        raise DeviceError(f"device file {path}: no such file")
+    problem = not_a_file(path)
+    if problem:
+        raise DeviceError(f"device file {path} {problem}")
     device = load_device(path)
     return HapticsDevice(device.device.name, "shipped" if path == DEVICE_FILE else str(path), device)
 

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip._core.files import not_a_file
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.systems.haptics import WANTED
@@ -93,8 +94,9 @@ def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, n
     readers = {".csv": csv.read_csv, ".parquet": parquet.read_table}
     if path.suffix.lower() not in readers:
         raise error(f"{what} {path}: expected a .csv or .parquet file")
-    if not path.is_file():
-        raise error(f"{what} {path}: no such file")
+    problem = not_a_file(path)
+    if problem:
+        raise error(f"{what} {path} {problem}")
     try:
         table = readers[path.suffix.lower()](path)
     except (pa.ArrowException, OSError) as problem:
