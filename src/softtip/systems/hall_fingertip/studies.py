@@ -236,20 +236,19 @@ def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "compares."), notes={best: f"softtip's lowest network error is design {best}'s."})
     _explain(table, {_design_letter(name): (
         f"{'The lowest network error; ' if _design_letter(name) == best else ''}errors concentrate where the angle is "
-        f"least observable, network worst at {_worst(results[name]['network']['per_angle_deg'])} deg: the 0°/90° "
-        "ambiguity explained under the per-angle table, which the publication's trials do not show.")
+        f"least observable, network worst at {_worst(results[name]['network']['per_angle_deg'])} deg; the table of "
+        "causes below measures what the bench's asymmetry and the contact scatter each contribute.")
         for name in results if name.startswith("cylindrical")})
     angles = sorted({column for _, column in per_angle}, key=lambda c: float(c[:-1]))
     rows = [f"{_design_letter(n)} · {m}" for n in results if n.startswith("cylindrical") for m in METHODS]
     matrix = Table("Orientation error per board angle (validation trials)", "design · method", rows, angles, per_angle,
                    unit="deg", digits=2, caption=(
-                       "The publication gives only the means (Table 2). Look for the large errors at 0° and 90° (and "
-                       "15°/75°), on every design: four magnets at 90° spacing over one sensor on the axis make a "
+                       "The publication gives only the means (Table 2). On a symmetric bench (the fingertip on the "
+                       "stage's axis, the board centred) four magnets at 90° spacing over one sensor on the axis make a "
                        "board at angle a and at a + 90° the same load, and a board through the axis at 0° or 45° gives "
-                       "Bx = By = 0 by mirror symmetry. Only Bx and By separate a from 90° - a, and they are a few µT "
-                       "against the board-position scatter; only fabrication tolerances separate 0° from 90°. The "
-                       "estimation-quality objective finds the same: the orientation bound is worst for magnets "
-                       "closest to the axis (design D's P2 = 4.5 mm)."))
+                       "Bx = By = 0 by mirror symmetry: only fabrication tolerances separate them. The stage's offset "
+                       "moves the board off the axis by an amount that changes with the angle, which Sx and Sy read; "
+                       "what remains is the per-trial contact scatter against that signal (the table of causes)."))
     feature_table = paper_table(published_table("pushing-feature-displacement"), {
         (letter, "displacement"): value for letter, value in feature.items()}, caption=(
         "The design study's objective on the twin's own mechanics (the influence matrices of the protocol's mesh): "
@@ -352,8 +351,11 @@ def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcom
     calibration = results["per_speed"].get(f"{v.speed_mm_s:g}")
     published = paper_table(published_table("hysteresis"), {} if calibration is None else {
         ("hysteresis", "calibration cycle"): calibration["hysteresis_percent_mean"]}, caption=(
-        f"The twin's material relaxation is set from this one figure on a cycle at {v.speed_mm_s:g} mm/s with a "
-        f"{v.rest_s:g} s rest, so it agrees by construction (up to noise and trial scatter)."))
+        f"The twin's material relaxation is set from this one figure on a cycle of {protocol.design.name} at "
+        f"{v.speed_mm_s:g} mm/s with a {v.rest_s:g} s rest, so it agrees by construction (up to noise and trial "
+        "scatter). Not like for like: the thesis measured it on generation 2 (the rectangular silicone pad) loaded "
+        "at 1 mm/s with a 3 s rest at 50 Hz; the generation-1 article's own hysteresis test (0.25 mm/s, 1 s rest) "
+        "gives no number."))
     speeds_table = Table("Hysteresis and sensitivity per loading speed", "speed", sorted(
         {row for row, _ in cells}, key=lambda r: float(r.split()[0])),
         ["hysteresis (%)", "sd (%)", "dBx/dF (mT/N)", "dBy/dF (mT/N)", "dBz/dF (mT/N)"], cells, digits=2, caption=(
