@@ -42,8 +42,12 @@ def test_a_good_insertion_reaches_the_target(insertion):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the seated lid is read as in the air: at the target pose the classifier "
-                                       "gives state 0 with p = 0.99, and state 1 in only 6 of the 91 cycles")
+@pytest.mark.xfail(strict=True, reason=(
+    "the seated lid is read as in the air. Measured (the same run without fabrication tolerances): the "
+    "state-1 calibration window (0.3-0.5 N) holds 14 samples, two a trial (the lid crosses it in 0.04 s at "
+    "5 mm/s and 50 Hz), against 178 in the air; the target pose (0.6 mm) loads the seat with 0.56 N, beyond "
+    "the window. Noiseless the classifier reads state 1 there (p = 0.96) but state 3 at 0.75 N, and one noisy "
+    "reading at the target tips it to state 0 (p = 0.90)"))
 def test_at_the_target_the_seated_lid_is_detected(insertion):
     assert insertion("good")["state_detected"] == 1
 

@@ -41,7 +41,8 @@ def test_the_s1_tables_hold_the_publications_cells():
         assert sum(c.low for c in cells[:10]) / 10 == pytest.approx(cells[10].low, abs=0.006), row
     # every table belongs to a study softtip reproduces
     assert {t.study for t in published_tables().values()} <= set(studies())
-    assert [t.key for t in tables_of("pushing")] == ["pushing-orientation-error", "pushing-estimate-time"]
+    assert [t.key for t in tables_of("pushing")] == ["pushing-feature-displacement", "pushing-orientation-error",
+                                                     "pushing-estimate-time"]
 
 
 def _toy(**changes) -> PublishedTable:

@@ -33,13 +33,19 @@ def demo(
                          json_output)
     if report is None:
         return
-    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator")
-    for column in ("axis", "offline MAE (N)", "offline R²", "live MAE (N)", "live peak |F| (N)"):
+    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator, every "
+                        "sample (rests included); at rest: the estimate's mean ± sd where no force acts")
+    for column in ("axis", "offline MAE (N)", "offline R²", "offline at rest (N)", "live MAE (N)", "live at rest (N)",
+                   "live peak |F| (N)"):
         table.add_column(column, justify="right")
+    nan = float("nan")
     for axis, offline in report["calibration"]["validation"].items():
         live = report["live"].get(axis, {})
         table.add_row(axis, f"{offline['mean_abs_error_N']:.3f}", f"{offline['r2']:.4f}",
-                      f"{live.get('mean_abs_error_N', float('nan')):.3f}", f"{live.get('peak_true_N', float('nan')):.2f}")
+                      f"{offline['rest_mean_N']:+.3f} ± {offline['rest_sd_N']:.3f}",
+                      f"{live.get('mean_abs_error_N', nan):.3f}",
+                      f"{live.get('rest_mean_N', nan):+.3f} ± {live.get('rest_sd_N', nan):.3f}",
+                      f"{live.get('peak_true_N', nan):.2f}")
     console.print(table)
     pipeline = report["pipeline"]
     console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "

@@ -1,8 +1,8 @@
 """The main job, end to end on the built-in simulated sensor: twin -> calibration -> live estimates.
 
 1. the 3-axis force calibration protocol runs on the twin (cylindrical-D): a dataset of trials;
-2. a 3-10-3 Levenberg-Marquardt network is fitted on its calibration trials, scored on its
-   validation trials and saved as a softtip model file;
+2. a 3-10-3 Levenberg-Marquardt network is fitted on its calibration trials (rests included), scored
+   on its validation trials and saved as a softtip model file;
 3. an emulated fingertip replays the same motions from the twin over a pseudo-terminal in the
    firmware's protocol; the live pipeline (driver -> baseline -> the saved model) estimates the
    force frame by frame, and the estimates are scored against the twin's true force.
@@ -14,11 +14,10 @@ import functools
 
 import numpy as np
 
-from softtip import metrics
 from softtip._core.progress import SILENT, Progress
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
-from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model
+from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model, force_errors
 from softtip.systems.hall_fingertip.live import cached_scenario
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
@@ -45,7 +44,7 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
         times = np.array([t for t, _ in frames])
         estimates = np.array([e for _, e in frames])
         truth = scenario.force(times)
-        live = {k: {"mean_abs_error_N": float(metrics.mean_abs_error(truth[:, i], estimates[:, i])),
-                    "peak_true_N": float(np.abs(truth[:, i]).max())} for i, k in enumerate(FORCES)}
+        live = {k: {**force_errors(truth[:, i], estimates[:, i]), "peak_true_N": float(np.abs(truth[:, i]).max())}
+                for i, k in enumerate(FORCES)}
     return {"model": str(model_path), "calibration": calibration, "live": live, "estimated_frames": len(frames),
             "pipeline": summary}

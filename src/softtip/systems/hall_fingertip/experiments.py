@@ -98,6 +98,15 @@ def _force_labels(force: np.ndarray, times: np.ndarray, prony: PronySeries) -> d
 
 # ---------------------------------------------------------------------------------------------- generation 1
 
+def stage_position(realism: Realism, angle_deg: float) -> np.ndarray:
+    """Where (x, y in m) the mid-plane of a board turned to ``angle_deg`` on the rotary stage passes the
+    fingertip's axis: the stage's axis ``stage_axis_offset_mm`` off it along x, the board's mid-plane
+    ``board_edge_offset_mm`` off the stage's axis across the board."""
+    angle = math.radians(angle_deg)
+    across = np.array([-math.sin(angle), math.cos(angle)])
+    return (np.array([realism.stage_axis_offset_mm, 0.0]) + realism.board_edge_offset_mm * across) * MM
+
+
 def pushing(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1 pushing test: a board at each angle pushed ``depth_mm`` at ``speed_mm_s``."""
     writer = TrialWriter(1, labels={"angle_deg": "deg", "depth_mm": "mm", "fx_N": "N", "fy_N": "N", "fz_N": "N"},
@@ -108,7 +117,7 @@ def pushing(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     for angle in p.angles_deg:
         for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
             true_angle = angle + bench.scatter(realism.angle_sd_deg)
-            position = tuple(bench.scatter(realism.position_sd_mm * MM, 2))
+            position = tuple(stage_position(realism, true_angle) + bench.scatter(realism.position_sd_mm * MM, 2))
             trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
             table = path_table(bench.fingertip.press(
                 LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=math.radians(true_angle)), depth,

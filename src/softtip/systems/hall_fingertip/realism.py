@@ -1,6 +1,11 @@
 """What makes a virtual experiment look like a real one, with the source of every number.
 
-On by default; each effect can be switched off (set to 0) in a protocol's ``[realism]`` table.
+On by default; each effect can be switched off (set to 0) in a protocol's ``[realism]`` table. The
+pushing test's bench geometry is one of them: a fingertip centred on a rotary stage and a board centred
+on the stage's axis make the unit four-fold symmetric about the board, so that a board at a and at
+a + 90° load the chip alike, which the published bench evidently was not (its Sx and Sy changed
+strongly and smoothly with the board's angle); ``stage_axis_offset_mm`` and ``board_edge_offset_mm``
+break that symmetry as an unaligned bench does.
 The causes of drift between sessions are off by default (a protocol is one session); set them to
 run a later session of the same unit (same seed): the session's temperature (the magnets' remanence,
 and with ``chip_temperature_drift`` each chip's offset and sensitivity), the elastomer's aging
@@ -48,6 +53,13 @@ REALISM_SOURCES = {
     "speed_sd": "per trial: the robot's speed is exact, its start is not",
     "drift_K_per_sqrt_s": "temperature random walk of the magnets during a trial; the field follows Br's reversible "
                           "coefficient, -0.12 %/K for sintered NdFeB",
+    "stage_axis_offset_mm": "pushing test: the rotary stage's axis off the fingertip's axis, along x (through magnet "
+                            "0); not published: a 25 mm fingertip centred over a stage by eye sits about 1 mm off. "
+                            "With it Sx and Sy change strongly and smoothly with the board's angle, as on the "
+                            "published bench (the pushing report's table of causes)",
+    "board_edge_offset_mm": "pushing test: the board's mid-plane off the stage's axis, across the board; not "
+                            "published: 0, a board centred on the axis (clamped by one face on the axis it would be "
+                            "half its 1.6 mm thickness off: the pushing report measures that too)",
     "session_temperature_K": "the session's temperature minus the calibration session's (off: 0); Br follows "
                              "-0.12 %/K (sintered NdFeB's reversible coefficient, e.g. the Magnet Materials Producers "
                              "Association's MMPA 0100 tables, Arnold's and VAC's datasheets give -0.11 to -0.13)",
@@ -75,6 +87,8 @@ class Realism(RealismTable):
     angle_sd_deg: NonNegativeNumber = 0.5
     speed_sd: NonNegativeNumber = 0.02
     drift_K_per_sqrt_s: NonNegativeNumber = 0.02
+    stage_axis_offset_mm: Number = 1.0
+    board_edge_offset_mm: Number = 0.0
     session_temperature_K: Number = 0.0
     chip_temperature_drift: Flag = False
     modulus_change: number("a number above -1", gt=-1) = 0.0
