@@ -54,6 +54,7 @@ _group("recording", "MCAP recordings of the live stream.", {"repair": recording.
 _group("bench", "Benchmarks measured on this machine (ratios against baselines of the same run).",
        {"twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live,
         "magnetics": bench.bench_magnetics, "calibration": bench.bench_calibration, "sysid": bench.bench_sysid,
+        "studies": bench.bench_studies,
         **{name: load(reference) for system in _registered for name, reference in system.bench_commands.items()}})
 for _system in _registered:
     for _name, _reference in _system.commands.items():
