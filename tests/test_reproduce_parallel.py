@@ -21,7 +21,7 @@ def _measured(value):
     return value
 
 
-@pytest.mark.slow  # both smoke runs twice: some 70 s on 2 cores
+@pytest.mark.slow  # both smoke runs twice: 32 min on 2 cores under a load average of 16-30
 def test_a_pool_of_processes_reproduces_the_serial_results(tmp_path):
     finished = []
     for run in ("serial", "parallel"):
