@@ -203,6 +203,53 @@ def test_a_held_press_creeps_by_the_law_through_the_prony_creep():
     assert depth[-1] > 1.2 * depth[0]
 
 
+def test_a_held_tangential_force_creeps_by_its_own_relaxation_function():
+    g, tau = 0.5, 11.8  # Pataky et al.'s time scale, one term: Fung's creep function by hand
+    pad = FingerPad(prony=ELASTIC, shear_prony=PronySeries((g,), (tau,)))
+    times, force = held([0.6, -0.3, 2.0], seconds=30.0, rate=100.0)
+    shear = pad_response(times, force, pad, ChipMount()).shear
+    g_inf = 1 - g
+    creeping = force[:, :2] / g_inf * (1 - g * np.exp(-g_inf * times / tau))[:, None]
+    tangent = 2 / 3 * (pad.stiffness + pad.stiffening * 2.0)  # Mindlin's 2/3 of b + m Fz, the pressed pad elastic
+    np.testing.assert_allclose(shear, creeping / tangent, rtol=1e-8)  # the recursion accumulates 3.5e-9 in 30 s
+    assert shear[-1, 0] > 1.7 * shear[0, 0]  # 1/g_inf = 2 once crept: most of it in 30 s
+
+
+def test_the_tissue_under_the_chip_relaxes_by_its_own_function_around_the_preload():
+    g, tau = 0.6, 0.2
+    pad, mount = FingerPad(prony=ELASTIC), ChipMount(preload=0.5, tissue_prony=PronySeries((g,), (tau,)))
+    ramp = 1e-5  # s: a step of the skin, linear over this time (the response's own interpolation)
+    times = np.concatenate([[0.0, 1.0], 1.0 + ramp + np.linspace(0, 2.0, 201)])
+    skin = np.zeros((len(times), 3))
+    skin[2:, 2] = 50e-6
+    pressure = chip_forces(times, skin, pad, mount)[:, 2]
+    face = mount.face_area * pad.edge_pressure * pad.stiffening
+    relaxed = 0.5 / (1 - g)  # the seated elastic force that has relaxed to the preload
+    seated = np.log1p(pad.stiffening * relaxed / face) / pad.stiffening
+    step = face / pad.stiffening * np.expm1(pad.stiffening * (seated + 50e-6)) - relaxed
+    since = times[2:] - times[2]
+    expected = 0.5 + step * ((1 - g) + g * np.exp(-since / tau))
+    assert pressure[:2] == pytest.approx([0.5, 0.5])
+    np.testing.assert_allclose(pressure[2:], expected, rtol=1e-4)
+
+
+def test_with_one_relaxation_function_the_chip_follows_a_tangential_force_without_lag():
+    # pressed and held, then a distal force stepped on: with one function for the pad sheared and the
+    # tissue under the chip, the creep of the first and the relaxation of the second cancel
+    times, force = held([0.0, 0.0, 2.0], seconds=40.0, rate=100.0)
+    force[2000:, 1] = 0.8
+    readings = {}
+    for name, shear_prony in (("one function", None), ("tangential creep", PronySeries((0.5,), (11.8,)))):
+        pad = FingerPad(shear_prony=shear_prony)
+        response = pad_response(times, force, pad, ChipMount())
+        readings[name] = chip_forces(times, response.skin, pad, ChipMount())[:, 0]
+    # the largest departure of the chip's distal shear from its first value after the step, as a share of it
+    drift = {name: np.abs(chip[2001:] - chip[2001]).max() / np.abs(chip[2001] - chip[1999])
+             for name, chip in readings.items()}
+    assert drift["one function"] < 0.04  # 3.3 %: only the laws' curvature (the bulge stiffens the chip's tissue)
+    assert drift["tangential creep"] > 0.25  # 28 %: the chip's tissue relaxes in 1 s, the pad creeps for 12
+
+
 def test_the_ring_preload_is_an_offset_and_sets_the_chip_sensitivity():
     pad = FingerPad(prony=ELASTIC)
     times = np.array([0.0, 1.0, 1.0 + 1e-3])

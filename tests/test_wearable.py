@@ -165,6 +165,10 @@ def test_the_side_sensor_carries_every_axis_of_the_table_force(shipped):
     ({"realism": {"magnetisation_sd": 0.1}}, r"realism.magnetisation_sd: unknown key"),
     ({"viscoelastic": {"g": [0.6, 0.6], "tau_s": [1.0, 2.0]}}, r"viscoelastic.g = \[0.6, 0.6\]: the weights sum"),
     ({"viscoelastic": {"g": [0.1], "tau_s": [0.0]}}, r"viscoelastic.tau_s = \[0.0\]: expected positive time"),
+    ({"viscoelastic": {"tangential_g": [0.5, 0.5]}}, r"viscoelastic.tangential_g = \[0.5, 0.5\]: the weights sum"),
+    ({"viscoelastic": {"nail_fold_g": [0.1, 0.1]}}, r"viscoelastic.nail_fold_g = \[0.1, 0.1\]: .*one time constant"),
+    ({"viscoelastic": {"nail_fold_tau_s": [-1.0]}}, r"viscoelastic.nail_fold_tau_s = \[-1.0\]: expected positive"),
+    ({"viscoelastic": {"tangential_creep": "yes"}}, r"viscoelastic.tangential_creep = 'yes': expected true or false"),
     ({"design": "cylindrical-A"}, r"design: unknown key"),
 ])
 def test_mistakes_in_a_wearable_protocol_are_one_line_errors_naming_the_key(change, message):

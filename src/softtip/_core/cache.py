@@ -16,7 +16,9 @@ its bytes are kept in an entry beside it (:func:`read_file_entry`, :func:`write_
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import fcntl
 import hashlib
 import importlib.util
 import json
@@ -24,7 +26,7 @@ import os
 import stat
 import sys
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Iterator, TypeVar
 
 import numpy as np
 
@@ -32,6 +34,7 @@ from softtip._core.archive import read_archive, write_archive
 from softtip._core.user import user_folder
 
 ENTRY_FORMAT, ENTRY_VERSION = "softtip-cache-entry", 1
+CACHE_VARIABLE = "SOFTTIP_CACHE_DIR"  # the environment variable that chooses the cache's folder
 Loaded = TypeVar("Loaded")
 
 
@@ -45,7 +48,7 @@ def cache_dir() -> Path:
     variable moves the cache for everything it does afterwards. An empty or relative ``HOME`` falls back to
     the user's home in the password database, as XDG readers do; a home that is the filesystem root
     (no home at all) is refused rather than filling ``/.cache``."""
-    chosen = os.environ.get("SOFTTIP_CACHE_DIR")
+    chosen = os.environ.get(CACHE_VARIABLE)
     if chosen:
         return Path(chosen)
     return user_folder("XDG_CACHE_HOME", ".cache", CacheEntryError, "SOFTTIP_CACHE_DIR")
@@ -141,6 +144,21 @@ def write_entry(path: Path, key: str, kind: str, metadata: dict[str, Any], array
                   "again next time", file=sys.stderr)
         return False
     return True
+
+
+@contextlib.contextmanager
+def computing(path: Path) -> Iterator[None]:
+    """Held while this process computes the entry at ``path``: another process about to compute the same
+    entry waits here, then finds it stored (read it again inside the block) instead of computing it a
+    second time. An exclusive ``flock`` on ``NAME.lock`` beside the entry, which the kernel drops however
+    the process ends; the empty lock file stays (removing it would let a third process lock a new one)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    descriptor = os.open(path.with_name(f"{path.name}.lock"), os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(descriptor)
 
 
 def _entry_of_file(path: Path) -> Path:

@@ -192,3 +192,35 @@ def bench_sysid(
         console.print(f"  target {name} <= {report['targets'][name]:g}: {'met' if met else '[red]missed[/]'}")
     for name, ratio in report["ratios"].items():
         console.print(f"  {name:45s} {ratio:10.2f}")
+
+
+def bench_studies(
+    studies: list[str] = typer.Argument(None, help="Studies to time (default: all of them)."),
+    jobs: int = typer.Option(None, "--jobs", "-j", help="Processes of the parallel run (default: one per core)."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the experiments and the models."),
+    quick: bool = typer.Option(False, "--quick", help="Each study's smoke run (reproduce --quick)."),
+    cold: bool = typer.Option(False, "--cold", help="Each run on an empty cache of its own (default: the cache as "
+                                                    "it is; an empty one is filled by the serial run)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Reproduce the studies one after another, then in a pool of processes, in one call: wall and CPU
+    time of each run, each study's time, the load average, and the parallel run's speed-up."""
+    from softtip.bench.studies import bench_studies as run
+    from softtip.cli.lab import MAX_JOBS, chosen_studies
+    from softtip.studies.reproduce import default_workers
+
+    names = chosen_studies(studies)
+    check_number(jobs, "--jobs", minimum=1, maximum=MAX_JOBS)
+    check_number(seed, "--seed", minimum=0)
+    report = run(names, jobs or default_workers(), seed=seed, quick=quick, cold=cold,
+                 progress=progress_for(json_output))
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    for name in ("serial", "parallel"):
+        timed = report[name]
+        console.print(f"{name:8s} ({timed['workers']} process{'es' if timed['workers'] > 1 else ''}): wall "
+                      f"{timed['wall_s']:.1f} s, CPU {timed['cpu_s']:.1f} s; load average before "
+                      f"{', '.join(f'{v:.2f}' for v in timed['load_average_before'])}, after "
+                      f"{', '.join(f'{v:.2f}' for v in timed['load_average_after'])}")
+    console.print(f"speed-up of the parallel run: {report['speedup']:.2f}x on {report['cpus']} CPUs")

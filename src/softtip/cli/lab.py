@@ -27,6 +27,7 @@ STOPPING_RULES = ("auto", "trials", "blocks")
 MIN_TRIALS_HELD_OUT = 10
 DEFAULT_BLOCK_S = 5.0
 MAX_BLOCK_S = 7 * 86_400.0  # a week, as --duration: a longer block is one block per trial
+MAX_JOBS = 256  # processes of reproduce --jobs: beyond, more than any machine's cores
 
 
 def lab_run(
@@ -56,6 +57,16 @@ def lab_run(
         console.print(f"{summary['trials']} trials, {summary['samples']} samples -> {path}")
 
 
+def chosen_studies(studies: list[str] | None) -> tuple[str, ...]:
+    """The registered studies named on the command line, each once (``all`` or none: every one); a name
+    not registered is a user error."""
+    names = STUDY_NAMES if not studies or studies == ["all"] else tuple(dict.fromkeys(studies))
+    unknown = [name for name in names if name not in STUDY_NAMES]
+    if unknown:
+        fail(f"STUDIES = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    return names
+
+
 def reproduce(
     studies: list[str] = typer.Argument(..., help=f"One or more of {', '.join(STUDY_NAMES)}, or all."),
     output: Path = typer.Option(Path("reports"), "--output", "-o", help="Directory for the HTML reports and index.html."),
@@ -64,36 +75,35 @@ def reproduce(
                                help="Two trials per condition and each study's coarse protocol: a smoke run, "
                                     "not the study."),
     force: bool = typer.Option(False, "--force", help="Replace the reports and index.html that --output holds."),
+    jobs: int = typer.Option(None, "--jobs", "-j",
+                             help="Studies run at once, each in a process of its own (default: one per core; 1 runs "
+                                  "them one after another). The results are the same either way."),
     json_output: bool = typer.Option(False, "--json", help="Print each study's results beside the published figures as JSON."),
 ) -> None:
     """Run published studies end to end (experiments on the twin -> models -> metrics); write one
     self-contained HTML report per study, the publication's tables beside softtip's, and index.html."""
     import sys
 
-    from softtip.studies.reproduce import INDEX_FILE, report_files, reproduce_study, write_index
+    from softtip.studies.reproduce import INDEX_FILE, default_workers, report_files, reproduce_studies, write_index
 
-    names = STUDY_NAMES if studies == ["all"] else tuple(dict.fromkeys(studies))
-    unknown = [name for name in names if name not in STUDY_NAMES]
-    if unknown:
-        fail(f"STUDIES = {unknown[0]!r}: expected one of {', '.join(STUDY_NAMES)}, or all")
+    names = chosen_studies(studies)
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
+    check_number(jobs, "--jobs", minimum=1, maximum=MAX_JOBS)
     check_output_folder(output, "--output", [*(file for name in names for file in report_files(name)), INDEX_FILE],
                         force=force)
     command = "softtip " + " ".join(sys.argv[1:])
-    everything = {}
-    progress = progress_for(json_output)
-    for name in names:
-        with progress.task(f"reproducing {name}"):
-            study = reproduce_study(name, seed=seed, quick=quick, progress=progress, command=command)
-        report = study.write(output)
-        everything[name] = study.to_json(str(report))
+
+    def finished(name: str, report: dict) -> None:
         if not json_output:
-            headline = everything[name]["headline"]
+            headline = report["headline"]
             published = f", published {headline['published']} ({headline['verdict']})" if headline["published"] else ""
             value = "n/a" if headline["softtip"] is None else f"{headline['softtip']:.4g}"
             console.print(f"{name}: {headline['label']} = {value} {headline['unit']}{published}; "
-                          f"{report} ({study.seconds:.0f} s)")
+                          f"{report['report']} ({report['seconds']:.0f} s)")
+
+    everything = reproduce_studies(names, output, seed=seed, quick=quick, workers=jobs or default_workers(),
+                                   progress=progress_for(json_output), command=command, finished=finished)
     index = write_index(output)
     if json_output:
         print(json.dumps({"index": str(index), "studies": everything}, indent=2))

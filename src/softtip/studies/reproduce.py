@@ -3,13 +3,20 @@ with its protocol and provenance; an index of every study in a report directory.
 
 ``reproduce_study("pushing")`` returns a :class:`StudyReport`: it renders in Jupyter, writes one
 self-contained HTML file and a JSON of its results, and heads one row of ``index.html``.
+:func:`reproduce_studies` runs several, each in a process of its own when given workers: every study
+is seeded on its own and runs with single-threaded native pools in either way, so a parallel run's
+results are the serial run's.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import platform
 import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -21,6 +28,7 @@ from softtip._core.files import atomic_write
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import Study, load, studies
 from softtip._core.systems import study as registered_study
+from softtip._core.threads import single_threaded
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import shipped_protocol_path
 from softtip.published import OUTSIDE
@@ -174,6 +182,58 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
         "started (UTC)": started.strftime("%Y-%m-%d %H:%M:%S"), "run time": f"{seconds:.1f} s",
         "python / platform": f"{platform.python_version()} / {platform.platform(terse=True)}"}
     return StudyReport(study, outcome, table, provenance, seconds)
+
+
+def reproduce_into(directory: str | Path, name: str, seed: int = 1, quick: bool = False,
+                   progress: Progress = SILENT, command: str | None = None) -> dict:
+    """Study ``name`` reproduced and its report written in ``directory``: the report's JSON (what the
+    index reads), its ``report`` the HTML file's path. Native thread pools are kept to one thread: the
+    studies' fits are small and thin, and a pool of processes already takes every core."""
+    with single_threaded():
+        study = reproduce_study(name, seed=seed, quick=quick, progress=progress, command=command)
+    path = study.write(directory)
+    return study.to_json(str(path))
+
+
+def default_workers() -> int:
+    """One process per core."""
+    return os.cpu_count() or 1
+
+
+def reproduce_studies(names: Sequence[str], directory: str | Path, seed: int = 1, quick: bool = False,
+                      workers: int = 1, progress: Progress = SILENT, command: str | None = None,
+                      finished: Callable[[str, dict], None] | None = None) -> dict[str, dict]:
+    """Studies ``names`` reproduced into ``directory``, serially (``workers`` = 1) or in a pool of
+    ``workers`` processes; each report's JSON by name, in the order of ``names``. ``finished(name, json)``
+    is called as each study ends (in the order they end). The workers are started afresh (not forked
+    from this process, whose threads may hold locks), inherit the environment and so the cache, and
+    report nothing but the JSON: their progress is one bar here, a step per study."""
+    if workers < 1:
+        raise ValueError(f"workers = {workers}: expected at least 1")
+    results = {}
+    if workers == 1 or len(names) == 1:
+        for name in names:
+            with progress.task(f"reproducing {name}"):
+                results[name] = reproduce_into(directory, name, seed, quick, progress, command)
+            if finished:
+                finished(name, results[name])
+    else:
+        with (progress.task(f"reproducing {len(names)} studies in {min(workers, len(names))} processes",
+                            total=len(names)) as task,
+              ProcessPoolExecutor(min(workers, len(names)), mp_context=multiprocessing.get_context("spawn")) as pool):
+            running = {pool.submit(reproduce_into, directory, name, seed, quick, SILENT, command): name
+                       for name in names}
+            try:
+                for future in as_completed(running):
+                    name = running[future]
+                    results[name] = future.result()
+                    task.advance(note=f"last: {name}")
+                    if finished:
+                        finished(name, results[name])
+            except BaseException:  # a study that failed (or Ctrl-C) stops the ones not yet started
+                pool.shutdown(cancel_futures=True)
+                raise
+    return {name: results[name] for name in names}
 
 
 INDEX_FILE = "index.html"

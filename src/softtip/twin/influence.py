@@ -8,16 +8,26 @@ load step (the lab interpolates time series between these exact states).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Sequence
 
 
+from softtip._core.cache import artefact_key, cache_dir, code_hash, computing, read_entry, write_entry
 from softtip._core.progress import SILENT, Progress
 from softtip.design.model import Design
 from softtip.mechanics.contact import LoadCase, ReducedContactResult, SurfaceInfluence, solve_influence_contact
 from softtip.mechanics.fe import BodyModel
 from softtip.mechanics.mesh import mesh_design
 from softtip.twin.engines import Response
+
+_KIND = "surface influence"
+_ARRAYS = tuple(field.name for field in fields(SurfaceInfluence))
+
+
+def _influence(design: Design, mesh_size: float, reach: float, curvature_points: int,
+               progress: Progress) -> SurfaceInfluence:
+    body = BodyModel.for_design(design, mesh_design(design, mesh_size, curvature_points=curvature_points))
+    return SurfaceInfluence.build(body, design.height - reach, progress=progress)
 
 
 @dataclass
@@ -29,11 +39,25 @@ class InfluenceEngine:
 
     @classmethod
     def build(cls, design: Design, mesh_size: float, reach: float, curvature_points: int = 10,
-              progress: Progress = SILENT) -> InfluenceEngine:
-        """Influence matrices of the surface within ``reach`` (m) of the top, on a ``mesh_size`` mesh."""
-        body = BodyModel.for_design(design, mesh_design(design, mesh_size, curvature_points=curvature_points))
-        influence = SurfaceInfluence.build(body, design.height - reach, progress=progress)
-        return cls(design=design, influence=influence)
+              progress: Progress = SILENT, use_cache: bool = True) -> InfluenceEngine:
+        """Influence matrices of the surface within ``reach`` (m) of the top, on a ``mesh_size`` mesh;
+        kept in the cache, where every study and process on the same design and mesh finds them (one
+        process computes them while the others wait for the entry)."""
+        if not use_cache:
+            return cls(design=design, influence=_influence(design, mesh_size, reach, curvature_points, progress))
+        key = artefact_key({"design": design.spec, "mesh_size": mesh_size, "reach": reach,
+                            "curvature_points": curvature_points},
+                           code_hash("softtip.design", "softtip.mechanics", "softtip.twin.influence"))
+        path = cache_dir() / "influence" / f"{key}.npz"
+        entry = read_entry(path, key, _KIND)
+        if entry is None:
+            with computing(path):
+                entry = read_entry(path, key, _KIND)  # stored meanwhile by a process this one waited for
+                if entry is None:
+                    influence = _influence(design, mesh_size, reach, curvature_points, progress)
+                    write_entry(path, key, _KIND, {}, {name: getattr(influence, name) for name in _ARRAYS})
+                    return cls(design=design, influence=influence)
+        return cls(design=design, influence=SurfaceInfluence(**{name: entry[1][name] for name in _ARRAYS}))
 
     def press(self, load: LoadCase, normal_steps: int | None = None, tangential_steps: int = 4) -> ReducedContactResult:
         """One load along its path, with the state after every load step."""

@@ -33,8 +33,8 @@ from pydantic import Field
 
 from softtip._core.channels import AXES
 from softtip.systems.wearable.reading import FORCE
-from softtip._core.config import (Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real, Refusal,
-                                  choice, expect, schema)
+from softtip._core.config import (Flag, Fraction, NonNegativeNumber, Numbers, PositiveInteger, PositiveNumber, Real,
+                                  Refusal, choice, expect, schema)
 from softtip._core.progress import Progress
 from softtip._core.units import MM
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
@@ -42,8 +42,8 @@ from softtip.lab.bench import SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.systems.wearable.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.systems.wearable.realism import REALISM_SOURCES, WearableRealism
-from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, PAD_RELAXATION, SIDES, ChipMount, FingerPad, scaled,
-                                         shape_radii)
+from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, NAIL_FOLD_RELAXATION, PAD_RELAXATION, SIDES,
+                                                TANGENTIAL_RELAXATION, ChipMount, FingerPad, scaled, shape_radii)
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.wearable.chip import CHIP, TABLE_SENSOR
 from softtip.systems.wearable.twin import WearableTwin
@@ -106,22 +106,49 @@ class WearableParameters:
                 raise Refusal(key, "expected each entry once")
 
 
+def _prony(g: list[float], tau_s: list[float], keys: tuple[str, str]) -> PronySeries:
+    """The Prony series of weights ``g`` and times ``tau_s``, or a refusal naming the key (``keys``) at fault."""
+    try:
+        return PronySeries(tuple(g), tuple(tau_s))
+    except ValueError as error:
+        raise Refusal(keys[0] if "prony.g" in str(error) else keys[1], str(error).split(": ", 1)[-1]) from None
+
+
 @schema(section="viscoelastic")
 class PadViscoelastic:
-    """The finger tissue's reduced relaxation function: Prony weights ``g`` and times ``tau_s``; default
-    :data:`~softtip.systems.wearable.fingerpad.PAD_RELAXATION` (Pawluk & Howe 1999's time constants, assumed weights)."""
+    """The finger tissue's reduced relaxation functions, each Prony weights ``g`` and times ``tau_s``: the
+    pad's (default :data:`~softtip.systems.wearable.fingerpad.PAD_RELAXATION`: Pawluk & Howe 1999's time
+    constants, assumed weights); with ``tangential_creep`` the pad's under tangential load (``tangential_*``,
+    default :data:`~softtip.systems.wearable.fingerpad.TANGENTIAL_RELAXATION`), with ``nail_fold`` the
+    tissue's under the chip (``nail_fold_*``, default
+    :data:`~softtip.systems.wearable.fingerpad.NAIL_FOLD_RELAXATION`); either switched off is the pad's."""
 
     g: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.g))
     tau_s: Numbers = field(default_factory=lambda: list(PAD_RELAXATION.tau))
+    tangential_creep: Flag = True
+    tangential_g: Numbers = field(default_factory=lambda: list(TANGENTIAL_RELAXATION.g))
+    tangential_tau_s: Numbers = field(default_factory=lambda: list(TANGENTIAL_RELAXATION.tau))
+    nail_fold: Flag = True
+    nail_fold_g: Numbers = field(default_factory=lambda: list(NAIL_FOLD_RELAXATION.g))
+    nail_fold_tau_s: Numbers = field(default_factory=lambda: list(NAIL_FOLD_RELAXATION.tau))
 
-    def __post_init__(self) -> None:
-        try:
-            self.prony()
-        except ValueError as error:
-            raise Refusal("g" if "prony.g" in str(error) else "tau_s", str(error).split(": ", 1)[-1]) from None
+    def __post_init__(self) -> None:  # each series checked, switched on or not
+        self.prony()
+        self.tangential()
+        self.nail_fold_prony()
 
     def prony(self) -> PronySeries:
-        return PronySeries(tuple(self.g), tuple(self.tau_s))
+        return _prony(self.g, self.tau_s, ("g", "tau_s"))
+
+    def tangential(self) -> PronySeries | None:
+        """The pad's relaxation under tangential load; None when switched off (the pad's own)."""
+        prony = _prony(self.tangential_g, self.tangential_tau_s, ("tangential_g", "tangential_tau_s"))
+        return prony if self.tangential_creep else None
+
+    def nail_fold_prony(self) -> PronySeries | None:
+        """The relaxation of the tissue under the chip; None when switched off (the pad's own)."""
+        prony = _prony(self.nail_fold_g, self.nail_fold_tau_s, ("nail_fold_g", "nail_fold_tau_s"))
+        return prony if self.nail_fold else None
 
 
 @dataclass(frozen=True)
@@ -146,9 +173,11 @@ class WearableDevice:
 
 @dataclass
 class WearableBench(SeededBench):
-    """What the wearable protocol needs: the tissue's relaxation, the realism and a seeded stream."""
+    """What the wearable protocol needs: the tissue's relaxations, the realism and a seeded stream."""
 
     realism: WearableRealism
+    tangential: PronySeries | None = None  # the pad's under tangential load (None: ``prony``)
+    nail_fold: PronySeries | None = None  # the tissue's under the chip (None: ``prony``)
 
 
 def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dict) -> Dataset:
@@ -166,7 +195,7 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
                                    p.point_radius_mm * MM) for _, contact in trials])
     nominal = FingerPad(width=p.finger_width_mm * MM, stiffness=p.pad_stiffness_N_per_mm / MM,
                         stiffening=p.pad_stiffening_per_mm / MM, friction=p.friction,
-                        transmission=p.nail_fold_transmission, prony=bench.prony)
+                        transmission=p.nail_fold_transmission, prony=bench.prony, shear_prony=bench.tangential)
     effort = Effort(press_peak=p.press_peak_N, rest=p.rest_N, dorsal_hold=p.dorsal_hold_N,
                     tilt_normal=p.tilt_normal_N, tangential_effort=p.tangential_effort,
                     friction_sense=p.friction, normal_coupling=p.normal_coupling,
@@ -178,7 +207,8 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
         for run in range(p.runs):
             mount = ChipMount(side=p.sensor_side,
                               position_y=(p.sensor_offset_mm + bench.scatter(realism.sensor_position_sd_mm)) * MM,
-                              preload=max(p.ring_preload_N * (1 + bench.scatter(realism.ring_preload_sd)), 0.0))
+                              preload=max(p.ring_preload_N * (1 + bench.scatter(realism.ring_preload_sd)), 0.0),
+                              tissue_prony=bench.nail_fold)
             noise = rng if realism.noise else None
             air = CHIP.acquire(np.array([0.0, 0.0, mount.preload]), noise).values[2]
             skew = rng.uniform(-1, 1) * realism.stream_skew_ms / 1000  # s
@@ -212,10 +242,10 @@ def _device(file: _WearableProtocolFile, parameters: WearableParameters, source:
 
 
 def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[WearableBench, dict, str]:
-    """The finger tissue's relaxation, given by the ``[viscoelastic]`` table."""
-    p = protocol.parameters
-    bench = WearableBench(prony=protocol.viscoelastic.prony(), realism=protocol.realism,
-                          rng=np.random.default_rng(protocol.seed), rate_hz=p.rate_hz)
+    """The finger tissue's relaxations, given by the ``[viscoelastic]`` table."""
+    p, tissue = protocol.parameters, protocol.viscoelastic
+    bench = WearableBench(prony=tissue.prony(), realism=protocol.realism, rng=np.random.default_rng(protocol.seed),
+                          rate_hz=p.rate_hz, tangential=tissue.tangential(), nail_fold=tissue.nail_fold_prony())
     return bench, {}, f"{protocol.name}: {p.participants} participants x {p.runs} runs on {protocol.design.name}"
 
 
@@ -233,6 +263,16 @@ def _size(protocol: str, p: WearableParameters) -> Size:
 BENCH = BenchKind(
     protocol_file=_WearableProtocolFile, parameters={"wearable": WearableParameters}, runners={"wearable": wearable},
     device=_device, setup=_bench, realism_sources=REALISM_SOURCES,
-    viscoelastic_sources={"g": "assumed weights (softtip.systems.wearable.fingerpad)",
-                          "tau_s": "time constants of Pawluk & Howe 1999 (softtip.systems.wearable.fingerpad)"},
+    viscoelastic_sources={
+        "g": "assumed weights (softtip.systems.wearable.fingerpad)",
+        "tau_s": "time constants of Pawluk & Howe 1999 (softtip.systems.wearable.fingerpad)",
+        "tangential_creep": "the pad relaxes under tangential load on its own time scale (Pataky et al. 2005); "
+                            "off: as pressed",
+        "tangential_g": "assumed: half of the tangential force relaxes",
+        "tangential_tau_s": "a decade apart up to the 11.8 s of Pataky, Latash & Zatsiorsky, J. Biomech. 38, 2005",
+        "nail_fold": "the chip presses skin over the nail's edge, which relaxes faster than the pulp; off: as the "
+                     "pulp",
+        "nail_fold_g": "skin in compression relaxes to 0.28-0.47 (Wang et al., PLoS ONE 10, 2015, mouse skin): "
+                       "0.4 kept",
+        "nail_fold_tau_s": "skin's relaxation time in compression, about 0.2 s (Wang et al. 2015)"},
     size=_size)

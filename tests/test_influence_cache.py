@@ -1,0 +1,60 @@
+"""The surface's influence matrices are computed once per design and mesh and shared through the cache:
+by the studies one after another, and by processes at once (one computes, the others wait for it)."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from softtip._core.cache import cache_dir, computing
+from softtip._core.progress import Progress, Task
+from softtip._core.units import MM
+from softtip.design.model import load_design
+from softtip.twin.influence import InfluenceEngine
+
+
+class Stages(Progress):
+    def __init__(self) -> None:
+        self.names: list[str] = []
+
+    def task(self, description: str, total: float | None = None) -> Task:
+        self.names.append(description)
+        return Task()
+
+
+@pytest.mark.slow  # two factorisations and their back-substitutions: 10.7 min on 2 cores under a load average of 22-25
+def test_the_influence_matrices_are_computed_once_and_read_back_bit_for_bit():
+    design = load_design("rectangular")
+    first, second, third = Stages(), Stages(), Stages()
+    built = InfluenceEngine.build(design, 3.0 * MM, 2.0 * MM, curvature_points=3, progress=first)
+    served = InfluenceEngine.build(design, 3.0 * MM, 2.0 * MM, curvature_points=3, progress=second)
+    assert first.names == ["unit load responses"] and second.names == []  # the back-substitutions, once
+    for name in ("nodes", "node_ids", "compliance", "magnets", "magnet_centers"):
+        assert np.array_equal(getattr(served.influence, name), getattr(built.influence, name))
+    InfluenceEngine.build(design, 3.0 * MM, 2.5 * MM, curvature_points=3, progress=third)  # another reach
+    assert third.names == ["unit load responses"]  # is computed, into an entry of its own
+    assert len(list((cache_dir() / "influence").glob("*.npz"))) == 2
+
+
+def test_a_process_that_needs_an_entry_being_computed_waits_for_it(tmp_path):
+    entry = tmp_path / "entry.npz"
+    probe = textwrap.dedent(f"""
+        import fcntl, os, sys
+        descriptor = os.open({str(entry) + '.lock'!r}, os.O_WRONLY)
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            sys.exit(3)
+    """)
+    with computing(entry):
+        assert subprocess.run([sys.executable, "-c", probe]).returncode == 3  # held: another process would wait
+    assert subprocess.run([sys.executable, "-c", probe]).returncode == 0  # released with the block
+    descriptor = os.open(f"{entry}.lock", os.O_WRONLY)
+    fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)  # and in this process too
+    os.close(descriptor)
