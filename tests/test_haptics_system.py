@@ -104,7 +104,7 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     scale = [c for c in tables["The experiment's scale: the figures the device's unknowns are fitted to"].comparisons()]
     assert {c.verdict for c in scale} <= {"fitted", "outside"} and len(scale) == 2  # no small sphere in this run
     assert scale[0].value == pytest.approx(outcome.results["target_force_N"]["mean"])
-    # the servos' stall, not modelled, is shown to be far from what the cables carry
+    # the servos' stall (modelled: device tests) is shown to be far from what the cables carry in the study
     servos = tables["Where softtip's procedure departs from the published one"].cells[("servos", "softtip")]
     stall = device.servo.stall_torque / device.device.pulley_radius
     tension = float(servos.split("test fingertips is ")[1].split(" N")[0])

@@ -108,7 +108,7 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
               _statistics_table(statistics, pooled), _collection_table(minutes, p.hold_s),
               _light_table(found, p.light_force_N, p.contact_threshold_N),
               _departures_table(largest_tension(device, fingertips, p.fs_levels),
-                                device.servo.stall_torque / device.device.pulley_radius)]
+                                device.stall_tension)]
     figure = Figure.of("Rendering error per fingertip and method", (
         "Box plots over the targets of |F_target − F_rendered| (N), read by the sensor under each test fingertip. "
         "Look for the standard method's spread growing with the size mismatch, and for A against B on the "
@@ -570,8 +570,10 @@ def _departures_table(tension: float, stall: float) -> Table:
         "contact": ("with friction (a tilted platform pushes sideways too)",
                     "frictionless: force along the platform's normal only"),
         "servos": ("position commands at about 50 Hz", "reach each configuration to their dead band before the hold; "
-                   f"their stall is not modelled: the largest cable tension over the FS table on the test fingertips "
-                   f"is {tension:.1f} N, the stall's {stall:.0f} N"),
+                   "a servo holds at most its stall torque over the pulley, beyond it the cable pays out and the "
+                   f"platform stops short: the largest cable tension over the FS table on the test fingertips is "
+                   f"{tension:.1f} N, the stall's {stall:.0f} N"
+                   + (", so the study's servos never stall" if tension < stall else ": the hardest presses stall")),
         "targets": ("100 from random configurations that touch the FS",
                     "the same procedure, the servos' angles drawn uniformly over their range"),
         "statistics": ("Bonferroni over the publication's tests (threshold 0.0028)",
