@@ -66,7 +66,7 @@ def test_a_parquet_table_with_torques_and_the_ds_reads_back_as_written(tmp_path)
     ("fx_N,fy_N,fz_N,tz_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0,0\n1,1,1,1,1,1,1\n", "missing column tx_Nm"),
     ("fx_N,fy_N,fz_N,ds_fx_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0,0\n1,1,1,1,1,1,1\n",
      "missing column ds_fy_N"),
-    ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n", "1 rows, expected at least 2"),
+    ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n", "1 rows, expected 2 to 29791 entries"),
     ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,inf,1,1,1,1\n", "column fy_N, row 1"),
     ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,1,1,1,x,1\n", "column motor2_rad: expected"),
     ("fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n0,0,0,0,0,0\n1,1,1,1,1,181\n",
@@ -82,6 +82,18 @@ def test_bad_table_files_are_refused_in_one_line(tmp_path, text, words):
             as refused:
         read_table(path, DEVICE).renderer()
     assert "\n" not in str(refused.value)
+
+
+def test_a_table_larger_than_the_largest_fs_table_is_refused_before_it_is_read_further(tmp_path):
+    # 31³ rows is the largest FS table --fs-levels collects: one more is refused as --fs-levels 32 is
+    rows = np.arange(31**3 + 1)
+    path = tmp_path / "huge.csv"
+    path.write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n" + "".join(f"0,0,{k},0,0,1\n" for k in rows))
+    with pytest.raises(TableFileError, match=r"29792 rows, expected 2 to 29791 entries \(the largest FS table, "
+                                             r"--fs-levels 31\)"):
+        read_table(path, DEVICE)
+    path.write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n" + "".join(f"0,0,{k},0,0,1\n" for k in rows[1:]))
+    assert len(read_table(path, DEVICE).motor_inputs) == 31**3
 
 
 def test_the_exported_csv_reads_back_into_the_same_renderer(tmp_path):
@@ -263,6 +275,32 @@ def test_a_protocol_takes_fingertip_files_and_a_recorded_fs_table(tmp_path):
         mine, cast = (found.column("fingertip") == "mine") & (methods == method), rows & (methods == method)
         for motor in ("motor1_rad", "motor2_rad", "motor3_rad"):
             assert np.array_equal(found.column(motor)[mine], found.column(motor)[cast])
+
+
+def test_an_exported_fs_table_feeds_a_protocol_that_renders_as_the_simulated_one(tmp_path):
+    from softtip.lab import run_protocol
+
+    exported = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "fs.h"), "--fs-table",
+                                   str(tmp_path / "fs.csv"), "--fs-levels", "7", "--seed", "3", "--json"])
+    assert exported.exit_code == 0, exported.output
+    table = read_table(tmp_path / "fs.csv", DEVICE)
+    assert table.merged == 0 and table.platform_wrenches is not None and table.wrenches.shape[1] == 6
+    # the header is the renderer on that same table
+    assert json.loads(exported.stdout)["entries"] == len(NearestNeighbourRenderer().fit(table.wrenches,
+                                                                                         table.motor_inputs).features_)
+    expected, _ = run_protocol(_protocol(tmp_path))
+    found, _ = run_protocol(_protocol(tmp_path, fs_table="fs.csv"))
+    # the researcher's round trip: the study on the exported table renders exactly as on its own collection
+    assert np.array_equal(found.column("error_N"), expected.column("error_N"))
+    assert np.array_equal(found.column("motor1_rad"), expected.column("motor1_rad"))
+    refused = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "b.h"), "--fs-table",
+                                  str(tmp_path / "b.csv"), "--method", "geometric"])
+    assert refused.exit_code == 2 and "--fs-table with --method = 'geometric'" in refused.stderr
+    plain = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "c.h"), "--csv", str(tmp_path / "c.csv")])
+    assert plain.exit_code == 0
+    refused = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "d.h"), "--table",
+                                  str(tmp_path / "c.csv"), "--fs-table", str(tmp_path / "d.csv")])
+    assert refused.exit_code == 2 and "has no DS readings" in refused.stderr and not (tmp_path / "d.h").exists()
 
 
 @pytest.mark.parametrize(("top", "words"), [

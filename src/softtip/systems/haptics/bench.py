@@ -32,13 +32,22 @@ from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect,
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
-from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
+from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.haptics.collection import Collection, CollectionSettings, collection_duration
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
 from softtip.systems.haptics.fingertip_file import load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
-from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS
+from softtip.systems.haptics.limits import (
+    LEVELS_EXPECTED,
+    MAX_FS_LEVELS,
+    MAX_NEIGHBOURS,
+    MAX_SIMULATED_PRESSES,
+    MAX_TABLE_ENTRIES,
+    MAX_TARGET_DRAWS,
+    MAX_TARGETS,
+)
+from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS, PRESS_DEPTHS
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
 from softtip.systems.haptics.sensitivity import CURVES, DEFAULT_VARIATIONS, VARIATION_NAMES, FingerVariation
 from softtip.systems.haptics.study import METHODS, StudySettings, run_study
@@ -61,7 +70,7 @@ _STUDY, _COLLECTION = StudySettings(), CollectionSettings()
 CURVE_SETTINGS = {"curve_n_neighbours": "n_neighbours", "curve_weighting_powers": "weighting_power",
                   "curve_fs_levels": "fs_levels", "curve_user_levels": "user_levels"}
 _CURVES = dict(CURVES)
-NeighbourCounts = Annotated[list[integer(1, 64)], expect("a list of integers 1..64")]
+NeighbourCounts = Annotated[list[integer(1, MAX_NEIGHBOURS)], expect(f"a list of integers 1..{MAX_NEIGHBOURS}")]
 WeightingPowers = Annotated[list[WeightingPower], expect("a list of numbers from 0 to 4")]
 FsLevels = Annotated[list[integer(2, 21)], expect("a list of integers 2..21")]
 UserLevels = Annotated[list[integer(2, 13)], expect("a list of integers 2..13")]
@@ -74,15 +83,15 @@ class HapticsParameters:
     """The ``[parameters]`` table of the haptics protocol (S3; units in the names). ``trials``: the
     target sensations (one trial each); the table sizes are levels per servo (13 → 13³)."""
 
-    trials: integer(2) = _STUDY.targets
-    fs_levels: integer(2) = _STUDY.fs_levels
-    user_levels: integer(2) = _STUDY.user_levels
-    adaptive_budget: integer(27) = _STUDY.adaptive_budget
-    n_neighbours: integer(1) = _STUDY.n_neighbours
+    trials: integer(2, MAX_TARGETS) = _STUDY.targets
+    fs_levels: integer(2, MAX_FS_LEVELS, LEVELS_EXPECTED) = _STUDY.fs_levels
+    user_levels: integer(2, MAX_FS_LEVELS, LEVELS_EXPECTED) = _STUDY.user_levels
+    adaptive_budget: integer(27, MAX_TABLE_ENTRIES) = _STUDY.adaptive_budget
+    n_neighbours: integer(1, MAX_NEIGHBOURS) = _STUDY.n_neighbours
     weighting_power: WeightingPower = _STUDY.weighting_power
     light_force_N: PositiveNumber = _STUDY.light_force
     contact_threshold_N: PositiveNumber = CONTACT_THRESHOLD
-    target_draws: integer(1) = _STUDY.target_draws
+    target_draws: integer(1, MAX_TARGET_DRAWS) = _STUDY.target_draws
     data_driven: choice(*DATA_DRIVEN_VARIANTS) = _STUDY.data_driven
     ds_torque_length_m: PositiveNumber = _STUDY.torque_length
     hold_s: PositiveNumber = _COLLECTION.hold_s
@@ -278,7 +287,19 @@ def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Hapti
                        f"methods on {protocol.design.name}")
 
 
+def haptics_size(protocol: str, p: HapticsParameters) -> Size:
+    """The configurations the protocol's run drives and reads on the simulated device: the FS table, the
+    random draws for targets, and per fingertip its user table, the adaptive table's candidates (the FS
+    table's grid), its presses and every target rendered by every method."""
+    fingertips = len(p.fingertips)
+    presses = (p.fs_levels**3 + p.target_draws
+               + fingertips * (p.user_levels**3 + p.fs_levels**3 + len(PRESS_DEPTHS) + p.trials * len(METHODS)))
+    return Size(presses, MAX_SIMULATED_PRESSES, "simulated presses",
+                f"fs_levels³ + target_draws + fingertips x (user_levels³ + fs_levels³ + {len(PRESS_DEPTHS)} presses + trials x "
+                f"{len(METHODS)} methods)")
+
+
 BENCH = BenchKind(
     protocol_file=_HapticsProtocolFile, parameters={"haptics": HapticsParameters}, runners={"haptics": haptics},
-    device=_device, setup=_bench, realism_sources={}, viscoelastic_sources={})
+    device=_device, setup=_bench, realism_sources={}, viscoelastic_sources={}, size=haptics_size)
 

@@ -31,10 +31,10 @@ from softtip.systems.haptics import WANTED
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
+from softtip.systems.haptics.limits import DURATION_EXPECTED, LOOP_RATE_HZ, MAX_DURATION_S, MAX_SENSATION_ROWS
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 from softtip.systems.haptics.servos import FrameResponse, ServoDevice
 
-LOOP_RATE_HZ = 1000.0
 MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
 SERVOS = ("servo1_rad", "servo2_rad", "servo3_rad")
 WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm")
@@ -73,11 +73,17 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
     if missing:
         raise SensationError(f"sensation file {path}: missing column {missing[0]} (expected {', '.join(SENSATION_COLUMNS)})")
     times = np.asarray(table["time_s"], dtype=float)
+    if len(times) > MAX_SENSATION_ROWS:
+        raise SensationError(f"sensation file {path}: {len(times)} rows, expected at most {MAX_SENSATION_ROWS} (one a "
+                             f"tick at {LOOP_RATE_HZ:g} Hz over --duration's limit of {MAX_DURATION_S:g} s)")
     forces = np.column_stack([np.asarray(table[name], dtype=float) for name in SENSATION_COLUMNS[1:]])
     if len(times) < 1 or not (np.all(np.isfinite(times)) and np.all(np.isfinite(forces))):
         raise SensationError(f"sensation file {path}: expected finite times and forces, at least one row")
     if np.any(np.diff(times) <= 0):
         raise SensationError(f"sensation file {path}: time_s must increase from row to row")
+    if duration_s is None and not times[-1] - times[0] <= MAX_DURATION_S:
+        raise SensationError(f"sensation file {path}: time_s spans {times[-1] - times[0]:.6g} s, expected "
+                             f"{DURATION_EXPECTED}: --duration's limit; --duration renders the first part")
     end = times[-1] - times[0] if duration_s is None else duration_s
     ticks = np.arange(max(int(round(end * LOOP_RATE_HZ)), 1)) / LOOP_RATE_HZ + times[0]
     held = forces[np.searchsorted(times, ticks, side="right") - 1]

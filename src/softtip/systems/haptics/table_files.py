@@ -13,7 +13,9 @@ device's servos are refused in one line naming the file and the column.
 **For firmware**, :func:`c_header` writes the renderer's own arrays (the table as
 :class:`~.rendering.NearestNeighbourRenderer` indexed it: the entries without contact merged into one
 at zero force) as C ``const`` arrays of ``float`` with their sizes and settings as macros, and
-:func:`write_table_csv` the same entries as a table file this module reads back.
+:func:`write_table_csv` the same entries as a table file this module reads back. :func:`write_fs_table_csv`
+writes an FS table as collected (the FS's and the DS's readings with the motor inputs, every
+configuration) for a haptics protocol's ``fs_table``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 
 from softtip._core.files import atomic_write
 from softtip.systems.haptics.device import DeviceSpec
+from softtip.systems.haptics.limits import MAX_FS_LEVELS, MAX_TABLE_ENTRIES
 from softtip.systems.haptics.live import table_columns
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, TableError
 
@@ -116,8 +119,9 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
         raise TableFileError(f"table file {path}: missing column {DS[ds.index(False)]} (the DS's readings: all six "
                              f"of {', '.join(DS)}, or none)")
     rows = len(next(iter(columns.values())))
-    if rows < 2:
-        raise TableFileError(f"table file {path}: {rows} rows, expected at least 2 entries")
+    if not 2 <= rows <= MAX_TABLE_ENTRIES:
+        raise TableFileError(f"table file {path}: {rows} rows, expected 2 to {MAX_TABLE_ENTRIES} entries (the largest "
+                             f"FS table, --fs-levels {MAX_FS_LEVELS})")
     wrenches = _numbers(columns, FORCES + (TORQUES if all(torques) else ()), path)
     motor = _numbers(columns, MOTORS_RAD if units[0] else MOTORS_DEG, path)
     if device is not None:
@@ -134,13 +138,26 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     return RecordedTable(str(path), merged_wrenches, merged_motor, merged_platform, rows - len(merged_motor))
 
 
+def _write_csv(path: str | Path, names: tuple[str, ...], rows: np.ndarray) -> None:
+    """``rows`` under the header ``names``, every value at full precision (it reads back exactly)."""
+    atomic_write(path, ",".join(names) + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+
+
 def write_table_csv(path: str | Path, renderer: NearestNeighbourRenderer) -> None:
     """The renderer's entries as a table file (forces and motor inputs in rad, full precision)."""
     if renderer.torque_length is not None:
         raise ValueError("renderer: a table for firmware searches forces only (no torque length)")
-    header = ",".join(FORCES + MOTORS_RAD)
-    rows = np.hstack([renderer.features_, renderer.motor_inputs_])
-    atomic_write(path, header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+    _write_csv(path, FORCES + MOTORS_RAD, np.hstack([renderer.features_, renderer.motor_inputs_]))
+
+
+def write_fs_table_csv(path: str | Path, wrenches, platform_wrenches, motor_inputs) -> None:
+    """An FS table as collected, one row per configuration, as a haptics protocol's ``fs_table`` reads
+    it: the FS's ``wrenches`` (entries, 6, or 3 forces), the DS's (entries, 6) and the motor inputs
+    (entries, 3, rad), at full precision."""
+    wrenches = np.asarray(wrenches, dtype=float)
+    names = FORCES + (TORQUES if wrenches.shape[1] == 6 else ()) + DS + MOTORS_RAD
+    _write_csv(path, names, np.hstack([wrenches, np.asarray(platform_wrenches, dtype=float),
+                                       np.asarray(motor_inputs, dtype=float)]))
 
 
 def _c_float(value: float) -> str:
