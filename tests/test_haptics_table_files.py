@@ -303,6 +303,74 @@ def test_an_exported_fs_table_feeds_a_protocol_that_renders_as_the_simulated_one
     assert refused.exit_code == 2 and "has no DS readings" in refused.stderr and not (tmp_path / "d.h").exists()
 
 
+_WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm")
+
+
+def _imported_fs_table(tmp_path, labels: bool = True):
+    """The study's 7³ FS table at seed 3 logged as a rig would (two log files, one per trial) and brought in
+    by ``softtip import``: the FS's forces as an "other" chip, and with ``labels`` every table column as a label."""
+    from softtip.systems.haptics.study import fs_table
+
+    fs = fs_table(DEVICE, 7, CollectionSettings(), 3)
+    names = [*_WRENCH, *(f"ds_{n}" for n in _WRENCH), "motor1_rad", "motor2_rad", "motor3_rad"]
+    values = np.hstack([fs.finger_wrenches, fs.platform_wrenches, fs.motor_inputs])
+    half = len(values) // 2
+    for name, rows, start in (("a.csv", values[:half], 0), ("b.csv", values[half:], half)):
+        (tmp_path / name).write_text("t," + ",".join(names) + "\n" + "".join(
+            f"{(start + k) * 0.01!r}," + ",".join(map(repr, map(float, row))) + "\n" for k, row in enumerate(rows)))
+    units = {"N": "N", "Nm": "Nm", "rad": "rad"}
+    columns = ", ".join(f'{n} = {{ column = "{n}", unit = "{units[n.rsplit("_", 1)[1]]}" }}' for n in names)
+    (tmp_path / "map.toml").write_text(
+        '[sensor]\ntime = "t"\nchip = "other"\nname = "fs"\nunit = "N"\nchips = [["fx_N", "fy_N", "fz_N"]]\n'
+        + (f"[labels]\ncolumns = {{ {columns} }}\n" if labels else "")
+        + '[trials]\nsplit = "file"\nvalidation = { last = 1 }\nbaseline = { samples = 1 }\n')
+    made = runner.invoke(app, ["import", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "-m",
+                               str(tmp_path / "map.toml"), "-o", str(tmp_path / "imported.parquet"), "--force"])
+    assert made.exit_code == 0, made.output
+    return fs, tmp_path / "imported.parquet"
+
+
+def test_a_table_brought_in_by_softtip_import_is_a_table_file(tmp_path):
+    fs, imported = _imported_fs_table(tmp_path)
+    # as a protocol's fs_table: exactly the collection it was logged from, so the study renders as on it
+    recorded = _protocol(tmp_path, fs_table="imported.parquet").design.fs
+    for name in ("finger_wrenches", "platform_wrenches", "motor_inputs"):
+        assert np.array_equal(getattr(recorded, name), getattr(fs, name)), name
+    # and for --table: the renderer on the dataset is the renderer on the collection
+    result = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "t.h"), "--table", str(imported),
+                                 "--csv", str(tmp_path / "t.csv"), "--json"])
+    assert result.exit_code == 0, result.output
+    direct = NearestNeighbourRenderer().fit(fs.finger_wrenches, fs.motor_inputs)
+    assert np.array_equal(read_table(tmp_path / "t.csv").wrenches, direct.features_)
+    # a dataset is verified as every dataset is: one flipped byte is refused in one line naming the file
+    damaged = tmp_path / "damaged.parquet"
+    content = bytearray(imported.read_bytes())
+    content[len(content) // 3] ^= 0x01
+    damaged.write_bytes(bytes(content))
+    with pytest.raises(TableFileError, match=f"table file {damaged}: ") as refused:
+        read_table(damaged, DEVICE)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_dataset_without_the_table_s_labels_is_refused_naming_the_fix(tmp_path):
+    from softtip.data import DatasetMetadata, TrialWriter
+
+    _, imported = _imported_fs_table(tmp_path, labels=False)
+    with pytest.raises(TableFileError, match=r"missing column fx_N .*; a softtip dataset holds them as labels of "
+                                             r"these names: softtip import \.\.\. --label fx_N=COLUMN:N"):
+        read_table(imported, DEVICE)
+    # a label whose unit is not its name's is refused: the name is what the reader trusts
+    writer = TrialWriter({"fs0_x_N": "N"}, labels={"fx_N": "g", "fy_N": "N", "fz_N": "N", "motor1_rad": "rad",
+                                                   "motor2_rad": "rad", "motor3_rad": "rad"},
+                         metadata=DatasetMetadata(seed=0))
+    ramp = np.linspace(0, 1, 10)
+    writer.add({"time_s": ramp, "fs0_x_N": ramp, "fx_N": ramp, "fy_N": ramp, "fz_N": ramp, "motor1_rad": ramp,
+                "motor2_rad": ramp, "motor3_rad": ramp})
+    writer.write(tmp_path / "grams.parquet")
+    with pytest.raises(TableFileError, match="grams.parquet: label fx_N is declared in g, expected N as its name says"):
+        read_table(tmp_path / "grams.parquet", DEVICE)
+
+
 @pytest.mark.parametrize(("top", "words"), [
     ({"fingertip_files": ["missing.toml"]}, "missing.toml"),
     ({"fingertip_files": ["same.toml"]}, "fingertip_files = .*'human 3 \\(10 mm\\)' is used twice"),

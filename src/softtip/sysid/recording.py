@@ -32,13 +32,13 @@ from softtip._core.archive import hash_arrays
 from softtip._core.config import OpenFraction, PositiveNumber, checked
 from softtip.data.csvload import parse_numbers, read_csv_table
 from softtip.data.dataset import (
-    METADATA_KEY,
     TIME,
     TRIAL,
     Dataset,
     DatasetError,
     column_to_numpy,
     first_line,
+    is_dataset_file,
     require_columns,
     trial_runs,
 )
@@ -432,13 +432,6 @@ def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     return values
 
 
-def _is_dataset_file(path: Path) -> bool:
-    try:
-        return METADATA_KEY in (pq.read_schema(path).metadata or {})
-    except (pa.ArrowException, OSError):
-        return False
-
-
 def _suffix(path: Path) -> str:
     if not path.is_file():
         raise DatasetError(f"recording {path} does not exist")
@@ -488,7 +481,7 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     whitespace = text_columns(path, names, None if suffix in WHITESPACE else ",") \
         if suffix in WHITESPACE or (suffix == ".csv" and names is not None) else None
     present = list(whitespace) if whitespace is not None else file_columns(path, names)
-    if suffix == ".parquet" and _is_dataset_file(path):
+    if suffix == ".parquet" and is_dataset_file(path):
         if time_column is not None or trial_column is not None or units is not None or resample is not None \
                 or missing is not None:
             raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units, and is evenly sampled")

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from softtip.data import Dataset, DatasetError, is_dataset_file
+from softtip.data.dataset import TIME
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.systems.haptics import WANTED
@@ -92,7 +94,8 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
 
 def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, np.ndarray]:
     """The columns of a CSV or Parquet file, a ``what`` ("sensation file" ...); a file of another kind,
-    missing or unreadable raises ``error`` naming it."""
+    missing or unreadable raises ``error`` naming it. A softtip dataset (``softtip import``'s) is read
+    as one, verified: its time, channels and labels by name (:func:`dataset_columns`)."""
     import pyarrow as pa
     from pyarrow import csv, parquet
 
@@ -101,11 +104,32 @@ def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, n
         raise error(f"{what} {path}: expected a .csv or .parquet file")
     if not path.is_file():
         raise error(f"{what} {path}: no such file")
+    if is_dataset_file(path):
+        return dataset_columns(path, what, error)
     try:
         table = readers[path.suffix.lower()](path)
     except (pa.ArrowException, OSError) as problem:
         raise error(f"{what} {path}: unreadable ({' '.join(str(problem).split())})") from None
     return {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
+
+
+# the units a column's name may end in, as a table or sensation file names them
+NAMED_UNITS = {"N": "N", "Nm": "N m", "rad": "rad", "deg": "deg", "s": "s"}
+
+
+def dataset_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, np.ndarray]:
+    """A softtip dataset's ``time_s``, channels and labels by name, read and verified as every dataset
+    is (its checksum, its declared columns); a label whose declared unit is not the one its name ends
+    in (``fx_N`` in grams) is refused naming it, since the name is what the table's reader trusts."""
+    try:
+        dataset = Dataset.read(path)
+    except DatasetError as problem:
+        raise error(f"{what} {problem}") from None
+    for name, unit in dataset.labels.items():
+        named = NAMED_UNITS.get(name.rsplit("_", 1)[-1])
+        if named is not None and unit.replace(" ", "") != named.replace(" ", ""):
+            raise error(f"{what} {path}: label {name} is declared in {unit}, expected {named} as its name says")
+    return {name: dataset.column(name) for name in (TIME, *dataset.channels, *dataset.labels)}
 
 
 @dataclass(frozen=True)

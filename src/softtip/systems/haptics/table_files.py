@@ -4,7 +4,9 @@
 the motor inputs, ``motor1_rad``, ``motor2_rad``, ``motor3_rad`` (or ``motor1_deg`` ... in degrees),
 and what the fingertip's sensor read, ``fx_N``, ``fy_N``, ``fz_N`` and, if it reads torques, ``tx_Nm``,
 ``ty_Nm``, ``tz_Nm``. The device-mounted sensor's readings, for personalisation A, may follow as
-``ds_fx_N`` ... ``ds_tz_Nm`` (all six). Values may be quantised (a servo's whole degrees, a sensor's
+``ds_fx_N`` ... ``ds_tz_Nm`` (all six). A softtip dataset (``softtip import``'s, checksummed) is a table
+file too: its labels of those names are the columns (each in the unit its name ends in), read and
+verified as every dataset is. Values may be quantised (a servo's whole degrees, a sensor's
 steps): a quantised sensor reads several configurations alike, so entries whose forces are equal are
 merged into one, their motor inputs (and the rest of their readings) averaged; how many were merged
 is reported. A missing column, a value that is not a finite number, or motor inputs beyond the
@@ -26,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from softtip._core.files import atomic_write
+from softtip.data import is_dataset_file
 from softtip.systems.haptics.device import DeviceSpec
 from softtip.systems.haptics.limits import MAX_FS_LEVELS, MAX_TABLE_ENTRIES
 from softtip.systems.haptics.live import table_columns
@@ -36,6 +39,11 @@ TORQUES = ("tx_Nm", "ty_Nm", "tz_Nm")
 MOTORS_RAD = ("motor1_rad", "motor2_rad", "motor3_rad")
 MOTORS_DEG = ("motor1_deg", "motor2_deg", "motor3_deg")
 DS = tuple(f"ds_{name}" for name in FORCES + TORQUES)
+
+
+# how a softtip dataset (softtip import's) holds a table: its labels, named as a table file's columns
+DATASET_FIX = ("; a softtip dataset holds them as labels of these names: softtip import ... --label fx_N=COLUMN:N "
+               "--label motor1_deg=COLUMN:deg ... (its chips' channels are not read as forces)")
 
 
 class TableFileError(ValueError):
@@ -105,7 +113,7 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     missing = [name for name in FORCES if name not in columns]
     if missing:
         raise TableFileError(f"table file {path}: missing column {missing[0]} (expected {', '.join(FORCES)}, "
-                             f"optionally {', '.join(TORQUES)})")
+                             f"optionally {', '.join(TORQUES)})" + (DATASET_FIX if is_dataset_file(path) else ""))
     torques = [name in columns for name in TORQUES]
     if any(torques) and not all(torques):
         raise TableFileError(f"table file {path}: missing column {TORQUES[torques.index(False)]} (torques: all "
@@ -113,7 +121,8 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     units = [all(name in columns for name in names) for names in (MOTORS_RAD, MOTORS_DEG)]
     if units[0] == units[1]:
         raise TableFileError(f"table file {path}: expected the motor inputs as {', '.join(MOTORS_RAD)} or as "
-                             f"{', '.join(MOTORS_DEG)}" + (" (not both)" if units[0] else ""))
+                             f"{', '.join(MOTORS_DEG)}" + (" (not both)" if units[0] else "")
+                             + (DATASET_FIX if is_dataset_file(path) and not units[0] else ""))
     ds = [name in columns for name in DS]
     if any(ds) and not all(ds):
         raise TableFileError(f"table file {path}: missing column {DS[ds.index(False)]} (the DS's readings: all six "
