@@ -395,6 +395,12 @@ def cable_tensions(spec: DeviceSpec, angles, finger_wrench) -> np.ndarray:
     return spring_forces(spec, lengths) + np.linalg.solve(balance, load[..., None])[..., 0]
 
 
+def normal_give(spec: DeviceSpec, normal_force) -> np.ndarray:
+    """How far (m) the platform gives way along its normal under a normal force (N, (...)) while the
+    servos hold: F / 3(k_c + k_s), :func:`loaded_pose`'s balance below the stall."""
+    return np.asarray(normal_force, dtype=float) / (3.0 * (spec.cables.stiffness + spec.springs.stiffness))
+
+
 _GIVE_TOLERANCE = 1e-15  # m: the cables' give, far below a servo's dead band (microns of cable)
 _GIVE_ITERATIONS = 100
 

@@ -24,6 +24,7 @@ from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.sensors.wrench import shift_wrench
 from softtip.studies.outcome import Headline, StudyOutcome
+from softtip.systems.haptics.ablation import ablate
 from softtip.systems.haptics.bench import CONDITIONS, RENDERED, study_fingertips
 from softtip.systems.haptics.collection import collection_duration, motor_grid
 from softtip.systems.haptics.data_driven import compare_data_driven
@@ -130,10 +131,12 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     sweeps = _sweeps(protocol, found, progress)
     results |= sweeps.results
     settings, collection = p.study_settings(), p.collection_settings()
-    variants = compare_data_driven(device, fingertips, *collect_study(device, fingertips, settings, collection,
-                                                                      protocol.seed, fs=protocol.design.fs),
-                                   settings, collection, protocol.seed)
+    collected = collect_study(device, fingertips, settings, collection, protocol.seed, fs=protocol.design.fs)
+    variants = compare_data_driven(device, fingertips, *collected, settings, collection, protocol.seed)
     tables.append(variants.table())
+    ablations = ablate(device, fingertips, *collected, settings, collection, protocol.seed)
+    tables.append(ablations.table())
+    results["ablations"] = ablations.to_dict()
     variants_figure = Figure.of("Personalisation A: as published against softtip's 3-D variant", (
         "Median error (N) per fingertip of A searching the DS's raw 6-D wrenches and of A searching its 3-D forces "
         "in the device's axes, on the same tables. Look for whether the published search loses anything by "
