@@ -87,6 +87,11 @@ def test_unreachable_pose_is_refused_in_one_line():
     ("released_length = 0.0162558 ", "released_length = 0.002  ", "device.released_length"),
     ("free_length = 0.025 ", "free_length = 0.010 ", "springs.free_length"),
     ("centre = [0.0, 0.0, -0.0085]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
+    ("centre = [0.0, 0.0, -0.0085]", "centre = [1e300, 0.0, -0.0085]", "finger.centre = .*: expected the centre inside"),
+    ("attachment_radius = 0.012 ", "attachment_radius = 1e300 ", "device.attachment_radius = 1e.300: expected a "
+                                                                  "length in m, above 0 and at most 0.1"),
+    ("command_rate_hz = 50.0", "command_rate_hz = 1e9", "servo.command_rate_hz = 1000000000.0: expected a rate in Hz above "
+                                                        "0 and at most the render loop's 1000"),
     ("stall_torque = 0.078", "stall_torque = -1", "servo.stall_torque"),
     # a servo that could not hold its spring, whichever side is absurd (issue 37: these rendered as shipped)
     ("stall_torque = 0.078", "stall_torque = 1e-9", "servo.stall_torque = 1e-09: expected above 0.00217 N m"),

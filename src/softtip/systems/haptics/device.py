@@ -53,10 +53,15 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.errors import NotConverged
+from softtip.systems.haptics.limits import LOOP_RATE_HZ
 
 DEVICE_FILE = Path(__file__).with_name("device.toml")
 _TOLERANCE = 1e-9  # rad: rounding in the kinematics' inverse, far below a servo's dead band
 
+# a fingertip-mounted device is centimetres across: a length beyond this is a unit slip, refused before
+# the kinematics divide by it
+LARGEST_LENGTH = 0.1  # m
+Length = number(f"a length in m, above 0 and at most {LARGEST_LENGTH:g}", gt=0, le=LARGEST_LENGTH)
 Angles3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 angles in degrees")]
 Point3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 coordinates (m)")]
 
@@ -74,10 +79,10 @@ class Geometry:
     """The cables' attachments and winding (m, degrees)."""
 
     name: Text
-    attachment_radius: PositiveNumber
+    attachment_radius: Length
     attachment_angles_deg: Angles3
-    pulley_radius: PositiveNumber
-    released_length: PositiveNumber
+    pulley_radius: Length
+    released_length: Length
     max_tilt_deg: number("an angle in degrees strictly between 0 and 90", gt=0, lt=90)
 
     def __post_init__(self) -> None:
@@ -96,7 +101,9 @@ class Servo:
     torque (N·m), the most it holds: beyond it the servo is driven back (:func:`loaded_pose`)."""
 
     angle_max_deg: number("an angle in degrees, 0 < angle <= 360", gt=0, le=360)
-    command_rate_hz: PositiveNumber
+    # a servo reads at most one command a tick of the 1 kHz render loop (softtip.systems.haptics.limits)
+    command_rate_hz: number(f"a rate in Hz above 0 and at most the render loop's {LOOP_RATE_HZ:g}", gt=0,
+                            le=LOOP_RATE_HZ)
     slew_deg_per_s: PositiveNumber
     resolution_deg: PositiveNumber
     stall_torque: PositiveNumber
@@ -109,7 +116,7 @@ class Springs:
     stiffen the cables' give (:func:`loaded_pose`)."""
 
     stiffness: PositiveNumber
-    free_length: PositiveNumber
+    free_length: Length
 
 
 @schema(section="cables", error=DeviceError)
@@ -190,6 +197,9 @@ class DeviceSpec:
                           "could not hold its spring")
         if not -self.device.released_length < self.finger.centre[2] < 0:
             raise Refusal(("finger", "centre"), "expected the centre between the platforms (-released_length < z < 0)")
+        if not np.hypot(*self.finger.centre[:2]) <= self.device.attachment_radius:
+            raise Refusal(("finger", "centre"), "expected the centre inside the cables' circle (x² + y² <= "
+                                                "device.attachment_radius²)")
         for key in self.fit.parameters if self.fit else ():
             section, _, name = key.partition(".")
             if section not in {"device", "servo", "springs", "cables", "finger"} or not isinstance(
