@@ -46,7 +46,7 @@ from softtip.systems.haptics.personalisation import (
     readings_renderer,
 )
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, wrench_features
-from softtip.systems.haptics.statistics import WilcoxonResult, wilcoxon
+from softtip.systems.haptics.statistics import WilcoxonResult, rank_sum, wilcoxon
 from softtip.systems.haptics.study import SharedTables, StudySettings, UserData
 
 _ABLATION_STREAM = 4  # the renderings' noise: a stream of the seed no other stage draws from
@@ -118,7 +118,7 @@ class Ablations:
             if test is not None:
                 reference = next(group[0] for group in GROUPS if k in group)
                 cells |= {(name, columns[2]): ROWS[reference].split(":")[0].split(",")[0],
-                          (name, columns[3]): float(test.signed_rank_sum), (name, columns[4]): test.p_bonferroni}
+                          (name, columns[3]): rank_sum(test.signed_rank_sum), (name, columns[4]): test.p_bonferroni}
         a, b = self.findings()
         return Table("Ablations: why A as published trails its 3-D variant, and B+ trails B", "method",
                      list(ROWS), columns, cells, digits=3,

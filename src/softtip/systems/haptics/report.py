@@ -43,7 +43,7 @@ from softtip.systems.haptics.sensitivity import (
     sensitivity_figure,
     sensitivity_study,
 )
-from softtip.systems.haptics.statistics import friedman, wilcoxon
+from softtip.systems.haptics.statistics import friedman, rank_sum, wilcoxon
 from softtip.systems.haptics.study import (
     NOTES,
     METHODS,
@@ -254,11 +254,6 @@ def _sensitivity_table(outcomes: tuple[VariationOutcome, ...], humans: list[str]
                      "the casts as published. In softtip's contact model the core's position moves only the "
                      "torques about the sensor's origin, and every method renders from forces. W+ − W− < 0: A's "
                      "errors are the smaller over every fingertip and target studied."))
-
-
-def rank_sum(value: float) -> float | int:
-    """A Wilcoxon rank sum, as an integer when it is one (ties make halves)."""
-    return int(value) if float(value).is_integer() else float(value)
 
 
 def _test(result) -> dict:
@@ -563,8 +558,10 @@ def _departures_table(tension: float, stall: float) -> Table:
         "device": ("a built device, dimensions not given",
                    "softtip's dimensions in a device file (device.toml); its released length, pulley radius and "
                    "cables' stiffness fitted to the published scale (the fit table)"),
-        "cables": ("cables inside springs, wound by servos", "each cable a spring in series: the platform gives way "
-                   "along its normal under the contact, keeping its tilt"),
+        "cables": ("cables inside springs, wound by servos", "each cable a spring in series, its spring easing beside "
+                   "it: the platform gives way along its normal under the contact, keeping its tilt; B+'s presses "
+                   "take the cables rigid, as published methods' kinematics do (the ablations table measures what "
+                   "that costs)"),
         "fingertips": ("VytaFlex 30 casts over a rigid core: three spheres and three casts of human fingertips",
                        "three spheres and three ellipsoidal casts (1.6 times longer along the finger), one rubber, "
                        "contact law calibrated by softtip's FE; the geometric method takes each human cast for its "
