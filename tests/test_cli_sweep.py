@@ -430,7 +430,8 @@ BAD_PROTOCOLS = [("haptics-fs-levels.toml", _haptics_protocol(("fs_levels = 13 "
                  ("haptics-trials.toml", _haptics_protocol(("trials = 100 ", "trials = 1000000000 "))),
                  ("haptics-draws.toml", _haptics_protocol(("target_draws = 20000 ", "target_draws = 10000000 "))),
                  ("haptics-neighbours.toml", _haptics_protocol(("n_neighbours = 8 ", "n_neighbours = 100000 "))),
-                 ("haptics-adaptive.toml", _haptics_protocol(("adaptive_budget = 64 ", "adaptive_budget = 1000000000 "))),
+                 ("haptics-adaptive.toml", _haptics_protocol(("adaptive_budget = 64 ",
+                                                              "adaptive_budget = 1000000000 "))),
                  ("haptics-size.toml", _haptics_protocol(("target_draws = 20000 ", "target_draws = 1000000 "),
                                                          ("trials = 100 ", "trials = 10000 ")))]
 FILE_CASES = [(words, option, name, content) for words, option, files in (

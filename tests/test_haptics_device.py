@@ -87,15 +87,17 @@ def test_unreachable_pose_is_refused_in_one_line():
     ("released_length = 0.0162558 ", "released_length = 0.002  ", "device.released_length"),
     ("free_length = 0.025 ", "free_length = 0.010 ", "springs.free_length"),
     ("centre = [0.0, 0.0, -0.0085]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
-    ("centre = [0.0, 0.0, -0.0085]", "centre = [1e300, 0.0, -0.0085]", "finger.centre = .*: expected the centre inside"),
+    ("centre = [0.0, 0.0, -0.0085]", "centre = [1e300, 0.0, -0.0085]",
+     "finger.centre = .*: expected the centre inside"),
     ("attachment_radius = 0.012 ", "attachment_radius = 1e300 ", "device.attachment_radius = 1e.300: expected a "
                                                                   "length in m, above 0 and at most 0.1"),
-    ("command_rate_hz = 50.0", "command_rate_hz = 1e9", "servo.command_rate_hz = 1000000000.0: expected a rate in Hz above "
-                                                        "0 and at most the render loop's 1000"),
+    ("command_rate_hz = 50.0", "command_rate_hz = 1e9",
+     "servo.command_rate_hz = 1000000000.0: expected a rate in Hz above 0 and at most the render loop's 1000"),
     ("stall_torque = 0.078", "stall_torque = -1", "servo.stall_torque"),
     # a servo that could not hold its spring, whichever side is absurd (issue 37: these rendered as shipped)
     ("stall_torque = 0.078", "stall_torque = 1e-9", "servo.stall_torque = 1e-09: expected above 0.00217 N m"),
-    ("stiffness = 200.0 ", "stiffness = 1e308 ", r"servo.stall_torque = 0.078: expected above 1.08e\+303 N m.*1.17e\+306 N: springs.stiffness"),
+    ("stiffness = 200.0 ", "stiffness = 1e308 ",
+     r"servo.stall_torque = 0.078: expected above 1.08e\+303 N m.*1.17e\+306 N: springs.stiffness"),
     ("[springs]", "[springs]\ndamping = 3", "springs.damping: unknown key"),
     ("[cables]\nstiffness", "[cables]\nstiffness = 1.0\nspan", "cables.span: unknown key"),
     ('"cables.stiffness"]', '"cables.nothing"]', "fit.parameters"),
@@ -212,7 +214,7 @@ def test_cables_and_springs_give_way_together_as_computed_by_hand():
 def test_a_stalled_servo_pays_out_cable_and_caps_the_force_as_computed_by_hand():
     lengths = cable_lengths(DEVICE, LEVEL)
     spring_push = DEVICE.springs.stiffness * (DEVICE.springs.free_length - lengths[0])
-    k_c, k_s = DEVICE.cables.stiffness, DEVICE.springs.stiffness
+    k_s = DEVICE.springs.stiffness
     # a stall leaving each cable 0.5 N above its spring's push: below the 0.778 N a cable would carry
     headroom = 0.5
     stall = (spring_push + headroom) * DEVICE.device.pulley_radius

@@ -17,7 +17,7 @@ from pyarrow import parquet
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
-from softtip.systems.haptics.collection import CollectionSettings, sensed_contact
+from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import forward_kinematics, load_device
 from softtip.systems.haptics.fingertip_file import FingertipFileError, load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, finger_wrench

@@ -126,8 +126,8 @@ class Ablations:
                          "Pooled over every fingertip and target, one cause taken away per row, every row on the "
                          "study's own tables and targets with the same noise. A: the published search on the three DS "
                          "components a frictionless press carries (the normal force, the two tilting torques), and "
-                         "both searches on exact DS readings (no noise, no steps) and from a user table as dense as the "
-                         "FS table. B+: the presses' depths and the "
+                         "both searches on exact DS readings (no noise, no steps) and from a user table as dense "
+                         "as the FS table. B+: the presses' depths and the "
                          "placement with the platform's give under the force (the cables' and springs' stiffness). "
                          "W+ − W− < 0: the row's errors are the smaller. softtip.systems.haptics.ablation."))
 
@@ -174,7 +174,8 @@ def _fingertip_rows(device: DeviceSpec, fingertip: Fingertip, index: int, user_d
     return [data_driven(fs.platform_wrenches, user.platform_wrenches, "published"),
             searched.render(press_components(fs.platform_wrenches)).motor_inputs,
             data_driven(fs.platform_wrenches, user.platform_wrenches, "device axes"),
-            data_driven(exact_fs_ds, exact_user_ds, "published"), data_driven(exact_fs_ds, exact_user_ds, "device axes"),
+            data_driven(exact_fs_ds, exact_user_ds, "published"),
+            data_driven(exact_fs_ds, exact_user_ds, "device axes"),
             data_driven(fs.platform_wrenches, dense.platform_wrenches, "published", dense),
             data_driven(fs.platform_wrenches, dense.platform_wrenches, "device axes", dense),
             geometric.motor_inputs, force_model("rigid"), force_model("compliant")]

@@ -295,8 +295,8 @@ def haptics_size(protocol: str, p: HapticsParameters) -> Size:
     presses = (p.fs_levels**3 + p.target_draws
                + fingertips * (p.user_levels**3 + p.fs_levels**3 + len(PRESS_DEPTHS) + p.trials * len(METHODS)))
     return Size(presses, MAX_SIMULATED_PRESSES, "simulated presses",
-                f"fs_levels³ + target_draws + fingertips x (user_levels³ + fs_levels³ + {len(PRESS_DEPTHS)} presses + trials x "
-                f"{len(METHODS)} methods)")
+                f"fs_levels³ + target_draws + fingertips x (user_levels³ + fs_levels³ + {len(PRESS_DEPTHS)} presses "
+                f"+ trials x {len(METHODS)} methods)")
 
 
 BENCH = BenchKind(
