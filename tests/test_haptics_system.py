@@ -169,12 +169,15 @@ def test_the_sweeps_rerun_the_datasets_study(coarse_protocol, coarse_dataset):
     titles = [table.title for table in outcome.tables]
     assert any(title.startswith("Rendering error against n") for title in titles)
     assert any(title.startswith("How the methods' ranking depends on the finger") for title in titles)
+    assert any(title.startswith("Ablations") for title in titles) and "ablations" in outcome.results
 
 
 def test_no_sweep_without_its_settings(coarse_protocol):
-    bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"])
+    bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"],
+                                   ablations=False)
     outcome = haptics(bare, 3, SILENT)
     assert "error_curves" not in outcome.results and "sensitivity" not in outcome.results
+    assert "ablations" not in outcome.results and not any(t.title.startswith("Ablations") for t in outcome.tables)
     assert len(outcome.figures) == 2  # the box plots and A's two variants
     assert any(note.startswith("No sensitivity study") for note in outcome.notes)
 
@@ -196,6 +199,8 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"ds_torque_length_m": 0.0}}, "ds_torque_length_m = 0"),
              ({"parameters": {"robustness_seeds": [2, 2]}}, "robustness_seeds = .*each value once"),
              ({"parameters": {"robustness_sigmas": 4.0}}, "robustness_sigmas"),
+             ({"parameters": {"fs_levels": 1000}}, r"fs_levels = 1000: expected an integer from 2 to 31 \(a table"),
+             ({"parameters": {"ablations": "yes"}}, "ablations = 'yes': expected true or false"),
              ({"device": "missing.toml"}, "missing.toml")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:
@@ -203,7 +208,7 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
         assert "\n" not in str(raised.value)
     broken = tmp_path / "device.toml"
     broken.write_text((SYSTEM.files() / "device.toml").read_text().replace("pulley_radius = 0.00092997",
-                                                                           "pulley_radius = 0.2"))
+                                                                           "pulley_radius = 0.05"))
     with pytest.raises(ConfigError, match="released_length"):
         protocol_from_dict(base | {"device": "device.toml"}, "test", tmp_path)
 

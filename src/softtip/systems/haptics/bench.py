@@ -14,8 +14,8 @@ table, or the sensor under the test fingertip saturated). Conditions: ``target_f
 ``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
 personalisation figures are in the metadata's ``sensor_settings``.
 
-The ``curve_*``, ``variations`` and ``robustness_*`` parameters are not the dataset's: the report
-(:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).
+The ``curve_*``, ``variations``, ``robustness_*`` and ``ablations`` parameters are not the dataset's: the
+report (:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`, :mod:`.ablation`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
+from softtip._core.config import (Flag, PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
                                   schema)
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
@@ -104,6 +104,7 @@ class HapticsParameters:
     variations: Variations = field(default_factory=lambda: list(VARIATION_NAMES))
     robustness_seeds: RobustnessSeeds = field(default_factory=lambda: [2, 3])
     robustness_sigmas: number("a number of standard deviations from 0 to 3", ge=0, le=3) = 1.0
+    ablations: Flag = True
 
     def __post_init__(self) -> None:
         for key in ("fingertips", *CURVE_SETTINGS, "variations", "robustness_seeds"):

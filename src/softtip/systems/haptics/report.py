@@ -134,9 +134,10 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     collected = collect_study(device, fingertips, settings, collection, protocol.seed, fs=protocol.design.fs)
     variants = compare_data_driven(device, fingertips, *collected, settings, collection, protocol.seed)
     tables.append(variants.table())
-    ablations = ablate(device, fingertips, *collected, settings, collection, protocol.seed)
-    tables.append(ablations.table())
-    results["ablations"] = ablations.to_dict()
+    if p.ablations:
+        ablations = ablate(device, fingertips, *collected, settings, collection, protocol.seed)
+        tables.append(ablations.table())
+        results["ablations"] = ablations.to_dict()
     variants_figure = Figure.of("Personalisation A: as published against softtip's 3-D variant", (
         "Median error (N) per fingertip of A searching the DS's raw 6-D wrenches and of A searching its 3-D forces "
         "in the device's axes, on the same tables. Look for whether the published search loses anything by "
