@@ -386,13 +386,31 @@ BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None
                   ("finger-key.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nstifness = 2\n'),
                   ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n')]
 _TABLE = "fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n"
+
+
+def _damaged_table_dataset(path: Path) -> None:
+    """A table as softtip import writes it (a dataset, its columns as labels), one byte flipped after."""
+    from softtip.data import DatasetMetadata, TrialWriter
+
+    names = ("fx_N", "fy_N", "fz_N", "motor1_deg", "motor2_deg", "motor3_deg")
+    writer = TrialWriter({"fs0_x_N": "N"}, labels={name: name.rsplit("_", 1)[1] for name in names},
+                         metadata=DatasetMetadata(seed=0))
+    ramp = np.linspace(0.0, 1.0, 20)
+    writer.add({"time_s": ramp, "fs0_x_N": ramp, **{name: ramp * (k + 1) for k, name in enumerate(names)}})
+    writer.write(path)
+    content = bytearray(path.read_bytes())
+    content[len(content) // 3] ^= 0x01
+    path.write_bytes(bytes(content))
+
+
 BAD_TABLES = [("table-garbage.parquet", GARBAGE), ("table-missing.csv", None), ("table.txt", b"fx_N\n1\n"),
               ("table-nan.csv", (_TABLE + "0,0,1,0,0,10\n0,0,nan,0,0,20\n").encode()),
               ("table-motors.csv", b"fx_N,fy_N,fz_N\n0,0,1\n0,0,2\n"),
               ("table-torques.csv", b"fx_N,fy_N,fz_N,tx_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,1,0,0,0,0\n"),
               ("table-text.csv", (_TABLE + "0,0,one,0,0,10\n0,0,2,0,0,20\n").encode()),
               ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode()),
-              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode())]
+              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode()),
+              ("table-dataset-damaged.parquet", _damaged_table_dataset)]
 
 
 def _rows_beyond_a_rendering(path: Path) -> None:

@@ -201,7 +201,8 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"robustness_sigmas": 4.0}}, "robustness_sigmas"),
              ({"parameters": {"fs_levels": 1000}}, r"fs_levels = 1000: expected an integer from 2 to 31 \(a table"),
              ({"parameters": {"ablations": "yes"}}, "ablations = 'yes': expected true or false"),
-             ({"device": "missing.toml"}, "missing.toml")]
+             ({"device": "missing.toml"}, "missing.toml"),
+             ({"fingertip_files": ["f.toml"] * 13}, "fingertip_files = 13: expected at most 12 fingertip files")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:
             protocol_from_dict(base | extra, "test", tmp_path)

@@ -40,6 +40,7 @@ from softtip.systems.haptics.fingertip_file import load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
 from softtip.systems.haptics.limits import (
     LEVELS_EXPECTED,
+    MAX_FINGERTIP_FILES,
     MAX_FS_LEVELS,
     MAX_NEIGHBOURS,
     MAX_SIMULATED_PRESSES,
@@ -219,6 +220,9 @@ def _device(file: _HapticsProtocolFile, parameters: HapticsParameters, source: s
         path = Path(name)
         return path if path.is_absolute() or base is None else base / path
 
+    if len(file.fingertip_files) > MAX_FINGERTIP_FILES:
+        raise refused(f"expected at most {MAX_FINGERTIP_FILES} fingertip files (each a whole fingertip's tables and "
+                      "renderings)", source, "fingertip_files", value=len(file.fingertip_files))
     setup = device_from_file("shipped" if file.device == "shipped" else located(file.device))
     fingertips = tuple(load_fingertip(located(name)) for name in file.fingertip_files)
     names = [*parameters.fingertips, *(f.name for f in fingertips)]

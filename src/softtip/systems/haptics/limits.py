@@ -10,6 +10,7 @@ MAX_TABLE_ENTRIES = MAX_FS_LEVELS**3  # a recorded table's rows: the largest FS 
 MAX_TARGETS = 10_000  # a protocol's trials: 100 times the published 100
 MAX_TARGET_DRAWS = 1_000_000  # random configurations tried for targets: 50 times the shipped 20,000
 MAX_NEIGHBOURS = 64
+MAX_FINGERTIP_FILES = 12  # a protocol's own fingertips, beside its named ones: twice the published six
 # a protocol's simulated presses (every configuration driven and read, softtip.systems.haptics.bench.haptics_size):
 # 25 times the shipped protocol's 40,467: a few minutes on a 2-core machine
 MAX_SIMULATED_PRESSES = 1_000_000
