@@ -519,16 +519,77 @@ BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None
                   ("finger-key.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nstifness = 2\n'),
                   ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n')]
 _TABLE = "fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n"
+
+
+def _damaged_table_dataset(path: Path) -> None:
+    """A table as softtip import writes it (a dataset, its columns as labels), one byte flipped after."""
+    from softtip.data import DatasetMetadata, TrialWriter
+
+    names = ("fx_N", "fy_N", "fz_N", "motor1_deg", "motor2_deg", "motor3_deg")
+    writer = TrialWriter({"fs0_x_N": "N"}, labels={name: name.rsplit("_", 1)[1] for name in names},
+                         metadata=DatasetMetadata(seed=0))
+    ramp = np.linspace(0.0, 1.0, 20)
+    writer.add({"time_s": ramp, "fs0_x_N": ramp, **{name: ramp * (k + 1) for k, name in enumerate(names)}})
+    writer.write(path)
+    content = bytearray(path.read_bytes())
+    content[len(content) // 3] ^= 0x01
+    path.write_bytes(bytes(content))
+
+
 BAD_TABLES = [("table-garbage.parquet", GARBAGE), ("table-missing.csv", None), ("table.txt", b"fx_N\n1\n"),
               ("table-nan.csv", (_TABLE + "0,0,1,0,0,10\n0,0,nan,0,0,20\n").encode()),
               ("table-motors.csv", b"fx_N,fy_N,fz_N\n0,0,1\n0,0,2\n"),
               ("table-torques.csv", b"fx_N,fy_N,fz_N,tx_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,1,0,0,0,0\n"),
               ("table-text.csv", (_TABLE + "0,0,one,0,0,10\n0,0,2,0,0,20\n").encode()),
               ("table-reach.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,200\n").encode()),
-              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode())]
-FILE_CASES = [(words, option, name, content) for words in (("haptics", "render"), ("haptics", "table", "export"))
-              for option, files in (("--fingertip", BAD_FINGERTIPS), ("--table", BAD_TABLES))
-              for name, content in files]
+              ("table-small.csv", (_TABLE + "0,0,1,0,0,10\n0,0,2,0,0,20\n").encode()),
+              ("table-dataset-damaged.parquet", _damaged_table_dataset)]
+
+
+def _rows_beyond_a_rendering(path: Path) -> None:
+    """A sensation of one row a tick over more than the longest rendering: 3,600,001 rows, 1e-4 s apart."""
+    import pyarrow as pa
+    from pyarrow import parquet
+
+    rows = 3_600_001
+    zeros = np.zeros(rows)
+    parquet.write_table(pa.table({"time_s": np.arange(rows) * 1e-4, "fx_N": zeros, "fy_N": zeros, "fz_N": zeros}),
+                        path)
+
+
+_SENSATION = "time_s,fx_N,fy_N,fz_N\n"
+# sizes a file sets beyond the command line's limits (issue 37): refused as the option would be, before work
+BAD_SENSATIONS = [("sensation-span.csv", (_SENSATION + "0,0,0,1\n1e9,0,0,1\n").encode()),
+                  ("sensation-rows.parquet", _rows_beyond_a_rendering)]
+_DEVICE = Path(__file__).parents[1].joinpath("src", "softtip", "systems", "haptics", "device.toml").read_text()
+BAD_DEVICES = [("device-stall.toml", _DEVICE.replace("stall_torque = 0.078", "stall_torque = 1e-9").encode()),
+               ("device-spring.toml", _DEVICE.replace("stiffness = 200.0 ", "stiffness = 1e308 ").encode())]
+_HAPTICS = Path(__file__).parents[1].joinpath("src", "softtip", "systems", "haptics", "protocols",
+                                              "haptics.toml").read_text()
+
+
+def _haptics_protocol(*changes: tuple[str, str]) -> bytes:
+    text = _HAPTICS
+    for old, new in changes:
+        assert old in text
+        text = text.replace(old, new, 1)
+    return text.encode()
+
+
+BAD_PROTOCOLS = [("haptics-fs-levels.toml", _haptics_protocol(("fs_levels = 13 ", "fs_levels = 1000 "))),
+                 ("haptics-user-levels.toml", _haptics_protocol(("user_levels = 7 ", "user_levels = 1000 "))),
+                 ("haptics-trials.toml", _haptics_protocol(("trials = 100 ", "trials = 1000000000 "))),
+                 ("haptics-draws.toml", _haptics_protocol(("target_draws = 20000 ", "target_draws = 10000000 "))),
+                 ("haptics-neighbours.toml", _haptics_protocol(("n_neighbours = 8 ", "n_neighbours = 100000 "))),
+                 ("haptics-adaptive.toml", _haptics_protocol(("adaptive_budget = 64 ",
+                                                              "adaptive_budget = 1000000000 "))),
+                 ("haptics-size.toml", _haptics_protocol(("target_draws = 20000 ", "target_draws = 1000000 "),
+                                                         ("trials = 100 ", "trials = 10000 ")))]
+FILE_CASES = [(words, option, name, content) for words, option, files in (
+    *((words, option, files) for words in (("haptics", "render"), ("haptics", "table", "export"))
+      for option, files in (("--fingertip", BAD_FINGERTIPS), ("--table", BAD_TABLES), ("--device", BAD_DEVICES))),
+    (("haptics", "render"), "--sensation", BAD_SENSATIONS), (("lab", "run"), "protocol", BAD_PROTOCOLS))
+    for name, content in files]
 
 
 @pytest.mark.parametrize(("words", "option", "name", "content"), FILE_CASES,
@@ -536,7 +597,9 @@ FILE_CASES = [(words, option, name, content) for words in (("haptics", "render")
 def test_a_bad_file_of_ones_own_is_refused_in_one_line(inputs, words, option, name, content):
     tmp, _ = inputs
     path = tmp / name
-    if content is not None:
+    if callable(content):
+        content(path)
+    elif content is not None:
         path.write_bytes(content)
     param = next(p for p in command_of(words).params if option in p.opts)
     verdict, said = judge(words, param, Bad("bad file", str(path)), inputs)

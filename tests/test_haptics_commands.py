@@ -90,10 +90,16 @@ def test_render_refuses_bad_sensation_files_and_outputs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     for name, text, words in (("nan.csv", "time_s,fx_N,fy_N,fz_N\n0,0,0,nan\n", "finite"),
                               ("back.csv", "time_s,fx_N,fy_N,fz_N\n0,0,0,1\n0,0,0,1\n", "increase"),
-                              ("cols.csv", "time_s,fx_N\n0,1\n", "missing column fy_N")):
+                              ("cols.csv", "time_s,fx_N\n0,1\n", "missing column fy_N"),
+                              ("span.csv", "time_s,fx_N,fy_N,fz_N\n0,0,0,1\n1e9,0,0,1\n",
+                               "time_s spans 1e+09 s, expected at most 3600 s")):
         (tmp_path / name).write_text(text)
         result = run("haptics", "render", "--sensation", name)
         assert result.exit_code == 2 and words in result.stderr, result.output
+    # the same span cut by --duration is a sensation like any other
+    result = run("haptics", "render", "--sensation", "span.csv", "--duration", "0.1", "--fs-levels", "5", "--fast",
+                 "--json")
+    assert result.exit_code == 0 and json.loads(result.stdout)["ticks"] == 100, result.output
     (tmp_path / "taken.mcap").write_text("")
     result = run("haptics", "render", "--record", "taken.mcap")
     assert result.exit_code == 2 and "--record" in result.stderr and "--force" in result.stderr

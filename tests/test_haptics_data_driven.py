@@ -74,3 +74,34 @@ def test_comparison_statistics_are_scipys(collected):
     assert comparison.to_dict()["torque_length_m"] == SETTINGS.torque_length
     with pytest.raises(ValueError, match="user_data: expected one per fingertip, 2, got 1"):
         compare_data_driven(DEVICE, FINGERTIPS, shared, user_data[:1], SETTINGS, EXACT, seed=2)
+
+
+def test_ablations_rerun_each_method_as_the_study_and_the_comparison_do(collected):
+    from softtip.systems.haptics.ablation import (
+        A_DEVICE_AXES,
+        A_PUBLISHED,
+        B,
+        B_PLUS_COMPLIANT,
+        B_PLUS_RIGID,
+        ROWS,
+        ablate,
+    )
+
+    shared, user_data = collected
+    ablations = ablate(DEVICE, FINGERTIPS, shared, user_data, SETTINGS, EXACT, seed=2)
+    assert ablations.errors.shape == (len(ROWS), 2, 40)
+    comparison = compare_data_driven(DEVICE, FINGERTIPS, shared, user_data, SETTINGS, EXACT, seed=2)
+    # its sensor noiseless, each row is the comparison's or the study's own rendering of that method
+    assert np.allclose(ablations.errors[A_PUBLISHED], comparison.errors[:, 0], rtol=0, atol=1e-6)
+    assert np.allclose(ablations.errors[A_DEVICE_AXES], comparison.errors[:, 1], rtol=0, atol=1e-6)
+    for index, fingertip in enumerate(FINGERTIPS):
+        outcome = study_fingertip(DEVICE, fingertip, shared, SETTINGS, EXACT, 2, index, tests=7,
+                                  user_data=user_data[index])
+        assert np.allclose(ablations.errors[B, index], outcome.errors[2], rtol=0, atol=1e-6)
+        assert np.allclose(ablations.errors[B_PLUS_RIGID, index], outcome.errors[3], rtol=0, atol=1e-6)
+    # the cables' give changes B+, and each row's test is scipy's against its group's first, Bonferroni over 9
+    assert not np.allclose(ablations.errors[B_PLUS_COMPLIANT], ablations.errors[B_PLUS_RIGID])
+    test = ablations.tests[B_PLUS_COMPLIANT]
+    reference = stats.wilcoxon(ablations.errors[B_PLUS_COMPLIANT].ravel(), ablations.errors[B_PLUS_RIGID].ravel())
+    assert test.p_bonferroni == pytest.approx(min(1.0, 9 * reference.pvalue), rel=1e-9)
+    assert ablations.table().rows == list(ROWS) and len(ablations.to_dict()["findings"]) == 2

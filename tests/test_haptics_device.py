@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -24,7 +25,10 @@ from softtip.systems.haptics.device import (
     inverse_kinematics,
     inverse_kinematics_unchecked,
     load_device,
+    loaded_pose,
+    move_time,
     quantised,
+    reachable,
     servo_angles,
     spring_forces,
 )
@@ -83,7 +87,17 @@ def test_unreachable_pose_is_refused_in_one_line():
     ("released_length = 0.0162558 ", "released_length = 0.002  ", "device.released_length"),
     ("free_length = 0.025 ", "free_length = 0.010 ", "springs.free_length"),
     ("centre = [0.0, 0.0, -0.0085]", "centre = [0.0, 0.0, 0.004]", "finger.centre"),
+    ("centre = [0.0, 0.0, -0.0085]", "centre = [1e300, 0.0, -0.0085]",
+     "finger.centre = .*: expected the centre inside"),
+    ("attachment_radius = 0.012 ", "attachment_radius = 1e300 ", "device.attachment_radius = 1e.300: expected a "
+                                                                  "length in m, above 0 and at most 0.1"),
+    ("command_rate_hz = 50.0", "command_rate_hz = 1e9",
+     "servo.command_rate_hz = 1000000000.0: expected a rate in Hz above 0 and at most the render loop's 1000"),
     ("stall_torque = 0.078", "stall_torque = -1", "servo.stall_torque"),
+    # a servo that could not hold its spring, whichever side is absurd (issue 37: these rendered as shipped)
+    ("stall_torque = 0.078", "stall_torque = 1e-9", "servo.stall_torque = 1e-09: expected above 0.00217 N m"),
+    ("stiffness = 200.0 ", "stiffness = 1e308 ",
+     r"servo.stall_torque = 0.078: expected above 1.08e\+303 N m.*1.17e\+306 N: springs.stiffness"),
     ("[springs]", "[springs]\ndamping = 3", "springs.damping: unknown key"),
     ("[cables]\nstiffness", "[cables]\nstiffness = 1.0\nspan", "cables.span: unknown key"),
     ('"cables.stiffness"]', '"cables.nothing"]', "fit.parameters"),
@@ -137,14 +151,14 @@ def test_replaced_device_keeps_its_own_dimensions():
 
 
 @pytest.mark.parametrize("angles", [np.full(3, math.pi), np.array([math.pi, 2.2, 2.9])], ids=["level", "tilted"])
-def test_loaded_platform_gives_way_along_its_normal_by_the_force_over_three_cables(angles):
+def test_loaded_platform_gives_way_along_its_normal_by_the_force_over_three_cables_and_springs(angles):
     # the reference: the give s that solves s = F(δ₀ − s) / 3k, found by scipy's brentq on the contact law
     rigid = forward_kinematics(DEVICE, angles)
     _, depth = finger_wrench(FINGERTIP_SENSOR, DEVICE, rigid)
     assert depth > 1e-4  # the press is real
     radius = cap_indentation(FINGERTIP_SENSOR.centre(DEVICE), FINGERTIP_SENSOR.semi_axes, rigid.centroid,
                              rigid.normal)[2]
-    three_cables = 3 * DEVICE.cables.stiffness
+    three_cables = 3 * (DEVICE.cables.stiffness + DEVICE.springs.stiffness)  # each spring eases as its cable stretches
     give = brentq(lambda s: s - normal_force(FINGERTIP_SENSOR.contact, depth - s, radius) / three_cables, 0.0, depth,
                   xtol=1e-15)
     pose, wrench = loaded_contact(FINGERTIP_SENSOR, DEVICE, angles)
@@ -160,3 +174,117 @@ def test_stiff_cables_leave_the_platform_where_its_kinematics_put_it():
     rigid = forward_kinematics(stiff, angles)
     assert np.allclose(pose.centroid, rigid.centroid, atol=1e-9)
     assert np.allclose(wrench, finger_wrench(FINGERTIP_SENSOR, stiff, rigid)[0], rtol=1e-3, atol=1e-9)
+
+
+def _linear_press(device, angles, stiffness, depth):
+    """A level platform at ``angles`` pressing a flat linear spring (``stiffness`` N/m) ``depth`` m
+    deep at its rigid pose: the loaded pose's force and give, and the rigid pose."""
+    rigid = forward_kinematics(device, angles)
+    surface = rigid.centroid[2] - depth
+
+    def contact(pose):
+        force = stiffness * np.maximum(pose.centroid[..., 2] - surface, 0.0)
+        return np.concatenate([force[..., None] * pose.normal, np.zeros(force.shape + (3,))], axis=-1)
+
+    pose, wrench = loaded_pose(device, angles, contact)
+    return wrench[2], rigid.centroid[2] - pose.centroid[2]
+
+
+def _with(device, section, **values):
+    return dataclasses.replace(device, **{section: dataclasses.replace(getattr(device, section), **values)})
+
+
+LEVEL = np.full(3, 1.5)
+CONTACT_STIFFNESS, DEPTH = 3000.0, 2e-3  # N/m, m: 6 N on rigid cables
+
+
+def test_cables_and_springs_give_way_together_as_computed_by_hand():
+    # a cable stretched by s pulls k_c s more; its spring, lengthened by s, pushes k_s s less: per cable
+    # k_f (d - s) / 3 = (k_c + k_s) s, so F = k_f d / (1 + k_f / 3(k_c + k_s))
+    for cable, spring in ((436.8, 200.0), (636.8, 1e-6), (200.0, 436.8), (5000.0, 200.0)):
+        device = _with(_with(DEVICE, "cables", stiffness=cable), "springs", stiffness=spring)
+        force, give = _linear_press(device, LEVEL, CONTACT_STIFFNESS, DEPTH)
+        expected = CONTACT_STIFFNESS * DEPTH / (1 + CONTACT_STIFFNESS / (3 * (cable + spring)))
+        assert force == pytest.approx(expected, rel=1e-12)
+        assert give == pytest.approx(expected / (3 * (cable + spring)), rel=1e-9)
+    shipped, _ = _linear_press(DEVICE, LEVEL, CONTACT_STIFFNESS, DEPTH)
+    assert shipped == pytest.approx(6.0 / (1 + 3000.0 / 1910.4), rel=1e-12)  # 2.334 N
+
+
+def test_a_stalled_servo_pays_out_cable_and_caps_the_force_as_computed_by_hand():
+    lengths = cable_lengths(DEVICE, LEVEL)
+    spring_push = DEVICE.springs.stiffness * (DEVICE.springs.free_length - lengths[0])
+    k_s = DEVICE.springs.stiffness
+    # a stall leaving each cable 0.5 N above its spring's push: below the 0.778 N a cable would carry
+    headroom = 0.5
+    stall = (spring_push + headroom) * DEVICE.device.pulley_radius
+    weak = _with(DEVICE, "servo", stall_torque=stall)
+    assert weak.stall_tension == pytest.approx(spring_push + headroom)
+    force, give = _linear_press(weak, LEVEL, CONTACT_STIFFNESS, DEPTH)
+    # stalled: H + k_s s = k_f (d - s) / 3, so s = (k_f d / 3 - H) / (k_s + k_f / 3) = 1.25 mm
+    expected_give = (CONTACT_STIFFNESS * DEPTH / 3 - headroom) / (k_s + CONTACT_STIFFNESS / 3)
+    assert expected_give == pytest.approx(1.25e-3)
+    assert give == pytest.approx(expected_give, rel=1e-9)
+    assert force == pytest.approx(CONTACT_STIFFNESS * (DEPTH - expected_give), rel=1e-9)  # 2.25 N, not 2.334 N
+    # each cable at the stall: its spring's push at the paid-out length plus its share of the force
+    assert spring_push - k_s * give + force / 3 == pytest.approx(weak.stall_tension, rel=1e-9)
+    # a stall the press never reaches changes nothing
+    strong, _ = _linear_press(_with(DEVICE, "servo", stall_torque=10 * DEVICE.servo.stall_torque), LEVEL,
+                              CONTACT_STIFFNESS, DEPTH)
+    shipped, _ = _linear_press(DEVICE, LEVEL, CONTACT_STIFFNESS, DEPTH)
+    assert strong == shipped
+
+
+def test_a_weak_servo_caps_what_the_platform_renders_on_a_finger():
+    angles = np.array([[math.pi, math.pi, math.pi], [math.pi, 2.2, 2.9], [0.6, 0.4, 0.5]])
+    _, shipped = loaded_contact(FINGERTIP_SENSOR, DEVICE, angles)
+    push = spring_forces(DEVICE, cable_lengths(DEVICE, angles)).max(axis=-1)
+    weak = _with(DEVICE, "servo", stall_torque=(push.max() + 0.2) * DEVICE.device.pulley_radius)
+    pose, capped = loaded_contact(FINGERTIP_SENSOR, weak, angles)
+    rigid = forward_kinematics(DEVICE, angles)
+    give = np.sum((rigid.centroid - pose.centroid) * rigid.normal, axis=-1)
+    along = np.sum(capped[:, :3] * rigid.normal, axis=-1)
+    shipped_along = np.sum(shipped[:, :3] * rigid.normal, axis=-1)
+    # the two hard presses stall: each cable at the stall, F / 3 = H + k_s s (H the headroom over the spring)
+    assert shipped_along[:2].min() > 3 * 0.2 * 2 and np.all(along[:2] < shipped_along[:2])
+    assert along[:2] == pytest.approx(3 * (weak.stall_tension - push[:2] + DEVICE.springs.stiffness * give[:2]),
+                                      rel=1e-9)
+    # the light press stays below the stall and renders as on the shipped servos
+    assert 0 < shipped_along[2] < 3 * (weak.stall_tension - push[2])
+    assert np.allclose(capped[2], shipped[2], rtol=1e-12, atol=0)
+
+
+# every value a device file documents, as dotted keys with a changed value that keeps the device valid
+DOCUMENTED = {
+    "device.attachment_radius": 0.013, "device.attachment_angles_deg": (80.0, 210.0, 330.0),
+    "device.pulley_radius": 0.00095, "device.released_length": 0.0165, "device.max_tilt_deg": 5.0,
+    "servo.angle_max_deg": 170.0, "servo.command_rate_hz": 40.0, "servo.slew_deg_per_s": 500.0,
+    "servo.resolution_deg": 0.6, "servo.stall_torque": 0.0035, "springs.stiffness": 150.0,
+    "springs.free_length": 0.024, "cables.stiffness": 500.0, "finger.centre": (0.0, 0.0, -0.0088),
+}
+
+
+def _behaviour(device) -> np.ndarray:
+    """What a device does, in numbers: loaded presses on the FS (hard, tilted, light), the servos'
+    response to commands, a move's time and which tilted configurations it reaches."""
+    angles = np.array([[math.pi, math.pi, math.pi], [math.pi, 2.2, 2.9], [1.6, 1.2, 1.4], [3.0, 0.0, 3.0]])
+    _, wrench = loaded_contact(FINGERTIP_SENSOR, device, np.clip(angles, 0, device.angle_max))
+    commands = np.tile(np.radians([[170.0, 10.0, 95.0]]), (120, 1))
+    return np.concatenate([wrench.ravel(), servo_angles(device, np.zeros(3), commands, 1000.0).ravel(),
+                           np.ravel(move_time(device, np.zeros(3), np.full(3, math.pi))),
+                           reachable(device, angles).astype(float), quantised(device, np.full(3, 4.0))])
+
+
+def test_documented_device_values_are_the_file_s_keys():
+    sections = tomllib.loads(DEVICE_FILE.read_text())
+    keys = {f"{section}.{key}" for section, values in sections.items() if section != "fit" for key in values}
+    assert keys - {"device.name"} == set(DOCUMENTED)
+
+
+@pytest.mark.parametrize("key", list(DOCUMENTED))
+def test_every_documented_device_value_reaches_the_computation(key):
+    # on servos that stall under the hardest presses, so the stall torque and the springs' preload act too
+    weak = _with(DEVICE, "servo", stall_torque=0.003)
+    section, _, name = key.partition(".")
+    changed = _with(weak, section, **{name: DOCUMENTED[key]})
+    assert not np.allclose(_behaviour(changed), _behaviour(weak), rtol=1e-9, atol=0)

@@ -289,6 +289,37 @@ def test_presses_recover_the_users_modulus_and_the_force_model_renders_the_fs_fo
     assert np.median(np.abs(np.linalg.norm(plain[ok, :3], axis=1) / fs_force[ok] - 1)) > 0.2
 
 
+def test_presses_read_with_the_cables_give_recover_the_modulus_on_the_compliant_device():
+    from softtip.mechanics.plate_contact import PlateContactLaw
+    from softtip.systems.haptics.fingertips import loaded_contact
+    from softtip.systems.haptics.personalisation import fit_presses, personalise_force_model, press_configurations
+
+    # the shipped device: its cables and springs give way under a press, F / 3(k_c + k_s)
+    softer = Fingertip(name="soft 7 mm", radius=7e-3, contact=PlateContactLaw(law="hertz", youngs_modulus=0.5e6))
+    presses = press_configurations(DEVICE, softer.radius)
+    read = sensed_contact(DEVICE, softer, presses, CollectionSettings(), None)
+    rigid = fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, saturated=read.saturated)
+    compliant = fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, saturated=read.saturated,
+                            cables="compliant")
+    # the rigid kinematics overstate each press's depth by the give, so the fitted pad is too soft
+    assert compliant.youngs_modulus == pytest.approx(0.5e6, rel=1e-6)
+    assert 0.39 < rigid.youngs_modulus / 0.5e6 < 0.41  # measured 0.402: the give is 31-47 % of each rigid depth
+    assert np.allclose(rigid.depths - compliant.depths, -read.platform_wrenches[:, 2] / (3 * (436.8 + 200.0)),
+                       rtol=1e-9)
+    # placed with the give, the loaded platform renders the FS's force on the user
+    grid = motor_grid(DEVICE, 7)
+    fs = sensed_contact(DEVICE, FINGERTIP_SENSOR, grid, CollectionSettings(), None)
+    personal = personalise_force_model(DEVICE, grid, fs.finger_wrenches, FINGERTIP_SENSOR.radius, softer.radius,
+                                       compliant, cables="compliant")
+    _, wrench = loaded_contact(softer, DEVICE, personal.motor_inputs)
+    fs_force = np.linalg.norm(fs.finger_wrenches[:, :3], axis=1)
+    ok = ~personal.outside & (fs_force > 0.1) & ~fs.saturated
+    assert ok.sum() > 30
+    assert np.allclose(np.linalg.norm(wrench[ok, :3], axis=1), fs_force[ok], rtol=1e-6)
+    with pytest.raises(ValueError, match="cables = 'stiff': expected one of rigid, compliant"):
+        fit_presses(DEVICE, presses, read.platform_wrenches, softer.radius, cables="stiff")
+
+
 def test_presses_that_never_touch_are_refused():
     from softtip.systems.haptics.personalisation import fit_presses
 

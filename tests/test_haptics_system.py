@@ -104,7 +104,7 @@ def test_the_report_compares_with_the_published_directions(coarse_protocol, coar
     scale = [c for c in tables["The experiment's scale: the figures the device's unknowns are fitted to"].comparisons()]
     assert {c.verdict for c in scale} <= {"fitted", "outside"} and len(scale) == 2  # no small sphere in this run
     assert scale[0].value == pytest.approx(outcome.results["target_force_N"]["mean"])
-    # the servos' stall, not modelled, is shown to be far from what the cables carry
+    # the servos' stall (modelled: device tests) is shown to be far from what the cables carry in the study
     servos = tables["Where softtip's procedure departs from the published one"].cells[("servos", "softtip")]
     stall = device.servo.stall_torque / device.device.pulley_radius
     tension = float(servos.split("test fingertips is ")[1].split(" N")[0])
@@ -169,12 +169,15 @@ def test_the_sweeps_rerun_the_datasets_study(coarse_protocol, coarse_dataset):
     titles = [table.title for table in outcome.tables]
     assert any(title.startswith("Rendering error against n") for title in titles)
     assert any(title.startswith("How the methods' ranking depends on the finger") for title in titles)
+    assert any(title.startswith("Ablations") for title in titles) and "ablations" in outcome.results
 
 
 def test_no_sweep_without_its_settings(coarse_protocol):
-    bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"])
+    bare = coarse_protocol.changed(curve_n_neighbours=[], curve_fs_levels=[], fingertips=["FS cast (7.5 mm)"],
+                                   ablations=False)
     outcome = haptics(bare, 3, SILENT)
     assert "error_curves" not in outcome.results and "sensitivity" not in outcome.results
+    assert "ablations" not in outcome.results and not any(t.title.startswith("Ablations") for t in outcome.tables)
     assert len(outcome.figures) == 2  # the box plots and A's two variants
     assert any(note.startswith("No sensitivity study") for note in outcome.notes)
 
@@ -196,14 +199,17 @@ def test_bad_protocols_are_refused_in_one_line(tmp_path):
              ({"parameters": {"ds_torque_length_m": 0.0}}, "ds_torque_length_m = 0"),
              ({"parameters": {"robustness_seeds": [2, 2]}}, "robustness_seeds = .*each value once"),
              ({"parameters": {"robustness_sigmas": 4.0}}, "robustness_sigmas"),
-             ({"device": "missing.toml"}, "missing.toml")]
+             ({"parameters": {"fs_levels": 1000}}, r"fs_levels = 1000: expected an integer from 2 to 31 \(a table"),
+             ({"parameters": {"ablations": "yes"}}, "ablations = 'yes': expected true or false"),
+             ({"device": "missing.toml"}, "missing.toml"),
+             ({"fingertip_files": ["f.toml"] * 13}, "fingertip_files = 13: expected at most 12 fingertip files")]
     for extra, word in cases:
         with pytest.raises(ValueError, match=word) as raised:
             protocol_from_dict(base | extra, "test", tmp_path)
         assert "\n" not in str(raised.value)
     broken = tmp_path / "device.toml"
     broken.write_text((SYSTEM.files() / "device.toml").read_text().replace("pulley_radius = 0.00092997",
-                                                                           "pulley_radius = 0.2"))
+                                                                           "pulley_radius = 0.05"))
     with pytest.raises(ConfigError, match="released_length"):
         protocol_from_dict(base | {"device": "device.toml"}, "test", tmp_path)
 

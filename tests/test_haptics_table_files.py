@@ -17,7 +17,7 @@ from pyarrow import parquet
 from typer.testing import CliRunner
 
 from softtip.cli.main import app
-from softtip.systems.haptics.collection import CollectionSettings, sensed_contact
+from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import forward_kinematics, load_device
 from softtip.systems.haptics.fingertip_file import FingertipFileError, load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, finger_wrench
@@ -66,7 +66,7 @@ def test_a_parquet_table_with_torques_and_the_ds_reads_back_as_written(tmp_path)
     ("fx_N,fy_N,fz_N,tz_Nm,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0,0\n1,1,1,1,1,1,1\n", "missing column tx_Nm"),
     ("fx_N,fy_N,fz_N,ds_fx_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0,0\n1,1,1,1,1,1,1\n",
      "missing column ds_fy_N"),
-    ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n", "1 rows, expected at least 2"),
+    ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n", "1 rows, expected 2 to 29791 entries"),
     ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,inf,1,1,1,1\n", "column fy_N, row 1"),
     ("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n0,0,0,0,0,0\n1,1,1,1,x,1\n", "column motor2_rad: expected"),
     ("fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n0,0,0,0,0,0\n1,1,1,1,1,181\n",
@@ -82,6 +82,18 @@ def test_bad_table_files_are_refused_in_one_line(tmp_path, text, words):
             as refused:
         read_table(path, DEVICE).renderer()
     assert "\n" not in str(refused.value)
+
+
+def test_a_table_larger_than_the_largest_fs_table_is_refused_before_it_is_read_further(tmp_path):
+    # 31³ rows is the largest FS table --fs-levels collects: one more is refused as --fs-levels 32 is
+    rows = np.arange(31**3 + 1)
+    path = tmp_path / "huge.csv"
+    path.write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n" + "".join(f"0,0,{k},0,0,1\n" for k in rows))
+    with pytest.raises(TableFileError, match=r"29792 rows, expected 2 to 29791 entries \(the largest FS table, "
+                                             r"--fs-levels 31\)"):
+        read_table(path, DEVICE)
+    path.write_text("fx_N,fy_N,fz_N,motor1_rad,motor2_rad,motor3_rad\n" + "".join(f"0,0,{k},0,0,1\n" for k in rows[1:]))
+    assert len(read_table(path, DEVICE).motor_inputs) == 31**3
 
 
 def test_the_exported_csv_reads_back_into_the_same_renderer(tmp_path):
@@ -263,6 +275,100 @@ def test_a_protocol_takes_fingertip_files_and_a_recorded_fs_table(tmp_path):
         mine, cast = (found.column("fingertip") == "mine") & (methods == method), rows & (methods == method)
         for motor in ("motor1_rad", "motor2_rad", "motor3_rad"):
             assert np.array_equal(found.column(motor)[mine], found.column(motor)[cast])
+
+
+def test_an_exported_fs_table_feeds_a_protocol_that_renders_as_the_simulated_one(tmp_path):
+    from softtip.lab import run_protocol
+
+    exported = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "fs.h"), "--fs-table",
+                                   str(tmp_path / "fs.csv"), "--fs-levels", "7", "--seed", "3", "--json"])
+    assert exported.exit_code == 0, exported.output
+    table = read_table(tmp_path / "fs.csv", DEVICE)
+    assert table.merged == 0 and table.platform_wrenches is not None and table.wrenches.shape[1] == 6
+    # the header is the renderer on that same table
+    assert json.loads(exported.stdout)["entries"] == len(NearestNeighbourRenderer().fit(table.wrenches,
+                                                                                         table.motor_inputs).features_)
+    expected, _ = run_protocol(_protocol(tmp_path))
+    found, _ = run_protocol(_protocol(tmp_path, fs_table="fs.csv"))
+    # the researcher's round trip: the study on the exported table renders exactly as on its own collection
+    assert np.array_equal(found.column("error_N"), expected.column("error_N"))
+    assert np.array_equal(found.column("motor1_rad"), expected.column("motor1_rad"))
+    refused = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "b.h"), "--fs-table",
+                                  str(tmp_path / "b.csv"), "--method", "geometric"])
+    assert refused.exit_code == 2 and "--fs-table with --method = 'geometric'" in refused.stderr
+    plain = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "c.h"), "--csv", str(tmp_path / "c.csv")])
+    assert plain.exit_code == 0
+    refused = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "d.h"), "--table",
+                                  str(tmp_path / "c.csv"), "--fs-table", str(tmp_path / "d.csv")])
+    assert refused.exit_code == 2 and "has no DS readings" in refused.stderr and not (tmp_path / "d.h").exists()
+
+
+_WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm")
+
+
+def _imported_fs_table(tmp_path, labels: bool = True):
+    """The study's 7³ FS table at seed 3 logged as a rig would (two log files, one per trial) and brought in
+    by ``softtip import``: the FS's forces as an "other" chip, and with ``labels`` every table column as a label."""
+    from softtip.systems.haptics.study import fs_table
+
+    fs = fs_table(DEVICE, 7, CollectionSettings(), 3)
+    names = [*_WRENCH, *(f"ds_{n}" for n in _WRENCH), "motor1_rad", "motor2_rad", "motor3_rad"]
+    values = np.hstack([fs.finger_wrenches, fs.platform_wrenches, fs.motor_inputs])
+    half = len(values) // 2
+    for name, rows, start in (("a.csv", values[:half], 0), ("b.csv", values[half:], half)):
+        (tmp_path / name).write_text("t," + ",".join(names) + "\n" + "".join(
+            f"{(start + k) * 0.01!r}," + ",".join(map(repr, map(float, row))) + "\n" for k, row in enumerate(rows)))
+    units = {"N": "N", "Nm": "Nm", "rad": "rad"}
+    columns = ", ".join(f'{n} = {{ column = "{n}", unit = "{units[n.rsplit("_", 1)[1]]}" }}' for n in names)
+    (tmp_path / "map.toml").write_text(
+        '[sensor]\ntime = "t"\nchip = "other"\nname = "fs"\nunit = "N"\nchips = [["fx_N", "fy_N", "fz_N"]]\n'
+        + (f"[labels]\ncolumns = {{ {columns} }}\n" if labels else "")
+        + '[trials]\nsplit = "file"\nvalidation = { last = 1 }\nbaseline = { samples = 1 }\n')
+    made = runner.invoke(app, ["import", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "-m",
+                               str(tmp_path / "map.toml"), "-o", str(tmp_path / "imported.parquet"), "--force"])
+    assert made.exit_code == 0, made.output
+    return fs, tmp_path / "imported.parquet"
+
+
+def test_a_table_brought_in_by_softtip_import_is_a_table_file(tmp_path):
+    fs, imported = _imported_fs_table(tmp_path)
+    # as a protocol's fs_table: exactly the collection it was logged from, so the study renders as on it
+    recorded = _protocol(tmp_path, fs_table="imported.parquet").design.fs
+    for name in ("finger_wrenches", "platform_wrenches", "motor_inputs"):
+        assert np.array_equal(getattr(recorded, name), getattr(fs, name)), name
+    # and for --table: the renderer on the dataset is the renderer on the collection
+    result = runner.invoke(app, ["haptics", "table", "export", str(tmp_path / "t.h"), "--table", str(imported),
+                                 "--csv", str(tmp_path / "t.csv"), "--json"])
+    assert result.exit_code == 0, result.output
+    direct = NearestNeighbourRenderer().fit(fs.finger_wrenches, fs.motor_inputs)
+    assert np.array_equal(read_table(tmp_path / "t.csv").wrenches, direct.features_)
+    # a dataset is verified as every dataset is: one flipped byte is refused in one line naming the file
+    damaged = tmp_path / "damaged.parquet"
+    content = bytearray(imported.read_bytes())
+    content[len(content) // 3] ^= 0x01
+    damaged.write_bytes(bytes(content))
+    with pytest.raises(TableFileError, match=f"table file {damaged}: ") as refused:
+        read_table(damaged, DEVICE)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_dataset_without_the_table_s_labels_is_refused_naming_the_fix(tmp_path):
+    from softtip.data import DatasetMetadata, TrialWriter
+
+    _, imported = _imported_fs_table(tmp_path, labels=False)
+    with pytest.raises(TableFileError, match=r"missing column fx_N .*; a softtip dataset holds them as labels of "
+                                             r"these names: softtip import \.\.\. --label fx_N=COLUMN:N"):
+        read_table(imported, DEVICE)
+    # a label whose unit is not its name's is refused: the name is what the reader trusts
+    writer = TrialWriter({"fs0_x_N": "N"}, labels={"fx_N": "g", "fy_N": "N", "fz_N": "N", "motor1_rad": "rad",
+                                                   "motor2_rad": "rad", "motor3_rad": "rad"},
+                         metadata=DatasetMetadata(seed=0))
+    ramp = np.linspace(0, 1, 10)
+    writer.add({"time_s": ramp, "fs0_x_N": ramp, "fx_N": ramp, "fy_N": ramp, "fz_N": ramp, "motor1_rad": ramp,
+                "motor2_rad": ramp, "motor3_rad": ramp})
+    writer.write(tmp_path / "grams.parquet")
+    with pytest.raises(TableFileError, match="grams.parquet: label fx_N is declared in g, expected N as its name says"):
+        read_table(tmp_path / "grams.parquet", DEVICE)
 
 
 @pytest.mark.parametrize(("top", "words"), [

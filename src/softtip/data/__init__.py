@@ -21,6 +21,7 @@ from softtip.data.dataset import (
     DatasetMetadata,
     TrialWriter,
     concat,
+    is_dataset_file,
     subtract_trial_baseline,
 )
 from softtip.data.splits import (
@@ -46,6 +47,7 @@ __all__ = [
     "channel_name",
     "channel_names",
     "concat",
+    "is_dataset_file",
     "kfold_by_trial",
     "leave_condition_out",
     "read_columns",

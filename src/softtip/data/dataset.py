@@ -565,6 +565,15 @@ class Dataset:
         return dataset
 
 
+def is_dataset_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a Parquet file that says it is a softtip dataset (its metadata entry), to be
+    read by :meth:`Dataset.read`, which verifies it; False for any other file or none."""
+    try:
+        return METADATA_KEY in (pq.read_schema(path).metadata or {})
+    except (pa.ArrowException, OSError):
+        return False
+
+
 def _checksum_place(content: bytes | bytearray, digest: str) -> slice | None:
     """Where the document's checksum ``digest`` is written in the file ``content`` (its last
     occurrence: the document is in the footer), or None."""

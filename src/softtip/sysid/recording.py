@@ -33,13 +33,13 @@ from softtip._core.config import OpenFraction, PositiveNumber, checked
 from softtip._core.files import not_a_file
 from softtip.data.csvload import parse_numbers, read_csv_table
 from softtip.data.dataset import (
-    METADATA_KEY,
     TIME,
     TRIAL,
     Dataset,
     DatasetError,
     column_to_numpy,
     first_line,
+    is_dataset_file,
     require_columns,
     trial_runs,
 )
@@ -434,13 +434,6 @@ def _parquet_columns(path: Path, wanted: list[str]) -> dict[str, np.ndarray]:
     return values
 
 
-def _is_dataset_file(path: Path) -> bool:
-    try:
-        return METADATA_KEY in (pq.read_schema(path).metadata or {})
-    except (pa.ArrowException, OSError):
-        return False
-
-
 def _suffix(path: Path) -> str:
     problem = not_a_file(path)
     if problem:
@@ -491,7 +484,7 @@ def read_recording(path: str | os.PathLike, inputs: Sequence[str], outputs: Sequ
     whitespace = text_columns(path, names, None if suffix in WHITESPACE else ",") \
         if suffix in WHITESPACE or (suffix == ".csv" and names is not None) else None
     present = list(whitespace) if whitespace is not None else file_columns(path, names)
-    if suffix == ".parquet" and _is_dataset_file(path):
+    if suffix == ".parquet" and is_dataset_file(path):
         if time_column is not None or trial_column is not None or units is not None or resample is not None \
                 or missing is not None:
             raise DatasetError(f"{path}: a softtip dataset names its own time, trial and units, and is evenly sampled")

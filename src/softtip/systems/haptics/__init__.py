@@ -33,7 +33,7 @@ SYSTEM = System(
               "S3: standard and personalised (data-driven A, geometric B) rendering errors on six test fingertips",
               quick={"curve_n_neighbours": [1, 8], "curve_weighting_powers": [1.0], "curve_fs_levels": [7, 13],
                      "curve_user_levels": [7], "variations": ["as published", "human pads half as stiff"],
-                     "robustness_seeds": [2], "robustness_sigmas": 0.0}),
+                     "robustness_seeds": [2], "robustness_sigmas": 0.0, "ablations": False}),
     ),
     bench_commands={"haptics": "softtip.systems.haptics.commands:bench_haptics"},
     commands={"haptics": "softtip.systems.haptics.commands:app"},

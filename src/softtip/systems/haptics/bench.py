@@ -14,8 +14,8 @@ table, or the sensor under the test fingertip saturated). Conditions: ``target_f
 ``target_t{x|y|z}_Nm`` (the FS's reading of the target). The collection times and each fingertip's
 personalisation figures are in the metadata's ``sensor_settings``.
 
-The ``curve_*``, ``variations`` and ``robustness_*`` parameters are not the dataset's: the report
-(:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`).
+The ``curve_*``, ``variations``, ``robustness_*`` and ``ablations`` parameters are not the dataset's: the
+report (:mod:`.report`) reruns the simulated study over them (:mod:`.sensitivity`, :mod:`.ablation`).
 """
 
 from __future__ import annotations
@@ -27,19 +27,29 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from softtip._core.config import (PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
+from softtip._core.config import (Flag, PositiveNumber, Refusal, Text, choice, expect, integer, number, refused,
                                   schema)
 from softtip._core.files import not_a_file
 from softtip._core.progress import Progress
 from softtip.data import Dataset, DatasetMetadata, TrialWriter
 from softtip.lab.bench import RealismTable, SeededBench
-from softtip.lab.protocols import BenchKind, Protocol, protocol_file_schema
+from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.haptics.collection import Collection, CollectionSettings, collection_duration
 from softtip.systems.haptics.device import DEVICE_FILE, DeviceError, DeviceSpec, load_device
 from softtip.systems.haptics.fingertip_file import load_fingertip
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS, Fingertip
-from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS
+from softtip.systems.haptics.limits import (
+    LEVELS_EXPECTED,
+    MAX_FINGERTIP_FILES,
+    MAX_FS_LEVELS,
+    MAX_NEIGHBOURS,
+    MAX_SIMULATED_PRESSES,
+    MAX_TABLE_ENTRIES,
+    MAX_TARGET_DRAWS,
+    MAX_TARGETS,
+)
+from softtip.systems.haptics.personalisation import DATA_DRIVEN_VARIANTS, PRESS_DEPTHS
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, WeightingPower
 from softtip.systems.haptics.sensitivity import CURVES, DEFAULT_VARIATIONS, VARIATION_NAMES, FingerVariation
 from softtip.systems.haptics.study import METHODS, StudySettings, run_study
@@ -62,7 +72,7 @@ _STUDY, _COLLECTION = StudySettings(), CollectionSettings()
 CURVE_SETTINGS = {"curve_n_neighbours": "n_neighbours", "curve_weighting_powers": "weighting_power",
                   "curve_fs_levels": "fs_levels", "curve_user_levels": "user_levels"}
 _CURVES = dict(CURVES)
-NeighbourCounts = Annotated[list[integer(1, 64)], expect("a list of integers 1..64")]
+NeighbourCounts = Annotated[list[integer(1, MAX_NEIGHBOURS)], expect(f"a list of integers 1..{MAX_NEIGHBOURS}")]
 WeightingPowers = Annotated[list[WeightingPower], expect("a list of numbers from 0 to 4")]
 FsLevels = Annotated[list[integer(2, 21)], expect("a list of integers 2..21")]
 UserLevels = Annotated[list[integer(2, 13)], expect("a list of integers 2..13")]
@@ -75,15 +85,15 @@ class HapticsParameters:
     """The ``[parameters]`` table of the haptics protocol (S3; units in the names). ``trials``: the
     target sensations (one trial each); the table sizes are levels per servo (13 → 13³)."""
 
-    trials: integer(2) = _STUDY.targets
-    fs_levels: integer(2) = _STUDY.fs_levels
-    user_levels: integer(2) = _STUDY.user_levels
-    adaptive_budget: integer(27) = _STUDY.adaptive_budget
-    n_neighbours: integer(1) = _STUDY.n_neighbours
+    trials: integer(2, MAX_TARGETS) = _STUDY.targets
+    fs_levels: integer(2, MAX_FS_LEVELS, LEVELS_EXPECTED) = _STUDY.fs_levels
+    user_levels: integer(2, MAX_FS_LEVELS, LEVELS_EXPECTED) = _STUDY.user_levels
+    adaptive_budget: integer(27, MAX_TABLE_ENTRIES) = _STUDY.adaptive_budget
+    n_neighbours: integer(1, MAX_NEIGHBOURS) = _STUDY.n_neighbours
     weighting_power: WeightingPower = _STUDY.weighting_power
     light_force_N: PositiveNumber = _STUDY.light_force
     contact_threshold_N: PositiveNumber = CONTACT_THRESHOLD
-    target_draws: integer(1) = _STUDY.target_draws
+    target_draws: integer(1, MAX_TARGET_DRAWS) = _STUDY.target_draws
     data_driven: choice(*DATA_DRIVEN_VARIANTS) = _STUDY.data_driven
     ds_torque_length_m: PositiveNumber = _STUDY.torque_length
     hold_s: PositiveNumber = _COLLECTION.hold_s
@@ -96,6 +106,7 @@ class HapticsParameters:
     variations: Variations = field(default_factory=lambda: list(VARIATION_NAMES))
     robustness_seeds: RobustnessSeeds = field(default_factory=lambda: [2, 3])
     robustness_sigmas: number("a number of standard deviations from 0 to 3", ge=0, le=3) = 1.0
+    ablations: Flag = True
 
     def __post_init__(self) -> None:
         for key in ("fingertips", *CURVE_SETTINGS, "variations", "robustness_seeds"):
@@ -211,6 +222,9 @@ def _device(file: _HapticsProtocolFile, parameters: HapticsParameters, source: s
         path = Path(name)
         return path if path.is_absolute() or base is None else base / path
 
+    if len(file.fingertip_files) > MAX_FINGERTIP_FILES:
+        raise refused(f"expected at most {MAX_FINGERTIP_FILES} fingertip files (each a whole fingertip's tables and "
+                      "renderings)", source, "fingertip_files", value=len(file.fingertip_files))
     setup = device_from_file("shipped" if file.device == "shipped" else located(file.device))
     fingertips = tuple(load_fingertip(located(name)) for name in file.fingertip_files)
     names = [*parameters.fingertips, *(f.name for f in fingertips)]
@@ -280,7 +294,19 @@ def _bench(protocol: Protocol, progress: Progress, timings: dict) -> tuple[Hapti
                        f"methods on {protocol.design.name}")
 
 
+def haptics_size(protocol: str, p: HapticsParameters) -> Size:
+    """The configurations the protocol's run drives and reads on the simulated device: the FS table, the
+    random draws for targets, and per fingertip its user table, the adaptive table's candidates (the FS
+    table's grid), its presses and every target rendered by every method."""
+    fingertips = len(p.fingertips)
+    presses = (p.fs_levels**3 + p.target_draws
+               + fingertips * (p.user_levels**3 + p.fs_levels**3 + len(PRESS_DEPTHS) + p.trials * len(METHODS)))
+    return Size(presses, MAX_SIMULATED_PRESSES, "simulated presses",
+                f"fs_levels³ + target_draws + fingertips x (user_levels³ + fs_levels³ + {len(PRESS_DEPTHS)} presses "
+                f"+ trials x {len(METHODS)} methods)")
+
+
 BENCH = BenchKind(
     protocol_file=_HapticsProtocolFile, parameters={"haptics": HapticsParameters}, runners={"haptics": haptics},
-    device=_device, setup=_bench, realism_sources={}, viscoelastic_sources={})
+    device=_device, setup=_bench, realism_sources={}, viscoelastic_sources={}, size=haptics_size)
 

@@ -13,12 +13,11 @@ from rich.table import Table
 
 from softtip._core.files import atomic_write
 from softtip.cli.common import check_output, check_outputs, claimed, console, fail, progress_for
+from softtip.systems.haptics.limits import DURATION_EXPECTED, LEVELS_EXPECTED, MAX_DURATION_S, MAX_FS_LEVELS
 
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
 RENDER_P99_TARGET_S, TABLE_BUILD_TARGET_S, REPRODUCE_TARGET_S = 50e-6, 0.1, 30.0
-MAX_DURATION_S = 3600.0
-MAX_FS_LEVELS = 31  # 29,791 configurations: a real collection of about nine hours
 
 
 def _finite_positive(value: float | None, option: str) -> None:
@@ -146,8 +145,7 @@ def _check_choices(method: str, fs_levels: int, seed: int) -> None:
     if method not in ("standard", "geometric"):
         fail(f"--method = {method!r}: expected standard or geometric")
     if not 2 <= fs_levels <= MAX_FS_LEVELS:
-        fail(f"--fs-levels = {fs_levels}: expected an integer from 2 to {MAX_FS_LEVELS} (a table of levels³ "
-             "configurations)")
+        fail(f"--fs-levels = {fs_levels}: expected {LEVELS_EXPECTED}")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
 
@@ -207,7 +205,7 @@ def render(
     # every option checked before the renderer's modules load (they take seconds on a busy machine)
     _finite_positive(duration, "--duration")
     if duration is not None and duration > MAX_DURATION_S:
-        fail(f"--duration = {duration}: expected at most {MAX_DURATION_S:g} s (the sequence is built in memory)")
+        fail(f"--duration = {duration}: expected {DURATION_EXPECTED}")
     _check_choices(method, fs_levels, seed)
     if foxglove_port is not None and not 0 < foxglove_port < 65536:
         fail(f"--foxglove-port = {foxglove_port}: expected a port from 1 to 65535")
@@ -282,38 +280,72 @@ def export_table(
     table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet) instead of a "
                                                           "simulated FS table."),
     fs_levels: int = typer.Option(13, "--fs-levels", help="Simulated FS table levels per servo, without --table."),
-    seed: int = typer.Option(1, "--seed", help="Seed of the simulated table collection."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the simulated table collection (the study's at that seed)."),
+    fs_table_file: Path = typer.Option(None, "--fs-table", help="Also write the FS table as collected, one row per "
+                                                                "configuration (.csv): the FS's wrench, the DS's "
+                                                                "(ds_*) and the motor inputs in rad, what a haptics "
+                                                                "protocol's fs_table reads (--method standard)."),
     force: bool = typer.Option(False, "--force", help="Replace output files that exist."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Write a lookup table for a device's firmware: the renderer's entries (forces in N, motor inputs
-    in degrees) as a C header of const arrays with its settings as macros, and with --csv as a CSV."""
+    in degrees) as a C header of const arrays with its settings as macros, and with --csv as a CSV;
+    with --fs-table, the FS table itself for a protocol's ``fs_table``."""
     _check_choices(method, fs_levels, seed)
     from softtip.systems.haptics.bench import device_from_file
-    from softtip.systems.haptics.table_files import c_header, read_table, write_table_csv
+    from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+    from softtip.systems.haptics.table_files import c_header, read_table, write_fs_table_csv, write_table_csv
 
     inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]
     if header.suffix != ".h":
         fail(f"header = {header}: expected a C header file name ending in .h")
-    if csv_file is not None and csv_file.suffix.lower() != ".csv":
-        fail(f"--csv = {csv_file}: expected a file name ending in .csv")
-    check_outputs([("header", header), ("--csv", csv_file)], inputs, force=force)
+    for option, path in (("--csv", csv_file), ("--fs-table", fs_table_file)):
+        if path is not None and path.suffix.lower() != ".csv":
+            fail(f"{option} = {path}: expected a file name ending in .csv")
+    if fs_table_file is not None and method != "standard":
+        fail(f"--fs-table with --method = {method!r}: expected --method standard (a protocol's fs_table is the FS's "
+             "own collection, which the study personalises)")
+    check_outputs([("header", header), ("--csv", csv_file), ("--fs-table", fs_table_file)], inputs, force=force)
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
     table = read_table(table_file, device) if table_file else None
-    renderer, out_of_reach = _renderer(device, table.renderer() if table else None, fs_levels,
-                                       np.random.default_rng(seed), method, finger, progress_for(json_output))
+    if table is not None and fs_table_file is not None and table.platform_wrenches is None:
+        fail(f"--fs-table: the table file {table_file} has no DS readings (ds_fx_N ... ds_tz_Nm), which a protocol's "
+             "fs_table needs")
+    collected = None if table else _study_fs_table(device, fs_levels, seed, progress_for(json_output))
+    indexed = (table.renderer() if table else
+               NearestNeighbourRenderer().fit(collected.finger_wrenches, collected.motor_inputs))
+    renderer, out_of_reach = _renderer(device, indexed, fs_levels, np.random.default_rng(seed), method, finger,
+                                       progress_for(json_output))
     source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
     provenance = (f"{source} on {device.device.name}, {method}"
                   + (f" for {finger.name}" if method == "geometric" else ""))
     atomic_write(header, c_header(renderer, "SOFTTIP_HAPTICS_TABLE_H", provenance.replace("*/", "* /")))
     if csv_file is not None:
         write_table_csv(csv_file, renderer)
-    summary = {"header": str(header), "csv": str(csv_file) if csv_file else None, "entries": len(renderer.features_),
+    if fs_table_file is not None:
+        write_fs_table_csv(fs_table_file, *((table.wrenches, table.platform_wrenches, table.motor_inputs) if table
+                                            else (collected.finger_wrenches, collected.platform_wrenches,
+                                                  collected.motor_inputs)))
+    summary = {"header": str(header), "csv": str(csv_file) if csv_file else None,
+               "fs_table": str(fs_table_file) if fs_table_file else None, "entries": len(renderer.features_),
                "file_rows_merged": table.merged if table is not None else 0,
                "entries_out_of_reach": out_of_reach, "provenance": provenance}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
     console.print(f"{summary['entries']} entries (those without contact as one) written to {header}"
-                  + (f" and {csv_file}" if csv_file else "") + f": {provenance}")
+                  + (f" and {csv_file}" if csv_file else "") + (f"; the FS table to {fs_table_file}" if fs_table_file
+                                                                else "") + f": {provenance}")
+
+
+def _study_fs_table(device, fs_levels: int, seed: int, progress):
+    """The FS table the study collects on ``device`` at ``seed`` (its own noise stream, the protocol's
+    default hold and window): a protocol reading it as its fs_table renders as one simulating it."""
+    from softtip.systems.haptics.collection import CollectionSettings
+    from softtip.systems.haptics.study import fs_table
+
+    with progress.task("haptics: FS table", total=1) as task:
+        collected = fs_table(device, fs_levels, CollectionSettings(), seed)
+        task.advance()
+    return collected

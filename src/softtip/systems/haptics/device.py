@@ -17,12 +17,17 @@ The servos take position commands at their frame rate (50 Hz), resolve them to t
 move at a finite slew rate (:func:`servo_angles`). The springs round the cables push the platforms
 apart; with the contact wrench on the platform, the cables' tensions follow from the platform's
 balance in z and in moment about x and y (:func:`cable_tensions`): a cable whose tension would be
-negative is slack, and one beyond the servo's stall torque cannot be held.
+negative is slack.
 
 Each cable, with its knots and the servo horn's give, is a spring in series (``[cables] stiffness``):
-under the contact's load it stretches, so a pressing platform sits lower than its kinematics say.
-:func:`loaded_pose` solves that balance with the contact; :func:`forward_kinematics` is the
-unloaded, rigid-cable pose every method's model uses.
+under the contact's load it stretches, so a pressing platform sits lower than its kinematics say, and
+the spring round it, lengthened as much, pushes less (``[springs] stiffness`` adds to the cable's).
+A servo holds at most its stall torque over the pulley's radius (:meth:`DeviceSpec.stall_tension`):
+beyond it the servo is driven back, the cable pays out and the platform stops short, so the force
+a platform renders is capped. :func:`loaded_pose` solves that balance with the contact;
+:func:`forward_kinematics` is the unloaded, rigid-cable pose every method's model uses. A device
+whose servos could not even hold their springs (the springs' push at the wound length beyond the
+stall tension) is refused when its file is read.
 """
 
 from __future__ import annotations
@@ -48,10 +53,15 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.errors import NotConverged
+from softtip.systems.haptics.limits import LOOP_RATE_HZ
 
 DEVICE_FILE = Path(__file__).with_name("device.toml")
 _TOLERANCE = 1e-9  # rad: rounding in the kinematics' inverse, far below a servo's dead band
 
+# a fingertip-mounted device is centimetres across: a length beyond this is a unit slip, refused before
+# the kinematics divide by it
+LARGEST_LENGTH = 0.1  # m
+Length = number(f"a length in m, above 0 and at most {LARGEST_LENGTH:g}", gt=0, le=LARGEST_LENGTH)
 Angles3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 angles in degrees")]
 Point3 = Annotated[tuple[Real, Real, Real], from_numpy, expect("3 coordinates (m)")]
 
@@ -69,10 +79,10 @@ class Geometry:
     """The cables' attachments and winding (m, degrees)."""
 
     name: Text
-    attachment_radius: PositiveNumber
+    attachment_radius: Length
     attachment_angles_deg: Angles3
-    pulley_radius: PositiveNumber
-    released_length: PositiveNumber
+    pulley_radius: Length
+    released_length: Length
     max_tilt_deg: number("an angle in degrees strictly between 0 and 90", gt=0, lt=90)
 
     def __post_init__(self) -> None:
@@ -87,10 +97,13 @@ class Geometry:
 
 @schema(section="servo", error=DeviceError)
 class Servo:
-    """A position servo: its range (degrees), command rate (Hz), slew (degrees/s), dead band and stall torque (N·m)."""
+    """A position servo: its range (degrees), command rate (Hz), slew (degrees/s), dead band and stall
+    torque (N·m), the most it holds: beyond it the servo is driven back (:func:`loaded_pose`)."""
 
     angle_max_deg: number("an angle in degrees, 0 < angle <= 360", gt=0, le=360)
-    command_rate_hz: PositiveNumber
+    # a servo reads at most one command a tick of the 1 kHz render loop (softtip.systems.haptics.limits)
+    command_rate_hz: number(f"a rate in Hz above 0 and at most the render loop's {LOOP_RATE_HZ:g}", gt=0,
+                            le=LOOP_RATE_HZ)
     slew_deg_per_s: PositiveNumber
     resolution_deg: PositiveNumber
     stall_torque: PositiveNumber
@@ -98,10 +111,12 @@ class Servo:
 
 @schema(section="springs", error=DeviceError)
 class Springs:
-    """The compression springs round the cables: stiffness (N/m) and free length (m)."""
+    """The compression springs round the cables: stiffness (N/m) and free length (m). Their push loads
+    the servos (:meth:`DeviceSpec.stall_tension`) and, as a pressed platform moves away, eases: they
+    stiffen the cables' give (:func:`loaded_pose`)."""
 
     stiffness: PositiveNumber
-    free_length: PositiveNumber
+    free_length: Length
 
 
 @schema(section="cables", error=DeviceError)
@@ -173,8 +188,18 @@ class DeviceSpec:
             raise Refusal(("springs", "free_length"),
                           f"expected above device.released_length = {self.device.released_length}: "
                           "released cables would go slack")
+        spring_push = self.springs.stiffness * (self.springs.free_length - wound)  # the most, at the wound length
+        if not spring_push < self.stall_tension:
+            held = spring_push * self.device.pulley_radius
+            raise Refusal(("servo", "stall_torque"),
+                          f"expected above {held:.3g} N m, what the spring's push at the wound cable length "
+                          f"({spring_push:.3g} N: springs.stiffness x compression) takes on the pulley: the servo "
+                          "could not hold its spring")
         if not -self.device.released_length < self.finger.centre[2] < 0:
             raise Refusal(("finger", "centre"), "expected the centre between the platforms (-released_length < z < 0)")
+        if not np.hypot(*self.finger.centre[:2]) <= self.device.attachment_radius:
+            raise Refusal(("finger", "centre"), "expected the centre inside the cables' circle (x² + y² <= "
+                                                "device.attachment_radius²)")
         for key in self.fit.parameters if self.fit else ():
             section, _, name = key.partition(".")
             if section not in {"device", "servo", "springs", "cables", "finger"} or not isinstance(
@@ -200,6 +225,11 @@ class DeviceSpec:
     def wound_length(self) -> float:
         """The cable length with the servo at its end (m): the mobile platform's highest."""
         return self.device.released_length - self.device.pulley_radius * math.radians(self.servo.angle_max_deg)
+
+    @property
+    def stall_tension(self) -> float:
+        """The most tension (N) a servo holds on its cable: its stall torque over the pulley's radius."""
+        return self.servo.stall_torque / self.device.pulley_radius
 
     @property
     def angle_max(self) -> float:
@@ -375,29 +405,43 @@ def cable_tensions(spec: DeviceSpec, angles, finger_wrench) -> np.ndarray:
     return spring_forces(spec, lengths) + np.linalg.solve(balance, load[..., None])[..., 0]
 
 
+def normal_give(spec: DeviceSpec, normal_force) -> np.ndarray:
+    """How far (m) the platform gives way along its normal under a normal force (N, (...)) while the
+    servos hold: F / 3(k_c + k_s), :func:`loaded_pose`'s balance below the stall."""
+    return np.asarray(normal_force, dtype=float) / (3.0 * (spec.cables.stiffness + spec.springs.stiffness))
+
+
 _GIVE_TOLERANCE = 1e-15  # m: the cables' give, far below a servo's dead band (microns of cable)
 _GIVE_ITERATIONS = 100
 
 
 def loaded_pose(spec: DeviceSpec, angles, contact) -> tuple[PlatformPose, np.ndarray]:
     """The platform's pose at servo ``angles`` (rad, (..., 3)) pressed on a finger, the cables
-    stretched by the contact, and the contact wrench there: ``contact(pose)`` gives the wrench
-    (..., 6) the platform applies to the finger. The three cables in parallel give way along the
-    platform's normal by F_n / (3k) (k = ``spec.cables.stiffness``), F_n the normal force there; the
-    springs' steady preload is part of the released length, and the platform keeps its tilt (the
-    contact's moment is left to the rigid balance, :func:`cable_tensions`). The give s solves
-    g(s) = s − F_n(s) / 3k = 0, g rising with s, bracketed by 0 and F_n(0) / 3k: the Illinois
+    stretched (and past their servos' stall, paid out) by the contact, and the contact wrench there:
+    ``contact(pose)`` gives the wrench (..., 6) the platform applies to the finger.
+
+    The platform gives way along its normal by s, keeping its tilt (the contact's moment is left to
+    the rigid balance, :func:`cable_tensions`), so the three cables share the normal force F_n(s)
+    alike: each holds F_n / 3 beyond its spring's preload, which is part of the released length.
+    Moving away, each cable stretches by s (tension k_c s, ``cables.stiffness``) and its spring
+    lengthens by s (its push eases by k_s s, ``springs.stiffness``) until a servo stalls: the
+    cable's tension can rise by at most H = T_stall − the largest spring push (the first servo to
+    stall stops the platform), and past it the servo pays cable out. So s solves
+    g(s) = min(k_c s, H) + k_s s − F_n(s) / 3 = 0, g rising with s from g(0) = −F_n(0) / 3; with
+    f = F_n(0) / 3 it is bracketed by 0 and max(f / (k_c + k_s), (f − H) / k_s). The Illinois
     false-position method narrows the bracket below 1e-15 m, or raises :class:`NotConverged`."""
     rigid = forward_kinematics(spec, angles)
-    stiffness = 3.0 * spec.cables.stiffness
+    cable, spring = spec.cables.stiffness, spec.springs.stiffness
+    headroom = spec.stall_tension - spring_forces(spec, cable_lengths(spec, angles)).max(axis=-1)
 
     def balance(give):
         wrench = contact(rigid.moved_along_normal(-give))
-        return give - np.sum(wrench[..., :3] * rigid.normal, axis=-1) / stiffness
+        return np.minimum(cable * give, headroom) + spring * give - np.sum(wrench[..., :3] * rigid.normal, axis=-1) / 3
 
     low = np.zeros(rigid.normal.shape[:-1])
     low_value = balance(low)
-    high = -low_value  # F_n(0) / 3k, where g >= 0: the force there is no larger than at 0
+    share = -low_value  # F_n(0) / 3
+    high = np.maximum(share / (cable + spring), (share - headroom) / spring)
     high_value = np.where(high > 0, balance(high), 0.0)
     kept = np.zeros(low.shape, dtype=int)  # which end stayed twice: -1 low, +1 high (Illinois' halving)
     for _ in range(_GIVE_ITERATIONS):
@@ -416,4 +460,5 @@ def loaded_pose(spec: DeviceSpec, angles, contact) -> tuple[PlatformPose, np.nda
         exact = value == 0
         low, high = np.where(exact, middle, low), np.where(exact, middle, high)
     raise NotConverged(f"loaded platform: the cables' give still spans {np.max(high - low):.3g} m after "
-                       f"{_GIVE_ITERATIONS} steps (cables.stiffness = {spec.cables.stiffness:g} N/m)")
+                       f"{_GIVE_ITERATIONS} steps (cables.stiffness = {cable:g} N/m, springs.stiffness = "
+                       f"{spring:g} N/m, servo.stall_torque = {spec.servo.stall_torque:g} N m)")

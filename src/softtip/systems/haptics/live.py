@@ -26,16 +26,18 @@ from pathlib import Path
 import numpy as np
 
 from softtip._core.files import not_a_file
+from softtip.data import Dataset, DatasetError, is_dataset_file
+from softtip.data.dataset import TIME
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.systems.haptics import WANTED
 from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
+from softtip.systems.haptics.limits import DURATION_EXPECTED, LOOP_RATE_HZ, MAX_DURATION_S, MAX_SENSATION_ROWS
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer
 from softtip.systems.haptics.servos import FrameResponse, ServoDevice
 
-LOOP_RATE_HZ = 1000.0
 MOTORS = ("motor1_rad", "motor2_rad", "motor3_rad")
 SERVOS = ("servo1_rad", "servo2_rad", "servo3_rad")
 WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm")
@@ -74,11 +76,17 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
     if missing:
         raise SensationError(f"sensation file {path}: missing column {missing[0]} (expected {', '.join(SENSATION_COLUMNS)})")
     times = np.asarray(table["time_s"], dtype=float)
+    if len(times) > MAX_SENSATION_ROWS:
+        raise SensationError(f"sensation file {path}: {len(times)} rows, expected at most {MAX_SENSATION_ROWS} (one a "
+                             f"tick at {LOOP_RATE_HZ:g} Hz over --duration's limit of {MAX_DURATION_S:g} s)")
     forces = np.column_stack([np.asarray(table[name], dtype=float) for name in SENSATION_COLUMNS[1:]])
     if len(times) < 1 or not (np.all(np.isfinite(times)) and np.all(np.isfinite(forces))):
         raise SensationError(f"sensation file {path}: expected finite times and forces, at least one row")
     if np.any(np.diff(times) <= 0):
         raise SensationError(f"sensation file {path}: time_s must increase from row to row")
+    if duration_s is None and not times[-1] - times[0] <= MAX_DURATION_S:
+        raise SensationError(f"sensation file {path}: time_s spans {times[-1] - times[0]:.6g} s, expected "
+                             f"{DURATION_EXPECTED}: --duration's limit; --duration renders the first part")
     end = times[-1] - times[0] if duration_s is None else duration_s
     ticks = np.arange(max(int(round(end * LOOP_RATE_HZ)), 1)) / LOOP_RATE_HZ + times[0]
     held = forces[np.searchsorted(times, ticks, side="right") - 1]
@@ -87,7 +95,8 @@ def recorded_sensation(path: str | Path, duration_s: float | None) -> np.ndarray
 
 def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, np.ndarray]:
     """The columns of a CSV or Parquet file, a ``what`` ("sensation file" ...); a file of another kind,
-    missing or unreadable raises ``error`` naming it."""
+    missing or unreadable raises ``error`` naming it. A softtip dataset (``softtip import``'s) is read
+    as one, verified: its time, channels and labels by name (:func:`dataset_columns`)."""
     import pyarrow as pa
     from pyarrow import csv, parquet
 
@@ -97,11 +106,32 @@ def table_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, n
     problem = not_a_file(path)
     if problem:
         raise error(f"{what} {path} {problem}")
+    if is_dataset_file(path):
+        return dataset_columns(path, what, error)
     try:
         table = readers[path.suffix.lower()](path)
     except (pa.ArrowException, OSError) as problem:
         raise error(f"{what} {path}: unreadable ({' '.join(str(problem).split())})") from None
     return {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
+
+
+# the units a column's name may end in, as a table or sensation file names them
+NAMED_UNITS = {"N": "N", "Nm": "N m", "rad": "rad", "deg": "deg", "s": "s"}
+
+
+def dataset_columns(path: Path, what: str, error: type[ValueError]) -> dict[str, np.ndarray]:
+    """A softtip dataset's ``time_s``, channels and labels by name, read and verified as every dataset
+    is (its checksum, its declared columns); a label whose declared unit is not the one its name ends
+    in (``fx_N`` in grams) is refused naming it, since the name is what the table's reader trusts."""
+    try:
+        dataset = Dataset.read(path)
+    except DatasetError as problem:
+        raise error(f"{what} {problem}") from None
+    for name, unit in dataset.labels.items():
+        named = NAMED_UNITS.get(name.rsplit("_", 1)[-1])
+        if named is not None and unit.replace(" ", "") != named.replace(" ", ""):
+            raise error(f"{what} {path}: label {name} is declared in {unit}, expected {named} as its name says")
+    return {name: dataset.column(name) for name in (TIME, *dataset.channels, *dataset.labels)}
 
 
 @dataclass(frozen=True)

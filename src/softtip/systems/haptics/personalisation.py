@@ -31,7 +31,9 @@ the geometric indentation of each press under the sphere model and the DS's forc
 Hertz modulus (:func:`~softtip.mechanics.plate_contact.fit_hertz_modulus`). Each FS entry's
 measured force |f*| is then rendered as the indentation that gives that force on the user's sphere,
 δ_U = Hertz⁻¹(|f*|), with the platform at p̃_c = p − (r_U − δ_U) z1 in the same orientation. An entry
-without contact keeps the geometric method's placement.
+without contact keeps the geometric method's placement. Both steps take the cables rigid, as the
+kinematics do; ``cables = "compliant"`` takes each press's depth less the platform's give under its
+force and commands each entry that much further (the report's ablation of B+).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from softtip.systems.haptics.device import (
     PlatformPose,
     forward_kinematics,
     inverse_kinematics_unchecked,
+    normal_give,
     quantised,
     reachable,
     servo_angles_of_lengths,
@@ -127,17 +130,26 @@ def press_configurations(device: DeviceSpec, user_radius: float, depths=PRESS_DE
     return np.repeat(np.clip(angles, 0.0, device.angle_max)[:, None], 3, axis=1)
 
 
+CABLE_MODELS = ("rigid", "compliant")  # how B+ places the platform: its kinematics, or less the cables' give
+
+
 def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius: float,
                 contact_threshold: float = CONTACT_THRESHOLD, poisson_ratio: float = 0.5,
-                saturated=None) -> PressFit:
+                saturated=None, cables: str = "rigid") -> PressFit:
     """Fit the user's Hertz modulus from at most five presses (``motor_inputs`` and the DS's readings);
-    presses where the DS ``saturated`` (presses,) are left out: their force is the range's end."""
+    presses where the DS ``saturated`` (presses,) are left out: their force is the range's end. With
+    ``cables = "compliant"`` each press's depth is the kinematics' less the platform's give under the
+    force the DS read (:func:`~.device.normal_give`, the device file's stiffnesses)."""
+    if cables not in CABLE_MODELS:
+        raise ValueError(f"cables = {cables!r}: expected one of {', '.join(CABLE_MODELS)}")
     motor_inputs = np.asarray(motor_inputs, dtype=float)
     if not 1 <= len(motor_inputs) <= MAX_PRESSES:
         raise ValueError(f"presses: {len(motor_inputs)} given, expected 1 to {MAX_PRESSES}")
     pose = forward_kinematics(device, quantised(device, motor_inputs))
     depths = cap_indentation(device.centre, np.full(3, user_radius), pose.centroid, pose.normal)[0]
     forces = np.linalg.norm(np.asarray(platform_wrenches, dtype=float)[:, :3], axis=1)
+    if cables == "compliant":
+        depths = depths - normal_give(device, forces)
     usable = np.ones(len(forces), bool) if saturated is None else ~np.asarray(saturated, dtype=bool)
     touching = (forces >= contact_threshold) & (depths > 0) & usable
     if not touching.any():
@@ -150,16 +162,22 @@ def fit_presses(device: DeviceSpec, motor_inputs, platform_wrenches, user_radius
 
 def personalise_force_model(device: DeviceSpec, fs_motor_inputs, fs_wrenches, fs_radius: float,
                             user_radius: float, user: PressFit, contact_threshold: float = CONTACT_THRESHOLD,
-                            poisson_ratio: float = 0.5, geometric: Rendering | None = None) -> Rendering:
+                            poisson_ratio: float = 0.5, geometric: Rendering | None = None,
+                            cables: str = "rigid") -> Rendering:
     """Personalised motor inputs (entries, 3) by the geometric method with the user's fitted Hertz law;
     flagged (and held at the servos' range) where the pose is out of reach. ``geometric``: the
     geometric method's personalisation of the same table, if already computed (without contact, the
-    entry keeps it)."""
+    entry keeps it). With ``cables = "compliant"`` the platform is commanded past the indentation by
+    its give under the entry's force (:func:`~.device.normal_give`)."""
+    if cables not in CABLE_MODELS:
+        raise ValueError(f"cables = {cables!r}: expected one of {', '.join(CABLE_MODELS)}")
     if geometric is None:
         geometric = personalise_geometric(device, fs_motor_inputs, fs_radius, user_radius)
     pose = forward_kinematics(device, fs_motor_inputs)
     force = np.linalg.norm(np.asarray(fs_wrenches, dtype=float)[:, :3], axis=1)
     depth = hertz_depth(force, user_radius, user.youngs_modulus, poisson_ratio)
+    if cables == "compliant":
+        depth = depth + normal_give(device, force)
     # p̃_c = p − (r_U − δ_U) z1: the plane at distance r_U − δ_U from the centre, towards the platform
     point = device.centre - (user_radius - depth)[:, None] * pose.normal
     angles = inverse_kinematics_unchecked(device, PlatformPose(point, pose.normal))

@@ -24,6 +24,7 @@ from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.sensors.wrench import shift_wrench
 from softtip.studies.outcome import Headline, StudyOutcome
+from softtip.systems.haptics.ablation import ablate
 from softtip.systems.haptics.bench import CONDITIONS, RENDERED, study_fingertips
 from softtip.systems.haptics.collection import collection_duration, motor_grid
 from softtip.systems.haptics.data_driven import compare_data_driven
@@ -42,7 +43,7 @@ from softtip.systems.haptics.sensitivity import (
     sensitivity_figure,
     sensitivity_study,
 )
-from softtip.systems.haptics.statistics import friedman, wilcoxon
+from softtip.systems.haptics.statistics import friedman, rank_sum, wilcoxon
 from softtip.systems.haptics.study import (
     NOTES,
     METHODS,
@@ -108,7 +109,7 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
               _statistics_table(statistics, pooled), _collection_table(minutes, p.hold_s),
               _light_table(found, p.light_force_N, p.contact_threshold_N),
               _departures_table(largest_tension(device, fingertips, p.fs_levels),
-                                device.servo.stall_torque / device.device.pulley_radius)]
+                                device.stall_tension)]
     figure = Figure.of("Rendering error per fingertip and method", (
         "Box plots over the targets of |F_target − F_rendered| (N), read by the sensor under each test fingertip. "
         "Look for the standard method's spread growing with the size mismatch, and for A against B on the "
@@ -130,10 +131,13 @@ def haptics(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     sweeps = _sweeps(protocol, found, progress)
     results |= sweeps.results
     settings, collection = p.study_settings(), p.collection_settings()
-    variants = compare_data_driven(device, fingertips, *collect_study(device, fingertips, settings, collection,
-                                                                      protocol.seed, fs=protocol.design.fs),
-                                   settings, collection, protocol.seed)
+    collected = collect_study(device, fingertips, settings, collection, protocol.seed, fs=protocol.design.fs)
+    variants = compare_data_driven(device, fingertips, *collected, settings, collection, protocol.seed)
     tables.append(variants.table())
+    if p.ablations:
+        ablations = ablate(device, fingertips, *collected, settings, collection, protocol.seed)
+        tables.append(ablations.table())
+        results["ablations"] = ablations.to_dict()
     variants_figure = Figure.of("Personalisation A: as published against softtip's 3-D variant", (
         "Median error (N) per fingertip of A searching the DS's raw 6-D wrenches and of A searching its 3-D forces "
         "in the device's axes, on the same tables. Look for whether the published search loses anything by "
@@ -251,11 +255,6 @@ def _sensitivity_table(outcomes: tuple[VariationOutcome, ...], humans: list[str]
                      "the casts as published. In softtip's contact model the core's position moves only the "
                      "torques about the sensor's origin, and every method renders from forces. W+ − W− < 0: A's "
                      "errors are the smaller over every fingertip and target studied."))
-
-
-def rank_sum(value: float) -> float | int:
-    """A Wilcoxon rank sum, as an integer when it is one (ties make halves)."""
-    return int(value) if float(value).is_integer() else float(value)
 
 
 def _test(result) -> dict:
@@ -560,8 +559,10 @@ def _departures_table(tension: float, stall: float) -> Table:
         "device": ("a built device, dimensions not given",
                    "softtip's dimensions in a device file (device.toml); its released length, pulley radius and "
                    "cables' stiffness fitted to the published scale (the fit table)"),
-        "cables": ("cables inside springs, wound by servos", "each cable a spring in series: the platform gives way "
-                   "along its normal under the contact, keeping its tilt"),
+        "cables": ("cables inside springs, wound by servos", "each cable a spring in series, its spring easing beside "
+                   "it: the platform gives way along its normal under the contact, keeping its tilt; B+'s presses "
+                   "take the cables rigid, as published methods' kinematics do (the ablations table measures what "
+                   "that costs)"),
         "fingertips": ("VytaFlex 30 casts over a rigid core: three spheres and three casts of human fingertips",
                        "three spheres and three ellipsoidal casts (1.6 times longer along the finger), one rubber, "
                        "contact law calibrated by softtip's FE; the geometric method takes each human cast for its "
@@ -570,8 +571,10 @@ def _departures_table(tension: float, stall: float) -> Table:
         "contact": ("with friction (a tilted platform pushes sideways too)",
                     "frictionless: force along the platform's normal only"),
         "servos": ("position commands at about 50 Hz", "reach each configuration to their dead band before the hold; "
-                   f"their stall is not modelled: the largest cable tension over the FS table on the test fingertips "
-                   f"is {tension:.1f} N, the stall's {stall:.0f} N"),
+                   "a servo holds at most its stall torque over the pulley, beyond it the cable pays out and the "
+                   f"platform stops short: the largest cable tension over the FS table on the test fingertips is "
+                   f"{tension:.1f} N, the stall's {stall:.0f} N"
+                   + (", so the study's servos never stall" if tension < stall else ": the hardest presses stall")),
         "targets": ("100 from random configurations that touch the FS",
                     "the same procedure, the servos' angles drawn uniformly over their range"),
         "statistics": ("Bonferroni over the publication's tests (threshold 0.0028)",

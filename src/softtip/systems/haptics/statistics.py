@@ -79,3 +79,8 @@ def wilcoxon(x, y, tests: int = 1) -> WilcoxonResult:
     result = stats.wilcoxon(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     return WilcoxonResult(w_plus, w_minus, float(result.statistic), w_plus - w_minus, float(result.pvalue),
                           min(1.0, float(result.pvalue) * tests), len(np.asarray(x)), int(tests))
+
+
+def rank_sum(value: float) -> float | int:
+    """A Wilcoxon rank sum, as an integer when it is one (ties make halves)."""
+    return int(value) if float(value).is_integer() else float(value)

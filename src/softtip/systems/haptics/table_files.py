@@ -4,7 +4,9 @@
 the motor inputs, ``motor1_rad``, ``motor2_rad``, ``motor3_rad`` (or ``motor1_deg`` ... in degrees),
 and what the fingertip's sensor read, ``fx_N``, ``fy_N``, ``fz_N`` and, if it reads torques, ``tx_Nm``,
 ``ty_Nm``, ``tz_Nm``. The device-mounted sensor's readings, for personalisation A, may follow as
-``ds_fx_N`` ... ``ds_tz_Nm`` (all six). Values may be quantised (a servo's whole degrees, a sensor's
+``ds_fx_N`` ... ``ds_tz_Nm`` (all six). A softtip dataset (``softtip import``'s, checksummed) is a table
+file too: its labels of those names are the columns (each in the unit its name ends in), read and
+verified as every dataset is. Values may be quantised (a servo's whole degrees, a sensor's
 steps): a quantised sensor reads several configurations alike, so entries whose forces are equal are
 merged into one, their motor inputs (and the rest of their readings) averaged; how many were merged
 is reported. A missing column, a value that is not a finite number, or motor inputs beyond the
@@ -13,7 +15,9 @@ device's servos are refused in one line naming the file and the column.
 **For firmware**, :func:`c_header` writes the renderer's own arrays (the table as
 :class:`~.rendering.NearestNeighbourRenderer` indexed it: the entries without contact merged into one
 at zero force) as C ``const`` arrays of ``float`` with their sizes and settings as macros, and
-:func:`write_table_csv` the same entries as a table file this module reads back.
+:func:`write_table_csv` the same entries as a table file this module reads back. :func:`write_fs_table_csv`
+writes an FS table as collected (the FS's and the DS's readings with the motor inputs, every
+configuration) for a haptics protocol's ``fs_table``.
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from softtip._core.files import atomic_write
+from softtip.data import is_dataset_file
 from softtip.systems.haptics.device import DeviceSpec
+from softtip.systems.haptics.limits import MAX_FS_LEVELS, MAX_TABLE_ENTRIES
 from softtip.systems.haptics.live import table_columns
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, TableError
 
@@ -33,6 +39,11 @@ TORQUES = ("tx_Nm", "ty_Nm", "tz_Nm")
 MOTORS_RAD = ("motor1_rad", "motor2_rad", "motor3_rad")
 MOTORS_DEG = ("motor1_deg", "motor2_deg", "motor3_deg")
 DS = tuple(f"ds_{name}" for name in FORCES + TORQUES)
+
+
+# how a softtip dataset (softtip import's) holds a table: its labels, named as a table file's columns
+DATASET_FIX = ("; a softtip dataset holds them as labels of these names: softtip import ... --label fx_N=COLUMN:N "
+               "--label motor1_deg=COLUMN:deg ... (its chips' channels are not read as forces)")
 
 
 class TableFileError(ValueError):
@@ -102,7 +113,7 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     missing = [name for name in FORCES if name not in columns]
     if missing:
         raise TableFileError(f"table file {path}: missing column {missing[0]} (expected {', '.join(FORCES)}, "
-                             f"optionally {', '.join(TORQUES)})")
+                             f"optionally {', '.join(TORQUES)})" + (DATASET_FIX if is_dataset_file(path) else ""))
     torques = [name in columns for name in TORQUES]
     if any(torques) and not all(torques):
         raise TableFileError(f"table file {path}: missing column {TORQUES[torques.index(False)]} (torques: all "
@@ -110,14 +121,16 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     units = [all(name in columns for name in names) for names in (MOTORS_RAD, MOTORS_DEG)]
     if units[0] == units[1]:
         raise TableFileError(f"table file {path}: expected the motor inputs as {', '.join(MOTORS_RAD)} or as "
-                             f"{', '.join(MOTORS_DEG)}" + (" (not both)" if units[0] else ""))
+                             f"{', '.join(MOTORS_DEG)}" + (" (not both)" if units[0] else "")
+                             + (DATASET_FIX if is_dataset_file(path) and not units[0] else ""))
     ds = [name in columns for name in DS]
     if any(ds) and not all(ds):
         raise TableFileError(f"table file {path}: missing column {DS[ds.index(False)]} (the DS's readings: all six "
                              f"of {', '.join(DS)}, or none)")
     rows = len(next(iter(columns.values())))
-    if rows < 2:
-        raise TableFileError(f"table file {path}: {rows} rows, expected at least 2 entries")
+    if not 2 <= rows <= MAX_TABLE_ENTRIES:
+        raise TableFileError(f"table file {path}: {rows} rows, expected 2 to {MAX_TABLE_ENTRIES} entries (the largest "
+                             f"FS table, --fs-levels {MAX_FS_LEVELS})")
     wrenches = _numbers(columns, FORCES + (TORQUES if all(torques) else ()), path)
     motor = _numbers(columns, MOTORS_RAD if units[0] else MOTORS_DEG, path)
     if device is not None:
@@ -134,13 +147,26 @@ def read_table(path: str | Path, device: DeviceSpec | None = None) -> RecordedTa
     return RecordedTable(str(path), merged_wrenches, merged_motor, merged_platform, rows - len(merged_motor))
 
 
+def _write_csv(path: str | Path, names: tuple[str, ...], rows: np.ndarray) -> None:
+    """``rows`` under the header ``names``, every value at full precision (it reads back exactly)."""
+    atomic_write(path, ",".join(names) + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+
+
 def write_table_csv(path: str | Path, renderer: NearestNeighbourRenderer) -> None:
     """The renderer's entries as a table file (forces and motor inputs in rad, full precision)."""
     if renderer.torque_length is not None:
         raise ValueError("renderer: a table for firmware searches forces only (no torque length)")
-    header = ",".join(FORCES + MOTORS_RAD)
-    rows = np.hstack([renderer.features_, renderer.motor_inputs_])
-    atomic_write(path, header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+    _write_csv(path, FORCES + MOTORS_RAD, np.hstack([renderer.features_, renderer.motor_inputs_]))
+
+
+def write_fs_table_csv(path: str | Path, wrenches, platform_wrenches, motor_inputs) -> None:
+    """An FS table as collected, one row per configuration, as a haptics protocol's ``fs_table`` reads
+    it: the FS's ``wrenches`` (entries, 6, or 3 forces), the DS's (entries, 6) and the motor inputs
+    (entries, 3, rad), at full precision."""
+    wrenches = np.asarray(wrenches, dtype=float)
+    names = FORCES + (TORQUES if wrenches.shape[1] == 6 else ()) + DS + MOTORS_RAD
+    _write_csv(path, names, np.hstack([wrenches, np.asarray(platform_wrenches, dtype=float),
+                                       np.asarray(motor_inputs, dtype=float)]))
 
 
 def _c_float(value: float) -> str:
