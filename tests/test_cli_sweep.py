@@ -517,7 +517,8 @@ GARBAGE = b"\x00\x1b[2J not a file of any kind \xff" * 8
 BAD_FINGERTIPS = [("finger-garbage.toml", GARBAGE), ("finger-missing.toml", None),
                   ("finger-small.toml", b'[fingertip]\nname = "x"\nradius_mm = 5.0\n'),
                   ("finger-key.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nstifness = 2\n'),
-                  ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n')]
+                  ("finger-nan.toml", b'[fingertip]\nname = "x"\nradius_mm = nan\n'),
+                  ("finger-modulus.toml", b'[fingertip]\nname = "x"\nradius_mm = 9.0\nyoungs_modulus_MPa = 1e300\n')]
 _TABLE = "fx_N,fy_N,fz_N,motor1_deg,motor2_deg,motor3_deg\n"
 
 

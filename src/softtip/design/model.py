@@ -117,6 +117,7 @@ PoissonRatio = number("0 < nu < 0.5 (a compressible elastic solid)", gt=0, lt=0.
 # A soft body's modulus: from the softest gels (a few kPa) to the hardest rubbers (Shore 90A, tens of MPa). Beyond
 # either end the body is no soft fingertip: the contact laws and the FE's load steps are made for the range between.
 ElastomerModulus = number("1e3 <= E <= 1e8 Pa (a soft elastomer: from gels to the hardest rubbers)", ge=1e3, le=1e8)
+ElastomerModulusMPa = number("0.001 <= E <= 100 MPa (a soft elastomer)", ge=1e-3, le=100.0)  # the same, in MPa
 # From foams to the densest filled silicones and beyond (tungsten-filled rubbers reach 11,000 kg/m3).
 Density = number("100 <= rho <= 20000 kg/m3 (a solid: from foams to metal-filled rubbers)", ge=100, le=2e4)
 STRONGEST_NDFEB_T = 1.6  # the remanence of the strongest sintered NdFeB: no magnet is polarised more

@@ -32,7 +32,7 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.units import MM, UM
-from softtip.design.model import STRONGEST_NDFEB_T
+from softtip.design.model import STRONGEST_NDFEB_T, ElastomerModulusMPa
 from softtip.magnetics.dipoles import Rectangles
 from softtip.mechanics.rod import Rod, half_space_rotational_stiffness
 from softtip.sensors.gmr import ConstantCurrentReadout, SpinValveSensor, published_spin_valve
@@ -49,10 +49,6 @@ Pair = Annotated[list[Real], Field(min_length=2, max_length=2), expect("a pair o
 PositivePair = Annotated[list[Annotated[Real, Field(gt=0)]], Field(min_length=2, max_length=2),
                          expect("a pair of positive numbers")]
 Points = Annotated[list[Pair], Field(min_length=1), expect("a non-empty list of [x, y] pairs")]
-
-
-# a soft magnetic composite: PDMS and its NdFeB-filled blends lie within 0.1-10 MPa
-PillarModulus = number("0.001 <= E <= 100 MPa (a soft elastomer)", ge=1e-3, le=100.0)
 
 
 def _interval(pair: list[float], key: str) -> None:
@@ -77,7 +73,7 @@ class PillarsTable:
     height_mm: PositiveNumber
     tip_diameter_um: PositiveNumber
     base_diameter_um: PositiveNumber
-    youngs_modulus_MPa: PillarModulus
+    youngs_modulus_MPa: ElastomerModulusMPa  # PDMS and its NdFeB-filled blends lie within 0.1-10 MPa
     poisson_ratio: number("a number from 0 to 0.5", ge=0.0, le=0.5)
     moment_memu: PositiveNumber
     magnetisation: choice("up", "down")

@@ -43,6 +43,7 @@ from softtip._core.config import (
 from softtip._core.errors import NotConverged
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM, MN, UM
+from softtip.design.model import ElastomerModulusMPa
 from softtip.magnetics.dipoles import dipole_field, frustum_shares
 from softtip.mechanics.rod import PlateContact, Rod
 from softtip.sensors.gmr import TESLA_PER_OERSTED
@@ -58,7 +59,7 @@ from softtip.systems.cilia.fit import (
     identifiability,
     profiles,
 )
-from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, DieError, PillarModulus, pillar_rod, read_die
+from softtip.systems.cilia.layout import MEMU, SHIPPED_DIE, DieError, pillar_rod, read_die
 from softtip.systems.cilia.model import BalanceCurve, BalancePlate, CiliaModel, ForceCurve, pillar_dipoles
 from softtip.systems.cilia.resolution import (
     BUDGET_PARTS,
@@ -85,7 +86,7 @@ class CiliaSettings:
     truth_moment_memu: PositiveNumber = 2.8
     truth_diameter_um: PositiveNumber = 200.0
     height_mm: PositiveNumber | None = None  # None: the die file's
-    youngs_modulus_MPa: PillarModulus | None = None  # None: the die file's
+    youngs_modulus_MPa: ElastomerModulusMPa | None = None  # None: the die file's
     repeatability: Fraction = 0.01  # of the full-scale voltage change, rms, per load step
     linear_fraction: OpenFraction = 0.1  # raised to hold at least 5 points where the plan is short
     # repeated loadings of the twin: the first is the study's curve; every one is fitted for the recovery

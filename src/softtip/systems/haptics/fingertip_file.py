@@ -26,6 +26,7 @@ from typing import Annotated
 from softtip._core.config import (ConfigError, PositiveNumber, Real, Refusal, Text, choice, expect, from_numpy, number,
                                   parse, read_toml, schema)
 from softtip._core.units import MM
+from softtip.design.model import ElastomerModulusMPa
 from softtip.mechanics.plate_contact import PlateContactLaw
 from softtip.systems.haptics.fingertips import (CALIBRATED_RADII, SHAPE_AXES, VYTAFLEX_30_MODULUS, Fingertip,
                                                 layer_thickness)
@@ -47,7 +48,7 @@ class FingertipFile:
     radius_mm: number("a radius from 3 to 20 mm", ge=3, le=20)
     shape: choice(*SHAPE_AXES) = "sphere"
     law: choice("cast", "hertz", "exponential") = "cast"
-    youngs_modulus_MPa: PositiveNumber = VYTAFLEX_30_MODULUS / MPA
+    youngs_modulus_MPa: ElastomerModulusMPa = VYTAFLEX_30_MODULUS / MPA
     stiffness_N_per_m: PositiveNumber = _EXPONENTIAL.stiffness
     stiffening_per_m: PositiveNumber = _EXPONENTIAL.stiffening
     core_offset_mm: OffsetMm = (0.0, 0.0, 0.0)
