@@ -453,7 +453,8 @@ def test_the_readme_walk_through_runs_as_written_and_scores_the_held_out_recordi
     held_out = dataset.select(rows=dataset.column("role") == "validation")
     assert set(held_out.column("source")) == {"20250401_015717_probe"}
     assert scores[0]["validation_samples"] == len(held_out)
-    assert scores[0]["validation"]["fz_N"]["rmse"] <= 0.40  # the issue's bound for a whole held-out recording
+    # measured 0.331 N (seeds 0-4: 0.322-0.356 N), within the issue's 0.40 N for a whole held-out recording
+    assert scores[0]["validation"]["fz_N"]["rmse"] <= 0.36
     within = Dataset.read(tmp_path / "within.parquet")
     assert len(within.trials) == 20 and list(within.trial_conditions["role"]).count("validation") == 4
     assert scores[1]["validation"]["fz_N"]["rmse"] <= 0.27  # the published figure of the authors' split

@@ -113,6 +113,33 @@ def test_the_cli_recalibrates_a_real_session_from_five_presses(tmp_path, eflesh,
     assert meta.extra["session"]["presses"] == 5 and plot.stat().st_size > 10_000
 
 
+
+@pytest.mark.slow
+def test_the_cli_recalibrates_a_network_as_it_does_the_polynomial(tmp_path, eflesh):
+    runner = CliRunner()
+    curves = {}
+    for kind in ("network", "polynomial"):
+        model = tmp_path / f"{kind}.npz"
+        made = runner.invoke(app, ["calibrate", str(eflesh[RECORDINGS[1]]), "-t", "fz_N", "--model", kind,
+                                   "-o", str(model), "--json"])
+        assert made.exit_code == 0, made.output
+        result = runner.invoke(app, ["recalibrate", str(model), str(eflesh[RECORDINGS[0]]), "--presses", "5",
+                                     "--press-above", "0.5", "-o", str(tmp_path / f"{kind}-session.npz"), "--json"])
+        assert result.exit_code == 0, result.output
+        summary = json.loads(result.stdout)
+        curves[kind] = np.array([row["rmse"][0] for row in summary["rmse_by_presses"]])
+    network, polynomial = curves["network"], curves["polynomial"]
+    # measured (1 -> 0, network seed 0): 2.02 N as it is, 0.76 N after five presses; the polynomial 2.09 and
+    # 0.75 N. The gains fitted through the network correct it as they do the polynomial: to within 10 %.
+    assert network[5] < 0.6 * network[0] and network[5] < summary["zero_rmse"][0] / 20
+    assert abs(network[5] - polynomial[5]) < 0.1 * polynomial[5]
+    # the saved network carries its gains: it scores the same on the scored rows
+    estimator, meta = load_model(tmp_path / "network-session.npz")
+    times, changes, force = eflesh_session(RECORDINGS[0])
+    scored = slice(int(np.flatnonzero(np.diff((force > 0.5).astype(int)) == -1)[4]) + 1, None)
+    error = estimator.predict(changes.reshape(len(force), -1)[scored]) - force[scored]
+    assert np.sqrt(np.mean(error**2)) == pytest.approx(network[5], rel=1e-9)
+
 def test_too_few_presses_is_one_line(tmp_path, eflesh):
     model = tmp_path / "model.npz"
     rng = np.random.default_rng(0)
