@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from softtip.calibration import PolynomialFit, load_model, save_model
-from softtip.calibration.session import SessionGains, gain_groups, press_ends, session_curve
+from softtip.calibration.session import SessionAffine, SessionGains, gain_groups, press_ends, session_curve
 from softtip.cli.main import app
 from softtip.data import DatasetMetadata, TrialWriter, channel_columns, channel_names
 
@@ -56,6 +56,30 @@ def test_gains_put_into_a_known_sensor_are_recovered_from_four_presses():
     np.testing.assert_allclose(fitted.predict(session), truth, atol=1e-6)
     np.testing.assert_allclose(fitted.corrected_model().predict(session), truth, atol=1e-6)
 
+
+
+def test_an_affine_map_put_into_a_known_sensor_is_recovered_and_alpha_holds_it_to_the_identity():
+    rng = np.random.default_rng(4)
+    channels = channel_names(2)
+    weights = rng.normal(0, 0.02, (6, 6))  # a linear sensor of two chips, as many outputs as inputs: invertible
+    model = PolynomialFit(1).fit(X := rng.normal(0, 80, (300, 6)), X @ weights)
+    groups = gain_groups(channels)
+    # the new session reads each chip through a matrix and an offset the model does not know
+    maps = [np.eye(3) + rng.normal(0, 0.2, (3, 3)) for _ in range(2)]
+    offsets = rng.normal(0, 10, 6)
+    session = rng.normal(0, 80, (60, 6))
+    truth = np.column_stack([session[:, :3] @ maps[0].T, session[:, 3:] @ maps[1].T]) + offsets
+    truth = truth @ weights
+    fitted = SessionAffine(model, groups, alpha=1e-12).fit(session, truth)
+    for found, made in zip(fitted.matrices_, maps, strict=True):
+        np.testing.assert_allclose(found, made, atol=1e-6)
+    np.testing.assert_allclose(fitted.offsets_, offsets, atol=1e-4)
+    np.testing.assert_allclose(fitted.predict(session), truth, atol=1e-6)
+    held = SessionAffine(model, groups, alpha=1e8).fit(session, truth)  # the penalty outweighs the data
+    np.testing.assert_allclose(held.map_, np.eye(6), atol=1e-3)
+    np.testing.assert_allclose(held.offsets_, 0, atol=1e-3 * np.sqrt(np.mean(session**2)))
+    with pytest.raises(ValueError, match="alpha = 0"):
+        SessionAffine(model, groups, alpha=0).fit(session, truth)
 
 def eflesh_session(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times s, changes (rows, chips, 3) µT, force N) of one recording: every magnetometer row with a

@@ -374,8 +374,8 @@ def _read_log(paths: list[Path], log: _Log, refs: list[int | str], *,
     pieces.sort(key=lambda piece: piece[1][0, 0])
     for (before, earlier), (path, later) in zip(pieces[:-1], pieces[1:]):
         if later[0, 0] < earlier[-1, 0] or (strictly and later[0, 0] == earlier[-1, 0]):
-            raise DatasetError(f"{path}: starts at time {float(later[0, 0])}, before {before} ends ({float(earlier[-1, 0])}): "
-                               "the files of one log must follow each other in time")
+            raise DatasetError(f"{path}: starts at time {float(later[0, 0])}, before {before} ends "
+                               f"({float(earlier[-1, 0])}): the files of one log must follow each other in time")
     return pieces
 
 
@@ -461,7 +461,8 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     sensor, labels = mapping.sensor, mapping.labels
     sensor_files, label_files = log_files(source, mapping)
     sensor_file = sensor_files[0] if len(sensor_files) == 1 else source / sensor.file  # what errors name
-    own_labels = [] if labels is None or label_files is not None else [label.column for label in labels.columns.values()]
+    own_labels = ([] if labels is None or label_files is not None
+                  else [label.column for label in labels.columns.values()])
     split_column = [mapping.trials.column] if mapping.trials.split == "column" else []
     refs = [*sensor.columns_used(), *own_labels, *split_column]
     pieces = _read_log(sensor_files, sensor, refs, strictly=True)
