@@ -165,6 +165,6 @@ def plot_drift(study: DriftStudy, path) -> None:
     curve.set_xlabel("presses of the later session used")
     curve.set_ylabel("force RMSE (N)")
     curve.set_ylim(bottom=0)
-    curve.legend(fontsize="small", loc="center right")
+    curve.legend(fontsize="small", loc="upper right")
     curve.set_title("Every cause at once, re-calibrated", fontsize="medium")
     save_figure(figure, path, dpi=110)
