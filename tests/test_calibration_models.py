@@ -205,6 +205,31 @@ def test_early_stopping_fires_on_noise_and_returns_the_best_validation_weights()
     assert np.mean((scaled - scaled_prediction) ** 2) == pytest.approx(history[network.best_epoch_], rel=1e-9)
 
 
+
+@pytest.mark.parametrize("min_progress", [None, 0.01, 0.003])
+def test_failures_stop_training_only_once_it_has_stopped_learning_by_min_progress(min_progress):
+    rng = np.random.default_rng(5)
+    x, x_val = rng.uniform(-1, 1, (200, 6)), rng.uniform(-1, 1, (200, 6))
+    noisy = lambda points: smooth_targets(points)[:, 0] + 0.1 * rng.standard_normal(len(points))  # noqa: E731
+    y, y_val = noisy(x), noisy(x_val)
+    network = LMNetwork((10,), min_progress=min_progress, random_state=0).fit(x, y, validation_data=(x_val, y_val))
+    train, validation = network.history_["train"], network.history_["validation"]
+    # the rule by hand: an epoch above the lowest validation error so far is a failure, a new lowest
+    # resets the count; stop at 6 failures, once the training error fell by less than min_progress of
+    # itself over the last 6 epochs (always, without min_progress)
+    lowest, failures = validation[0], 0
+    for epoch in range(len(validation)):
+        if validation[epoch] < lowest:
+            lowest, failures = validation[epoch], 0
+        elif validation[epoch] > lowest:
+            failures += 1
+        stalled = min_progress is None or (epoch >= 6 and train[epoch - 6] - train[epoch] < min_progress * train[epoch])
+        if failures >= 6 and stalled:
+            break
+    assert network.stop_reason_ == "validation" and len(validation) - 1 == epoch >= network.best_epoch_ + 6
+    assert network.best_epoch_ == int(np.argmin(validation))
+
+
 def test_deep_four_by_ten_network_trains_with_lm():
     rng = np.random.default_rng(10)
     x = rng.uniform(-1, 1, (500, 3))
@@ -244,6 +269,7 @@ def test_fit_with_groups_and_in_cross_validation_by_trial(smooth_problem):
     ({"division": (0.5, 0.6, 0.1)}, "division"),
     ({"mu_inc": 0.5}, "mu_inc"),
     ({"max_fail": 0}, "max_fail"),
+    ({"min_progress": -0.1}, "min_progress"),
 ])
 def test_bad_hyper_parameters_are_named(params, message):
     with pytest.raises(ValueError, match=message):

@@ -143,7 +143,7 @@ def test_a_network_on_four_taxel_trials_learns_when_blocks_stop_it_and_not_when_
 def test_cross_validation_by_trial_equals_a_hand_made_leave_one_trial_out():
     rng = np.random.default_rng(2)
     X, y, trial, time = taxel_trials([10.0, 9.0, 11.0, 10.0, 9.5, 10.5, 10.0, 9.0], rng)
-    candidates = [checks.Candidate("ridge", lambda: checks.baseline("ridge", 0), False)]
+    candidates = [checks.Candidate("ridge", lambda rule: checks.baseline("ridge", 0), False)]
     cross = checks.cross_validate_by_trial(candidates, X, y, trial, time, n_splits=8)
     predicted = np.empty_like(y)
     for held_out in range(8):
@@ -223,6 +223,40 @@ def test_the_network_on_two_real_recordings_stops_by_blocks_and_beats_scikit_lea
     assert summary["shift"]["input_share"] < checks.SHIFT_WARNING_SHARE and summary["warnings"] == []
     assert "warning" not in stderr
 
+
+
+def _halves(trial: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """Each trial cut in two at its median time: trial k becomes 2k and 2k + 1."""
+    halves = 2 * trial
+    for k in np.unique(trial):
+        mine = trial == k
+        halves[mine] += time[mine] > np.median(time[mine])
+    return halves
+
+
+@pytest.mark.slow
+def test_blocks_stop_training_on_real_recordings_where_it_carries_over_at_every_seed():
+    from softtip.lab.importing import import_logs, load_mapping
+
+    data, _ = import_logs([EFLESH / name for name in RECORDINGS], load_mapping(EFLESH / "import.toml"))
+    X, y = data.X(), data.column("fz_N")
+    calibration = data.column("role") == "calibration"
+    trial, time = data.groups[calibration], data.column("time_s")[calibration]
+    rmse = {}
+    for case, trials in (("two", trial), ("four", _halves(trial, time))):
+        groups, rule = checks.stopping_groups(trials, time, "auto")
+        assert rule == "blocks"
+        for progress in (checks.min_progress(rule), None):
+            rmse[case, progress] = np.array([metrics.rmse(y[~calibration], LMNetwork(
+                (10,), min_progress=progress, random_state=seed).fit(X[calibration], y[calibration], groups=groups)
+                .predict(X[~calibration])) for seed in range(5)])
+    # measured, seeds 0-4, the last recording held out: two calibration recordings 0.331 0.331 0.356 0.347
+    # 0.322 N (the toolbox's 6 failures alone: 0.377 0.436 0.358 0.417 0.454 N); each cut in two, 0.311
+    # 0.334 0.382 0.339 0.336 N (0.385 0.449 0.382 0.339 0.399 N)
+    two, four = rmse["two", checks.BLOCKS_MIN_PROGRESS], rmse["four", checks.BLOCKS_MIN_PROGRESS]
+    assert two.max() <= 0.40 and four.max() <= 0.40  # the issue's bound for a whole held-out recording
+    assert np.median(four) <= np.median(rmse["four", None]) and two.max() < rmse["two", None].max()
+    assert np.median(two) < np.median(rmse["two", None]) - 0.03
 
 def test_a_held_out_recording_beyond_the_calibration_range_is_warned_of(eflesh, tmp_path):
     summary, stderr = calibrate(eflesh[RECORDINGS[0]], "-t", "fz_N", "-o", tmp_path / "m.npz", "--model",

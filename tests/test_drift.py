@@ -110,4 +110,15 @@ def test_the_drift_study_runs_a_later_session_of_the_same_unit(tmp_path):
     # Fz's (aging and creep change the readings' shape, not only their scale).
     assert (curve[5, :2] < 0.25 * curve[0, :2]).all() and curve[5, 2] < 0.7 * curve[0, 2]
     assert (curve[0] < np.array(study["session_correction"]["zero_rmse_N"]) / 2).all()
+    # Each cause alone after 5 presses (measured, seed 1, --quick; own session 0.012, 0.061, 0.156 N): aging
+    # 0.013, 0.062, 0.160 N and creep 0.013, 0.054, 0.144 N, back to the own session's error; the steel
+    # plate 0.012, 0.068, 0.83 N: the plate is what leaves Fz's error, its images' field is not a gain.
+    for name in ("elastomer 10 % stiffer (aging)", "0.1 mm compression set (creep)"):
+        assert (np.array(causes[name]["after_5_presses_rmse_N"]) < 1.2 * own).all()
+    plate = np.array(causes["steel plate 3 mm below the chips"]["after_5_presses_rmse_N"])
+    assert plate[2] > 3 * own[2] and plate[2] > 0.7 * curve[5, 2]
+    # An affine map of the chip's readings (measured: 0.015, 0.050, 0.39 N after 5 presses; 2.1 N on Fz after
+    # one) takes out more of Fz's error than the gains, not all of it, and from one press it is worse than none
+    affine = np.array([row["rmse_N"] for row in study["session_correction"]["affine_rmse_N_by_presses"]])
+    assert affine[5, 2] < 0.75 * curve[5, 2] and affine[5, 2] > 2 * own[2] and affine[1, 2] > affine[0, 2]
     assert plot.stat().st_size > 20_000

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -71,8 +72,6 @@ def test_the_eflesh_logs_import_as_a_hand_join_gives():
 
 
 def test_the_rest_rule_zeroes_each_trial_on_its_samples_at_rest():
-    from dataclasses import replace
-
     from softtip.lab.importing import Baseline
 
     mapping = load_mapping(EXCERPT / "import.toml")
@@ -89,8 +88,6 @@ def test_the_rest_rule_zeroes_each_trial_on_its_samples_at_rest():
 
 
 def test_pieces_of_a_recording_split_at_its_pauses_share_its_zero():
-    from dataclasses import replace
-
     from softtip.lab.importing import Baseline, Trials, Validation
 
     mapping = load_mapping(EXCERPT / "import.toml")
@@ -196,6 +193,45 @@ def test_a_log_out_of_time_order_is_refused_naming_the_line(tmp_path):
         import_logs([folder], joined)
 
 
+
+def _rotated(folder: Path, target: Path, name: str, cuts: list[int]) -> None:
+    """A log of ``folder`` written in pieces cut before the given lines, named so that the order of their
+    names is not that of their times (a rig's counter past 9)."""
+    lines = (folder / name).read_text().splitlines(keepends=True)
+    stem, suffix = name.split(".")
+    for k, (start, stop) in enumerate(zip([0, *cuts], [*cuts, len(lines)])):
+        (target / f"{stem}-{[10, 9, 11, 8][k]}.{suffix}").write_text("".join(lines[start:stop]))
+
+
+def test_a_log_written_in_several_files_imports_as_the_whole_file(tmp_path):
+    mapping = load_mapping(EXCERPT / "import.toml")
+    for folder in RECORDINGS:
+        (tmp_path / folder.name).mkdir()
+        _rotated(folder, tmp_path / folder.name, "sensor.csv", [70, 150, 200])  # four sensor files, three label files
+        _rotated(folder, tmp_path / folder.name, "states.csv", [100, 101])
+    pieces = replace(mapping, sensor=replace(mapping.sensor, file="sensor-*.csv"),
+                     labels=replace(mapping.labels, file="states-*.csv"))
+    whole, whole_report = import_logs(RECORDINGS, mapping)
+    rotated, report = import_logs(sorted(tmp_path.iterdir()), pieces)
+    assert report == whole_report and len(rotated) == len(whole)
+    for name in whole.columns:
+        np.testing.assert_array_equal(rotated.column(name), whole.column(name), err_msg=name)
+    result = CliRunner().invoke(app, ["import", *map(str, sorted(tmp_path.iterdir())), "-m", str(EXCERPT / "import.toml"),
+                                      "-o", str(tmp_path / "rotated.parquet"), "--json"])
+    assert result.exit_code == 2 and "sensor.csv: does not exist" in result.output  # the mapping names one file
+    first = tmp_path / RECORDINGS[0].name
+    (first / "sensor-9.csv").rename(first / "sensor-12.csv")
+    (first / "sensor-12.csv").write_text((first / "sensor-12.csv").read_text() + (first / "sensor-11.csv").read_text())
+    with pytest.raises(DatasetError, match=r"sensor-11.csv: starts at time 1743486\d+\.\d+, before .*sensor-12.csv "
+                                           r"ends .*: the files of one log must follow each other in time"):
+        import_logs([first], pieces)
+    with pytest.raises(DatasetError, match=r"labels.file = 'scale-\*.csv' matches no file"):
+        import_logs([first], replace(pieces, labels=replace(pieces.labels, file="scale-*.csv")))
+    even = replace(pieces.sensor, time=None, rate_hz=30.0)
+    with pytest.raises(DatasetError, match=r"sensor.file = 'sensor-\*.csv' matches 4 files: a log in several files "
+                                           "needs its time column"):
+        import_logs([first], replace(pieces, sensor=even))
+
 @pytest.mark.parametrize("name, unit, factor", [
     ("fz_N", "g", GRAM_FORCE_N), ("fz_N", "mN", 1e-3), ("fz_N", "lbf", 4.4482216152605), ("fz_N", "N", 1.0),
     ("fz_mN", "kN", 1e6), ("depth_mm", "m", 1e3), ("depth_mm", "um", 1e-3), ("angle_deg", "rad", 180 / np.pi)])
@@ -289,8 +325,6 @@ def test_a_mapping_mistake_is_one_line_naming_the_key(tmp_path, change, message)
 
 def test_the_validation_and_baseline_refuse_what_cannot_be(tmp_path):
     mapping = load_mapping(EXCERPT / "import.toml")
-    from dataclasses import replace
-
     from softtip.lab.importing import Baseline, Validation
 
     with pytest.raises(DatasetError, match=r"validation.last = 2: all 2 trials would validate"):
@@ -422,7 +456,8 @@ def test_the_readme_walk_through_runs_as_written_and_scores_the_held_out_recordi
     held_out = dataset.select(rows=dataset.column("role") == "validation")
     assert set(held_out.column("source")) == {"20250401_015717_probe"}
     assert scores[0]["validation_samples"] == len(held_out)
-    assert scores[0]["validation"]["fz_N"]["rmse"] <= 0.40  # the issue's bound for a whole held-out recording
+    # measured 0.331 N (seeds 0-4: 0.322-0.356 N), within the issue's 0.40 N for a whole held-out recording
+    assert scores[0]["validation"]["fz_N"]["rmse"] <= 0.36
     within = Dataset.read(tmp_path / "within.parquet")
     assert len(within.trials) == 20 and list(within.trial_conditions["role"]).count("validation") == 4
     assert scores[1]["validation"]["fz_N"]["rmse"] <= 0.27  # the published figure of the authors' split

@@ -18,13 +18,18 @@ Semantics followed:
 * training stops at the first of: mean squared error <= ``goal``, ``max_epochs`` epochs,
   gradient norm ‖Jᵀe‖ <= ``min_grad``, μ >= ``mu_max``, ``max_fail`` validation failures
   (epochs whose validation error is above the lowest so far, counted since that lowest);
-  the weights of the lowest validation error are returned.
+  the weights of the lowest validation error are returned. With ``min_progress`` (not the
+  toolbox's; None is its rule) validation failures stop training only once it has stopped
+  learning too: its training error fell by less than that fraction over the last ``max_fail``
+  epochs, so a plateau that the validation error sits out while the training error still falls
+  does not end it (:mod:`softtip.calibration.validation` says when this is needed).
 
 Errors in ``history_`` are mean squared errors of the scaled targets.
 """
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Annotated
@@ -89,7 +94,8 @@ def _mse(layers, inputs, targets) -> float:
 def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.ndarray],
                         validation: tuple[np.ndarray, np.ndarray], test: tuple[np.ndarray, np.ndarray], *,
                         max_epochs: int, max_fail: int, mu: float, mu_dec: float, mu_inc: float,
-                        mu_max: float, min_grad: float, goal: float) -> TrainingResult:
+                        mu_max: float, min_grad: float, goal: float,
+                        min_progress: float | None = None) -> TrainingResult:
     """Train a tanh network with linear outputs on (inputs, targets) pairs; see the module notes."""
     shapes = [w.shape for w in layers]
     theta = pack(layers)
@@ -107,8 +113,11 @@ def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.nd
         gradient_norm = float(np.linalg.norm(gradient))
         for key, value in zip(history, (perf, vperf, _mse(current, *test), mu, gradient_norm), strict=True):
             history[key].append(value)
+        learning = (min_progress is not None and epoch >= max_fail
+                    and history["train"][epoch - max_fail] - perf >= min_progress * perf)
         reason = stop_reason(epoch, perf, gradient_norm, stopping, max_epochs=max_epochs, goal=goal,
-                             min_grad=min_grad, max_fail=max_fail, limit_reached="mu_max" if mu >= mu_max else "")
+                             min_grad=min_grad, max_fail=math.inf if learning else max_fail,
+                             limit_reached="mu_max" if mu >= mu_max else "")
         if reason:
             break
         curvature = gauss_newton_matrix(current, activations)
@@ -170,6 +179,7 @@ class LMSettings(TanhNetworkSettings):
     mu_dec: OpenFraction
     mu_inc: Growth
     mu_max: Number
+    min_progress: NonNegativeNumber | None
 
     def __post_init__(self):
         if not self.mu_max > self.mu:
@@ -277,7 +287,7 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
 
     def __init__(self, hidden_layer_sizes=(10,), *, max_epochs=1000, max_fail=6, mu=1e-3, mu_dec=0.1,
                  mu_inc=10.0, mu_max=1e10, min_grad=1e-7, goal=0.0, division=(0.70, 0.15, 0.15),
-                 random_state=None):
+                 min_progress=None, random_state=None):
         self.hidden_layer_sizes = hidden_layer_sizes
         self.max_epochs = max_epochs
         self.max_fail = max_fail
@@ -288,6 +298,7 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
         self.min_grad = min_grad
         self.goal = goal
         self.division = division
+        self.min_progress = min_progress
         self.random_state = random_state
 
     def __sklearn_tags__(self):
@@ -325,7 +336,8 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
             result = levenberg_marquardt(
                 initial_layers(sizes, rng), *scaled, max_epochs=settings.max_epochs, max_fail=settings.max_fail,
                 mu=settings.mu, mu_dec=settings.mu_dec, mu_inc=settings.mu_inc, mu_max=settings.mu_max,
-                min_grad=settings.min_grad, goal=settings.goal)
+                min_grad=settings.min_grad, goal=settings.goal,
+                min_progress=settings.min_progress)
         self._keep_training(result)
         self._set_runtime_from_scaling()
         return self

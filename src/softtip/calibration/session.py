@@ -16,8 +16,13 @@ other than predicting zero. A new session is therefore
    1/20..20: a gain at a bound is reported). ``"channel"`` gives every input its own gain (more
    presses needed), ``"common"`` one gain for all.
 
-Gains rather than an affine correction of the inputs: the re-zero has taken out the offsets, and an
-offset fitted from a few presses is poorly determined (tried on the eFlesh recordings, it did worse).
+Gains rather than an affine correction of the inputs by default: the re-zero has taken out the
+offsets, and an offset fitted from a few presses is poorly determined (tried on the eFlesh
+recordings, it did worse). Where the readings change shape, not only scale (a steel plate near the
+chips adds its images' field, which depends on where the magnets are), :class:`SessionAffine` maps
+each chip's readings by a matrix and an offset, regularised toward the identity: on the twin with
+every cause of drift at once it leaves 0.39 N on Fz after five presses where gains leave 0.60 N
+(``softtip fingertip drift``), and from one press it is worse than no correction.
 Gains rather than a correction of the output: the chips drift apart (the 2-3.5x above differed from
 chip to chip), which one output scale cannot follow. The corrected model is the original with a
 scaling step in front (:meth:`SessionGains.corrected_model`), saved and run live as any model.
@@ -70,6 +75,19 @@ def press_ends(load: np.ndarray, trials: np.ndarray, above: float) -> np.ndarray
     return np.array([np.flatnonzero(runs == run)[-1] + 1 for run in range(1, runs.max() + 1)], dtype=int)
 
 
+def _session_rows(estimator, X, y) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A session correction's checked inputs, its inputs' groups (0 for all without ``groups``), its
+    targets as (rows, outputs) and each output's weight: one over the square root of rows times its
+    mean square, so that newtons and newton-metres weigh alike."""
+    X, y = validate_data(estimator, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
+    groups = np.zeros(X.shape[1], int) if estimator.groups is None else np.asarray(estimator.groups, dtype=int)
+    if groups.shape != (X.shape[1],) or groups.min() < 0:
+        raise ValueError(f"groups: expected one non-negative group per input ({X.shape[1]}), got {groups}")
+    targets = y.reshape(len(y), -1)
+    weight = 1.0 / np.sqrt(len(targets) * np.maximum(np.mean(targets**2, axis=0), np.finfo(float).tiny))
+    return X, groups, targets, weight
+
+
 class SessionGains(RegressorMixin, BaseEstimator):
     """A fitted ``model`` (anything with ``predict``) with its inputs multiplied by gains fitted on a new
     session: the gain of ``groups[j]`` multiplies input j (see the module notes).
@@ -84,13 +102,7 @@ class SessionGains(RegressorMixin, BaseEstimator):
         self.groups = groups
 
     def fit(self, X, y):
-        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
-        groups = np.zeros(X.shape[1], int) if self.groups is None else np.asarray(self.groups, dtype=int)
-        if groups.shape != (X.shape[1],) or groups.min() < 0:
-            raise ValueError(f"groups: expected one non-negative group per input ({X.shape[1]}), got {groups}")
-        targets = y.reshape(len(y), -1)
-        # Each output's residual in units of its own size, so newtons and newton-metres weigh alike.
-        weight = 1.0 / np.sqrt(len(targets) * np.maximum(np.mean(targets**2, axis=0), np.finfo(float).tiny))
+        X, groups, targets, weight = _session_rows(self, X, y)
         count = groups.max() + 1
 
         def residuals(group_gains: np.ndarray) -> np.ndarray:
@@ -131,8 +143,9 @@ class SessionCurve:
     """Errors of a model on a new session after 0..``len(rmse) - 1`` presses.
 
     ``rmse`` (presses + 1, outputs): on the scored rows, those after the last press used;
-    ``zero_rmse``: predicting zero on them; ``gains``: the per-input gains after each count of presses
-    (ones for none); ``press_ends``: the row after each press found; ``scored_rows``: how many.
+    ``zero_rmse``: predicting zero on them; ``gains``: the per-input gains (an affine map's
+    diagonal) after each count of presses (ones for none); ``press_ends``: the row after each press
+    found; ``scored_rows``: how many.
     """
 
     rmse: np.ndarray
@@ -144,9 +157,10 @@ class SessionCurve:
 
 
 def session_curve(model, X: np.ndarray, y: np.ndarray, trials: np.ndarray, *, presses: int, above: float,
-                  groups: np.ndarray) -> SessionCurve:
+                  groups: np.ndarray, affine: bool = False) -> SessionCurve:
     """``model`` on a new session (``X`` changes from its rest, ``y`` its loads, rows in time order):
-    re-calibrated by :class:`SessionGains` on the rows up to the end of its first k presses, for k in
+    re-calibrated by :class:`SessionGains` (``affine``: :class:`SessionAffine`, whose matrices'
+    diagonals are then the curve's gains) on the rows up to the end of its first k presses, for k in
     0..``presses``, and scored on the rows after the ``presses``-th (a press: rows whose largest
     absolute output exceeds ``above``). ValueError if the session has too few presses or nothing after
     them."""
@@ -165,10 +179,70 @@ def session_curve(model, X: np.ndarray, y: np.ndarray, trials: np.ndarray, *, pr
 
     errors, gains, at_bound = [rmse(model.predict(X[scored]))], [np.ones(X.shape[1])], [()]
     for k in range(1, presses + 1):
-        fitted = SessionGains(model, groups).fit(X[: ends[k - 1]], y2[: ends[k - 1]])
+        correction = SessionAffine(model, groups) if affine else SessionGains(model, groups)
+        fitted = correction.fit(X[: ends[k - 1]], y2[: ends[k - 1]])
         errors.append(rmse(fitted.predict(X[scored])))
-        gains.append(fitted.gains_)
-        at_bound.append(tuple(int(g) for g in fitted.at_bound_))
+        gains.append(np.diag(fitted.map_) if affine else fitted.gains_)
+        at_bound.append(() if affine else tuple(int(g) for g in fitted.at_bound_))
     return SessionCurve(rmse=np.array(errors), zero_rmse=rmse(np.zeros_like(y2[scored])), gains=np.array(gains),
                         press_ends=ends, scored_rows=len(X) - start, at_bound=tuple(at_bound))
+
+
+class SessionAffine(RegressorMixin, BaseEstimator):
+    """A fitted ``model`` with each group's inputs (a chip's, by :func:`gain_groups`) mapped by a matrix
+    and an offset fitted on a new session: ``x_g -> A_g x_g + s_g b_g``, ``s_g`` the RMS of the group's
+    inputs on the rows fitted, so that ``b_g`` is in units of the readings' size. The fit minimises the
+    outputs' squared error (each output over its mean square, as :class:`SessionGains`) plus ``alpha``
+    times Σ‖A_g − I‖² + ‖b_g‖²: with few presses the map stays near the identity where they do not
+    determine it.
+
+    Fitted attributes: ``matrices_`` (one per group), ``offsets_`` (in the inputs' units),
+    ``cost_`` (as :class:`SessionGains`), ``n_features_in_``.
+    """
+
+    def __init__(self, model=None, groups=None, alpha=1e-3):
+        self.model = model
+        self.groups = groups
+        self.alpha = alpha
+
+    def fit(self, X, y):
+        if not (isinstance(self.alpha, (int, float)) and 0 < self.alpha < np.inf):
+            raise ValueError(f"alpha = {self.alpha!r}: expected a number > 0")
+        X, groups, targets, weight = _session_rows(self, X, y)
+        members = [np.flatnonzero(groups == g) for g in np.unique(groups)]
+        sizes = np.sqrt([np.mean(X[:, m] ** 2) for m in members])
+        sizes = np.where(sizes > 0, sizes, 1.0)
+        identity = np.concatenate([np.r_[np.eye(len(m)).ravel(), np.zeros(len(m))] for m in members])
+
+        def residuals(parameters: np.ndarray) -> np.ndarray:
+            self._set_map(parameters, members, sizes, X.shape[1])
+            predicted = np.asarray(self.model.predict(self._mapped(X))).reshape(targets.shape)
+            return np.r_[((predicted - targets) * weight).ravel(), np.sqrt(self.alpha) * (parameters - identity)]
+
+        result = least_squares(residuals, identity, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+        if result.status <= 0:
+            raise NotConverged(f"session affine map: least squares stopped without converging ({result.message})")
+        self._set_map(result.x, members, sizes, X.shape[1])
+        self.matrices_ = [self.map_[np.ix_(m, m)] for m in members]
+        self.offsets_ = self.shift_.copy()
+        self.cost_ = float(np.sum(result.fun[:targets.size] ** 2) / targets.shape[1])
+        return self
+
+    def _set_map(self, parameters: np.ndarray, members: list[np.ndarray], sizes: np.ndarray, n: int) -> None:
+        """The block-diagonal matrix ``map_`` and the offset ``shift_`` of packed parameters."""
+        self.map_, self.shift_ = np.zeros((n, n)), np.zeros(n)
+        start = 0
+        for m, size in zip(members, sizes, strict=True):
+            k = len(m)
+            self.map_[np.ix_(m, m)] = parameters[start:start + k * k].reshape(k, k)
+            self.shift_[m] = size * parameters[start + k * k:start + k * k + k]
+            start += k * k + k
+
+    def _mapped(self, X: np.ndarray) -> np.ndarray:
+        return X @ self.map_.T + self.shift_
+
+    def predict(self, X):
+        check_is_fitted(self, "matrices_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return self.model.predict(self._mapped(X))
 

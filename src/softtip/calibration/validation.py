@@ -13,7 +13,16 @@ works:
   (:func:`softtip.data.splits.time_blocks`), whole blocks held out. Every kind of trial is in
   training and in validation; a block is long against the time over which neighbouring samples are
   alike, so the validation error is not that of samples the network was trained on (a random share
-  of samples would follow the training error and never stop training);
+  of samples would follow the training error and never stop training). Because it is not, it does
+  not fall at every epoch the training error falls: Levenberg–Marquardt crosses plateaus (μ raised,
+  small steps) on which the held-out blocks' error sits a few per cent above its lowest for ten or
+  twenty epochs before both fall again. The toolbox's 6 failures, set for a random share, stop
+  there. So with blocks, failures stop training only once the network has stopped learning too:
+  its training error fell by less than :data:`BLOCKS_MIN_PROGRESS` over the last 6 epochs
+  (``min_progress`` of :class:`~softtip.calibration.network.LMNetwork`). A plateau, where the
+  training error still falls, is crossed; overfitting, where the validation error rises while the
+  training error barely moves, still stops it. The weights kept are those of the lowest
+  validation error;
 * ``auto`` (the default) — ``trials`` when the calibration set has at least
   :data:`MIN_TRIALS_HELD_OUT` trials (the default 15 % validation share is then two trials or
   more), ``blocks`` otherwise.
@@ -64,6 +73,7 @@ StoppingRule = Literal["auto", "trials", "blocks"]
 STOPPING_RULES: tuple[str, ...] = get_args(StoppingRule)
 MIN_TRIALS_HELD_OUT = 10  # round(0.15 * 10) = 2 validation trials: fewer, and one trial decides when to stop
 DEFAULT_BLOCK_S = 5.0  # several seconds: longer than a press's rise, short against a recording
+BLOCKS_MIN_PROGRESS = 0.01  # a training error falling by 1 % in 6 epochs is still learning (see the notes)
 RANGE_MARGIN = 0.05  # of the calibration span, each side: quantisation steps and noise are not a shift
 SHIFT_WARNING_SHARE = 0.01  # of the validation samples beyond the widened range
 BASELINES: tuple[str, ...] = ("ridge", "boosting", "mlp")
@@ -84,6 +94,13 @@ def stopping_groups(trial: np.ndarray, time_s: np.ndarray, rule: StoppingRule,
     if rule == "trials":
         return trial, rule
     return time_blocks(trial, time_s, block_s), rule
+
+
+def min_progress(rule: str) -> float | None:
+    """The network's ``min_progress`` under an applied rule (``trials`` or ``blocks``): the toolbox's
+    failures alone with whole trials; with blocks, failures while the training error falls do not
+    count (see the module notes)."""
+    return BLOCKS_MIN_PROGRESS if rule == "blocks" else None
 
 
 # --------------------------------------------------------------------------
@@ -244,10 +261,11 @@ def baselines(calibration: tuple[np.ndarray, np.ndarray], validation: tuple[np.n
 
 @dataclass(frozen=True)
 class Candidate:
-    """A model to cross-validate: a factory of unfitted estimators, and whether its fit takes early-stopping groups."""
+    """A model to cross-validate: a factory of unfitted estimators given the early-stopping rule applied
+    (``trials`` or ``blocks``, for :func:`min_progress`), and whether its fit takes early-stopping groups."""
 
     name: str
-    make: Callable[[], BaseEstimator]
+    make: Callable[[str], BaseEstimator]
     takes_groups: bool
 
 
@@ -272,9 +290,9 @@ def cross_validate_by_trial(candidates: list[Candidate], X: np.ndarray, y: np.nd
     targets = y.reshape(len(y), -1)
     predicted = {candidate.name: np.empty_like(targets) for candidate in candidates}
     for train, test in folds:
-        groups, _ = stopping_groups(trial[train], time_s[train], rule, block_s)
+        groups, applied = stopping_groups(trial[train], time_s[train], rule, block_s)
         for candidate in candidates:
-            model = candidate.make()
+            model = candidate.make(applied)
             if candidate.takes_groups:
                 model.fit(X[train], y[train], groups=groups)
             else:

@@ -90,7 +90,7 @@ def import_logs(
     from softtip._core.config import read_toml
     from softtip.data import DatasetError
     from softtip.lab.importing import import_logs as read_logs
-    from softtip.lab.importing import mapping_from
+    from softtip.lab.importing import log_files, mapping_from
 
     if mapping is not None:
         check_input(mapping, "--mapping")
@@ -131,10 +131,9 @@ def import_logs(
     source = ("the options" if mapping is None else str(mapping) if document == as_written
               else f"{mapping} with the options")
     loaded = mapping_from(document, source)
-    labels = loaded.labels
     inputs = [*([] if mapping is None else [mapping]), *sources]
-    inputs += [source / name for source in sources if source.is_dir()
-               for name in (loaded.sensor.file, labels.file if labels else None) if name]
+    inputs += [path for source in sources if source.is_dir()
+               for files in log_files(source, loaded) for path in files or []]
     check_output(output, "--output", inputs, force=force)
     dataset, report = read_logs(sources, loaded)
     path = dataset.write(output)

@@ -190,7 +190,7 @@ def calibrate(
         cross = _cross_validation(X[train], y[train], trial, time_s, cv, model, candidates, seed, early_stopping,
                                   block_s, baseline, names, json_output)
         sizes = candidates[[_label(model, c) for c in candidates].index(cross["selected"])]
-    estimator = _make_model(model, sizes, seed)
+    estimator = _make_model(model, sizes, seed, rule)
     start = time.perf_counter()
     estimator.fit(X[train], y[train], groups=groups)
     seconds = time.perf_counter() - start
@@ -264,10 +264,10 @@ def _cross_validation(X, y, trial, time_s, folds: int, kind: str, candidates: li
     calibration trials, and the candidate selected."""
     from softtip.calibration.validation import BASELINES, Candidate, baseline, cross_validate_by_trial, selected
 
-    models = [Candidate(_label(kind, sizes), lambda sizes=sizes: _make_model(kind, sizes, seed), True)
+    models = [Candidate(_label(kind, sizes), lambda rule, sizes=sizes: _make_model(kind, sizes, seed, rule), True)
               for sizes in candidates]
     if with_baselines:
-        models += [Candidate(name, lambda name=name: baseline(name, seed), False) for name in BASELINES]
+        models += [Candidate(name, lambda rule, name=name: baseline(name, seed), False) for name in BASELINES]
     with progress_for(json_output).task(f"cross-validating by trial ({folds} folds)"):
         cross = cross_validate_by_trial(models, X, y, trial, time_s, folds, early_stopping, block_s)
     own = {model.name: cross.rmse[model.name] for model in models[:len(candidates)]}
@@ -390,13 +390,15 @@ def _check_label_units(data, dataset: Path, targets: list[str]) -> None:
             fail(f"{dataset}: label {name!r} is declared in {declared!r}, but its name says {named!r}")
 
 
-def _make_model(kind: str, sizes: tuple[int, ...], seed: int):
+def _make_model(kind: str, sizes: tuple[int, ...], seed: int, rule: str):
+    """An unfitted model of ``kind``; a network's early stopping as the applied ``rule`` (trials or blocks) asks."""
     from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier
+    from softtip.calibration.validation import min_progress
 
     if kind == "polynomial":
         return PolynomialFit()
     if kind == "network":
-        return LMNetwork(sizes, random_state=seed)
+        return LMNetwork(sizes, min_progress=min_progress(rule), random_state=seed)
     return SoftmaxClassifier(sizes, random_state=seed)
 
 

@@ -28,7 +28,10 @@ A mapping, written once as a small TOML file, says how a rig's logs become trial
                                   # { label = "fz_N", below = 0.05 }: its samples at rest; per = "source":
                                   # one zero for all the trials of a source
 
-A source is a file (the sensor log, labels in it) or a folder holding the mapping's files. Labels are
+A source is a file (the sensor log, labels in it) or a folder holding the mapping's files. A ``file``
+may be a pattern (``file = "sensor-*.csv"``): a rig that rotates its logs writes one log in several
+files, read as one in the order of their first times (each needs the time column; files that overlap
+in time are refused). Labels are
 converted to the unit their name ends in (``fz_N``: N) from the unit they were logged in; a label whose
 name states no unit is kept in its logged unit. The dataset's conditions are ``role`` (calibration or
 validation, what ``softtip calibrate`` splits by) and ``source`` (where each trial came from).
@@ -38,6 +41,7 @@ Its reader of delimited text is :func:`softtip.data.csvload.read_columns`, for a
 
 from __future__ import annotations
 
+import glob
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -347,18 +351,53 @@ class ImportReport:
     join_offset_s: float | None  # the largest |sensor time - label time| of the rows kept
 
 
-def _files(source: Path, mapping: ImportMapping) -> tuple[Path, Path | None]:
-    """The sensor log and the label log (None: labels in the sensor log) of one source."""
+def log_files(source: Path, mapping: ImportMapping) -> tuple[list[Path], list[Path] | None]:
+    """The pieces of the sensor log and of the label log (None: labels in the sensor log) of one source:
+    one file each, or every file of the source's folder a pattern in ``file`` matches (a rig that
+    rotates its logs), in no particular order (:func:`_read_log` puts them in time order)."""
     labels = mapping.labels
     separate = labels is not None and labels.file is not None
     if source.is_dir():
         if mapping.sensor.file is None:
             raise DatasetError(f"{source}: a folder, but the mapping names no sensor.file to read in it")
-        return source / mapping.sensor.file, (source / labels.file) if separate else None
+        return (_pieces(source, mapping.sensor, "sensor"),
+                _pieces(source, labels, "labels") if separate else None)
     if separate:
         raise DatasetError(f"{source}: a file, but the labels are in a log of their own ({labels.file}): "
                            "give the folder holding both")
-    return source, None
+    return [source], None
+
+
+def _pieces(folder: Path, log: _Log, table: str) -> list[Path]:
+    """The files of ``folder`` that a log's ``file`` names: itself, or every match of its pattern."""
+    if not glob.has_magic(log.file):
+        return [folder / log.file]
+    found = sorted(path for path in folder.glob(log.file) if path.is_file())
+    if not found:
+        raise DatasetError(f"{folder}: {table}.file = {log.file!r} matches no file")
+    if len(found) > 1 and log.time is None:
+        raise DatasetError(f"{folder}: {table}.file = {log.file!r} matches {len(found)} files: a log in several "
+                           "files needs its time column to put them in order")
+    return found
+
+
+def _read_log(paths: list[Path], log: _Log, refs: list[int | str], *,
+              strictly: bool) -> list[tuple[Path, np.ndarray]]:
+    """Each piece of a log with its ``refs`` columns (the time column first, if the log has one), the
+    pieces in time order; a piece that starts before the one ahead of it ends (or, ``strictly``, as it
+    ends) is refused naming both."""
+    pieces = [(path, read_columns(path, refs, header=log.header, delimiter=log.delimiter)) for path in paths]
+    if len(pieces) == 1:
+        return pieces
+    for path, values in pieces:
+        if not len(values):
+            raise DatasetError(f"{path}: no rows")
+    pieces.sort(key=lambda piece: piece[1][0, 0])
+    for (before, earlier), (path, later) in zip(pieces[:-1], pieces[1:]):
+        if later[0, 0] < earlier[-1, 0] or (strictly and later[0, 0] == earlier[-1, 0]):
+            raise DatasetError(f"{path}: starts at time {float(later[0, 0])}, before {before} ends "
+                               f"({float(earlier[-1, 0])}): the files of one log must follow each other in time")
+    return pieces
 
 
 def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -411,8 +450,7 @@ def _check_time_order(path: Path, log: _Log, time: np.ndarray, ids: np.ndarray, 
 def _join(path: Path, labels: LabelLog, sensor_time: np.ndarray, label_time: np.ndarray,
           label_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(sensor rows kept, their labels, |time offset|): each sensor row takes the label row nearest in
-    time whose every label is a reading, if it lies within the tolerance."""
-    _check_time_order(path, labels, label_time, np.zeros(len(label_time), dtype=np.int64), strictly=False)
+    time whose every label is a reading, if it lies within the tolerance; ``label_time`` in order."""
     valid = np.all(np.isfinite(label_values), axis=1)
     if labels.missing is not None:
         valid &= ~np.any(label_values == labels.missing, axis=1)
@@ -441,20 +479,29 @@ class _Trial:
 def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], int, float | None]:
     """One source's trials, the sensor rows it dropped for want of a label, the largest join offset."""
     sensor, labels = mapping.sensor, mapping.labels
-    sensor_file, label_file = _files(source, mapping)
-    own_labels = [] if labels is None or label_file is not None else [label.column for label in labels.columns.values()]
+    sensor_files, label_files = log_files(source, mapping)
+    sensor_file = sensor_files[0] if len(sensor_files) == 1 else source / sensor.file  # what errors name
+    own_labels = ([] if labels is None or label_files is not None
+                  else [label.column for label in labels.columns.values()])
     split_column = [mapping.trials.column] if mapping.trials.split == "column" else []
     refs = [*sensor.columns_used(), *own_labels, *split_column]
-    values = read_columns(sensor_file, refs, header=sensor.header, delimiter=sensor.delimiter)
+    pieces = _read_log(sensor_files, sensor, refs, strictly=True)
+    values = np.concatenate([piece for _, piece in pieces])
     if len(values) == 0:
         raise DatasetError(f"{sensor_file}: no rows")
     n_time = 0 if sensor.time is None else 1
     time = _times(sensor, values)
-    readings, saturated = _sensor_values(sensor_file, sensor, values[:, n_time:n_time + 3 * len(sensor.chips)])
-    rest = values[:, n_time + 3 * len(sensor.chips):]
+    chip_columns = slice(n_time, n_time + 3 * len(sensor.chips))
+    read = [_sensor_values(path, sensor, piece[:, chip_columns]) for path, piece in pieces]
+    readings = np.concatenate([piece_readings for piece_readings, _ in read])
+    saturated = None if read[0][1] is None else np.concatenate([piece_saturated for _, piece_saturated in read])
+    rest = values[:, chip_columns.stop:]
     own = rest[:, :len(own_labels)]
     ids = _trial_ids(sensor_file, mapping.trials, time, rest[:, len(own_labels):])
-    _check_time_order(sensor_file, sensor, time, ids, strictly=True)
+    first = 0
+    for path, piece in pieces:  # each file's own lines named
+        _check_time_order(path, sensor, time[first:first + len(piece)], ids[first:first + len(piece)], strictly=True)
+        first += len(piece)
     starts, lengths = trial_runs(ids)
     clock, time = time, time - np.repeat(time[starts], lengths)  # from each trial's first sample, kept or not
     baseline = mapping.trials.baseline
@@ -469,7 +516,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
     dropped, largest = 0, None
     if labels is None:
         label_values = np.zeros((len(time), 0))
-    elif label_file is None:
+    elif label_files is None:
         label_values = own
         missing = ~np.all(np.isfinite(own), axis=1)
         if labels.missing is not None:
@@ -480,9 +527,13 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
         saturated = None if saturated is None else saturated[keep]
     else:
         label_refs = [labels.time, *(label.column for label in labels.columns.values())]
-        logged = read_columns(label_file, label_refs, header=labels.header, delimiter=labels.delimiter)
-        keep, label_values, offset = _join(label_file, labels, clock, _times(labels, logged),
-                                           logged[:, 1:])
+        label_pieces = _read_log(label_files, labels, label_refs, strictly=False)
+        for path, piece in label_pieces:
+            _check_time_order(path, labels, _times(labels, piece), np.zeros(len(piece), dtype=np.int64),
+                              strictly=False)
+        logged = np.concatenate([piece for _, piece in label_pieces])
+        label_file = label_files[0] if len(label_files) == 1 else source / labels.file
+        keep, label_values, offset = _join(label_file, labels, clock, _times(labels, logged), logged[:, 1:])
         dropped = int((~keep).sum())
         largest = float(offset.max()) if offset.size else None
         time, readings, ids, zero_ids = time[keep], readings[keep], ids[keep], zero_ids[keep]

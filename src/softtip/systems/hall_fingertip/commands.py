@@ -107,7 +107,7 @@ def drift(
         if plot.suffix.lower() != ".png":
             fail(f"--plot {plot}: expected a file name ending in .png")
         check_output(plot, "--plot", force=force)
-    from softtip.systems.hall_fingertip.drift import TARGETS, drift_study, plot_drift
+    from softtip.systems.hall_fingertip.drift import PRESSES, TARGETS, drift_study, plot_drift
 
     study = drift_study(seed, quick, progress_for(json_output))
     if plot is not None:
@@ -115,17 +115,20 @@ def drift(
     if json_output:
         print(json.dumps({**study.to_dict(), "plot": None if plot is None else str(plot)}, indent=2))
         return
-    table = Table(title=f"Drift between sessions, unit of seed {seed}: force RMSE (N) on the later session")
-    for column in ("cause", "readings' change (%)", *TARGETS):
+    table = Table(title=f"Drift between sessions, unit of seed {seed}: force RMSE (N) on the later session, "
+                        f"as calibrated and after {PRESSES} presses")
+    for column in ("cause", "readings' change (%)", *TARGETS, *(f"{t} after {PRESSES}" for t in TARGETS)):
         table.add_column(column, justify="right")
-    table.add_row("none (the calibration session)", "0", *(f"{v:.3f}" for v in study.calibration_rmse_N))
+    table.add_row("none (the calibration session)", "0", *(f"{v:.3f}" for v in study.calibration_rmse_N),
+                  *("" for _ in TARGETS))
     for cause in study.causes:
-        table.add_row(cause.name, f"{100 * cause.reading_change:.2f}", *(f"{v:.3f}" for v in cause.force_rmse_N))
+        table.add_row(cause.name, f"{100 * cause.reading_change:.2f}",
+                      *(f"{v:.3f}" for v in (*cause.force_rmse_N, *cause.corrected_rmse_N)))
     console.print(table)
     curve = Table(title=f"Every cause at once, re-calibrated from its first presses ({study.scored_rows} rows scored)")
-    for column in ("presses", *TARGETS):
+    for column in ("presses", *(f"{t}: gains" for t in TARGETS), *(f"{t}: affine" for t in TARGETS)):
         curve.add_column(column, justify="right")
-    curve.add_row("predicting zero", *(f"{v:.3f}" for v in study.zero_rmse_N))
-    for k, row in enumerate(study.presses_rmse_N):
-        curve.add_row(str(k), *(f"{v:.3f}" for v in row))
+    curve.add_row("predicting zero", *(f"{v:.3f}" for v in (*study.zero_rmse_N, *study.zero_rmse_N)))
+    for k, (gains, affine) in enumerate(zip(study.presses_rmse_N, study.affine_presses_rmse_N, strict=True)):
+        curve.add_row(str(k), *(f"{v:.3f}" for v in (*gains, *affine)))
     console.print(curve)

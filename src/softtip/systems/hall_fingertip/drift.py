@@ -9,13 +9,17 @@ in every session, so two sessions differ by the drift alone. For each cause:
   session's readings, sample by sample (the re-zero at the start of each trial has taken out every
   offset, so this is what a re-zero cannot correct);
 * the force error of the calibration session's network (3-10-3, Levenberg-Marquardt) on the later
-  session's validation trials, beside its error in its own session.
+  session's validation trials, beside its error in its own session;
+* what a session correction leaves of it: the later session re-calibrated from its first 5 presses
+  (:func:`softtip.calibration.session.session_curve`, one gain per channel: design D has one chip)
+  and scored on the rows after them.
 
-With every cause on at once, the later session is re-calibrated from its first 0..5 presses
-(:func:`softtip.calibration.session.session_curve`, one gain per channel: design D has one chip) and
-scored on its later trials. Its presses are taken in turn from each motion (normal, shear along x,
-along y, normal, ...), as a user re-calibrating presses in each direction; the protocol runs them
-motion by motion.
+With every cause on at once, the later session is re-calibrated from its first 0..5 presses the same
+way, and by an affine map of the chip's readings (:class:`~softtip.calibration.session.SessionAffine`,
+a matrix and an offset regularised toward the identity), and scored on its later trials. Its presses
+(here and for each cause) are taken in turn from each motion (normal, shear along x, along y,
+normal, ...), as a user re-calibrating presses in each direction; the protocol runs them motion by
+motion.
 """
 
 from __future__ import annotations
@@ -46,13 +50,15 @@ QUICK = {"calibration_trials": 3, "validation_trials": 1}  # 12 presses: 5 to re
 
 @dataclass(frozen=True)
 class CauseSize:
-    """One cause's effect: ``reading_change`` (RMS, fraction of the calibration session's RMS) and the
-    calibration model's force RMSE (N, per axis of :data:`TARGETS`) on the later session."""
+    """One cause's effect: ``reading_change`` (RMS, fraction of the calibration session's RMS), the
+    calibration model's force RMSE (N, per axis of :data:`TARGETS`) on the later session, and its RMSE
+    after the session correction from :data:`PRESSES` presses (on the rows after them)."""
 
     name: str
     settings: dict
     reading_change: float
     force_rmse_N: tuple[float, ...]
+    corrected_rmse_N: tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -62,6 +68,7 @@ class DriftStudy:
     calibration_rmse_N: tuple[float, ...]
     causes: tuple[CauseSize, ...]
     presses_rmse_N: np.ndarray  # (PRESSES + 1, 3): the session with every cause, after 0..5 presses
+    affine_presses_rmse_N: np.ndarray  # the same, corrected by an affine map of the readings
     zero_rmse_N: np.ndarray
     scored_rows: int
 
@@ -69,11 +76,14 @@ class DriftStudy:
         return {"seed": self.seed, "quick": self.quick, "targets": list(TARGETS),
                 "calibration_session_rmse_N": list(self.calibration_rmse_N),
                 "causes": [{"cause": c.name, "realism": c.settings, "reading_change_percent": 100 * c.reading_change,
-                            "force_rmse_N": list(c.force_rmse_N)} for c in self.causes],
+                            "force_rmse_N": list(c.force_rmse_N),
+                            f"after_{PRESSES}_presses_rmse_N": list(c.corrected_rmse_N)} for c in self.causes],
                 "session_correction": {"causes": ALL_CAUSES, "scored_rows": self.scored_rows,
                                        "zero_rmse_N": self.zero_rmse_N.tolist(),
                                        "rmse_N_by_presses": [{"presses": k, "rmse_N": row.tolist()}
-                                                             for k, row in enumerate(self.presses_rmse_N)]}}
+                                                             for k, row in enumerate(self.presses_rmse_N)],
+                                       "affine_rmse_N_by_presses": [{"presses": k, "rmse_N": row.tolist()} for k, row
+                                                                    in enumerate(self.affine_presses_rmse_N)]}}
 
 
 def in_turn(data) -> np.ndarray:
@@ -107,15 +117,19 @@ def drift_study(seed: int = 1, quick: bool = False, progress: Progress = SILENT)
     causes = []
     for name, settings in sessions.items():
         X, y, data = session(settings)
+        rows = in_turn(data)
+        above = 0.1 * np.abs(y).max()
+        curve = session_curve(model, X[rows], y[rows], data.groups[rows], presses=PRESSES, above=above,
+                              groups=gain_groups(list(data.channels), "channel"))
         if name == ALL_CAUSES:
-            rows = in_turn(data)
-            curve = session_curve(model, X[rows], y[rows], data.groups[rows], presses=PRESSES,
-                                  above=0.1 * np.abs(y).max(), groups=gain_groups(list(data.channels), "channel"))
+            affine = session_curve(model, X[rows], y[rows], data.groups[rows], presses=PRESSES, above=above,
+                                   groups=gain_groups(list(data.channels), "chip"), affine=True)
             continue
         change = float(np.sqrt(np.mean((X - X0) ** 2) / np.mean(X0**2)))
-        causes.append(CauseSize(name, settings, change, _rmse(model, X[validation], y[validation])))
+        causes.append(CauseSize(name, settings, change, _rmse(model, X[validation], y[validation]),
+                                tuple(curve.rmse[-1].tolist())))
     return DriftStudy(seed, quick, _rmse(model, X0[validation], y0[validation]), tuple(causes), curve.rmse,
-                      curve.zero_rmse, curve.scored_rows)
+                      affine.rmse, curve.zero_rmse, curve.scored_rows)
 
 
 def plot_drift(study: DriftStudy, path) -> None:
@@ -144,12 +158,13 @@ def plot_drift(study: DriftStudy, path) -> None:
     error.set_title("The calibration session's network on it", fontsize="medium")
     presses = np.arange(len(study.presses_rmse_N))
     for k, axis in enumerate(TARGETS):
-        curve.plot(presses, study.presses_rmse_N[:, k], "o-", label=axis)
+        line, = curve.plot(presses, study.presses_rmse_N[:, k], "o-", label=f"{axis}: gains")
+        curve.plot(presses, study.affine_presses_rmse_N[:, k], "s--", color=line.get_color(), label=f"{axis}: affine")
     curve.axhline(float(np.mean(study.zero_rmse_N)), color="k", ls=":", label="predicting zero (mean of axes)")
     curve.set_xticks(presses)
     curve.set_xlabel("presses of the later session used")
     curve.set_ylabel("force RMSE (N)")
     curve.set_ylim(bottom=0)
-    curve.legend(fontsize="small", loc="center right")
+    curve.legend(fontsize="small", loc="upper right")
     curve.set_title("Every cause at once, re-calibrated", fontsize="medium")
     save_figure(figure, path, dpi=110)
