@@ -77,7 +77,7 @@ def bench_cilia(
         console.print(note, markup=False)
     console.print("verdict: " + ("every target met" if not missed else
                                  f"{len(missed)} of {len(report['timings'])} targets missed: {'; '.join(missed)}"),
-                  markup=False)
+                  markup=False, soft_wrap=True)  # one line, however narrow the terminal: its last line is the verdict
 
 
 @app.command("design")
