@@ -32,6 +32,7 @@ from softtip.systems.cilia.model import CiliaModel
 
 CHI2_95 = float(stats.chi2.ppf(0.95, 1))  # 3.841: one parameter's 95 % likelihood-ratio threshold
 SECANT_SPAN = 0.05  # log units: the fit's diameter derivative is a secant through a curve kept this near
+SECANT_FLOOR = 1e-7  # and at least this far
 
 
 class CurveError(DieError):
@@ -94,14 +95,15 @@ class CurveModel:
         ``log_parameters``, by forward differences of relative size 1e-5 (scipy's ``diff_step`` in
         ``least_squares``). The moment's costs nothing (the fields at this diameter are kept). With
         ``secant_span`` > 0 the diameter's is the secant through the nearest diameter already computed when
-        that one lies within ``secant_span`` in log units (and beyond the forward step): no new curve."""
+        that one lies within ``secant_span`` in log units and beyond 1e-7 (where the rods' 1e-10 tolerance
+        is still a thousandth of the difference): no new curve."""
         steps = 1e-5 * np.maximum(1.0, np.abs(log_parameters))
         moment, diameter = np.exp(log_parameters)
         here = self.predict(moment, diameter)
         by_moment = (self.predict(moment * math.exp(steps[0]), diameter) - here) / steps[0]
         gaps = [math.log(known / diameter) for known in self._fields if known != diameter]
         nearest = min(gaps, key=abs, default=math.inf)
-        step = nearest if steps[1] <= abs(nearest) <= secant_span else steps[1]
+        step = nearest if SECANT_FLOOR <= abs(nearest) <= secant_span else steps[1]
         by_diameter = (self.predict(moment, diameter * math.exp(step)) - here) / step
         return np.stack([by_moment, by_diameter], axis=-1)
 
