@@ -183,8 +183,10 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     assert np.allclose(sorted({r.roughness for r in recordings}), [0.0, 18.3e-6, 46.2e-6, 162e-6], rtol=1e-12)
     study = analyse_roughness(recordings, 1e-3, 50.0, seed=0)
     assert np.all(np.diff(study.total_rms) > 0) and study.classification.windows > 0
-    with pytest.raises(ValueError, match="dataset: expected the conditions mode, surface"):
-        recordings_of(read.select(rows=read.column("mode") == "paper"), channel="s0_bx_uT")
+    with pytest.raises(ValueError, match="dataset: expected the channel s0_bx_uT; its channels: gmr_x_V, gmr_y_V"):
+        recordings_of(read, channel="s0_bx_uT")
+    with pytest.raises(ValueError, match="dataset: no brushing trials"):
+        recordings_of(read.select(rows=read.column("mode") == "paper"))
     # the command reads the same file the same way
     from softtip.systems.cilia.commands import roughness_cilia
 
