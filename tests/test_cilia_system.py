@@ -99,6 +99,32 @@ def test_a_die_with_one_sensor_direction_runs_the_protocol_and_the_bench(tmp_pat
     assert json.loads(ran.output)["sensor"] == "Y"
 
 
+def test_reproduce_on_a_die_of_the_other_sensor_alone_asks_for_it_before_any_work(tmp_path):
+    from softtip.studies.reproduce import reproduce_study
+    from softtip.systems.cilia.layout import DieError
+
+    with pytest.raises(DieError, match=r"parameters.sensor = 'X': the die file y-only.toml has the sensor Y only; "
+                                       r'set sensor = "Y"'):
+        reproduce_study("cilia", seed=1, protocol_path=coarse(tmp_path, points=5, die=f'"{y_only_die(tmp_path)}"'))
+
+
+@pytest.mark.slow
+def test_reproduce_reads_a_die_with_one_sensor_direction(tmp_path):
+    from softtip.studies.reproduce import reproduce_study
+
+    die = y_only_die(tmp_path)
+    report = reproduce_study("cilia", seed=1, protocol_path=coarse(tmp_path, points=8, die=f'"{die}"', sensor='"Y"',
+                                                                   gap_causes="false"))
+    results = report.outcome.results
+    assert list(results["rest_V"]) == list(results["minimum_force_3sigma_uN"]) == ["Y"]
+    # the Y strips sense across the bend: the pillars bent along x barely move its voltage, so no force in
+    # reach is resolved (the shipped die's Y: 0.006 V/N at rest)
+    assert results["minimum_force_3sigma_uN"]["Y"] > 26e3
+    assert results["roughness"]["recordings"] == 4 * (2 * 3 + 1)  # 2 strips x 3 speeds, and a rate of 2/s on one
+    assert results["chain_against_continuous"]["sensor"] == "Y"
+    assert all(figure.png.startswith(b"\x89PNG") for figure in report.outcome.figures)
+
+
 def test_the_record_is_light_and_names_every_part():
     loaded = subprocess.run([sys.executable, "-c", "import sys, softtip.systems.cilia as c; "
                              "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'scipy', "
@@ -157,8 +183,10 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     assert np.allclose(sorted({r.roughness for r in recordings}), [0.0, 18.3e-6, 46.2e-6, 162e-6], rtol=1e-12)
     study = analyse_roughness(recordings, 1e-3, 50.0, seed=0)
     assert np.all(np.diff(study.total_rms) > 0) and study.classification.windows > 0
-    with pytest.raises(ValueError, match="dataset: expected the conditions mode, surface"):
-        recordings_of(read.select(rows=read.column("mode") == "paper"), channel="s0_bx_uT")
+    with pytest.raises(ValueError, match="dataset: expected the channel s0_bx_uT; its channels: gmr_x_V, gmr_y_V"):
+        recordings_of(read, channel="s0_bx_uT")
+    with pytest.raises(ValueError, match="dataset: no brushing trials"):
+        recordings_of(read.select(rows=read.column("mode") == "paper"))
     # the command reads the same file the same way
     from softtip.systems.cilia.commands import roughness_cilia
 

@@ -183,21 +183,31 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
     corners = xs.size * ys.size
     if corners < 4 * count:
         chunk = max(1, _PAIRS_PER_CHUNK // corners)
+        # each element's four corners as flat indices into the (X, Y) grid of corners
+        high_high, high_low = x_high * ys.size + y_high, x_high * ys.size + y_low
+        low_high, low_low = x_low * ys.size + y_high, x_low * ys.size + y_low
         for start in range(0, flat_positions.shape[0], chunk):
-            p = flat_positions[start:start + chunk, :, None, None]  # (d, 3, 1, 1)
-            m = flat_moments[start:start + chunk, :, None, None]
-            dx, dy = xs[:, None] - p[:, 0], ys[None, :] - p[:, 1]  # (d, X, 1), (d, 1, Y)
-            height = rectangles.z - p[:, 2]
-            root = np.sqrt(dx * dx + dy * dy + height * height)  # (d, X, Y): each corner's distance
+            p = flat_positions[start:start + chunk]  # (d, 3)
+            m = flat_moments[start:start + chunk]
+            # offsets to the corners' lines (d, X) and (d, Y), heights (d, 1): only the distance and the
+            # primitive itself are taken on the full (d, X, Y) grid, in place
+            dx, dy = xs[None, :] - p[:, 0:1], ys[None, :] - p[:, 1:2]
+            height = rectangles.z - p[:, 2:3]
+            height2 = height * height
+            root = np.add((dx * dx)[:, :, None], (dy * dy + height2)[:, None, :])
+            np.sqrt(root, out=root)  # (d, X, Y): each corner's distance
+            primitive = np.empty_like(root)
             for column, axis in enumerate(axes):
                 # the primitive of ∫ φ d(along) at each corner (module notes), across = the edges across ``axis``
                 across, along = (dx, dy) if axis == 0 else (dy, dx)
-                rho2 = across * across + height * height
-                axial = m[:, axis] * across + m[:, 2] * height
-                primitive = (axial * along / rho2 - m[:, 1 - axis]) / root
+                slope = (m[:, axis:axis + 1] * across + m[:, 2:3] * height) / (across * across + height2)
+                grid = (slope[:, :, None] * along[:, None, :]) if axis == 0 else (along[:, :, None] * slope[:, None, :])
+                np.subtract(grid, m[:, 1 - axis, None, None], out=primitive)
+                np.divide(primitive, root, out=primitive)
+                flat = primitive.reshape(primitive.shape[0], -1)
                 # either axis: (upper edge across − lower edge across) of (upper end − lower end) along it
-                out[start:start + chunk, :, column] = (primitive[:, x_high, y_high] - primitive[:, x_high, y_low]
-                                                       - primitive[:, x_low, y_high] + primitive[:, x_low, y_low])
+                out[start:start + chunk, :, column] = (flat[:, high_high] - flat[:, high_low]
+                                                       - flat[:, low_high] + flat[:, low_low])
     else:
         chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
         edges = (rectangles.x, rectangles.y)

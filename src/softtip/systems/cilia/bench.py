@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from softtip._core.config import PositiveNumber, schema
 from softtip._core.progress import Progress
@@ -202,15 +203,30 @@ def curve_of(dataset: Dataset, mode: str, repeat: int, sensor: str) -> MeasuredC
     return MeasuredCurve(part.column("force_N"), part.column(channel(sensor)), sensor)
 
 
+BRUSHING_CONDITIONS = ("mode", "surface", "roughness_um", "repeat", "speed_mm_s", "rate_hz")
+BRUSHING_LABELS = ("roughness_um", "speed_mm_s", "rate_hz")  # and optionally "strip": an imported log's
+
+
 def recordings_of(dataset: Dataset, channel: str = "gmr_x_V") -> list[Recording]:
-    """The brushings of a ``cilia`` dataset (trials of mode ``brushing``: a lab run's or a user's own, with the
-    conditions ``surface``, ``roughness_um``, ``repeat`` (the strip), ``speed_mm_s`` and ``rate_hz``), read
-    from ``channel``."""
-    missing = [name for name in ("mode", "surface", "roughness_um", "repeat", "speed_mm_s", "rate_hz")
-               if name not in dataset.conditions]
-    if missing or channel not in dataset.channels:
-        raise DieError(f"dataset: expected the conditions mode, surface, roughness_um, repeat, speed_mm_s and "
-                       f"rate_hz and the channel {channel}; missing {', '.join(missing) or channel}")
+    """The brushings of a dataset, read from ``channel``: a ``cilia`` dataset's (trials of mode ``brushing``,
+    a lab run's or a user's own, with the conditions ``surface``, ``roughness_um``, ``repeat`` (the strip),
+    ``speed_mm_s`` and ``rate_hz``), or a log brought in by ``softtip import`` with the labels
+    ``roughness_um``, ``speed_mm_s``, ``rate_hz`` and optionally ``strip`` on every reading (a recording is a
+    run of a trial's readings with the same values; a surface is named by its roughness)."""
+    if channel not in dataset.channels:
+        raise DieError(f"dataset: expected the channel {channel}; its channels: {', '.join(dataset.channels)}")
+    if all(name in dataset.labels for name in BRUSHING_LABELS):
+        values = {name: dataset.column(name) for name in (*BRUSHING_LABELS, "strip") if name in dataset.labels}
+        roughness = values["roughness_um"]
+        return recordings_in_runs(f"dataset {channel}", [f"{value:g} um" for value in roughness],
+                                  values.get("strip", np.zeros(len(dataset))), values["speed_mm_s"],
+                                  values["rate_hz"], roughness, dataset.column(channel), dataset.column("trial"))
+    missing = [name for name in BRUSHING_CONDITIONS if name not in dataset.conditions]
+    if missing:
+        raise DieError(f"dataset: expected brushings: the conditions {', '.join(BRUSHING_CONDITIONS)} (missing "
+                       f"{', '.join(missing)}), or, for a log brought in by softtip import, the labels "
+                       f"{', '.join(BRUSHING_LABELS)} on every reading (import them with --label roughness_um=COLUMN:um "
+                       "--label speed_mm_s=COLUMN:mm/s --label rate_hz=COLUMN:Hz)")
     brushing = dataset.select(rows=dataset.column("mode") == BRUSHING)
     if len(brushing) == 0:
         raise DieError("dataset: no brushing trials (mode = brushing)")
@@ -247,20 +263,28 @@ def recordings_from_csv(path: Path, channel: str) -> list[Recording]:
     values = {name: parse_numbers(path, name, table.column(name)) for name in numeric}
     surface = np.array([str(v) for v in table.column("surface").to_pylist()])
     strip = values.get("strip", np.zeros(table.num_rows))
-    if not (np.all(np.isfinite(values[channel])) and np.all(strip >= 0) and np.all(strip == np.round(strip))):
-        raise DieError(f"{path}: expected finite readings in {channel!r} and whole strip numbers >= 0")
-    for name in ("speed_mm_s", "rate_hz"):
-        if not np.all(values[name] > 0):
-            raise DieError(f"{path}: column {name!r}: expected positive numbers")
-    if not np.all(values["roughness_um"] >= 0):
-        raise DieError(f"{path}: column 'roughness_um': expected roughnesses >= 0 um")
-    keys = list(zip(surface, strip, values["speed_mm_s"], values["rate_hz"], values["roughness_um"]))
+    return recordings_in_runs(str(path), surface, strip, values["speed_mm_s"], values["rate_hz"],
+                              values["roughness_um"], values[channel], np.zeros(len(surface)))
+
+
+def recordings_in_runs(source: str, surface: list[str] | NDArray, strip: NDArray, speed: NDArray, rate: NDArray,
+                       roughness: NDArray, readings: NDArray, trial: NDArray) -> list[Recording]:
+    """Brushings from per-reading columns (speeds mm/s, rates /s, roughnesses µm): a recording is a run of
+    consecutive readings of one ``trial`` with the same surface, strip, speed, rate and roughness."""
+    if not (np.all(np.isfinite(readings)) and np.all(strip >= 0) and np.all(strip == np.round(strip))):
+        raise DieError(f"{source}: expected finite readings and whole strip numbers >= 0")
+    for name, column in (("speed_mm_s", speed), ("rate_hz", rate)):
+        if not np.all(column > 0):
+            raise DieError(f"{source}: {name}: expected positive numbers")
+    if not np.all(roughness >= 0):
+        raise DieError(f"{source}: roughness_um: expected roughnesses >= 0 um")
+    keys = list(zip(trial, surface, strip, speed, rate, roughness))
     starts = [0] + [row for row in range(1, len(keys)) if keys[row] != keys[row - 1]] + [len(keys)]
     recordings = []
     for start, end in zip(starts[:-1], starts[1:]):
-        name, number, speed, rate, roughness = keys[start]
-        recordings.append(Recording(str(name), float(roughness) * UM, int(number), float(speed) * MM, float(rate),
-                                    values[channel][start:end]))
+        _, name, number, speed_mm_s, rate_hz, roughness_um = keys[start]
+        recordings.append(Recording(str(name), float(roughness_um) * UM, int(number), float(speed_mm_s) * MM,
+                                    float(rate_hz), np.asarray(readings[start:end], dtype=np.float64)))
     return recordings
 
 
@@ -281,6 +305,39 @@ def curve_from_csv(path: Path, force_column: str, voltage_column: str, force_uni
     require_columns(path, [force_column, voltage_column], table.column_names)
     force = parse_numbers(path, force_column, table.column(force_column)) * FORCE_UNITS[force_unit]
     volts = parse_numbers(path, voltage_column, table.column(voltage_column))
+    return _tared_curve(path, force, volts, sensor, tare, force_column, voltage_column)
+
+
+VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3, "uV": 1e-6}
+
+
+def curve_from_dataset(path: Path, dataset: Dataset, force_label: str, channel: str, sensor: str, tare: bool,
+                       trial: int | None) -> MeasuredCurve:
+    """A measured force–voltage curve from a dataset (``softtip import``'s, or any other): the label
+    ``force_label`` in its declared unit (N, mN or g) against the channel ``channel`` (V, mV or µV), of its
+    one trial or of ``trial``; ``tare`` as :func:`curve_from_csv`."""
+    if force_label not in dataset.labels:
+        raise DieError(f"{path}: no label {force_label!r} (--force-column); its labels: "
+                       f"{', '.join(dataset.labels) or 'none'}")
+    if channel not in dataset.channels:
+        raise DieError(f"{path}: no channel {channel!r} (--voltage-column); its channels: {', '.join(dataset.channels)}")
+    force_unit, voltage_unit = dataset.labels[force_label], dataset.channel_units[channel]
+    if force_unit not in FORCE_UNITS or voltage_unit not in VOLTAGE_UNITS:
+        raise DieError(f"{path}: {force_label} in {force_unit!r} and {channel} in {voltage_unit!r}: expected a force "
+                       f"in {', '.join(FORCE_UNITS)} and a voltage in {', '.join(VOLTAGE_UNITS)}")
+    trials = dataset.trials
+    if trial is None and len(trials) > 1:
+        raise DieError(f"{path}: {len(trials)} trials (0 to {len(trials) - 1}): expected one curve; choose it with --trial")
+    if trial is not None and trial not in trials:
+        raise DieError(f"{path}: --trial = {trial}: expected one of its trials, 0 to {len(trials) - 1}")
+    part = dataset if trial is None else dataset.select(trials=[trial])
+    force = np.asarray(part.column(force_label), dtype=np.float64) * FORCE_UNITS[force_unit]
+    volts = np.asarray(part.column(channel), dtype=np.float64) * VOLTAGE_UNITS[voltage_unit]
+    return _tared_curve(path, force, volts, sensor, tare, force_label, channel)
+
+
+def _tared_curve(path: Path, force: NDArray, volts: NDArray, sensor: str, tare: bool, force_column: str,
+                 voltage_column: str) -> MeasuredCurve:
     if tare:
         unloaded = force == 0
         if not unloaded.any():

@@ -78,7 +78,7 @@ def bench_cilia(
         console.print(note, markup=False)
     console.print("verdict: " + ("every target met" if not missed else
                                  f"{len(missed)} of {len(report['timings'])} targets missed: {'; '.join(missed)}"),
-                  markup=False)
+                  markup=False, soft_wrap=True)  # one line, however narrow the terminal: its last line is the verdict
 
 
 @app.command("design")
@@ -96,6 +96,8 @@ def design_cilia(
     save: Path = typer.Option(None, "--save", help="Also write the result as JSON to this file."),
     force: bool = typer.Option(False, "--force", help="Overwrite --plot's and --save's files."),
     seed: int = typer.Option(1, "--seed", help="Seed of the search (1: the one softtip reproduce cilia uses)."),
+    descend: bool = typer.Option(False, "--descend", help="After each range's search, descend on the grid to a "
+                                 "local minimum (no neighbour better; about twice the evaluations)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Search pillar diameter, taper, height, moment, placement and number of pillars on the same die for the
@@ -130,7 +132,7 @@ def design_cilia(
     settings = {key: (value if value is not None else (COARSE if coarse else full)[key]) for key, value in chosen.items()}
     ranges = ranges or study.design_ranges_mN
     found = search_designs(layout, tuple(r * 1e-3 for r in ranges), sensor, settings["steps"], settings["budget"],
-                           settings["points"], seed=seed, progress=progress_for(json_output))
+                           settings["points"], seed=seed, progress=progress_for(json_output), descend=descend)
     report = found.to_dict()
     if plot is not None:
         save_figure(found.figure, plot, dpi=120)
@@ -157,18 +159,23 @@ def design_cilia(
                           + f", at rest {design['minimum_force_at_rest_uN']:.1f} uN")
         console.print(f"0-{entry['range_mN']:g} mN  verdict: the best design found "
                       + ("beats the published one" if entry["beats_published"] else
-                         f"does NOT beat the published one (its search: {entry['evaluations']} evaluations)"))
+                         f"does NOT beat the published one (its search: {entry['evaluations']} evaluations"
+                         + (f", then {entry['descent_evaluations']} in its descent to a local minimum of the grid)"
+                            if descend else ")")))
 
 
 @app.command("fit")
 def fit_cilia(
     curve: Path = typer.Argument(..., help="A measured force-voltage curve: a CSV table with a force and a voltage "
-                                 "column."),
-    force_column: str = typer.Option("force_N", "--force-column", help="The force column."),
-    force_unit: str = typer.Option("N", "--force-unit", help="Its unit: N, mN or g (a balance's reading, times "
-                                   "standard gravity)."),
-    voltage_column: str = typer.Option("voltage_V", "--voltage-column", help="The voltage column (V): the change "
-                                       "from the unloaded reading, or with --tare the sensor's voltage."),
+                                 "column, or a dataset (.parquet, e.g. softtip import's) with a force label and a "
+                                 "voltage channel."),
+    force_column: str = typer.Option("force_N", "--force-column", help="The force column (a dataset's label)."),
+    force_unit: str = typer.Option(None, "--force-unit", help="A CSV's force unit: N (default), mN or g (a balance's "
+                                   "reading, times standard gravity); a dataset declares its own."),
+    voltage_column: str = typer.Option("voltage_V", "--voltage-column", help="The voltage column (a dataset's "
+                                       "channel; V): the change from the unloaded reading, or with --tare the "
+                                       "sensor's voltage."),
+    trial: int = typer.Option(None, "--trial", help="A dataset's trial holding the curve (needed when it has several)."),
     tare: bool = typer.Option(False, "--tare", help="Subtract the mean voltage of the rows at zero force."),
     sensor: str = typer.Option("X", "--sensor", help="The sensor the curve was read from."),
     die: Path = typer.Option(None, "--die", help="Die file (default: the shipped, declared layout): the pillars' "
@@ -181,8 +188,9 @@ def fit_cilia(
     cylinders clamped to the die, loaded at the tip, height and modulus held) and softtip's (the die file's
     tapered pillars on their base), each with 95 % intervals (Student's t), the parameters' correlation and
     the residuals' rms."""
-    if curve.suffix.lower() != ".csv":
-        fail(f"curve = {curve}: expected a CSV table (.csv)")
+    table = curve.suffix.lower() == ".csv"
+    if not table and curve.suffix.lower() != ".parquet":
+        fail(f"curve = {curve}: expected a CSV table (.csv) or a dataset (.parquet)")
     check_input(curve, "curve")
     if die is not None:
         from softtip.systems.cilia.layout import read_die
@@ -190,18 +198,27 @@ def fit_cilia(
         read_die(die)  # a die file that cannot be built is refused before the fit's modules load
     from softtip.systems.cilia.bench import FORCE_UNITS
 
-    if force_unit not in FORCE_UNITS:
-        fail(f"--force-unit = {force_unit!r}: expected one of {', '.join(FORCE_UNITS)}")
+    if force_unit is not None and (not table or force_unit not in FORCE_UNITS):
+        fail(f"--force-unit = {force_unit!r}: " + (f"expected one of {', '.join(FORCE_UNITS)}" if table else
+                                                   "a dataset declares its labels' units; give it for a CSV only"))
+    if trial is not None and (table or trial < 0):
+        fail(f"--trial = {trial}: " + ("a CSV table is one curve; give it for a dataset only" if table else
+                                       "expected a trial number >= 0"))
     if sensor not in ("X", "Y"):
         fail(f"--sensor = {sensor!r}: expected X or Y")
     if plot is not None:
         if plot.suffix.lower() not in (".png", ".svg", ".pdf"):
             fail(f"--plot = {plot}: expected a .png, .svg or .pdf file")
         plot = check_output(plot, "--plot", inputs=[curve, *([die] if die else [])], force=force)
-    from softtip.systems.cilia.bench import curve_from_csv
+    from softtip.systems.cilia.bench import curve_from_csv, curve_from_dataset
     from softtip.systems.cilia.measured import fit_both
 
-    measured = curve_from_csv(curve, force_column, voltage_column, force_unit, sensor, tare)
+    if table:
+        measured = curve_from_csv(curve, force_column, voltage_column, force_unit or "N", sensor, tare)
+    else:
+        from softtip.data import Dataset
+
+        measured = curve_from_dataset(curve, Dataset.read(curve), force_column, voltage_column, sensor, tare, trial)
     found = fit_both(die, measured, progress_for(json_output))
     report = {"curve": str(curve), "sensor": sensor, "points": int(measured.force.size), **found.to_dict()}
     if plot is not None:

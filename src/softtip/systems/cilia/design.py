@@ -25,7 +25,11 @@ composite cannot carry are refused before the search, with the reason (the die f
 (:class:`softtip.optimize.bayes.BayesianSearch`: Gaussian-process expected improvement on the discrete
 candidate grid, :mod:`softtip.optimize.space` for the grid), run once per stated range on log10 of the
 figure of merit, smallest range first; each range's search is told every design the earlier ones
-evaluated (a design's curve gives its figure at every range). The trade-off curve is the lower envelope of
+evaluated (a design's curve gives its figure at every range). With ``descend`` the global search is
+followed by a descent on the grid from its best design, one neighbour at a time (one parameter one step up
+or down, or another placement), to the first neighbour that is better, until none is: each range's search
+then ends in a local minimum of the grid, every one of whose neighbours it has evaluated (at five values per
+parameter about as many evaluations again as the global search's). The trade-off curve is the lower envelope of
 every evaluated design's figure against the range; each range's best is the best at that range of every
 design evaluated (a later range's search may find a better one for an earlier range), so it lies on that
 curve, and the report says whether it beats the published design.
@@ -191,12 +195,16 @@ def evaluate(die: Die, design: PillarDesign, sensor: str, force_top: float, poin
 @dataclass(frozen=True)
 class RangeSearch:
     """The search for one stated range: the best design found for it among every design evaluated (None:
-    none has a figure), the evaluations its own search asked for, and why that search stopped."""
+    none has a figure), the evaluations its own global search asked for, why that search stopped, the
+    designs its descent evaluated and where it ended (a local minimum of the grid: no neighbour better; None
+    without a descent)."""
 
     force_range: float
     best: Evaluation | None
     evaluations: int
     stop_reason: str
+    descent_evaluations: int
+    local_minimum: Evaluation | None
 
     def beats(self, reference: Evaluation) -> bool:
         """The best design found resolves a smaller force over this range than ``reference``."""
@@ -236,6 +244,7 @@ class DesignSearch:
                 "not_converged": self.not_converged,
                 "seconds": self.seconds,
                 "ranges": [{"range_mN": s.force_range / MN, "evaluations": s.evaluations, "stop": s.stop_reason,
+                            "descent_evaluations": s.descent_evaluations,
                             "beats_published": s.beats(self.published),
                             "best": None if s.best is None else figures(s.best, s.force_range),
                             "published": figures(self.published, s.force_range)} for s in self.ranges],
@@ -246,10 +255,10 @@ class DesignSearch:
 
 def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X", steps: int = 5,
                    budget: int = 30, points: int = 17, chain_count: int = 10, seed: int = 0,
-                   progress: Progress = SILENT) -> DesignSearch:
+                   progress: Progress = SILENT, descend: bool = False) -> DesignSearch:
     """Search the design space (``steps`` values per parameter) for the smallest figure of merit at each
     of ``force_ranges`` (N), ``budget`` evaluations each, every design's curve sampled at ``points``
-    forces."""
+    forces; with ``descend``, each range's search then descends to a local minimum of the grid."""
     ranges = tuple(sorted(float(r) for r in force_ranges))
     if not ranges or not all(math.isfinite(r) and r > 0 for r in ranges):
         raise DieError(f"force_ranges = {force_ranges!r}: expected one or more positive forces in N")
@@ -288,6 +297,14 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
     def figure_of(result: Evaluation | None, force_range: float) -> float:
         return math.inf if result is None else result.over(force_range)
 
+    # a candidate's neighbours: one parameter one grid step away, or the same design in another placement
+    step = np.array([1.0 / (steps - 1)] * len(SPACE) + [math.inf])  # the placement is a category
+
+    def neighbours(index: int) -> NDArray[np.int_]:
+        change = np.abs(points_ - points_[index])
+        moved = change > 1e-9
+        return np.flatnonzero((moved.sum(axis=1) == 1) & np.all(change <= step * (1 + 1e-9), axis=1))
+
     asked: dict[int, Evaluation | None] = {}  # every candidate evaluated, by its index
     searches = []
     for force_range in ranges:
@@ -303,7 +320,23 @@ def search_designs(die: Die, force_ranges: tuple[float, ...], sensor: str = "X",
                     search.tell(index, -math.log10(figure) if math.isfinite(figure) else None)
                     best = min(asked.values(), key=lambda e: figure_of(e, force_range))
                     task.advance(note="best " + (f"{best.over(force_range) / UN:.3g} µN" if best else "-"))
-        searches.append(RangeSearch(force_range, None, len(search.asked), search.stop_reason))
+        current = min(asked, key=lambda i: figure_of(asked[i], force_range))
+        descended = 0
+        if descend:
+            with progress.task(f"descent on the grid, range {force_range / MN:g} mN", total=None) as task:
+                while math.isfinite(figure_of(asked[current], force_range)):
+                    for index in neighbours(current):
+                        if index not in asked:
+                            asked[index] = evaluated(candidates[index][1])
+                            descended += 1
+                            task.advance()
+                        if figure_of(asked[index], force_range) < figure_of(asked[current], force_range):
+                            current = index
+                            break
+                    else:  # no neighbour is better
+                        break
+        searches.append(RangeSearch(force_range, None, len(search.asked), search.stop_reason, descended,
+                                    asked[current] if descend else None))
     evaluations = tuple(e for e in known.values() if e is not None)
     # each range's best among every design evaluated, the later ranges' included: what the trade-off curve
     # draws, so no range's best sits above it
@@ -368,7 +401,9 @@ def design_table(search: DesignSearch) -> Table:
                       evaluation.range_end / MN)
             cells.update({(row, column): value for column, value in zip(DESIGN_COLUMNS, values)})
     refused = ", ".join(f"{count} {reason}" for reason, count in search.refused.items()) or "none"
-    stops = "; ".join(f"{s.force_range / MN:g} mN: {s.evaluations} evaluations, {s.stop_reason}" for s in search.ranges)
+    stops = "; ".join(f"{s.force_range / MN:g} mN: {s.evaluations} evaluations, {s.stop_reason}"
+                      + (f", then {s.descent_evaluations} in the descent to a local minimum of the grid"
+                         if s.local_minimum is not None else "") for s in search.ranges)
     return Table("Design search on the same die (softtip's addition)", "range and design", rows, list(DESIGN_COLUMNS),
                  cells, digits=3, notes=notes,
                  caption=f"Sensor {search.sensor}; {search.candidates} candidates ({search.steps} values per "

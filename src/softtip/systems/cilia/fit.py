@@ -31,6 +31,8 @@ from softtip.systems.cilia.layout import DieError
 from softtip.systems.cilia.model import CiliaModel
 
 CHI2_95 = float(stats.chi2.ppf(0.95, 1))  # 3.841: one parameter's 95 % likelihood-ratio threshold
+SECANT_SPAN = 0.05  # log units: the fit's diameter derivative is a secant through a curve kept this near
+SECANT_FLOOR = 1e-7  # and at least this far
 
 
 class CurveError(DieError):
@@ -88,6 +90,23 @@ class CurveModel:
         volts = self.model.volts(moment * self.unit_fields(diameter), self.sensor)
         return volts[1:] - volts[0]
 
+    def jacobian(self, log_parameters: NDArray, secant_span: float = 0.0) -> NDArray[np.float64]:
+        """(N, 2) derivatives of :meth:`predict` in the log moment and the log diameter at
+        ``log_parameters``, by forward differences of relative size 1e-5 (scipy's ``diff_step`` in
+        ``least_squares``). The moment's costs nothing (the fields at this diameter are kept). With
+        ``secant_span`` > 0 the diameter's is the secant through the nearest diameter already computed when
+        that one lies within ``secant_span`` in log units and beyond 1e-7 (where the rods' 1e-10 tolerance
+        is still a thousandth of the difference): no new curve."""
+        steps = 1e-5 * np.maximum(1.0, np.abs(log_parameters))
+        moment, diameter = np.exp(log_parameters)
+        here = self.predict(moment, diameter)
+        by_moment = (self.predict(moment * math.exp(steps[0]), diameter) - here) / steps[0]
+        gaps = [math.log(known / diameter) for known in self._fields if known != diameter]
+        nearest = min(gaps, key=abs, default=math.inf)
+        step = nearest if SECANT_FLOOR <= abs(nearest) <= secant_span else steps[1]
+        by_diameter = (self.predict(moment, diameter * math.exp(step)) - here) / step
+        return np.stack([by_moment, by_diameter], axis=-1)
+
 
 @dataclass(frozen=True)
 class Profile:
@@ -139,12 +158,16 @@ def fit_curve(model: CiliaModel, curve: MeasuredCurve, start: tuple[float, float
     rod = model.die.pillars.rod
     taper = rod.base_diameter / rod.tip_diameter
     bounds = (np.log([1e-9, 0.02 * rod.length]), np.log([1e-3, 0.5 * rod.length / max(taper, 1.0)]))
-    solved = optimize.least_squares(residual, np.log(start), bounds=bounds, method="trf", x_scale=1.0,
-                                    diff_step=1e-5, xtol=1e-10, ftol=1e-12, gtol=1e-12, max_nfev=200)
+    # every new diameter costs a curve (rods and fields); the moment's derivative costs none: on the way the
+    # diameter's is a secant through the last diameters computed (a Broyden-like update), and at the
+    # optimum a forward difference, for the covariance
+    solved = optimize.least_squares(residual, np.log(start), jac=lambda x: predictor.jacobian(x, SECANT_SPAN),
+                                    bounds=bounds, method="trf", x_scale=1.0, xtol=1e-10, ftol=1e-12, gtol=1e-12,
+                                    max_nfev=200)
     if solved.status <= 0:
         raise NotConverged(f"fit: least squares stopped without converging ({solved.message})")
     on_bound = np.isclose(solved.x, bounds[0], atol=1e-6) | np.isclose(solved.x, bounds[1], atol=1e-6)
-    return _summary(solved.x, solved.fun, solved.jac, curve, solved.nfev, bool(np.any(on_bound)))
+    return _summary(solved.x, solved.fun, predictor.jacobian(solved.x), curve, solved.nfev, bool(np.any(on_bound)))
 
 
 def _summary(log_parameters: NDArray, residuals: NDArray, jacobian: NDArray, curve: MeasuredCurve,

@@ -28,12 +28,12 @@ from softtip.published import published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.systems.cilia.bench import SENSORS, curve_of, recordings_of
+from softtip.systems.cilia.bench import channel, curve_of, recordings_of
 from softtip.systems.cilia.continuous import chain_against_stack, continuous_table
 from softtip.systems.cilia.design import DESIGN_CAPTION, design_table, search_designs
 from softtip.systems.cilia.fit import CurveFit
-from softtip.systems.cilia.layout import MEMU
-from softtip.systems.cilia.resolution import BUDGET_PARTS, ForceBudget
+from softtip.systems.cilia.layout import MEMU, DieError, read_die
+from softtip.systems.cilia.resolution import BUDGET_PARTS, ForceBudget, Resolution
 from softtip.systems.cilia.roughness import RoughnessStudy, analyse_roughness, readout_levels
 from softtip.systems.cilia.roughness_report import roughness_report
 from softtip.systems.cilia.study import (
@@ -53,6 +53,11 @@ PILLAR_DIAMETER = "pillar diameter (µm)"  # the publication's cylinder has one 
 
 
 def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
+    on_die = tuple(m.name for m in read_die(protocol.design.path).meanders)
+    if protocol.parameters.sensor not in on_die:
+        raise DieError(f"protocol {protocol.name}: parameters.sensor = {protocol.parameters.sensor!r}: the die file "
+                       f"{protocol.design.path.name} has the sensor {' and '.join(on_die)} only; set "
+                       f"sensor = \"{on_die[0]}\"")
     made, timings = run_protocol(protocol, progress)
     with tempfile.TemporaryDirectory() as folder:  # the analysis reads the file, as it would a user's
         dataset = Dataset.read(made.write(Path(folder) / f"{protocol.name}.parquet"))
@@ -66,10 +71,10 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     study = analyse_curves(settings, seed, model, truth, measured, balance,
                            curve_of(dataset, "balance", repeats[0], settings.sensor), progress,
                            protocol.realism.dwell_s)
-    rest = {sensor: model.rest_volts(sensor) for sensor in SENSORS}
+    rest = {sensor: model.rest_volts(sensor) for sensor in on_die}
     with progress.task("roughness: the dataset's brushings, the classifier, the other readout"):
-        rough = analyse_roughness(recordings_of(dataset), settings.brush_speed_mm_s * MM, settings.brush_rate_hz,
-                                  seed)
+        rough = analyse_roughness(recordings_of(dataset, channel(settings.sensor)), settings.brush_speed_mm_s * MM,
+                                  settings.brush_rate_hz, seed)
         other = readout_levels(model, balance_contact(settings), settings.brush_engagement_um * UM,
                                settings.brush_length_mm * MM, settings.brush_speed_mm_s * MM, settings.brush_rate_hz,
                                settings.brush_strips, seed, not settings.brush_bridge)
@@ -77,7 +82,7 @@ def cilia(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                                     settings.brush_rate_hz, settings.brush_engagement_um, settings.brush_strips,
                                     settings.brush_length_mm)
     with progress.task("the dipole chain against continuous cones"):
-        continuous = chain_against_stack(model, np.array([1.0, 8.0, settings.force_max_mN]) * MN, "X")
+        continuous = chain_against_stack(model, np.array([1.0, 8.0, settings.force_max_mN]) * MN, settings.sensor)
     designs = search_designs(model.die, tuple(r * MN for r in settings.design_ranges_mN), settings.sensor,
                              settings.design_steps, settings.design_budget, settings.design_points,
                              settings.chain_count, seed, progress)
@@ -306,11 +311,11 @@ def _sampling(rough: RoughnessStudy) -> Table:
 
 
 def _readout(model, rest: dict[str, float]) -> Table:
-    current = model.die.meander("X").readout.current
-    cells = {(sensor, "resistance at rest (kΩ)"): rest[sensor] / current / 1e3 for sensor in SENSORS}
-    return Table("The readout at rest", "sensor", list(SENSORS), ["resistance at rest (kΩ)"], cells, digits=1,
-                 caption=f"At {current * 1e6:.0f} µA, self-heating included: X at {rest['X']:.2f} V, Y at "
-                         f"{rest['Y']:.2f} V. The spin valves are built from the published magnetoresistance, "
+    current = model.die.meanders[0].readout.current
+    cells = {(sensor, "resistance at rest (kΩ)"): rest[sensor] / current / 1e3 for sensor in rest}
+    return Table("The readout at rest", "sensor", list(rest), ["resistance at rest (kΩ)"], cells, digits=1,
+                 caption=f"At {current * 1e6:.0f} µA, self-heating included: "
+                         + ", ".join(f"{sensor} at {volts:.2f} V" for sensor, volts in rest.items()) + ". The spin valves are built from the published magnetoresistance, "
                          "sensitivity and linear range (about 183 and 169 kΩ by the spec's arithmetic), so this "
                          "is a check of the readout, not of the publication.")
 
@@ -374,12 +379,17 @@ def _recovery_table(study: CiliaStudy) -> Table:
                          "the bench's repeatability); every one is fitted from the same start.")
 
 
+def _sensors(study: CiliaStudy) -> tuple[Resolution, ...]:
+    """The study sensor's resolution, then the other sensor's if the die has it."""
+    return (study.resolution,) + ((study.other_sensor,) if study.other_sensor is not None else ())
+
+
 def _resolution_table(study: CiliaStudy) -> Table:
-    rows = [study.resolution.sensor, study.other_sensor.sensor]
+    rows = [resolved.sensor for resolved in _sensors(study)]
     columns = ["sensitivity at rest (mV/mN)", "noise σ (µV)", "meter count (µV)", "minimum force, 3σ (µN)",
                "smallest step (µN)", "range upper end (mN)"]
     cells = {}
-    for resolved in (study.resolution, study.other_sensor):
+    for resolved in _sensors(study):
         row = resolved.sensor
         beyond = resolved.minimum_force_at_rest > resolved.force[-1]  # insensitive: no force in reach resolves
         cells.update({(row, columns[0]): resolved.sensitivity, (row, columns[1]): resolved.noise.total * 1e6,
@@ -391,8 +401,9 @@ def _resolution_table(study: CiliaStudy) -> Table:
                  caption="At zero force. 3σ: three standard deviations of one reading over the local slope; the "
                          "smallest step: a difference of two readings above its own noise (3√2 σ) and at least "
                          "one meter count. The range ends where the slope has fallen to a tenth.",
-                 notes={study.other_sensor.sensor: "Its strips sense across the bend: the pillars bent along x "
-                        "barely change the field it sees."})
+                 notes={} if study.other_sensor is None else {
+                     study.other_sensor.sensor: "Its strips sense across the bend: the pillars bent along x "
+                                                "barely change the field it sees."})
 
 
 def _balance_table(study: CiliaStudy) -> Table:
@@ -465,10 +476,9 @@ def _results(study: CiliaStudy, rest: dict[str, float], timings: dict) -> dict:
             "linear_part": fit_of(study.identifiability.linear), "whole_curve": fit_of(study.identifiability.whole),
             "recovery": {"moment_bias_spread": list(study.recovery.moment_error),
                          "diameter_bias_spread": list(study.recovery.diameter_error)},
-            "minimum_force_3sigma_uN": {r.sensor: r.minimum_force_at_rest / UN
-                                        for r in (study.resolution, study.other_sensor)},
-            "smallest_step_uN": {r.sensor: r.smallest_step_at_rest / UN for r in (study.resolution, study.other_sensor)},
-            "sensitivity_mV_per_mN": {r.sensor: r.sensitivity for r in (study.resolution, study.other_sensor)},
+            "minimum_force_3sigma_uN": {r.sensor: r.minimum_force_at_rest / UN for r in _sensors(study)},
+            "smallest_step_uN": {r.sensor: r.smallest_step_at_rest / UN for r in _sensors(study)},
+            "sensitivity_mV_per_mN": {r.sensor: r.sensitivity for r in _sensors(study)},
             "range_mN": [v / MN for v in study.resolution.range],
             "rest_V": rest,
             "balance": {"buckling_mN": study.balance.buckling_force / MN,

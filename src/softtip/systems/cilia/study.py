@@ -250,7 +250,7 @@ class CiliaStudy:
     identifiability: Identifiability
     recovery: Recovery
     resolution: Resolution
-    other_sensor: Resolution
+    other_sensor: Resolution | None  # None: the die has one sensor direction
     balance: BalanceOutcome
     publication_tip_load: PublicationFit
     moment_gap: tuple[GapCause, ...]
@@ -370,8 +370,9 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
     recovery = Recovery(abs(model.die.pillars.moment), model.die.pillars.rod.tip_diameter, np.array(trials_m),
                         np.array(trials_d))
     with progress.task("resolution, balance, the publication's fit, layout", total=5) as task:
-        resolved, other = resolutions(model, (first.sensor, "Y" if first.sensor == "X" else "X"),
-                                      1.5 * settings.force_max_mN * MN)
+        on_die = tuple(m.name for m in model.die.meanders)  # the study's sensor first, the other if the die has it
+        resolved, *other = resolutions(model, (first.sensor, *(s for s in on_die if s != first.sensor)),
+                                       1.5 * settings.force_max_mN * MN)
         task.advance()
         balanced = _balance(model, balance, balance_measured, settings, dwell)
         task.advance(note="balance test")
@@ -387,7 +388,7 @@ def analyse_curves(settings: CiliaSettings, seed: int, model: CiliaModel, truth:
                            pillars=_pillars_figure(truth, balanced),
                            profiles=_profiles_figure(profile_d, profile_m, fitted, recovery))
     return CiliaStudy(settings, seed, truth, first, fitted, profile_d, profile_m, identified, recovery, resolved,
-                      other, balanced, tip_load, gap, rig, layout, figures)
+                      other[0] if other else None, balanced, tip_load, gap, rig, layout, figures)
 
 
 def measure(model: CiliaModel, truth: ForceCurve, repeatability: float, rng: np.random.Generator) -> MeasuredCurve:
