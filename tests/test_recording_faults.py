@@ -902,6 +902,8 @@ def test_how_a_cut_or_damaged_tail_ends_is_said_word_for_word(tmp_path):
     claimed[start + 6] = 0x01  # the length's sixth byte: 2**40 more
     assert tail(bytes(claimed)) == (f"a record of opcode 0x06 claims {chunk.chunk_length - 9 + 2**40} bytes, more "
                                     "than the file holds")
+    claimed[start + 1:start + 9] = struct.pack("<Q", len(claimed))  # as long as the whole file: no more than it
+    assert tail(bytes(claimed)) == f"the file ends {start + 9} bytes short of a record (opcode 0x06)"
     assert tail(content[:end] + bytes(20)) == f"no record follows the record of opcode 0x06 at byte {start}"
 
 
@@ -1072,4 +1074,52 @@ def test_a_record_head_that_ends_the_file_is_read(tmp_path):
     path = tmp_path / "tiny.mcap"
     path.write_bytes(MAGIC + struct.pack("<BQ", 0x01, 8) + bytes(8) + struct.pack("<BQ", 0x02, 0))
     recording = read_recording(path)
-    assert not recording.truncated and recording.truncation == "" and recording.topics == {}
+    assert recording.truncated is False and recording.truncation == "" and recording.topics == {}
+    # the header followed by nine bytes that begin no record: nothing follows it
+    path.write_bytes(MAGIC + struct.pack("<BQ", 0x01, 8) + bytes(8) + bytes(9))
+    with pytest.raises(RecordingError) as refused:
+        read_recording(path)
+    assert str(refused.value) == f"{path}: unreadable MCAP file (no record follows the record of opcode 0x01 at byte 8)"
+
+
+def test_a_data_end_record_states_its_crc_and_0_for_none(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    content = whole.read_bytes()
+    data_end = content.rindex(b"\x0f\x04\x00\x00\x00\x00\x00\x00\x00", 0, len(content) - 8 - FOOTER_BYTES)
+    crc = content[data_end + 9:data_end + 13]
+    assert read_recording(whole).salvage.data_crc_ok is True
+
+    def scanned(body: bytes):
+        (tmp_path / "data-end.mcap").write_bytes(rewritten_record(content, data_end, body))
+        return read_recording(tmp_path / "data-end.mcap").salvage
+
+    assert scanned(crc).data_crc_ok is True
+    assert scanned(bytes(4)).data_crc_ok is None  # 0: the writer states none
+    assert scanned(b"\x01\x00\x00\x00").data_crc_ok is False
+
+
+def test_each_damaged_length_is_counted_in_the_data_and_in_the_summary(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, intact = indexed_messages(whole)
+    chunks = chunks_of(whole)
+    content = bytearray(whole.read_bytes())
+    for chunk in (chunks[1], chunks[3]):
+        content[chunk.chunk_start_offset + 1] ^= 0x01  # one byte longer or shorter
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start = struct.unpack_from("<Q", content, footer + 9)[0]
+    index = next(offset for offset, opcode, _ in records_between(bytes(content), summary_start, footer) if opcode == 0x08)
+    content[index + 1] ^= 0x01  # a chunk index's length, in the summary
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = read_recording(damaged).salvage
+    assert (salvage.resynchronised, salvage.damaged_records, salvage.messages) == (3, 0, len(intact))
+
+
+def test_a_stray_byte_after_the_magic_costs_its_own_head(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    _, intact = indexed_messages(whole)
+    stray = tmp_path / "stray.mcap"
+    stray.write_bytes(MAGIC + b"\x05" + whole.read_bytes()[len(MAGIC):])  # a message's opcode, then the file
+    salvage = read_recording(stray).salvage
+    # the stray head (its length read from the header's first bytes) is skipped; the header and all after it read
+    assert (salvage.damaged_records, salvage.messages, salvage.bytes_lost) == (1, len(intact), 9)
