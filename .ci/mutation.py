@@ -109,7 +109,9 @@ def main() -> None:
     elif action == "rerun":
         # mutmut copies the tests once: bring over the ones written since
         shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)
-        survivors = [name for module in modules for name, status in outcomes(module).items() if status not in CAUGHT]
+        equivalent = {entry["mutant"] for entry in tomllib.loads(EQUIVALENT_FILE.read_text())["equivalent"]}
+        survivors = [name for module in modules for name, status in outcomes(module).items()
+                     if status not in CAUGHT and name not in equivalent]  # the report checks those
         if survivors:
             cli.main(["run", "--max-children", "1", *survivors], standalone_mode=False)
     elif action == "report":

@@ -848,6 +848,7 @@ def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
         written, whole = map(int, re.search(r"device: (\d+) of (\d+) bytes written", str(failed.value)).groups())
         assert written == whole // 2 and whole > 100
         left = path.read_bytes()
+        writer.add_message(channel, 7, b'{"n": 3}', 7)
         writer.finish()  # after a failed write: nothing more is written, and no second error
     assert path.read_bytes() == left
 
