@@ -15,7 +15,13 @@ import pytest
 
 from softtip import __version__
 from softtip.data import Dataset, DatasetError, DatasetMetadata, TrialWriter, concat
-from softtip.data.dataset import column_to_numpy, first_line, require_columns, subtract_trial_baseline
+from softtip.data.dataset import (
+    UnverifiedDatasetWarning,
+    column_to_numpy,
+    first_line,
+    require_columns,
+    subtract_trial_baseline,
+)
 
 
 def small() -> Dataset:
@@ -49,6 +55,9 @@ CASES = {
                              "y: 'nope' is not a label or condition (labels: fz_N, state; conditions: phi_deg)"),
     "y of a channel": (lambda: bare().y(["s0_bz_uT"]),
                        "y: 's0_bz_uT' is not a label or condition (labels: none; conditions: none)"),
+    "y of an unknown name among two conditions": (lambda: Dataset(
+        {"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "a": [1.0], "b": [2.0]}, conditions={"a": "1", "b": "1"}
+    ).y("nope"), "y: 'nope' is not a label or condition (labels: none; conditions: a, b)"),
     "select of both": (lambda: small().select([0], trials=[3]), "select: give either rows or trials"),
     "select of neither": (lambda: small().select(), "select: give either rows or trials"),
     "select of a short mask": (lambda: small().select(np.array([True, False])),
@@ -359,3 +368,29 @@ def test_first_line_of_an_error_or_its_type_when_it_says_nothing():
     assert first_line(ValueError("one\ntwo")) == "one"
     assert first_line(ValueError("  \n ")) == "ValueError"
     assert first_line(KeyError()) == "KeyError"
+
+
+def test_text_columns_of_either_arrow_string_type_come_back_as_text():
+    for column in (pa.array(["a", "bc"]), pa.array(["a", "bc"], pa.large_string())):
+        values = column_to_numpy("s", column)
+        assert values.dtype == np.dtype("<U2") and values.tolist() == ["a", "bc"]
+
+
+def test_a_file_that_is_no_parquet_is_refused_in_pyarrows_first_line(tmp_path):
+    path = tmp_path / "notes.parquet"
+    path.write_text("trial,time_s\n0,0\n")
+    with pytest.raises(pa.ArrowException) as arrow:  # the reference: pyarrow's own refusal
+        pq.read_schema(path)
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: not a Parquet file ({str(arrow.value).splitlines()[0]})"
+
+
+def test_a_file_without_a_checksum_warns_in_full_at_the_callers_line(tmp_path):
+    path = written(tmp_path)
+    with_document(path, lambda d: {k: v for k, v in d.items() if k != "sha256"} | {"softtip_version": "0.1.0"})
+    with pytest.warns(UnverifiedDatasetWarning) as warned:
+        Dataset.read(path)
+    assert str(warned[0].message) == (f"{path}: no checksum (written by softtip 0.1.0, before datasets carried one): "
+                                      "its content cannot be verified; write it again to add one")
+    assert warned[0].filename == __file__  # the line that read the file, not the dataset module's
