@@ -847,9 +847,23 @@ def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
         # the disk took half of the write: the message counts what it took of the whole
         written, whole = map(int, re.search(r"device: (\d+) of (\d+) bytes written", str(failed.value)).groups())
         assert written == whole // 2 and whole > 100
+
+
+def test_finish_after_a_failed_write_writes_nothing_more(tmp_path, monkeypatch):
+    path = tmp_path / "failed.mcap"
+    written_whole = os.pwrite
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, compression="none")
+        writer.start()
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        monkeypatch.setattr(os, "pwrite", lambda fd, data, offset: (_ for _ in ()).throw(OSError(
+            errno.ENOSPC, os.strerror(errno.ENOSPC))) if data else written_whole(fd, data, offset))
+        with pytest.raises(RecordingError, match="the recording.s write failed"):
+            writer.flush()
         left = path.read_bytes()
         writer.add_message(channel, 7, b'{"n": 3}', 7)
-        writer.finish()  # after a failed write: nothing more is written, and no second error
+        writer.finish()  # nothing more is written, and no second error
     assert path.read_bytes() == left
 
 
