@@ -1077,8 +1077,12 @@ def test_a_flush_waits_for_the_disk_only_when_asked(tmp_path, monkeypatch):
 def test_a_scan_yields_the_content_records_and_parses_each_body_whole(tmp_path):
     whole = recorded(tmp_path / "whole.mcap", frames=50)
     with whole.open("rb") as stream:
-        kinds = {type(record).__name__ for record in scan_recording(stream, Salvage(whole.stat().st_size), whole)}
-    assert kinds == {"Header", "Schema", "Channel", "Message", "Metadata"}  # no index, statistics or DataEnd
+        kinds = collections.Counter(type(record).__name__
+                                    for record in scan_recording(stream, Salvage(whole.stat().st_size), whole))
+    summary, messages = indexed_messages(whole)  # the reference: mcap's indexed reader
+    # each once (the summary's copies of schemas and channels are not read again); no index, statistics or DataEnd
+    assert kinds == {"Header": 1, "Schema": len(summary.schemas), "Channel": len(summary.channels),
+                     "Metadata": len(summary.metadata_indexes), "Message": len(messages)}
     # a header record's body (two empty strings) parses; with a byte more it is not a header
     assert [type(record).__name__ for record in _records(0x01, bytes(8))] == ["Header"]
     assert _records(0x01, bytes(9)) is None
@@ -1138,3 +1142,18 @@ def test_a_stray_byte_after_the_magic_costs_its_own_head(tmp_path):
     salvage = read_recording(stray).salvage
     # the stray head (its length read from the header's first bytes) is skipped; the header and all after it read
     assert (salvage.damaged_records, salvage.messages, salvage.bytes_lost) == (1, len(intact), 9)
+
+
+def test_a_summary_record_with_a_damaged_length_is_passed_whatever_its_body(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    content = bytearray(whole.read_bytes())
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start = struct.unpack_from("<Q", content, footer + 9)[0]
+    index = next(offset for offset, opcode, _ in records_between(bytes(content), summary_start, footer) if opcode == 0x08)
+    content[index + 1] ^= 0x01  # its length
+    content[index + 9 + 32 + 3] ^= 0x80  # and its message index offsets' byte count: the body parses no more
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = read_recording(damaged).salvage
+    # the summary only indexes the data: passed over to the next record, nothing of the data lost
+    assert (salvage.resynchronised, salvage.damaged_records, salvage.messages) == (1, 0, 51)
