@@ -1157,3 +1157,18 @@ def test_a_summary_record_with_a_damaged_length_is_passed_whatever_its_body(tmp_
     salvage = read_recording(damaged).salvage
     # the summary only indexes the data: passed over to the next record, nothing of the data lost
     assert (salvage.resynchronised, salvage.damaged_records, salvage.messages) == (1, 0, 51)
+
+
+def test_resynchronising_looks_only_past_the_damaged_record(tmp_path):
+    # by hand: a header whose last byte (its library's one character) is 0x02, the footer's opcode; then at
+    # byte 26 a schema record of 3 bytes that does not parse, zeros, and a footer's head 779 bytes on.
+    # Read from the byte before the damaged record, that 0x02 and the damaged record's first 8 bytes would
+    # make a "record" reaching that footer exactly: only the bytes after the damaged record's start count.
+    start = len(MAGIC) + 9 + 9
+    content = (MAGIC + struct.pack("<BQII1s", 0x01, 9, 0, 1, b"\x02") + struct.pack("<BQ", 0x03, 3) + bytes(770)
+               + struct.pack("<BQ", 0x02, 0))
+    assert content[start - 1] == 0x02 and len(content) == start + 779 + 9
+    path = tmp_path / "edge.mcap"
+    path.write_bytes(content)
+    salvage = read_recording(path).salvage
+    assert (salvage.truncated, salvage.damaged_records, salvage.bytes_lost) == (False, 1, 779)
