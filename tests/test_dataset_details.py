@@ -394,3 +394,12 @@ def test_a_file_without_a_checksum_warns_in_full_at_the_callers_line(tmp_path):
     assert str(warned[0].message) == (f"{path}: no checksum (written by softtip 0.1.0, before datasets carried one): "
                                       "its content cannot be verified; write it again to add one")
     assert warned[0].filename == __file__  # the line that read the file, not the dataset module's
+
+
+def test_a_nan_put_into_the_metadata_after_its_checks_is_not_written(tmp_path):
+    dataset = Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                      metadata=DatasetMetadata(design={"gain": 1.0}))
+    dataset.metadata.design["gain"] = float("nan")  # the metadata's objects are plain dicts
+    with pytest.raises(ValueError, match="Out of range float values are not JSON compliant"):
+        dataset.write(tmp_path / "nan.parquet")
+    assert not (tmp_path / "nan.parquet").exists()
