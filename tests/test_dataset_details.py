@@ -58,6 +58,17 @@ CASES = {
     "y of an unknown name among two conditions": (lambda: Dataset(
         {"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "a": [1.0], "b": [2.0]}, conditions={"a": "1", "b": "1"}
     ).y("nope"), "y: 'nope' is not a label or condition (labels: none; conditions: a, b)"),
+    "a condition not an identifier": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                      conditions={"f z": "1"}),
+                                      "conditions: 'f z' is not a valid column name (letters, digits, underscores)"),
+    "columns of three lengths": (lambda: Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0, 2.0],
+                                                  "a": [1.0, 2.0, 3.0], "z": [1.0]}, labels={"a": "1", "z": "1"}),
+                                 "columns differ in length: a has 3 rows, z has 1"),
+    "a 2-D label": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "f": [[1.0]]},
+                                    labels={"f": "N"}),
+                    "column f: expected a 1-D array, got shape (1, 1)"),
+    "a softtip version of no text": (lambda: DatasetMetadata(softtip_version=3),
+                                     "metadata softtip_version = 3: expected a non-empty string"),
     "select of both": (lambda: small().select([0], trials=[3]), "select: give either rows or trials"),
     "select of neither": (lambda: small().select(), "select: give either rows or trials"),
     "select of a short mask": (lambda: small().select(np.array([True, False])),
@@ -402,3 +413,15 @@ def test_a_nan_put_into_the_metadata_after_its_checks_is_not_written(tmp_path):
     with pytest.raises(ValueError, match="Out of range float values are not JSON compliant"):
         dataset.write(tmp_path / "nan.parquet")
     assert not (tmp_path / "nan.parquet").exists()
+
+
+def test_magnetic_channels_are_ordered_by_sensor_number_and_text_labels_stored_as_text():
+    dataset = Dataset({"trial": [0], "time_s": [0.0], "s10_bx_uT": [1.0], "s2_bz_uT": [2.0], "s2_bx_uT": [3.0],
+                       "state": np.array(["ab"], dtype=object)}, labels={"state": "1"})
+    assert dataset.channels == ("s2_bx_uT", "s2_bz_uT", "s10_bx_uT")  # 2 before 10, as numbers
+    assert dataset.column("state").dtype == np.dtype("<U2")
+    empty = Dataset({"trial": np.zeros(0, int), "time_s": [], "s0_bz_uT": [], "state": np.array([], dtype=str)},
+                    labels={"state": "1"})
+    assert empty.column("state").dtype == np.dtype("<U1")
+    assert type(DatasetMetadata(seed=np.int64(7)).seed) is int
+
