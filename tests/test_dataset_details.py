@@ -6,6 +6,9 @@ datasets against hand-computed values."""
 from __future__ import annotations
 
 import json
+import time
+import types
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +72,11 @@ CASES = {
                     "column f: expected a 1-D array, got shape (1, 1)"),
     "a softtip version of no text": (lambda: DatasetMetadata(softtip_version=3),
                                      "metadata softtip_version = 3: expected a non-empty string"),
+    "a trial split, not the first": (lambda: Dataset({"trial": [0, 5, 6, 5], "time_s": [0.0, 0.0, 0.0, 1.0],
+                                                     "s0_bz_uT": np.zeros(4)}),
+                                     "the rows of trial 5 are not contiguous"),
+    "a 2-D trial column": (lambda: Dataset({"trial": [[0]], "time_s": [0.0], "s0_bz_uT": [1.0]}),
+                           "column trial: expected a 1-D array, got shape (1, 1)"),
     "select of both": (lambda: small().select([0], trials=[3]), "select: give either rows or trials"),
     "select of neither": (lambda: small().select(), "select: give either rows or trials"),
     "select of a short mask": (lambda: small().select(np.array([True, False])),
@@ -422,6 +430,27 @@ def test_magnetic_channels_are_ordered_by_sensor_number_and_text_labels_stored_a
     assert dataset.column("state").dtype == np.dtype("<U2")
     empty = Dataset({"trial": np.zeros(0, int), "time_s": [], "s0_bz_uT": [], "state": np.array([], dtype=str)},
                     labels={"state": "1"})
-    assert empty.column("state").dtype == np.dtype("<U1")
+    assert empty.column("state").dtype == np.dtype("<U1") and empty.column("trial").dtype == np.int64
+    assert empty.trial_lengths.dtype == np.intp and len(empty.trial_lengths) == len(empty.trials) == 0
     assert type(DatasetMetadata(seed=np.int64(7)).seed) is int
 
+
+
+def test_a_condition_that_is_nan_over_a_whole_trial_is_constant_and_declarations_are_plain_dicts():
+    dataset = Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0, 2.0], "c": [np.nan, np.nan],
+                       "f": [1.0, 2.0]},
+                      labels=types.MappingProxyType({"f": "N"}), conditions=types.MappingProxyType({"c": "1"}))
+    assert np.isnan(dataset.trial_conditions["c"]).all()
+    assert (type(dataset.labels), type(dataset.conditions)) == (dict, dict)
+    assert (dataset.labels, dataset.conditions) == ({"f": "N"}, {"c": "1"})
+
+
+def test_the_creation_time_is_utc_whatever_the_machines_zone(monkeypatch):
+    monkeypatch.setenv("TZ", "Asia/Tokyo")  # nine hours from UTC, no summer time
+    time.tzset()
+    try:
+        created = datetime.fromisoformat(DatasetMetadata().created_utc.replace("Z", "+00:00"))
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    assert abs((datetime.now(timezone.utc) - created).total_seconds()) < 60
