@@ -107,9 +107,13 @@ def main() -> None:
     if action == "run":
         cli.main(["run", "--max-children", "1"], standalone_mode=False)
     elif action == "rerun":
-        # mutmut copies the tests once: bring over the ones written since
+        # mutmut copies the tests once: bring over the ones written or changed since, and forget which
+        # test reaches which function (a changed test may reach more), so that it is collected again
         shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)
-        survivors = [name for module in modules for name, status in outcomes(module).items() if status not in CAUGHT]
+        Path("mutants/mutmut-stats.json").unlink(missing_ok=True)
+        equivalent = {entry["mutant"] for entry in tomllib.loads(EQUIVALENT_FILE.read_text())["equivalent"]}
+        survivors = [name for module in modules for name, status in outcomes(module).items()
+                     if status not in CAUGHT and name not in equivalent]  # the report checks those
         if survivors:
             cli.main(["run", "--max-children", "1", *survivors], standalone_mode=False)
     elif action == "report":

@@ -6,6 +6,9 @@ datasets against hand-computed values."""
 from __future__ import annotations
 
 import json
+import time
+import types
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +18,13 @@ import pytest
 
 from softtip import __version__
 from softtip.data import Dataset, DatasetError, DatasetMetadata, TrialWriter, concat
-from softtip.data.dataset import column_to_numpy, first_line, require_columns, subtract_trial_baseline
+from softtip.data.dataset import (
+    UnverifiedDatasetWarning,
+    column_to_numpy,
+    first_line,
+    require_columns,
+    subtract_trial_baseline,
+)
 
 
 def small() -> Dataset:
@@ -49,6 +58,25 @@ CASES = {
                              "y: 'nope' is not a label or condition (labels: fz_N, state; conditions: phi_deg)"),
     "y of a channel": (lambda: bare().y(["s0_bz_uT"]),
                        "y: 's0_bz_uT' is not a label or condition (labels: none; conditions: none)"),
+    "y of an unknown name among two conditions": (lambda: Dataset(
+        {"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "a": [1.0], "b": [2.0]}, conditions={"a": "1", "b": "1"}
+    ).y("nope"), "y: 'nope' is not a label or condition (labels: none; conditions: a, b)"),
+    "a condition not an identifier": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                                                      conditions={"f z": "1"}),
+                                      "conditions: 'f z' is not a valid column name (letters, digits, underscores)"),
+    "columns of three lengths": (lambda: Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0, 2.0],
+                                                  "a": [1.0, 2.0, 3.0], "z": [1.0]}, labels={"a": "1", "z": "1"}),
+                                 "columns differ in length: a has 3 rows, z has 1"),
+    "a 2-D label": (lambda: Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0], "f": [[1.0]]},
+                                    labels={"f": "N"}),
+                    "column f: expected a 1-D array, got shape (1, 1)"),
+    "a softtip version of no text": (lambda: DatasetMetadata(softtip_version=3),
+                                     "metadata softtip_version = 3: expected a non-empty string"),
+    "a trial split, not the first": (lambda: Dataset({"trial": [0, 5, 6, 5], "time_s": [0.0, 0.0, 0.0, 1.0],
+                                                     "s0_bz_uT": np.zeros(4)}),
+                                     "the rows of trial 5 are not contiguous"),
+    "a 2-D trial column": (lambda: Dataset({"trial": [[0]], "time_s": [0.0], "s0_bz_uT": [1.0]}),
+                           "column trial: expected a 1-D array, got shape (1, 1)"),
     "select of both": (lambda: small().select([0], trials=[3]), "select: give either rows or trials"),
     "select of neither": (lambda: small().select(), "select: give either rows or trials"),
     "select of a short mask": (lambda: small().select(np.array([True, False])),
@@ -359,3 +387,70 @@ def test_first_line_of_an_error_or_its_type_when_it_says_nothing():
     assert first_line(ValueError("one\ntwo")) == "one"
     assert first_line(ValueError("  \n ")) == "ValueError"
     assert first_line(KeyError()) == "KeyError"
+
+
+def test_text_columns_of_either_arrow_string_type_come_back_as_text():
+    for column in (pa.array(["a", "bc"]), pa.array(["a", "bc"], pa.large_string())):
+        values = column_to_numpy("s", column)
+        assert values.dtype == np.dtype("<U2") and values.tolist() == ["a", "bc"]
+
+
+def test_a_file_that_is_no_parquet_is_refused_in_pyarrows_first_line(tmp_path):
+    path = tmp_path / "notes.parquet"
+    path.write_text("trial,time_s\n0,0\n")
+    with pytest.raises(pa.ArrowException) as arrow:  # the reference: pyarrow's own refusal
+        pq.read_schema(path)
+    with pytest.raises(DatasetError) as refusal:
+        Dataset.read(path)
+    assert str(refusal.value) == f"{path}: not a Parquet file ({str(arrow.value).splitlines()[0]})"
+
+
+def test_a_file_without_a_checksum_warns_in_full(tmp_path):
+    path = written(tmp_path)
+    with_document(path, lambda d: {k: v for k, v in d.items() if k != "sha256"} | {"softtip_version": "0.1.0"})
+    with pytest.warns(UnverifiedDatasetWarning) as warned:
+        Dataset.read(path)
+    assert str(warned[0].message) == (f"{path}: no checksum (written by softtip 0.1.0, before datasets carried one): "
+                                      "its content cannot be verified; write it again to add one")
+
+
+def test_a_nan_put_into_the_metadata_after_its_checks_is_not_written(tmp_path):
+    dataset = Dataset({"trial": [0], "time_s": [0.0], "s0_bz_uT": [1.0]},
+                      metadata=DatasetMetadata(design={"gain": 1.0}))
+    dataset.metadata.design["gain"] = float("nan")  # the metadata's objects are plain dicts
+    with pytest.raises(ValueError, match="Out of range float values are not JSON compliant"):
+        dataset.write(tmp_path / "nan.parquet")
+    assert not (tmp_path / "nan.parquet").exists()
+
+
+def test_magnetic_channels_are_ordered_by_sensor_number_and_text_labels_stored_as_text():
+    dataset = Dataset({"trial": [0], "time_s": [0.0], "s10_bx_uT": [1.0], "s2_bz_uT": [2.0], "s2_bx_uT": [3.0],
+                       "state": np.array(["ab"], dtype=object)}, labels={"state": "1"})
+    assert dataset.channels == ("s2_bx_uT", "s2_bz_uT", "s10_bx_uT")  # 2 before 10, as numbers
+    assert dataset.column("state").dtype == np.dtype("<U2")
+    empty = Dataset({"trial": np.zeros(0, int), "time_s": [], "s0_bz_uT": [], "state": np.array([], dtype=str)},
+                    labels={"state": "1"})
+    assert empty.column("state").dtype == np.dtype("<U1") and empty.column("trial").dtype == np.int64
+    assert empty.trial_lengths.dtype == np.intp and len(empty.trial_lengths) == len(empty.trials) == 0
+    assert type(DatasetMetadata(seed=np.int64(7)).seed) is int
+
+
+
+def test_a_condition_that_is_nan_over_a_whole_trial_is_constant_and_declarations_are_plain_dicts():
+    dataset = Dataset({"trial": [0, 0], "time_s": [0.0, 1.0], "s0_bz_uT": [1.0, 2.0], "c": [np.nan, np.nan],
+                       "f": [1.0, 2.0]},
+                      labels=types.MappingProxyType({"f": "N"}), conditions=types.MappingProxyType({"c": "1"}))
+    assert np.isnan(dataset.trial_conditions["c"]).all()
+    assert (type(dataset.labels), type(dataset.conditions)) == (dict, dict)
+    assert (dataset.labels, dataset.conditions) == ({"f": "N"}, {"c": "1"})
+
+
+def test_the_creation_time_is_utc_whatever_the_machines_zone(monkeypatch):
+    monkeypatch.setenv("TZ", "Asia/Tokyo")  # nine hours from UTC, no summer time
+    time.tzset()
+    try:
+        created = datetime.fromisoformat(DatasetMetadata().created_utc.replace("Z", "+00:00"))
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    assert abs((datetime.now(timezone.utc) - created).total_seconds()) < 60

@@ -847,8 +847,23 @@ def test_a_tail_put_back_short_is_said_so(tmp_path, monkeypatch):
         # the disk took half of the write: the message counts what it took of the whole
         written, whole = map(int, re.search(r"device: (\d+) of (\d+) bytes written", str(failed.value)).groups())
         assert written == whole // 2 and whole > 100
+
+
+def test_finish_after_a_failed_write_writes_nothing_more(tmp_path, monkeypatch):
+    path = tmp_path / "failed.mcap"
+    written_whole = os.pwrite
+    with path.open("wb") as stream:
+        writer = SealedMcapWriter(stream, compression="none")
+        writer.start()
+        channel = writer.register_channel("/notes", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        writer.add_message(channel, 5, b'{"n": 1}', 5)
+        monkeypatch.setattr(os, "pwrite", lambda fd, data, offset: (_ for _ in ()).throw(OSError(
+            errno.ENOSPC, os.strerror(errno.ENOSPC))) if data else written_whole(fd, data, offset))
+        with pytest.raises(RecordingError, match="the recording.s write failed"):
+            writer.flush()
         left = path.read_bytes()
-        writer.finish()  # after a failed write: nothing more is written, and no second error
+        writer.add_message(channel, 7, b'{"n": 3}', 7)
+        writer.finish()  # nothing more is written, and no second error
     assert path.read_bytes() == left
 
 
@@ -902,6 +917,8 @@ def test_how_a_cut_or_damaged_tail_ends_is_said_word_for_word(tmp_path):
     claimed[start + 6] = 0x01  # the length's sixth byte: 2**40 more
     assert tail(bytes(claimed)) == (f"a record of opcode 0x06 claims {chunk.chunk_length - 9 + 2**40} bytes, more "
                                     "than the file holds")
+    claimed[start + 1:start + 9] = struct.pack("<Q", len(claimed))  # as long as the whole file: no more than it
+    assert tail(bytes(claimed)) == f"the file ends {start + 9} bytes short of a record (opcode 0x06)"
     assert tail(content[:end] + bytes(20)) == f"no record follows the record of opcode 0x06 at byte {start}"
 
 
@@ -1060,8 +1077,12 @@ def test_a_flush_waits_for_the_disk_only_when_asked(tmp_path, monkeypatch):
 def test_a_scan_yields_the_content_records_and_parses_each_body_whole(tmp_path):
     whole = recorded(tmp_path / "whole.mcap", frames=50)
     with whole.open("rb") as stream:
-        kinds = {type(record).__name__ for record in scan_recording(stream, Salvage(whole.stat().st_size), whole)}
-    assert kinds == {"Header", "Schema", "Channel", "Message", "Metadata"}  # no index, statistics or DataEnd
+        kinds = collections.Counter(type(record).__name__
+                                    for record in scan_recording(stream, Salvage(whole.stat().st_size), whole))
+    summary, messages = indexed_messages(whole)  # the reference: mcap's indexed reader
+    # each once (the summary's copies of schemas and channels are not read again); no index, statistics or DataEnd
+    assert kinds == {"Header": 1, "Schema": len(summary.schemas), "Channel": len(summary.channels),
+                     "Metadata": len(summary.metadata_indexes), "Message": len(messages)}
     # a header record's body (two empty strings) parses; with a byte more it is not a header
     assert [type(record).__name__ for record in _records(0x01, bytes(8))] == ["Header"]
     assert _records(0x01, bytes(9)) is None
@@ -1072,4 +1093,82 @@ def test_a_record_head_that_ends_the_file_is_read(tmp_path):
     path = tmp_path / "tiny.mcap"
     path.write_bytes(MAGIC + struct.pack("<BQ", 0x01, 8) + bytes(8) + struct.pack("<BQ", 0x02, 0))
     recording = read_recording(path)
-    assert not recording.truncated and recording.truncation == "" and recording.topics == {}
+    assert recording.truncated is False and recording.truncation == "" and recording.topics == {}
+    # the header followed by nine bytes that begin no record: nothing follows it
+    path.write_bytes(MAGIC + struct.pack("<BQ", 0x01, 8) + bytes(8) + bytes(9))
+    with pytest.raises(RecordingError) as refused:
+        read_recording(path)
+    assert str(refused.value) == f"{path}: unreadable MCAP file (no record follows the record of opcode 0x01 at byte 8)"
+
+
+def test_a_data_end_record_states_its_crc_and_0_for_none(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    content = whole.read_bytes()
+    data_end = content.rindex(b"\x0f\x04\x00\x00\x00\x00\x00\x00\x00", 0, len(content) - 8 - FOOTER_BYTES)
+    crc = content[data_end + 9:data_end + 13]
+    assert read_recording(whole).salvage.data_crc_ok is True
+
+    def scanned(body: bytes):
+        (tmp_path / "data-end.mcap").write_bytes(rewritten_record(content, data_end, body))
+        return read_recording(tmp_path / "data-end.mcap").salvage
+
+    assert scanned(crc).data_crc_ok is True
+    assert scanned(bytes(4)).data_crc_ok is None  # 0: the writer states none
+    assert scanned(b"\x01\x00\x00\x00").data_crc_ok is False
+
+
+def test_each_damaged_length_is_counted_in_the_data_and_in_the_summary(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap")
+    _, intact = indexed_messages(whole)
+    chunks = chunks_of(whole)
+    content = bytearray(whole.read_bytes())
+    for chunk in (chunks[1], chunks[3]):
+        content[chunk.chunk_start_offset + 1] ^= 0x01  # one byte longer or shorter
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start = struct.unpack_from("<Q", content, footer + 9)[0]
+    index = next(offset for offset, opcode, _ in records_between(bytes(content), summary_start, footer) if opcode == 0x08)
+    content[index + 1] ^= 0x01  # a chunk index's length, in the summary
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = read_recording(damaged).salvage
+    assert (salvage.resynchronised, salvage.damaged_records, salvage.messages) == (3, 0, len(intact))
+
+
+def test_a_stray_byte_after_the_magic_costs_its_own_head(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    _, intact = indexed_messages(whole)
+    stray = tmp_path / "stray.mcap"
+    stray.write_bytes(MAGIC + b"\x05" + whole.read_bytes()[len(MAGIC):])  # a message's opcode, then the file
+    salvage = read_recording(stray).salvage
+    # the stray head (its length read from the header's first bytes) is skipped; the header and all after it read
+    assert (salvage.damaged_records, salvage.messages, salvage.bytes_lost) == (1, len(intact), 9)
+
+
+def test_a_summary_record_with_a_damaged_length_is_passed_whatever_its_body(tmp_path):
+    whole = recorded(tmp_path / "whole.mcap", frames=50)
+    content = bytearray(whole.read_bytes())
+    footer = len(content) - 8 - FOOTER_BYTES
+    summary_start = struct.unpack_from("<Q", content, footer + 9)[0]
+    index = next(offset for offset, opcode, _ in records_between(bytes(content), summary_start, footer) if opcode == 0x08)
+    content[index + 1] ^= 0x01  # its length
+    content[index + 9 + 32 + 3] ^= 0x80  # and its message index offsets' byte count: the body parses no more
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(content))
+    salvage = read_recording(damaged).salvage
+    # the summary only indexes the data: passed over to the next record, nothing of the data lost
+    assert (salvage.resynchronised, salvage.damaged_records, salvage.messages) == (1, 0, 51)
+
+
+def test_resynchronising_looks_only_past_the_damaged_record(tmp_path):
+    # by hand: a header whose last byte (its library's one character) is 0x02, the footer's opcode; then at
+    # byte 26 a schema record of 3 bytes that does not parse, zeros, and a footer's head 779 bytes on.
+    # Read from the byte before the damaged record, that 0x02 and the damaged record's first 8 bytes would
+    # make a "record" reaching that footer exactly: only the bytes after the damaged record's start count.
+    start = len(MAGIC) + 9 + 9
+    content = (MAGIC + struct.pack("<BQII1s", 0x01, 9, 0, 1, b"\x02") + struct.pack("<BQ", 0x03, 3) + bytes(770)
+               + struct.pack("<BQ", 0x02, 0))
+    assert content[start - 1] == 0x02 and len(content) == start + 779 + 9
+    path = tmp_path / "edge.mcap"
+    path.write_bytes(content)
+    salvage = read_recording(path).salvage
+    assert (salvage.truncated, salvage.damaged_records, salvage.bytes_lost) == (False, 1, 779)
