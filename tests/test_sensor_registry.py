@@ -56,7 +56,7 @@ def test_changes_beyond_twice_the_registered_range_are_refused(stated, full_scal
     check_changes(inside, stated, "d.parquet")
     beyond = {**inside, "s1_bz_uT": np.array([0.0, 2.001 * full_scale[2]])}
     with pytest.raises(ValueError, match="^" + re.escape(
-            f"d.parquet: channel s1_bz_uT reaches {2.001 * full_scale[2]:.4g} uT, beyond twice the mlx90393's "
+            f"d.parquet: channel s1_bz_uT reaches {2.001 * full_scale[2]:.4g} uT, beyond twice the MLX90393's "
             f"{full_scale[2]:.4g} uT range at {where}") + "$"):
         check_changes(beyond, stated, "d.parquet")
 

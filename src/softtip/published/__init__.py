@@ -181,18 +181,21 @@ def _table(system: str, source: str, key: str, table: dict) -> PublishedTable:
                           fitted=parsed.fitted)
 
 
-@functools.cache
 def published_tables() -> dict[str, PublishedTable]:
-    """Every published table of every registered system, by key."""
+    """Every published table of every registered system, by key (read again when the registry changes)."""
+    return _tables_of_files(tuple((system.name, system.label, str(file)) for system in systems().values()
+                                  if (file := system.published()) is not None))
+
+
+@functools.cache
+def _tables_of_files(files: tuple[tuple[str, str, str], ...]) -> dict[str, PublishedTable]:
     tables: dict[str, PublishedTable] = {}
-    for system in systems().values():
-        if (file := system.published()) is None:
-            continue
-        path, source = Path(str(file)), f"{system.name}: published.toml"
-        for key, table in read_toml(path, "published figures").items():
+    for name, label, file in files:
+        source = f"{name}: published.toml"
+        for key, table in read_toml(Path(file), "published figures").items():
             if key in tables:
                 raise ConfigError(f"{source}: table {key} is also {tables[key].system}'s")
-            tables[key] = _table(system.label, source, key, table)
+            tables[key] = _table(label, source, key, table)
     return tables
 
 

@@ -32,7 +32,7 @@ class SensorKind:
     axis it outputs unclipped, ``step(settings)``: its output step per axis, both in the reading's unit;
     ``decode(settings, words)``: its raw output words (..., axes) as (values in the reading's unit,
     saturated), with ``raw_unit`` what a log calls those words ("counts"); a chip that outputs values
-    has neither.
+    has neither; ``title``: how messages name it (its name when not given).
     """
 
     name: str
@@ -44,6 +44,7 @@ class SensorKind:
     step: Callable[[Any], np.ndarray]
     decode: Callable[[Any, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
     raw_unit: str | None = None
+    title: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -117,4 +118,4 @@ def check_changes(columns: Mapping[str, np.ndarray], stated: Mapping[str, Any] |
             largest = float(np.nanmax(np.abs(values))) if len(values) else 0.0
             if not largest <= 2 * full_scale[axis]:
                 raise ValueError(f"{source}: channel {channel} reaches {largest:.4g} {reading.unit}, beyond twice "
-                                 f"the {kind.name}'s {full_scale[axis]:.4g} {reading.unit} range at {where}")
+                                 f"the {kind.title or kind.name}'s {full_scale[axis]:.4g} {reading.unit} range at {where}")
