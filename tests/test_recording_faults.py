@@ -1022,7 +1022,7 @@ def test_a_recording_of_no_message_states_what_mcaps_own_writer_states(tmp_path)
         mcap_writer.finish()
     with path.open("rb") as stream, reference.open("rb") as other:
         ours, theirs = make_reader(stream), make_reader(other)
-        assert (ours.get_header().profile, ours.get_header().library) == ("", "")
+        assert set(vars(ours.get_header()).values()) == {""}  # its profile and the writer it names: both empty
         statistics, expected = ours.get_summary().statistics, theirs.get_summary().statistics
     assert (statistics.message_count, statistics.message_start_time, statistics.message_end_time) == (
         expected.message_count, expected.message_start_time, expected.message_end_time) == (0, 0, 0)
