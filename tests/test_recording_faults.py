@@ -161,6 +161,15 @@ def recorded(path: Path, frames: int = 600, per_flush: int = 25) -> Path:
     return path
 
 
+def recorded_with_a_force(path: Path) -> Path:
+    """200 frames of one Hall chip, each with an estimated Fz in N: the labels the wrench topic carries."""
+    recorder = McapRecorder(path, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
+    recorder.write_frames([SimpleNamespace(**{**vars(hall_frame(k)), "estimates": np.array([0.01 * k])})
+                           for k in range(200)])
+    recorder.close()
+    return path
+
+
 def chunks_of(path: Path) -> list:
     with path.open("rb") as stream:
         return sorted(make_reader(stream).get_summary().chunk_indexes, key=lambda index: index.chunk_start_offset)
@@ -265,13 +274,7 @@ def test_a_recording_carries_a_crc_of_its_data_section(tmp_path):
 
 
 def test_a_flipped_byte_in_a_topic_name_is_refused_not_converted_without_its_labels(tmp_path):
-    whole = tmp_path / "whole.mcap"
-    recorder = McapRecorder(whole, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
-    recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
-                                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
-                                           baseline_version=0, estimates=np.array([0.01 * k]), state=None)
-                           for k in range(200)])
-    recorder.close()
+    whole = recorded_with_a_force(tmp_path / "whole.mcap")
     assert convert(whole).dataset.labels == {"Fz": "N"}  # from the wrench topic
     content = bytearray(whole.read_bytes())
     topic = content.index(b"/fingertip/wrench")  # the channel record in the data section (before the summary's)
@@ -292,13 +295,7 @@ def test_a_flipped_byte_in_a_topic_name_is_refused_not_converted_without_its_lab
 
 
 def test_a_topic_name_flipped_beside_a_damaged_chunk_is_refused_unless_salvaged(tmp_path):
-    whole = tmp_path / "whole.mcap"
-    recorder = McapRecorder(whole, 1, target_names=["Fz"], target_units=["N"], chunk_size=1024)
-    recorder.write_frames([SimpleNamespace(seq=k, stamp_ns=1_700_000_000_000_000_000 + k * 10_000_000,
-                                           reading=np.full((1, 3), 1e-6 * k), baseline=np.zeros((1, 3)),
-                                           baseline_version=0, estimates=np.array([0.01 * k]), state=None)
-                           for k in range(200)])
-    recorder.close()
+    whole = recorded_with_a_force(tmp_path / "whole.mcap")
     damaged_chunk = chunks_of(whole)[3]
     content = bytearray(whole.read_bytes())
     content[damaged_chunk.chunk_start_offset + damaged_chunk.chunk_length - 5] ^= 0x20
