@@ -7,6 +7,8 @@ import textwrap
 
 import pytest
 
+from softtip._core.progress import Progress, Task
+
 
 @pytest.fixture(autouse=True, scope="session")
 def private_cache_dir(tmp_path_factory):
@@ -83,3 +85,20 @@ def install_package():
         (info / "entry_points.txt").write_text(f"[softtip.systems]\n{textwrap.dedent(systems).strip()}\n")
 
     return install
+
+
+class StageNames(Progress):
+    """The stages a job announces, in order, shown nowhere."""
+
+    def __init__(self) -> None:
+        self.names: list[str] = []
+
+    def task(self, description: str, total: float | None = None) -> Task:
+        self.names.append(description)
+        return Task()
+
+
+@pytest.fixture
+def stage_names() -> type[StageNames]:
+    """Makes a progress that records the names of the stages a job runs."""
+    return StageNames

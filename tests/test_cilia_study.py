@@ -6,27 +6,17 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from softtip._core.progress import Progress, Task
 from softtip.systems.cilia.layout import DieError
 from softtip.systems.cilia.study import CiliaSettings, run_study
 
 
-class Recorder(Progress):
-    def __init__(self) -> None:
-        self.stages: list[str] = []
-
-    def task(self, description: str, total: float | None = None) -> Task:
-        self.stages.append(description)
-        return Task()
-
-
 @pytest.mark.slow
-def test_the_study_fits_the_twins_curve_and_reports_every_figure():
+def test_the_study_fits_the_twins_curve_and_reports_every_figure(stage_names):
     settings = CiliaSettings(points=16, trials=2, depths_um=(10.0, 20.0), meander_scales=(0.9,), rig_tilts_deg=(1.0,),
                              rig_plate_stiffnesses_uNm=(100.0,))
-    progress = Recorder()
+    progress = stage_names()
     study = run_study(settings, seed=4, progress=progress)
-    assert progress.stages == ["fit, profiles and identifiability", "recovery of the twin's truth",
+    assert progress.names == ["fit, profiles and identifiability", "recovery of the twin's truth",
                                "resolution, balance, the publication's fit, layout"]
     fit = study.fit
     # the twin's truth (2.8 memu, 200 µm) is found within its 95 % intervals

@@ -13,25 +13,15 @@ import numpy as np
 import pytest
 
 from softtip._core.cache import cache_dir, computing
-from softtip._core.progress import Progress, Task
 from softtip._core.units import MM
 from softtip.design.model import load_design
 from softtip.twin.influence import InfluenceEngine
 
 
-class Stages(Progress):
-    def __init__(self) -> None:
-        self.names: list[str] = []
-
-    def task(self, description: str, total: float | None = None) -> Task:
-        self.names.append(description)
-        return Task()
-
-
 @pytest.mark.slow  # two factorisations and their back-substitutions: 10.7 min on 2 cores under a load average of 22-25
-def test_the_influence_matrices_are_computed_once_and_read_back_bit_for_bit():
+def test_the_influence_matrices_are_computed_once_and_read_back_bit_for_bit(stage_names):
     design = load_design("rectangular")
-    first, second, third = Stages(), Stages(), Stages()
+    first, second, third = stage_names(), stage_names(), stage_names()
     earlier = set((cache_dir() / "influence").glob("*.npz"))  # other tests' designs and meshes
     built = InfluenceEngine.build(design, 3.0 * MM, 2.0 * MM, curvature_points=3, progress=first)
     served = InfluenceEngine.build(design, 3.0 * MM, 2.0 * MM, curvature_points=3, progress=second)
