@@ -123,7 +123,9 @@ class StudyReport:
 
     def report(self) -> Report:
         headline = self.outcome.headline
-        lead = f"{self.study.follows}. Headline: {headline.label} = " + (
+        smoke = self.provenance.get("quick (smoke run)", "no") != "no"
+        lead = ("A smoke run (--quick): fewer trials than the study, so its figures are not the study's. "
+                if smoke else "") + f"{self.study.follows}. Headline: {headline.label} = " + (
             "n/a" if headline.value is None else f"{headline.value:.3g} {headline.unit}".strip())
         if headline.comparison is not None:
             lead += f" (published {headline.comparison.published.text}; {headline.comparison.verdict})"
