@@ -20,7 +20,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import typer
 
-from softtip._core.channels import Reading
+from softtip._core.channels import MAGNETIC, Reading
 from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
@@ -34,16 +34,17 @@ from softtip.lab.protocols import load_protocol, protocol_file_schema
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.published import published_table, published_tables
 from softtip.realtime.scenario import LiveScenario
+from softtip.report.document import Figure
 from softtip.report.tables import Table
 from softtip.sensors.registry import SensorKind
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.studies.reproduce import quick_cuts, reproduce_study
 
 __all__ = [
-    "Analysis", "BenchKind", "DatasetMetadata", "Device", "Headline", "LiveScenario", "NonNegativeNumber",
-    "PacedSource", "PositiveNumber", "PronySeries", "Reading", "RealismTable", "Scenario", "SeededBench",
-    "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter", "check_system", "integer",
-    "protocol_file_schema", "published_table", "run_protocol", "schema",
+    "MAGNETIC", "SILENT", "Analysis", "BenchKind", "DatasetMetadata", "Device", "Figure", "Headline", "LiveScenario",
+    "NonNegativeNumber", "PacedSource", "PositiveNumber", "PronySeries", "Reading", "RealismTable", "Scenario",
+    "SeededBench", "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter", "check_system",
+    "integer", "protocol_file_schema", "published_table", "run_protocol", "schema",
 ]
 
 ROLES = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it

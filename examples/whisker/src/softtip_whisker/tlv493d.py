@@ -1,0 +1,84 @@
+"""The Infineon TLV493D-A1B6 3-D Hall sensor as the host reads it: 12-bit two's-complement words per axis
+(or their 8 most significant bits in the fast readout), 98 µT per word step, clipped at the words' ends.
+
+Figures from the TLV493D-A1B6 data sheet (Rev. 1.1, 2019-04-09) and its user manual (V1.03, 2018-02-20):
+linear range ±130 mT per axis, 12-bit data per axis, 98 µT per LSB (the 8-bit readout drops the 4 least
+significant bits: 16 LSB, 1.568 mT), update rates of 3.3 kHz (fast mode), 100 Hz (low-power mode) and
+10 Hz (ultra-low-power mode).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from softtip.plugin import MAGNETIC, SensorKind, schema
+
+STEP_12_BIT_UT = 98.0  # data sheet: "resolution 98 µT/LSB"
+LINEAR_RANGE_UT = 130_000.0  # data sheet: linear field measurement up to ±130 mT
+UPDATE_RATE_HZ = {"fast": 3300.0, "low-power": 100.0, "ultra-low-power": 10.0}
+
+
+@schema(section="sensor")
+class TLV493DSettings:
+    """What a host sets: the power mode (its update rate) and the readout's bits per axis."""
+
+    mode: Literal["fast", "low-power", "ultra-low-power"] = "low-power"
+    bits: Literal[12, 8] = 12
+
+    @classmethod
+    def from_dict(cls, table: dict) -> TLV493DSettings:
+        return cls(**table)
+
+    def to_dict(self) -> dict:
+        return {"mode": self.mode, "bits": self.bits}
+
+    @property
+    def rate_hz(self) -> float:
+        return UPDATE_RATE_HZ[self.mode]
+
+
+def _word_limits(settings: TLV493DSettings) -> tuple[int, int]:
+    half = 1 << (settings.bits - 1)
+    return -half, half - 1
+
+
+def step_uT(settings: TLV493DSettings) -> np.ndarray:
+    """The output step per axis (µT): 98 µT at 12 bits, 16 times that at 8."""
+    return np.full(3, STEP_12_BIT_UT * (1 << (12 - settings.bits)))
+
+
+def full_scale_uT(settings: TLV493DSettings) -> np.ndarray:
+    """The largest magnitude per axis the words hold unclipped (µT): the top word's field."""
+    return step_uT(settings) * _word_limits(settings)[1]
+
+
+def read_uT(field_T: np.ndarray, settings: TLV493DSettings, rng: np.random.Generator,
+            noise_uT: float) -> tuple[np.ndarray, np.ndarray]:
+    """What the host reads of fields ``field_T`` (..., 3, tesla): (values in µT, saturated): the field plus
+    white noise of ``noise_uT`` rms, rounded to the output step and clipped at the words' ends."""
+    step = step_uT(settings)
+    lowest, highest = _word_limits(settings)
+    field_uT = np.asarray(field_T, dtype=np.float64) * 1e6
+    words = np.rint((field_uT + rng.normal(0.0, noise_uT, field_uT.shape)) / step)
+    saturated = (words <= lowest) | (words >= highest)
+    return np.clip(words, lowest, highest) * step, saturated
+
+
+def decode(settings: TLV493DSettings, words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Raw words (..., 3) as the registers assemble them (0 .. 2^bits - 1, two's complement) into
+    (values in µT, saturated)."""
+    words = np.asarray(words)
+    if not np.issubdtype(words.dtype, np.integer) or words.ndim == 0 or words.shape[-1] != 3:
+        raise ValueError(f"words: expected integer words of shape (..., 3), got {words.dtype} {words.shape}")
+    modulus = 1 << settings.bits
+    if words.size and (words.min() < 0 or words.max() >= modulus):
+        raise ValueError(f"words: expected {settings.bits}-bit register words 0..{modulus - 1}")
+    signed = np.where(words >= modulus // 2, words.astype(np.int64) - modulus, words)
+    lowest, highest = _word_limits(settings)
+    return signed * step_uT(settings), (signed <= lowest) | (signed >= highest)
+
+
+SENSOR = SensorKind("tlv493d", MAGNETIC, 3, TLV493DSettings, widest=TLV493DSettings(), full_scale=full_scale_uT,
+                    step=step_uT, decode=decode, raw_unit="counts", title="TLV493D")
