@@ -12,7 +12,7 @@ import pytest
 
 from softtip.mechanics.rod import Rod, solve_tip_force
 from softtip.plugin import SILENT, check_system
-from softtip.sensors.registry import sensor_kind
+from softtip.sensors.registry import check_changes, sensor_kind
 from softtip_whisker.bench import SweepParameters, check_range, deflection_profile
 from softtip_whisker.live import whisker_scenario
 from softtip_whisker.study import output_step, rest_noise
@@ -117,3 +117,11 @@ def test_a_push_beyond_the_linear_model_or_a_field_beyond_the_chips_range_is_ref
     with pytest.raises(ValueError, match=r"^design: the magnet's field at the chip reaches 193\.4 mT"):
         check_range(Whisker(layer_mm=0.8), 3.0)
     check_range(Whisker(), 3.0)  # the shipped protocol's: 0.08 rad, 118 mT
+
+
+def test_calibrate_checks_a_dataset_against_the_registered_chip_at_its_stated_settings():
+    stated = {"mode": "low-power", "bits": 12}
+    check_changes({"s0_bx_uT": np.array([-401.2e3, 401.2e3])}, stated, "sweep.parquet")  # twice 2047 x 98 µT
+    with pytest.raises(ValueError, match=r"^sweep\.parquet: channel s0_bx_uT reaches 4\.013e\+05 uT, beyond twice "
+                                         r"the TLV493D's 2\.006e\+05 uT range at the dataset's sensor settings$"):
+        check_changes({"s0_bx_uT": np.array([401.3e3])}, stated, "sweep.parquet")
