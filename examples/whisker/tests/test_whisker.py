@@ -10,12 +10,14 @@ import magpylib
 import numpy as np
 import pytest
 
+from softtip.lab.protocols import load_protocol
 from softtip.mechanics.rod import Rod, solve_tip_force
 from softtip.plugin import SILENT, check_system
 from softtip.sensors.registry import check_changes, sensor_kind
 from softtip_whisker.bench import SweepParameters, check_range, deflection_profile
 from softtip_whisker.live import whisker_scenario
 from softtip_whisker.study import output_step, rest_noise
+from softtip_whisker.study import whisker as whisker_study
 from softtip_whisker.tlv493d import SENSOR, TLV493DSettings, decode, read_uT
 from softtip_whisker.whisker import Whisker, field_at_chip, tilts
 
@@ -125,3 +127,12 @@ def test_calibrate_checks_a_dataset_against_the_registered_chip_at_its_stated_se
     with pytest.raises(ValueError, match=r"^sweep\.parquet: channel s0_bx_uT reaches 4\.013e\+05 uT, beyond twice "
                                          r"the TLV493D's 2\.006e\+05 uT range at the dataset's sensor settings$"):
         check_changes({"s0_bx_uT": np.array([401.3e3])}, stated, "sweep.parquet")
+
+
+def test_the_study_reads_the_chips_step_and_noise_back_from_the_shipped_protocol():
+    protocol = load_protocol("whisker-sweep").changed(calibration_trials=4, validation_trials=2)
+    outcome = whisker_study(protocol, 7, SILENT)
+    assert outcome.results["output_step_uT"] == 98.0
+    # 6 trials x 20 readings at rest x 3 axes: a standard deviation's standard error is 100 / sqrt(2 x 360) µT,
+    # 3.7 µT; three of them
+    assert outcome.results["rms_noise_uT"] == pytest.approx(100.0, abs=11.0)

@@ -59,6 +59,11 @@ def whisker(protocol, seed, progress) -> StudyOutcome:
                  caption="The twin's chip is set from these data-sheet figures: measuring them back checks the "
                          "path from the chip through the protocol and the dataset.",
                  published=published_table("tlv493d-output"))
+    board = Table("TLV493D rms noise at rest, beside a characterised board", "figure", ["rms noise"], ["µT"],
+                  {("rms noise", "µT"): noise}, unit="µT", digits=0,
+                  caption="The twin's chip has the data sheet's typical noise; one board measured on its own was "
+                          "noisier.",
+                  published=published_table("tlv493d-measured-noise"))
     forces = Table("The tip's force from the field, validation pushes", "axis", ["fx", "fy"],
                    ["RMSE (mN)", "largest (mN)"],
                    {(axis, column): float(value) for axis, k in (("fx", 0), ("fy", 1))
@@ -69,7 +74,7 @@ def whisker(protocol, seed, progress) -> StudyOutcome:
     figure = _force_figure(force[validation], estimate)
     results = {"force_rmse_mN": rmse_mN.tolist(), "largest_force_mN": span_mN.tolist(), "output_step_uT": step,
                "rms_noise_uT": noise, "tip_compliance_mm_per_N": protocol.design.whisker.tip_compliance * 1e3}
-    return StudyOutcome(results, [forces, chip], [figure],
+    return StudyOutcome(results, [forces, chip, board], [figure],
                         Headline.of(forces, "fx", "RMSE (mN)", "the tip's force from the field: RMSE"))
 
 
