@@ -55,19 +55,19 @@ def whisker(protocol, seed, progress) -> StudyOutcome:
     rest = _rest_readings(dataset, protocol, change)
     noise = rest_noise(rest, step)
     chip = Table("TLV493D output step and noise, from the readings at rest", "figure", ["output step", "rms noise"],
-                 ["µT"], {("output step", "µT"): step, ("rms noise", "µT"): noise}, unit="µT", digits=0,
+                 ["at rest"], {("output step", "at rest"): step, ("rms noise", "at rest"): noise}, unit="µT", digits=0,
                  caption="The twin's chip is set from these data-sheet figures: measuring them back checks the "
                          "path from the chip through the protocol and the dataset.",
                  published=published_table("tlv493d-output"))
-    board = Table("TLV493D rms noise at rest, beside a characterised board", "figure", ["rms noise"], ["µT"],
-                  {("rms noise", "µT"): noise}, unit="µT", digits=0,
+    board = Table("TLV493D rms noise at rest, beside a characterised board", "figure", ["rms noise"], ["at rest"],
+                  {("rms noise", "at rest"): noise}, unit="µT", digits=0,
                   caption="The twin's chip has the data sheet's typical noise; one board measured on its own was "
                           "noisier.",
                   published=published_table("tlv493d-measured-noise"))
     forces = Table("The tip's force from the field, validation pushes", "axis", ["fx", "fy"],
-                   ["RMSE (mN)", "largest (mN)"],
+                   ["RMSE", "largest"],
                    {(axis, column): float(value) for axis, k in (("fx", 0), ("fy", 1))
-                    for column, value in (("RMSE (mN)", rmse_mN[k]), ("largest (mN)", span_mN[k]))},
+                    for column, value in (("RMSE", rmse_mN[k]), ("largest", span_mN[k]))},
                    unit="mN", digits=2,
                    caption="A linear map of the field's change fitted on the calibration pushes; the validation "
                            "pushes come from directions the calibration never saw.")
@@ -75,7 +75,7 @@ def whisker(protocol, seed, progress) -> StudyOutcome:
     results = {"force_rmse_mN": rmse_mN.tolist(), "largest_force_mN": span_mN.tolist(), "output_step_uT": step,
                "rms_noise_uT": noise, "tip_compliance_mm_per_N": protocol.design.whisker.tip_compliance * 1e3}
     return StudyOutcome(results, [forces, chip, board], [figure],
-                        Headline.of(forces, "fx", "RMSE (mN)", "the tip's force from the field: RMSE"))
+                        Headline.of(forces, "fx", "RMSE", "the tip's force fx from the field: RMSE"))
 
 
 def _rest_readings(dataset, protocol, change: np.ndarray) -> np.ndarray:
