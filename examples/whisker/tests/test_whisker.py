@@ -24,25 +24,30 @@ from softtip_whisker.whisker import Whisker, field_at_chip, tilts
 MM = 1e-3
 
 
-def test_the_field_at_the_chip_is_magpylibs_of_the_magnet_rocked_about_its_bottom_face():
+def test_the_field_at_the_chip_is_magpylibs_of_the_magnet_slid_and_rocked_about_its_bottom_face():
     whisker = Whisker()
-    forces = np.array([[0.0, 0.0], [0.02, 0.0], [-0.01, 0.03], [0.035, -0.02]])
+    forces = np.array([[0.0, 0.0], [0.02, 0.0], [-0.01, 0.015], [0.012, -0.01]])
     expected = []
-    for rotvec in tilts(whisker, forces):
+    for force, rotvec in zip(forces, tilts(whisker, forces)):
         magnet = magpylib.magnet.Cylinder(polarization=(0, 0, whisker.polarization_T),
                                           dimension=(whisker.magnet_diameter_mm * MM, whisker.magnet_height_mm * MM),
                                           position=(0, 0, (whisker.layer_mm + whisker.magnet_height_mm / 2) * MM))
-        magnet.rotate_from_rotvec(rotvec, anchor=(0, 0, whisker.layer_mm * MM), degrees=False)
+        slid = (*force / whisker.sliding_stiffness, 0.0)
+        magnet.move(slid)
+        magnet.rotate_from_rotvec(rotvec, anchor=np.add(slid, (0, 0, whisker.layer_mm * MM)), degrees=False)
         expected.append(magnet.getB((0, 0, 0)))
     np.testing.assert_allclose(field_at_chip(whisker, forces), expected, rtol=1e-9, atol=1e-12)
 
 
-def test_the_magnets_tilt_is_the_moment_over_the_rocking_stiffness_by_hand():
-    whisker = Whisker()  # Gazetas' rocking footing: K = 8 G a³ / (3 (1 - ν)), a = 2 mm, E = 1 MPa, ν = 0.49
-    stiffness = 8 * (1e6 / (2 * 1.49)) * (2e-3) ** 3 / (3 * 0.51)
-    assert whisker.rocking_stiffness == pytest.approx(stiffness, rel=1e-12)
+def test_the_magnets_stiffnesses_and_tilt_by_hand():
+    # a rigid disc of radius R = 1.5 mm on a layer h = 1.5 mm thick, E = 1 MPa, ν = 0.49 (G = E / 2.98):
+    # rocking 8 G R³ / (3 (1 - ν)) (1 + R / 6h), sliding 8 G R / (2 - ν) (1 + R / 2h)
+    whisker, shear = Whisker(), 1e6 / 2.98
+    rocking = 8 * shear * 1.5e-3 ** 3 / (3 * 0.51) * (1 + 1 / 6)
+    assert whisker.rocking_stiffness == pytest.approx(rocking, rel=1e-12)
+    assert whisker.sliding_stiffness == pytest.approx(8 * shear * 1.5e-3 / 1.51 * 1.5, rel=1e-12)
     # 10 mN along +y at the tip, 31 mm above the rocking centre, turns the magnet about -x
-    assert tilts(whisker, np.array([[0.0, 0.01]]))[0] == pytest.approx([-0.01 * 0.031 / stiffness, 0.0, 0.0])
+    assert tilts(whisker, np.array([[0.0, 0.01]]))[0] == pytest.approx([-0.01 * 0.031 / rocking, 0.0, 0.0])
 
 
 def test_the_wires_bending_is_the_rod_solvers_at_a_small_force():
@@ -114,11 +119,14 @@ def test_the_sensor_is_registered_and_the_system_holds_every_rule():
 
 
 def test_a_push_beyond_the_linear_model_or_a_field_beyond_the_chips_range_is_refused():
-    with pytest.raises(ValueError, match=r"^parameters\.deflection_mm = 6\.0: tilts the magnet by 0\.159 rad"):
-        check_range(Whisker(), 6.0)
-    with pytest.raises(ValueError, match=r"^design: the magnet's field at the chip reaches 193\.4 mT"):
-        check_range(Whisker(layer_mm=0.8), 3.0)
-    check_range(Whisker(), 3.0)  # the shipped protocol's: 0.08 rad, 118 mT
+    with pytest.raises(ValueError, match=r"^parameters\.deflection_mm = 4\.0: tilts the magnet by 0\.117 rad"):
+        check_range(Whisker(), 4.0)
+    # a 2 mm tall magnet at rest, on its axis: J / 2 (3.5 / sqrt(3.5² + 1.5²) - 1.5 / sqrt(1.5² + 1.5²)) = 137.8 mT
+    with pytest.raises(ValueError, match=r"^design: the magnet's field at the chip reaches 137\.8 mT"):
+        check_range(Whisker(magnet_height_mm=2.0), 0.01)
+    with pytest.raises(ValueError, match=r"^design\.layer_mm = 1\.2: expected at least the magnet's radius \(1\.5 mm\)"):
+        check_range(Whisker(layer_mm=1.2), 3.0)
+    check_range(Whisker(), 3.0)  # the shipped protocol's: 0.087 rad, 98 mT
 
 
 def test_calibrate_checks_a_dataset_against_the_registered_chip_at_its_stated_settings():

@@ -91,7 +91,10 @@ def deflection_profile(p: SweepParameters, rate_hz: float) -> np.ndarray:
 
 
 def check_range(whisker: Whisker, deflection_mm: float) -> None:
-    """Refuses a push the linear model or the chip's linear range cannot take, before any trial."""
+    """Refuses a design or a push the model or the chip's linear range cannot take, before any trial."""
+    if whisker.layer_mm < whisker.magnet_diameter_mm / 2:
+        raise ValueError(f"design.layer_mm = {whisker.layer_mm}: expected at least the magnet's radius "
+                         f"({whisker.magnet_diameter_mm / 2:g} mm), where the layer's stiffness factors hold")
     force = deflection_mm * MM / whisker.tip_compliance
     tilt = force * whisker.lever_m / whisker.rocking_stiffness
     if tilt > LARGEST_TILT_RAD:

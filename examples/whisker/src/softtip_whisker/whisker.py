@@ -1,12 +1,15 @@
-"""A whisker's physics: a steel wire rising from a cylindrical magnet that rests on a silicone layer over
-a TLV493D. A sideways force on the wire's tip bends the wire and rocks the magnet on the rubber; the
-magnet's tilt changes the field at the chip, on all three axes.
+"""A whisker's physics: a steel wire rising from a cylindrical magnet bonded on a silicone layer over a
+TLV493D. A sideways force on the wire's tip bends the wire, rocks the magnet on the rubber and slides it
+sideways; the magnet's pose changes the field at the chip, on all three axes.
 
-The magnet rocks as a rigid circular footing on an elastic half-space (the toolkit's
-``half_space_rotational_stiffness``, Gazetas 1991), about the centre of its bottom face; the wire bends as
-an Euler-Bernoulli cantilever clamped in the magnet. Both are linear: the model holds while the tilt stays
-small (the protocol keeps it under 0.1 rad). The field is the exact field of the posed cylinder
-(``softtip.magnetics``).
+The magnet is a rigid circular footing on an elastic layer over a rigid base (the chip's board): its
+rocking stiffness is the half-space's (the toolkit's ``half_space_rotational_stiffness``) times
+(1 + R / 6h), its sliding stiffness 8 G R / (2 - ν) times (1 + R / 2h), R its radius and h the layer's
+thickness (the stratum-on-bedrock factors of Gazetas, "Foundation vibrations", Foundation Engineering
+Handbook, 1991, Table 15.1; they hold for layers at least as thick as R). It rocks about the centre of its
+bottom face. The wire bends as an Euler-Bernoulli cantilever clamped in the magnet. All of it is linear:
+the model holds while the tilt stays small (the bench keeps it under 0.1 rad). The field is the exact
+field of the posed cylinder (``softtip.magnetics``).
 """
 
 from __future__ import annotations
@@ -27,16 +30,16 @@ MM = 1e-3
 class Whisker:
     """The whisker as built (lengths in mm, moduli as named).
 
-    Defaults: a 0.5 mm spring-steel wire (E about 200 GPa) 30 mm long, in a 4 x 1 mm N42 disc magnet
-    (remanence 1.28-1.32 T, axially magnetised) resting on a 1.5 mm layer of a silicone of 1 MPa
-    (nearly incompressible) above the chip's sensitive point: about 118 mT at rest, inside the chip's
-    linear ±130 mT. (The magnet's tilt and the shift of its centre move the field under it in opposite
-    senses: a thicker layer or a taller magnet cancels more of the signal.)"""
+    Defaults: a 0.5 mm spring-steel wire (E about 200 GPa) 30 mm long, in a 3 x 1 mm N42 disc magnet
+    (remanence 1.28-1.32 T, axially magnetised) bonded on a 1.5 mm layer of a silicone of 1 MPa (nearly
+    incompressible) over the chip's sensitive point: about 98 mT at rest, inside the chip's linear
+    ±130 mT. (The magnet's tilt and the shift of its centre move the field under it in opposite senses:
+    a thicker layer or a taller magnet cancels more of the signal.)"""
 
     wire_length_mm: PositiveNumber = 30.0
     wire_diameter_mm: PositiveNumber = 0.5
     wire_modulus_GPa: PositiveNumber = 200.0
-    magnet_diameter_mm: PositiveNumber = 4.0
+    magnet_diameter_mm: PositiveNumber = 3.0
     magnet_height_mm: PositiveNumber = 1.0
     polarization_T: PositiveNumber = 1.3
     rubber_modulus_MPa: PositiveNumber = 1.0
@@ -57,10 +60,22 @@ class Whisker:
         return (self.magnet_height_mm + self.wire_length_mm) * MM
 
     @property
+    def _radius_over_layer(self) -> float:
+        return self.magnet_diameter_mm / 2.0 / self.layer_mm
+
+    @property
     def rocking_stiffness(self) -> float:
-        """The magnet's rocking stiffness on the rubber (N·m/rad)."""
-        return half_space_rotational_stiffness(self.rubber_modulus_MPa * 1e6, self.rubber_poisson,
-                                               self.magnet_diameter_mm * MM)
+        """The magnet's rocking stiffness on the layer (N·m/rad)."""
+        half_space = half_space_rotational_stiffness(self.rubber_modulus_MPa * 1e6, self.rubber_poisson,
+                                                     self.magnet_diameter_mm * MM)
+        return half_space * (1.0 + self._radius_over_layer / 6.0)
+
+    @property
+    def sliding_stiffness(self) -> float:
+        """The magnet's sideways stiffness on the layer (N/m)."""
+        shear = self.rubber_modulus_MPa * 1e6 / (2.0 * (1.0 + self.rubber_poisson))
+        half_space = 8.0 * shear * self.magnet_diameter_mm * MM / 2.0 / (2.0 - self.rubber_poisson)
+        return half_space * (1.0 + self._radius_over_layer / 2.0)
 
     @property
     def wire_compliance(self) -> float:
@@ -70,8 +85,9 @@ class Whisker:
 
     @property
     def tip_compliance(self) -> float:
-        """The tip's sideways displacement per newton (m/N): the wire's bending and the magnet's rocking."""
-        return self.wire_compliance + self.lever_m ** 2 / self.rocking_stiffness
+        """The tip's sideways displacement per newton (m/N): the wire's bending, the magnet's rocking and its
+        sliding."""
+        return self.wire_compliance + self.lever_m ** 2 / self.rocking_stiffness + 1.0 / self.sliding_stiffness
 
 
 def tilts(whisker: Whisker, tip_force_N: np.ndarray) -> np.ndarray:
@@ -85,9 +101,11 @@ def tilts(whisker: Whisker, tip_force_N: np.ndarray) -> np.ndarray:
 
 def field_at_chip(whisker: Whisker, tip_force_N: np.ndarray) -> np.ndarray:
     """The flux density (N, 3) (T) at the chip's sensitive point (the origin) under tip forces (N, 2)."""
-    rotvecs = tilts(whisker, tip_force_N)
+    force = np.asarray(tip_force_N, dtype=np.float64)
+    rotvecs = tilts(whisker, force)
+    pivots = np.column_stack([force / whisker.sliding_stiffness, np.full(len(force), whisker.layer_mm * MM)])
     centre_above_pivot = np.array([0.0, 0.0, whisker.magnet_height_mm * MM / 2.0])
-    centres = np.array([0.0, 0.0, whisker.layer_mm * MM]) + Rotation.from_rotvec(rotvecs).apply(centre_above_pivot)
+    centres = pivots + Rotation.from_rotvec(rotvecs).apply(centre_above_pivot)
     field = magnet_field_at_sensors(np.zeros((1, 3)), centres[:, None, :], rotvecs[:, None, :],
                                     whisker.magnet_diameter_mm * MM / 2.0, whisker.magnet_height_mm * MM,
                                     whisker.polarization_T)
