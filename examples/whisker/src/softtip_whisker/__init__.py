@@ -15,7 +15,9 @@ SYSTEM = System(
     protocols={"whisker-sweep": "whisker"},
     studies=(Study("whisker", "whisker-sweep", "softtip_whisker.study:whisker",
                    "W1: the tip's force from the TLV493D's field; the chip's output step and noise beside its "
-                   "data sheet"),),
+                   "data sheet",
+                   # three directions are the fewest that span the plane the force map is fitted in
+                   quick={"calibration_trials": 3}),),
     scenarios={"whisker": "softtip_whisker.live:whisker_scenario"},
     sensors={"tlv493d": "softtip_whisker.tlv493d:SENSOR"},
 )
