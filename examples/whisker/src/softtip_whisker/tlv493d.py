@@ -4,7 +4,9 @@
 Figures from the TLV493D-A1B6 data sheet (Rev. 1.1, 2019-04-09) and its user manual (V1.03, 2018-02-20):
 linear range ±130 mT per axis, 12-bit data per axis, 98 µT per LSB (the 8-bit readout drops the 4 least
 significant bits: 16 LSB, 1.568 mT), update rates of 3.3 kHz (fast mode), 100 Hz (low-power mode) and
-10 Hz (ultra-low-power mode).
+10 Hz (ultra-low-power mode). Infineon's Arduino library for the chip (TLV493D-A1B6-3DMagnetic-Sensor)
+decodes with the same 0.098 mT per word, reads the 8-bit values from the high bytes alone and waits
+10 ms and 100 ms per measurement in the two low-power modes.
 """
 
 from __future__ import annotations
