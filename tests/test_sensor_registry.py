@@ -4,6 +4,7 @@ reads, and a dataset's readings are checked against the registered sensor at the
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -13,7 +14,9 @@ import sys
 import numpy as np
 import pytest
 
+from softtip._core.channels import Reading
 from softtip._core.systems import NotRegistered, owner
+from softtip.realtime.baseline import Baseline
 from softtip.sensors.registry import SensorKind, check_changes, sensor_kind
 
 # GAIN_SEL 0, RES 3 (the widest): 6.009 µT/LSB on x, y and 9.680 on z, ±11000 counts (RES 3's span)
@@ -35,6 +38,38 @@ def test_the_fingertip_declares_the_hall_chip_the_checks_ask():
     assert saturated.tolist() == [[False, False, True]]
     with pytest.raises(NotRegistered, match=r"^sensor 'tmag5273': expected one of mlx90393$"):
         sensor_kind("tmag5273")
+
+
+def test_a_streams_chips_are_a_registered_sensor_at_its_settings_and_give_its_recorded_covariance():
+    """The default settings (GAIN_SEL 7, RES 0, OSR 0, DIG_FILT 2): 0.150 / 0.242 µT per LSB; noise 0.25 µT
+    on x, y at 2^3 (2 + 2^7) = 1040 samples averaged, scaled by sqrt(1040 / 6) at 2^0 (2 + 2^2) = 6, and by
+    0.242 / 0.150 on z; plus the step's uniform quantisation, step^2 / 12."""
+    from softtip.realtime.recording.format import magnetic_covariance_T2
+
+    hall = sensor_kind("mlx90393")
+    chips = hall.at(hall.settings())
+    noise_xy_uT2 = 0.25**2 * 1040 / 6
+    expected_uT2 = [noise_xy_uT2 + 0.150**2 / 12] * 2 + [noise_xy_uT2 * (0.242 / 0.150) ** 2 + 0.242**2 / 12]
+    np.testing.assert_allclose(magnetic_covariance_T2(chips), np.diag(expected_uT2).ravel() * 1e-12, rtol=1e-12)
+    assert chips.to_dict() == hall.settings().to_dict()
+    silent = dataclasses.replace(hall, noise=None)  # a sensor whose datasheet states no noise: ROS's "unknown"
+    np.testing.assert_array_equal(magnetic_covariance_T2(silent.at(hall.settings())), np.zeros(9))
+    with pytest.raises(ValueError, match=r"^settings of sensor 'mlx90393': expected MLX90393Settings, got dict$"):
+        hall.at(FINEST_SETTINGS)
+
+
+def test_a_stream_refuses_settings_of_a_sensor_of_another_reading():
+    from softtip.hardware import PacedSource
+    from softtip.realtime.pipeline import Pipeline
+
+    force = Reading("force", "N", "F", "N", prefix="f", infix="f", units={"N": 1.0}, drift_threshold=0.05,
+                    baseline_step=1e-4, decimals=3, topic="force", message="geometry_msgs/msg/WrenchStamped")
+    hall = sensor_kind("mlx90393").at(sensor_kind("mlx90393").settings())
+    refusal = r"^settings: expected a registered sensor of force at its settings, got ChipSettings\(kind=Sensor"
+    with pytest.raises(ValueError, match=refusal):
+        PacedSource(np.zeros((2, 1, 3)), 10.0, reading=force, settings=hall)
+    with pytest.raises(ValueError, match=refusal):
+        Pipeline(1, reading=force, baseline=Baseline(reading=force), settings=hall)
 
 
 def test_a_sensor_record_refuses_what_it_cannot_be():

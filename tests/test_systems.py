@@ -3,7 +3,8 @@ edit to softtip, it appears in every command that loops over the registered syst
 
 The package (written here, "installed" on the path with its dist-info) is a linear spring pressed by
 a rigid plate, read by a linear 1-axis displacement sensor (a 3-axis reading whose x and y stay 0);
-its study fits the stiffness by least squares and prints it beside its "published" figure.
+its study fits the stiffness by least squares and prints it beside its "published" figure. Its gauge
+on a serial port sends one displacement per text line: a wire format of its own, a registered driver.
 """
 
 from __future__ import annotations
@@ -12,12 +13,18 @@ import json
 import os
 import subprocess
 import sys
+import threading
+import time
+import tty
 from pathlib import Path
+
+import numpy as np
 
 import pytest
 from mcap.reader import make_reader
 
 from softtip._core.systems import System, names, register, systems, unregister
+from softtip.data import Dataset
 
 STIFFNESS_N_PER_MM = 2.5  # the spring's; the "publication" printed 2.4
 
@@ -34,7 +41,61 @@ PACKAGE = {
             package=__name__, readings=(DISPLACEMENT,), benches={"spring": "springtip.bench:BENCH"},
             protocols={"spring-push": "spring"},
             studies=(Study("spring-push", "spring-push", "springtip.bench:analyse", "T1: the spring's stiffness"),),
-            scenarios={"spring": "springtip.bench:scenario"})
+            scenarios={"spring": "springtip.bench:scenario"}, drivers={"spring-gauge": "springtip.gauge:DRIVER"})
+    ''',
+    "gauge.py": '''
+        import threading
+        import time
+
+        import numpy as np
+        import serial
+
+        from softtip.plugin import Driver, Sample
+        from springtip import DISPLACEMENT
+
+        class GaugeStream:
+            """The spring's gauge on a serial port: one displacement in mm per text line, at its own rate."""
+
+            reading, settings, rate_hz, finished, chips = DISPLACEMENT, None, None, False, 1
+
+            def __init__(self, request):
+                if request.settings is not None or request.chips not in (None, 1):
+                    raise ValueError("the spring's gauge is one sensor with no settings")
+                self.name, self.port, self.delivered = f"spring gauge on {request.port}", request.port, 0
+                self._stop, self._thread, self._serial = threading.Event(), None, None
+
+            def open(self):
+                self._serial = serial.serial_for_url(self.port, timeout=0.05)
+                return self
+
+            def start(self, deliver):
+                self._thread = threading.Thread(target=self._run, args=(deliver,), daemon=True)
+                self._thread.start()
+                return self
+
+            def _run(self, deliver):
+                ok, status, clear = np.ones(1, bool), np.zeros(1, np.uint8), np.zeros((1, 3), bool)
+                while not self._stop.is_set():
+                    line = self._serial.readline()
+                    if line.endswith(b"\\n"):
+                        reading = np.zeros((1, 3))
+                        reading[0, 2] = float(line)
+                        deliver(Sample(seq=self.delivered % 65536, device_time_s=None, host_time_s=time.perf_counter(),
+                                       reading=reading, status=status, chip_ok=ok, saturated=clear))
+                        self.delivered += 1
+
+            def counters(self):
+                return {"delivered": self.delivered}
+
+            def close(self):
+                self._stop.set()
+                if self._thread is not None:
+                    self._thread.join()
+                if self._serial is not None:
+                    self._serial.close()
+
+        DRIVER = Driver("spring-gauge", "the spring's gauge: a displacement in mm per text line", GaugeStream,
+                        own_rate=True)
     ''',
     "bench.py": '''
         import dataclasses
@@ -181,6 +242,43 @@ def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_system
     converted = softtip(springtip, tmp_path, "convert", "spring.mcap", "spring-live.parquet", "--json")
     assert converted.returncode == 0, converted.stderr
     assert json.loads(converted.stdout)["channels"] == ["d0_xx_mm", "d0_xy_mm", "d0_xz_mm"]
+
+
+def test_a_driver_of_its_own_streams_its_board_on_a_port(springtip, tmp_path):
+    """The gauge (a pseudo-terminal fed 0.00, 0.01, 0.02 ... mm, a line every 10 ms) read through the
+    spring's registered driver, recorded and converted: the changes from the first line are the lines'."""
+    controller, device = os.openpty()
+    tty.setraw(device)
+    stop = threading.Event()
+
+    def gauge() -> None:
+        for k in range(100_000):
+            if stop.wait(0.01):
+                return
+            os.write(controller, f"{0.01 * k:.2f}\n".encode())
+
+    port = os.ttyname(device)
+    feeding = threading.Thread(target=gauge, daemon=True)
+    feeding.start()
+    try:
+        streamed = softtip(springtip, tmp_path, "live", "--port", port, "--driver", "spring-gauge",
+                           "--baseline-frames", "1", "--duration", "1.5", "--record", "gauge.mcap", "--json")
+        refused = softtip(springtip, tmp_path, "live", "--port", port, "--driver", "spring-gauge", "--rate", "100")
+    finally:
+        stop.set()
+        feeding.join()
+        os.close(controller)
+        os.close(device)
+    assert streamed.returncode == 0, streamed.stderr
+    summary = json.loads(streamed.stdout)
+    assert summary["source"] == f"spring gauge on {port}" and summary["chips"] == 1
+    assert summary["frames"] == summary["delivered"] > 50
+    assert refused.returncode == 2 and refused.stderr.strip() == (
+        "error: --rate = 100: a spring-gauge board streams at its own rate; leave --rate out")
+    converted = softtip(springtip, tmp_path, "convert", "gauge.mcap", "gauge.parquet", "--json")
+    assert converted.returncode == 0, converted.stderr
+    change = Dataset.read(tmp_path / "gauge.parquet").column("d0_xz_mm")
+    np.testing.assert_allclose(change, 0.01 * np.arange(len(change)), atol=1e-9)  # every line, in order
 
 
 def test_a_name_two_systems_claim_is_refused_and_the_toolkit_systems_are_registered():

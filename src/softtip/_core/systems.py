@@ -84,6 +84,8 @@ class System:
     commands: Mapping[str, str] = field(default_factory=dict)
     # the chips it reads: name -> "module:attribute" of a softtip.sensors.registry.SensorKind
     sensors: Mapping[str, str] = field(default_factory=dict)
+    # the wire formats softtip live --port --driver NAME reads: "module:attribute" of a softtip.hardware.drivers.Driver
+    drivers: Mapping[str, str] = field(default_factory=dict)
 
     def files(self) -> Traversable:
         return resources.files(self.package)
@@ -119,7 +121,7 @@ _entry_points = "unread"  # "reading" while they load: a plug-in that registers 
 _UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for study in s.studies],
            "scenario": lambda s: s.scenarios, "demo": lambda s: s.demos, "bench": lambda s: s.bench_commands,
            "command": lambda s: s.commands, "reading": lambda s: [r.quantity for r in s.readings],
-           "sensor": lambda s: s.sensors}
+           "sensor": lambda s: s.sensors, "driver": lambda s: s.drivers}
 
 
 def register(system: System) -> System:

@@ -36,7 +36,9 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.units import MM
+from softtip.sensors.mlx90393 import SENSOR as MLX90393_SENSOR
 from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.registry import ChipSettings
 
 
 class DesignError(ConfigError):
@@ -83,6 +85,11 @@ class Design:
     magnets: tuple[Magnet, ...]
     sensor_positions: np.ndarray  # (S, 3) m, the Hall sensors' sensitive points
     sensor_settings: MLX90393Settings  # the chips' register settings, validated when the design is read
+
+    @property
+    def chip_settings(self) -> ChipSettings:
+        """Its chips as a live stream states them: the registered MLX90393 at the design's settings."""
+        return MLX90393_SENSOR.at(self.sensor_settings)
 
     @property
     def geometry_key(self) -> dict:

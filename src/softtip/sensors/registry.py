@@ -45,6 +45,7 @@ class SensorKind:
     decode: Callable[[Any, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
     raw_unit: str | None = None
     title: str | None = None
+    noise: Callable[[Any], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -55,6 +56,10 @@ class SensorKind:
             raise ValueError(f"sensor {self.name!r}: give decode and raw_unit together, or neither")
         if not isinstance(self.widest, self.settings):
             raise ValueError(f"sensor {self.name!r}: widest: expected {self.settings.__name__} settings")
+
+    def at(self, settings: Any) -> ChipSettings:
+        """This sensor at ``settings`` (an instance of its schema), as a live stream states its chips."""
+        return ChipSettings(self, settings)
 
     def settings_from(self, table: Mapping[str, Any]) -> Any:
         """Its settings from a recorded mapping; anything else is refused in one line."""
@@ -68,6 +73,42 @@ class SensorKind:
     def beyond(self, values: np.ndarray, settings: Any) -> np.ndarray:
         """Where values (..., 3) are more than a step beyond what it outputs: not its readings."""
         return np.abs(values) > self.full_scale(settings) + self.step(settings)
+
+
+@dataclass(frozen=True)
+class ChipSettings:
+    """A stream's chips: one registered sensor (``kind``) at ``values``, an instance of its settings
+    schema - what a live scenario, session and pipeline carry instead of one chip's settings type."""
+
+    kind: SensorKind
+    values: Any
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.kind, SensorKind):
+            raise ValueError(f"kind = {self.kind!r}: expected a SensorKind")
+        if not isinstance(self.values, self.kind.settings):
+            raise ValueError(f"settings of sensor {self.kind.name!r}: expected {self.kind.settings.__name__}, "
+                             f"got {type(self.values).__name__}")
+
+    def to_dict(self) -> dict:
+        """The settings as a dataset's and a recording's metadata record them."""
+        return self.values.to_dict()
+
+    def variance(self) -> np.ndarray | None:
+        """Per-axis variance of a reading in the reading's unit squared: the noise plus the uniform
+        quantisation of the output step (step^2 / 12); None when the sensor declares no noise."""
+        if self.kind.noise is None:
+            return None
+        return self.kind.noise(self.values) ** 2 + self.kind.step(self.values) ** 2 / 12.0
+
+
+def stream_settings(settings: ChipSettings | None, reading: Reading) -> ChipSettings | None:
+    """``settings`` of a stream's chips, refused in one line unless they are None or a registered
+    sensor of the stream's ``reading`` at its settings."""
+    if settings is not None and (not isinstance(settings, ChipSettings) or settings.kind.reading != reading):
+        raise ValueError(f"settings: expected a registered sensor of {reading.quantity} at its settings, "
+                         f"got {settings!r}")
+    return settings
 
 
 def sensor_kinds() -> dict[str, SensorKind]:

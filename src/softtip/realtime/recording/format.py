@@ -39,8 +39,7 @@ import numpy as np
 
 from softtip._core.channels import Reading
 from softtip._core.units import FORCE_UNITS
-from softtip._core.units import UT_PER_T
-from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
+from softtip.sensors.registry import ChipSettings
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -183,10 +182,11 @@ def wrench_values(estimates: np.ndarray, mapping: Sequence[tuple[int, int, float
     return wrench
 
 
-def magnetic_covariance_T2(settings: MLX90393Settings | None) -> np.ndarray:
-    """Row-major 3x3 covariance in T^2 of a chip read with ``settings``: sensor noise plus uniform
-    quantisation (LSB^2/12) per axis; zeros (ROS: unknown) when the settings are not known."""
-    if settings is None:
+def magnetic_covariance_T2(settings: ChipSettings | None) -> np.ndarray:
+    """Row-major 3x3 covariance, in its message's unit squared (T^2 for a magnetic field), of a chip
+    read at ``settings``: the registered sensor's noise plus uniform quantisation per axis; zeros (ROS:
+    unknown) when the settings are not known or the sensor declares no noise."""
+    variance = None if settings is None else settings.variance()
+    if variance is None:
         return np.zeros(9)
-    variance_uT2 = noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12.0
-    return np.diag(variance_uT2 / UT_PER_T**2).ravel()
+    return np.diag(variance / per_message_unit(settings.kind.reading) ** 2).ravel()
