@@ -72,6 +72,29 @@ def test_a_stream_refuses_settings_of_a_sensor_of_another_reading():
         Pipeline(1, reading=force, baseline=Baseline(reading=force), settings=hall)
 
 
+def test_a_reading_of_fewer_axes_names_and_places_only_its_own():
+    """A chip reading x and z (an in-plane and a normal axis): two channels per sensor, stored x, z."""
+    shear = Reading("shear", "mm", "u", "mm", prefix="u", infix="", units={"mm": 1.0}, drift_threshold=0.01,
+                    baseline_step=1e-4, decimals=3, topic="shear", message="geometry_msgs/msg/Vector3Stamped",
+                    axes=("x", "z"))
+    assert shear.channel_names(2) == ("u0_x_mm", "u0_z_mm", "u1_x_mm", "u1_z_mm") and shear.positions == (0, 2)
+    assert [shear.channel_index(name) for name in ("u1_z_mm", "u0_x_mm", "u1_x_mm")] == [3, 0, 2]
+    assert not shear.is_channel("u0_y_mm")
+    columns = shear.columns(np.arange(8.0).reshape(2, 2, 2))
+    assert {name: list(values) for name, values in columns.items()} == {
+        "u0_x_mm": [0.0, 4.0], "u0_z_mm": [1.0, 5.0], "u1_x_mm": [2.0, 6.0], "u1_z_mm": [3.0, 7.0]}
+    with pytest.raises(ValueError, match=r"^readings: expected shape \(n_samples, n_sensors, 2\), got \(2, 2, 3\)$"):
+        shear.columns(np.zeros((2, 2, 3)))
+    with pytest.raises(ValueError, match=r"expected a sensor index >= 0 and an axis in x, z, got 0, 'y'"):
+        shear.channel_name(0, "y")
+    for axes in ((), ("z", "x"), ("x", "x"), ("w",), ["z"]):
+        with pytest.raises(ValueError, match=r"^reading 'shear': axes = .*: expected one to three of x, y, z"):
+            dataclasses.replace(shear, axes=axes)
+    hall = sensor_kind("mlx90393")
+    with pytest.raises(ValueError, match=r"^sensor 'shear-chip': axes = 3: its reading 'shear' has 2 \(x, z\)$"):
+        dataclasses.replace(hall, name="shear-chip", reading=shear)
+
+
 def test_a_sensor_record_refuses_what_it_cannot_be():
     hall = sensor_kind("mlx90393")
     fields = dict(reading=hall.reading, settings=hall.settings, widest=hall.widest, full_scale=hall.full_scale,

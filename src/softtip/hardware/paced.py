@@ -51,8 +51,8 @@ class ThreadedSource(Protocol):
 
 
 class PacedSource:
-    """``readings`` (N, chips, 3, in the unit of ``reading``) delivered one per ``1 / rate_hz``
-    seconds, from the first again after the last when ``loop``; ``saturated`` (N, chips, 3) marks
+    """``readings`` (N, chips, the reading's axes, in its unit) delivered one per ``1 / rate_hz``
+    seconds, from the first again after the last when ``loop``; ``saturated`` (its shape) marks
     axes at the end of their range; ``settings``: the registered sensor that read them, at its settings. ``start(deliver)`` calls ``deliver(sample)`` for every frame
     on the source's thread; the device time of frame k is k / rate_hz. A frame the thread wakes
     for more than one period late is still delivered, and counted as late.
@@ -62,9 +62,9 @@ class PacedSource:
                  saturated: np.ndarray | None = None, loop: bool = True, name: str = "replay",
                  settings: ChipSettings | None = None) -> None:
         readings = np.asarray(readings, dtype=np.float64)
-        if readings.ndim != 3 or readings.shape[2] != 3 or not len(readings) or readings.shape[1] < 1:
-            raise ValueError(f"readings: expected shape (frames, chips, 3) with frames and chips >= 1, "
-                             f"got {readings.shape}")
+        if readings.ndim != 3 or readings.shape[2] != len(reading.axes) or not len(readings) or readings.shape[1] < 1:
+            raise ValueError(f"readings: expected shape (frames, chips, {len(reading.axes)}) with frames and chips "
+                             f">= 1, got {readings.shape}")
         self.readings = readings
         self.rate_hz = checked(PositiveNumber, "rate_hz", rate_hz)
         self.reading = reading

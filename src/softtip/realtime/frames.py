@@ -17,8 +17,8 @@ class FrameResult(NamedTuple):
 
     stamp_ns: acquisition time, ns since the Unix epoch; host_time_s: the driver's arrival
     stamp (perf_counter clock); device_time_s: the device clock, or None.
-    reading: (chips, 3) reading in the stream's unit (:attr:`StreamInfo.reading`), NaN for a
-    faulty chip; chip_ok (chips,), saturated (chips, 3).
+    reading: (chips, axes) reading in the stream's unit, on its axes only (:attr:`StreamInfo.reading`),
+    NaN for a faulty chip; chip_ok (chips,), saturated (chips, axes).
     baseline: the baseline in use (read-only, replaced when it changes) or None before
     the first one; baseline_version counts the baselines used so far.
     change: reading minus baseline, or None. estimates: the regression targets in

@@ -52,6 +52,9 @@ class SensorKind:
             raise ValueError(f"sensor name {self.name!r}: expected a lower-case name (letters, digits, - or _)")
         if isinstance(self.axes, bool) or self.axes not in (1, 2, 3):
             raise ValueError(f"sensor {self.name!r}: axes = {self.axes!r}: expected 1, 2 or 3")
+        if self.axes != len(self.reading.axes):
+            raise ValueError(f"sensor {self.name!r}: axes = {self.axes}: its reading {self.reading.quantity!r} "
+                             f"has {len(self.reading.axes)} ({', '.join(self.reading.axes)})")
         if (self.decode is None) != (self.raw_unit is None):
             raise ValueError(f"sensor {self.name!r}: give decode and raw_unit together, or neither")
         if not isinstance(self.widest, self.settings):
@@ -66,12 +69,12 @@ class SensorKind:
         return self.settings.from_dict(table)
 
     def saturated(self, values: np.ndarray, settings: Any) -> np.ndarray:
-        """Where values (..., 3) in the reading's unit are at its clip: within half a step of the full
+        """Where values (..., axes) in the reading's unit are at its clip: within half a step of the full
         scale (a host's conversion rounds to the step)."""
         return np.abs(values) >= self.full_scale(settings) - self.step(settings) / 2
 
     def beyond(self, values: np.ndarray, settings: Any) -> np.ndarray:
-        """Where values (..., 3) are more than a step beyond what it outputs: not its readings."""
+        """Where values (..., axes) are more than a step beyond what it outputs: not its readings."""
         return np.abs(values) > self.full_scale(settings) + self.step(settings)
 
 

@@ -129,15 +129,25 @@ def reading_topic(reading: Reading) -> tuple[str, str]:
 
 def reading_fields(reading: Reading, values: np.ndarray, vector: Callable[[np.ndarray], dict],
                    covariance: list | None = None) -> dict:
-    """The fields of a chip's reading message after its header: ``values`` (3, in the reading's
-    unit) in SI, each vector encoded by ``vector``; a MagneticField carries ``covariance``
+    """The fields of a chip's reading message after its header: ``values`` (its axes, in the reading's
+    unit) in SI, each vector encoded by ``vector`` (an axis the reading does not have is NaN: the
+    message's x, y, z are fixed, the chip's axes are not); a MagneticField carries ``covariance``
     (9 values, T², default unknown: zeros), a force chip's WrenchStamped a NaN torque."""
-    carried = values / per_message_unit(reading)
+    carried = in_xyz(reading, np.asarray(values) / per_message_unit(reading))
     if reading.message == MAGNETIC_FIELD:
         return {"magnetic_field": vector(carried), "magnetic_field_covariance": covariance or [0.0] * 9}
     if reading.message == VECTOR3_STAMPED:
         return {"vector": vector(carried)}
     return {"wrench": {"force": vector(carried), "torque": vector(_NO_TORQUE)}}
+
+
+def in_xyz(reading: Reading, values: np.ndarray, missing: float = np.nan) -> np.ndarray:
+    """Values on a reading's axes (..., axes) placed in a message's x, y, z (..., 3): the axes it does
+    not read are ``missing``."""
+    values = np.asarray(values, dtype=np.float64)
+    placed = np.full((*values.shape[:-1], 3), missing)
+    placed[..., list(reading.positions)] = values
+    return placed
 
 
 def per_message_unit(reading: Reading) -> float:
@@ -189,4 +199,5 @@ def magnetic_covariance_T2(settings: ChipSettings | None) -> np.ndarray:
     variance = None if settings is None else settings.variance()
     if variance is None:
         return np.zeros(9)
-    return np.diag(variance / per_message_unit(settings.kind.reading) ** 2).ravel()
+    reading = settings.kind.reading  # an axis the chip does not read: unknown, 0
+    return np.diag(in_xyz(reading, variance / per_message_unit(reading) ** 2, missing=0.0)).ravel()
