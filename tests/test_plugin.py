@@ -57,7 +57,7 @@ def test_the_spring_holds_every_rule(install_spring):
     ({"__init__.py": [('drivers={"spring-gauge": ', 'drivers={"softtip": ')]},
      ["springtip (System 'springtip'): drivers.softtip = 'springtip.gauge:DRIVER': the Driver is named "
       "'spring-gauge', expected 'softtip'",
-      "springtip (System 'springtip'): drivers.softtip: softtip's own driver is named so: expected another name"]),
+      "springtip (System 'springtip'): drivers.softtip: softtip's own is named so: expected another name"]),
 ], ids=["a typo in a reference", "a realism key without its source", "a role of its own, a scenario unchecked",
         "an analysis that fails", "a driver named as softtip's own"])
 def test_each_broken_rule_is_one_line_naming_where(install_spring, tmp_path, edits, expected):

@@ -29,7 +29,7 @@ FINEST_UT = np.array([0.150, 0.150, 0.242]) * 32767
 def test_the_fingertip_declares_the_hall_chip_the_checks_ask():
     hall = sensor_kind("mlx90393")
     assert owner("sensor", "mlx90393").name == "hall-fingertip"
-    assert (hall.axes, hall.raw_unit, hall.reading.unit) == (3, "counts", "uT")
+    assert (hall.axes, hall.raw_unit, hall.raw_bits, hall.reading.unit) == (3, "counts", 16, "uT")
     np.testing.assert_allclose(hall.full_scale(hall.widest), WIDEST_UT, rtol=1e-12)
     np.testing.assert_allclose(hall.full_scale(hall.settings_from(FINEST_SETTINGS)), FINEST_UT, rtol=1e-12)
     # the decoder: RES 0 words are two's complement, 0xFFFF is -1 count
@@ -101,8 +101,10 @@ def test_a_sensor_record_refuses_what_it_cannot_be():
                   step=hall.step)
     with pytest.raises(ValueError, match=r"sensor 'flat': axes = 4: expected 1, 2 or 3"):
         SensorKind("flat", axes=4, **fields)
-    with pytest.raises(ValueError, match=r"sensor 'half': give decode and raw_unit together, or neither"):
+    with pytest.raises(ValueError, match=r"sensor 'half': give decode, raw_unit and raw_bits together, or none"):
         SensorKind("half", axes=3, raw_unit="counts", **fields)
+    with pytest.raises(ValueError, match=r"sensor 'wide': raw_bits = 64: expected an integer 1..63"):
+        SensorKind("wide", axes=3, decode=hall.decode, raw_unit="counts", raw_bits=64, **fields)
     with pytest.raises(ValueError, match=r"sensor name 'Hall chip': expected a lower-case name"):
         SensorKind("Hall chip", axes=3, **fields)
 

@@ -233,6 +233,7 @@ def softtip(env: dict, cwd: Path, *args: str) -> subprocess.CompletedProcess:
                           timeout=120)
 
 
+@pytest.mark.slow  # seven commands in child processes: about 30 s
 def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_systems(springtip, tmp_path):
     help_text = softtip(springtip, tmp_path, "--help").stdout
     assert "springtip" in help_text and "hall-fingertip" in help_text

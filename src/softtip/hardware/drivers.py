@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Self
 
 from softtip._core.channels import MAGNETIC
-from softtip._core.systems import NotRegistered, load, owner, systems
+from softtip._core.systems import own_or_declared
 from softtip.hardware.driver import FingertipDriver, Sample
 from softtip.hardware.paced import ThreadedSource
 from softtip.hardware.reskin import RESKIN_CHIPS, ReSkinStream
@@ -129,22 +129,7 @@ OWN = {driver.name: driver for driver in (
            _board_records("anyskin"), own_rate=True))}
 
 
-def driver_names() -> list[str]:
-    """softtip's own drivers, then every registered system's not named as one of them."""
-    return [*OWN, *(name for system in systems().values() for name in system.drivers if name not in OWN)]
-
-
 def driver(name: str) -> Driver:
     """The driver ``name``: softtip's own, or a registered system's (imported now); another name is
     refused in one line with the known ones."""
-    if name in OWN:
-        return OWN[name]
-    try:
-        system = owner("driver", name)
-    except NotRegistered:
-        raise NotRegistered(f"driver {name!r}: expected one of {', '.join(driver_names())}") from None
-    found = load(system.drivers[name])
-    if not isinstance(found, Driver) or found.name != name:
-        raise TypeError(f"system {system.name!r}: drivers.{name} = {system.drivers[name]!r}: expected a Driver "
-                        f"named {name!r}")
-    return found
+    return own_or_declared("driver", name, OWN, Driver, "driver")

@@ -422,10 +422,11 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
         return readings, np.abs(readings) >= sensor.full_scale
     kind = sensor.kind
     if sensor.unit == kind.raw_unit:
-        whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < 1 << 16)
+        words = 1 << kind.raw_bits
+        whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < words)
         if not whole.all():
-            _refuse_beyond(path, sensor, ~whole, "a 16-bit register word (an integer 0..65535)")
-        return kind.decode(settings, readings.astype(np.uint16))
+            _refuse_beyond(path, sensor, ~whole, f"a {kind.raw_bits}-bit output word (an integer 0..{words - 1})")
+        return kind.decode(settings, readings.astype(np.int64))
     readings = readings * kind.reading.units[sensor.unit]
     if settings is None:
         return readings, None

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from softtip._core.channels import Reading
-from softtip._core.systems import System, known_readings, load, owner, systems
+from softtip._core.systems import declared, known_readings, systems
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*")
 
@@ -31,8 +31,10 @@ class SensorKind:
     without declared settings are checked against; ``full_scale(settings)``: the largest magnitude per
     axis it outputs unclipped, ``step(settings)``: its output step per axis, both in the reading's unit;
     ``decode(settings, words)``: its raw output words (..., axes) as (values in the reading's unit,
-    saturated), with ``raw_unit`` what a log calls those words ("counts"); a chip that outputs values
-    has neither; ``title``: how messages name it (its name when not given).
+    saturated), with ``raw_unit`` what a log calls those words ("counts") and ``raw_bits`` their width
+    (a word is an integer 0 .. 2^raw_bits - 1); a chip that outputs values has none of the three;
+    ``title``: how messages name it (its name when not given); ``noise(settings)``: its RMS noise per
+    axis in the reading's unit, when its datasheet states it (a recording's covariance, estimation bounds).
     """
 
     name: str
@@ -46,6 +48,7 @@ class SensorKind:
     raw_unit: str | None = None
     title: str | None = None
     noise: Callable[[Any], np.ndarray] | None = None
+    raw_bits: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -55,8 +58,10 @@ class SensorKind:
         if self.axes != len(self.reading.axes):
             raise ValueError(f"sensor {self.name!r}: axes = {self.axes}: its reading {self.reading.quantity!r} "
                              f"has {len(self.reading.axes)} ({', '.join(self.reading.axes)})")
-        if (self.decode is None) != (self.raw_unit is None):
-            raise ValueError(f"sensor {self.name!r}: give decode and raw_unit together, or neither")
+        if len({self.decode is None, self.raw_unit is None, self.raw_bits is None}) > 1:
+            raise ValueError(f"sensor {self.name!r}: give decode, raw_unit and raw_bits together, or none")
+        if self.raw_bits is not None and (isinstance(self.raw_bits, bool) or self.raw_bits not in range(1, 64)):
+            raise ValueError(f"sensor {self.name!r}: raw_bits = {self.raw_bits!r}: expected an integer 1..63")
         if not isinstance(self.widest, self.settings):
             raise ValueError(f"sensor {self.name!r}: widest: expected {self.settings.__name__} settings")
 
@@ -116,20 +121,12 @@ def stream_settings(settings: ChipSettings | None, reading: Reading) -> ChipSett
 
 def sensor_kinds() -> dict[str, SensorKind]:
     """Every sensor the registered systems declare, by name (their modules imported now)."""
-    return {name: _declared(system, name) for system in systems().values() for name in system.sensors}
+    return {name: declared("sensor", name, SensorKind) for system in systems().values() for name in system.sensors}
 
 
 def sensor_kind(name: str) -> SensorKind:
     """The registered sensor ``name``; another name is refused with the registered ones."""
-    return _declared(owner("sensor", name), name)
-
-
-def _declared(system: System, name: str) -> SensorKind:
-    kind = load(system.sensors[name])
-    if not isinstance(kind, SensorKind) or kind.name != name:
-        raise TypeError(f"system {system.name!r}: sensors.{name} = {system.sensors[name]!r}: expected a SensorKind "
-                        f"named {name!r}")
-    return kind
+    return declared("sensor", name, SensorKind)
 
 
 def check_changes(columns: Mapping[str, np.ndarray], stated: Mapping[str, Any] | None, source: str) -> None:
