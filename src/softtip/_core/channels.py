@@ -1,8 +1,8 @@
 """Sensor channels: one axis of one sensor of one to three axes, named after what the sensor reads.
 
 A :class:`Reading` is what a stream's sensors read, on which axes (x, y, z or some of them), in one
-unit, and how their channels are named. The toolkit's own is :data:`MAGNETIC`: the change of flux density of a Hall chip, in
-µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register their own
+unit, and how their channels are named. The toolkit's own is :data:`MAGNETIC`: the change of flux
+density of a Hall chip, in µT; channel ``s{k}_b{x|y|z}_uT`` is axis x, y or z of sensor k. Systems register their own
 (:class:`softtip._core.systems.System`), e.g. a force chip's in N; the registry knows every reading
 (``known_readings``, ``reading_of``), this module none but its own.
 

@@ -53,9 +53,10 @@ class ThreadedSource(Protocol):
 class PacedSource:
     """``readings`` (N, chips, the reading's axes, in its unit) delivered one per ``1 / rate_hz``
     seconds, from the first again after the last when ``loop``; ``saturated`` (its shape) marks
-    axes at the end of their range; ``settings``: the registered sensor that read them, at its settings. ``start(deliver)`` calls ``deliver(sample)`` for every frame
-    on the source's thread; the device time of frame k is k / rate_hz. A frame the thread wakes
-    for more than one period late is still delivered, and counted as late.
+    axes at the end of their range; ``settings``: the registered sensor that read them, at its settings.
+    ``start(deliver)`` calls ``deliver(sample)`` for every frame on the source's thread; the device
+    time of frame k is k / rate_hz. A frame the thread wakes for more than one period late is still
+    delivered, and counted as late.
     """
 
     def __init__(self, readings: np.ndarray, rate_hz: float, *, reading: Reading,

@@ -31,7 +31,8 @@ def accept_any_stream(chips: int, rate_hz: float | None) -> None:
 class LiveScenario:
     """An emulated stream: ``source`` is ``"emulator"`` (a fingertip board behind a pseudo-terminal in
     the firmware's protocol, its chips reading ``emulator_source(t_s) -> (chips, 3)`` µT at
-    ``settings``, a registered sensor at its settings, :meth:`softtip.sensors.registry.SensorKind.at`) or a :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware);
+    ``settings``, a registered sensor at its settings, :meth:`softtip.sensors.registry.SensorKind.at`)
+    or a :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, stating its own);
     ``models``: the model files it comes with; ``chips``: how many it streams; ``rate_hz``: its own
     rate, when it has one (a paced source), else the command's; ``baseline_frames``: the frames its
     baseline averages (a protocol's tare is one)."""
