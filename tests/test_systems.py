@@ -25,6 +25,7 @@ from mcap.reader import make_reader
 
 from softtip._core.systems import System, names, register, systems, unregister
 from softtip.data import Dataset
+from softtip.realtime.recording.reader import read_recording
 
 STIFFNESS_N_PER_MM = 2.5  # the spring's; the "publication" printed 2.4
 
@@ -233,7 +234,7 @@ def softtip(env: dict, cwd: Path, *args: str) -> subprocess.CompletedProcess:
                           timeout=120)
 
 
-@pytest.mark.slow  # seven commands in child processes: about 30 s
+@pytest.mark.slow  # nine commands in child processes: 30 to 100 s, by the machine's load
 def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_systems(springtip, tmp_path):
     help_text = softtip(springtip, tmp_path, "--help").stdout
     assert "springtip" in help_text and "hall-fingertip" in help_text
@@ -268,6 +269,10 @@ def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_system
     with open(tmp_path / "spring.mcap", "rb") as handle:
         topics = {channel.topic for channel in make_reader(handle).get_summary().channels.values()}
     assert "/fingertip/chip0/displacement" in topics
+    vectors = [message.vector for message in
+               read_recording(tmp_path / "spring.mcap").topics["/fingertip/chip0/displacement"].decoded()]
+    # a Vector3's x, y, z are fixed: the axes the gauge does not read are NaN, its own the depth (mm, as read)
+    assert np.isnan([(v.x, v.y) for v in vectors]).all() and max(v.z for v in vectors) == pytest.approx(1.0)
     converted = softtip(springtip, tmp_path, "convert", "spring.mcap", "spring-live.parquet", "--json")
     assert converted.returncode == 0, converted.stderr
     assert json.loads(converted.stdout)["channels"] == ["d0_xz_mm"]
@@ -278,6 +283,7 @@ def test_a_system_of_its_own_appears_in_every_command_that_loops_over_the_system
     np.testing.assert_allclose(force[estimated], STIFFNESS_N_PER_MM * change[estimated], atol=1e-6)  # Hooke's law
 
 
+@pytest.mark.slow  # three commands in child processes: 7 to 24 s, by the machine's load
 def test_a_driver_of_its_own_streams_its_board_on_a_port(springtip, tmp_path):
     """The gauge (a pseudo-terminal fed 0.00, 0.01, 0.02 ... mm, a line every 10 ms) read through the
     spring's registered driver, recorded and converted: the changes from the first line are the lines'."""
