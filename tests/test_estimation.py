@@ -13,7 +13,7 @@ from softtip.mechanics.indenters import CornerPlate, TiltedPlate
 from softtip.optimize.estimation import (Steps, _simulations, cramer_rao, estimation_bounds,
                                          reading_covariance_uT2)
 from softtip.optimize.runs import FEResult, Simulation
-from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.mlx90393 import SENSOR, MLX90393Settings
 
 
 def test_cramer_rao_of_one_parameter_is_variance_over_squared_slope():
@@ -29,7 +29,7 @@ def test_cramer_rao_of_a_redundant_parameter_is_infinite():
 
 def test_reading_noise_includes_quantisation():
     settings = MLX90393Settings(gain_sel=7, res_xyz=(0, 0, 0), osr=0, dig_filt=2)
-    variance = reading_covariance_uT2(settings, 2)
+    variance = reading_covariance_uT2(SENSOR.at(settings), 2)
     # noise: 0.25 µT RMS on x and y at OSR 3 / DIG_FILT 7 (8 x 130 samples averaged), white, so at
     # OSR 0 / DIG_FILT 2 (1 x 6 samples) 0.25 sqrt(1040 / 6) µT; z the same in counts, so larger by
     # the sensitivity ratio 0.242 / 0.150; quantisation: LSB^2 / 12 with the LSBs of GAIN_SEL 7,
@@ -68,7 +68,7 @@ def test_bounds_of_a_linear_sensor_match_the_analytic_formula():
                          [5.0, -3e5, 1e4, 1e4]])
     force_jacobian = np.array([[0.0, 800.0, 0.0], [0.0, 0.0, 800.0], [3000.0, 0.0, 0.0]])  # N per m
     bounds = estimation_bounds(design, _linear_results(jacobian, force_jacobian, steps, base), steps)
-    variance = reading_covariance_uT2(design.sensor_settings, 1)
+    variance = reading_covariance_uT2(design.chip_settings, 1)
     weights = np.diag(1 / variance)
     angle_depth = jacobian[:, :2]
     expected_angle = math.degrees(math.sqrt(np.linalg.inv(angle_depth.T @ weights @ angle_depth)[0, 0]))

@@ -259,6 +259,10 @@ def test_raw_words_are_read_at_the_declared_gain_and_saturated_words_flagged(tmp
     assert list(dataset.column("saturated")) == [False, True]
     assert report.saturated == {"s0_bx_uT": 1, "s0_by_uT": 0, "s0_bz_uT": 1}
     assert dataset.metadata.sensor_settings["res_xyz"] == [0, 1, 2]
+    wide = _counts_log(tmp_path / "wide.csv", [(1000, 65536, 32768)])  # a word the chip's 16 bits cannot hold
+    with pytest.raises(DatasetError, match="^" + re.escape(
+            f"{wide}: line 1, column 3 (chip 0 y): beyond a 16-bit output word (an integer 0..65535)") + "$"):
+        import_logs([wide], mapping)
 
 
 def test_a_reading_beyond_the_declared_range_is_refused_and_one_at_its_limit_flagged(tmp_path):

@@ -49,7 +49,7 @@ def linear_model(tmp_path):
 def test_an_anyskin_board_streams_through_the_baseline_a_model_and_the_recording(tmp_path, linear_model):
     recording = tmp_path / "board.mcap"
     with ReSkinBoard(board_field, RATE_HZ, CHIPS) as board:
-        result = CliRunner().invoke(app, ["live", "--port", board.port, "--format", "anyskin", "--model",
+        result = CliRunner().invoke(app, ["live", "--port", board.port, "--driver", "anyskin", "--model",
                                           str(linear_model), "--baseline-frames", "20", "--record", str(recording),
                                           "--duration", "3", "--json"])
     assert result.exit_code == 0, result.output
@@ -72,11 +72,13 @@ def test_an_anyskin_board_streams_through_the_baseline_a_model_and_the_recording
     np.testing.assert_allclose(force[estimated], press * (WEIGHTS @ gains), atol=1e-5)
 
 
-def test_a_board_format_refuses_what_it_cannot_do(tmp_path):
+def test_a_board_driver_refuses_what_it_cannot_do(tmp_path):
     runner = CliRunner()
-    for args, named in ((["--emulate", "--format", "anyskin"], "--format anyskin"),
-                        (["--port", str(tmp_path / "tty"), "--format", "reskin", "--rate", "100"], "--rate = 100"),
-                        (["--port", str(tmp_path / "tty"), "--format", "anyskin", "--duration", "1"], "cannot open")):
+    for args, named in ((["--emulate", "--driver", "anyskin"], "--driver anyskin"),
+                        (["--port", str(tmp_path / "tty"), "--driver", "reskin", "--rate", "100"], "--rate = 100"),
+                        (["--port", str(tmp_path / "tty"), "--format", "anyskin", "--duration", "1"], "cannot open"),
+                        (["--port", str(tmp_path / "tty"), "--driver", "usb-hid"],
+                         "driver 'usb-hid': expected one of softtip, reskin, anyskin")):
         result = runner.invoke(app, ["live", *args])
         assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1, result.output
         assert named in result.output

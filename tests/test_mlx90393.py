@@ -14,7 +14,7 @@ from softtip.sensors import (
     max_output_rate_hz,
     noise_rms_uT,
 )
-from softtip.sensors.mlx90393 import SENSITIVITY_UT
+from softtip.sensors.mlx90393 import SENSITIVITY_UT, _read_only
 
 # --------------------------------------------------------------------------
 # Sensitivity: entries hand-copied from datasheet rev. 006, Table 17
@@ -51,6 +51,14 @@ def test_datasheet_tables_are_read_only():
         assert table.dtype == np.float64 and table.shape == (8, 4)
         with pytest.raises(ValueError, match="read-only"):
             table[0, 0] = 1.0
+
+
+def test_a_table_is_made_a_read_only_float_copy():
+    source = [[1, 2], [3, 4]]
+    table = _read_only(source)
+    assert table.dtype == np.float64 and table.tolist() == [[1.0, 2.0], [3.0, 4.0]] and not table.flags.writeable
+    source[0][0] = 9
+    assert table[0, 0] == 1.0
 
 
 def test_each_res_step_doubles_the_lsb():
@@ -247,6 +255,27 @@ def test_noise_is_reproducible_with_a_seeded_rng():
     assert np.unique(first[:, 0]).size > 1
     np.testing.assert_array_equal(sensor.read_uT(b_t, rng=np.random.default_rng(4)),
                                   sensor.read_uT(b_t, rng=np.random.default_rng(4)))
+
+
+def test_acquire_returns_the_words_and_what_a_host_decodes_from_them():
+    """GAIN_SEL 7, RES 0 (the defaults): 0.150 / 0.242 µT per count, two's complement words, ±32767;
+    100, -200, 300 µT are 666.7, -1333.3 and 1239.7 counts; noise 0.25 sqrt(1040 / 6) µT on x, y,
+    0.242 / 0.150 times that on z, drawn from the rng as standard normals."""
+    sensor = MLX90393()
+    field_t = np.array([100e-6, -200e-6, 300e-6])
+    lsb = np.array([0.150, 0.150, 0.242])
+    exact = sensor.acquire(field_t)
+    assert exact.raw.dtype == np.uint16 and exact.raw.tolist() == [667, (1 << 16) - 1333, 1240]
+    np.testing.assert_allclose(exact.values, np.array([667, -1333, 1240]) * lsb, rtol=1e-12)
+    assert exact.saturated.tolist() == [False, False, False]
+    clipped = sensor.acquire(np.array([1.0, 0.0, -1.0]))  # 1 T: beyond every range
+    assert clipped.raw.tolist() == [32767, 0, 32768] and clipped.saturated.tolist() == [True, False, True]
+    noisy = sensor.acquire(field_t, rng=np.random.default_rng(5))
+    sigma_uT = 0.25 * np.sqrt(1040 / 6) * np.array([1.0, 1.0, 0.242 / 0.150])
+    counts = np.rint(field_t * 1e6 / lsb + np.random.default_rng(5).standard_normal(3) * sigma_uT / lsb)
+    assert np.abs(counts - [667, -1333, 1240]).max() >= 5  # the noise moved the words
+    np.testing.assert_allclose(noisy.values, counts * lsb, rtol=1e-12)
+    np.testing.assert_array_equal(noisy.raw, (counts.astype(np.int32) % (1 << 16)).astype(np.uint16))
 
 
 def test_noise_without_an_rng_draws_from_a_fresh_generator():

@@ -22,7 +22,8 @@ def install_spring(tmp_path, monkeypatch, install_package, request):
     monkeypatch.setattr(registry, "_INSTALLED_BY", {})
     monkeypatch.setattr(registry, "_entry_points", "unread")
     monkeypatch.syspath_prepend(str(tmp_path))
-    request.addfinalizer(lambda: [sys.modules.pop(name, None) for name in ("springtip", "springtip.bench")])
+    modules = ("springtip", "springtip.bench", "springtip.gauge")
+    request.addfinalizer(lambda: [sys.modules.pop(name, None) for name in modules])
 
     def install(edits: dict[str, list[tuple[str, str]]]) -> None:
         files = dict(PACKAGE)
@@ -53,8 +54,12 @@ def test_the_spring_holds_every_rule(install_spring):
     ({"bench.py": [("stiffness = float(", "stiffness = flat(")]},
      ["springtip (System 'springtip'): study 'spring-push': its quick reproduction failed (NameError: name 'flat' "
       "is not defined)"]),
+    ({"__init__.py": [('drivers={"spring-gauge": ', 'drivers={"softtip": ')]},
+     ["springtip (System 'springtip'): drivers.softtip = 'springtip.gauge:DRIVER': the Driver is named "
+      "'spring-gauge', expected 'softtip'",
+      "springtip (System 'springtip'): drivers.softtip: softtip's own is named so: expected another name"]),
 ], ids=["a typo in a reference", "a realism key without its source", "a role of its own, a scenario unchecked",
-        "an analysis that fails"])
+        "an analysis that fails", "a driver named as softtip's own"])
 def test_each_broken_rule_is_one_line_naming_where(install_spring, tmp_path, edits, expected):
     install_spring(edits)
     protocol = tmp_path / "springtip" / "protocols" / "spring-push.toml"

@@ -233,7 +233,9 @@ def test_an_edited_or_upgraded_plug_in_gets_new_keys_for_its_cached_artefacts(un
     assert protocol_key(load_protocol("spring-push")) == first  # the same inputs and code, the same key
 
     model = tmp_path / "springtip" / "bench.py"
-    model.write_text(model.read_text().replace("read[:, 0, 2] = depth", "read[:, 0, 2] = 1.01 * depth"))
+    text = model.read_text()
+    assert "read = (depth + " in text
+    model.write_text(text.replace("read = (depth + ", "read = (1.01 * depth + "))
     edited = protocol_key(protocol)
     assert edited != first
 

@@ -25,26 +25,33 @@ from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, sch
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
 from softtip.data import DatasetMetadata, TrialWriter
+from softtip.design.model import (OWN_BODY_KINDS, BodyKind, BodyMaterial, DesignSpec, MagnetSizes, magnets_at,
+                                  ring_of_magnets)
 from softtip.data.splits import CALIBRATION, VALIDATION
-from softtip.hardware import PacedSource
+from softtip.hardware import PacedSource, Sample
+from softtip.hardware.drivers import OWN as OWN_DRIVERS
+from softtip.hardware.drivers import Driver, PortRequest
 from softtip.lab import BenchKind, run_protocol
 from softtip.lab.bench import SeededBench
 from softtip.lab.protocols import Protocol as LabProtocol
 from softtip.lab.protocols import load_protocol, protocol_file_schema
+from softtip.mechanics.mesh import BodySolid
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.published import published_table, published_tables
 from softtip.realtime.scenario import LiveScenario
 from softtip.report.document import Figure
 from softtip.report.tables import Table
-from softtip.sensors.registry import SensorKind
+from softtip.sensors.registry import ChipSettings, SensorKind
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.studies.reproduce import quick_cuts, reproduce_study
 
 __all__ = [
-    "MAGNETIC", "SILENT", "Analysis", "BenchKind", "DatasetMetadata", "Device", "Figure", "Headline", "LiveScenario",
-    "NonNegativeNumber", "PacedSource", "PositiveNumber", "PronySeries", "Reading", "RealismTable", "Scenario",
-    "SeededBench", "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter", "check_system",
-    "integer", "protocol_file_schema", "published_table", "run_protocol", "schema",
+    "MAGNETIC", "SILENT", "Analysis", "BenchKind", "BodyKind", "BodyMaterial", "BodySolid", "ChipSettings",
+    "DatasetMetadata", "DesignSpec", "Device", "Driver", "Figure", "Headline", "LiveScenario", "MagnetSizes",
+    "NonNegativeNumber", "PacedSource", "PortRequest", "PositiveNumber", "PronySeries", "Reading", "RealismTable",
+    "Sample", "Scenario", "SeededBench", "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter",
+    "check_system", "integer", "magnets_at", "protocol_file_schema", "published_table", "ring_of_magnets",
+    "run_protocol", "schema",
 ]
 
 ROLES = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it
@@ -86,6 +93,8 @@ def _references(system: System) -> list[tuple[str, str, type | None]]:
     named += [(f"bench_commands.{k}", v, None) for k, v in system.bench_commands.items()]
     named += [(f"commands.{k}", v, typer.Typer) for k, v in system.commands.items()]
     named += [(f"sensors.{k}", v, SensorKind) for k, v in system.sensors.items()]
+    named += [(f"drivers.{k}", v, Driver) for k, v in system.drivers.items()]
+    named += [(f"bodies.{k}", v, BodyKind) for k, v in system.bodies.items()]
     named += [(f"studies.{s.name}.analysis", s.analysis, None) for s in system.studies]
     return named + [("defaults.demo", system.defaults["demo"], None)] if "demo" in system.defaults else named
 
@@ -108,8 +117,14 @@ def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -
             continue
         if kind is not None and not isinstance(target, kind):
             broken.append(f"{record}: {key} = {reference!r}: expected a {kind.__name__}, got {type(target).__name__}")
+        elif kind in (SensorKind, Driver, BodyKind) and target.name != key.partition(".")[2]:
+            broken.append(f"{record}: {key} = {reference!r}: the {kind.__name__} is named {target.name!r}, expected "
+                          f"{key.partition('.')[2]!r}")
         elif kind is None and not callable(target):
             broken.append(f"{record}: {key} = {reference!r}: expected a function, got {type(target).__name__}")
+    for what, names, own in (("drivers", system.drivers, OWN_DRIVERS), ("bodies", system.bodies, OWN_BODY_KINDS)):
+        for key in sorted(set(names) & set(own)):
+            broken.append(f"{record}: {what}.{key}: softtip's own is named so: expected another name")
     for use in ("simulate", "bench"):
         if use in system.defaults and system.defaults[use] not in system.designs():
             broken.append(f"{record}: defaults.{use} = {system.defaults[use]!r}: expected {DEFAULT_USES[use]}")

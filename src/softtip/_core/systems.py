@@ -84,6 +84,10 @@ class System:
     commands: Mapping[str, str] = field(default_factory=dict)
     # the chips it reads: name -> "module:attribute" of a softtip.sensors.registry.SensorKind
     sensors: Mapping[str, str] = field(default_factory=dict)
+    # the wire formats softtip live --port --driver NAME reads: "module:attribute" of a softtip.hardware.drivers.Driver
+    drivers: Mapping[str, str] = field(default_factory=dict)
+    # kinds of body its designs may be (simulate, optimize): "module:attribute" of a softtip.design.model.BodyKind
+    bodies: Mapping[str, str] = field(default_factory=dict)
 
     def files(self) -> Traversable:
         return resources.files(self.package)
@@ -119,7 +123,9 @@ _entry_points = "unread"  # "reading" while they load: a plug-in that registers 
 _UNIQUE = {"protocol": lambda s: s.protocols, "study": lambda s: [study.name for study in s.studies],
            "scenario": lambda s: s.scenarios, "demo": lambda s: s.demos, "bench": lambda s: s.bench_commands,
            "command": lambda s: s.commands, "reading": lambda s: [r.quantity for r in s.readings],
-           "sensor": lambda s: s.sensors}
+           "sensor": lambda s: s.sensors, "driver": lambda s: s.drivers,
+           "body": lambda s: s.bodies}
+_FIELDS = {"sensor": "sensors", "driver": "drivers", "body": "bodies"}  # the record's field of a kind of name
 
 
 def register(system: System) -> System:
@@ -239,6 +245,36 @@ def owner(kind: str, name: str) -> System:
         if name in _UNIQUE[kind](system):
             return system
     raise NotRegistered(f"{kind} {name!r}: expected one of {', '.join(names(kind)) or '(none registered)'}")
+
+
+def declared(kind: str, name: str, expected: type) -> Any:
+    """What the system that registered ``name`` as a ``kind`` (sensor, driver, body) names for it,
+    imported now: an ``expected`` whose ``.name`` is ``name``, else refused naming the record's key; a
+    name no system registered is refused with the registered ones."""
+    system = owner(kind, name)
+    reference = _UNIQUE[kind](system)[name]
+    found = load(reference)
+    if not isinstance(found, expected) or found.name != name:
+        raise TypeError(f"system {system.name!r}: {_FIELDS[kind]}.{name} = {reference!r}: expected a "
+                        f"{expected.__name__} named {name!r}")
+    return found
+
+
+def beside_own(kind: str, own: Mapping[str, Any]) -> list[str]:
+    """The names of a kind softtip has its own of (drivers, body kinds): its own, then every registered
+    system's not named as one of them (softtip's keep their names)."""
+    return [*own, *(name for name in names(kind) if name not in own)]
+
+
+def own_or_declared(kind: str, name: str, own: Mapping[str, Any], expected: type, what: str) -> Any:
+    """softtip's own ``name`` of a kind, or the ``expected`` a registered system declares for it (imported
+    now); another name is refused in one line with the known ones (``what`` names the kind there)."""
+    if name in own:
+        return own[name]
+    try:
+        return declared(kind, name, expected)
+    except NotRegistered:
+        raise NotRegistered(f"{what} {name!r}: expected one of {', '.join(beside_own(kind, own))}") from None
 
 
 def names(kind: str) -> list[str]:

@@ -23,21 +23,12 @@ MAX_CHIPS = 64  # chips on one board's bus
 MAX_REST_BAND = 1e6  # above any reading's full scale (the widest Hall chip's is about 1.4e5 µT)
 
 
-class BoardFormat(str, Enum):
-    """What the board on --port streams: softtip's firmware, or a ReSkin / AnySkin board's records
-    (the two send the same binary records, so both names read them)."""
-
-    softtip = "softtip"
-    anyskin = "anyskin"
-    reskin = "reskin"
-
-
 def live(
     port: str = typer.Option(None, "--port", help="Serial port of a fingertip board (e.g. /dev/ttyACM0)."),
-    board_format: BoardFormat = typer.Option(BoardFormat.softtip, "--format",
-                                             help="What the board on --port streams: softtip's firmware, or the "
-                                                  "binary records of a ReSkin / AnySkin board (5 chips unless "
-                                                  "--chips; temperature, x, y, z per chip)."),
+    driver_name: str = typer.Option("softtip", "--driver", "--format",
+                                    help="The wire format of the board on --port, a registered driver: softtip's "
+                                         "firmware (softtip), a ReSkin / AnySkin board's binary records (reskin, "
+                                         "anyskin: 5 chips unless --chips), or one a system registers."),
     model: list[Path] = typer.Option([], "--model", help="Saved softtip model(s) to run on every frame "
                                                          "(with --emulate, default: the scenario's own)."),
     emulate: bool = typer.Option(False, "--emulate", help="An emulated sensor replaying a registered system's "
@@ -90,16 +81,16 @@ def live(
     if record is not None:
         check_output(record, "--record", model, force=force)
     scenario = getattr(scenario, "value", scenario)
-    board_format = BoardFormat(board_format)
     source, settings, emulator_source, frames = port, None, None, baseline_frames or 50
-    if board_format is not BoardFormat.softtip:
-        if emulate:
-            fail(f"--format {board_format.value}: reads a board on --port; --emulate plays softtip's firmware")
-        if rate is not None:
-            fail(f"--rate = {rate}: a {board_format.value} board streams at its own rate; leave --rate out")
-        from softtip.hardware.reskin import RESKIN_CHIPS, ReSkinStream
+    if driver_name != "softtip" or not emulate:
+        from softtip.hardware.drivers import PortRequest, driver
 
-        source = ReSkinStream(port, chips or RESKIN_CHIPS, name=board_format.value)
+        wire = driver(driver_name)
+        if emulate:
+            fail(f"--driver {driver_name}: reads a board on --port; --emulate plays softtip's firmware")
+        if wire.own_rate and rate is not None:
+            fail(f"--rate = {rate}: a {driver_name} board streams at its own rate; leave --rate out")
+        source = wire.source(PortRequest(port, chips, rate))
     # claimed before any scenario is computed: a second live recording to the same file stops here
     with claimed(record, "--record"):
         if emulate:

@@ -4,6 +4,10 @@ A design is written in TOML with millimetre keys (``*_mm``) because that is how
 fingertips are drawn; :func:`design_from_dict` converts it into SI dataclasses
 and refuses anything that cannot be built, with one line naming the parameter
 and the limit it breaks.
+
+Its ``kind`` names a :class:`BodyKind`: softtip's own are ``cylindrical`` and ``rectangular``; a
+system registers another (``System.bodies``: name -> ``"module:attribute"`` of a :class:`BodyKind`),
+which ``simulate``, ``optimize`` and the twin then build and mesh as they do softtip's own.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+from collections.abc import Callable
 from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -18,7 +23,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
-from softtip._core.systems import systems
+from softtip._core.systems import beside_own, own_or_declared, systems
 from softtip._core.config import (
     ConfigError,
     NonNegativeNumber,
@@ -36,7 +41,9 @@ from softtip._core.config import (
     schema,
 )
 from softtip._core.units import MM
+from softtip.sensors.mlx90393 import SENSOR as MLX90393_SENSOR
 from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.registry import ChipSettings
 
 
 class DesignError(ConfigError):
@@ -85,6 +92,11 @@ class Design:
     sensor_settings: MLX90393Settings  # the chips' register settings, validated when the design is read
 
     @property
+    def chip_settings(self) -> ChipSettings:
+        """Its chips as a live stream states them: the registered MLX90393 at the design's settings."""
+        return MLX90393_SENSOR.at(self.sensor_settings)
+
+    @property
     def geometry_key(self) -> dict:
         """What determines the mesh: shapes and sizes, not materials, magnetisation or sensors."""
         physics = {"youngs_modulus_Pa", "poisson_ratio", "density_kg_m3", "polarization_T", "surface_field_T"}
@@ -127,7 +139,9 @@ Points = Annotated[list[tuple[Real, Real, Real]], Field(min_length=1), expect("a
 
 
 @schema
-class _BodyMaterial:
+class BodyMaterial:
+    """A body table's fillet and elastomer (a body kind's ``[body]`` schema extends it)."""
+
     _: KW_ONLY
     fillet_mm: NonNegativeNumber = 0.0
     youngs_modulus_Pa: ElastomerModulus = 0.59e6
@@ -140,7 +154,9 @@ class _BodyMaterial:
 
 
 @schema
-class _Magnets:
+class MagnetSizes:
+    """A magnets table's sizes, depth below the top and polarisation (a kind's ``[magnets]`` extends it)."""
+
     _: KW_ONLY
     diameter_mm: PositiveNumber
     height_mm: PositiveNumber
@@ -188,7 +204,7 @@ def _check_sensors_inside(positions: list, inside, problem: str) -> None:
             raise Refusal(("sensor", "positions_mm", index), problem)
 
 
-def _below_the_top(magnets: _Magnets, body_height: float) -> tuple[float, float]:
+def _below_the_top(magnets: MagnetSizes, body_height: float) -> tuple[float, float]:
     """z of the magnets' top and bottom faces (mm)."""
     top, bottom = body_height - magnets.depth_mm, body_height - magnets.depth_mm - magnets.height_mm
     if bottom <= 0:
@@ -212,7 +228,7 @@ def _cut_into_cavity(bottom: float, cavity_height: float) -> Refusal:
 
 
 @schema
-class _Spec:
+class DesignSpec:
     """What every kind of design has besides its body, cavity and magnets."""
 
     _: KW_ONLY
@@ -222,7 +238,7 @@ class _Spec:
 
 
 @schema
-class CylindricalBody(_BodyMaterial):
+class CylindricalBody(BodyMaterial):
     diameter_mm: PositiveNumber
     height_mm: PositiveNumber
 
@@ -240,7 +256,7 @@ class CylindricalCavity:
 
 
 @schema
-class CylindricalMagnets(_Magnets):
+class CylindricalMagnets(MagnetSizes):
     circle_radius_mm: PositiveNumber
     count: PositiveInteger = 4
     first_angle_deg: Number = 0.0
@@ -254,7 +270,7 @@ class CylindricalMagnets(_Magnets):
 
 
 @schema
-class CylindricalSpec(_Spec):
+class CylindricalSpec(DesignSpec):
     kind: Literal["cylindrical"]
     body: CylindricalBody
     cavity: CylindricalCavity
@@ -286,7 +302,7 @@ class CylindricalSpec(_Spec):
 
 
 @schema
-class RectangularBody(_BodyMaterial):
+class RectangularBody(BodyMaterial):
     width_mm: PositiveNumber
     length_mm: PositiveNumber
     height_mm: PositiveNumber
@@ -304,7 +320,7 @@ class RectangularCavity:
 
 
 @schema
-class RectangularMagnets(_Magnets):
+class RectangularMagnets(MagnetSizes):
     pitch_x_mm: PositiveNumber
     pitch_y_mm: PositiveNumber
 
@@ -316,7 +332,7 @@ class RectangularMagnets(_Magnets):
 
 
 @schema
-class RectangularSpec(_Spec):
+class RectangularSpec(DesignSpec):
     kind: Literal["rectangular"]
     body: RectangularBody
     cavity: RectangularCavity
@@ -361,11 +377,12 @@ def polarization_from_surface_field(surface_field: float, diameter: float, heigh
     return 2 * surface_field * math.hypot(radius, height) / height
 
 
-# ---------------------------------------------------------------- the two families
+# ---------------------------------------------------------------- the kinds of body
 
 
-def _design(spec: CylindricalSpec | RectangularSpec, raw: dict, source: str, magnets_xy: list) -> Design:
-    """The design whose magnets' centres are at ``magnets_xy`` (m)."""
+def magnets_at(spec: DesignSpec, raw: dict, source: str, magnets_xy: list) -> Design:
+    """The design of a validated ``spec`` (its file's ``raw`` table) whose magnets' centres are at
+    ``magnets_xy`` (m), at the depth its magnets table states: what every kind's builder returns."""
     magnets = spec.magnets
     top, bottom = _below_the_top(magnets, spec.body.height_mm)
     center_z = (top + bottom) / 2 * MM
@@ -379,20 +396,48 @@ def _design(spec: CylindricalSpec | RectangularSpec, raw: dict, source: str, mag
         sensor_settings=parse(MLX90393Settings, spec.sensor.readout, source, "sensor", error=DesignError))
 
 
-def _cylindrical(spec: CylindricalSpec, raw: dict, source: str) -> Design:
+def ring_of_magnets(spec: DesignSpec, raw: dict, source: str) -> Design:
+    """A kind's builder for magnets on a circle (a ``[magnets]`` table of :class:`CylindricalMagnets`)."""
     magnets = spec.magnets
     circle, first = magnets.circle_radius_mm * MM, math.radians(magnets.first_angle_deg)
     angles = [first + 2 * math.pi * i / magnets.count for i in range(magnets.count)]
-    return _design(spec, raw, source, [(circle * math.cos(a), circle * math.sin(a)) for a in angles])
+    return magnets_at(spec, raw, source, [(circle * math.cos(a), circle * math.sin(a)) for a in angles])
 
 
 def _rectangular(spec: RectangularSpec, raw: dict, source: str) -> Design:
     pitch_x, pitch_y = spec.magnets.pitch_x_mm, spec.magnets.pitch_y_mm
-    return _design(spec, raw, source, [(sx * pitch_x / 2 * MM, sy * pitch_y / 2 * MM)
-                                       for sy in (-1, 1) for sx in (-1, 1)])
+    return magnets_at(spec, raw, source, [(sx * pitch_x / 2 * MM, sy * pitch_y / 2 * MM)
+                                          for sy in (-1, 1) for sx in (-1, 1)])
 
 
-_KINDS = {"cylindrical": (CylindricalSpec, _cylindrical), "rectangular": (RectangularSpec, _rectangular)}
+@dataclass(frozen=True)
+class BodyKind:
+    """A kind of body: ``spec``, its design file's schema (a :class:`DesignSpec` with ``kind`` its name,
+    ``body`` (a :class:`BodyMaterial` with ``height_mm``), ``cavity`` and ``magnets`` (a
+    :class:`MagnetSizes`) tables and ``sensor_positions_mm``, validated when the file is read);
+    ``build(spec, raw, source) -> Design`` (:func:`magnets_at` places its magnets); ``solid``: the
+    ``"module:function"`` of its gmsh solid, ``solid(design, occ) -> softtip.mechanics.mesh.BodySolid``,
+    imported by the mesher (whose cache key holds that module's code)."""
+
+    name: str
+    spec: type
+    build: Callable[[Any, dict, str], Design]
+    solid: str
+
+
+OWN_BODY_KINDS = {kind.name: kind for kind in (
+    BodyKind("cylindrical", CylindricalSpec, ring_of_magnets, "softtip.mechanics.mesh:cylindrical_solid"),
+    BodyKind("rectangular", RectangularSpec, _rectangular, "softtip.mechanics.mesh:rectangular_solid"))}
+
+
+def body_kind_names() -> list[str]:
+    """softtip's own kinds, then every registered system's not named as one of them."""
+    return beside_own("body", OWN_BODY_KINDS)
+
+
+def body_kind(name: str) -> BodyKind:
+    """The kind of body ``name``: softtip's own or a registered system's (imported now)."""
+    return own_or_declared("body", name, OWN_BODY_KINDS, BodyKind, "body kind")
 
 
 def design_from_dict(spec: dict, source: str = "design") -> Design:
@@ -400,11 +445,12 @@ def design_from_dict(spec: dict, source: str = "design") -> Design:
     if not isinstance(spec, dict):
         raise DesignError(f"{source}: expected a table of design parameters")
     kind = spec.get("kind")
-    if kind not in _KINDS:
-        raise refused(f"expected one of {', '.join(sorted(_KINDS))}", source, "kind", value=kind, error=DesignError)
-    schema_of_kind, build = _KINDS[kind]
+    if not isinstance(kind, str) or kind not in body_kind_names():
+        raise refused(f"expected one of {', '.join(body_kind_names())}", source, "kind", value=kind,
+                      error=DesignError)
+    body = body_kind(kind)
     raw = copy.deepcopy(spec)
-    return build(parse(schema_of_kind, raw, source, error=DesignError), raw, source)
+    return body.build(parse(body.spec, raw, source, error=DesignError), raw, source)
 
 
 def _shipped() -> dict[str, Path]:

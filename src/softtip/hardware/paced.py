@@ -19,6 +19,7 @@ from softtip._core.channels import Reading
 from softtip._core.config import PositiveNumber, checked
 from softtip._core.threads import BackgroundThread
 from softtip.hardware.driver import Sample
+from softtip.sensors.registry import ChipSettings, stream_settings
 
 _SEQ_MODULUS = 1 << 16  # sequence numbers wrap as the firmware's do
 
@@ -26,7 +27,8 @@ _SEQ_MODULUS = 1 << 16  # sequence numbers wrap as the firmware's do
 @runtime_checkable
 class ThreadedSource(Protocol):
     """A source that delivers Samples on a thread of its own: ``name``, ``chips``, ``rate_hz``
-    (None: no stated rate), ``reading`` (what its chips read), ``finished`` (its last frame is
+    (None: no stated rate), ``reading`` (what its chips read), ``settings`` (its chips' registered
+    sensor at their settings, or None when it does not know them), ``finished`` (its last frame is
     delivered), ``open()`` (takes its device, before the live session opens its sinks),
     ``start(deliver)``, ``counters()`` and ``close()``."""
 
@@ -34,6 +36,7 @@ class ThreadedSource(Protocol):
     chips: int
     rate_hz: float | None
     reading: Reading
+    settings: ChipSettings | None
 
     @property
     def finished(self) -> bool: ...
@@ -48,22 +51,25 @@ class ThreadedSource(Protocol):
 
 
 class PacedSource:
-    """``readings`` (N, chips, 3, in the unit of ``reading``) delivered one per ``1 / rate_hz``
-    seconds, from the first again after the last when ``loop``; ``saturated`` (N, chips, 3) marks
-    axes at the end of their range. ``start(deliver)`` calls ``deliver(sample)`` for every frame
-    on the source's thread; the device time of frame k is k / rate_hz. A frame the thread wakes
-    for more than one period late is still delivered, and counted as late.
+    """``readings`` (N, chips, the reading's axes, in its unit) delivered one per ``1 / rate_hz``
+    seconds, from the first again after the last when ``loop``; ``saturated`` (its shape) marks
+    axes at the end of their range; ``settings``: the registered sensor that read them, at its settings.
+    ``start(deliver)`` calls ``deliver(sample)`` for every frame on the source's thread; the device
+    time of frame k is k / rate_hz. A frame the thread wakes for more than one period late is still
+    delivered, and counted as late.
     """
 
     def __init__(self, readings: np.ndarray, rate_hz: float, *, reading: Reading,
-                 saturated: np.ndarray | None = None, loop: bool = True, name: str = "replay") -> None:
+                 saturated: np.ndarray | None = None, loop: bool = True, name: str = "replay",
+                 settings: ChipSettings | None = None) -> None:
         readings = np.asarray(readings, dtype=np.float64)
-        if readings.ndim != 3 or readings.shape[2] != 3 or not len(readings) or readings.shape[1] < 1:
-            raise ValueError(f"readings: expected shape (frames, chips, 3) with frames and chips >= 1, "
-                             f"got {readings.shape}")
+        if readings.ndim != 3 or readings.shape[2] != len(reading.axes) or not len(readings) or readings.shape[1] < 1:
+            raise ValueError(f"readings: expected shape (frames, chips, {len(reading.axes)}) with frames and chips "
+                             f">= 1, got {readings.shape}")
         self.readings = readings
         self.rate_hz = checked(PositiveNumber, "rate_hz", rate_hz)
         self.reading = reading
+        self.settings = stream_settings(settings, reading)
         self.saturated = np.zeros(readings.shape, bool) if saturated is None else np.asarray(saturated, bool)
         if self.saturated.shape != readings.shape:
             raise ValueError(f"saturated: expected shape {readings.shape}, got {self.saturated.shape}")

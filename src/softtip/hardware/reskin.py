@@ -185,6 +185,7 @@ class ReSkinStream:
     (the pipeline then stamps them with their arrival)."""
 
     reading = MAGNETIC
+    settings = None  # the board's firmware sets its chips; it does not send how
     rate_hz = None
     finished = False  # a board streams until it is closed
 

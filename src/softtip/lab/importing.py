@@ -108,10 +108,11 @@ class _Log:
 
 @schema
 class SensorLog(_Log):
-    """The sensor log: each chip's x, y, z columns, what chip it is and in what unit."""
+    """The sensor log: each chip's columns (one per axis its reading has: x, y, z for a 3-axis chip),
+    what chip it is and in what unit."""
 
     chips: Annotated[list[list[ColumnRef]], Field(min_length=1),
-                     expect("a list of [x, y, z] columns, one per chip")] = field(default_factory=list)
+                     expect("a list of each chip's axis columns")] = field(default_factory=list)
     chip: Text | None = None
     unit: Text = "uT"
     name: Annotated[str, Strict(), Field(pattern=r"^[a-z][a-z0-9]*$"),
@@ -122,12 +123,14 @@ class SensorLog(_Log):
     hallconf: Hallconf | None = None
 
     def __post_init__(self) -> None:
-        if not self.chips or any(len(chip) != 3 for chip in self.chips):
-            raise Refusal("chips", "expected a list of [x, y, z] columns, one per chip")
+        if not self.chips:
+            raise Refusal("chips", "expected a list of each chip's axis columns")
         super().__post_init__()
         if (self.time is None) == (self.rate_hz is None):
             raise Refusal("time", "give the time column or rate_hz (evenly spaced samples), one of them")
         settings = (self.gain_sel, self.res_xyz)
+        if any(len(chip) != len(self.axes) for chip in self.chips):
+            raise Refusal("chips", f"expected a list of [{', '.join(self.axes)}] columns, one per chip")
         if self.chip == OTHER:
             if self.name is None or any(value is not None for value in (*settings, self.hallconf)):
                 raise Refusal("name", "chip = \"other\" needs a name for its channels, and takes no chip settings")
@@ -148,6 +151,11 @@ class SensorLog(_Log):
     def columns_named(self) -> list[tuple[tuple, int | str]]:
         return [*super().columns_named(), *((("chips", k, a), ref) for k, chip in enumerate(self.chips)
                                              for a, ref in enumerate(chip))]
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """The axes each chip's columns hold: its registered reading's (x, y, z for another chip)."""
+        return AXES if self.chip == OTHER else self.kind.reading.axes
 
     @property
     def kind(self) -> SensorKind:
@@ -401,9 +409,9 @@ def _read_log(paths: list[Path], log: _Log, refs: list[int | str], *,
 
 
 def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """The chips' readings (rows, chips, 3) in the stored unit, and which samples are saturated
+    """The chips' readings (rows, chips, axes) in the stored unit, and which samples are saturated
     (None: the sensor's limits are unknown)."""
-    readings = values.reshape(len(values), len(sensor.chips), 3)
+    readings = values.reshape(len(values), len(sensor.chips), len(sensor.axes))
     settings = sensor.settings
     if sensor.chip == OTHER:
         if sensor.full_scale is None:
@@ -414,10 +422,11 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
         return readings, np.abs(readings) >= sensor.full_scale
     kind = sensor.kind
     if sensor.unit == kind.raw_unit:
-        whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < 1 << 16)
+        words = 1 << kind.raw_bits
+        whole = np.isfinite(readings) & (readings == np.round(readings)) & (readings >= 0) & (readings < words)
         if not whole.all():
-            _refuse_beyond(path, sensor, ~whole, "a 16-bit register word (an integer 0..65535)")
-        return kind.decode(settings, readings.astype(np.uint16))
+            _refuse_beyond(path, sensor, ~whole, f"a {kind.raw_bits}-bit output word (an integer 0..{words - 1})")
+        return kind.decode(settings, readings.astype(np.int64))
     readings = readings * kind.reading.units[sensor.unit]
     if settings is None:
         return readings, None
@@ -430,7 +439,7 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
 def _refuse_beyond(path: Path, sensor: SensorLog, where: np.ndarray, what: str) -> None:
     row, chip, axis = (int(k) for k in np.argwhere(where)[0])
     raise DatasetError(f"{path}: line {row + (2 if sensor.header else 1)}, column {sensor.chips[chip][axis]} "
-                       f"(chip {chip} {AXES[axis]}): beyond {what}")
+                       f"(chip {chip} {sensor.axes[axis]}): beyond {what}")
 
 
 def _check_time_order(path: Path, log: _Log, time: np.ndarray, ids: np.ndarray, *, strictly: bool) -> None:
@@ -471,7 +480,7 @@ def _join(path: Path, labels: LabelLog, sensor_time: np.ndarray, label_time: np.
 class _Trial:
     source: str
     time: np.ndarray
-    readings: np.ndarray  # (rows, chips, 3)
+    readings: np.ndarray  # (rows, chips, axes)
     labels: np.ndarray  # (rows, labels)
     saturated: np.ndarray | None
 
@@ -491,7 +500,7 @@ def _read_source(source: Path, mapping: ImportMapping) -> tuple[list[_Trial], in
         raise DatasetError(f"{sensor_file}: no rows")
     n_time = 0 if sensor.time is None else 1
     time = _times(sensor, values)
-    chip_columns = slice(n_time, n_time + 3 * len(sensor.chips))
+    chip_columns = slice(n_time, n_time + len(sensor.axes) * len(sensor.chips))
     read = [_sensor_values(path, sensor, piece[:, chip_columns]) for path, piece in pieces]
     readings = np.concatenate([piece_readings for piece_readings, _ in read])
     saturated = None if read[0][1] is None else np.concatenate([piece_saturated for _, piece_saturated in read])
@@ -606,7 +615,7 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
         TIME: np.concatenate([trial.time for trial in trials])}
     readings = np.concatenate([trial.readings for trial in trials])
     for chip in range(len(sensor.chips)):
-        for a, axis in enumerate(AXES):
+        for a, axis in enumerate(sensor.axes):
             columns[sensor.channel(chip, axis)] = readings[:, chip, a]
     label_units = {} if labels is None else {name: stored_unit(name, label.unit)
                                              for name, label in labels.columns.items()}
@@ -620,7 +629,7 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
     columns["role"] = np.repeat(np.where(validates, VALIDATION, CALIBRATION), [len(t.time) for t in trials])
     columns["source"] = np.repeat([trial.source for trial in trials], [len(t.time) for t in trials])
     channel_units = {} if sensor.chip != OTHER else {sensor.channel(chip, axis): sensor.unit
-                                                     for chip in range(len(sensor.chips)) for axis in AXES}
+                                                     for chip in range(len(sensor.chips)) for axis in sensor.axes}
     settings = sensor.settings
     metadata = DatasetMetadata(
         description=mapping.description or f"imported from {', '.join(trial.source for trial in trials[:3])}"
@@ -630,7 +639,7 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
                       channel_units)
     saturated = {} if saturation is None else {
         sensor.channel(chip, axis): int(saturation[:, chip, a].sum())
-        for chip in range(len(sensor.chips)) for a, axis in enumerate(AXES)}
+        for chip in range(len(sensor.chips)) for a, axis in enumerate(sensor.axes)}
     report = ImportReport(trials=n, samples=len(dataset), validation_trials=[int(k) for k in np.flatnonzero(validates)],
                           unlabelled_dropped=dropped, saturated=saturated,
                           join_offset_s=max(offsets) if offsets else None)

@@ -21,8 +21,9 @@ from types import ModuleType
 import numpy as np
 
 from softtip._core.cache import artefact_key, cache_dir, code_hash, read_entry, write_entry
+from softtip._core.systems import load
 from softtip._core.units import MM
-from softtip.design.model import Design
+from softtip.design.model import Design, body_kind
 
 _GMSH_LOCK = threading.Lock()  # gmsh keeps global state
 
@@ -64,7 +65,8 @@ def mesh_key(design: Design, size: float, curvature_points: int,
 
     recipe = {"geometry": design.geometry_key, "size": size, "curvature_points": curvature_points,
               "contact_layer": None if contact_layer is None else list(contact_layer), "gmsh": gmsh.__version__}
-    return artefact_key(recipe, code_hash(__name__, "softtip.design.model"), length=20)
+    solid_module = body_kind(design.kind).solid.partition(":")[0]
+    return artefact_key(recipe, code_hash(__name__, "softtip.design.model", solid_module), length=20)
 
 
 def mesh_design(design: Design, size: float = 1.5 * MM, curvature_points: int = 10,
@@ -158,33 +160,52 @@ def tet_mesh_from_gmsh(groups: dict[str, list[int]], key: str) -> TetMesh:
     return TetMesh(points=points, tets=tets, boundaries=boundaries, key=key)
 
 
+@dataclass(frozen=True)
+class BodySolid:
+    """A body kind's gmsh solid (what ``BodyKind.solid(design, occ)`` returns): the body's and its
+    cavity's volume tags, the cavity's bounding box (x0, y0, z0, x1, y1, z1, m) and how far the top
+    face's edges reach from the axis in x and y (m; their fillet is the design's ``fillet_mm``). The
+    body stands on z = 0 with its top at ``design.height``; the mesher fillets, hollows and meshes it."""
+
+    body: int
+    cavity: int
+    cavity_box: tuple[float, float, float, float, float, float]
+    top_reach: tuple[float, float]
+
+
+def cylindrical_solid(design: Design, occ) -> BodySolid:
+    """A cylinder with a cylindrical cavity, both on the z axis."""
+    radius = design.spec["body"]["diameter_mm"] * MM / 2
+    c_radius, c_height = design.spec["cavity"]["radius_mm"] * MM, design.spec["cavity"]["height_mm"] * MM
+    return BodySolid(occ.addCylinder(0, 0, 0, 0, 0, design.height, radius),
+                     occ.addCylinder(0, 0, 0, 0, 0, c_height, c_radius),
+                     (-c_radius, -c_radius, 0.0, c_radius, c_radius, c_height), (radius, radius))
+
+
+def rectangular_solid(design: Design, occ) -> BodySolid:
+    """A box with a box-shaped cavity, both centred on the z axis."""
+    w, l = design.spec["body"]["width_mm"] * MM, design.spec["body"]["length_mm"] * MM
+    cw, cl, ch = (design.spec["cavity"][k] * MM for k in ("width_mm", "length_mm", "height_mm"))
+    return BodySolid(occ.addBox(-w / 2, -l / 2, 0, w, l, design.height), occ.addBox(-cw / 2, -cl / 2, 0, cw, cl, ch),
+                     (-cw / 2, -cl / 2, 0.0, cw / 2, cl / 2, ch), (w, l))
+
+
 def _body_and_cavity(design: Design, occ) -> tuple[int, tuple[float, ...]]:
     """Create the filleted body minus its hollow; return its tag and the hollow's bounding box."""
-    body_spec, cavity_spec = design.spec["body"], design.spec["cavity"]
+    solid = load(body_kind(design.kind).solid)(design, occ)
+    if not isinstance(solid, BodySolid):
+        raise TypeError(f"body kind {design.kind!r}: its solid returned {type(solid).__name__}, expected a BodySolid")
     h = design.height
-    fillet = body_spec.get("fillet_mm", 0.0) * MM
-    if design.kind == "cylindrical":
-        radius = body_spec["diameter_mm"] * MM / 2
-        body = occ.addCylinder(0, 0, 0, 0, 0, h, radius)
-        top_edges = lambda: [e for _, e in occ.getEntitiesInBoundingBox(  # noqa: E731
-            -radius * 1.01, -radius * 1.01, h * 0.999, radius * 1.01, radius * 1.01, h * 1.001, 1)]
-        c_radius, c_height = cavity_spec["radius_mm"] * MM, cavity_spec["height_mm"] * MM
-        cavity = occ.addCylinder(0, 0, 0, 0, 0, c_height, c_radius)
-        cavity_box = (-c_radius, -c_radius, 0.0, c_radius, c_radius, c_height)
-    else:
-        w, l = body_spec["width_mm"] * MM, body_spec["length_mm"] * MM
-        body = occ.addBox(-w / 2, -l / 2, 0, w, l, h)
-        top_edges = lambda: [e for _, e in occ.getEntitiesInBoundingBox(  # noqa: E731
-            -w, -l, h * 0.999, w, l, h * 1.001, 1)]
-        cw, cl, ch = (cavity_spec[k] * MM for k in ("width_mm", "length_mm", "height_mm"))
-        cavity = occ.addBox(-cw / 2, -cl / 2, 0, cw, cl, ch)
-        cavity_box = (-cw / 2, -cl / 2, 0.0, cw / 2, cl / 2, ch)
+    fillet = design.spec["body"].get("fillet_mm", 0.0) * MM
     occ.synchronize()
+    body = solid.body
     if fillet > 0:
-        body = occ.fillet([body], top_edges(), [fillet])[0][1]
-    out, _ = occ.cut([(3, body)], [(3, cavity)])
+        x, y = (reach * 1.01 for reach in solid.top_reach)
+        edges = [e for _, e in occ.getEntitiesInBoundingBox(-x, -y, h * 0.999, x, y, h * 1.001, 1)]
+        body = occ.fillet([body], edges, [fillet])[0][1]
+    out, _ = occ.cut([(3, body)], [(3, solid.cavity)])
     occ.synchronize()
-    return out[0][1], cavity_box
+    return out[0][1], solid.cavity_box
 
 
 def _classify_surfaces(design: Design, cavity_box: tuple[float, ...]) -> dict[str, list[int]]:

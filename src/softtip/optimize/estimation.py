@@ -8,9 +8,9 @@ load parameters given the sensor's noise:
     I = J^T Sigma^-1 J,   Cov(p_hat) >= I^-1
 
 with J = d(readings)/d(load parameters) from finite differences of FE solves
-around an operating point, and Sigma the MLX90393's noise at the design's
-register settings (datasheet noise at its averaging, plus one LSB's
-quantisation, LSB^2 / 12, per axis). No estimator - polynomial, network or
+around an operating point, and Sigma the design's registered sensor's noise at
+its settings (for the MLX90393: datasheet noise at its averaging), plus one output
+step's quantisation, step^2 / 12, per axis. No estimator - polynomial, network or
 otherwise - can be more precise on average, so the bound ranks designs by
 what any calibration could achieve, not by how far one magnet moves.
 
@@ -41,7 +41,7 @@ from softtip._core.units import MM, UT_PER_T
 from softtip.design.model import Design
 from softtip.optimize.objectives import Infeasible, Objective, ObjectiveSettings, objective
 from softtip.optimize.runs import FEResult, Simulation
-from softtip.sensors.mlx90393 import MLX90393Settings, full_scale_uT, lsb_uT, noise_rms_uT
+from softtip.sensors.registry import ChipSettings
 
 # the pushing test: a board across the top, pushed at the centre; 22.5 deg lies between the
 # magnets' symmetry lines (0 and 45 deg), where neither sensitivity vanishes by symmetry
@@ -68,9 +68,12 @@ def _simulations(base: Simulation, steps: Steps) -> tuple[Simulation, ...]:
             replace(base, depth_mm=steps.max_depth_mm))
 
 
-def reading_covariance_uT2(settings: MLX90393Settings, sensors: int) -> np.ndarray:
-    """Diagonal noise variance (µT^2) of every reading, sensor-major (x, y, z of sensor 0, ...)."""
-    per_axis = noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12.0
+def reading_covariance_uT2(chips: ChipSettings, sensors: int) -> np.ndarray:
+    """Diagonal noise variance (µT^2) of every reading, sensor-major (x, y, z of sensor 0, ...): the
+    registered sensor's noise and output step at its settings."""
+    per_axis = chips.variance()
+    if per_axis is None:
+        raise ValueError(f"sensor {chips.kind.name!r} declares no noise: the estimation bounds need it")
     return np.tile(per_axis, sensors)
 
 
@@ -96,8 +99,8 @@ def estimation_bounds(design: Design, results: Sequence[FEResult], steps: Steps)
     """Both bounds from the results of :func:`_simulations`, in that order."""
     base, angle_up, angle_down, deeper, shallower, shear_x, shear_y, deepest = results
     readings = [r.field_change_T.ravel() * UT_PER_T for r in results]  # µT, sensor-major
-    settings = design.sensor_settings
-    variance = reading_covariance_uT2(settings, len(base.field_change_T))
+    chips = design.chip_settings
+    variance = reading_covariance_uT2(chips, len(base.field_change_T))
     d_angle = (readings[1] - readings[2]) / np.radians(2 * steps.angle_deg)
     d_depth = (readings[3] - readings[4]) / (2 * steps.depth_mm * MM)
     d_tx = (readings[5] - readings[0]) / (steps.tangential_mm * MM)
@@ -109,7 +112,8 @@ def estimation_bounds(design: Design, results: Sequence[FEResult], steps: Steps)
     covariance = cramer_rao(np.column_stack([d_depth, d_tx, d_ty]), variance)
     force_cov = force_jacobian @ covariance @ force_jacobian.T if np.isfinite(covariance).all() else covariance
     peak = np.abs((deepest.field_rest_T + deepest.field_change_T) * UT_PER_T)
-    margin = float(((full_scale_uT(settings) - peak) / full_scale_uT(settings)).min())
+    full_scale = chips.kind.full_scale(chips.values)
+    margin = float(((full_scale - peak) / full_scale).min())
     return EstimationBounds(orientation_deg=float(np.degrees(np.sqrt(orientation[0, 0]))),
                             force_mN=np.sqrt(np.abs(np.diag(force_cov))) * 1e3, saturation_margin=margin)
 

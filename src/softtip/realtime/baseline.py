@@ -54,7 +54,7 @@ def drift_step(filtered: np.ndarray, reading: np.ndarray, alpha: float,
 
 
 class Baseline:
-    """The baseline in use, shape (chips, 3), in the unit of ``reading``; see the module notes.
+    """The baseline in use, shape (chips, axes), in the unit of ``reading``; see the module notes.
     ``drift_threshold`` and ``step`` default to the reading's, ``rest_band`` to half the drift
     threshold.
 

@@ -62,7 +62,7 @@ class Estimator:
             raise ValueError(f"model {name}: input unit {unknown[0]!r} is not one of {', '.join(self.reading.units)}")
         scale = 1.0 / np.array([self.reading.units[u] for u in units])  # model units per reading unit
         self._scale = None if np.all(scale == 1.0) else scale
-        self.chips_needed = int(self.input_index.max()) // 3 + 1
+        self.chips_needed = int(self.input_index.max()) // len(self.reading.axes) + 1
         if kind == "auto":
             kind = "classifier" if hasattr(model, "classes_") else "regression"
         if kind == "classifier" and not self.dynamic:

@@ -9,7 +9,7 @@ from typing import NamedTuple
 import numpy as np
 
 from softtip._core.channels import MAGNETIC, Reading
-from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.registry import ChipSettings
 
 
 class FrameResult(NamedTuple):
@@ -17,8 +17,8 @@ class FrameResult(NamedTuple):
 
     stamp_ns: acquisition time, ns since the Unix epoch; host_time_s: the driver's arrival
     stamp (perf_counter clock); device_time_s: the device clock, or None.
-    reading: (chips, 3) reading in the stream's unit (:attr:`StreamInfo.reading`), NaN for a
-    faulty chip; chip_ok (chips,), saturated (chips, 3).
+    reading: (chips, axes) reading in the stream's unit, on its axes only (:attr:`StreamInfo.reading`),
+    NaN for a faulty chip; chip_ok (chips,), saturated (chips, axes).
     baseline: the baseline in use (read-only, replaced when it changes) or None before
     the first one; baseline_version counts the baselines used so far.
     change: reading minus baseline, or None. estimates: the regression targets in
@@ -46,7 +46,7 @@ class StreamInfo:
     """What sinks are told when the pipeline opens.
 
     ``reading``: what the chips read and in which unit (flux density in µT, or force in N);
-    ``settings``: the Hall chips' settings (None for other sensors).
+    ``settings``: the chips' registered sensor at its settings (None when the source does not state them).
 
     counters(latency_window=None) returns the live counters (frames, lost frames, latency
     percentiles over the last latency_window frames...) as a dict; take_baseline() asks
@@ -57,7 +57,7 @@ class StreamInfo:
     target_names: tuple[str, ...]
     target_units: tuple[str, ...]
     classes: tuple[str, ...] | None
-    settings: MLX90393Settings | None
+    settings: ChipSettings | None
     rate_hz: float | None
     metadata: dict = field(default_factory=dict)
     reading: Reading = MAGNETIC

@@ -46,7 +46,7 @@ from softtip.realtime.clock import AcquisitionClock
 from softtip.realtime.estimator import Estimator
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
-from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.registry import ChipSettings, stream_settings
 
 logger = logging.getLogger(__name__)
 
@@ -78,12 +78,13 @@ class Pipeline:
 
     def __init__(self, chips: int, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
                  baseline: Baseline | None = None, free_states: Sequence[str] = (),
-                 callbacks: Sequence[Callable[[FrameResult], None]] = (), settings: MLX90393Settings | None = None,
+                 callbacks: Sequence[Callable[[FrameResult], None]] = (), settings: ChipSettings | None = None,
                  rate_hz: float | None = None, metadata: Mapping | None = None,
                  source_counters: Callable[[], Mapping] | None = None, reading: Reading = MAGNETIC) -> None:
         checked(PositiveInteger, "chips", chips)
         self.chips = chips
         self.reading = reading
+        stream_settings(settings, reading)
         self.baseline = Baseline(reading=reading) if baseline is None else baseline
         if not isinstance(self.baseline, Baseline):
             raise ValueError(f"baseline = {baseline!r}: expected a Baseline")
@@ -149,6 +150,7 @@ class Pipeline:
                              "step": self.baseline.step, "free_states": sorted(self.free_states),
                              "rest_s": self.baseline.rest_s, "rest_band": self.baseline.rest_band},
                 "reading": {"quantity": reading.quantity, "unit": reading.unit},
+                "sensor": None if settings is None else settings.kind.name,
                 "sensor_settings": None if settings is None else settings.to_dict(),
                 "rate_hz": rate_hz, **dict(metadata or {})},
             counters=self.counters, take_baseline=self.take_baseline)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from softtip.hardware import PacedSource
-from softtip.sensors import MLX90393Settings
+from softtip.sensors.registry import ChipSettings
 
 StreamCheck = Callable[[int, float | None], None]
 
@@ -31,7 +31,8 @@ def accept_any_stream(chips: int, rate_hz: float | None) -> None:
 class LiveScenario:
     """An emulated stream: ``source`` is ``"emulator"`` (a fingertip board behind a pseudo-terminal in
     the firmware's protocol, its chips reading ``emulator_source(t_s) -> (chips, 3)`` µT at
-    ``settings``) or a :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware);
+    ``settings``, a registered sensor at its settings, :meth:`softtip.sensors.registry.SensorKind.at`)
+    or a :class:`~softtip.hardware.PacedSource` (a sensor with no softtip firmware, stating its own);
     ``models``: the model files it comes with; ``chips``: how many it streams; ``rate_hz``: its own
     rate, when it has one (a paced source), else the command's; ``baseline_frames``: the frames its
     baseline averages (a protocol's tare is one)."""
@@ -41,6 +42,6 @@ class LiveScenario:
     models: tuple[Path, ...]
     chips: int
     emulator_source: Callable[[float], np.ndarray] | None = None
-    settings: MLX90393Settings | None = None
+    settings: ChipSettings | None = None
     rate_hz: float | None = None
     baseline_frames: int = 50

@@ -17,15 +17,14 @@ from typing import Self
 
 import numpy as np
 
-from softtip._core.channels import MAGNETIC
-from softtip.hardware import (EmulatorLog, EmulatorProcess, FaultPlan, FingertipDriver, PressCycle, Sample,
-                              ThreadedSource)
+from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, PressCycle, Sample, ThreadedSource
+from softtip.hardware.drivers import FirmwareStream, PortRequest, firmware_settings
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.estimator import Estimator
 from softtip.realtime.frames import FrameResult
 from softtip.realtime.pipeline import Pipeline
 from softtip.realtime.sinks.base import Sink
-from softtip.sensors.mlx90393 import MLX90393Settings
+from softtip.sensors.registry import ChipSettings
 
 EMULATOR = "emulator"
 # Signals that end a live session as Ctrl-C does, closing its sinks (a recording gets its summary):
@@ -34,11 +33,12 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if 
 
 
 class LiveSession:
-    """A fingertip (``source_spec``: a serial device path or pyserial URL, or
-    ``"emulator"`` for an emulated one in a child process), its driver and a pipeline; or a
-    :class:`~softtip.hardware.ThreadedSource` (a sensor with no softtip firmware: an emulated
-    force chip's :class:`~softtip.hardware.PacedSource`, a ReSkin / AnySkin board's
-    :class:`~softtip.hardware.ReSkinStream`) and a pipeline of its reading.
+    """A live source and a pipeline of its reading and settings: a
+    :class:`~softtip.hardware.ThreadedSource` (a registered driver's board,
+    :mod:`softtip.hardware.drivers`; an emulated sensor's :class:`~softtip.hardware.PacedSource`), or
+    softtip's fingertip firmware (``source_spec``: a serial device path or pyserial URL, or
+    ``"emulator"`` for an emulated fingertip in a child process) with its chips at ``settings``
+    (default: their power-on settings).
 
     ``with LiveSession(...) as session: session.wait(duration_s)``; afterwards
     :meth:`summary` reports frames, lost frames, latency and the CPU time of this process
@@ -47,20 +47,21 @@ class LiveSession:
     """
 
     def __init__(self, source_spec: str | ThreadedSource, estimators: Sequence[Estimator] = (), sinks: Sequence[Sink] = (), *,
-                 rate_hz: int = 50, chips: int | None = None, settings: MLX90393Settings | None = None,
-                 baudrate: int = 1_000_000, baseline: Baseline | None = None, free_states: Sequence[str] = (),
+                 rate_hz: int = 50, chips: int | None = None, settings: ChipSettings | None = None,
+                 baseline: Baseline | None = None, free_states: Sequence[str] = (),
                  callbacks: Sequence[Callable[[FrameResult], None]] = (),
                  emulator_source: Callable[[float], np.ndarray] | None = None,
                  emulator_faults: FaultPlan | None = None, emulator_seed: int | None = 0) -> None:
         self.threaded = source_spec if isinstance(source_spec, ThreadedSource) else None
         if self.threaded is None and (not isinstance(source_spec, str) or not source_spec.strip()):
             raise ValueError(f"source = {source_spec!r}: expected a serial port, {EMULATOR!r} or a threaded source")
+        if self.threaded is not None and settings is not None:
+            raise ValueError(f"settings: the source {self.threaded.name!r} states its own chips' settings")
         self.source_spec = source_spec if self.threaded is None else self.threaded.name
         self.estimators = list(estimators)
         self.sinks = list(sinks)
         self.rate_hz = rate_hz if self.threaded is None else self.threaded.rate_hz
-        self.settings = MLX90393Settings() if settings is None else settings
-        self.baudrate = baudrate
+        self.settings = self.threaded.settings if self.threaded is not None else firmware_settings(settings)
         self.baseline = baseline
         self.free_states = free_states
         self.callbacks = list(callbacks)
@@ -69,47 +70,24 @@ class LiveSession:
         self.chips = (self.threaded.chips if self.threaded is not None else
                       chips if chips is not None else (max(needed, 4) if self.emulated else None))
         self._emulator = (EmulatorProcess(emulator_source or PressCycle(self.chips), rate_hz, self.chips,
-                                          self.settings, emulator_faults, emulator_seed)
+                                          self.settings.values, emulator_faults, emulator_seed)
                           if self.emulated else None)
         self.emulator_log: EmulatorLog | None = None
-        self.driver: FingertipDriver | None = None
         self.pipeline: Pipeline | None = None
         self._cpu_s = self._wall_s = 0.0
         self._started = False
 
     def start(self) -> LiveSession:
-        if self.threaded is not None:
-            return self._start_threaded()
         try:
-            port = self._emulator.start().port if self._emulator is not None else self.source_spec
-            self.driver = FingertipDriver(port, self.baudrate, self.settings, self.rate_hz,
-                                          callback=self._forward, queue_size=0)
-            self.driver.open()
-            chips = self.driver.identity.chips if self.chips is None else self.chips
-            if chips != self.driver.identity.chips:
-                raise ValueError(f"chips = {chips}: the device at {self.source_spec!r} reports "
-                                 f"{self.driver.identity.chips}")
-            self.pipeline = Pipeline(chips, self.estimators, self.sinks, baseline=self.baseline,
-                                     free_states=self.free_states, callbacks=self.callbacks, settings=self.settings,
-                                     rate_hz=self.rate_hz, metadata={"source": self.source_spec,
-                                                                     "device": self.driver.identity.name},
-                                     source_counters=self._driver_counters)
-            self.pipeline.open()
-            self._cpu_s, self._wall_s = time.process_time(), time.perf_counter()
-            self.driver.start()
-            self._started = True
-        except BaseException:
-            self.close()
-            raise
-        return self
-
-    def _start_threaded(self) -> LiveSession:
-        source = self.threaded
-        try:
+            if self.threaded is None:
+                port = self._emulator.start().port if self._emulator is not None else self.source_spec
+                self.threaded = FirmwareStream(PortRequest(port, self.chips, self.rate_hz, self.settings))
+            source = self.threaded
             source.open()
             self.pipeline = Pipeline(source.chips, self.estimators, self.sinks, baseline=self.baseline,
-                                     free_states=self.free_states, callbacks=self.callbacks, settings=None,
-                                     rate_hz=source.rate_hz, metadata={"source": source.name, "device": source.name},
+                                     free_states=self.free_states, callbacks=self.callbacks, settings=self.settings,
+                                     rate_hz=source.rate_hz, metadata={"source": self.source_spec,
+                                                                       "device": source.name},
                                      source_counters=source.counters, reading=source.reading)
             self.pipeline.open()
             self._cpu_s, self._wall_s = time.process_time(), time.perf_counter()
@@ -122,12 +100,6 @@ class LiveSession:
 
     def _forward(self, sample: Sample) -> None:
         self.pipeline.process(sample)  # the pipeline exists once the device has said how many chips
-
-    def _driver_counters(self) -> dict:
-        stats = self.driver.stats
-        return {"delivered": stats.frames, "lost_in_transit": stats.dropped, "crc_errors": stats.crc_errors,
-                "malformed": stats.malformed, "bytes_discarded": stats.bytes_discarded,
-                "reconnects": stats.reconnects}
 
     def wait(self, duration_s: float | None = None, stop: threading.Event | None = None) -> None:
         """Stream for duration_s seconds (None: until ``stop`` is set or Ctrl-C), or until a threaded
@@ -150,8 +122,6 @@ class LiveSession:
             self._wall_s = time.perf_counter() - self._wall_s
             self._started = False
         try:
-            if self.driver is not None:
-                self.driver.close()
             if self.threaded is not None:
                 self.threaded.close()
         finally:
@@ -182,7 +152,7 @@ class LiveSession:
 
 def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
              duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
-             settings: MLX90393Settings | None = None, baudrate: int = 1_000_000, baseline_frames: int = 50,
+             settings: ChipSettings | None = None, baseline_frames: int = 50,
              drift_time_constant_s: float | None = None, drift_threshold: float | None = None,
              rest_s: float | None = None, rest_band: float | None = None,
              free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),
@@ -197,11 +167,11 @@ def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path
     in the reading's unit (default: the reading's). ``rest_s``, ``rest_band``: re-zero at rest
     (:class:`~softtip.realtime.baseline.Baseline`)."""
     estimators = [Estimator.from_file(path) for path in model_paths]
-    reading = source_spec.reading if isinstance(source_spec, ThreadedSource) else MAGNETIC
+    reading = (source_spec if isinstance(source_spec, ThreadedSource) else FirmwareStream).reading
     baseline = Baseline(baseline_frames, drift_time_constant_s=drift_time_constant_s,
                         drift_threshold=drift_threshold, rest_s=rest_s, rest_band=rest_band, reading=reading)
     session = LiveSession(source_spec, estimators, sinks, rate_hz=rate_hz, chips=chips, settings=settings,
-                          baudrate=baudrate, baseline=baseline, free_states=free_states, callbacks=callbacks,
+                          baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)
     in_main_thread = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGUSR1")
     stopping = {number: signal.signal(number, _interrupt) for number in STOP_SIGNALS} if in_main_thread else {}

@@ -356,4 +356,5 @@ def _check_last_axis(name: str, array: np.ndarray) -> None:
 # as the toolkit's checks know it (softtip.sensors.registry), declared by the systems that use it
 SENSOR = SensorKind("mlx90393", MAGNETIC, 3, MLX90393Settings, widest=MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3)),
                     full_scale=full_scale_uT, step=lsb_uT,
-                    decode=lambda settings, words: MLX90393(settings).decode(words), raw_unit="counts", title="MLX90393")
+                    decode=lambda settings, words: MLX90393(settings).decode(words), raw_unit="counts", raw_bits=16,
+                    title="MLX90393", noise=noise_rms_uT)

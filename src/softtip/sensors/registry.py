@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from softtip._core.channels import Reading
-from softtip._core.systems import System, known_readings, load, owner, systems
+from softtip._core.systems import declared, known_readings, systems
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*")
 
@@ -31,8 +31,10 @@ class SensorKind:
     without declared settings are checked against; ``full_scale(settings)``: the largest magnitude per
     axis it outputs unclipped, ``step(settings)``: its output step per axis, both in the reading's unit;
     ``decode(settings, words)``: its raw output words (..., axes) as (values in the reading's unit,
-    saturated), with ``raw_unit`` what a log calls those words ("counts"); a chip that outputs values
-    has neither; ``title``: how messages name it (its name when not given).
+    saturated), with ``raw_unit`` what a log calls those words ("counts") and ``raw_bits`` their width
+    (a word is an integer 0 .. 2^raw_bits - 1); a chip that outputs values has none of the three;
+    ``title``: how messages name it (its name when not given); ``noise(settings)``: its RMS noise per
+    axis in the reading's unit, when its datasheet states it (a recording's covariance, estimation bounds).
     """
 
     name: str
@@ -45,47 +47,86 @@ class SensorKind:
     decode: Callable[[Any, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
     raw_unit: str | None = None
     title: str | None = None
+    noise: Callable[[Any], np.ndarray] | None = None
+    raw_bits: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
             raise ValueError(f"sensor name {self.name!r}: expected a lower-case name (letters, digits, - or _)")
         if isinstance(self.axes, bool) or self.axes not in (1, 2, 3):
             raise ValueError(f"sensor {self.name!r}: axes = {self.axes!r}: expected 1, 2 or 3")
-        if (self.decode is None) != (self.raw_unit is None):
-            raise ValueError(f"sensor {self.name!r}: give decode and raw_unit together, or neither")
+        if self.axes != len(self.reading.axes):
+            raise ValueError(f"sensor {self.name!r}: axes = {self.axes}: its reading {self.reading.quantity!r} "
+                             f"has {len(self.reading.axes)} ({', '.join(self.reading.axes)})")
+        if len({self.decode is None, self.raw_unit is None, self.raw_bits is None}) > 1:
+            raise ValueError(f"sensor {self.name!r}: give decode, raw_unit and raw_bits together, or none")
+        if self.raw_bits is not None and (isinstance(self.raw_bits, bool) or self.raw_bits not in range(1, 64)):
+            raise ValueError(f"sensor {self.name!r}: raw_bits = {self.raw_bits!r}: expected an integer 1..63")
         if not isinstance(self.widest, self.settings):
             raise ValueError(f"sensor {self.name!r}: widest: expected {self.settings.__name__} settings")
+
+    def at(self, settings: Any) -> ChipSettings:
+        """This sensor at ``settings`` (an instance of its schema), as a live stream states its chips."""
+        return ChipSettings(self, settings)
 
     def settings_from(self, table: Mapping[str, Any]) -> Any:
         """Its settings from a recorded mapping; anything else is refused in one line."""
         return self.settings.from_dict(table)
 
     def saturated(self, values: np.ndarray, settings: Any) -> np.ndarray:
-        """Where values (..., 3) in the reading's unit are at its clip: within half a step of the full
+        """Where values (..., axes) in the reading's unit are at its clip: within half a step of the full
         scale (a host's conversion rounds to the step)."""
         return np.abs(values) >= self.full_scale(settings) - self.step(settings) / 2
 
     def beyond(self, values: np.ndarray, settings: Any) -> np.ndarray:
-        """Where values (..., 3) are more than a step beyond what it outputs: not its readings."""
+        """Where values (..., axes) are more than a step beyond what it outputs: not its readings."""
         return np.abs(values) > self.full_scale(settings) + self.step(settings)
+
+
+@dataclass(frozen=True)
+class ChipSettings:
+    """A stream's chips: one registered sensor (``kind``) at ``values``, an instance of its settings
+    schema - what a live scenario, session and pipeline carry instead of one chip's settings type."""
+
+    kind: SensorKind
+    values: Any
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.kind, SensorKind):
+            raise ValueError(f"kind = {self.kind!r}: expected a SensorKind")
+        if not isinstance(self.values, self.kind.settings):
+            raise ValueError(f"settings of sensor {self.kind.name!r}: expected {self.kind.settings.__name__}, "
+                             f"got {type(self.values).__name__}")
+
+    def to_dict(self) -> dict:
+        """The settings as a dataset's and a recording's metadata record them."""
+        return self.values.to_dict()
+
+    def variance(self) -> np.ndarray | None:
+        """Per-axis variance of a reading in the reading's unit squared: the noise plus the uniform
+        quantisation of the output step (step^2 / 12); None when the sensor declares no noise."""
+        if self.kind.noise is None:
+            return None
+        return self.kind.noise(self.values) ** 2 + self.kind.step(self.values) ** 2 / 12.0
+
+
+def stream_settings(settings: ChipSettings | None, reading: Reading) -> ChipSettings | None:
+    """``settings`` of a stream's chips, refused in one line unless they are None or a registered
+    sensor of the stream's ``reading`` at its settings."""
+    if settings is not None and (not isinstance(settings, ChipSettings) or settings.kind.reading != reading):
+        raise ValueError(f"settings: expected a registered sensor of {reading.quantity} at its settings, "
+                         f"got {settings!r}")
+    return settings
 
 
 def sensor_kinds() -> dict[str, SensorKind]:
     """Every sensor the registered systems declare, by name (their modules imported now)."""
-    return {name: _declared(system, name) for system in systems().values() for name in system.sensors}
+    return {name: declared("sensor", name, SensorKind) for system in systems().values() for name in system.sensors}
 
 
 def sensor_kind(name: str) -> SensorKind:
     """The registered sensor ``name``; another name is refused with the registered ones."""
-    return _declared(owner("sensor", name), name)
-
-
-def _declared(system: System, name: str) -> SensorKind:
-    kind = load(system.sensors[name])
-    if not isinstance(kind, SensorKind) or kind.name != name:
-        raise TypeError(f"system {system.name!r}: sensors.{name} = {system.sensors[name]!r}: expected a SensorKind "
-                        f"named {name!r}")
-    return kind
+    return declared("sensor", name, SensorKind)
 
 
 def check_changes(columns: Mapping[str, np.ndarray], stated: Mapping[str, Any] | None, source: str) -> None:

@@ -97,11 +97,12 @@ def _vectors(vectors) -> np.ndarray:
 
 
 def _readings(topic: TopicMessages, reading: Reading) -> tuple[np.ndarray, np.ndarray]:
-    """(header stamps in ns, readings (n, 3) in the reading's unit) of a topic of a chip's messages."""
+    """(header stamps in ns, readings (n, axes) in the reading's unit) of a topic of a chip's messages:
+    the reading's own axes of each message's vector."""
     messages = topic.decoded()
     stamps = np.array([_stamp_ns(m.header) for m in messages], dtype=np.int64)
     vector = operator.attrgetter(READING_VECTORS[reading.message])
-    return stamps, _vectors(vector(m) for m in messages) * per_message_unit(reading)
+    return stamps, _vectors(vector(m) for m in messages)[:, list(reading.positions)] * per_message_unit(reading)
 
 
 def _reading_topics(recording: Recording, prefix: str | None) -> tuple[str, list[str], Reading]:
@@ -134,7 +135,7 @@ def _reading_topics(recording: Recording, prefix: str | None) -> tuple[str, list
 
 def _frames(recording: Recording, topics: list[str],
             reading: Reading) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(stamps in ns, log times of chip 0, readings (n, chips, 3), stamps left out as incomplete)."""
+    """(stamps in ns, log times of chip 0, readings (n, chips, axes), stamps left out as incomplete)."""
     decoded = []
     for name in topics:
         topic = recording.topics[name]

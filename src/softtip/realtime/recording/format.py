@@ -39,8 +39,7 @@ import numpy as np
 
 from softtip._core.channels import Reading
 from softtip._core.units import FORCE_UNITS
-from softtip._core.units import UT_PER_T
-from softtip.sensors.mlx90393 import MLX90393Settings, lsb_uT, noise_rms_uT
+from softtip.sensors.registry import ChipSettings
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -130,15 +129,25 @@ def reading_topic(reading: Reading) -> tuple[str, str]:
 
 def reading_fields(reading: Reading, values: np.ndarray, vector: Callable[[np.ndarray], dict],
                    covariance: list | None = None) -> dict:
-    """The fields of a chip's reading message after its header: ``values`` (3, in the reading's
-    unit) in SI, each vector encoded by ``vector``; a MagneticField carries ``covariance``
+    """The fields of a chip's reading message after its header: ``values`` (its axes, in the reading's
+    unit) in SI, each vector encoded by ``vector`` (an axis the reading does not have is NaN: the
+    message's x, y, z are fixed, the chip's axes are not); a MagneticField carries ``covariance``
     (9 values, T², default unknown: zeros), a force chip's WrenchStamped a NaN torque."""
-    carried = values / per_message_unit(reading)
+    carried = in_xyz(reading, np.asarray(values) / per_message_unit(reading))
     if reading.message == MAGNETIC_FIELD:
         return {"magnetic_field": vector(carried), "magnetic_field_covariance": covariance or [0.0] * 9}
     if reading.message == VECTOR3_STAMPED:
         return {"vector": vector(carried)}
     return {"wrench": {"force": vector(carried), "torque": vector(_NO_TORQUE)}}
+
+
+def in_xyz(reading: Reading, values: np.ndarray, missing: float = np.nan) -> np.ndarray:
+    """Values on a reading's axes (..., axes) placed in a message's x, y, z (..., 3): the axes it does
+    not read are ``missing``."""
+    values = np.asarray(values, dtype=np.float64)
+    placed = np.full((*values.shape[:-1], 3), missing)
+    placed[..., list(reading.positions)] = values
+    return placed
 
 
 def per_message_unit(reading: Reading) -> float:
@@ -183,10 +192,12 @@ def wrench_values(estimates: np.ndarray, mapping: Sequence[tuple[int, int, float
     return wrench
 
 
-def magnetic_covariance_T2(settings: MLX90393Settings | None) -> np.ndarray:
-    """Row-major 3x3 covariance in T^2 of a chip read with ``settings``: sensor noise plus uniform
-    quantisation (LSB^2/12) per axis; zeros (ROS: unknown) when the settings are not known."""
-    if settings is None:
+def magnetic_covariance_T2(settings: ChipSettings | None) -> np.ndarray:
+    """Row-major 3x3 covariance, in its message's unit squared (T^2 for a magnetic field), of a chip
+    read at ``settings``: the registered sensor's noise plus uniform quantisation per axis; zeros (ROS:
+    unknown) when the settings are not known or the sensor declares no noise."""
+    variance = None if settings is None else settings.variance()
+    if variance is None:
         return np.zeros(9)
-    variance_uT2 = noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12.0
-    return np.diag(variance_uT2 / UT_PER_T**2).ravel()
+    reading = settings.kind.reading  # an axis the chip does not read: unknown, 0
+    return np.diag(in_xyz(reading, variance / per_message_unit(reading) ** 2, missing=0.0)).ravel()

@@ -168,9 +168,9 @@ class McapRecorder:
         if not frames:
             return
         readings = np.stack([f.reading for f in frames])
-        if readings.shape[1:] != (self.chips, 3):
+        if readings.shape[1:] != (self.chips, len(self.reading.axes)):
             raise RecordingError(f"frames hold readings of shape {readings.shape[1:]}, the recording "
-                                 f"{(self.chips, 3)}")
+                                 f"{(self.chips, len(self.reading.axes))}")
         write = self._writer.write_message
         for frame, reading in zip(frames, readings, strict=True):
             stamp, seq = frame.stamp_ns, frame.seq

@@ -108,11 +108,11 @@ class DashboardSink(Sink):
         counters = stream.counters(latency_window=max(1, int(nominal_hz * self.window_s)))
         reading = stream.reading
         chips = Table(title=f"Change of {reading.quantity} ({reading.shown_unit})", expand=False)
-        for column in ("chip", *(f"Δ{reading.symbol}{axis}" for axis in "xyz"), ""):
+        for column in ("chip", *(f"Δ{reading.symbol}{axis}" for axis in reading.axes), ""):
             chips.add_column(column, justify="right")
         for k in range(stream.chips):
             if frame is None or frame.change is None:
-                values = ["—"] * 3
+                values = ["—"] * len(reading.axes)
             else:
                 values = [_number(v, reading.decimals) for v in frame.change[k]]
             flags = "" if frame is None else (

@@ -35,7 +35,7 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
         if frame.estimates is not None and frame.device_time_s is not None:
             frames.append((frame.device_time_s, np.array(frame.estimates[:3])))
 
-    settings = protocol.design.sensor_settings
+    settings = protocol.design.chip_settings
     summary = run_live("emulator", [model_path], live_sinks(dashboard=dashboard, record=record), duration_s,
                        rate_hz=rate_hz, chips=1, settings=settings, callbacks=[collect],
                        emulator_source=scenario)

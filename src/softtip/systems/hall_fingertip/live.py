@@ -38,7 +38,7 @@ def push_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_s
         model = calibrate_force_model(protocol.seed, progress, reuse=True)[0]
     return LiveScenario("the twin's pushes and shears on one fingertip", "emulator", (model,),
                         chips=scenario.field_uT.shape[1], emulator_source=scenario,
-                        settings=protocol.design.sensor_settings)
+                        settings=protocol.design.chip_settings)
 
 
 def insertion_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
@@ -53,4 +53,4 @@ def insertion_scenario(progress: Progress = SILENT, check: StreamCheck = accept_
         models = tuple(trained_model_files(protocol, progress))
     return LiveScenario("the inverter lid between two fingertips, seated and on either clip", "emulator", models,
                         chips=scenario.field_uT.shape[1], emulator_source=scenario,
-                        settings=protocol.design.sensor_settings)
+                        settings=protocol.design.chip_settings)
