@@ -8,7 +8,8 @@
 // --fields: text, one row per conversion, 3 * N numbers (x, y, z in uT of chip 0, then chip 1, ...);
 // '#' starts a comment. A regular file is read whole and its rows used in turn, cycling: the k-th
 // conversion of every chip (that is the frame of sequence number k) takes row k mod rows. A FIFO is
-// read as rows arrive; a conversion takes the next unread row, or the last one when none is new.
+// read as rows arrive: the k-th conversion takes row k if it has arrived, else the latest row (a zero
+// field before the first).
 // The simulation is paced to the wall clock (simulated time never runs ahead of real time).
 //
 // Standard input takes control lines: "nak CHIP 0|1" (the chip stops / resumes acknowledging its
