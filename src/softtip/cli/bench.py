@@ -143,8 +143,9 @@ def bench_firmware(
         mark = "[green]ok[/]" if answer["ok"] else "[red]WRONG[/]"
         console.print(f"  {answer['case']}: {answer['answer']} ({mark})", highlight=False)
     for fault in report["faults"]:
-        console.print(f"  {fault['case']}: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in fault.items()
-                                                         if k != "case"), highlight=False)
+        console.print(f"  {fault['case']}: " + ", ".join(
+            f"{k.replace('_', ' ')} {f'{v:.2f}' if isinstance(v, float) else v}" for k, v in fault.items() if k != "case"),
+            highlight=False)
 
 
 
