@@ -14,12 +14,13 @@
 //
 // Standard input takes control lines: "nak CHIP 0|1" (the chip stops / resumes acknowledging its
 // address), "stuck 0|1" (SDA held low: no START completes), "reset CHIP" (the chip restarts with
-// power-on registers, as after a supply dip), "regs" (print every chip's registers 0x00 and 0x02), "time",
-// "quit". Standard output carries one event per line:
+// power-on registers, as after a supply dip), "burst CHIP" (the chip is left in burst mode), "regs"
+// (print every chip's registers 0x00 and 0x02), "time", "quit". Standard output carries one event
+// per line:
 //   pty PATH                         the serial port to open
 //   conv CHIP K SIM_NS WALL_NS X Y Z  chip's K-th conversion ended (simulated time, CLOCK_MONOTONIC)
 //   frame SEQ SIM_NS WALL_NS          a DATA frame's last bit left the UART; its bytes went to the pty
-//   early CHIP SIM_NS                 RM before the conversion ended (the previous data are sent)
+//   early CHIP SIM_NS                 RM before the conversion ended (ERROR, with the previous data)
 //   regs CHIP REG0 REG2               answer to "regs" (hexadecimal)
 //   time SIM_NS WALL_NS               every 10 ms of simulated time, on "time", and at exit
 // Written from the MLX90393 datasheet (Melexis, rev. 006), the TCA9548A datasheet (Texas Instruments)
@@ -299,6 +300,9 @@ static void mlx_start_single(mlx_t *m, uint8_t zyxt) {
     avr_cycle_timer_register(sim.avr, cycles, conversion_done, m);
 }
 
+// An all-zero zyxt argument of SB, SW or SM takes BURST_SEL, bits [9:6] of register 0x01.
+static uint8_t burst_sel(const mlx_t *m) { return (uint8_t)((m->reg[1] >> 6) & 0xF); }
+
 // Execute the command collected in the write phase; fill the response (status byte first).
 static void mlx_execute(mlx_t *m) {
     uint8_t error = 0, d = 0;
@@ -314,10 +318,10 @@ static void mlx_execute(mlx_t *m) {
         case CMD_SM:
             if (m->mode & (STATUS_BURST | STATUS_WOC | STATUS_SM)) {
                 error = STATUS_ERROR;  // a mode is already running: EX first
-            } else if (low == 0) {
-                error = STATUS_ERROR;
+            } else if ((low ? low : burst_sel(m)) == 0) {
+                error = STATUS_ERROR;  // nothing to convert
             } else if (code == CMD_SM) {
-                mlx_start_single(m, low);
+                mlx_start_single(m, low ? low : burst_sel(m));
             } else {
                 m->mode = code == CMD_SB ? STATUS_BURST : STATUS_WOC;
             }
@@ -327,7 +331,10 @@ static void mlx_execute(mlx_t *m) {
                 error = STATUS_ERROR;
                 break;
             }
-            if (sim.avr->cycle < m->ready_cycle) printf("early %d %lld\n", m->index, (long long)sim_ns(sim.avr->cycle));
+            if (sim.avr->cycle < m->ready_cycle) {  // DRDY low: the previous data, flagged
+                error = STATUS_ERROR;
+                printf("early %d %lld\n", m->index, (long long)sim_ns(sim.avr->cycle));
+            }
             for (int axis = 0; axis < 4; ++axis)  // T before X, Y, Z
                 if (low & (1 << axis)) out[words++] = m->data[axis];
             break;
@@ -544,6 +551,8 @@ static void control(char *line) {
         sim.stuck_bus = on;
     } else if (sscanf(line, "reset %d", &chip) == 1 && chip >= 0 && chip < sim.chips) {
         mlx_power_on(&sim.mlx[chip]);
+    } else if (sscanf(line, "burst %d", &chip) == 1 && chip >= 0 && chip < sim.chips) {
+        sim.mlx[chip].mode = STATUS_BURST;  // as if something had started burst mode: SM is refused until EX
     } else if (strncmp(line, "time", 4) == 0) {
         printf("time %lld %lld\n", (long long)sim_ns(sim.avr->cycle), (long long)wall_ns());
     } else if (strncmp(line, "regs", 4) == 0) {
