@@ -101,6 +101,24 @@ def test_a_chip_that_does_not_acknowledge_is_reported_and_recovers(simulator, fi
     assert refused[-1] < len(samples) - 15 and not status[refused[-1] + 1:].any()
 
 
+def test_a_chip_that_refuses_commands_is_reset_after_one_frame(simulator, fields_uT):
+    with simulated_board(simulator, fields_uT) as board:
+        with FingertipDriver(board.port, rate_hz=200, reply_timeout_s=3.0, boot_timeout_s=12.0) as driver:
+            driver.start()
+            board.wait_simulated(0.03)
+            board.control("burst 1")  # left in burst mode: SM is refused with ERROR until EX
+            board.wait_simulated(0.1)
+            samples = driver.drain()
+    status = np.array([s.status for s in samples])
+    # one frame reports CHIP_ERROR (bit 1, NaN on the host); EX, RT and the settings follow it
+    assert np.flatnonzero(status[:, 1]).size == 1 and status[:, 1].max() == 0x02 and not status[:, 0].any()
+    after = samples[int(np.flatnonzero(status[:, 1])[0]) + 1:]
+    assert len(after) >= 15
+    for sample in after:  # the refused SM started no conversion: the chip is one behind the frames
+        row = fields_uT[(sample.seq - 1) % len(fields_uT), 1]
+        np.testing.assert_allclose(sample.reading[1], by_hand(row, 0.150, 0.242), rtol=0, atol=1e-9)
+
+
 def test_a_stuck_bus_costs_one_timeout_per_frame_and_the_rate_holds(simulator, fields_uT):
     with simulated_board(simulator, fields_uT) as board:
         with FingertipDriver(board.port, rate_hz=100, reply_timeout_s=3.0, boot_timeout_s=12.0) as driver:

@@ -178,8 +178,10 @@ void acquire_frame() {
     }
     Serial.write(out, encode_data(out, seq, frame_time_us, flags, readings, CHIP_COUNT));
     ++seq;
+    // ERROR too: a chip left in burst or wake-up-on-change mode refuses SM until EX, and after an
+    // uncorrectable memory error it accepts nothing but RT (datasheet, "Status byte")
     for (uint8_t i = 0; i < CHIP_COUNT; ++i) {
-        if (readings[i].status & (CHIP_RESET | CHIP_BUS_ERROR)) chip_needs_init[i] = true;
+        if (readings[i].status & (CHIP_RESET | CHIP_BUS_ERROR | CHIP_ERROR)) chip_needs_init[i] = true;
     }
 }
 

@@ -452,8 +452,9 @@ def _recovered_from(status: np.ndarray, chip: int) -> int:
 
 
 def fault_answers(build: SimulatorBuild, chips: int, fields_uT: np.ndarray, hold_s: float = 0.2) -> list[dict]:
-    """The stream while one chip does not acknowledge, while SDA is held low, and after a chip restarts
-    (supply dip): what the frames report, and whether the stream recovers with the fields as fed."""
+    """The stream while one chip does not acknowledge, while SDA is held low, after a chip restarts
+    (supply dip) and after one is left in burst mode: what the frames report, and whether the stream
+    recovers with the fields as fed."""
     answers = []
     faulty = chips - 1
     others = [c for c in range(chips) if c != faulty]
@@ -508,6 +509,13 @@ def fault_answers(build: SimulatorBuild, chips: int, fields_uT: np.ndarray, hold
             "case": f"chip {faulty} restarts with power-on registers",
             "frames": len(during),
             "frames_with_its_reset": int(np.sum(status[:, faulty] & ChipStatus.RESET != 0)),
+            **recovery(during, status, [faulty]),
+        })
+        during, status, _, _ = phase(f"burst {faulty}", None)
+        answers.append({
+            "case": f"chip {faulty} left in burst mode (refuses SM until EX)",
+            "frames": len(during),
+            "frames_with_its_chip_error": int(np.sum(status[:, faulty] & ChipStatus.CHIP_ERROR != 0)),
             **recovery(during, status, [faulty]),
         })
         answers.append({"case": "frames lost in transit during the faults (sequence gaps)",
