@@ -4,8 +4,10 @@ emulated TCA9548A and MLX90393s, and streams to the host driver over a pseudo-te
 The fields fed to the emulated chips are read back through the firmware, the frames and the driver,
 and compared with a hand computation from the datasheet's sensitivity (Table 17, HALLCONF 0xC): 0.150
 µT per count on X and Y and 0.242 on Z at GAIN_SEL 7, RES 0 (the power-on gain); 3.004 and 4.840 at
-GAIN_SEL 0, RES 2. A chip that does not acknowledge must be reported as the protocol says (status bit
-0, BUS_ERROR; the host reads NaN) while the other chips carry on. CI installs simavr with .ci/run.
+GAIN_SEL 0, RES 2; the temperature word 46244 + 45.2 per kelvin above 25 °C (the datasheet's
+typical reference, the driver's too). A chip that does not acknowledge must be reported as the
+protocol says (status bit 0, BUS_ERROR; the host reads NaN) while the other chips carry on. CI
+installs simavr with .ci/run.
 """
 
 import json
@@ -43,7 +45,7 @@ def by_hand(field_uT: np.ndarray, xy_uT_per_count: float, z_uT_per_count: float)
 
 
 def streamed(simulator, fields_uT, settings: MLX90393Settings, seconds: float, rate_hz: int):
-    with simulated_board(simulator, fields_uT) as board:
+    with simulated_board(simulator, fields_uT, temperature_c=31.5) as board:
         with FingertipDriver(board.port, settings=settings, rate_hz=rate_hz, reply_timeout_s=3.0,
                              boot_timeout_s=12.0) as driver:
             driver.start()
@@ -55,7 +57,8 @@ def streamed(simulator, fields_uT, settings: MLX90393Settings, seconds: float, r
 
 
 @pytest.mark.parametrize("settings, xy, z", [(MLX90393Settings(), 0.150, 0.242),
-                                             (MLX90393Settings(gain_sel=0, res_xyz=(2, 2, 2)), 3.004, 4.840)])
+                                             (MLX90393Settings(gain_sel=0, res_xyz=(2, 2, 2), temperature=True),
+                                              3.004, 4.840)])
 def test_frames_decode_and_read_back_the_fields_fed(simulator, fields_uT, settings, xy, z):
     samples, stats, sent, conversions = streamed(simulator, fields_uT, settings, 0.25, 200)
     seqs = [s.seq for s in samples]
@@ -70,6 +73,10 @@ def test_frames_decode_and_read_back_the_fields_fed(simulator, fields_uT, settin
         assert not sample.status.any()
         np.testing.assert_allclose(sample.reading, by_hand(fields_uT[sample.seq % len(fields_uT)], xy, z),
                                    rtol=0, atol=1e-9)
+        if settings.temperature:  # the chip sends T first: 46244 + 6.5 K x 45.2 = 46537.8 -> 46538 counts
+            assert sample.temperature_C == pytest.approx([25 + (46538 - 46244) / 45.2] * CHIPS, abs=1e-9)
+        else:
+            assert sample.temperature_C is None
     period = np.median(np.diff([s.device_time_s for s in samples]))
     assert period == pytest.approx(1 / 200, abs=2e-6)  # micros() ticks in 4 us steps
 

@@ -156,12 +156,13 @@ class BoardLog:
 class SimulatedBoard:
     """The firmware running in the simulator: ``port`` for the host, ``control`` for bus faults."""
 
-    def __init__(self, build: SimulatorBuild, chips: int, fields_path: Path) -> None:
+    def __init__(self, build: SimulatorBuild, chips: int, fields_path: Path, temperature_c: float = 25.0) -> None:
         self.chips = chips
         self.log = BoardLog()
         self._registers: queue.Queue[tuple[int, int, int]] = queue.Queue()
         self._process = subprocess.Popen(
-            [str(build.harness), str(build.firmware[chips]), "--chips", str(chips), "--fields", str(fields_path)],
+            [str(build.harness), str(build.firmware[chips]), "--chips", str(chips), "--fields", str(fields_path),
+             "--temperature-c", repr(float(temperature_c))],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
         line = self._process.stdout.readline()
         while line and not line.startswith("pty "):
@@ -232,11 +233,12 @@ class SimulatedBoard:
 
 
 @contextmanager
-def simulated_board(build: SimulatorBuild, fields_uT: np.ndarray) -> Iterator[SimulatedBoard]:
+def simulated_board(build: SimulatorBuild, fields_uT: np.ndarray, temperature_c: float = 25.0
+                    ) -> Iterator[SimulatedBoard]:
     with tempfile.TemporaryDirectory(prefix="softtip-firmware-") as folder:
         path = Path(folder) / "fields.txt"
         write_fields(path, fields_uT)
-        board = SimulatedBoard(build, fields_uT.shape[1], path)
+        board = SimulatedBoard(build, fields_uT.shape[1], path, temperature_c)
         try:
             yield board
         finally:
