@@ -154,6 +154,8 @@ def test_commands_and_bad_input_are_answered_as_the_protocol_says(simulator, fie
     by_case = {a["case"]: a["answer"] for a in answers}
     assert by_case["IDENTIFY with a bad CRC"] == "no reply"
     assert by_case["reserved command 0x15"] == "ERROR UNKNOWN_COMMAND (detail 0x00)"
+    # CHIP_FAILURE's detail has bit i set for each chip i that refused the settings
+    assert by_case[f"CONFIGURE while chip {CHIPS - 1} does not acknowledge"] == "ERROR CHIP_FAILURE (detail 0x02)"
     # GAIN_SEL 5 at [6:4], HALLCONF 0xC; OSR 1, DIG_FILT 3 at [4:2], RES 1, 1, 2 at [6:5], [8:7], [10:9]
     words = (0x5C, 0x1 | 3 << 2 | 1 << 5 | 1 << 7 | 2 << 9)
     assert by_case["registers 0x00, 0x02 after CONFIGURE"] == str([words] * CHIPS)

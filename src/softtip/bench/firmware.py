@@ -409,6 +409,10 @@ def command_answers(build: SimulatorBuild, chips: int, fields_uT: np.ndarray) ->
             wanted = [register_words(configured, *registers) for registers in power_on]
             answers.append({"case": "registers 0x00, 0x02 after CONFIGURE", "answer": str(words),
                             "expected": str(wanted), "ok": words == wanted})
+            board.control(f"nak {chips - 1} 1")
+            ask(f"CONFIGURE while chip {chips - 1} does not acknowledge", encode_frame(configure_command(12, configured)),
+                f"ERROR CHIP_FAILURE (detail {1 << (chips - 1):#04x})")
+            board.control(f"nak {chips - 1} 0")
             forbidden = bytes([7, 0, 0, 0, 0, 0, 0, 0xC, 0])  # OSR 0 with DIG_FILT 0
             ask("CONFIGURE with OSR 0, DIG_FILT 0", encode_frame(Command(FrameType.CONFIGURE, 3, forbidden)),
                 "ERROR BAD_SETTINGS (detail 0x00)")
