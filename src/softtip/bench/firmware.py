@@ -37,7 +37,7 @@ from softtip.hardware.emulator_process import PressCycle
 from softtip.hardware.protocol import (CHIP_FAULTS, Ack, ChipStatus, Command, ErrorCode, ErrorReply, FrameDecoder,
                                        FrameType, Identity, configure_command, encode_frame, identify_command,
                                        set_rate_command, start_command, stop_command)
-from softtip.sensors.mlx90393 import MLX90393, MLX90393Settings
+from softtip.sensors.mlx90393 import MLX90393, MLX90393Settings, conversion_time_s
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[3] / "firmware"
 ARDUINO_MK = Path("/usr/share/arduino/Arduino.mk")
@@ -50,6 +50,9 @@ MAX_RATE_HZ = 1000  # the firmware's highest rate: frames then follow back to ba
 FIELD_ROWS = 4000  # rows of the field file, used in turn by the conversions (cycling)
 REPLY_WAIT_S = 3.0  # wall time for a reply: the simulation may run several times slower than real time
 SIMULATED_WAIT_S = 0.05  # simulated time a dropped command is given to prove it has no reply
+# PROTOCOL.md's frame-period budget: bit periods at 400 kHz of a mux select, an SM and an XYZ RM
+I2C_BIT_US = 2.5
+SELECT_BITS, SM_BITS, RM_BITS = 20, 39, 93
 
 
 class SimulatorUnavailable(RuntimeError):
@@ -245,6 +248,17 @@ def simulated_board(build: SimulatorBuild, fields_uT: np.ndarray, temperature_c:
             board.close()
 
 
+def bus_and_conversion_us(chips: int, settings: MLX90393Settings = MLX90393Settings()) -> float:
+    """The shortest frame the firmware's sequence allows, counting only the bus and the conversion
+    (PROTOCOL.md's budget; XYZ): select + SM of chip 0 (no select with one chip: its channel stays),
+    the wait for its conversion (+10 %) while the others are triggered, its RM, then select + RM of
+    each other chip."""
+    select = SELECT_BITS if chips > 1 else 0
+    wait_us = conversion_time_s(settings) * 1e6 * 1.1
+    bits = select + SM_BITS + RM_BITS + (chips - 1) * (SELECT_BITS + RM_BITS)
+    return bits * I2C_BIT_US + wait_us
+
+
 def as_fed(board: SimulatedBoard, samples: list[Sample], fields_uT: np.ndarray,
            settings: MLX90393Settings) -> np.ndarray:
     """(frames, chips) whether each chip's reading is the field it was fed, as the host decodes it.
@@ -324,6 +338,7 @@ def stream(build: SimulatorBuild, chips: int, seconds: float, fields_uT: np.ndar
         simulated_s = board.log.sim_ns * 1e-9
         figures = stream_figures(board, samples, fields_uT, settings)
     figures.update(chips=chips, rate_hz=rate_hz, simulated_s=simulated_s,
+                   frames_per_s_bus_and_conversion_bound=1e6 / bus_and_conversion_us(chips, settings),
                    realtime_factor=simulated_s / (time.perf_counter() - wall_start),
                    crc_errors=stats.crc_errors, malformed=stats.malformed, gaps=stats.dropped,
                    queue_overflows=stats.queue_overflows)

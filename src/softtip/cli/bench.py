@@ -133,7 +133,8 @@ def bench_firmware(
                   f"{', '.join(f'{v:.2f}' for v in report['load_average_after'])} after; {report['cpus']} CPUs")
     for s in report["streams"]:
         latency, simulated, host = s["latency_oldest_chip"], s["latency_simulated_part"], s["latency_host_part"]
-        console.print(f"{s['chips']} chip{'s' * (s['chips'] > 1)}: {s['frames_per_s']:.1f} frames/s; "
+        console.print(f"{s['chips']} chip{'s' * (s['chips'] > 1)}: {s['frames_per_s']:.1f} frames/s (bus and "
+                      f"conversion alone: {s['frames_per_s_bus_and_conversion_bound']:.0f}); "
                       f"{s['frames_received']}/{s['frames_sent']} frames received, {s['frames_lost']} lost, "
                       f"{s['crc_errors'] + s['malformed']} damaged, {s['frames_not_as_fed']} not as fed; latency "
                       f"p50 {latency['p50_ms']:.2f} / p99 {latency['p99_ms']:.2f} / max {latency['max_ms']:.2f} ms "
