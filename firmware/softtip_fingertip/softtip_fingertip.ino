@@ -37,6 +37,12 @@ const uint8_t MLX_MUX_ADDRESS = 0x0C;
 const uint8_t DIRECT_ADDRESSES[MAX_CHIPS] = {0x0C, 0x0D, 0x0E, 0x0F, 0x10, 0x11, 0x12, 0x13};
 const uint8_t NO_CHANNEL = 0xFF;
 
+#if defined(WIRE_HAS_TIMEOUT) || defined(ARDUINO_ARCH_AVR)  // AVR core >= 1.8.3
+#define SOFTTIP_WIRE_TIMEOUT 1
+#else
+#define SOFTTIP_WIRE_TIMEOUT 0
+#endif
+
 #if SOFTTIP_USE_MUX
 #define SOFTTIP_BUS_NAME "mux"
 #else
@@ -70,6 +76,23 @@ uint8_t out[MAX_DATA_FRAME];
 // ---------------------------------------------------------------------------
 // Bus
 // ---------------------------------------------------------------------------
+
+// A transfer of this frame timed out (SDA or SCL held low): the frame's remaining transfers are
+// skipped, so a stuck bus costs one timeout per frame instead of one per transfer, and the stream
+// keeps its rate with every chip flagged BUS_ERROR.
+bool bus_timed_out() {
+#if SOFTTIP_WIRE_TIMEOUT
+    return Wire.getWireTimeoutFlag();
+#else
+    return false;
+#endif
+}
+
+void clear_bus_timeout() {
+#if SOFTTIP_WIRE_TIMEOUT
+    Wire.clearWireTimeoutFlag();
+#endif
+}
 
 // Route the bus to chip i; false when the multiplexer does not acknowledge.
 bool select_chip(uint8_t i) {
@@ -126,16 +149,18 @@ uint8_t configure_all() {
 void acquire_frame() {
     const uint8_t zyxt = static_cast<uint8_t>(MLX_AXES_XYZ | (settings.temperature ? MLX_AXIS_T : 0));
     const uint32_t frame_time_us = micros();
+    clear_bus_timeout();
     for (uint8_t i = 0; i < CHIP_COUNT; ++i) {
         ChipReading &reading = readings[i];
         reading.x = reading.y = reading.z = reading.temperature = 0;
-        reading.status = select_chip(i) ? chips[i].start_single(zyxt) : static_cast<uint8_t>(CHIP_BUS_ERROR);
+        const bool reachable = !bus_timed_out() && select_chip(i);
+        reading.status = reachable ? chips[i].start_single(zyxt) : static_cast<uint8_t>(CHIP_BUS_ERROR);
         trigger_us[i] = micros();
     }
     for (uint8_t i = 0; i < CHIP_COUNT; ++i) {
         ChipReading &reading = readings[i];
         if (reading.status & CHIP_FAULTS) continue;
-        if (!select_chip(i)) {
+        if (bus_timed_out() || !select_chip(i)) {
             reading.status |= CHIP_BUS_ERROR;
             continue;
         }
@@ -153,8 +178,10 @@ void acquire_frame() {
     }
     Serial.write(out, encode_data(out, seq, frame_time_us, flags, readings, CHIP_COUNT));
     ++seq;
+    // ERROR too: a chip left in burst or wake-up-on-change mode refuses SM until EX, and after an
+    // uncorrectable memory error it accepts nothing but RT (datasheet, "Status byte")
     for (uint8_t i = 0; i < CHIP_COUNT; ++i) {
-        if (readings[i].status & (CHIP_RESET | CHIP_BUS_ERROR)) chip_needs_init[i] = true;
+        if (readings[i].status & (CHIP_RESET | CHIP_BUS_ERROR | CHIP_ERROR)) chip_needs_init[i] = true;
     }
 }
 
@@ -220,7 +247,7 @@ void setup() {
     Serial.begin(SERIAL_BAUD);
     Wire.begin();
     Wire.setClock(I2C_CLOCK_HZ);
-#if defined(WIRE_HAS_TIMEOUT) || defined(ARDUINO_ARCH_AVR)  // AVR core >= 1.8.3
+#if SOFTTIP_WIRE_TIMEOUT
     Wire.setWireTimeout(I2C_TIMEOUT_US, true);
 #endif
     settings = default_settings();
@@ -245,7 +272,8 @@ void loop() {
     // Behind schedule (period shorter than an acquisition, or a stall): restart the
     // schedule from now instead of sending a burst of late frames.
     if (static_cast<int32_t>(micros() - next_frame_us) > 0) next_frame_us = micros();
-    for (uint8_t i = 0; i < CHIP_COUNT; ++i) {
+    // a bus that timed out is retried by the next frame, not by every chip's initialisation
+    for (uint8_t i = 0; i < CHIP_COUNT && !bus_timed_out(); ++i) {
         if (chip_needs_init[i]) initialize_chip(i);
     }
 }

@@ -103,6 +103,53 @@ def bench_live(
 
 
 
+def bench_firmware(
+    chips: int = typer.Option(4, "--chips", help="Chips of the largest build (each count from 1 is measured)."),
+    seconds: float = typer.Option(2.0, "--seconds", help="Simulated seconds of streaming per chip count."),
+    fields: Path = typer.Option(None, "--fields", help="Text file of fields fed to the chips: one row per "
+                                "conversion, x y z (µT) of each chip (default: the emulator's press cycles)."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The firmware's own AVR build run in simavr with an emulated TCA9548A and MLX90393s, streaming to
+    the host driver over a pseudo-terminal at 1,000,000 baud: frames per second per chip count, frames
+    lost or damaged, latency from conversion to decoded frame, the fields read back, and the firmware's
+    answer to each host command, to bad input and to bus faults."""
+    from softtip.bench.firmware import FIRMWARE_DIR, MAX_CHIPS, bench_firmware as run, read_fields, toolchain_missing
+    from softtip.cli.common import check_input
+
+    check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
+    check_number(seconds, "--seconds", above=0, maximum=LONGEST_S, unit="s")
+    fields_uT = None if fields is None else read_fields(check_input(fields, "--fields"), chips)
+    if not FIRMWARE_DIR.is_dir():
+        fail("bench firmware: the firmware sources are not installed with the package: run it from a source checkout")
+    missing = toolchain_missing()
+    if missing is not None:
+        fail(f"bench firmware: {missing}")
+    report = run(chips, seconds, progress=progress_for(json_output), fields_uT=fields_uT)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print(f"load average {', '.join(f'{v:.2f}' for v in report['load_average_before'])} before, "
+                  f"{', '.join(f'{v:.2f}' for v in report['load_average_after'])} after; {report['cpus']} CPUs")
+    for s in report["streams"]:
+        latency, simulated, host = s["latency_oldest_chip"], s["latency_simulated_part"], s["latency_host_part"]
+        console.print(f"{s['chips']} chip{'s' * (s['chips'] > 1)}: {s['frames_per_s']:.1f} frames/s (bus and "
+                      f"conversion alone: {s['frames_per_s_bus_and_conversion_bound']:.0f}); "
+                      f"{s['frames_received']}/{s['frames_sent']} frames received, {s['frames_lost']} lost, "
+                      f"{s['crc_errors'] + s['malformed']} damaged, {s['frames_not_as_fed']} not as fed; latency "
+                      f"p50 {latency['p50_ms']:.2f} / p99 {latency['p99_ms']:.2f} / max {latency['max_ms']:.2f} ms "
+                      f"(on the board {simulated['p50_ms']:.2f} ms, host p99 {host['p99_ms']:.2f} ms; simulation at "
+                      f"{s['realtime_factor']:.2f}x real time)")
+    for answer in report["commands"]:
+        mark = "[green]ok[/]" if answer["ok"] else "[red]WRONG[/]"
+        console.print(f"  {answer['case']}: {answer['answer']} ({mark})", highlight=False)
+    for fault in report["faults"]:
+        console.print(f"  {fault['case']}: " + ", ".join(
+            f"{k.replace('_', ' ')} {f'{v:.2f}' if isinstance(v, float) else v}" for k, v in fault.items() if k != "case"),
+            highlight=False)
+
+
+
 def bench_magnetics(
     poses: list[int] = typer.Option([100_000, 1_000_000], "--poses", help="Pose sets per batch (repeatable)."),
     sensors: list[int] = typer.Option([1, 2], "--sensors", help="Sensors (repeatable)."),

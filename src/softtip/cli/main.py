@@ -60,7 +60,8 @@ def _benches() -> typer.Typer:
     from softtip.cli import bench
 
     return _typer_group(BENCH_HELP, {
-        "twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live, "magnetics": bench.bench_magnetics,
+        "twin": bench.bench_twin, "rom": bench.bench_rom, "live": bench.bench_live, "firmware": bench.bench_firmware,
+        "magnetics": bench.bench_magnetics,
         "calibration": bench.bench_calibration, "sysid": bench.bench_sysid, "studies": bench.bench_studies,
         **{name: load(reference) for system in _registered for name, reference in system.bench_commands.items()}})
 
