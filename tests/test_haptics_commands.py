@@ -267,9 +267,10 @@ def test_the_emulated_device_answers_each_frame_with_the_models_wrench_and_the_l
     controller = EmulatedController(master, device, TEST_FINGERTIPS[1], LOOP_RATE_HZ, None)
     path = tmp_path / "replies.mcap"
     try:
+        # paced (at normal priority): the replies come while the loop runs
         summary = render_stream(device, renderer, SerialDevice(os.ttyname(slave), device), wanted,
-                                [RecorderSink(path)], paced=False)
-        controller.stop()
+                                [RecorderSink(path)], realtime=False)
+        controller.thread.join(10.0)  # it ends at the release
     finally:
         os.close(slave)
         os.close(master)
@@ -282,13 +283,16 @@ def test_the_emulated_device_answers_each_frame_with_the_models_wrench_and_the_l
         expected.append(model.frame(20).wrench[-1])
     replied = np.array([wrench for _, wrench in controller.replied])
     assert [frame for frame, _ in controller.replied] == list(range(10)) and np.allclose(replied, expected)
-    # the host read those that came while it ran (the last one answers the release), to the line's 6 digits
+    # the host read those that came while it ran (frames 0-8: the last answers the release; measured 9 of 9),
+    # and holds the newest from the frame after it read it, to the line's 6 digits
     values = np.array([m.data for m in read_recording(path).topics["/fingertip/estimates"].decoded()])
     held = values[:, 6:12]
     read = np.unique(held[np.isfinite(held[:, 0])], axis=0)
-    assert summary.replies == len(read) >= 1 and summary.malformed_replies == 0
+    assert 5 <= summary.replies <= 9 and len(read) >= 1 and summary.malformed_replies == 0
     assert all(np.isclose(row, replied, rtol=1e-5, atol=1e-9).all(axis=1).any() for row in read)
     assert summary.error_source == "device" and len(summary.errors_N) == summary.replies
+    # each scored against the wanted force at its frame's last tick, by hand for the first
+    assert np.isclose(summary.errors_N[0], np.linalg.norm(replied[0, :3] - wanted[19, :3]), rtol=1e-5)
 
 
 def test_a_garbled_reply_is_counted_and_skipped():
@@ -375,3 +379,22 @@ def test_foxglove_port_prints_the_address_to_open():
 def test_a_method_that_collects_on_the_user_is_refused_with_a_real_device():
     result = run("haptics", "render", "--port", "loop://", "--method", "A")
     assert result.exit_code == 2 and "--method = 'A' with --port" in result.stderr
+
+
+def test_bench_loop_times_each_case_beside_its_baseline_with_the_load():
+    result = runner.invoke(app, ["bench", "haptics-loop", "--seconds", "0.2", "--no-record", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["targets_p99_us"] == {"idle": 1000.0, "loaded": 2000.0}
+    for case in ("idle", "loaded"):
+        runs = report[case]
+        for kind in ("real-time", "baseline"):
+            run_ = runs[kind]
+            assert run_["ticks"] == 200 and 0 <= run_["lateness_p50_us"] <= run_["lateness_p99_us"] <= run_["lateness_max_us"]
+            assert len(run_["load_average_before"]) == 3
+        assert runs["baseline"]["timing"]["granted"] == "normal priority"
+        assert runs["meets_target"] == (runs["real-time"]["lateness_p99_us"] <= report["targets_p99_us"][case])
+    assert report["idle"]["busy_cpus"] == [] and len(report["loaded"]["busy_cpus"]) >= 1
+    for args, words in ((("--seconds", "0.01"), "--seconds = 0.01"), (("--seed", "-1"), "--seed = -1")):
+        result = runner.invoke(app, ["bench", "haptics-loop", *args])
+        assert result.exit_code == 2 and words in result.stderr, result.output

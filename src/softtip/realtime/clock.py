@@ -74,10 +74,13 @@ class Timing:
 
     def to_dict(self) -> dict:
         return {"priority": self.priority, "cpu": self.cpu, "affinity": self.affinity,
-                "switch_interval_s": self.switch_interval_s}
+                "switch_interval_s": self.switch_interval_s, "granted": self.granted}
 
-    def describe(self) -> str:
-        return f"{self.priority}; {self.affinity}; GIL switch interval {self.switch_interval_s * 1e6:g} µs"
+    @property
+    def granted(self) -> str:
+        """In a few words: the policy the loop ran under, and its CPU."""
+        policy = "SCHED_FIFO" if self.priority.startswith("SCHED_FIFO") else "normal priority"
+        return policy + ("" if self.cpu is None else f", CPU {self.cpu}")
 
 
 def loop_cpu() -> int:

@@ -124,6 +124,46 @@ def bench_haptics(
     console.print(table)
 
 
+def bench_haptics_loop(
+    seconds: float = typer.Option(5.0, "--seconds", help="Seconds each run of the loop renders."),
+    record: bool = typer.Option(True, "--record/--no-record", help="Record each run to a temporary MCAP file, as "
+                                                                   "`haptics render --record` does."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the table, the synthetic sensation and the noise."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The 1 kHz render loop's lateness (each tick's start after its deadline) on this machine: idle, and
+    with a spinning process on every other CPU; each with real-time priority asked for, beside the same
+    run at normal priority as the baseline; with the load average around each run."""
+    _finite_positive(seconds, "--seconds")
+    if not 0.1 <= seconds <= 600:
+        fail(f"--seconds = {seconds}: expected from 0.1 to 600")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    from softtip.systems.haptics.live import bench_loop
+
+    with progress_for(json_output).task("haptics loop: idle and loaded, real-time and baseline", total=1) as task:
+        report = bench_loop(seconds, record, seed)
+        task.advance()
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"softtip bench haptics-loop (this machine, {seconds:g} s a run"
+                        + (", recorded)" if record else ")"))
+    for column in ("case", "run", "lateness p50", "p99", "max", "late ticks", "target p99", "load (1 min)",
+                   "granted"):
+        table.add_column(column, justify="right")
+    for case in ("idle", "loaded"):
+        for kind in ("real-time", "baseline"):
+            run = report[case][kind]
+            verdict = ("" if kind == "baseline" else
+                       f"≤ {report['targets_p99_us'][case]:.0f} µs " + ("✓" if report[case]["meets_target"] else "✗"))
+            table.add_row(case + (f" (CPUs {report[case]['busy_cpus']} busy)" if case == "loaded" else ""), kind,
+                          f"{run['lateness_p50_us']:.0f} µs", f"{run['lateness_p99_us']:.0f} µs",
+                          f"{run['lateness_max_us']:.0f} µs", f"{run['late_ticks']} of {run['ticks']}", verdict,
+                          f"{run['load_average_before'][0]:.2f}", run["timing"]["granted"])
+    console.print(table)
+
+
 def _fingertip(value: str, option: str):
     """A shipped test fingertip's name, or a fingertip TOML file (refused in one line)."""
     from softtip.systems.haptics.bench import FINGERTIP_NAMES
@@ -156,11 +196,19 @@ def _check_choices(method: str, fs_levels: int, seed: int) -> None:
         fail(f"--seed = {seed}: expected an integer >= 0")
 
 
-def _check_table_for(method: str, table, table_file: Path | None) -> None:
-    """A and A+ personalise a table by its DS readings: a table file without them is refused for those."""
-    if table is not None and method in ("A", "A+") and table.platform_wrenches is None:
+def _table(table_file: Path | None, device, method: str):
+    """The recorded table ``table_file`` (None without one), refused in one line naming it if the renderer
+    cannot index it, or if ``method`` is A or A+ and it has no DS readings to personalise it by."""
+    from softtip.systems.haptics.table_files import read_table
+
+    if table_file is None:
+        return None
+    table = read_table(table_file, device)
+    table.renderer()
+    if method in ("A", "A+") and table.platform_wrenches is None:
         fail(f"--method {method} with --table {table_file}: {method} personalises the table by its DS readings "
              "(ds_fx_N .. ds_tz_Nm), which the file has none of")
+    return table
 
 
 def _renderer(device, motor_inputs, finger_wrenches, platform_wrenches, method: str, finger, seed: int, progress):
@@ -245,7 +293,6 @@ def render(
         synthetic_sensation,
     )
     from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice, check_baud
-    from softtip.systems.haptics.table_files import read_table
 
     method = METHOD_ALIASES.get(method, method)
     if port is not None and method in USER_DATA_METHODS:
@@ -260,8 +307,7 @@ def render(
         record = check_output(record, "--record", inputs, force=force)
     device = device_from_file(device_file or "shipped").device
     check_baud(baud, device.servo.command_rate_hz, "--baud")
-    table = read_table(table_file, device) if table_file else None
-    _check_table_for(method, table, table_file)
+    table = _table(table_file, device, method)
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
     rng = np.random.default_rng(seed)
     progress = progress_for(json_output)
@@ -349,9 +395,8 @@ def export_table(
     _check_choices(method, fs_levels, seed)
     from softtip.systems.haptics.bench import device_from_file
     from softtip.systems.haptics.live import METHOD_ALIASES
-    from softtip.systems.haptics.table_files import c_header, read_table, write_fs_table_csv, write_table_csv
+    from softtip.systems.haptics.table_files import c_header, write_fs_table_csv, write_table_csv
 
-    method = METHOD_ALIASES.get(method, method)
     inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]
     if header.suffix != ".h":
         fail(f"header = {header}: expected a C header file name ending in .h")
@@ -362,14 +407,14 @@ def export_table(
         fail(f"--fs-table with --method = {method!r}: expected --method standard (a protocol's fs_table is the FS's "
              "own collection, which the study personalises)")
     check_outputs([("header", header), ("--csv", csv_file), ("--fs-table", fs_table_file)], inputs, force=force)
+    method = METHOD_ALIASES.get(method, method)
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
-    table = read_table(table_file, device) if table_file else None
+    table = _table(table_file, device, method)
     if table is not None and fs_table_file is not None and table.platform_wrenches is None:
         fail(f"--fs-table: the table file {table_file} has no DS readings (ds_fx_N ... ds_tz_Nm), which a protocol's "
              "fs_table needs")
     fs = table if table is not None else _study_fs_table(device, fs_levels, seed, progress_for(json_output))
-    _check_table_for(method, table, table_file)
     renderer, out_of_reach = _renderer(device, fs.motor_inputs, fs.wrenches if table is not None else
                                        fs.finger_wrenches, fs.platform_wrenches, method, finger, seed,
                                        progress_for(json_output))

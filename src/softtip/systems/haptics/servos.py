@@ -243,7 +243,7 @@ class EmulatedController:
     the protocol's lines and moves the device model (:class:`SimulatedDevice`) accordingly, a frame of
     ``loop_rate_hz / command_rate_hz`` ticks per command, and answers each frame's end (the next ``F``
     or the ``R``) with the model's wrench at its last tick in a ``W`` line. Runs in a thread until
-    the release or :meth:`stop`; ``lines`` keeps every line it took."""
+    the release, the host's end closed or :meth:`stop`; ``lines`` keeps every line it took."""
 
     def __init__(self, link: int, device: DeviceSpec, fingertip: Fingertip, loop_rate_hz: float,
                  rng: np.random.Generator | None) -> None:
