@@ -22,11 +22,10 @@ from softtip.realtime.sinks.ros2 import ros2_available
 from softtip.systems.haptics.device import DEVICE_FILE, load_device, quantised, servo_angles
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
 from softtip.realtime.sinks.recorder import RecorderSink
-from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
-from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
 from softtip.systems.haptics.live import (
     LOOP_RATE_HZ,
     TARGET_NAMES,
+    fs_collection,
     fs_renderer,
     personalised_renderer,
     render_stream,
@@ -47,9 +46,7 @@ runner = CliRunner()
 @functools.cache
 def _fs_table_9():
     """A 9³ FS table on the shipped device, its saturated entries left out."""
-    device = load_device()
-    return sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, 9), CollectionSettings(),
-                          np.random.default_rng(1)).unsaturated()
+    return fs_collection(load_device(), 9, np.random.default_rng(1))
 
 
 def run(*args: str):

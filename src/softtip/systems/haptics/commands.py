@@ -224,12 +224,10 @@ def _renderer(device, motor_inputs, finger_wrenches, platform_wrenches, method: 
 
 def _fs_table(device, fs_levels: int, rng: np.random.Generator, progress):
     """A simulated FS table of ``fs_levels``³ configurations on ``device``, its saturated entries left out."""
-    from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
-    from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
+    from softtip.systems.haptics.live import fs_collection
 
     with progress.task("haptics: FS table", total=1) as task:
-        table = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, fs_levels), CollectionSettings(),
-                               rng).unsaturated()
+        table = fs_collection(device, fs_levels, rng)
         task.advance()
     return table
 

@@ -1,20 +1,27 @@
-"""Real-time rendering: a sensation sequence (recorded or synthetic) through the renderer and the device
-model, a 1 kHz loop whose commands the servos take at their 50 Hz frame rate, out on the live
-pipeline's sinks.
+"""Real-time rendering: a sensation sequence (recorded or synthetic, or synthetic without end) through
+the renderer to the device model or a real device, a loop on 1 kHz deadlines whose commands the
+servos take at their 50 Hz frame rate, out on the live pipeline's sinks.
 
-Each tick the renderer turns the wanted wrench into motor inputs (:meth:`NearestNeighbourRenderer.render_one`,
-timed: its latency); at the first tick of each servo frame (50 Hz) that command, resolved to the
-servos' dead band, goes to the device (:mod:`.servos`): the simulated one slews its servos towards it
-and the sensor under the fingertip reads the wrench the platform applies, one sample a tick with its
-noise; a real one on a serial port (:class:`~.servos.SerialDevice`) takes it as a line of text.
-Frames go to the sinks as the live pipeline's :class:`~softtip.realtime.frames.FrameResult`: the
-reading is the wanted force (:data:`~softtip.systems.haptics.WANTED`), the estimates are the
-commanded motor inputs, the servos' angles and the rendered wrench (recorded on the ``wrench`` topic
-as ``geometry_msgs/WrenchStamped``), NaN where a real device reports none.
+At the first tick of each servo frame a command is due: the renderer turns that tick's wanted wrench
+into motor inputs (:meth:`NearestNeighbourRenderer.render_one`, timed: its latency), resolved to the
+servos' dead band, and it goes to the device (:mod:`.servos`). The renderer runs only then (once in
+20 ticks for softtip's 50 Hz servos; a device file whose servos take a command every tick, 1000 Hz,
+is rendered every tick): the servos would not read the other renderings. At the frame's end
+:class:`FrameWork`, on a thread of its own, asks the device what it did: the simulated one slews its
+servos towards the command and the sensor under the fingertip reads the wrench the platform applies,
+one sample a tick with its noise; a real one on a serial port (:class:`~.servos.SerialDevice`) answers
+with the wrench reports its sensor sent back, if it has one. Frames go to the sinks as the live
+pipeline's :class:`~softtip.realtime.frames.FrameResult`: the reading is the wanted force
+(:data:`~softtip.systems.haptics.WANTED`), the estimates are the commanded motor inputs (held over
+the frame), the servos' angles, the rendered wrench (recorded on the ``wrench`` topic as
+``geometry_msgs/WrenchStamped``), NaN where a device reports none, and the tick's lateness.
 
-Paced, each tick starts on the wall clock at its 1 kHz time (a tick that starts more than one period
-late is counted); unpaced, the loop runs as fast as the machine allows. Either way the frames' stamps
-are the 1 kHz ticks.
+Time is measured: paced, each tick waits for its deadline on the monotonic clock
+(:class:`~softtip.realtime.clock.DeadlineClock`: a sleep, then a short spin), at real-time priority
+where Linux permits (:func:`~softtip.realtime.clock.realtime_thread`); each frame's stamp is its
+tick's actual start, and its lateness (the start after the deadline) is recorded beside the
+estimates and summarised (p50, p99, maximum). Unpaced (``--fast``), the loop runs as fast as the
+machine allows and the lateness is NaN.
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.recorder import RecorderSink
 from softtip.systems.haptics import WANTED
-from softtip.systems.haptics.collection import CollectionSettings, motor_grid, sensed_contact
+from softtip.systems.haptics.collection import Collection, CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, load_device, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip
 from softtip.systems.haptics.limits import DURATION_EXPECTED, LOOP_RATE_HZ, MAX_DURATION_S, MAX_SENSATION_ROWS
@@ -393,10 +400,16 @@ def personalised_renderer(device: DeviceSpec, method: str, fingertip: Fingertip,
     return renderer.fit(finger_wrenches, personal.motor_inputs), int(personal.outside.sum())
 
 
+def fs_collection(device: DeviceSpec, fs_levels: int, rng: np.random.Generator,
+                  collection: CollectionSettings = CollectionSettings()) -> Collection:
+    """An FS table of ``fs_levels``³ configurations collected on ``device``, its saturated entries left out."""
+    return sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, fs_levels), collection, rng).unsaturated()
+
+
 def fs_renderer(device: DeviceSpec, fs_levels: int, rng: np.random.Generator,
                 collection: CollectionSettings = CollectionSettings(), **renderer) -> NearestNeighbourRenderer:
     """The standard renderer on an FS table of ``fs_levels``³ configurations collected on ``device``."""
-    table = sensed_contact(device, FINGERTIP_SENSOR, motor_grid(device, fs_levels), collection, rng).unsaturated()
+    table = fs_collection(device, fs_levels, rng, collection)
     return NearestNeighbourRenderer(**renderer).fit(table.finger_wrenches, table.motor_inputs)
 
 
