@@ -36,7 +36,7 @@ replies; a device without a sensor sends none, and the host then reports the err
 The host reads what arrived once a frame and never waits for it; a line it cannot parse is counted
 (``malformed_replies``) and skipped. A command line is at most :data:`LONGEST_LINE` bytes, so 50
 lines a second need at least :func:`least_baud` baud (10 bits a byte on the wire); a reply line is
-at most :data:`LONGEST_REPLY` bytes, the same budget from the device (about 39,000 baud at 50 Hz).
+at most :data:`LONGEST_REPLY` bytes: 50 a second need 44,000 baud from the device.
 """
 
 from __future__ import annotations
