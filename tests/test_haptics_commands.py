@@ -21,6 +21,7 @@ from softtip.realtime.recording.reader import read_recording
 from softtip.realtime.sinks.ros2 import ros2_available
 from softtip.systems.haptics.device import DEVICE_FILE, load_device, quantised, servo_angles
 from softtip.systems.haptics.fingertips import TEST_FINGERTIPS
+from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.recorder import RecorderSink
 from softtip.systems.haptics.live import (
     LOOP_RATE_HZ,
@@ -320,14 +321,25 @@ def test_each_ticks_measured_start_is_its_stamp_and_its_lateness_is_recorded(tmp
     assert report["lateness_p50_us"] <= report["lateness_p99_us"] <= report["lateness_max_us"] == lateness.max() * 1e6
 
 
+class CtrlC(Sink):
+    """Presses Ctrl-C (interrupts the main thread) once it has been handed ``after`` frames."""
+
+    def __init__(self, after: int):
+        self.after, self.written = after, 0
+
+    def write(self, frame):
+        self.written += 1
+        if self.written == self.after:
+            _thread.interrupt_main()
+
+
 def test_ctrl_c_ends_an_endless_rendering_and_keeps_the_recording(tmp_path):
     device = load_device()
     rng = np.random.default_rng(6)
     path = tmp_path / "endless.mcap"
-    threading.Timer(0.5, _thread.interrupt_main).start()
     summary = render_stream(device, fs_renderer(device, 7, rng), SimulatedDevice(device, TEST_FINGERTIPS[0],
                                                                                   LOOP_RATE_HZ, rng),
-                            synthetic_holds(device, rng), [RecorderSink(path)])
+                            synthetic_holds(device, rng), [RecorderSink(path), CtrlC(after=300)])
     assert summary.interrupted and summary.ticks >= 300
     recording = read_recording(path)
     assert not recording.truncated and len(recording.topics["/fingertip/estimates"].data) == summary.ticks
@@ -395,3 +407,29 @@ def test_bench_loop_times_each_case_beside_its_baseline_with_the_load():
     for args, words in ((("--seconds", "0.01"), "--seconds = 0.01"), (("--seed", "-1"), "--seed = -1")):
         result = runner.invoke(app, ["bench", "haptics-loop", *args])
         assert result.exit_code == 2 and words in result.stderr, result.output
+
+
+class FailingSink(Sink):
+    """A sink whose disk fills at its 50th frame."""
+
+    def __init__(self):
+        self.written, self.closed = 0, False
+
+    def write(self, frame):
+        self.written += 1
+        if self.written == 50:
+            raise OSError(28, "No space left on device")
+
+    def close(self):
+        self.closed = True
+
+
+def test_a_failing_sink_stops_the_loop_and_the_servos_are_released():
+    device = load_device()
+    rng = np.random.default_rng(9)
+    sink, servos = FailingSink(), SerialDevice("loop://", device)
+    with pytest.raises(OSError, match="No space left"):
+        render_stream(device, fs_renderer(device, 7, rng), servos, synthetic_holds(device, rng), [sink],
+                      realtime=False)
+    # stopped within a frame or two of the failure (50 frames of 20 ticks would be a second), all closed
+    assert 50 <= sink.written < 100 and sink.closed and servos.port is None

@@ -13,7 +13,15 @@ from rich.table import Table
 
 from softtip._core.files import atomic_write
 from softtip.cli.common import check_output, check_outputs, claimed, console, errors, fail, progress_for
-from softtip.systems.haptics.limits import DURATION_EXPECTED, LEVELS_EXPECTED, MAX_DURATION_S, MAX_FS_LEVELS
+from softtip.systems.haptics.limits import (
+    DURATION_EXPECTED,
+    LEVELS_EXPECTED,
+    MAX_DURATION_S,
+    MAX_FS_LEVELS,
+    METHOD_ALIASES,
+    SHORT_NAMES,
+    USER_DATA_METHODS,
+)
 
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
@@ -179,7 +187,7 @@ def _file(fingertip: str) -> Path | None:
     return Path(fingertip) if fingertip.endswith(".toml") else None
 
 
-METHOD_CHOICES = ("standard", "A", "B", "B+", "A+", "data-driven", "geometric")  # .live.METHODS and their aliases
+METHOD_CHOICES = (*SHORT_NAMES, *METHOD_ALIASES)
 METHOD_HELP = ("standard; A (data-driven: the user's table on the device model); B (geometric, for --fingertip's "
                "radius); B+ (B with the user's stiffness from five presses); A+ (A from an adaptive user table); "
                "data-driven and geometric name A and B")
@@ -281,8 +289,6 @@ def render(
     from softtip.systems.haptics.bench import device_from_file
     from softtip.systems.haptics.live import (
         LOOP_RATE_HZ,
-        METHOD_ALIASES,
-        USER_DATA_METHODS,
         recorded_sensation,
         render_stream,
         synthetic_holds,
@@ -318,7 +324,7 @@ def render(
                 device, fs.motor_inputs, fs.wrenches if table is not None else fs.finger_wrenches,
                 fs.platform_wrenches, method, finger, seed, progress)
             if wanted is None:
-                wanted = (synthetic_holds(device, rng) if duration is None else
+                wanted = (synthetic_holds(device, rng, batch=1) if duration is None else
                           synthetic_sensation(device, duration, rng))
         except BaseException:
             servos.close()
@@ -390,7 +396,6 @@ def export_table(
     with --fs-table, the FS table itself for a protocol's ``fs_table``."""
     _check_choices(method, fs_levels, seed)
     from softtip.systems.haptics.bench import device_from_file
-    from softtip.systems.haptics.live import METHOD_ALIASES
     from softtip.systems.haptics.table_files import c_header, write_fs_table_csv, write_table_csv
 
     inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]

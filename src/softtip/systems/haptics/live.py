@@ -52,7 +52,14 @@ from softtip.systems.haptics import WANTED
 from softtip.systems.haptics.collection import Collection, CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, load_device, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip
-from softtip.systems.haptics.limits import DURATION_EXPECTED, LOOP_RATE_HZ, MAX_DURATION_S, MAX_SENSATION_ROWS
+from softtip.systems.haptics.limits import (
+    DURATION_EXPECTED,
+    LOOP_RATE_HZ,
+    MAX_DURATION_S,
+    MAX_SENSATION_ROWS,
+    METHOD_ALIASES,
+    SHORT_NAMES,
+)
 from softtip.systems.haptics.personalisation import personalise_geometric
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, Rendering
 from softtip.systems.haptics.servos import ServoDevice, SimulatedDevice
@@ -79,21 +86,27 @@ class SensationError(ValueError):
     """A sensation file or sequence that cannot be rendered."""
 
 
+UNTOUCHED_DRAWS = 128  # random configurations in a row that miss the FS before a device is refused
+
+
 def synthetic_holds(device: DeviceSpec, rng: np.random.Generator, hold_s: float = 0.5,
                     collection: CollectionSettings = CollectionSettings(), batch: int = 16) -> Iterator[np.ndarray]:
     """Wanted wrenches at 1 kHz without end, one hold (ticks, 6) at a time: sensations recorded by the FS
     at random configurations that touch it (as the study's targets are), each held ``hold_s`` and
-    reached from the one before by a raised-cosine blend over the hold's first quarter; drawn
-    ``batch`` holds at a time."""
+    reached from the one before by a raised-cosine blend over the hold's first quarter; ``8 batch``
+    configurations drawn at a time, at most ``batch`` of them used (a small batch keeps each draw's
+    sensor noise, one call to the generator, short: a stream drawn beside the loop uses 1)."""
     per_hold = int(round(hold_s * LOOP_RATE_HZ))
     blend = (1 - np.cos(np.pi * np.clip(np.arange(per_hold) / per_hold * 4, 0, 1)))[:, None] / 2
-    previous = None
+    previous, missed = None, 0
     while True:
         read = sensed_contact(device, FINGERTIP_SENSOR, rng.uniform(0.0, device.angle_max, (8 * batch, 3)),
                               collection, rng)
         touching = read.finger_wrenches[np.linalg.norm(read.finger_wrenches[:, :3], axis=1) > 0.1][:batch]
-        if len(touching) < 2:
-            raise SensationError("synthetic sensation: too few random configurations touch the FS on this device")
+        missed = 0 if len(touching) else missed + 8 * batch
+        if missed >= UNTOUCHED_DRAWS:
+            raise SensationError(f"synthetic sensation: none of {missed} random configurations touches the FS on "
+                                 "this device")
         for wrench in touching:
             if previous is not None:
                 yield previous * (1 - blend) + wrench * blend
@@ -238,6 +251,55 @@ def sensation_frames(sensation: np.ndarray | Iterable[np.ndarray], frame_ticks: 
         yield pending
 
 
+PREFETCHED_FRAMES = 100  # servo frames of the sensation made ahead of the loop: 2 s at 50 Hz
+
+
+class Prefetched:
+    """``frames`` made up to ``depth`` ahead on a thread of their own, from construction on, so that
+    drawing a synthetic sensation's next holds does not hold up a tick; iterating yields them, an error
+    in making them is raised there; :meth:`close` stops the thread."""
+
+    def __init__(self, frames: Iterator[np.ndarray], depth: int = PREFETCHED_FRAMES) -> None:
+        self._frames, self._made = frames, queue.Queue(maxsize=depth)
+        self._ended, self._stop = threading.Event(), threading.Event()
+        self.thread = threading.Thread(target=self._make, name="haptics-sensation", daemon=True)
+        self.thread.start()
+
+    def wait_ahead(self) -> None:
+        """Until ``depth`` frames are made, or all of them."""
+        while not (self._made.full() or self._ended.is_set()):
+            time.sleep(0.01)
+
+    def _make(self) -> None:
+        try:
+            for frame in self._frames:
+                if not self._put(frame):
+                    return
+            self._put(None)
+        except BaseException as problem:  # raised to the loop
+            self._put(problem)
+        finally:
+            self._ended.set()
+
+    def _put(self, item) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._made.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        while (frame := self._made.get()) is not None:
+            if isinstance(frame, BaseException):
+                raise frame
+            yield frame
+
+    def close(self) -> None:
+        self._stop.set()
+
+
 class FrameWork:
     """What the loop hands off at the end of each servo frame, done on a thread of its own so that the
     loop's thread only waits, renders and sends: what the device did over the frame
@@ -325,10 +387,12 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
             sink.open(info)
             opened.append(sink)
         worker = FrameWork(servos, opened, time.time_ns() - time.perf_counter_ns())
+        frames_ahead = Prefetched(sensation_frames(sensation, frame_ticks))
+        frames_ahead.wait_ahead()
         with realtime_thread(paced and realtime) as timing:
             started = clock.start()
             try:
-                for wanted in sensation_frames(sensation, frame_ticks):
+                for wanted in frames_ahead:
                     starts, work = np.empty(len(wanted)), np.empty(len(wanted))
                     for k in range(len(wanted)):
                         starts[k] = clock.wait(seq + k) if paced else time.perf_counter()
@@ -346,6 +410,8 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
                     worker.check()
             except KeyboardInterrupt:
                 interrupted = True
+            finally:
+                frames_ahead.close()
             wall_s = time.perf_counter() - started
     finally:
         try:
@@ -363,23 +429,18 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
                          outside, wall_s, interrupted, timing)
 
 
-METHODS = ("standard", "A", "B", "B+", "A+")  # as the study names them (.study.SHORT_NAMES)
-METHOD_ALIASES = {"data-driven": "A", "geometric": "B"}  # the publication's names of A and B
-USER_DATA_METHODS = ("A", "B+", "A+")  # methods that drive configurations on the user's fingertip first
-
-
 def personalised_renderer(device: DeviceSpec, method: str, fingertip: Fingertip, motor_inputs, finger_wrenches,
                           platform_wrenches, seed: int, settings: StudySettings = StudySettings(),
                           collection: CollectionSettings = CollectionSettings()) -> tuple[NearestNeighbourRenderer, int]:
     """The renderer on an FS table (its motor inputs, the FS's wrenches and the DS's, None if not read)
-    personalised for ``fingertip`` by ``method`` (:data:`METHODS`) as the study does it, and how many
+    personalised for ``fingertip`` by ``method`` (:data:`~.limits.SHORT_NAMES`) as the study does it, and how many
     entries the personalisation flagged (out of reach, or outside the user's table). A, B+ and A+
     collect the user's data first, on the device model with ``fingertip`` in it, each on the study's
     own stream at ``seed`` (:func:`~.study.collect_user_data`: the user table and the presses;
     and A+'s adaptive table, as for the study's first fingertip)."""
     method = METHOD_ALIASES.get(method, method)
-    if method not in METHODS:
-        raise ValueError(f"method = {method!r}: expected one of {', '.join(METHODS)}")
+    if method not in SHORT_NAMES:
+        raise ValueError(f"method = {method!r}: expected one of {', '.join(SHORT_NAMES)}")
     if method in ("A", "A+") and platform_wrenches is None:
         raise ValueError(f"method {method} personalises the FS table by its DS readings (ds_fx_N ... ds_tz_Nm), "
                          "which this table has none of")

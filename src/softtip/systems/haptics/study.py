@@ -40,6 +40,7 @@ from softtip.systems.haptics.collection import (
 )
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import CORE_RADIUS, FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
+from softtip.systems.haptics.limits import SHORT_NAMES  # the methods as the plots' ticks name them
 from softtip.systems.haptics.personalisation import (
     DATA_DRIVEN_VARIANTS,
     DS_TORQUE_LENGTH,
@@ -56,7 +57,6 @@ from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, f
 # the publication's three methods, then softtip's additions: B with the user's stiffness from five
 # presses, and A from an adaptive user table of at most ``adaptive_budget`` configurations
 METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)", "data-driven, adaptive (A+)")
-SHORT_NAMES = ("standard", "A", "B", "B+", "A+")  # the methods as the plots' ticks name them
 PUBLISHED_METHODS = 3  # the statistics compare these, as published
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
