@@ -35,6 +35,7 @@ SYSTEM = System(
                      "curve_user_levels": [7], "variations": ["as published", "human pads half as stiff"],
                      "robustness_seeds": [2], "robustness_sigmas": 0.0, "ablations": False}),
     ),
-    bench_commands={"haptics": "softtip.systems.haptics.commands:bench_haptics"},
+    bench_commands={"haptics": "softtip.systems.haptics.commands:bench_haptics",
+                    "haptics-loop": "softtip.systems.haptics.commands:bench_haptics_loop"},
     commands={"haptics": "softtip.systems.haptics.commands:app"},
 )

@@ -12,8 +12,16 @@ import typer
 from rich.table import Table
 
 from softtip._core.files import atomic_write
-from softtip.cli.common import check_output, check_outputs, claimed, console, fail, progress_for
-from softtip.systems.haptics.limits import DURATION_EXPECTED, LEVELS_EXPECTED, MAX_DURATION_S, MAX_FS_LEVELS
+from softtip.cli.common import check_output, check_outputs, claimed, console, errors, fail, progress_for
+from softtip.systems.haptics.limits import (
+    DURATION_EXPECTED,
+    LEVELS_EXPECTED,
+    MAX_DURATION_S,
+    MAX_FS_LEVELS,
+    METHOD_ALIASES,
+    SHORT_NAMES,
+    USER_DATA_METHODS,
+)
 
 app = typer.Typer(help="S3: personalised haptic rendering with the 3-cable fingertip device.", no_args_is_help=True)
 
@@ -124,6 +132,44 @@ def bench_haptics(
     console.print(table)
 
 
+def bench_haptics_loop(
+    seconds: float = typer.Option(5.0, "--seconds", help="Seconds each run of the loop renders."),
+    record: bool = typer.Option(True, "--record/--no-record", help="Record each run to a temporary MCAP file, as "
+                                                                   "`haptics render --record` does."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the table, the synthetic sensation and the noise."),
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The 1 kHz render loop's lateness (each tick's start after its deadline) on this machine: idle, and
+    with a spinning process on every other CPU; each with real-time priority asked for, beside the same
+    run at normal priority as the baseline; with the load average around each run."""
+    _finite_positive(seconds, "--seconds")
+    if not 0.1 <= seconds <= 600:
+        fail(f"--seconds = {seconds}: expected from 0.1 to 600")
+    if seed < 0:
+        fail(f"--seed = {seed}: expected an integer >= 0")
+    from softtip.systems.haptics.live import bench_loop
+
+    with progress_for(json_output).task("haptics loop: idle and loaded, real-time and baseline", total=1) as task:
+        report = bench_loop(seconds, record, seed)
+        task.advance()
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"softtip bench haptics-loop ({seconds:g} s a run" + (", recorded" if record else "")
+                        + f"; loaded: CPUs {report['loaded']['busy_cpus']} spinning)")
+    for column in ("case", "run", "lateness p50/p99/max µs", "> 1 ms late", "p99 target", "load", "granted"):
+        table.add_column(column, justify="right")
+    for case in ("idle", "loaded"):
+        for kind in ("real-time", "baseline"):
+            run = report[case][kind]
+            verdict = ("" if kind == "baseline" else
+                       f"≤ {report['targets_p99_us'][case]:.0f} " + ("✓" if report[case]["meets_target"] else "✗"))
+            table.add_row(case, kind, f"{run['lateness_p50_us']:.0f} / {run['lateness_p99_us']:.0f} / "
+                                      f"{run['lateness_max_us']:.0f}", f"{run['late_ticks']} of {run['ticks']}",
+                          verdict, f"{run['load_average_before'][0]:.2f}", run["timing"]["granted"])
+    console.print(table)
+
+
 def _fingertip(value: str, option: str):
     """A shipped test fingertip's name, or a fingertip TOML file (refused in one line)."""
     from softtip.systems.haptics.bench import FINGERTIP_NAMES
@@ -141,57 +187,83 @@ def _file(fingertip: str) -> Path | None:
     return Path(fingertip) if fingertip.endswith(".toml") else None
 
 
+METHOD_CHOICES = (*SHORT_NAMES, *METHOD_ALIASES)
+METHOD_HELP = ("standard; A (data-driven: the user's table on the device model); B (geometric, for --fingertip's "
+               "radius); B+ (B with the user's stiffness from five presses); A+ (A from an adaptive user table); "
+               "data-driven and geometric name A and B")
+
+
 def _check_choices(method: str, fs_levels: int, seed: int) -> None:
-    if method not in ("standard", "geometric"):
-        fail(f"--method = {method!r}: expected standard or geometric")
+    if method not in METHOD_CHOICES:
+        fail(f"--method = {method!r}: expected one of {', '.join(METHOD_CHOICES)}")
     if not 2 <= fs_levels <= MAX_FS_LEVELS:
         fail(f"--fs-levels = {fs_levels}: expected {LEVELS_EXPECTED}")
     if seed < 0:
         fail(f"--seed = {seed}: expected an integer >= 0")
 
 
-def _renderer(device, renderer, fs_levels: int, rng: np.random.Generator, method: str, finger, progress):
-    """The renderer for ``finger``: ``renderer`` (a recorded table's), or one on a simulated FS table of
-    ``fs_levels``³ configurations, personalised by ``method``; and how many entries the geometric
-    method could not reach."""
-    from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR
-    from softtip.systems.haptics.live import fs_renderer
-    from softtip.systems.haptics.personalisation import personalise_geometric
-    from softtip.systems.haptics.rendering import NearestNeighbourRenderer
+def _table(table_file: Path | None, device, method: str):
+    """The recorded table ``table_file`` (None without one), refused in one line naming it if the renderer
+    cannot index it, or if ``method`` is A or A+ and it has no DS readings to personalise it by."""
+    from softtip.systems.haptics.table_files import read_table
 
-    if renderer is None:
-        with progress.task("haptics: FS table", total=1) as task:
-            renderer = fs_renderer(device, fs_levels, rng)
-            task.advance()
-    if method != "geometric":
-        return renderer, 0
-    personal = personalise_geometric(device, renderer.motor_inputs_, FINGERTIP_SENSOR.radius, finger.radius)
-    personalised = NearestNeighbourRenderer(**renderer.get_params()).fit(renderer.features_, personal.motor_inputs)
-    return personalised, int(personal.outside.sum())
+    if table_file is None:
+        return None
+    table = read_table(table_file, device)
+    table.renderer()
+    if method in ("A", "A+") and table.platform_wrenches is None:
+        fail(f"--method {method} with --table {table_file}: {method} personalises the table by its DS readings "
+             "(ds_fx_N .. ds_tz_Nm), which the file has none of")
+    return table
+
+
+def _renderer(device, motor_inputs, finger_wrenches, platform_wrenches, method: str, finger, seed: int, progress):
+    """The renderer on an FS table (its arrays) for ``finger``, personalised by ``method``, and how many
+    entries the personalisation flagged."""
+    from softtip.systems.haptics.live import personalised_renderer
+
+    with progress.task(f"haptics: the table personalised ({method})", total=1) as task:
+        made = personalised_renderer(device, method, finger, motor_inputs, finger_wrenches, platform_wrenches, seed)
+        task.advance()
+    return made
+
+
+def _fs_table(device, fs_levels: int, rng: np.random.Generator, progress):
+    """A simulated FS table of ``fs_levels``³ configurations on ``device``, its saturated entries left out."""
+    from softtip.systems.haptics.live import fs_collection
+
+    with progress.task("haptics: FS table", total=1) as task:
+        table = fs_collection(device, fs_levels, rng)
+        task.advance()
+    return table
 
 
 @app.command("render")
 def render(
-    duration: float = typer.Option(None, "--duration", help="Seconds to render (default: 5 s synthetic, or the "
-                                                            "whole file)."),
+    duration: float = typer.Option(None, "--duration", help="Seconds to render (default: a synthetic sensation "
+                                                            "until Ctrl-C, or the whole --sensation file)."),
     sensation: Path = typer.Option(None, "--sensation", help="A recorded sensation (.csv or .parquet: time_s, fx_N, "
                                                              "fy_N, fz_N); default a synthetic one."),
     fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip",
                                   help="The test fingertip in the device: a shipped one's name or a fingertip .toml "
                                        "file."),
-    method: str = typer.Option("standard", "--method", help="standard or geometric (B, for --fingertip's radius)."),
+    method: str = typer.Option("standard", "--method", help=METHOD_HELP + "."),
     device_file: Path = typer.Option(None, "--device", help="A device TOML file (default softtip's device)."),
     table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet: fx_N, fy_N, "
-                                                          "fz_N [, tx_Nm, ty_Nm, tz_Nm], motor1_rad.. or motor1_deg..) "
-                                                          "instead of a simulated FS table."),
+                                                          "fz_N [, tx_Nm, ty_Nm, tz_Nm], motor1_rad.. or motor1_deg.. "
+                                                          "[, ds_fx_N .. ds_tz_Nm for A and A+]) instead of a "
+                                                          "simulated FS table."),
     fs_levels: int = typer.Option(13, "--fs-levels", help="Simulated FS table levels per servo (13: 13³ entries), "
                                                           "without --table."),
     seed: int = typer.Option(1, "--seed", help="Seed of the table collection, the synthetic sensation and the noise."),
     record: Path = typer.Option(None, "--record", help="Record the stream to this MCAP file."),
     foxglove_port: int = typer.Option(None, "--foxglove-port", help="Serve a Foxglove live view on this port."),
     ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (needs rclpy, a sourced ROS 2)."),
-    realtime: bool = typer.Option(True, "--realtime/--fast", help="Pace the loop to the wall clock at 1 kHz, or run "
+    realtime: bool = typer.Option(True, "--realtime/--fast", help="Pace the loop to its 1 kHz deadlines, or run "
                                                                   "it as fast as the machine allows."),
+    priority: bool = typer.Option(True, "--priority/--no-priority", help="Run the paced loop at real-time priority "
+                                                                         "(SCHED_FIFO) pinned to one CPU, where Linux "
+                                                                         "permits it."),
     port: str = typer.Option(None, "--port", help="Drive a real device: its controller's serial port (a device path "
                                                   "or a pyserial URL), in the line protocol of "
                                                   "softtip.systems.haptics.servos; default the device model."),
@@ -200,8 +272,8 @@ def render(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Stream a sensation through the renderer to the device model, or with --port to a real device: a
-    1 kHz loop, the servos' 50 Hz commands, the commanded motor inputs and the rendered wrench out on
-    the live sinks (MCAP, Foxglove)."""
+    loop on 1 kHz deadlines rendering a command at each of the servos' 50 Hz frames, out on the live
+    sinks (MCAP, Foxglove) with each tick's measured start; Ctrl-C ends it, keeping the recording."""
     # every option checked before the renderer's modules load (they take seconds on a busy machine)
     _finite_positive(duration, "--duration")
     if duration is not None and duration > MAX_DURATION_S:
@@ -212,12 +284,22 @@ def render(
     if port is not None and not port.isprintable():
         fail(f"--port = {port!r}: expected a serial device path or a pyserial URL")
     from softtip.realtime.sinks.factory import live_sinks
+    from softtip.realtime.sinks.foxglove import FoxgloveSink
     from softtip.realtime.sinks.ros2 import ros2_available
     from softtip.systems.haptics.bench import device_from_file
-    from softtip.systems.haptics.live import LOOP_RATE_HZ, recorded_sensation, render_stream, synthetic_sensation
+    from softtip.systems.haptics.live import (
+        LOOP_RATE_HZ,
+        recorded_sensation,
+        render_stream,
+        synthetic_holds,
+        synthetic_sensation,
+    )
     from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice, check_baud
-    from softtip.systems.haptics.table_files import read_table
 
+    method = METHOD_ALIASES.get(method, method)
+    if port is not None and method in USER_DATA_METHODS:
+        fail(f"--method = {method!r} with --port: the user's data are collected on the device model, not on a real "
+             f"device; use --method standard or B with --port")
     finger = _fingertip(fingertip, "--fingertip")
     if ros2 and not ros2_available():
         fail("--ros2: ROS 2 is not available (rclpy and the standard message packages do not import; source the "
@@ -227,41 +309,62 @@ def render(
         record = check_output(record, "--record", inputs, force=force)
     device = device_from_file(device_file or "shipped").device
     check_baud(baud, device.servo.command_rate_hz, "--baud")
-    table = read_table(table_file, device) if table_file else None
-    recorded = table.renderer() if table else None
+    table = _table(table_file, device, method)
     wanted = recorded_sensation(sensation, duration) if sensation is not None else None
     rng = np.random.default_rng(seed)
+    progress = progress_for(json_output)
     with claimed(record, "--record"):  # a second render recording to the same file is refused
         # the port is the last check: opened before any work, released whatever happens next
         servos = (SimulatedDevice(device, finger, LOOP_RATE_HZ, rng) if port is None
                   else SerialDevice(port, device, baud, "--port", "--baud"))
         try:
             sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
-            renderer, out_of_reach = _renderer(device, recorded, fs_levels, rng, method, finger,
-                                               progress_for(json_output))
+            fs = table if table is not None else _fs_table(device, fs_levels, rng, progress)
+            renderer, out_of_reach = _renderer(
+                device, fs.motor_inputs, fs.wrenches if table is not None else fs.finger_wrenches,
+                fs.platform_wrenches, method, finger, seed, progress)
             if wanted is None:
-                wanted = synthetic_sensation(device, 5.0 if duration is None else duration, rng)
+                wanted = (synthetic_holds(device, rng, batch=1) if duration is None else
+                          synthetic_sensation(device, duration, rng))
         except BaseException:
             servos.close()
             raise
+        for sink in sinks:
+            if isinstance(sink, FoxgloveSink):
+                errors.print(f"Foxglove live view: open ws://{sink.host}:{sink.port} in Foxglove (Open connection, "
+                             "Foxglove WebSocket)", highlight=False)
+        if duration is None and sensation is None:
+            errors.print("rendering until Ctrl-C", highlight=False)
         source = str(table_file) if table_file else f"simulated FS table, {fs_levels}³"
         summary = render_stream(device, renderer, servos, wanted, sinks, metadata={
             "fingertip": finger.name, "method": method, "table": source, "seed": seed,
             "sensation": str(sensation) if sensation else "synthetic", "device": port or "simulated"},
-            paced=realtime).to_dict()
+            paced=realtime, realtime=priority).to_dict()
     summary |= {"fingertip": finger.name, "method": method, "table": source,
-                "table_entries_out_of_reach": out_of_reach, "device": port or "simulated",
+                "table_entries_flagged": out_of_reach, "device": port or "simulated",
                 "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))
         return
-    error = ("not measured (a serial device reports no wrench)" if summary["median_error_N"] is None else
-             f"median {summary['median_error_N']:.3f} N, p90 {summary['p90_error_N']:.3f} N")
-    console.print(f"{summary['ticks']} ticks at 1 kHz on {finger.name} ({method}, {summary['device']} device), "
-                  f"{summary['servo_frames']} servo commands, {summary['late_ticks']} late: rendering p99 "
-                  f"{summary['latency_p99_us']:.1f} µs; |F_wanted − F_rendered| {error}; {summary['outside_table']} "
-                  f"ticks outside the table, {out_of_reach} table entries out of reach"
-                  + (f"; recorded to {record}" if record else ""))
+    console.print(_render_line(summary, finger.name, record), highlight=False)
+
+
+def _render_line(summary: dict, finger: str, record: Path | None) -> str:
+    """What ``haptics render`` did, in words."""
+    error = (f"median {summary['median_error_N']:.3f} N, p90 {summary['p90_error_N']:.3f} N (read by the "
+             f"{summary['error_measured_by']})" if summary["median_error_N"] is not None
+             else "not measured (the device reports no wrench)")
+    timing = summary["timing"]
+    lateness = ("not paced (--fast)" if summary["lateness_p50_us"] is None else
+                f"p50 {summary['lateness_p50_us']:.0f} µs, p99 {summary['lateness_p99_us']:.0f} µs, max "
+                f"{summary['lateness_max_us']:.0f} µs, {summary['late_ticks']} ticks over a period late")
+    return (f"{summary['ticks']} ticks at 1 kHz on {finger} ({summary['method']}, {summary['device']} device)"
+            + (", ended by Ctrl-C" if summary["interrupted"] else "")
+            + f"; {summary['renderings']} renderings, one per servo command: p99 {summary['latency_p99_us']:.1f} µs"
+            + f"; ticks' start after their deadline: {lateness} ({timing['priority']}; {timing['affinity']})"
+            + f"; |F_wanted − F_rendered| {error}; {summary['outside_table']} renderings outside the table, "
+            + f"{summary['table_entries_flagged']} table entries flagged"
+            + (f"; recorded to {record}" if record else ""))
 
 
 table_app = typer.Typer(help="Lookup tables: export one for a device's firmware.", no_args_is_help=True)
@@ -272,10 +375,10 @@ app.add_typer(table_app, name="table")
 def export_table(
     header: Path = typer.Argument(..., help="The C header to write (.h): the table as const float arrays."),
     csv_file: Path = typer.Option(None, "--csv", help="Also write the same entries as a table file (.csv)."),
-    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip", help="The user's fingertip (for --method "
-                                                                         "geometric): a shipped one's name or a "
+    fingertip: str = typer.Option("FS cast (7.5 mm)", "--fingertip", help="The user's fingertip (for a --method "
+                                                                         "other than standard): a shipped one's name or a "
                                                                          "fingertip .toml file."),
-    method: str = typer.Option("standard", "--method", help="standard or geometric (B, for --fingertip's radius)."),
+    method: str = typer.Option("standard", "--method", help=METHOD_HELP + "."),
     device_file: Path = typer.Option(None, "--device", help="A device TOML file (default softtip's device)."),
     table_file: Path = typer.Option(None, "--table", help="A recorded lookup table (.csv or .parquet) instead of a "
                                                           "simulated FS table."),
@@ -293,8 +396,7 @@ def export_table(
     with --fs-table, the FS table itself for a protocol's ``fs_table``."""
     _check_choices(method, fs_levels, seed)
     from softtip.systems.haptics.bench import device_from_file
-    from softtip.systems.haptics.rendering import NearestNeighbourRenderer
-    from softtip.systems.haptics.table_files import c_header, read_table, write_fs_table_csv, write_table_csv
+    from softtip.systems.haptics.table_files import c_header, write_fs_table_csv, write_table_csv
 
     inputs = [p for p in (device_file, table_file, _file(fingertip)) if p is not None]
     if header.suffix != ".h":
@@ -306,27 +408,26 @@ def export_table(
         fail(f"--fs-table with --method = {method!r}: expected --method standard (a protocol's fs_table is the FS's "
              "own collection, which the study personalises)")
     check_outputs([("header", header), ("--csv", csv_file), ("--fs-table", fs_table_file)], inputs, force=force)
+    method = METHOD_ALIASES.get(method, method)
     finger = _fingertip(fingertip, "--fingertip")
     device = device_from_file(device_file or "shipped").device
-    table = read_table(table_file, device) if table_file else None
+    table = _table(table_file, device, method)
     if table is not None and fs_table_file is not None and table.platform_wrenches is None:
         fail(f"--fs-table: the table file {table_file} has no DS readings (ds_fx_N ... ds_tz_Nm), which a protocol's "
              "fs_table needs")
-    collected = None if table else _study_fs_table(device, fs_levels, seed, progress_for(json_output))
-    indexed = (table.renderer() if table else
-               NearestNeighbourRenderer().fit(collected.finger_wrenches, collected.motor_inputs))
-    renderer, out_of_reach = _renderer(device, indexed, fs_levels, np.random.default_rng(seed), method, finger,
+    fs = table if table is not None else _study_fs_table(device, fs_levels, seed, progress_for(json_output))
+    renderer, out_of_reach = _renderer(device, fs.motor_inputs, fs.wrenches if table is not None else
+                                       fs.finger_wrenches, fs.platform_wrenches, method, finger, seed,
                                        progress_for(json_output))
     source = f"table file {table_file.name}" if table_file else f"simulated {fs_levels}³ FS table, seed {seed}"
     provenance = (f"{source} on {device.device.name}, {method}"
-                  + (f" for {finger.name}" if method == "geometric" else ""))
+                  + (f" for {finger.name}" if method != "standard" else ""))
     atomic_write(header, c_header(renderer, "SOFTTIP_HAPTICS_TABLE_H", provenance.replace("*/", "* /")))
     if csv_file is not None:
         write_table_csv(csv_file, renderer)
     if fs_table_file is not None:
-        write_fs_table_csv(fs_table_file, *((table.wrenches, table.platform_wrenches, table.motor_inputs) if table
-                                            else (collected.finger_wrenches, collected.platform_wrenches,
-                                                  collected.motor_inputs)))
+        write_fs_table_csv(fs_table_file, table.wrenches if table is not None else fs.finger_wrenches,
+                           fs.platform_wrenches, fs.motor_inputs)
     summary = {"header": str(header), "csv": str(csv_file) if csv_file else None,
                "fs_table": str(fs_table_file) if fs_table_file else None, "entries": len(renderer.features_),
                "file_rows_merged": table.merged if table is not None else 0,

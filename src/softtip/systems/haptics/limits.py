@@ -1,6 +1,7 @@
 """The largest sizes S3's command-line options and files may ask for, one place for both: a file is
-refused above the same limit, in the same words, as the option that sets the same size. Plain numbers,
-so the command line checks its options before any of the system's modules load."""
+refused above the same limit, in the same words, as the option that sets the same size; and the
+rendering methods by name. Plain values, so the command line checks its options before any of the
+system's modules load."""
 
 LOOP_RATE_HZ = 1000.0  # the render loop's rate: one wanted wrench a tick
 MAX_DURATION_S = 3600.0  # a rendering, from --duration or a sensation file's span: the sequence is built in memory
@@ -17,3 +18,7 @@ MAX_SIMULATED_PRESSES = 1_000_000
 
 LEVELS_EXPECTED = f"an integer from 2 to {MAX_FS_LEVELS} (a table of levels³ configurations)"
 DURATION_EXPECTED = f"at most {MAX_DURATION_S:g} s (the sequence is built in memory)"
+
+SHORT_NAMES = ("standard", "A", "B", "B+", "A+")  # the study's methods (.study.METHODS) as plots and options name them
+METHOD_ALIASES = {"data-driven": "A", "geometric": "B"}  # the publication's names of A and B
+USER_DATA_METHODS = ("A", "B+", "A+")  # methods that drive configurations on the user's fingertip first

@@ -1,19 +1,20 @@
 """The devices ``softtip haptics render`` drives: the simulated device and a real one on a serial port,
-behind one small interface (:class:`ServoDevice`).
+behind one small interface (:class:`ServoDevice`), and an emulated controller that answers the serial
+protocol with the device model (:class:`EmulatedController`).
 
-The render loop renders every 1 kHz tick; at the first tick of each servo frame (50 Hz) it sends the
-frame's position command, resolved to the servos' dead band, with :meth:`ServoDevice.send`, and at
-the frame's end asks :meth:`ServoDevice.frame` what the device did over its ticks.
+The render loop ticks at 1 kHz; at the first tick of each servo frame (50 Hz) it renders the frame's
+position command, resolved to the servos' dead band, and sends it with :meth:`ServoDevice.send`,
+and at the frame's end asks :meth:`ServoDevice.frame` what the device did over its ticks.
 :class:`SimulatedDevice` answers with the device model (the servos slewing towards the command, the
-wrench the platform then applies to the fingertip, read by the sensor under it); :class:`SerialDevice`
-writes the command to the device's controller and answers nothing (a serial device reports nothing
-back: the loop then has no rendered wrench to compare).
+wrench the platform then applies to the fingertip, read by the sensor under it every tick);
+:class:`SerialDevice` writes the command to the device's controller and answers with the wrench
+reports the controller sent back since (none from a device without a sensor).
 
-**The serial line protocol** (host to device only, ASCII, one line per message, each ended by
-``\\n``; 115200 baud, 8N1 by default):
+**The serial line protocol** (version 2; ASCII, one line per message, each ended by ``\\n``; 115200
+baud, 8N1 by default). Host to device:
 
-``H 1 <rate_hz>``
-    Hello, sent once on opening: the protocol's version (1) and the command rate in Hz (``50``).
+``H 2 <rate_hz>``
+    Hello, sent once on opening: the protocol's version (2) and the command rate in Hz (``50``).
 ``F <frame> <angle1_deg> <angle2_deg> <angle3_deg>``
     A frame's position command, sent at the frame's first tick: ``frame`` counts the frames from 0;
     the angles are the three servos' commands in degrees with three decimals, already resolved to
@@ -23,13 +24,27 @@ back: the loop then has no rendered wrench to compare).
     Release, sent when the stream ends or is interrupted: every servo back to 0 degrees (cables
     unwound, the platform off the finger).
 
-A line is at most :data:`LONGEST_LINE` bytes, so 50 lines a second need at least
-:func:`least_baud` baud (10 bits a byte on the wire).
+Device to host, only from a device with a force sensor under the fingertip (version 1 had no
+replies; a device without a sensor sends none, and the host then reports the error "not measured"):
+
+``W <frame> <fx_N> <fy_N> <fz_N> <tx_Nm> <ty_Nm> <tz_Nm>``
+    The wrench the sensor under the fingertip read at the end of frame ``frame`` (its last sample
+    before the next command took effect), in the sensor's axes, N and N·m, each a decimal number
+    (``%.6g``); sent when the frame ends, which for the host is during the next frame (so the host
+    holds it from the frame after it read it, and scores it against that frame's wanted force).
+
+The host reads what arrived once a frame and never waits for it; a line it cannot parse is counted
+(``malformed_replies``) and skipped. A command line is at most :data:`LONGEST_LINE` bytes, so 50
+lines a second need at least :func:`least_baud` baud (10 bits a byte on the wire); a reply line is
+at most :data:`LONGEST_REPLY` bytes: 50 a second need 44,000 baud from the device.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import select
+import threading
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -42,10 +57,12 @@ from softtip.systems.haptics.collection import CollectionSettings
 from softtip.systems.haptics.device import DeviceSpec, servo_angles
 from softtip.systems.haptics.fingertips import Fingertip, loaded_contact
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 DEFAULT_BAUD = 115_200
 MAX_FRAMES = 10**7  # frame numbers up to 7 digits: 55 hours at 50 Hz
 LONGEST_LINE = len(f"F {MAX_FRAMES - 1} 999.999 999.999 999.999\n")
+LONGEST_REPLY = len(f"W {MAX_FRAMES - 1}" + " -1.23457e-05" * 6 + "\n")
+WRENCH_REPLY = "W"
 BITS_PER_BYTE = 10  # start, 8 data bits, stop
 
 
@@ -56,21 +73,29 @@ class ServoLinkError(ValueError):
 @dataclass(frozen=True)
 class FrameResponse:
     """What the device did over one frame's ticks: the servos' angles (ticks, 3) in rad, the wrench
-    the sensor under the fingertip read (ticks, 6) in N and N·m, and where it saturated (ticks, 3)."""
+    the sensor under the fingertip read (ticks, 6) in N and N·m, and where it saturated (ticks, 3);
+    NaN where the device does not say. ``reported``: the wrench reports (frame, (6,)) a serial
+    device sent back during the frame, None for the device model (its ``wrench`` is read every tick)."""
 
     angles: np.ndarray
     wrench: np.ndarray
     saturated: np.ndarray
+    reported: list[tuple[int, np.ndarray]] | None = None
 
 
 class ServoDevice(Protocol):
-    """What the render loop drives."""
+    """What the render loop drives: ``measured_by`` names who reads the rendered wrench; ``replies``
+    and ``malformed`` count the device's wrench reports and the lines it sent that were none."""
+
+    measured_by: str
+    replies: int
+    malformed: int
 
     def send(self, frame: int, command: np.ndarray) -> None:
         """The frame's position command (rad, (3,)), as the servos resolve it."""
 
-    def frame(self, ticks: int) -> FrameResponse | None:
-        """What the device did over the current frame's ``ticks`` loop ticks; None if it reports nothing."""
+    def frame(self, ticks: int) -> FrameResponse:
+        """What the device did over the current frame's ``ticks`` loop ticks."""
 
     def close(self) -> None:
         """The stream is over: release the finger."""
@@ -78,29 +103,34 @@ class ServoDevice(Protocol):
 
 class SimulatedDevice:
     """The device model on ``fingertip``: the servos from rest, slewing towards each frame's command
-    at the loop's rate; the sensor under the fingertip reads each tick (``rng`` None: exact)."""
+    at the loop's rate; the sensor under the fingertip reads each tick (``rng`` None: exact). Each
+    :meth:`frame` models the next frame sent and not yet modelled, so the loop may send the next
+    command before it asks what the last one did."""
+
+    measured_by, replies, malformed = "device model", 0, 0
 
     def __init__(self, device: DeviceSpec, fingertip: Fingertip, loop_rate_hz: float,
                  rng: np.random.Generator | None, collection: CollectionSettings = CollectionSettings()):
         self.device, self.fingertip, self.loop_rate_hz = device, fingertip, loop_rate_hz
         self.rng, self.collection = rng, collection
         self.angle = np.zeros(3)
-        self.command = np.zeros(3)
         self.sent: list[np.ndarray] = []  # every frame's command, in order
+        self.modelled = 0  # frames modelled so far
 
     def send(self, frame: int, command: np.ndarray) -> None:
-        self.command = np.array(command, dtype=float)
-        self.sent.append(self.command)
+        self.sent.append(np.array(command, dtype=float))
 
     def frame(self, ticks: int) -> FrameResponse:
-        angles = servo_angles(self.device, self.angle, np.broadcast_to(self.command, (ticks, 3)), self.loop_rate_hz)
+        command = self.sent[self.modelled]
+        self.modelled += 1
+        angles = servo_angles(self.device, self.angle, np.broadcast_to(command, (ticks, 3)), self.loop_rate_hz)
         self.angle = angles[-1]
         _, on_finger = loaded_contact(self.fingertip, self.device, angles)
         wrench, saturated = read_wrenches(on_finger, self.collection.sensor, self.rng)
         return FrameResponse(angles, wrench, saturated[:, :3])
 
     def close(self) -> None:
-        self.command = np.zeros(3)
+        """The model has no finger to release: what it did is already read."""
 
 
 def least_baud(rate_hz: float) -> int:
@@ -122,11 +152,16 @@ class SerialDevice:
     module's line protocol. Opening it sends the hello; a port that cannot be opened, or a baud rate
     too slow for the commands, is refused in one line naming the option (``port_option``, ``baud_option``)."""
 
+    measured_by = "device"
+
     def __init__(self, port: str, device: DeviceSpec, baud: int = DEFAULT_BAUD, port_option: str = "port",
                  baud_option: str = "baud"):
         rate = device.servo.command_rate_hz
         check_baud(baud, rate, baud_option)
         self.option, self.port_name = port_option, port
+        self.held = np.full(6, np.nan)  # the newest wrench report, held from the frame after it came
+        self.replies = self.malformed = 0
+        self._pending = b""
         try:
             self.port = open_serial(port, baud)
         except PortError as problem:
@@ -139,8 +174,33 @@ class SerialDevice:
         degrees = np.degrees(command)
         self._write(f"F {frame} {degrees[0]:.3f} {degrees[1]:.3f} {degrees[2]:.3f}\n")
 
-    def frame(self, ticks: int) -> None:
-        return None
+    def frame(self, ticks: int) -> FrameResponse:
+        wrench = np.tile(self.held, (ticks, 1))
+        reported = self._replies()
+        if reported:
+            self.held = reported[-1][1]
+        return FrameResponse(np.full((ticks, 3), np.nan), wrench, np.zeros((ticks, 3), bool), reported)
+
+    def _replies(self) -> list[tuple[int, np.ndarray]]:
+        """The wrench reports that arrived since the last call, without waiting."""
+        try:
+            waiting = self.port.in_waiting
+            data = self.port.read(waiting) if waiting else b""
+        except (serial.SerialException, OSError) as problem:
+            raise ServoLinkError(f"{self.option} = {self.port_name!r}: the device stopped answering "
+                                 f"({' '.join(str(problem).split())})") from None
+        *lines, self._pending = (self._pending + data).split(b"\n")
+        if len(self._pending) > LONGEST_REPLY:  # no line end in sight: noise, not a reply
+            self._pending, self.malformed = b"", self.malformed + 1
+        reported = []
+        for line in lines:
+            parsed = parse_reply(line)
+            if parsed is None:
+                self.malformed += line.strip() != b""
+            else:
+                reported.append(parsed)
+        self.replies += len(reported)
+        return reported
 
     def close(self) -> None:
         if self.port is None:
@@ -158,3 +218,76 @@ class SerialDevice:
         except (serial.SerialException, OSError) as problem:
             raise ServoLinkError(f"{self.option} = {self.port_name!r}: the device stopped taking commands "
                                  f"({' '.join(str(problem).split())})") from None
+
+
+def parse_reply(line: bytes) -> tuple[int, np.ndarray] | None:
+    """A ``W`` line's frame and finite wrench (6,), or None for anything else."""
+    words = line.decode("ascii", "replace").split()
+    if len(words) != 8 or words[0] != WRENCH_REPLY or not words[1].isdigit():
+        return None
+    try:
+        wrench = np.array([float(word) for word in words[2:]])
+    except ValueError:
+        return None
+    return (int(words[1]), wrench) if np.all(np.isfinite(wrench)) else None
+
+
+def wrench_reply(frame: int, wrench: np.ndarray) -> str:
+    """The ``W`` line reporting ``wrench`` (6,: N, N·m) read at the end of ``frame``."""
+    return f"{WRENCH_REPLY} {frame} " + " ".join(f"{value:.6g}" for value in wrench) + "\n"
+
+
+class EmulatedController:
+    """A device controller with a sensor under the fingertip, emulated on the device end of a serial
+    link (``link``: a file descriptor, the master of a pty pair whose slave the host opens): it takes
+    the protocol's lines and moves the device model (:class:`SimulatedDevice`) accordingly, a frame of
+    ``loop_rate_hz / command_rate_hz`` ticks per command, and answers each frame's end (the next ``F``
+    or the ``R``) with the model's wrench at its last tick in a ``W`` line. Runs in a thread until
+    the release, the host's end closed or :meth:`stop`; ``lines`` keeps every line it took."""
+
+    def __init__(self, link: int, device: DeviceSpec, fingertip: Fingertip, loop_rate_hz: float,
+                 rng: np.random.Generator | None) -> None:
+        self.link, self.model = link, SimulatedDevice(device, fingertip, loop_rate_hz, rng)
+        self.ticks = int(round(loop_rate_hz / device.servo.command_rate_hz))
+        self.lines: list[str] = []
+        self.replied: list[tuple[int, np.ndarray]] = []
+        self._frame: int | None = None
+        self._stopping = threading.Event()
+        self.thread = threading.Thread(target=self._serve, name="emulated-haptic-device", daemon=True)
+        self.thread.start()
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        self._stopping.set()
+        self.thread.join(timeout_s)
+
+    def _serve(self) -> None:
+        pending = b""
+        while not self._stopping.is_set():
+            ready, _, _ = select.select([self.link], [], [], 0.05)
+            if not ready:
+                continue
+            try:
+                data = os.read(self.link, 4096)
+            except OSError:  # the host closed its end
+                return
+            *lines, pending = (pending + data).split(b"\n")
+            for line in lines:
+                text = line.decode("ascii").strip()
+                self.lines.append(text)
+                words = text.split()
+                if words and words[0] in ("F", "R"):
+                    self._end_frame()
+                if words and words[0] == "F":
+                    self._frame = int(words[1])
+                    self.model.send(self._frame, np.radians([float(word) for word in words[2:5]]))
+                elif words and words[0] == "R":
+                    self.model.close()
+                    return
+
+    def _end_frame(self) -> None:
+        """The current frame's ticks on the model, and its last reading sent back."""
+        if self._frame is None:
+            return
+        wrench = self.model.frame(self.ticks).wrench[-1]
+        self.replied.append((self._frame, wrench))
+        os.write(self.link, wrench_reply(self._frame, wrench).encode("ascii"))

@@ -30,7 +30,7 @@ from matplotlib.figure import Figure
 from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, choice, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
-from softtip.systems.haptics.adaptive import adaptive_user_table
+from softtip.systems.haptics.adaptive import AdaptiveTable, adaptive_user_table
 from softtip.systems.haptics.collection import (
     Collection,
     CollectionSettings,
@@ -40,22 +40,23 @@ from softtip.systems.haptics.collection import (
 )
 from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, load_device
 from softtip.systems.haptics.fingertips import CORE_RADIUS, FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip, finger_wrench
+from softtip.systems.haptics.limits import SHORT_NAMES  # the methods as the plots' ticks name them
 from softtip.systems.haptics.personalisation import (
     DATA_DRIVEN_VARIANTS,
     DS_TORQUE_LENGTH,
+    PressFit,
     fit_presses,
     personalise_data_driven,
     personalise_force_model,
     personalise_geometric,
     press_configurations,
 )
-from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, WeightingPower
+from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, NearestNeighbourRenderer, Rendering, WeightingPower
 from softtip.systems.haptics.statistics import FriedmanResult, WilcoxonResult, friedman, wilcoxon
 
 # the publication's three methods, then softtip's additions: B with the user's stiffness from five
 # presses, and A from an adaptive user table of at most ``adaptive_budget`` configurations
 METHODS = ("standard", "data-driven (A)", "geometric (B)", "geometric + presses (B+)", "data-driven, adaptive (A+)")
-SHORT_NAMES = ("standard", "A", "B", "B+", "A+")  # the methods as the plots' ticks name them
 PUBLISHED_METHODS = 3  # the statistics compare these, as published
 PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -211,6 +212,11 @@ def _fingertip_stream(seed: int, index: int, stage: int) -> np.random.Generator:
 _USER, _PRESSES, _ADAPTIVE, _RENDERINGS = range(4)  # the stages of a fingertip, each on its own stream
 
 
+def adaptive_stream(seed: int, index: int) -> np.random.Generator:
+    """The stream the ``index``-th test fingertip's adaptive user table (A+) is drawn from."""
+    return _fingertip_stream(seed, index, _ADAPTIVE)
+
+
 def collect_user_data(device: DeviceSpec, fingertip: Fingertip, settings: StudySettings,
                       collection: CollectionSettings, seed: int, index: int) -> UserData:
     """The ``index``-th test fingertip's user table and presses."""
@@ -232,8 +238,7 @@ def study_fingertip(device: DeviceSpec, fingertip: Fingertip, shared: SharedTabl
     with _refusing(fingertip):
         if user_data is None:
             user_data = collect_user_data(device, fingertip, settings, collection, seed, index)
-        personal = _personalise(device, fingertip, fs, user_data, settings, collection,
-                                _fingertip_stream(seed, index, _ADAPTIVE))
+        personal = _personalise(device, fingertip, fs, user_data, settings, collection, adaptive_stream(seed, index))
     standard = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold,
                                         settings.weighting_power).get_params()
     rng = _fingertip_stream(seed, index, _RENDERINGS)
@@ -333,31 +338,55 @@ class _Personalised:
 
 def _personalise(device: DeviceSpec, fingertip: Fingertip, fs: Collection, user_data: UserData,
                  settings: StudySettings, collection: CollectionSettings, rng: np.random.Generator) -> _Personalised:
-    usable = user_data.user_table.unsaturated()
-    if len(usable.motor_inputs) < settings.n_neighbours:
-        raise ValueError(f"user table: only {len(usable.motor_inputs)} of its {len(user_data.user_table.motor_inputs)} "
-                         f"configurations read without saturating a sensor, expected at least n_neighbours = "
-                         f"{settings.n_neighbours}")
-    data_driven = personalise_data_driven(device, fs.motor_inputs, fs.platform_wrenches, usable.motor_inputs,
-                                          usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
-                                          settings.weighting_power, settings.data_driven, settings.torque_length)
+    data_driven = data_driven_table(device, fs.motor_inputs, fs.platform_wrenches, user_data.user_table, settings)
     geometric = personalise_geometric(device, fs.motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
-    presses = user_data.presses
-    pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
-                          settings.contact_threshold, saturated=presses.saturated)
-    force_model = personalise_force_model(device, fs.motor_inputs, fs.finger_wrenches, FINGERTIP_SENSOR.radius,
-                                          fingertip.radius, pressed, settings.contact_threshold, geometric=geometric)
-    adaptive = adaptive_user_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches, collection, rng,
-                                   settings.adaptive_budget, candidate_levels=settings.fs_levels,
-                                   n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
-    adaptive_usable = adaptive.collection.unsaturated()
-    # A+ picks its configurations by the DS's forces in the device's axes (.adaptive), and renders by them
-    data_driven_adaptive = personalise_data_driven(
-        device, fs.motor_inputs, fs.platform_wrenches, adaptive_usable.motor_inputs, adaptive_usable.platform_wrenches,
-        settings.n_neighbours, settings.contact_threshold, settings.weighting_power, "device axes")
+    force_model, pressed = force_model_table(device, fingertip, fs.motor_inputs, fs.finger_wrenches,
+                                             user_data.presses, settings, geometric)
+    data_driven_adaptive, adaptive = adaptive_table(device, fingertip, fs.motor_inputs, fs.platform_wrenches,
+                                                    settings, collection, rng)
     return _Personalised((data_driven.motor_inputs, geometric.motor_inputs, force_model.motor_inputs,
                           data_driven_adaptive.motor_inputs), int(data_driven.outside.sum()),
                          int(geometric.outside.sum()), pressed.youngs_modulus, adaptive.collection.duration_s)
+
+
+def data_driven_table(device: DeviceSpec, fs_motor_inputs, fs_platform_wrenches, user_table: Collection,
+                      settings: StudySettings) -> Rendering:
+    """Method A: the FS table (its motor inputs and DS readings) personalised from the user's table
+    (its unsaturated entries, at least ``n_neighbours`` of them) by the settings' variant."""
+    usable = user_table.unsaturated()
+    if len(usable.motor_inputs) < settings.n_neighbours:
+        raise ValueError(f"user table: only {len(usable.motor_inputs)} of its {len(user_table.motor_inputs)} "
+                         f"configurations read without saturating a sensor, expected at least n_neighbours = "
+                         f"{settings.n_neighbours}")
+    return personalise_data_driven(device, fs_motor_inputs, fs_platform_wrenches, usable.motor_inputs,
+                                   usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
+                                   settings.weighting_power, settings.data_driven, settings.torque_length)
+
+
+def force_model_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_inputs, fs_finger_wrenches,
+                      presses: Collection, settings: StudySettings,
+                      geometric: Rendering | None = None) -> tuple[Rendering, PressFit]:
+    """Method B+: the user's Hertz modulus fitted from the ``presses`` on ``fingertip``, and the FS
+    table personalised with it (``geometric``: method B's personalisation of the same table, if made)."""
+    pressed = fit_presses(device, presses.motor_inputs, presses.platform_wrenches, fingertip.radius,
+                          settings.contact_threshold, saturated=presses.saturated)
+    return personalise_force_model(device, fs_motor_inputs, fs_finger_wrenches, FINGERTIP_SENSOR.radius,
+                                   fingertip.radius, pressed, settings.contact_threshold, geometric=geometric), pressed
+
+
+def adaptive_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_inputs, fs_platform_wrenches,
+                   settings: StudySettings, collection: CollectionSettings,
+                   rng: np.random.Generator | None) -> tuple[Rendering, AdaptiveTable]:
+    """Method A+: an adaptive user table of at most ``adaptive_budget`` configurations driven on
+    ``fingertip``, and the FS table personalised from it."""
+    adaptive = adaptive_user_table(device, fingertip, fs_motor_inputs, fs_platform_wrenches, collection, rng,
+                                   settings.adaptive_budget, candidate_levels=settings.fs_levels,
+                                   n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
+    usable = adaptive.collection.unsaturated()
+    # A+ picks its configurations by the DS's forces in the device's axes (.adaptive), and renders by them
+    return personalise_data_driven(device, fs_motor_inputs, fs_platform_wrenches, usable.motor_inputs,
+                                   usable.platform_wrenches, settings.n_neighbours, settings.contact_threshold,
+                                   settings.weighting_power, "device axes"), adaptive
 
 
 def _contact_to_layer(device: DeviceSpec, fs: Collection, targets: np.ndarray) -> float:
