@@ -83,4 +83,4 @@ def decode(settings: TLV493DSettings, words: np.ndarray) -> tuple[np.ndarray, np
 
 
 SENSOR = SensorKind("tlv493d", MAGNETIC, 3, TLV493DSettings, widest=TLV493DSettings(), full_scale=full_scale_uT,
-                    step=step_uT, decode=decode, raw_unit="counts", title="TLV493D")
+                    step=step_uT, decode=decode, raw_unit="counts", raw_bits=12, title="TLV493D")
