@@ -447,11 +447,15 @@ static void twi_message(avr_irq_t *irq, uint32_t value, void *param) {
 }
 
 // simavr schedules each bus state as a number of 1 us bus clocks; stretch it to the clock the
-// firmware configured (SCL = F_CPU / (16 + 2 * TWBR * 4^TWPS)). With SDA held low no START completes.
+// firmware configured (SCL = F_CPU / (16 + 2 * TWBR * 4^TWPS)). simavr 1.6 gives a START and the
+// address byte of a write no time: they take 1 and 9 bus clocks here, like any other byte.
+// With SDA held low no START completes.
 static void twcr_write(avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param) {
     (void)param;
     const int starting = (v & (1 << TWSTA_BIT)) && !(avr->data[TWCR_ADDRESS] & (1 << TWSTA_BIT));
+    const int was_addressed = sim.twi->state & TWI_COND_ADDR;
     sim.twcr_write(avr, addr, v, sim.twi);
+    const int address_sent = !was_addressed && (sim.twi->state & TWI_COND_ADDR);
     for (avr_cycle_timer_slot_p slot = avr->cycle_timers.timer; slot; slot = slot->next) {
         if (slot->param != sim.twi) continue;
         const avr_cycle_timer_t timer = slot->timer;
@@ -462,7 +466,9 @@ static void twcr_write(avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param) {
         const avr_cycle_count_t usec_cycles = slot->when > avr->cycle ? slot->when - avr->cycle : 0;
         const uint32_t prescale = 1u << (2 * (avr->data[TWSR_ADDRESS] & 3));
         const uint32_t bit_cycles = 16u + 2u * avr->data[TWBR_ADDRESS] * prescale;
-        const avr_cycle_count_t bus_clocks = usec_cycles / avr_usec_to_cycles(avr, 1);
+        avr_cycle_count_t bus_clocks = usec_cycles / avr_usec_to_cycles(avr, 1);
+        if (address_sent) bus_clocks = 9;
+        else if (starting) bus_clocks = 1;
         if (bus_clocks == 0) return;
         avr_cycle_timer_cancel(avr, timer, sim.twi);
         avr_cycle_timer_register(avr, bus_clocks * bit_cycles, timer, sim.twi);
