@@ -24,10 +24,9 @@
 //   regs CHIP REG0 REG2               answer to "regs" (hexadecimal)
 //   time SIM_NS WALL_NS               every 10 ms of simulated time, on "time", and at exit
 // Written from the MLX90393 datasheet (Melexis, rev. 006), the TCA9548A datasheet (Texas Instruments)
-// and simavr's TWI model; simavr 1.6 times one bus clock as 1 us whatever TWBR says, so each bus
-// state it schedules is stretched here to the clock the firmware set (400 kHz: 2.5 us).
+// and simavr's TWI model; simavr 1.6 times one bus clock as 1 us whatever TWBR says, and a START, a
+// STOP and a write's address byte as none: here they take the clock the firmware set (400 kHz: 2.5 us).
 #define _GNU_SOURCE
-#include <errno.h>
 #include <fcntl.h>
 #include <math.h>
 #include <pty.h>
