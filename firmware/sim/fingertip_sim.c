@@ -24,10 +24,9 @@
 //   regs CHIP REG0 REG2               answer to "regs" (hexadecimal)
 //   time SIM_NS WALL_NS               every 10 ms of simulated time, on "time", and at exit
 // Written from the MLX90393 datasheet (Melexis, rev. 006), the TCA9548A datasheet (Texas Instruments)
-// and simavr's TWI model; simavr 1.6 times one bus clock as 1 us whatever TWBR says, so each bus
-// state it schedules is stretched here to the clock the firmware set (400 kHz: 2.5 us).
+// and simavr's TWI model; simavr 1.6 times one bus clock as 1 us whatever TWBR says, and a START, a
+// STOP and a write's address byte as none: here they take the clock the firmware set (400 kHz: 2.5 us).
 #define _GNU_SOURCE
-#include <errno.h>
 #include <fcntl.h>
 #include <math.h>
 #include <pty.h>
@@ -54,6 +53,7 @@
 #define TWBR_ADDRESS 0xB8
 #define TWSR_ADDRESS 0xB9
 #define TWSTA_BIT 5
+#define TWSTO_BIT 4
 #define POLL_CYCLES 1600  // 100 us at 16 MHz: serial and control are serviced this often
 #define REPORT_CYCLES 160000  // 10 ms: the simulated time is reported this often
 
@@ -446,12 +446,33 @@ static void twi_message(avr_irq_t *irq, uint32_t value, void *param) {
     }
 }
 
+static uint32_t bus_clock_cycles(avr_t *avr) {
+    const uint32_t prescale = 1u << (2 * (avr->data[TWSR_ADDRESS] & 3));
+    return 16u + 2u * avr->data[TWBR_ADDRESS] * prescale;
+}
+
+static avr_cycle_count_t stop_sent(avr_t *avr, avr_cycle_count_t when, void *param) {
+    (void)when, (void)param;
+    avr->data[TWCR_ADDRESS] &= (uint8_t)~(1 << TWSTO_BIT);
+    return 0;
+}
+
 // simavr schedules each bus state as a number of 1 us bus clocks; stretch it to the clock the
-// firmware configured (SCL = F_CPU / (16 + 2 * TWBR * 4^TWPS)). With SDA held low no START completes.
+// firmware configured (SCL = F_CPU / (16 + 2 * TWBR * 4^TWPS)). simavr 1.6 gives a START, a STOP
+// and the address byte of a write no time: they take 1, 1 and 9 bus clocks here (TWSTO stays set
+// until the STOP is sent, as the hardware keeps it). With SDA held low no START completes.
 static void twcr_write(avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param) {
     (void)param;
-    const int starting = (v & (1 << TWSTA_BIT)) && !(avr->data[TWCR_ADDRESS] & (1 << TWSTA_BIT));
+    const uint8_t before = avr->data[TWCR_ADDRESS];
+    const int starting = (v & (1 << TWSTA_BIT)) && !(before & (1 << TWSTA_BIT));
+    const int stopping = (v & (1 << TWSTO_BIT)) && !(before & (1 << TWSTO_BIT)) && sim.twi->state;
+    const int was_addressed = sim.twi->state & TWI_COND_ADDR;
     sim.twcr_write(avr, addr, v, sim.twi);
+    if (stopping) {
+        avr->data[TWCR_ADDRESS] |= 1 << TWSTO_BIT;
+        avr_cycle_timer_register(avr, bus_clock_cycles(avr), stop_sent, NULL);
+    }
+    const int address_sent = !was_addressed && (sim.twi->state & TWI_COND_ADDR);
     for (avr_cycle_timer_slot_p slot = avr->cycle_timers.timer; slot; slot = slot->next) {
         if (slot->param != sim.twi) continue;
         const avr_cycle_timer_t timer = slot->timer;
@@ -460,9 +481,10 @@ static void twcr_write(avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param) {
             return;
         }
         const avr_cycle_count_t usec_cycles = slot->when > avr->cycle ? slot->when - avr->cycle : 0;
-        const uint32_t prescale = 1u << (2 * (avr->data[TWSR_ADDRESS] & 3));
-        const uint32_t bit_cycles = 16u + 2u * avr->data[TWBR_ADDRESS] * prescale;
-        const avr_cycle_count_t bus_clocks = usec_cycles / avr_usec_to_cycles(avr, 1);
+        const uint32_t bit_cycles = bus_clock_cycles(avr);
+        avr_cycle_count_t bus_clocks = usec_cycles / avr_usec_to_cycles(avr, 1);
+        if (address_sent) bus_clocks = 9;
+        else if (starting) bus_clocks = 1;
         if (bus_clocks == 0) return;
         avr_cycle_timer_cancel(avr, timer, sim.twi);
         avr_cycle_timer_register(avr, bus_clocks * bit_cycles, timer, sim.twi);

@@ -290,7 +290,10 @@ def _percentiles_ms(values_s: np.ndarray) -> dict[str, float]:
 
 def stream_figures(board: SimulatedBoard, samples: list[Sample], fields_uT: np.ndarray,
                    settings: MLX90393Settings) -> dict:
-    """Frames per second (simulated), frames lost and damaged, latency, and the fields read back."""
+    """Frames per second (simulated), frames lost and damaged, latency, and the fields read back, of a
+    fault-free stream: frame k carries every chip's k-th conversion."""
+    if not samples:
+        raise SimulatorUnavailable("no frame reached the host: the simulation may be far slower than real time")
     received = {sample.seq: sample for sample in samples}
     sent = {frame.seq: frame for frame in board.log.frames}
     first, last = min(received), max(received)
