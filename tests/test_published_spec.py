@@ -170,3 +170,19 @@ def test_markdown_tables_are_read_with_the_prose_line_before_them():
                                      ("After.", ["x"], [])]
     assert spec_cell("—") is None and printed(parse_value("< 0.5", 2, "t")) == spec_cell("< 0.5")
 
+
+def test_the_s1_hysteresis_procedure_is_the_specifications_and_the_shipped_protocol_runs_it():
+    from softtip.lab import load_protocol
+    from softtip.published import published_procedure
+
+    text = (SPEC / "S1-published.md").read_text(encoding="utf-8").replace("\n", " ")
+    speed, depth, rest, rate = map(float, re.search(
+        r"for generation 2: loaded at ([\d.]+) mm/s to ([\d.]+) mm, ([\d.]+) s rest, released, ([\d.]+) Hz", text).groups())
+    procedure = published_procedure("hysteresis")
+    assert dict(procedure.settings) == {"rate_hz": rate, "speeds_mm_s": (speed,), "depth_mm": depth, "rest_s": rest}
+    shipped = load_protocol("hysteresis")
+    assert shipped.design.spec["kind"] == "rectangular"  # generation 2's design
+    # the thesis's cycle is run as published; softtip adds two slower speeds, and that one difference is marked
+    assert [key for key in ("rate_hz", "speeds_mm_s", "depth_mm", "rest_s")
+            if procedure.differs(key, getattr(shipped.parameters, key))] == ["speeds_mm_s"]
+    assert speed in shipped.parameters.speeds_mm_s

@@ -34,6 +34,11 @@ def test_hysteresis_study_compares_the_thesis_cycle_as_a_prediction(hysteresis_s
         causes["the thesis's cycle (1 mm/s, 3 s rest)"]["hysteresis (%)"], abs=0.4)
     # the magnets sit beside the chip's axis, where their Bz is negative; pressing brings them closer
     assert per_speed["1"]["sensitivity_mT_per_N"][2] < 0
+    # the one published setting the protocol does not follow is marked: softtip adds two slower speeds
+    assert [d.setting for d in hysteresis_study.procedure_differences] == ["parameters.speeds_mm_s"]
+    assert hysteresis_study.protocol_table.cells[("parameters.rest_s", "published procedure")] == "same"
+    assert hysteresis_study.protocol_table.cells[("parameters.speeds_mm_s", "published procedure")] == (
+        "differs: published [1.0]")
 
 
 def _linear_material_hysteresis(weight: float, tau: float, depth: float, speed: float, rest: float) -> float:

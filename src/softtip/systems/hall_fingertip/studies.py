@@ -31,7 +31,7 @@ from softtip.systems.hall_fingertip.protocols import THESIS_CYCLE, fingertip_for
 from softtip.twin import Twin
 from softtip.twin.influence import InfluenceEngine
 from softtip.data.splits import by_role
-from softtip.published import OUTSIDE, published_table
+from softtip.published import OUTSIDE, published_procedure, published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
@@ -399,7 +399,8 @@ def hysteresis(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcom
         rows = dataset.groups == np.unique(dataset.groups[speeds == speed])[0]
         ax.plot(force[rows], z[rows] / 1000, lw=1, label=label)
     _label_axes(ax, "normal force (N)", "first sensor's z MFD change (mT)", legend={})
-    thesis_speed, thesis_rest = (float(part.split()[0]) for part in THESIS_CYCLE.split(", "))
+    thesis = published_procedure(protocol.name).settings  # the cycle the thesis measured its figure on
+    thesis_speed, thesis_rest = thesis["speeds_mm_s"][0], thesis["rest_s"]
     at_thesis = results["per_speed"].get(f"{thesis_speed:g}") if p.rest_s == thesis_rest else None
     table = published_table("hysteresis")
     # the material set on the thesis's own cycle makes the row agree by construction
