@@ -143,7 +143,7 @@ def test_a_report_is_one_self_contained_page_and_renders_inline_in_jupyter(tmp_p
 
     figure, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])
-    table = paper_table(published_table("hysteresis"), {("hysteresis", "calibration cycle"): 7.1})
+    table = paper_table(published_table("hysteresis"), {("hysteresis", "1 mm/s, 3 s rest"): 7.1})
     report = Report("t", "lead", [Section("s", ["a note"], [table], [Figure.of("f", "what to look for", figure)])])
     page = report.write(tmp_path / "r.html").read_text()
     assert page.startswith("<!doctype html>") and "<style>" in page
@@ -151,4 +151,4 @@ def test_a_report_is_one_self_contained_page_and_renders_inline_in_jupyter(tmp_p
     png = base64.b64decode(re.search(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)[1])
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     inline = report._repr_html_()
-    assert "<html" not in inline and "<style>" in inline and "7.3" in inline and "◆" in inline
+    assert "<html" not in inline and "<style>" in inline and "7.3" in inline and "✓" in inline

@@ -104,8 +104,10 @@ def _s1_expected() -> dict[tuple[str, str, str], str | None]:
     estimate = re.search(r"One estimate took (\d+) ms \(FNN\) and (\d+) ms \(PFM\)", text)
     expected[("pushing-estimate-time", "one estimate", "network (FNN)")] = estimate[1]
     expected[("pushing-estimate-time", "one estimate", "polynomial (PFM)")] = estimate[2]
-    expected[("hysteresis", "hysteresis", "calibration cycle")] = re.search(
-        r"The thesis gives ([\d.]+) % hysteresis", text)[1]
+    # the thesis's figure, in the column of the cycle it was measured on
+    thesis = re.search(r"The thesis gives ([\d.]+) % hysteresis .*? loaded at ([\d.]+) mm/s to 3 mm, (\d+) s rest",
+                       text.replace("\n", " "))
+    expected[("hysteresis", "hysteresis", f"{thesis[2]} mm/s, {thesis[3]} s rest")] = thesis[1]
     thickness = re.search(r"\(([\d, and]+) mm\): the error .* each within (\d+)°", text.replace("\n", " "))
     for board in re.findall(r"\d+", thickness[1]):
         expected[("grasp-positions-thickness", "φ (°)", f"{board} mm")] = f"< {thickness[2]}"
@@ -167,3 +169,20 @@ def test_markdown_tables_are_read_with_the_prose_line_before_them():
     assert markdown_tables(text) == [("A caption:", ["a", "b"], [["1", "—"], ["2", "< 0.5"]]),
                                      ("After.", ["x"], [])]
     assert spec_cell("—") is None and printed(parse_value("< 0.5", 2, "t")) == spec_cell("< 0.5")
+
+
+def test_the_s1_hysteresis_procedure_is_the_specifications_and_the_shipped_protocol_runs_it():
+    from softtip.lab import load_protocol
+    from softtip.published import published_procedure
+
+    text = (SPEC / "S1-published.md").read_text(encoding="utf-8").replace("\n", " ")
+    speed, depth, rest, rate = map(float, re.search(
+        r"for generation 2: loaded at ([\d.]+) mm/s to ([\d.]+) mm, ([\d.]+) s rest, released, ([\d.]+) Hz", text).groups())
+    procedure = published_procedure("hysteresis")
+    assert dict(procedure.settings) == {"rate_hz": rate, "speeds_mm_s": (speed,), "depth_mm": depth, "rest_s": rest}
+    shipped = load_protocol("hysteresis")
+    assert shipped.design.spec["kind"] == "rectangular"  # generation 2's design
+    # the thesis's cycle is run as published; softtip adds two slower speeds, and that one difference is marked
+    assert [key for key in ("rate_hz", "speeds_mm_s", "depth_mm", "rest_s")
+            if procedure.differs(key, getattr(shipped.parameters, key))] == ["speeds_mm_s"]
+    assert speed in shipped.parameters.speeds_mm_s

@@ -39,7 +39,7 @@ def reports(tmp_path_factory, coarse_protocol):
     not the studies' figures."""
     directory = tmp_path_factory.mktemp("reports")
     for name, study in studies().items():
-        design = "rectangular" if name in ("grasp-positions", "contact-states", "inverter") else "cylindrical-D"
+        design = "rectangular" if name in ("hysteresis", "grasp-positions", "contact-states", "inverter") else "cylindrical-D"
         path = coarse_protocol(study.protocol, design, fewer=True)
         reproduce_study(name, quick=True, protocol_path=path).write(directory)
     write_index(directory)
@@ -94,3 +94,10 @@ def test_each_report_json_puts_results_beside_the_published_figures(reports):
                 assert comparison["difference"] == pytest.approx(comparison["softtip"] - published, abs=1e-5)
         # a study that follows published tables compares at least one of their cells
         assert bool(entry["comparisons"]) == bool(tables_of(name)), name
+        # every setting that is not the publication's procedure is listed with both values
+        for difference in entry["procedure_differences"]:
+            assert difference["setting"].startswith("parameters.") and difference["softtip"] != difference["published"]
+    # a smoke run's trials are cut below the published counts: marked
+    pushing = json.loads((reports / "pushing.json").read_text())["procedure_differences"]
+    assert {"setting": "parameters.calibration_trials", "softtip": 2, "published": 10.0} in [
+        {key: d[key] for key in ("setting", "softtip", "published")} for d in pushing]

@@ -13,22 +13,32 @@ from softtip.studies.reproduce import reproduce_study
 
 @pytest.fixture(scope="module")
 def hysteresis_study(coarse_protocol):
-    path = coarse_protocol("hysteresis", "cylindrical-D", 2.5, "trials = 2\n")
+    path = coarse_protocol("hysteresis", "rectangular", 3.0, "trials = 2\n")
     return reproduce_study("hysteresis", protocol_path=path)
 
 
 @pytest.mark.slow
-def test_hysteresis_study_reproduces_its_calibration_cycle(hysteresis_study, tmp_path):
-    per_speed = hysteresis_study.outcome.results["per_speed"]
-    # a calibration check, not a prediction: the material was set from this 7.3 % cycle at 0.25 mm/s;
-    # here it is measured on noisy trials with the S1 formula
-    assert per_speed["0.25"]["hysteresis_percent_mean"] == pytest.approx(7.3, abs=0.6)
-    # the magnets sit beside the chip's axis, where their Bz is negative; pressing brings them closer
-    assert per_speed["0.25"]["sensitivity_mT_per_N"][2] < 0
-    # the published figure it was set from sits beside it, judged as fitted, not as a prediction
+def test_hysteresis_study_compares_the_thesis_cycle_as_a_prediction(hysteresis_study, tmp_path):
+    results = hysteresis_study.outcome.results
+    per_speed, causes = results["per_speed"], results["causes"]
+    # the material is set on the fit's own cycle (0.25 mm/s, 1 s rest): the noise-free cycle gives the 7.3 % back
+    assert causes["the fit's cycle (0.25 mm/s, 1 s rest)"]["hysteresis (%)"] == pytest.approx(7.3, abs=1e-6)
+    # the thesis's cycle (1 mm/s, 3 s rest) is judged as a prediction against the published figure, not as fitted
     [comparison] = hysteresis_study.comparisons()
-    assert comparison["published"] == "7.3" and comparison["verdict"] == "fitted"
-    assert comparison["difference"] == pytest.approx(per_speed["0.25"]["hysteresis_percent_mean"] - 7.3, abs=1e-6)
+    assert comparison["column"] == "1 mm/s, 3 s rest" and comparison["published"] == "7.3"
+    assert comparison["verdict"] == "outside" and comparison["softtip"] == pytest.approx(
+        per_speed["1"]["hysteresis_percent_mean"], abs=1e-6)
+    # the noisy trials (two, on a coarse mesh, off-centre by the contact's scatter) sit near the noise-free
+    # centred cycle (measured: 5.25 against 5.51 %)
+    assert per_speed["1"]["hysteresis_percent_mean"] == pytest.approx(
+        causes["the thesis's cycle (1 mm/s, 3 s rest)"]["hysteresis (%)"], abs=0.4)
+    # the magnets sit beside the chip's axis, where their Bz is negative; pressing brings them closer
+    assert per_speed["1"]["sensitivity_mT_per_N"][2] < 0
+    # the one published setting the protocol does not follow is marked: softtip adds two slower speeds
+    assert [d.setting for d in hysteresis_study.procedure_differences] == ["parameters.speeds_mm_s"]
+    assert hysteresis_study.protocol_table.cells[("parameters.rest_s", "published procedure")] == "same"
+    assert hysteresis_study.protocol_table.cells[("parameters.speeds_mm_s", "published procedure")] == (
+        "differs: published [1.0]")
 
 
 def _linear_material_hysteresis(weight: float, tau: float, depth: float, speed: float, rest: float) -> float:
@@ -53,23 +63,27 @@ def _linear_material_hysteresis(weight: float, tau: float, depth: float, speed: 
 
 
 @pytest.mark.slow
-def test_hysteresis_at_the_other_speeds_follows_the_closed_form_qlv_response(hysteresis_study):
-    per_speed = hysteresis_study.outcome.results["per_speed"]
-    # The material relaxes with one time constant, the calibration cycle's time to its peak (3 mm at
-    # 0.25 mm/s: 12 s), and its weight is set for 7.3 % on that cycle (1 s rest). The closed form for a
-    # linear material, set the same way, predicts how the loop narrows at 0.5 and 1 mm/s: a faster cycle
-    # gives the material less time to relax. The fingertip's stiffening with depth moves the mid-force
-    # crossing, so the ratios agree to 10 % (measured: 1.5 % and 6 %); a time constant half or twice as
-    # long would miss by 13-39 %.
-    def closed_form(weight, speed):
-        return _linear_material_hysteresis(weight, 12.0, 3.0, speed, 1.0)
-
-    weight = brentq(lambda w: closed_form(w, 0.25) - 7.3, 1e-6, 0.99)
-    calibrated = per_speed["0.25"]["hysteresis_percent_mean"]
-    for speed in (0.5, 1.0):
-        measured = per_speed[f"{speed:g}"]["hysteresis_percent_mean"] / calibrated
-        assert measured == pytest.approx(closed_form(weight, speed) / 7.3, rel=0.1), speed
-    assert per_speed["1"]["hysteresis_percent_mean"] < per_speed["0.5"]["hysteresis_percent_mean"] < calibrated
+def test_the_table_of_causes_follows_the_closed_form_qlv_response(hysteresis_study):
+    causes = hysteresis_study.outcome.results["causes"]
+    # The material relaxes with one time constant, the fit's cycle's time to its peak (3 mm at 0.25 mm/s:
+    # 12 s), and its weight is set for 7.3 % on that cycle (1 s rest). The closed form for a linear material,
+    # set the same way, predicts every other cycle of the table of causes: speed, rest, a time constant or
+    # weight scaled. The fingertip's stiffening with depth moves the mid-force crossing (measured: within
+    # 3.5 %); the gap between the closed form's cycles is far larger (3.1 to 8.6 %).
+    weight = brentq(lambda w: _linear_material_hysteresis(w, 12.0, 3.0, 0.25, 1.0) - 7.3, 1e-6, 0.99)
+    thesis = "the thesis's cycle (1 mm/s, 3 s rest)"
+    expected = {"the thesis's speed, the fit's rest (1 mm/s, 1 s)": (weight, 12.0, 1.0, 1.0),
+                "the fit's speed, the thesis's rest (0.25 mm/s, 3 s)": (weight, 12.0, 0.25, 3.0),
+                thesis: (weight, 12.0, 1.0, 3.0),
+                f"{thesis}, time constant x0.5 (6.02 s)": (weight, 6.0, 1.0, 3.0),
+                f"{thesis}, time constant x2 (24.1 s)": (weight, 24.0, 1.0, 3.0),
+                f"{thesis}, relaxing weight x0.5 ({0.5 * causes[thesis]['relaxing weight']:.3g})":
+                    (weight / 2, 12.0, 1.0, 3.0)}
+    for row, (w, tau, speed, rest) in expected.items():
+        assert causes[row]["hysteresis (%)"] == pytest.approx(
+            _linear_material_hysteresis(w, tau, 3.0, speed, rest), rel=0.05), row
+    # the gap's cause: at the thesis's speed the material has less time to relax than on the fit's cycle
+    assert causes[thesis]["hysteresis (%)"] < 7.3 - 0.6
 
 
 @pytest.mark.slow

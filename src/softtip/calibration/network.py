@@ -23,6 +23,10 @@ Semantics followed:
   learning too: its training error fell by less than that fraction over the last ``max_fail``
   epochs, so a plateau that the validation error sits out while the training error still falls
   does not end it (:mod:`softtip.calibration.validation` says when this is needed).
+* with ``anchored`` (not the toolbox's) the linear output layer is refitted once trained, by least
+  squares on the training share, so that a zero input gives exactly a zero output: for inputs and
+  targets that are both changes from a baseline (a sensor's readings and the force on it), where an
+  untouched sensor must read no force whatever the network learnt about the rest of its range.
 
 Errors in ``history_`` are mean squared errors of the scaled targets.
 """
@@ -41,6 +45,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
 from softtip._core.config import (
+    Flag,
     NonNegativeNumber,
     Number,
     OpenFraction,
@@ -142,6 +147,18 @@ def levenberg_marquardt(layers: list[np.ndarray], train: tuple[np.ndarray, np.nd
                           reason, stopping.best_epoch)
 
 
+def anchored_output_layer(layers: list[np.ndarray], inputs: np.ndarray, targets: np.ndarray,
+                          anchor_input: np.ndarray, anchor_target: np.ndarray) -> np.ndarray:
+    """The linear output layer (augmented, bias last) refitted by least squares on (inputs, targets), the
+    hidden layers kept, under the constraint that ``anchor_input`` gives exactly ``anchor_target``: a
+    fit of the targets' departures from the anchor's on the hidden activations' departures, without
+    an intercept."""
+    hidden = forward(layers, inputs)[-2]
+    anchor = forward(layers, anchor_input[None])[-2][0]
+    weights, *_ = np.linalg.lstsq(hidden - anchor, targets - anchor_target, rcond=None)
+    return np.column_stack([weights.T, anchor_target - anchor @ weights])
+
+
 def _one_or_more(sizes):
     return (sizes,) if isinstance(sizes, numbers.Integral) and not isinstance(sizes, bool) else sizes
 
@@ -180,6 +197,7 @@ class LMSettings(TanhNetworkSettings):
     mu_inc: Growth
     mu_max: Number
     min_progress: NonNegativeNumber | None
+    anchored: Flag
 
     def __post_init__(self):
         if not self.mu_max > self.mu:
@@ -287,7 +305,7 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
 
     def __init__(self, hidden_layer_sizes=(10,), *, max_epochs=1000, max_fail=6, mu=1e-3, mu_dec=0.1,
                  mu_inc=10.0, mu_max=1e10, min_grad=1e-7, goal=0.0, division=(0.70, 0.15, 0.15),
-                 min_progress=None, random_state=None):
+                 min_progress=None, anchored=False, random_state=None):
         self.hidden_layer_sizes = hidden_layer_sizes
         self.max_epochs = max_epochs
         self.max_fail = max_fail
@@ -299,6 +317,7 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
         self.goal = goal
         self.division = division
         self.min_progress = min_progress
+        self.anchored = anchored
         self.random_state = random_state
 
     def __sklearn_tags__(self):
@@ -339,6 +358,10 @@ class LMNetwork(RegressorMixin, TanhNetworkBase):
                 min_grad=settings.min_grad, goal=settings.goal,
                 min_progress=settings.min_progress)
         self._keep_training(result)
+        if settings.anchored:
+            zero_input = to_unit_range(np.zeros((1, X.shape[1])), self.input_min_, self.input_max_)[0]
+            zero_target = to_unit_range(np.zeros((1, self.n_outputs_)), self.target_min_, self.target_max_)[0]
+            self.weights_[-1] = anchored_output_layer(self.weights_, *scaled[0], zero_input, zero_target)
         self._set_runtime_from_scaling()
         return self
 

@@ -7,6 +7,10 @@ a range (``"0.8..0.92"``) or blank (``""``). A table's ``close`` says when softt
 as close to a published number, and why; ``better = "lower"`` or ``"higher"`` (or a list, one per
 column, ``""`` for none) makes a figure past the published one on that side count as meeting it; ``fitted = true`` marks a figure a model
 parameter was set from (agreement by construction, not a prediction).
+
+The publications' procedures are data there too: ``[procedures.PROTOCOL]`` gives a ``source`` and,
+under a protocol's own parameter names, the value the publication used (a number, true/false, a list
+of numbers or of [x, y] pairs); a protocol's report marks every setting that differs from it.
 """
 
 from __future__ import annotations
@@ -16,7 +20,9 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
+
+import numpy as np
 
 from softtip._core.systems import systems
 from softtip._core.config import ConfigError, Flag, PositiveNumber, Text, choice, integer, parse, read_toml, schema
@@ -183,20 +189,85 @@ def _table(system: str, source: str, key: str, table: dict) -> PublishedTable:
 
 def published_tables() -> dict[str, PublishedTable]:
     """Every published table of every registered system, by key (read again when the registry changes)."""
-    return _tables_of_files(tuple((system.name, system.label, str(file)) for system in systems().values()
-                                  if (file := system.published()) is not None))
+    return _published_of_files(_system_files())[0]
+
+
+PROCEDURES = "procedures"  # published.toml's key of the publications' procedures, not a table of figures
+ProcedureValue = bool | float | tuple[float, ...] | tuple[tuple[float, ...], ...]
+
+
+@dataclass(frozen=True)
+class PublishedProcedure:
+    """How the publication ran one protocol's experiment: the value it used for each parameter it states."""
+
+    protocol: str
+    system: str
+    source: str
+    settings: Mapping[str, ProcedureValue]
+
+    def differs(self, key: str, value: Any) -> bool | None:
+        """Whether softtip's ``value`` of parameter ``key`` differs from the published one; None when the
+        publication states none."""
+        if key not in self.settings:
+            return None
+        published = self.settings[key]
+        if isinstance(published, bool) or isinstance(value, bool):
+            return published is not value
+        mine, theirs = np.asarray(value, dtype=float), np.asarray(published, dtype=float)
+        return mine.shape != theirs.shape or not np.allclose(mine, theirs, rtol=1e-9, atol=0.0)
+
+
+def _procedure_value(value: Any, where: str) -> ProcedureValue:
+    numbers = (int, float)
+    if isinstance(value, bool) or isinstance(value, numbers):
+        return value if isinstance(value, bool) else float(value)
+    if isinstance(value, list) and value and all(isinstance(v, numbers) and not isinstance(v, bool) for v in value):
+        return tuple(float(v) for v in value)
+    if isinstance(value, list) and value and all(
+            isinstance(v, list) and len(v) == 2 and all(isinstance(c, numbers) and not isinstance(c, bool) for c in v)
+            for v in value):
+        return tuple(tuple(float(c) for c in v) for v in value)
+    raise ConfigError(f"{where} = {value!r}: expected a number, true/false, a list of numbers or of [x, y] pairs")
+
+
+def _procedures(label: str, source: str, table: Any) -> dict[str, PublishedProcedure]:
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: {PROCEDURES}: expected a table of [{PROCEDURES}.PROTOCOL] tables")
+    procedures = {}
+    for protocol, entries in table.items():
+        where = f"{source}: {PROCEDURES}.{protocol}"
+        if not isinstance(entries, dict) or not isinstance(entries.get("source"), str) or not entries["source"].strip():
+            raise ConfigError(f"{where}: expected a table with a source (text) and the published parameters")
+        settings = {key: _procedure_value(value, f"{where}.{key}") for key, value in entries.items() if key != "source"}
+        procedures[protocol] = PublishedProcedure(protocol, label, entries["source"], settings)
+    return procedures
+
+
+def published_procedure(protocol: str) -> PublishedProcedure | None:
+    """The published procedure of protocol ``protocol``, if its system's ``published.toml`` declares one."""
+    return _published_of_files(_system_files())[1].get(protocol)
+
+
+def _system_files() -> tuple[tuple[str, str, str], ...]:
+    return tuple((system.name, system.label, str(file)) for system in systems().values()
+                 if (file := system.published()) is not None)
 
 
 @functools.cache
-def _tables_of_files(files: tuple[tuple[str, str, str], ...]) -> dict[str, PublishedTable]:
+def _published_of_files(files: tuple[tuple[str, str, str], ...]
+                        ) -> tuple[dict[str, PublishedTable], dict[str, PublishedProcedure]]:
     tables: dict[str, PublishedTable] = {}
+    procedures: dict[str, PublishedProcedure] = {}
     for name, label, file in files:
         source = f"{name}: published.toml"
         for key, table in read_toml(Path(file), "published figures").items():
+            if key == PROCEDURES:
+                procedures |= _procedures(label, source, table)
+                continue
             if key in tables:
                 raise ConfigError(f"{source}: table {key} is also {tables[key].system}'s")
             tables[key] = _table(label, source, key, table)
-    return tables
+    return tables, procedures
 
 
 def published_table(key: str) -> PublishedTable:

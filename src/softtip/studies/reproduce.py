@@ -17,7 +17,7 @@ import platform
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -31,9 +31,11 @@ from softtip._core.systems import study as registered_study
 from softtip._core.threads import single_threaded
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import shipped_protocol_path
-from softtip.published import OUTSIDE
+from softtip.published import OUTSIDE, published_procedure
 from softtip.report.document import Report, Section
 from softtip.report.index import index_report
+from softtip.report.procedure import (PROCEDURE_COLUMN, ProcedureDifference, procedure_caption, procedure_cell,
+                                      procedure_differences, shown)
 from softtip.report.tables import Table
 from softtip.studies.outcome import StudyOutcome
 
@@ -61,13 +63,11 @@ def _rounded(value, digits=3):
     return value
 
 
-def _shown(value) -> str:
-    return json.dumps(value, ensure_ascii=False) if isinstance(value, (list, dict)) else str(value)
-
-
 def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study: Study) -> Table:
-    """Every setting of the run: value, unit, default or changed, and where the value comes from."""
+    """Every setting of the run: value, unit, default or changed, where the value comes from, and the
+    publication's value where it states one (a difference marked)."""
     rows, cells = [], {}
+    procedure = published_procedure(protocol.name)
 
     def add(section: str, key: str, value, default, origin: str) -> None:
         row = f"{section}.{key}"
@@ -76,9 +76,10 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study:
         where = ("--quick (a smoke run)" if key in quick_keys and section == "parameters"
                  else f"set by the study: {study.because}" if key in study.sets and section == "parameters"
                  else f"changed in {source}" if changed else origin)
-        cells.update({(row, "value"): _shown(value), (row, "unit"): parameter_unit(key),
-                      (row, "default or changed"): f"changed (default {_shown(default)})" if changed else "default",
-                      (row, "where from"): where})
+        cells.update({(row, "value"): shown(value), (row, "unit"): parameter_unit(key),
+                      (row, "default or changed"): f"changed (default {shown(default)})" if changed else "default",
+                      (row, "where from"): where,
+                      (row, PROCEDURE_COLUMN): procedure_cell(procedure, key, value) if section == "parameters" else None})
 
     bench = protocol.bench
     defaults = bench.defaults(protocol.name)
@@ -91,8 +92,10 @@ def protocol_table(protocol: Protocol, source: str, quick_keys: set[str], study:
     defaults = asdict(type(protocol.viscoelastic)())
     for key, value in asdict(protocol.viscoelastic).items():
         add("viscoelastic", key, value, defaults[key], bench.viscoelastic_sources[key])
-    return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from"], cells,
-                 caption="Every setting of this run; realism effects are set to 0 to switch them off.")
+    differences = procedure_differences(procedure, "parameters", asdict(protocol.parameters))
+    return Table("Protocol", "setting", rows, ["value", "unit", "default or changed", "where from", PROCEDURE_COLUMN],
+                 cells, caption="Every setting of this run; realism effects are set to 0 to switch them off. "
+                                + procedure_caption(procedure, differences))
 
 
 @dataclass
@@ -104,6 +107,7 @@ class StudyReport:
     protocol_table: Table
     provenance: dict[str, str]
     seconds: float
+    procedure_differences: list[ProcedureDifference] = field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -118,6 +122,7 @@ class StudyReport:
         return {"format": REPORT_FORMAT, "study": self.name, "follows": self.study.follows,
                 "headline": self.outcome.headline.to_dict(), "comparisons": comparisons,
                 "outside": sum(c["verdict"] == OUTSIDE for c in comparisons),
+                "procedure_differences": [difference.to_dict() for difference in self.procedure_differences],
                 "results": _rounded(self.outcome.results), "seconds": round(self.seconds, 1),
                 "provenance": self.provenance, "report": report_file}
 
@@ -183,7 +188,8 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
         "command": command or f"softtip.studies.reproduce.reproduce_study({name!r}, seed={seed}, quick={quick})",
         "started (UTC)": started.strftime("%Y-%m-%d %H:%M:%S"), "run time": f"{seconds:.1f} s",
         "python / platform": f"{platform.python_version()} / {platform.platform(terse=True)}"}
-    return StudyReport(study, outcome, table, provenance, seconds)
+    differences = procedure_differences(published_procedure(protocol.name), "parameters", asdict(protocol.parameters))
+    return StudyReport(study, outcome, table, provenance, seconds, differences)
 
 
 def reproduce_into(directory: str | Path, name: str, seed: int = 1, quick: bool = False,

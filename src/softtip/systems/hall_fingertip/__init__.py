@@ -24,7 +24,7 @@ SYSTEM = System(
         Study("force3", "force3", f"{_STUDIES}:force3",
               "S1 §1: 3-axis force calibration against a reference force sensor"),
         Study("hysteresis", "hysteresis", f"{_STUDIES}:hysteresis",
-              "S1 §1: load to 3 mm and unload, hysteresis and sensitivity"),
+              "S1 §2 (the thesis, generation 2): load to 3 mm at 1 mm/s, 3 s rest, unload; hysteresis and sensitivity"),
         Study("grasp-two", "grasp-two", f"{_STUDIES}:grasp_two",
               "S1 §1: board orientation grasped between two fingertips"),
         Study("grasp-positions", "grasp-positions", f"{_STUDIES}:grasp_positions",

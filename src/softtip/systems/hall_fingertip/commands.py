@@ -36,7 +36,7 @@ def demo(
     table = Table(title="force estimates: validation trials (offline) and live frames from the emulator, every "
                         "sample (rests included); at rest: the estimate's mean ± sd where no force acts")
     for column in ("axis", "offline MAE (N)", "offline R²", "offline at rest (N)", "live MAE (N)", "live at rest (N)",
-                   "live peak |F| (N)"):
+                   "live MAE rest / loading / unloading (N)", "live peak |F| (N)"):
         table.add_column(column, justify="right")
     nan = float("nan")
     for axis, offline in report["calibration"]["validation"].items():
@@ -45,6 +45,8 @@ def demo(
                       f"{offline['rest_mean_N']:+.3f} ± {offline['rest_sd_N']:.3f}",
                       f"{live.get('mean_abs_error_N', nan):.3f}",
                       f"{live.get('rest_mean_N', nan):+.3f} ± {live.get('rest_sd_N', nan):.3f}",
+                      " / ".join(f"{live.get('by_phase', {}).get(f'{phase}_mean_abs_error_N', nan):.3f}"
+                                 for phase in ("rest", "loading", "unloading")),
                       f"{live.get('peak_true_N', nan):.2f}")
     console.print(table)
     pipeline = report["pipeline"]

@@ -17,7 +17,7 @@ import numpy as np
 from softtip._core.progress import SILENT, Progress
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
-from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model, force_errors
+from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model, force_errors, phase_errors
 from softtip.systems.hall_fingertip.live import cached_scenario
 from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
@@ -44,7 +44,7 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
         times = np.array([t for t, _ in frames])
         estimates = np.array([e for _, e in frames])
         truth = scenario.force(times)
-        live = {k: {**force_errors(truth[:, i], estimates[:, i]), "peak_true_N": float(np.abs(truth[:, i]).max())}
-                for i, k in enumerate(FORCES)}
+        live = {k: {**force_errors(truth[:, i], estimates[:, i]), "peak_true_N": float(np.abs(truth[:, i]).max()),
+                    "by_phase": phase_errors(truth[:, i], estimates[:, i])} for i, k in enumerate(FORCES)}
     return {"model": str(model_path), "calibration": calibration, "live": live, "estimated_frames": len(frames),
             "pipeline": summary}

@@ -19,6 +19,7 @@ import numpy as np
 
 from softtip.data import Dataset, DatasetMetadata, TrialWriter, channel_columns
 from softtip.data.splits import CALIBRATION, VALIDATION
+from softtip._core.signals import hysteresis_percent
 from softtip.lab.bench import SeededBench
 from softtip._core.units import MM
 from softtip.design.model import Design
@@ -54,19 +55,34 @@ class Bench(SeededBench):
         return np.arange(0.0, duration + 1e-9, 1.0 / self.rate_hz)
 
 
-def material_prony(fingertip: InfluenceEngine, hysteresis_percent: float, depth: float, speed: float,
-                   rest: float) -> PronySeries:
-    """The material's relaxation, set once per design so that a centred board load/unload cycle
-    (``depth`` at ``speed`` with ``rest`` s at the bottom) shows ``hysteresis_percent`` between
-    sensor z and normal force - the published fingertip's measured figure (S1 §1-2). Every other
-    speed and protocol is then a prediction."""
+def centred_cycle(fingertip: InfluenceEngine, depth: float, speed: float,
+                  rest: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One noise-free load/unload cycle of a centred board: ``depth`` at ``speed`` (m, m/s), ``rest`` s at
+    the bottom, released at ``speed``: times (s), the first chip's z field change (T) and the elastic
+    normal force (N), 400 samples."""
     table = path_table(fingertip.press(LoadCase(Board(), depth, friction="stick"), normal_steps=8))
     times = np.linspace(0, 2 * depth / speed + rest, 400)
     profile = np.minimum(times * speed, depth)
     profile = np.where(times > depth / speed + rest, depth - (times - depth / speed - rest) * speed, profile)
     poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-    z = Readout(fingertip.design).field_change(poses)[:, 0, 2]
-    return prony_for_hysteresis(hysteresis_percent, times, z, force[:, 2])
+    return times, Readout(fingertip.design).field_change(poses)[:, 0, 2], force[:, 2]
+
+
+def material_prony(fingertip: InfluenceEngine, hysteresis_percent: float, depth: float, speed: float,
+                   rest: float) -> PronySeries:
+    """The material's relaxation, set once per design so that a centred board load/unload cycle
+    (``depth`` at ``speed`` with ``rest`` s at the bottom) shows ``hysteresis_percent`` between
+    sensor z and normal force. One cycle fixes one weight for one time constant (the cycle's time to
+    its peak); every other cycle, speed and protocol is then a prediction."""
+    return prony_for_hysteresis(hysteresis_percent, *centred_cycle(fingertip, depth, speed, rest))
+
+
+def cycle_hysteresis(fingertip: InfluenceEngine, prony: PronySeries, depth: float, speed: float,
+                     rest: float) -> float:
+    """The S1 hysteresis (%) of a centred cycle (:func:`centred_cycle`) with the material relaxing as
+    ``prony``: the force a reference sensor reads (it never pulls) against the chip's z."""
+    times, z, force = centred_cycle(fingertip, depth, speed, rest)
+    return hysteresis_percent(z, np.maximum(qlv_response(times, force, prony), 0.0))
 
 
 def _metadata(bench: Bench, record: dict, seed: int, description: str, designs: dict | None = None) -> DatasetMetadata:
