@@ -104,9 +104,9 @@ def _set_fifo(thread_id: int, priority: int) -> tuple[int, os.sched_param] | Non
 def realtime_thread(realtime: bool = True, cpu: int | None = None) -> Iterator[Timing]:
     """For the calling thread: SCHED_FIFO at :data:`RT_PRIORITY` and, once granted, pinned to ``cpu``
     (default :func:`loop_cpu`); the process's other Python threads (sinks' writers ...) at SCHED_FIFO
-    just below it and kept to the other CPUs, so that none is preempted, by another process or by the
-    loop itself, while it holds the GIL; and the GIL
-    handed over within :data:`SWITCH_INTERVAL_S`; the objects alive on entry left out of garbage
+    just below it, so that none is preempted by another process while it holds the GIL (not pinned:
+    kept off the loop's CPU, one holding the GIL waited there behind another in C work, and the loop
+    with it); and the GIL handed over within :data:`SWITCH_INTERVAL_S`; the objects alive on entry left out of garbage
     collections until exit (:func:`gc.freeze`). Each where Linux permits it, all undone on exit.
     The thread is pinned only with the priority: without it, a pinned thread waits for its CPU while
     another may be free. ``realtime`` False asks for none of it."""
@@ -128,13 +128,9 @@ def realtime_thread(realtime: bool = True, cpu: int | None = None) -> Iterator[T
     pinned, pinning = None, "not pinned (no real-time priority)"
     if before is not None:
         pinned = loop_cpu() if cpu is None else cpu
-        others = affinity - {pinned}
         try:
             os.sched_setaffinity(0, {pinned})
-            for thread_id in helpers if others else ():  # kept off the loop's CPU: it would preempt them
-                with suppress(OSError):
-                    os.sched_setaffinity(thread_id, others)
-            pinning = f"pinned to CPU {pinned}" + (f", the other threads to CPUs {sorted(others)}" if others else "")
+            pinning = f"pinned to CPU {pinned}"
         except OSError as problem:
             pinned, pinning = None, f"not pinned (not permitted: {problem.strerror})"
     sys.setswitchinterval(SWITCH_INTERVAL_S)
@@ -147,9 +143,7 @@ def realtime_thread(realtime: bool = True, cpu: int | None = None) -> Iterator[T
         gc.unfreeze()
         sys.setswitchinterval(previous_interval)
         if pinned is not None:
-            for thread_id in (0, *helpers):
-                with suppress(OSError):  # a helper that has ended since
-                    os.sched_setaffinity(thread_id, affinity)
+            os.sched_setaffinity(0, affinity)
         for thread_id, policy in [(0, before), *helpers.items()]:
             if policy is not None:
                 with suppress(OSError):  # a helper that has ended since

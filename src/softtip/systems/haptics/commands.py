@@ -354,14 +354,14 @@ def _render_line(summary: dict, finger: str, record: Path | None) -> str:
     error = (f"median {summary['median_error_N']:.3f} N, p90 {summary['p90_error_N']:.3f} N (read by the "
              f"{summary['error_measured_by']})" if summary["median_error_N"] is not None
              else "not measured (the device reports no wrench)")
-    timing = summary["timing"]
     lateness = ("not paced (--fast)" if summary["lateness_p50_us"] is None else
                 f"p50 {summary['lateness_p50_us']:.0f} µs, p99 {summary['lateness_p99_us']:.0f} µs, max "
-                f"{summary['lateness_max_us']:.0f} µs, {summary['late_ticks']} ticks over a period late")
+                f"{summary['lateness_max_us']:.0f} µs, {summary['late_ticks']} ticks over a period late "
+                f"({summary['timing']['granted']})")
     return (f"{summary['ticks']} ticks at 1 kHz on {finger} ({summary['method']}, {summary['device']} device)"
             + (", ended by Ctrl-C" if summary["interrupted"] else "")
             + f"; {summary['renderings']} renderings, one per servo command: p99 {summary['latency_p99_us']:.1f} µs"
-            + f"; ticks' start after their deadline: {lateness} ({timing['priority']}; {timing['affinity']})"
+            + f"; ticks' start after their deadline: {lateness}"
             + f"; |F_wanted − F_rendered| {error}; {summary['outside_table']} renderings outside the table, "
             + f"{summary['table_entries_flagged']} table entries flagged"
             + (f"; recorded to {record}" if record else ""))

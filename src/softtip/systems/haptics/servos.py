@@ -30,8 +30,9 @@ replies; a device without a sensor sends none, and the host then reports the err
 ``W <frame> <fx_N> <fy_N> <fz_N> <tx_Nm> <ty_Nm> <tz_Nm>``
     The wrench the sensor under the fingertip read at the end of frame ``frame`` (its last sample
     before the next command took effect), in the sensor's axes, N and N·m, each a decimal number
-    (``%.6g``); sent when the frame ends, which for the host is during the next frame (so the host
-    holds it from the frame after it read it, and scores it against that frame's wanted force).
+    (``%.6g``); sent when the frame ends, which for the host is during the next frame. The host holds
+    the newest from the frame after the one it read it in, and scores each against the wanted force
+    at the last tick of frame ``frame``.
 
 The host reads what arrived once a frame and never waits for it; a line it cannot parse is counted
 (``malformed_replies``) and skipped. A command line is at most :data:`LONGEST_LINE` bytes, so 50
