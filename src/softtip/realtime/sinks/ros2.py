@@ -16,11 +16,12 @@ node offers the service ``~/take_baseline`` (std_srvs/srv/Trigger): the insertio
 "take the baseline" step.
 
 Delivery: the publishers are reliable and keep the last ``qos_depth`` messages per topic for
-subscribers that fall behind (1000: two seconds at 500 frames/s), and they are transient-local, so
-a subscriber that asks for transient-local durability also receives the messages published before
-discovery matched it (a node's first frames go out while discovery still runs; a volatile
-subscriber, ROS 2's default, receives from its match on). At the end the node waits up to
-``ack_timeout_s`` for every reliable subscriber to acknowledge every message before it leaves.
+subscribers that fall behind (2500: five seconds at 500 frames/s), and they are transient-local, so a
+subscriber that asks for transient-local durability also receives the messages published before
+discovery matched it: discovery takes 0.1-0.3 s on an idle machine and 1-3 s on a loaded one, and a
+volatile subscriber (ROS 2's default) receives only from its match on. At the end the node stays
+until it is ``DISCOVERY_S`` old (so a short run still reaches subscribers that were waiting for it),
+then waits up to ``ack_timeout_s`` for every reliable subscriber to acknowledge every message.
 Messages are packed as CDR bytes with :mod:`struct` (a few µs each, against some 50 µs for building
 rclpy message objects) by a publisher thread that sends the frames queued since its last pass every
 ``publish_interval_s`` (5 ms: at 500 frames/s a few frames per pass), keeping the ROS work out of the
@@ -62,6 +63,7 @@ _MODULES = ("rclpy", "rclpy.executors", "rclpy.qos", "rclpy.duration", "sensor_m
             "std_msgs.msg", "std_srvs.srv")
 _MISSING_LIBRARY = re.compile(r"(\S+\.so[.\d]*): cannot open shared object file")
 _CDR_LE = b"\x00\x01\x00\x00"  # the encapsulation header of little-endian CDR
+DISCOVERY_S = 2.0  # how long discovery may take to match a running subscriber (0.1-0.3 s idle, over 1 s loaded)
 
 
 class ROS2Unavailable(MissingExtra):
@@ -170,7 +172,7 @@ class ROS2Sink(Sink):
     """Publishes each frame on ROS 2 topics under ``prefix`` from a node named ``node_name``
     (module notes). ``qos_depth``: the messages each publisher keeps for late or slow subscribers."""
 
-    def __init__(self, node_name: str = "softtip_fingertip", *, prefix: str = DEFAULT_PREFIX, qos_depth: int = 1000,
+    def __init__(self, node_name: str = "softtip_fingertip", *, prefix: str = DEFAULT_PREFIX, qos_depth: int = 2500,
                  publish_interval_s: float = 0.005, ack_timeout_s: float = 2.0) -> None:
         self._ros = _import_ros()
         self.node_name = node_name
@@ -182,6 +184,7 @@ class ROS2Sink(Sink):
         self._closing = threading.Event()
         self._threads: list[threading.Thread] = []
         self._owns_context = False
+        self._opened_at = 0.0
         self.frames_published = 0
         self.messages_published = 0
         self.unacknowledged: list[str] = []  # topics a subscriber had not acknowledged in full at the end
@@ -196,6 +199,7 @@ class ROS2Sink(Sink):
         self._stream = stream
         self._wrench = wrench_mapping(stream.target_names, stream.target_units)
         node = self._node = rclpy.create_node(self.node_name)
+        self._opened_at = time.monotonic()
         profile = qos.QoSProfile(depth=self.qos_depth, reliability=qos.ReliabilityPolicy.RELIABLE,
                                  durability=qos.DurabilityPolicy.TRANSIENT_LOCAL)
         prefix = self.prefix
@@ -287,6 +291,8 @@ class ROS2Sink(Sink):
         self._threads[1].join()
         while self._queue:
             self._publish(self._queue.popleft())
+        # a young node stays until subscribers already running have had time to discover it
+        time.sleep(max(0.0, self._opened_at + DISCOVERY_S - time.monotonic()))
         deadline = time.monotonic() + self.ack_timeout_s
         duration = self._ros["rclpy.duration"].Duration
         self.unacknowledged = [publisher.topic_name for publisher in self._publishers()
