@@ -18,8 +18,8 @@ node offers the service ``~/take_baseline`` (std_srvs/srv/Trigger): the insertio
 Delivery: the publishers are reliable and keep the last ``qos_depth`` messages per topic for
 subscribers that fall behind (2500: five seconds at 500 frames/s), and they are transient-local, so a
 subscriber that asks for transient-local durability also receives the messages published before
-discovery matched it: discovery takes 0.1-0.3 s on an idle machine and 1-3 s on a loaded one, and a
-volatile subscriber (ROS 2's default) receives only from its match on. At the end the node stays
+discovery matched it (discovery took 1.4-2.5 s to match a running subscriber on a 2-core machine at
+load average 13), and a volatile subscriber (ROS 2's default) receives only from its match on. At the end the node stays
 until it is ``DISCOVERY_S`` old (so a short run still reaches subscribers that were waiting for it),
 then waits up to ``ack_timeout_s`` for every reliable subscriber to acknowledge every message.
 Messages are packed as CDR bytes with :mod:`struct` (a few µs each, against some 50 µs for building
@@ -63,7 +63,7 @@ _MODULES = ("rclpy", "rclpy.executors", "rclpy.qos", "rclpy.duration", "sensor_m
             "std_msgs.msg", "std_srvs.srv")
 _MISSING_LIBRARY = re.compile(r"(\S+\.so[.\d]*): cannot open shared object file")
 _CDR_LE = b"\x00\x01\x00\x00"  # the encapsulation header of little-endian CDR
-DISCOVERY_S = 2.0  # how long discovery may take to match a running subscriber (0.1-0.3 s idle, over 1 s loaded)
+DISCOVERY_S = 2.0  # how long discovery may take to match a running subscriber (1.4-2.5 s measured, loaded)
 
 
 class ROS2Unavailable(MissingExtra):
