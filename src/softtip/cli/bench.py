@@ -210,11 +210,14 @@ def bench_sysid(
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Fit times and validation fit % of a 3x3 transfer function (order 6) and state-space model (order 8)
-    on 1,500 samples beside nfoursid (and SIPPY if installed), and streaming-step latency beside a numpy step."""
+    on 1,500 samples beside nfoursid and SIPPY (pip install 'softtip[bench]'), and streaming-step latency beside a
+    numpy step."""
+    from softtip._core.extras import require
     from softtip.bench.sysid import bench_sysid as run
 
     check_number(calls, "--calls", minimum=100, maximum=MAX_CALLS)
     check_number(seed, "--seed", minimum=0)
+    require("softtip bench sysid (its baselines)", "bench", "nfoursid", "sippy_unipi")
     with progress_for(json_output).task("identifying and timing"):
         report = run(calls, seed)
     if json_output:

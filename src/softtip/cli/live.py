@@ -39,7 +39,8 @@ def live(
     rate: int = typer.Option(None, "--rate", help="Frames per second (default 50; a paced sensor: its own)."),
     record: Path = typer.Option(None, "--record", help="Record to this MCAP file (ROS 2 message types)."),
     foxglove: int = typer.Option(None, "--foxglove", help="Serve a Foxglove WebSocket live view on this port."),
-    ros2: bool = typer.Option(False, "--ros2", help="Also publish the topics as a ROS 2 node (needs rclpy)."),
+    ros2: bool = typer.Option(False, "--ros2", help="Also publish the topics as a ROS 2 node "
+                                                   "(pip install 'softtip[ros2]')."),
     duration: float = typer.Option(None, "--duration", help="Seconds to run (default: until Ctrl-C)."),
     baseline_frames: int = typer.Option(None, "--baseline-frames", help="Frames averaged into the baseline "
                                                                        "(default 50, or the scenario's)."),
@@ -62,6 +63,7 @@ def live(
     from softtip._core.systems import load
     from softtip.realtime.session import run_live
     from softtip.realtime.sinks.factory import live_sinks
+    from softtip.realtime.sinks.ros2 import ros2_problem
 
     if emulate == (port is not None):
         fail("give either --port PORT or --emulate")
@@ -78,6 +80,8 @@ def live(
     check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
     check_number(baseline_frames, "--baseline-frames", minimum=1, maximum=MAX_RATE_HZ * 60)
     check_number(foxglove, "--foxglove", minimum=1, maximum=65535)
+    if ros2 and (problem := ros2_problem()) is not None:
+        fail(f"--ros2: {problem}")
     if record is not None:
         check_output(record, "--record", model, force=force)
     scenario = getattr(scenario, "value", scenario)
@@ -114,12 +118,16 @@ def live(
             if not first_frame:
                 first_frame.append(time.perf_counter() - STARTED)
 
-        summary = run_live(source, model,
-                           live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2),
-                           duration, rate_hz=rate or 50, chips=chips, settings=settings, baseline_frames=frames,
-                           drift_time_constant_s=drift_tau, rest_s=rezero_at_rest, rest_band=rest_band,
-                           emulator_source=emulator_source, callbacks=[note_first_frame])
+        sinks = live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2)
+        if foxglove is not None:
+            errors.print(f"Foxglove live view: open ws://localhost:{foxglove} (Open connection, Foxglove WebSocket)",
+                         markup=False, highlight=False, soft_wrap=True)
+        summary = run_live(source, model, sinks, duration, rate_hz=rate or 50, chips=chips, settings=settings,
+                           baseline_frames=frames, drift_time_constant_s=drift_tau, rest_s=rezero_at_rest,
+                           rest_band=rest_band, emulator_source=emulator_source, callbacks=[note_first_frame])
         summary["first_frame_s"] = first_frame[0] if first_frame else None
+        for sink in sinks:
+            summary.update(sink.report())
         if json_output:
             print(json.dumps(summary, indent=2, default=float))
 

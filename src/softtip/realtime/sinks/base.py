@@ -18,3 +18,7 @@ class Sink:
     def close(self) -> None:
         """Called once, after the last frame; finishes the sink's work."""
 
+    def report(self) -> dict:
+        """What the sink counted, for the session's summary, under the sink's name ({}: nothing)."""
+        return {}
+

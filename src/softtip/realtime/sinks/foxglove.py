@@ -4,13 +4,23 @@
 (``foxglove-websocket``), JSON-encoded with JSON schemas, on the recording's topics and
 with the same field layout (so one Foxglove layout serves live and recorded data), plus
 ``{prefix}/field_change`` (the change per chip in µT, for live plots; ``force_change`` in N for
-a force chip); at most
-``max_rate_hz`` frames per second, only on channels a client subscribed to.
+a force chip); at most ``max_rate_hz`` frames per second, only on channels a client subscribed to.
+
+Every frame the rate allows reaches every subscribed client: the acquisition thread queues it and
+the server thread sends the queue in order, each message once the client's connection has taken the
+one before. A client slower than the stream first fills its connection's socket buffers (up to 4 MB
+on Linux: a minute of one chip at 50 frames/s, two seconds of four chips unthinned at 500), then
+holds the queue up (the server sends to its clients one after the other, so it slows the others too);
+past ``queue_frames`` waiting frames (two seconds at the default rate) the oldest is dropped and
+counted (:meth:`FoxgloveSink.report`, in ``softtip live``'s summary), so the view stays current,
+memory stays bounded and the acquisition never waits. At the end, what is queued still goes out, for
+two seconds at most.
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import json
 import logging
 import math
@@ -18,7 +28,7 @@ import socket
 import threading
 import warnings
 
-from softtip._core.config import PositiveNumber, checked, integer
+from softtip._core.config import PositiveInteger, PositiveNumber, checked, integer
 from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.recording.format import (
     DEFAULT_PREFIX,
@@ -69,35 +79,63 @@ def _vector(values) -> dict:
 
 
 Port = integer(0, 65535)
+DRAIN_TIMEOUT_S = 2.0  # at closing, how long the queue may take to reach the clients
+CLOSE_TIMEOUT_S = 1.0  # then how long a client may take to answer the closing handshake
+
+
+class RateLimit:
+    """At most ``rate_hz`` frames per second of their stamps (None: every frame), as a token bucket
+    holding up to two frames' credit: a stream at the limit passes whole though its stamps jitter
+    (a frame stamped a little early spends the credit a late one left), a faster one is thinned
+    evenly."""
+
+    def __init__(self, rate_hz: float | None) -> None:
+        self.interval_ns = 0 if rate_hz is None else int(1e9 / checked(PositiveNumber, "max_rate_hz", rate_hz))
+        self._credit_ns = 2 * self.interval_ns
+        self._last_ns: int | None = None
+
+    def allows(self, stamp_ns: int) -> bool:
+        if self._last_ns is not None:
+            self._credit_ns = min(self._credit_ns + stamp_ns - self._last_ns, 2 * self.interval_ns)
+        self._last_ns = stamp_ns
+        if self._credit_ns < self.interval_ns:
+            return False
+        self._credit_ns -= self.interval_ns
+        return True
 
 
 class FoxgloveSink(Sink):
     """Serves the stream to Foxglove (``ws://host:port``, "Foxglove WebSocket" connection).
 
     ``port`` 0 picks a free port (read :attr:`port` after opening). Frames are sent at most
-    ``max_rate_hz`` per second (None: every frame).
+    ``max_rate_hz`` per second (None: every frame); ``queue_frames``: the frames that may wait for
+    a slow client before the oldest is dropped (module notes).
     """
 
     def __init__(self, port: int = 8765, host: str = "127.0.0.1", *, max_rate_hz: float | None = 50.0,
-                 prefix: str = DEFAULT_PREFIX, start_timeout_s: float = 10.0) -> None:
+                 queue_frames: int = 100, prefix: str = DEFAULT_PREFIX, start_timeout_s: float = 10.0) -> None:
         self.port = checked(Port, "foxglove port", port)
         self.host = host
-        self._min_interval_ns = (0 if max_rate_hz is None
-                                 else int(1e9 / checked(PositiveNumber, "max_rate_hz", max_rate_hz)))
+        self._rate = RateLimit(max_rate_hz)
+        self.queue_frames = checked(PositiveInteger, "queue_frames", queue_frames)
         self.prefix = prefix
         self._start_timeout_s = start_timeout_s
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._failure: BaseException | None = None
-        self._latest: FrameResult | None = None
-        self._wake_pending = False
-        self._last_sent_ns = -(1 << 62)
+        self._queue: collections.deque[FrameResult] = collections.deque()
+        self._queue_lock = threading.Lock()
+        self._wake: asyncio.Event | None = None
+        self._closing = False
         self._subscribed: set[int] = set()
         self._channels: dict[str, int] = {}
         self._server = None
         self._stopped: asyncio.Future | None = None
+        self.frames_queued = 0
         self.frames_sent = 0
+        self.frames_dropped = 0
+        self.messages_sent = 0
 
     def open(self, stream: StreamInfo) -> None:
         self._stream = stream
@@ -115,16 +153,29 @@ class FoxgloveSink(Sink):
         """The topics at least one client subscribed to."""
         return [topic for topic, channel in self._channels.items() if channel in self._subscribed]
 
+    def report(self) -> dict:
+        """Frames queued for the clients (those the rate allowed while a client was subscribed), sent
+        and dropped for a slow client, and the messages sent."""
+        return {"foxglove": {"address": f"ws://{self.host}:{self.port}", "frames_queued": self.frames_queued,
+                             "frames_sent": self.frames_sent, "frames_dropped_slow_client": self.frames_dropped,
+                             "messages_sent": self.messages_sent}}
+
     def write(self, frame: FrameResult) -> None:
-        if frame.stamp_ns - self._last_sent_ns < self._min_interval_ns:
+        if not self._rate.allows(frame.stamp_ns) or not self._subscribed:
             return
-        self._last_sent_ns = frame.stamp_ns
-        self._latest = frame
-        if not self._wake_pending:  # the server thread sends the latest frame when it gets to it
-            self._wake_pending = True
-            self._loop.call_soon_threadsafe(self._send_latest)
+        with self._queue_lock:
+            if len(self._queue) == self.queue_frames:
+                self._queue.popleft()
+                self.frames_dropped += 1
+            self._queue.append(frame)
+            self.frames_queued += 1
+            wake = len(self._queue) == 1  # otherwise the server thread is already sending the queue
+        if wake:
+            self._loop.call_soon_threadsafe(self._wake.set)
 
     def close(self) -> None:
+        """Sends what is queued (for at most ``DRAIN_TIMEOUT_S``: a client that stopped reading cannot
+        hold the session open), then stops the server."""
         if self._thread is None:
             return
         if self._loop is not None and self._stopped is not None:
@@ -166,7 +217,8 @@ class FoxgloveSink(Sink):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DeprecationWarning)
             server = FoxgloveServer(self.host, self.port, "softtip", supported_encodings=["json"],
-                                    logger=logging.getLogger(f"{__name__}.foxglove"))
+                                    logger=logging.getLogger(f"{__name__}.foxglove"),
+                                    server_kwargs={"compression": None, "close_timeout": CLOSE_TIMEOUT_S})
             server.start()
             opened = await asyncio.wait_for(server.wait_opened(), self._start_timeout_s)
         self._server = server
@@ -176,10 +228,18 @@ class FoxgloveSink(Sink):
             self._channels[topic] = await server.add_channel({
                 "topic": topic, "encoding": "json", "schemaName": name,
                 "schema": json.dumps(schema), "schemaEncoding": "jsonschema"})
+        self._wake = asyncio.Event()
+        sender = asyncio.create_task(self._send_queued())
         self._ready.set()
         try:
             await self._stopped
+            self._closing = True
+            self._wake.set()
+            await asyncio.wait_for(asyncio.shield(sender), DRAIN_TIMEOUT_S)
+        except TimeoutError:
+            pass  # a client that stopped reading: what it did not take is left unsent
         finally:
+            sender.cancel()
             server.close()
             await server.wait_closed()
 
@@ -197,17 +257,25 @@ class FoxgloveSink(Sink):
             topics.append((f"{prefix}/contact_state", STRING, STATE_SCHEMA))
         return topics
 
-    def _send_latest(self) -> None:
-        self._wake_pending = False
-        frame = self._latest
-        if frame is None or not self._subscribed:
-            return
-        for topic, message in self.messages(frame).items():
-            channel = self._channels[topic]
-            if channel in self._subscribed:
-                asyncio.ensure_future(self._server.send_message(channel, frame.stamp_ns,
-                                                                json.dumps(message).encode()))
-        self.frames_sent += 1
+    async def _send_queued(self) -> None:
+        """Sends the queued frames in order, each message once the clients' connections took the one
+        before (a slow client holds the queue up, and :meth:`write` drops its oldest frames)."""
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            while True:
+                with self._queue_lock:
+                    if not self._queue:
+                        break
+                    frame = self._queue.popleft()
+                for topic, message in self.messages(frame).items():
+                    channel = self._channels[topic]
+                    if channel in self._subscribed:
+                        await self._server.send_message(channel, frame.stamp_ns, json.dumps(message).encode())
+                        self.messages_sent += 1
+                self.frames_sent += 1
+            if self._closing:
+                return
 
     def _reading_fields(self, values) -> dict:
         fields = reading_fields(self._stream.reading, values, _vector)

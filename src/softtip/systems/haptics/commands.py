@@ -258,7 +258,7 @@ def render(
     seed: int = typer.Option(1, "--seed", help="Seed of the table collection, the synthetic sensation and the noise."),
     record: Path = typer.Option(None, "--record", help="Record the stream to this MCAP file."),
     foxglove_port: int = typer.Option(None, "--foxglove-port", help="Serve a Foxglove live view on this port."),
-    ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (needs rclpy, a sourced ROS 2)."),
+    ros2: bool = typer.Option(False, "--ros2", help="Publish on ROS 2 topics (pip install 'softtip[ros2]')."),
     realtime: bool = typer.Option(True, "--realtime/--fast", help="Pace the loop to its 1 kHz deadlines, or run "
                                                                   "it as fast as the machine allows."),
     priority: bool = typer.Option(True, "--priority/--no-priority", help="Run the paced loop at real-time priority "
@@ -285,7 +285,7 @@ def render(
         fail(f"--port = {port!r}: expected a serial device path or a pyserial URL")
     from softtip.realtime.sinks.factory import live_sinks
     from softtip.realtime.sinks.foxglove import FoxgloveSink
-    from softtip.realtime.sinks.ros2 import ros2_available
+    from softtip.realtime.sinks.ros2 import ros2_problem
     from softtip.systems.haptics.bench import device_from_file
     from softtip.systems.haptics.live import (
         LOOP_RATE_HZ,
@@ -301,9 +301,8 @@ def render(
         fail(f"--method = {method!r} with --port: the user's data are collected on the device model, not on a real "
              f"device; use --method standard or B with --port")
     finger = _fingertip(fingertip, "--fingertip")
-    if ros2 and not ros2_available():
-        fail("--ros2: ROS 2 is not available (rclpy and the standard message packages do not import; source the "
-             "ROS 2 setup script first)")
+    if ros2 and (problem := ros2_problem()) is not None:
+        fail(f"--ros2: {problem}")
     inputs = [p for p in (sensation, device_file, table_file, _file(fingertip)) if p is not None]
     if record is not None:
         record = check_output(record, "--record", inputs, force=force)
