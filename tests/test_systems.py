@@ -18,7 +18,6 @@ import tty
 from pathlib import Path
 
 import numpy as np
-
 import pytest
 from mcap.reader import make_reader
 
