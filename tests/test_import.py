@@ -122,8 +122,8 @@ def test_whitespace_logs_with_a_header_give_the_same_dataset(tmp_path):
         _whitespace_copy(folder / "states.csv", tmp_path / folder.name / "states.dat", ["t", "px", "py", "pz", "g"])
     chips = [[f"x{k}", f"y{k}", f"z{k}"] for k in range(5)]
     mapping = _mapping({
-        "sensor": {"file": "sensor.dat", "delimiter": "whitespace", "time": "t", "unit": "uT", "gain_sel": 1,
-                   "res_xyz": [2, 2, 2], "chips": chips},
+        "sensor": {"file": "sensor.dat", "delimiter": "whitespace", "time": "t", "unit": "uT",
+                   "settings": {"gain_sel": 1, "res_xyz": [2, 2, 2]}, "chips": chips},
         "labels": {"file": "states.dat", "delimiter": "whitespace", "time": "t", "missing": -1, "tolerance_s": 0.02,
                    "columns": {"fz_N": {"column": "g", "unit": "g"}}},
         "trials": {"validation": {"last": 1}, "baseline": {"samples": 20}}})
@@ -252,8 +252,8 @@ def test_raw_words_are_read_at_the_declared_gain_and_saturated_words_flagged(tmp
     # GAIN_SEL 5: 0.250 (x, y) and 0.403 µT (z) per count at RES 0, twice that at RES 1, four times at RES 2
     # (datasheet table 17); RES 0 and 1 words are two's complement, RES 2 words are offset by 32768 (table 21)
     path = _counts_log(tmp_path / "counts.csv", [(1000, 65535, 32768 + 100), (32767, 0, 32768 - 22000)])
-    mapping = _mapping({"sensor": {"header": False, "time": 1, "unit": "counts", "gain_sel": 5,
-                                   "res_xyz": [0, 1, 2], "chips": [[2, 3, 4]]}})
+    mapping = _mapping({"sensor": {"header": False, "time": 1, "unit": "counts",
+                                   "settings": {"gain_sel": 5, "res_xyz": [0, 1, 2]}, "chips": [[2, 3, 4]]}})
     dataset, report = import_logs([path], mapping)
     np.testing.assert_allclose(dataset.X(), [[250.0, -0.501, 100 * 1.613], [32767 * 0.250, 0.0, -22000 * 1.613]])
     assert list(dataset.column("saturated")) == [False, True]
@@ -268,15 +268,15 @@ def test_raw_words_are_read_at_the_declared_gain_and_saturated_words_flagged(tmp
 def test_a_reading_beyond_the_declared_range_is_refused_and_one_at_its_limit_flagged(tmp_path):
     # GAIN_SEL 7, RES 0: 32767 x 0.150 = 4915.05 µT full scale on x and y
     path = _counts_log(tmp_path / "field.csv", [(4915.05, 0, 0), (100.0, 0, 0)])
-    mapping = {"sensor": {"header": False, "time": 1, "unit": "uT", "gain_sel": 7, "res_xyz": [0, 0, 0],
+    mapping = {"sensor": {"header": False, "time": 1, "unit": "uT", "settings": {"gain_sel": 7, "res_xyz": [0, 0, 0]},
                           "chips": [[2, 3, 4]]}}
     dataset, _ = import_logs([path], _mapping(mapping))
     assert list(dataset.column("saturated")) == [True, False]
     _counts_log(path, [(100.0, 0, 0), (6000.0, 0, 0)])
-    with pytest.raises(DatasetError, match=r"field.csv: line 2, column 2 \(chip 0 x\): beyond the mlx90393's range at the declared gain_sel and res_xyz"):
+    with pytest.raises(DatasetError, match=r"field.csv: line 2, column 2 \(chip 0 x\): beyond the mlx90393's range at the declared settings"):
         import_logs([path], _mapping(mapping))
     # the same reading at the widest setting (GAIN_SEL 0, RES 0: 32767 x 0.751 µT) is in range
-    widest = {"sensor": {**mapping["sensor"], "gain_sel": 0}}
+    widest = {"sensor": {**mapping["sensor"], "settings": {"gain_sel": 0, "res_xyz": [0, 0, 0]}}}
     assert not import_logs([path], _mapping(widest))[0].column("saturated").any()
 
 
@@ -302,7 +302,12 @@ def test_another_sensor_is_imported_in_its_own_unit(tmp_path):
     ({"sensor": {"unit": "V", "chip": "mlx90393"}}, "sensor.unit = 'V': the mlx90393 reads in uT, .* or counts"),
     ({"sensor": {"chip": "tmag5273"}}, "sensor.chip = 'tmag5273': sensor 'tmag5273': expected one of mlx90393 or "
                                        "\"other\""),
-    ({"sensor": {"unit": "counts", "gain_sel": None}}, "raw counts need the chips' gain_sel and res_xyz"),
+    ({"sensor": {"unit": "counts", "settings": None}}, "sensor.settings: raw counts need the chips' settings to be read as flux density"),
+    ({"sensor": {"settings": {"gain_sel": 9}}},
+     r"^mapping: sensor.settings = \{'gain_sel': 9\}: not the MLX90393's settings \(sensor.gain_sel = 9: expected an "
+     r"integer 0..7\)$"),
+    ({"sensor": {"chip": "other", "name": "hall", "unit": "V"}}, "chip = \"other\" needs a name for its channels, "
+                                                               "and takes no chip settings"),
     ({"sensor": {"delimiter": "."}}, "delimiter.*not part of a number"),
     ({"labels": {"tolerance_s": None}}, "tolerance_s"),
     ({"labels": {"columns": {"fz_N": {"column": 5, "unit": "mm"}}}}, "label fz_N: its name says N"),

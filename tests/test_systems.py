@@ -14,12 +14,10 @@ import os
 import subprocess
 import sys
 import threading
-import time
 import tty
 from pathlib import Path
 
 import numpy as np
-
 import pytest
 from mcap.reader import make_reader
 

@@ -6,12 +6,12 @@ A mapping, written once as a small TOML file, says how a rig's logs become trial
     file = "sensor.csv"           # its name in each trial's folder
     header = false                # no header row: columns are numbered from 1
     time = 1                      # the time column, in time_unit (or rate_hz: evenly spaced)
-    unit = "uT"                   # uT, mT, G, T, or counts (the chip's 16-bit words; needs gain_sel, res_xyz)
+    unit = "uT"                   # uT, mT, G, T, or counts (the chip's output words; need its settings)
                                   # chip: a registered sensor (default: the one that reads in unit), or
                                   # "other": any 3-axis sensor, named and in its own unit
-    gain_sel = 1                  # the chips' settings: range checks and saturation follow them
-    res_xyz = [2, 2, 2]
-    chips = [[2, 3, 4], [5, 6, 7]]  # each chip's x, y, z columns
+    settings = { gain_sel = 1, res_xyz = [2, 2, 2] }  # the chips' settings, in the registered sensor's
+                                  # schema (keys left out take its defaults): range checks follow them
+    chips = [[2, 3, 4], [5, 6, 7]]  # each chip's columns, one per axis of its reading (x, y, z)
 
     [labels]                      # per-sample targets: in the sensor log, or a log of their own
     file = "states.csv"           # joined to the sensor log by nearest time, within tolerance_s
@@ -60,7 +60,6 @@ from softtip._core.units import FORCE_UNITS, MM, UM
 from softtip.data.csvload import TIME_UNITS_IN_S, WHITESPACE, read_columns
 from softtip.data.dataset import DIMENSIONLESS, TIME, TRIAL, Dataset, DatasetError, DatasetMetadata, trial_runs
 from softtip.data.splits import CALIBRATION, VALIDATION
-from softtip.sensors.mlx90393 import Hallconf, Resolutions
 from softtip.sensors.registry import SensorKind, sensor_kind, sensor_kinds
 
 STANDARD_GRAVITY = 9.80665  # m/s², the conventional value (3rd CGPM, 1901): a scale's grams as force
@@ -118,9 +117,7 @@ class SensorLog(_Log):
     name: Annotated[str, Strict(), Field(pattern=r"^[a-z][a-z0-9]*$"),
                     expect("a lower-case name (letters, then digits)")] | None = None
     full_scale: PositiveNumber | None = None
-    gain_sel: integer(0, 7) | None = None
-    res_xyz: Resolutions | None = None
-    hallconf: Hallconf | None = None
+    settings: dict[str, Any] | None = None  # the chips' settings, read by the registered sensor's schema
 
     def __post_init__(self) -> None:
         if not self.chips:
@@ -128,25 +125,27 @@ class SensorLog(_Log):
         super().__post_init__()
         if (self.time is None) == (self.rate_hz is None):
             raise Refusal("time", "give the time column or rate_hz (evenly spaced samples), one of them")
-        settings = (self.gain_sel, self.res_xyz)
         if any(len(chip) != len(self.axes) for chip in self.chips):
             raise Refusal("chips", f"expected a list of [{', '.join(self.axes)}] columns, one per chip")
         if self.chip == OTHER:
-            if self.name is None or any(value is not None for value in (*settings, self.hallconf)):
+            if self.name is None or self.settings is not None:
                 raise Refusal("name", "chip = \"other\" needs a name for its channels, and takes no chip settings")
             return
         kind = self.kind
         if self.unit not in (*kind.reading.units, kind.raw_unit):
             raise Refusal("unit", f"the {kind.name} reads in {', '.join(kind.reading.units)} or {kind.raw_unit}; "
                                   "another sensor is chip = \"other\"")
-        if self.unit == kind.raw_unit and None in settings:
-            raise Refusal("gain_sel", f"raw {kind.raw_unit} need the chips' gain_sel and res_xyz to be read as "
+        if self.unit == kind.raw_unit and self.settings is None:
+            raise Refusal("settings", f"raw {kind.raw_unit} need the chips' settings to be read as "
                                       f"{kind.reading.quantity}")
         if self.name is not None or self.full_scale is not None:
             raise Refusal("name" if self.name is not None else "full_scale",
                           f"the {kind.name}'s channels and range follow from the chip: give it for chip = \"other\"")
-        if (self.gain_sel is None) != (self.res_xyz is None):
-            raise Refusal("res_xyz", "give both gain_sel and res_xyz, or neither")
+        if self.settings is not None:
+            try:
+                kind.settings_from(self.settings)
+            except ValueError as refusal:
+                raise Refusal("settings", f"not the {kind.title or kind.name}'s settings ({refusal})") from None
 
     def columns_named(self) -> list[tuple[tuple, int | str]]:
         return [*super().columns_named(), *((("chips", k, a), ref) for k, chip in enumerate(self.chips)
@@ -172,12 +171,9 @@ class SensorLog(_Log):
         return reading_in[0]
 
     @property
-    def settings(self) -> Any:
+    def chip_settings(self) -> Any:
         """The chips' declared settings, in the registered sensor's schema, if any."""
-        if self.chip == OTHER or self.gain_sel is None:
-            return None
-        extra = {} if self.hallconf is None else {"hallconf": self.hallconf}
-        return self.kind.settings_from({"gain_sel": self.gain_sel, "res_xyz": list(self.res_xyz), **extra})
+        return None if self.chip == OTHER or self.settings is None else self.kind.settings_from(self.settings)
 
     def channel(self, chip: int, axis: str) -> str:
         if self.chip != OTHER:
@@ -412,7 +408,7 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
     """The chips' readings (rows, chips, axes) in the stored unit, and which samples are saturated
     (None: the sensor's limits are unknown)."""
     readings = values.reshape(len(values), len(sensor.chips), len(sensor.axes))
-    settings = sensor.settings
+    settings = sensor.chip_settings
     if sensor.chip == OTHER:
         if sensor.full_scale is None:
             return readings, None
@@ -432,7 +428,7 @@ def _sensor_values(path: Path, sensor: SensorLog, values: np.ndarray) -> tuple[n
         return readings, None
     beyond = kind.beyond(readings, settings)  # a step's rounding in the host's conversion is allowed
     if beyond.any():
-        _refuse_beyond(path, sensor, beyond, f"the {kind.name}'s range at the declared gain_sel and res_xyz")
+        _refuse_beyond(path, sensor, beyond, f"the {kind.name}'s range at the declared settings")
     return readings, kind.saturated(readings, settings)
 
 
@@ -630,7 +626,7 @@ def import_logs(sources: Sequence[str | os.PathLike], mapping: ImportMapping) ->
     columns["source"] = np.repeat([trial.source for trial in trials], [len(t.time) for t in trials])
     channel_units = {} if sensor.chip != OTHER else {sensor.channel(chip, axis): sensor.unit
                                                      for chip in range(len(sensor.chips)) for axis in sensor.axes}
-    settings = sensor.settings
+    settings = sensor.chip_settings
     metadata = DatasetMetadata(
         description=mapping.description or f"imported from {', '.join(trial.source for trial in trials[:3])}"
                                            + (" ..." if n > 3 else ""),
