@@ -8,6 +8,7 @@ the frames it sent; a Foxglove WebSocket client written from the protocol's byte
 """
 
 import asyncio
+import dataclasses
 import io
 import json
 import math
@@ -24,6 +25,7 @@ import pytest
 from mcap.reader import NonSeekingReader, make_reader
 from rich.console import Console
 
+from softtip._core.channels import MAGNETIC
 from softtip.data import Dataset, channel_names
 from softtip.hardware import FaultPlan, FrameFate, PressCycle, Sample
 from softtip.bench.live import soak
@@ -637,6 +639,39 @@ def test_foxglove_live_view_serves_the_frames_to_a_websocket_client():
     assert received[1]["header"]["stamp"] == {"sec": 1_700_000_000, "nanosec": 123_456_789}
     assert received[2]["wrench"]["force"] == {"x": None, "y": None, "z": 0.75}
     assert received[3]["chips"][0] == {"x": 10.0, "y": -20.0, "z": 30.0}
+
+
+def test_foxglove_places_a_one_axis_chips_reading_in_the_messages_z_leaving_x_and_y_empty():
+    import websockets
+
+    one_axis = dataclasses.replace(MAGNETIC, axes=("z",))
+    sink = FoxgloveSink(port=0, max_rate_hz=None)
+    sink.open(dataclasses.replace(stream_info(target_names=("Fz",), classes=None), reading=one_axis))
+    field = np.array([[30.0], [3.0]])
+    sent = frame(2, 1_700_000_000_000_000_000, field, np.zeros((2, 1)), 1, np.array([0.5]), None)
+
+    async def client():
+        async with websockets.connect(f"ws://127.0.0.1:{sink.port}", subprotocols=["foxglove.websocket.v1"]) as ws:
+            await ws.recv()
+            channels = {c["topic"]: c for c in json.loads(await ws.recv())["channels"]}
+            wanted = {"/fingertip/chip1/field": 1, "/fingertip/field_change": 2}
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": sub, "channelId": channels[topic]["id"]} for topic, sub in wanted.items()]}))
+            while len(sink.subscribed_topics) < 2:
+                await asyncio.sleep(0.01)
+            sink.write(sent)
+            received = {}
+            while len(received) < 2:
+                data = await asyncio.wait_for(ws.recv(), 5)
+                received[struct.unpack_from("<BIQ", data)[1]] = json.loads(data[13:])
+            return received
+
+    try:
+        received = asyncio.run(client())
+    finally:
+        sink.close()
+    assert received[1]["magnetic_field"] == {"x": None, "y": None, "z": 3e-6}
+    assert received[2]["chips"] == [{"x": None, "y": None, "z": 30.0}, {"x": None, "y": None, "z": 3.0}]
 
 
 # --------------------------------------------------------------------------

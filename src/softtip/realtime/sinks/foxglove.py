@@ -38,6 +38,7 @@ from softtip.realtime.recording.format import (
     VECTOR3_STAMPED,
     WRENCH_STAMPED,
     frame_id,
+    in_xyz,
     reading_fields,
     reading_topic,
     wrench_mapping,
@@ -296,7 +297,8 @@ class FoxgloveSink(Sink):
                 messages[f"{prefix}/chip{k}/baseline"] = {"header": header,
                                                           **self._reading_fields(frame.baseline[k])}
         if frame.change is not None:
-            messages[f"{prefix}/{leaf}_change"] = {"stamp": stamp, "chips": [_vector(c) for c in frame.change]}
+            messages[f"{prefix}/{leaf}_change"] = {"stamp": stamp,
+                                                   "chips": [_vector(c) for c in in_xyz(stream.reading, frame.change)]}
         if frame.estimates is not None:
             if self._wrench:
                 wrench = wrench_values(frame.estimates, self._wrench)

@@ -50,6 +50,7 @@ from softtip.realtime.recording.format import (
     VECTOR3_STAMPED,
     WRENCH_FLOATS,
     frame_id,
+    in_xyz,
     magnetic_covariance_T2,
     per_message_unit,
     reading_topic,
@@ -203,6 +204,7 @@ class ROS2Sink(Sink):
         profile = qos.QoSProfile(depth=self.qos_depth, reliability=qos.ReliabilityPolicy.RELIABLE,
                                  durability=qos.DurabilityPolicy.TRANSIENT_LOCAL)
         prefix = self.prefix
+        self._reading = stream.reading
         self._per_message = per_message_unit(stream.reading)
         leaf, _ = reading_topic(stream.reading)
         message = stream.reading.message
@@ -258,7 +260,7 @@ class ROS2Sink(Sink):
         self.messages_published += 1
 
     def _publish_chips(self, publishers, stamp_ns: int, readings: np.ndarray) -> None:
-        carried = readings / self._per_message
+        carried = in_xyz(self._reading, readings / self._per_message)  # a message's x, y, z are fixed
         for publisher, packer, values in zip(publishers, self._chips, carried.tolist(), strict=True):
             self._send(publisher, packer.pack(stamp_ns, values))
 
