@@ -345,8 +345,10 @@ def test_the_bench_says_what_each_figure_is_and_gives_a_verdict():
     assert ran.exit_code == 0, ran.output
     lines = ran.output.splitlines()
     timed = [line for line in lines if line.startswith(("force-voltage curve, 5 loads: ", "fit of moment"))]
-    assert len(timed) == 2 and all(("(target 0.3 s: " in line or "(target 5 s: " in line) for line in timed)
-    assert sum("times the baseline's time" in line for line in lines) == 2 and "ratio" not in ran.output
+    assert len(timed) == 2 and all(" s of CPU, " in line and " s wall (target " in line for line in timed)
+    assert "(target 0.3 s of CPU, idle: " in timed[0] and "(target 5 s of CPU, idle: " in timed[1]
+    assert sum(line.startswith("load average before the timings (1, 5, 15 min): ") for line in lines) == 1
+    assert sum("times the baseline's CPU time" in line for line in lines) == 2 and "ratio" not in ran.output
     met = ["MISSED" not in line for line in timed]
     assert lines[-1] == ("verdict: every target met" if all(met) else
                          f"verdict: {met.count(False)} of 2 targets missed: " + "; ".join(

@@ -205,9 +205,12 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
                 np.subtract(grid, m[:, 1 - axis, None, None], out=primitive)
                 np.divide(primitive, root, out=primitive)
                 flat = primitive.reshape(primitive.shape[0], -1)
+
+                def at(corner: NDArray) -> NDArray:  # np.take: twice as fast as indexing flat[:, corner]
+                    return np.take(flat, corner, axis=1)
+
                 # either axis: (upper edge across − lower edge across) of (upper end − lower end) along it
-                out[start:start + chunk, :, column] = (flat[:, high_high] - flat[:, high_low]
-                                                       - flat[:, low_high] + flat[:, low_low])
+                out[start:start + chunk, :, column] = at(high_high) - at(high_low) - at(low_high) + at(low_low)
     else:
         chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
         edges = (rectangles.x, rectangles.y)
