@@ -458,7 +458,7 @@ def _balance_table(study: CiliaStudy) -> Table:
                            f"buckling. The balance test is read with {count} equal dipoles a pillar, not the "
                            f"published {settings.chain_count}: its voltage comes from the area elements under the "
                            "buckled and lying roots, where the published chain's points sit too far apart (10 "
-                           "dipoles are 92 % of the largest change off 160, 40 within 2.5 %: "
+                           "dipoles are 120 % of the largest change off 160, 40 within 4.3 %: "
                            "tests/test_cilia_model.py); the last rows read it again with four times as many. A "
                            "chain converges to a line magnet, not to the pillars' 320 µm roots: see the notes.")
 
