@@ -74,7 +74,7 @@ def bench_cilia(
             "met" if figures["meets_target"] else "MISSED")
         if figures["meets_target"] is False:
             missed.append(name)
-        what = name.split(",")[0]
+        what = name.split(" (")[0].split(",")[0]  # the figure's name without its details
         console.print(f"{name}: {figures['cpu_seconds']:.3f} s of CPU, {figures['seconds']:.3f} s wall ({verdict})",
                       markup=False, soft_wrap=True)
         console.print(f"  baseline, {figures['baseline']}: {figures['baseline_cpu_seconds']:.3f} s of CPU; the {what} "
