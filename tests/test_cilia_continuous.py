@@ -14,10 +14,12 @@ from softtip.systems.cilia.model import CiliaModel
 
 @pytest.mark.slow
 def test_on_uniform_cylinders_the_chain_and_the_stack_agree():
-    # 100 µm under the bases (clear of the thick magnets' near field): measured 1.3 % and 0.06 % at 2 and 8 mN
+    # 100 µm under the bases: measured 5.3 % and 4.3 % at 2 and 8 mN (the meanders' squares reach within 50 µm
+    # of the middle pillar's axis, where ten points stand for a 200 µm magnet; on the earlier layout, X in the
+    # lower half of the active area, 1.3 % and 0.06 %)
     model = CiliaModel(uniform_clamped(read_die()).with_depth(100e-6))
     check = chain_against_stack(model, np.array([2e-3, 8e-3]), "X", pieces=40, nodes=3)
-    assert np.all(np.abs(check.gap) < 0.03)
+    assert np.all(np.abs(check.gap) < 0.07)
     # the stack has converged in its pieces: 20 against 40 (the reference's own error; measured 0.05 %)
     coarse = chain_against_stack(model, np.array([8e-3]), "X", pieces=20, nodes=3)
     assert coarse.stack[0] == pytest.approx(check.stack[1], rel=0.01)
@@ -25,8 +27,8 @@ def test_on_uniform_cylinders_the_chain_and_the_stack_agree():
 
 @pytest.mark.slow
 def test_on_the_shipped_cones_the_published_chain_overstates_the_change():
-    # measured: +45 % at 1 mN, +73 % at 8 mN (+154 % at 26 mN): the base carries 2.6 times the tip's moment
-    # per length, the chain an equal share each
+    # measured: +20 % at 1 mN, +40 % at 8 mN (+107 % at 26 mN): the base carries 2.6 times the tip's moment
+    # per length, the chain an equal share each; on uniform cylinders the same chain is within 5.3 % (above)
     check = chain_against_stack(CiliaModel(read_die()), np.array([1e-3, 8e-3]), "X", pieces=40, nodes=3)
-    assert np.all(check.gap > 0.3) and check.gap[1] > check.gap[0] and np.all(np.sign(check.chain) == np.sign(check.stack))
+    assert np.all(check.gap > 0.15) and check.gap[1] > check.gap[0] and np.all(np.sign(check.chain) == np.sign(check.stack))
     assert check.figure().axes and check.to_dict()["pieces"] == 40

@@ -83,7 +83,7 @@ def test_the_figure_of_merit_is_three_sigma_over_an_independent_slope():
 
 @pytest.mark.slow
 def test_every_search_ends_in_a_local_minimum_of_the_grid_found_by_brute_force():
-    """Two values per parameter (62 designs fit the die, 32 of them with a figure at 13 mN), every one
+    """Two values per parameter (62 designs fit the die, 34 of them with a figure at 13 mN), every one
     evaluated: at five seeds, the design each search's descent ends on has no better neighbour on the grid
     (one parameter changed, or the placement), and no search claims better than the grid's best."""
     space = tuple(ParameterRange(n, lo, hi, hi - lo) for n, lo, hi in SPACE)
@@ -98,14 +98,16 @@ def test_every_search_ends_in_a_local_minimum_of_the_grid_found_by_brute_force()
             return math.inf
 
     figures = {PillarDesign.of(p): figure(PillarDesign.of(p)) for p in feasible}
-    assert len(feasible) == 62 and np.isfinite(list(figures.values())).sum() == 32  # thin tall pillars turn over
+    assert len(feasible) == 62 and np.isfinite(list(figures.values())).sum() == 34  # thin tall pillars turn over
 
     def neighbours(design: PillarDesign) -> list[PillarDesign]:
         here = next(p for p in feasible if PillarDesign.of(p) == design)
         return [PillarDesign.of(p) for p in feasible if sum(p[k] != here[k] for k in here) == 1]
 
     minima = {d for d, f in figures.items() if math.isfinite(f) and all(figures[n] >= f for n in neighbours(d))}
-    assert len(minima) == 5  # measured: 65, 96, 112, 192 and 1173 µN; the grid's best is one of them
+    # measured: 103, 103, 104, 135, 135, 312, 312 and 526 µN; the grid's best is one of them (the five seeds
+    # end on 104 or 135 µN, after 4 to 11 evaluations of the descent)
+    assert len(minima) == 8
     for seed in range(5):
         found = search_designs(DIE, (13e-3,), steps=2, budget=8, points=9, seed=seed, descend=True)
         assert found.candidates - sum(found.refused.values()) == 62

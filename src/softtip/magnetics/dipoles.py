@@ -186,6 +186,9 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
         # each element's four corners as flat indices into the (X, Y) grid of corners
         high_high, high_low = x_high * ys.size + y_high, x_high * ys.size + y_low
         low_high, low_low = x_low * ys.size + y_high, x_low * ys.size + y_low
+        # the two (d, X, Y) buffers are made once: fresh ones per chunk cost the kernel page faults, not numbers
+        distances = np.empty((min(chunk, flat_positions.shape[0]), xs.size, ys.size))
+        primitives = np.empty_like(distances)
         for start in range(0, flat_positions.shape[0], chunk):
             p = flat_positions[start:start + chunk]  # (d, 3)
             m = flat_moments[start:start + chunk]
@@ -194,20 +197,26 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
             dx, dy = xs[None, :] - p[:, 0:1], ys[None, :] - p[:, 1:2]
             height = rectangles.z - p[:, 2:3]
             height2 = height * height
-            root = np.add((dx * dx)[:, :, None], (dy * dy + height2)[:, None, :])
+            root, primitive = distances[:p.shape[0]], primitives[:p.shape[0]]
+            np.add((dx * dx)[:, :, None], (dy * dy + height2)[:, None, :], out=root)
             np.sqrt(root, out=root)  # (d, X, Y): each corner's distance
-            primitive = np.empty_like(root)
             for column, axis in enumerate(axes):
                 # the primitive of ∫ φ d(along) at each corner (module notes), across = the edges across ``axis``
                 across, along = (dx, dy) if axis == 0 else (dy, dx)
                 slope = (m[:, axis:axis + 1] * across + m[:, 2:3] * height) / (across * across + height2)
-                grid = (slope[:, :, None] * along[:, None, :]) if axis == 0 else (along[:, :, None] * slope[:, None, :])
-                np.subtract(grid, m[:, 1 - axis, None, None], out=primitive)
+                if axis == 0:
+                    np.multiply(slope[:, :, None], along[:, None, :], out=primitive)
+                else:
+                    np.multiply(along[:, :, None], slope[:, None, :], out=primitive)
+                np.subtract(primitive, m[:, 1 - axis, None, None], out=primitive)
                 np.divide(primitive, root, out=primitive)
                 flat = primitive.reshape(primitive.shape[0], -1)
+
+                def at(corner: NDArray) -> NDArray:  # np.take: twice as fast as indexing flat[:, corner]
+                    return np.take(flat, corner, axis=1)
+
                 # either axis: (upper edge across − lower edge across) of (upper end − lower end) along it
-                out[start:start + chunk, :, column] = (flat[:, high_high] - flat[:, high_low]
-                                                       - flat[:, low_high] + flat[:, low_low])
+                out[start:start + chunk, :, column] = at(high_high) - at(high_low) - at(low_high) + at(low_low)
     else:
         chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
         edges = (rectangles.x, rectangles.y)

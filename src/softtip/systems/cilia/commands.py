@@ -65,15 +65,20 @@ def bench_cilia(
         print(json.dumps(report, indent=2))
         return
     missed = []
+    load = ", ".join(f"{value:.1f}" for value in report["load_average_before"])
+    console.print(f"load average before the timings (1, 5, 15 min): {load}; each figure the fastest of "
+                  f"{report['repeats']} runs", markup=False, soft_wrap=True)
     for name, figures in report["timings"].items():
         target = figures["target_seconds"]
-        verdict = "no target" if target is None else f"target {target:g} s: " + (
+        verdict = "no target" if target is None else f"target {target:g} s of CPU, idle: " + (
             "met" if figures["meets_target"] else "MISSED")
         if figures["meets_target"] is False:
             missed.append(name)
-        console.print(f"{name}: {figures['seconds']:.3f} s ({verdict})", markup=False)
-        console.print(f"  baseline, {figures['baseline']}: {figures['baseline_seconds']:.3f} s; {name.split(',')[0]} "
-                      f"takes {figures['ratio']:.3g} times the baseline's time", markup=False)
+        what = name.split(" (")[0].split(",")[0]  # the figure's name without its details
+        console.print(f"{name}: {figures['cpu_seconds']:.3f} s of CPU, {figures['seconds']:.3f} s wall ({verdict})",
+                      markup=False, soft_wrap=True)
+        console.print(f"  baseline, {figures['baseline']}: {figures['baseline_cpu_seconds']:.3f} s of CPU; the {what} "
+                      f"takes {figures['ratio']:.3g} times the baseline's CPU time", markup=False, soft_wrap=True)
     for note in report["notes"]:
         console.print(note, markup=False)
     console.print("verdict: " + ("every target met" if not missed else

@@ -104,7 +104,7 @@ class CiliaSettings:
     balance_readability_mg: PositiveNumber = 0.1
     plate_seating_mrad: NonNegativeNumber = 1.0
     warm_up_s: NonNegativeNumber = 60.0
-    gap_causes: Flag = True  # the publication's causes of its moment gap tried on the twin (six fits)
+    gap_causes: Flag = True  # the publication's causes of its moment gap tried on the twin and the layout (a fit each)
     # the balance test's unknowns swept: other die tilts (the declared plate), other plates (the first tilt)
     rig_tilts_deg: Annotated[tuple[number("an angle in degrees from -10 to 10", ge=-10.0, le=10.0), ...],
                              expect("a list of angles in degrees from -10 to 10")] = (1.0, 3.0)
@@ -198,6 +198,7 @@ class BalanceOutcome:
     publication: PublicationFit
     budget: ForceBudget
     finer_chain: BalanceCurve  # the same test with CHAIN_CHECK times the dipoles per pillar: the chain's convergence
+    volume_chain: BalanceCurve  # the same dipoles each carrying its slice's volume share (a uniformly magnetised cone)
 
 
 @dataclass(frozen=True)
@@ -409,11 +410,17 @@ def _balance(model: CiliaModel, curve: BalanceCurve, measured: MeasuredCurve, se
     buckling = float(curve.force[buckled[0]]) if buckled.size else float(curve.force.max())
     first, every = (np.flatnonzero(curve.lying_count >= count) for count in (1, len(curve.gaps[0])))
     within = measured.part(measured.force <= settings.force_max_mN * MN)  # the range the publication fitted
-    finer = replace(model, balance_chain_count=CHAIN_CHECK * settings.balance_chain_count).balance_curve(
-        balance_descent(model, settings), balance_contact(settings), curve.sensor, balance_plate(settings))
+    count = settings.balance_chain_count
+    rod = model.die.pillars.rod
+    by_volume = tuple(float(v) for v in frustum_shares(rod.base_diameter, rod.tip_diameter, count))
+    finer, volume = (variant.balance_curve(balance_descent(model, settings), balance_contact(settings), curve.sensor,
+                                           balance_plate(settings))
+                     for variant in (replace(model, balance_chain_count=CHAIN_CHECK * count),
+                                     replace(model, chain_count=count, chain_shares=by_volume, balance_chain_count=None)))
     return BalanceOutcome(curve, buckling, float(curve.force[first[0]]) if first.size else None,
                           float(curve.force[every[0]]) if every.size else None,
-                          publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer)
+                          publication_fit(model, within, "balance test"), _budget(model, curve, settings, dwell), finer,
+                          volume)
 
 
 CHAIN_CHECK = 4  # the balance test read again with this many times the dipoles: is its chain enough?
@@ -482,10 +489,16 @@ def _moment_gap(model: CiliaModel, settings: CiliaSettings) -> tuple[GapCause, .
          replace(model, chain_shares=rising[::-1])),
         ("spin-valve heating", "the die's thermal resistance × 100 (its warming 100 times the computed)", hot),
     ]
+    # the layout, which the publication shows only in figures: the twin as declared, its curve fitted by the
+    # publication's model on a die whose meanders are scaled about the centre (a fit's layout off the die's)
+    scaled = [("the layout (softtip's; not a published cause)",
+               f"the fit's meanders scaled by {scale:g} about the die's centre (the twin's as declared)",
+               replace(model, die=model.die.with_meanders_scaled(scale))) for scale in settings.meander_scales]
     causes = []
-    for cause, change, twin in variants:
+    for cause, change, twin, fitter in [(*variant, model) for variant in variants] + [
+            (cause, change, model, fitter) for cause, change, fitter in scaled]:
         curve = twin.curve(forces, settings.sensor)
-        found = publication_fit(model, MeasuredCurve(curve.force, curve.change, curve.sensor), cause)
+        found = publication_fit(fitter, MeasuredCurve(curve.force, curve.change, curve.sensor), cause)
         causes.append(GapCause(cause, change, abs(pillars.moment), found.fit, found.refusal))
     return tuple(causes)
 
@@ -577,14 +590,20 @@ def _field_map_figure(model: CiliaModel, truth: ForceCurve) -> Figure:
 
 
 def _bank_outlines(x: np.ndarray, y: np.ndarray, axis: int) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The bounding boxes of the strips that share their extent along the strips (the banks): strips
-    sensing x run along y, and the other way round."""
+    """The bounding boxes of the banks: runs of strips that share their extent along the strips (strips
+    sensing x run along y, and the other way round), split where a gap across them exceeds twice their pitch."""
     keys = np.round(y if axis == 0 else x, 12)
     outlines = []
     for key in np.unique(keys, axis=0):
-        members = np.all(keys == key, axis=1)
-        outlines.append(((float(x[members].min()), float(x[members].max())),
-                         (float(y[members].min()), float(y[members].max()))))
+        members = np.flatnonzero(np.all(keys == key, axis=1))
+        across = (x if axis == 0 else y)[members]
+        members = members[np.argsort(across[:, 0])]
+        starts = np.sort(across[:, 0])
+        steps = np.diff(starts)
+        breaks = np.flatnonzero(steps > 2 * np.median(steps)) + 1 if steps.size else np.array([], dtype=int)
+        for bank in np.split(members, breaks):
+            outlines.append(((float(x[bank].min()), float(x[bank].max())),
+                             (float(y[bank].min()), float(y[bank].max()))))
     return outlines
 
 
