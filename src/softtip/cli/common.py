@@ -31,7 +31,7 @@ from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
 from softtip._core.files import OutputClaimed, claim, not_a_file
-from softtip._core.progress import SILENT, Progress, RichProgress
+from softtip._core.progress import Progress, RichProgress
 from softtip._core.systems import load
 
 console = Console()
@@ -61,8 +61,8 @@ def printable(value: object) -> str:
 
 
 def progress_for(json_output: bool) -> Progress:
-    """Progress bars on stderr, none when the output is JSON."""
-    return SILENT if json_output else RichProgress(errors)
+    """Progress on stderr: bars, or lines when the output is JSON (stdout stays the JSON alone)."""
+    return RichProgress(errors, lines=json_output)
 
 
 def fail(message: str) -> None:
