@@ -14,15 +14,15 @@ from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
 
 def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
-    """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed)``)
-    and cached."""
+    """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed,
+    progress=progress)``) and cached."""
     path, key, kind = trained_model_path(protocol, f"scenario-{name}"), protocol_key(protocol), f"{name} scenario"
     entry = read_entry(path, key, kind)
     if entry is not None:
         arrays = entry[1]
         return TwinScenario(times_s=arrays["times_s"], field_uT=arrays["field_uT"], force_N=arrays["force_N"])
     with progress.task(f"computing the twin's {name} scenario (kept in the cache)"):
-        scenario = compute(protocol, protocol.seed)
+        scenario = compute(protocol, protocol.seed, progress=progress)
     write_entry(path, key, kind, {},
                 {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
     return scenario
