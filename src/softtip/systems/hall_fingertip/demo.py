@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import contextlib
-import functools
 
 import numpy as np
 
@@ -19,18 +18,14 @@ from softtip._core.progress import SILENT, Progress
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model, force_errors
-from softtip.systems.hall_fingertip.live import cached_scenario
-from softtip.systems.hall_fingertip.scenarios import pushing_scenario
-
-DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
+from softtip.systems.hall_fingertip.live import live_pushes
 
 
 def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, dashboard: bool = True,
                   record: str | None = None, progress: Progress = SILENT) -> dict:
     model_path, calibration, protocol = calibrate_force_model(seed, progress, reuse=True)
     with progress.task("live: the twin's pushes the emulated fingertip replays (kept in the cache)"):
-        scenario = cached_scenario(protocol, "demo-push",
-                                   functools.partial(pushing_scenario, speed_mm_s=DEMO_SPEED_MM_S), progress)
+        scenario = live_pushes(protocol, progress)  # the push scenario's: the next command finds it cached
     frames = []
 
     def collect(frame) -> None:
