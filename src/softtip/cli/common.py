@@ -61,8 +61,9 @@ def printable(value: object) -> str:
 
 
 def progress_for(json_output: bool) -> Progress:
-    """Progress on stderr: bars, or lines when the output is JSON (stdout stays the JSON alone)."""
-    return RichProgress(errors, lines=json_output)
+    """Progress on stderr: bars on a terminal; lines when the output is JSON (stdout stays the JSON alone)
+    or stderr goes to a file or a pipe (where bars would not show)."""
+    return RichProgress(errors, lines=json_output or not errors.is_terminal)
 
 
 def fail(message: str) -> None:

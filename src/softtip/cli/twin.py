@@ -118,15 +118,14 @@ def simulate(
     if depth >= fingertip.height / MM:
         fail(f"--depth = {depth} mm: deeper than the {fingertip.name} body is tall ({fingertip.height / MM:g} mm)")
     check_mesh_work(fingertip, mesh_size, force)
-    progress = progress_for(json_output)
-    with progress.task(f"mesh of {fingertip.name} at {mesh_size:g} mm (kept in the cache)"):
-        twin = Twin.finite_element(fingertip, mesh_size=mesh_size * MM, model=model.value,
-                                   ambient_field=np.array(ambient) / UT_PER_T)
+    twin = Twin.finite_element(fingertip, mesh_size=mesh_size * MM, model=model.value,
+                               ambient_field=np.array(ambient) / UT_PER_T)
     load = LoadCase(indenter=make_indenter(indenter.value, thickness=thickness * MM, angle_deg=angle,
                                            radius=radius * MM),
                     depth=depth * MM, tangential=(shear_x * MM, shear_y * MM), position=(x * MM, y * MM),
                     friction=friction.value)
-    result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed), progress=progress)
+    result = twin.simulate(load, noise=noise is Switch.on, rng=np.random.default_rng(seed),
+                           progress=progress_for(json_output))
     report = result_json(result, twin, angle, thickness, radius, mesh_size, noise is Switch.on)
     if plot is not None:
         from softtip.report.section import plot_section
