@@ -9,20 +9,15 @@ It loops, and keeps the true force so live estimates can be scored against it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM, UT_PER_T
-from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
-from softtip.systems.hall_fingertip.experiments import material_prony
-from softtip.lab.protocols import Protocol
-from softtip.systems.hall_fingertip.protocols import fingertip_for
-from softtip.systems.hall_fingertip.realism import FabricatedUnit
-from softtip.mechanics.contact import LoadCase
-from softtip.mechanics.indenters import Board
-from softtip.mechanics.poses import MagnetPoses
-from softtip.mechanics.viscoelastic import qlv_response
+
+if TYPE_CHECKING:
+    from softtip.lab.protocols import Protocol
 
 
 @dataclass(frozen=True)
@@ -63,6 +58,17 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     each followed by a release and a rest, on one fabricated unit of the protocol's design, at the
     protocol's speed unless ``speed_mm_s`` is given; the force is what a reference sensor reads
     (the material's relaxation included)."""
+    # the twin's mechanics are imported here, not with the module: a cached scenario is replayed (and
+    # unpickled in the emulator's process) without them, which takes seconds off a warm start
+    from softtip.mechanics.contact import LoadCase
+    from softtip.mechanics.indenters import Board
+    from softtip.mechanics.poses import MagnetPoses
+    from softtip.mechanics.viscoelastic import qlv_response
+    from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
+    from softtip.systems.hall_fingertip.experiments import material_prony
+    from softtip.systems.hall_fingertip.protocols import fingertip_for
+    from softtip.systems.hall_fingertip.realism import FabricatedUnit
+
     p = protocol.parameters
     fingertip = fingertip_for(protocol.design, p, progress)
     rng = np.random.default_rng(seed)
