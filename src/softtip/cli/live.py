@@ -67,6 +67,8 @@ def live(
     """Stream a fingertip (or an emulated sensor) through baseline -> models -> dashboard, recording,
     Foxglove, ROS 2. Re-zero (retake the baseline) with the z key on the dashboard or kill -USR1 PID,
     or at rest with --rezero-at-rest."""
+    import psutil
+
     from softtip._core.systems import load
     from softtip.realtime.session import run_live
     from softtip.realtime.sinks.factory import live_sinks
@@ -116,8 +118,6 @@ def live(
             source, chips, settings = stream.source, stream.chips, stream.settings
             emulator_source = stream.emulator_source
             model, frames = model or list(stream.models), baseline_frames or stream.baseline_frames
-        import psutil
-
         started = psutil.Process().create_time()  # the process's start (s since the epoch): what a user waits from
         first_frame = []
 
