@@ -142,7 +142,7 @@ def test_the_command_searches_and_writes_the_tradeoff_curve(tmp_path):
     result = CliRunner().invoke(design_app(), ["--coarse", "--range-mn", "26", "--budget", "4", "--plot", str(plot),
                                                "--seed", "2", "--json"])
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     assert report["steps"] == 3 and report["seed"] == 2 and report["ranges"][0]["evaluations"] == 4
     assert report["ranges"][0]["published"]["pillars"] == 5 and plot.read_bytes().startswith(b"\x89PNG")
 
@@ -152,7 +152,7 @@ def test_each_ranges_best_lies_on_the_tradeoff_curve_and_says_whether_it_beats_t
     result = CliRunner().invoke(design_app(), ["--coarse", "--range-mn", "13", "--range-mn", "26", "--budget", "3",
                                                "--points", "9", "--json"])
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     assert report["seed"] == 1
     found = search_designs(DIE, (13 * 1e-3, 26 * 1e-3), steps=3, budget=3, points=9, seed=1)  # as the command
     for search, entry in zip(found.ranges, report["ranges"]):

@@ -39,7 +39,7 @@ baseline = {{ samples = 1 }}
 def run(args: list[str]) -> dict:
     result = CliRunner().invoke(app, [*args, "--json"])
     assert result.exit_code == 0, result.output
-    return json.loads(result.output)
+    return json.loads(result.stdout)
 
 
 @pytest.fixture(scope="module")

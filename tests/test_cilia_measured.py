@@ -60,7 +60,7 @@ def test_the_command_recovers_the_publications_fit_with_its_model(balance_table,
     ran = CliRunner().invoke(app, [str(path), "--force-column", "grams", "--force-unit", "g", "--voltage-column",
                                    "volts", "--tare", "--plot", str(plot), "--json"])
     assert ran.exit_code == 0, ran.output
-    report = json.loads(ran.output)
+    report = json.loads(ran.stdout)
     published, own = (report["fits"][name] for name in MODELS)
     # the truth, 0.9 memu and 280 µm, inside the publication's model's 95 % intervals, which are narrow
     low, high = published["moment_interval_memu"]

@@ -208,7 +208,7 @@ def test_the_command_reads_a_csv_at_one_speed_as_the_publication_recorded(tmp_pa
     app.command()(user_errors(roughness_cilia))
     ran = CliRunner().invoke(app, [str(table), "--channel", "volts", "--seed", "0", "--json"])
     assert ran.exit_code == 0, ran.output
-    report = json.loads(ran.output)
+    report = json.loads(ran.stdout)
     study = analyse_roughness(recordings, 1e-3, 5.0, seed=0)
     assert report["speed_mm_s"] == 1.0 and report["rate_hz"] == 5.0 and report["recordings"] == 8
     np.testing.assert_allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-9)

@@ -97,7 +97,7 @@ def test_a_die_with_one_sensor_direction_runs_the_protocol_and_the_bench(tmp_pat
     assert len(brushing.trials) == 28 and np.all(np.isfinite(brushing.column("gmr_y_V")))
     ran = CliRunner().invoke(bench_app(), ["--die", str(die), "--loads", "5", "--repeats", "1", "--json"])
     assert ran.exit_code == 0, ran.output
-    assert json.loads(ran.output)["sensor"] == "Y"
+    assert json.loads(ran.stdout)["sensor"] == "Y"
 
 
 def test_reproduce_on_a_die_of_the_other_sensor_alone_asks_for_it_before_any_work(tmp_path):
@@ -195,7 +195,7 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     app.command()(user_errors(roughness_cilia))
     ran = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "1", "--seed", "0", "--json"])
     assert ran.exit_code == 0, ran.output
-    report = json.loads(ran.output)
+    report = json.loads(ran.stdout)
     assert report["recordings"] == 28 and np.allclose(report["ac_rms_uV"], study.total_rms * 1e6, rtol=1e-12)
     assert report["classification"]["accuracy_by_strip"] == study.classification.by_strip
     refused = CliRunner().invoke(app, [str(tmp_path / "cilia.parquet"), "--speed-mm-s", "3"])

@@ -28,7 +28,7 @@ def board_push():
     result = run("simulate", "--design", "cylindrical-D", "--indenter", "board", "--depth", "1.0", "--angle", "45",
                  "--json", *FAST)
     assert result.exit_code == 0, result.output
-    return json.loads(result.output)
+    return json.loads(result.stdout)
 
 
 def test_simulate_json_has_the_documented_fields(board_push):
@@ -67,7 +67,7 @@ def test_noise_off_gives_the_exact_field_and_noise_on_has_the_noise_models_sprea
     design.write_text(shipped_design_path("cylindrical-D").read_text().replace(
         "positions_mm = [[0.0, 0.0, 0.8]]", f"positions_mm = {grid}"))
     push = ("simulate", "--design", str(design), "--angle", "45", "--json", *FAST)
-    off, on = (json.loads(run(*push, "--noise", switch).output)["sensors"] for switch in ("off", "on"))
+    off, on = (json.loads(run(*push, "--noise", switch).stdout)["sensors"] for switch in ("off", "on"))
     assert len(on) == 16 and all(chip["dB_uT"] == chip["dB_exact_uT"] for chip in off)
     # each axis is the difference of two noisy, quantised readings (baseline and loaded): a variance of
     # 2 (noise^2 + LSB^2 / 12) at the design's GAIN_SEL 7, RES 0, OSR 0, DIG_FILT 2; in those units the
@@ -102,8 +102,8 @@ def test_sensor_model_facts_are_reported(board_push):
 
 
 def test_ambient_field_cancels_in_the_change_but_shifts_the_raw_counts():
-    base = json.loads(run("simulate", "--noise", "off", "--json", *FAST).output)["sensors"][0]
-    ambient = json.loads(run("simulate", "--noise", "off", "--ambient", "0", "0", "50", "--json", *FAST).output)
+    base = json.loads(run("simulate", "--noise", "off", "--json", *FAST).stdout)["sensors"][0]
+    ambient = json.loads(run("simulate", "--noise", "off", "--ambient", "0", "0", "50", "--json", *FAST).stdout)
     ambient = ambient["sensors"][0]
     np.testing.assert_allclose(ambient["dB_exact_uT"], base["dB_exact_uT"], atol=1e-3)
     shift = (np.array(ambient["counts"], dtype=np.int64) - np.array(base["counts"], dtype=np.int64)) % 65536
@@ -152,7 +152,7 @@ def test_a_bad_design_file_gives_one_line(tmp_path):
 
 
 def test_designs_lists_the_shipped_designs():
-    rows = json.loads(run("designs", "--json").output)
+    rows = json.loads(run("designs", "--json").stdout)
     assert [r["name"] for r in rows] == ["cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D",
                                          "rectangular"]
 
@@ -185,10 +185,10 @@ def test_calibrate_then_evaluate_a_saved_model(tmp_path):
     dataset = _synthetic_dataset(tmp_path / "push.parquet")
     model = tmp_path / "force.npz"
     fitted = json.loads(run("calibrate", str(dataset), "--target", "fz_N", "--model", "polynomial",
-                            "--output", str(model), "--json").output)
+                            "--output", str(model), "--json").stdout)
     # the readings are a per-axis cubic of the force: the polynomial's inverse map is close to exact
     assert fitted["validation"]["fz_N"]["r2"] > 0.999 and model.is_file()
-    scored = json.loads(run("evaluate", str(model), str(dataset), "--json").output)
+    scored = json.loads(run("evaluate", str(model), str(dataset), "--json").stdout)
     assert scored["fz_N"]["mean_abs_error"] < 0.02
     model.write_bytes(model.read_bytes()[:-200])
     refused = run("evaluate", str(model), str(dataset))

@@ -303,3 +303,17 @@ def test_the_silent_default_reports_nothing_and_rich_leaves_a_line_per_finished_
     lines = [line for line in screen.getvalue().splitlines() if line]
     assert [line.split(" (")[0] for line in lines] == ["✓ influence matrices", "✓ trials"]
     assert lines[1].startswith("✓ trials (2/2, ")
+
+
+def test_rich_progress_in_lines_says_each_task_as_it_starts_every_tenth_and_its_end():
+    screen = io.StringIO()
+    progress = RichProgress(Console(file=screen, width=40), lines=True)  # narrow: no line is wrapped
+    with progress.task("unit load responses of the fingertip's surface", total=25) as task:
+        for _ in range(25):
+            task.advance()
+    lines = screen.getvalue().splitlines()
+    assert lines[0] == "… unit load responses of the fingertip's surface"
+    # 25 steps: the tenths 1..9 are passed at steps 3, 5, 8, 10, 13, 15, 18, 20, 23
+    assert [line.split(": ")[1].split(" (")[0] for line in lines[1:-1]] == [
+        "3/25", "5/25", "8/25", "10/25", "13/25", "15/25", "18/25", "20/25", "23/25"]
+    assert lines[-1].startswith("✓ unit load responses of the fingertip's surface (25/25, ")

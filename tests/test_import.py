@@ -363,7 +363,7 @@ def test_the_command_imports_and_calibrate_and_evaluate_read_it(tmp_path):
                                     "-o", str(out), "--validate-trials", "0", "--baseline-seconds", "0.5",
                                     "--tolerance", "0.01", "--json"])
     assert made.exit_code == 0, made.output
-    summary = json.loads(made.output)
+    summary = json.loads(made.stdout)
     dataset = Dataset.read(out)
     assert summary["validation_trials"] == [0] and summary["samples"] == len(dataset)
     assert summary["largest_join_offset_s"] <= 0.01 and summary["labels"] == {"fz_N": "N", "saturated": "1"}
@@ -374,7 +374,7 @@ def test_the_command_imports_and_calibrate_and_evaluate_read_it(tmp_path):
                                       "-o", str(tmp_path / "m.npz"), "--json"])
     assert fitted.exit_code == 0, fitted.output
     scored = CliRunner().invoke(app, ["evaluate", str(tmp_path / "m.npz"), str(out), "--json"])
-    assert scored.exit_code == 0 and json.loads(scored.output)["fz_N"]["rmse"] >= 0
+    assert scored.exit_code == 0 and json.loads(scored.stdout)["fz_N"]["rmse"] >= 0
 
 
 def test_an_imported_dataset_feeds_sysid(tmp_path):
@@ -460,7 +460,7 @@ def test_the_readme_walk_through_runs_as_written_and_scores_the_held_out_recordi
             result = CliRunner().invoke(app, words)
             assert result.exit_code == 0, f"{line}: {result.output}"
             if words[0] == "calibrate":
-                scores.append(json.loads(result.output))
+                scores.append(json.loads(result.stdout))
     dataset = Dataset.read(tmp_path / "eflesh.parquet")
     held_out = dataset.select(rows=dataset.column("role") == "validation")
     assert set(held_out.column("source")) == {"20250401_015717_probe"}

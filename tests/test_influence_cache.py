@@ -49,3 +49,47 @@ def test_a_process_that_needs_an_entry_being_computed_waits_for_it(tmp_path):
     descriptor = os.open(f"{entry}.lock", os.O_WRONLY)
     fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)  # and in this process too
     os.close(descriptor)
+
+
+INTERRUPTED_BUILD = """
+import os, signal, sys
+from softtip._core.progress import Progress, Task
+from softtip._core.units import MM
+from softtip.design.model import load_design
+from softtip.twin.influence import InfluenceEngine
+
+class CtrlCAfter(Progress):  # the user presses Ctrl-C once this many blocks are solved
+    def task(self, description, total=None):
+        progress = self
+        class Blocks(Task):
+            done_blocks = 0
+            def advance(self, steps=1, note=None):
+                Blocks.done_blocks += 1
+                if Blocks.done_blocks == int(sys.argv[1]):
+                    os.kill(os.getpid(), signal.SIGINT)
+        return Blocks()
+
+InfluenceEngine.build(load_design("cylindrical-D"), 3.0 * MM, 4.5 * MM, curvature_points=3, progress=CtrlCAfter())
+"""
+
+
+@pytest.mark.slow  # three factorisations and nine blocks of back-substitutions: 32 s under a load average of 12
+def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resumes_from_them(monkeypatch):
+    """1,299 surface unknowns: six blocks of back-substitutions; Ctrl-C after the third."""
+    from softtip._core.cache import EntryPieces
+
+    interrupted = subprocess.run([sys.executable, "-c", INTERRUPTED_BUILD, "3"], capture_output=True, text=True)
+    assert interrupted.returncode != 0 and "KeyboardInterrupt" in interrupted.stderr
+    kept = list((cache_dir() / "influence").glob("*.npz.pieces/*.npz"))
+    assert len(kept) == 3
+    solved = []
+    write = EntryPieces.write
+    monkeypatch.setattr(EntryPieces, "write", lambda self, index, arrays: (solved.append(index),
+                                                                           write(self, index, arrays)))
+    design = load_design("cylindrical-D")
+    resumed = InfluenceEngine.build(design, 3.0 * MM, 4.5 * MM, curvature_points=3)
+    assert solved == [3, 4, 5]  # only the blocks the interrupted run had not finished
+    assert not list((cache_dir() / "influence").glob("*.npz.pieces"))  # gone once the whole entry is stored
+    whole = InfluenceEngine.build(design, 3.0 * MM, 4.5 * MM, curvature_points=3, use_cache=False)
+    assert np.allclose(resumed.influence.compliance, whole.influence.compliance, rtol=1e-10, atol=0)
+    assert np.allclose(resumed.influence.magnets, whole.influence.magnets, rtol=1e-10, atol=0)

@@ -53,7 +53,7 @@ def test_an_anyskin_board_streams_through_the_baseline_a_model_and_the_recording
                                           str(linear_model), "--baseline-frames", "20", "--record", str(recording),
                                           "--duration", "3", "--json"])
     assert result.exit_code == 0, result.output
-    summary = json.loads(result.output)
+    summary = json.loads(result.stdout)
     assert summary["chips"] == CHIPS and summary["rate_hz"] is None and summary["resyncs"] == 0
     assert summary["delivered"] == summary["frames"] > 150 and summary["sink_errors"] == 0
 

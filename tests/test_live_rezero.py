@@ -109,7 +109,7 @@ def test_live_rezero_at_rest_takes_out_an_offset_step(tmp_path, rezero):
                 "--record", str(recording), "--duration", "4", "--json"]
         result = CliRunner().invoke(app, args + (["--rezero-at-rest", "0.5", "--rest-band", "5"] if rezero else []))
     assert result.exit_code == 0, result.output
-    summary = json.loads(result.output)
+    summary = json.loads(result.stdout)
     changes = convert(recording).dataset.X()
     last = changes[-20:]
     if rezero:

@@ -139,7 +139,7 @@ def test_softtip_live_streams_the_emulated_wearable_sensor_through_its_identifie
     result = CliRunner().invoke(app, ["live", "--emulate", "--scenario", "wearable", "--duration", "2",
                                       "--record", str(record), "--json"])
     assert result.exit_code == 0, result.output
-    summary = json.loads(result.output[result.output.index("{"):])
+    summary = json.loads(result.stdout)
     assert summary["chips"] == 1 and summary["rate_hz"] == 10 and summary["estimated"] >= 15
     assert summary["sink_errors"] == 0 and summary["late"] == 0
     dataset = convert(record).dataset

@@ -370,7 +370,7 @@ def test_a_damaged_record_length_is_repaired_with_every_message(tmp_path, byte, 
     assert (tail is None) == (byte == 1) and (len(streamed) < len(intact)) == (byte != 1)
     result = CliRunner().invoke(app, ["recording", "repair", str(damaged), "--json"])
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    report = json.loads(result.stdout)
     repaired = Path(report["output"])
     # the chunk is read with the length the next record implies, and its own CRC holds: nothing is lost
     assert indexed_messages(repaired)[1] == intact and report["messages_read"] == len(intact) == 601

@@ -161,6 +161,32 @@ def computing(path: Path) -> Iterator[None]:
         os.close(descriptor)
 
 
+class EntryPieces:
+    """The finished pieces of the entry at ``path`` while it is computed, each an entry of its own for the same
+    key (``NAME.pieces/INDEX.npz``): a computation stopped part way (Ctrl-C, a crash) keeps what it finished,
+    and the next one computes only the rest. :meth:`clear` removes them once the whole entry is stored."""
+
+    def __init__(self, path: Path, key: str, kind: str):
+        self.folder, self.key, self.kind = path.with_name(f"{path.name}.pieces"), key, f"{kind} piece"
+
+    def _path(self, index: int) -> Path:
+        return self.folder / f"{index}.npz"
+
+    def read(self, index: int) -> dict[str, np.ndarray] | None:
+        """The arrays of piece ``index``, or None when it is still to compute."""
+        entry = read_entry(self._path(index), self.key, self.kind)
+        return None if entry is None else entry[1]
+
+    def write(self, index: int, arrays: dict[str, np.ndarray]) -> None:
+        write_entry(self._path(index), self.key, self.kind, {}, arrays)
+
+    def clear(self) -> None:
+        for piece in self.folder.glob("*.npz") if _is_folder(self.folder) else ():
+            piece.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self.folder.rmdir()
+
+
 def _entry_of_file(path: Path) -> Path:
     return path.with_name(f"{path.name}.entry")
 

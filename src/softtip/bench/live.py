@@ -15,10 +15,15 @@ must be counted as lost by the driver.
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import resource
+import subprocess
+import sys
 import tempfile
 import threading
+import time
 from array import array
 from collections.abc import Callable
 from pathlib import Path
@@ -26,7 +31,9 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
+from softtip._core.cache import CACHE_VARIABLE
 from softtip._core.channels import channel_names
+from softtip._core.progress import SILENT, Progress
 from softtip.hardware import FaultPlan, FrameFate, PressCycle
 from softtip.realtime.baseline import Baseline
 from softtip.realtime.estimator import Estimator
@@ -37,6 +44,47 @@ from softtip.realtime.sinks.recorder import RecorderSink
 SOAK_TARGETS = ("Fx", "Fy", "Fz", "grip_force")
 LATENCY_TARGET_P99_MS = 2.0
 CPU_TARGET_PERCENT = 15.0
+START_TARGETS_S = {"cold": 60.0, "warm": 5.0}  # to the first frame, on an idle machine (issue 40)
+START_STREAM_S = 1.0  # what each start streams once it has its first frame
+
+
+class StartFailed(RuntimeError):
+    """A ``softtip live`` started by :func:`start_times` ended with an error."""
+
+
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def start_times(scenario: str = "push", progress: Progress = SILENT) -> dict:
+    """Seconds from the start of ``softtip live --emulate --scenario SCENARIO`` to its first frame, run twice
+    in child processes one after the other: cold, on an empty cache folder of its own, then warm, on the
+    same folder as the cold run left it. Each with its CPU time (the command's process and its emulator),
+    its wall time to the end, and the load average just before it (the first frame is the command's own
+    ``first_frame_s``, measured from the process's start)."""
+    command = [sys.executable, "-m", "softtip", "live", "--emulate", "--scenario", scenario,
+               "--duration", f"{START_STREAM_S:g}", "--json"]
+    runs = {}
+    with tempfile.TemporaryDirectory(prefix="softtip-start-") as cache:
+        for kind, waits_for in (("cold", "the twin's run and the models computed into an empty cache"),
+                                ("warm", "the same, read from the cache")):
+            with progress.task(f"start of live --emulate --scenario {scenario}, {kind}: {waits_for}"):
+                load = os.getloadavg()
+                cpu_before, wall_before = _children_cpu_s(), time.perf_counter()
+                child = subprocess.run(command, env=os.environ | {CACHE_VARIABLE: cache}, capture_output=True,
+                                       text=True)
+                wall_s, cpu_s = time.perf_counter() - wall_before, _children_cpu_s() - cpu_before
+            if child.returncode != 0:
+                said = (child.stderr.strip().splitlines() or ["nothing on stderr"])[-1]
+                raise StartFailed(f"{' '.join(command[2:])} ({kind} start) ended with exit code "
+                                  f"{child.returncode}: {said}")
+            first_frame_s = json.loads(child.stdout)["first_frame_s"]
+            runs[kind] = {"first_frame_s": first_frame_s, "cpu_s": cpu_s, "wall_s": wall_s,
+                          "load_average_1_5_15_min": list(load),
+                          "target_s": START_TARGETS_S[kind],
+                          "target_met": first_frame_s is not None and first_frame_s <= START_TARGETS_S[kind]}
+    return {"scenario": scenario, "streamed_s": START_STREAM_S, "cpus": os.cpu_count(), **runs}
 
 
 def soak_network(chips: int = 4, hidden: int = 20, seed: int = 0) -> Estimator:

@@ -80,12 +80,14 @@ def bench_live(
     rate: int = typer.Option(500, "--rate", help="Frames per second."),
     chips: int = typer.Option(4, "--chips", help="Chips per frame."),
     faults: bool = typer.Option(False, "--faults", help="Inject corrupt and dropped bytes, stalls, chip errors."),
+    start: bool = typer.Option(False, "--start", help="First time the start of live --emulate --scenario push "
+                               "to its first frame, cold (an empty cache) then warm, before the soak."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Soak: emulator -> driver -> baseline -> a 12-20-4 network -> MCAP recorder; every frame counted,
     latency from arrival to estimate, CPU of the pipeline's process (emulator in another process)."""
     from softtip.hardware import FaultPlan
-    from softtip.bench.live import soak
+    from softtip.bench.live import soak, start_times
     from softtip.cli.live import MAX_CHIPS, MAX_RATE_HZ
 
     check_number(duration, "--duration", above=0, maximum=LONGEST_S, unit="s")
@@ -94,8 +96,10 @@ def bench_live(
 
     plan = FaultPlan(corrupt_every=97, drop_byte_every=131, stall_every=211, stall_ms=3, chip_error_every=53,
                      seed=1) if faults else None
-    with progress_for(json_output).task(f"soaking for {duration:g} s"):
-        report = soak(duration, rate, chips, plan)
+    progress = progress_for(json_output)
+    starts = {"start": start_times(progress=progress)} if start else {}
+    with progress.task(f"soaking for {duration:g} s"):
+        report = starts | soak(duration, rate, chips, plan)
     if json_output:
         print(json.dumps(report, indent=2, default=float))
     else:

@@ -31,7 +31,7 @@ from typer.core import TyperArgument, TyperGroup
 
 from softtip._core.errors import NotConverged
 from softtip._core.files import OutputClaimed, claim, not_a_file
-from softtip._core.progress import SILENT, Progress, RichProgress
+from softtip._core.progress import Progress, RichProgress
 from softtip._core.systems import load
 
 console = Console()
@@ -61,8 +61,9 @@ def printable(value: object) -> str:
 
 
 def progress_for(json_output: bool) -> Progress:
-    """Progress bars on stderr, none when the output is JSON."""
-    return SILENT if json_output else RichProgress(errors)
+    """Progress on stderr: bars on a terminal; lines when the output is JSON (stdout stays the JSON alone)
+    or stderr goes to a file or a pipe (where bars would not show)."""
+    return RichProgress(errors, lines=json_output or not errors.is_terminal)
 
 
 def fail(message: str) -> None:

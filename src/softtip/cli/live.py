@@ -14,7 +14,6 @@ from softtip._core.systems import default, names, owner
 from softtip.cli.common import (FORCE, LONGEST_S, check_input, check_number, check_output, claimed, console, errors,
                                 fail, printable, progress_for)
 
-STARTED = time.perf_counter()  # when the command line was loaded: the start a user waits from
 SCENARIOS = tuple(names("scenario"))
 SCENARIO_HELP = "; ".join(f"{name} ({owner('scenario', name).name})" for name in SCENARIOS)
 Scenario = Enum("Scenario", {name: name for name in SCENARIOS}, type=str)  # the choices shown in the help
@@ -60,6 +59,8 @@ def live(
     """Stream a fingertip (or an emulated sensor) through baseline -> models -> dashboard, recording,
     Foxglove, ROS 2. Re-zero (retake the baseline) with the z key on the dashboard or kill -USR1 PID,
     or at rest with --rezero-at-rest."""
+    import psutil
+
     from softtip._core.systems import load
     from softtip.realtime.session import run_live
     from softtip.realtime.sinks.factory import live_sinks
@@ -112,11 +113,12 @@ def live(
             source, chips, settings = stream.source, stream.chips, stream.settings
             emulator_source = stream.emulator_source
             model, frames = model or list(stream.models), baseline_frames or stream.baseline_frames
+        started = psutil.Process().create_time()  # the process's start (s since the epoch): what a user waits from
         first_frame = []
 
         def note_first_frame(frame) -> None:
             if not first_frame:
-                first_frame.append(time.perf_counter() - STARTED)
+                first_frame.append(time.time() - started)
 
         sinks = live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2)
         if foxglove is not None:

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from softtip.design.model import Design, Material
+from softtip._core.cache import EntryPieces
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.mesh import TetMesh
 from softtip.mechanics.poses import MagnetPoses
@@ -244,23 +245,29 @@ class BodyModel:
     def magnet_poses(self, unknowns: np.ndarray) -> MagnetPoses:
         return MagnetPoses.from_rigid(unknowns[self.n_free:].reshape(-1, 6).copy())
 
-    def unit_load_responses(self, solver, columns: np.ndarray, block: int = 240,
-                            progress: Progress = SILENT) -> tuple[np.ndarray, np.ndarray]:
+    def unit_load_responses(self, solver, columns: np.ndarray, block: int = 240, progress: Progress = SILENT,
+                            pieces: EntryPieces | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Responses to a unit force on each of the unknowns ``columns``, by back-substitution in
         blocks with ``solver`` (an :class:`~softtip.mechanics.linsolve.SPDSolver` holding the
         factorised stiffness): at the same unknowns (len, len) - a compliance - and at the magnets'
-        rigid coordinates (6M, len)."""
+        rigid coordinates (6M, len). ``pieces``: where each finished block is kept, and read back
+        instead of solved again (a run stopped part way resumes)."""
         rigid = np.arange(self.n_free, self.size)
         at_columns = np.empty((len(columns), len(columns)))
         at_magnets = np.empty((len(rigid), len(columns)))
         with progress.task("unit load responses", total=len(columns)) as task:
-            for start in range(0, len(columns), block):
+            for index, start in enumerate(range(0, len(columns), block)):
                 chunk = columns[start:start + block]
-                unit = np.zeros((self.size, len(chunk)))
-                unit[chunk, np.arange(len(chunk))] = 1.0
-                solved = solver.solve(unit)
-                at_columns[:, start:start + len(chunk)] = solved[columns]
-                at_magnets[:, start:start + len(chunk)] = solved[rigid]
+                kept = pieces.read(index) if pieces is not None else None
+                if kept is None:
+                    unit = np.zeros((self.size, len(chunk)))
+                    unit[chunk, np.arange(len(chunk))] = 1.0
+                    solved = solver.solve(unit)
+                    kept = {"at_columns": solved[columns], "at_magnets": solved[rigid]}
+                    if pieces is not None:
+                        pieces.write(index, kept)
+                at_columns[:, start:start + len(chunk)] = kept["at_columns"]
+                at_magnets[:, start:start + len(chunk)] = kept["at_magnets"]
                 task.advance(len(chunk))
         return 0.5 * (at_columns + at_columns.T), at_magnets  # symmetric up to round-off
 

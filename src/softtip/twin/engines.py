@@ -80,7 +80,7 @@ class FiniteElementEngine:
     def respond(self, loads: Sequence[LoadCase], model: str | None = None, progress: Progress = SILENT) -> Response:
         model = _checked_model(model or self.model)
         body = self.body
-        solutions = [solve_linear_contact(body, load) if model == "linear"
+        solutions = [solve_linear_contact(body, load, progress=progress) if model == "linear"
                      else solve_hyperelastic_contact(body, load, progress=progress) for load in loads]
         timings = dict(self.timings)
         for solution in solutions:

@@ -12,7 +12,8 @@ from dataclasses import dataclass, fields
 from typing import Sequence
 
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash, computing, read_entry, write_entry
+from softtip._core.cache import (EntryPieces, artefact_key, cache_dir, code_hash, computing, read_entry,
+                                 write_entry)
 from softtip._core.progress import SILENT, Progress
 from softtip.design.model import Design
 from softtip.mechanics.contact import LoadCase, ReducedContactResult, SurfaceInfluence, solve_influence_contact
@@ -25,9 +26,9 @@ _ARRAYS = tuple(field.name for field in fields(SurfaceInfluence))
 
 
 def _influence(design: Design, mesh_size: float, reach: float, curvature_points: int,
-               progress: Progress) -> SurfaceInfluence:
+               progress: Progress, pieces: EntryPieces | None = None) -> SurfaceInfluence:
     body = BodyModel.for_design(design, mesh_design(design, mesh_size, curvature_points=curvature_points))
-    return SurfaceInfluence.build(body, design.height - reach, progress=progress)
+    return SurfaceInfluence.build(body, design.height - reach, progress=progress, pieces=pieces)
 
 
 @dataclass
@@ -42,7 +43,8 @@ class InfluenceEngine:
               progress: Progress = SILENT, use_cache: bool = True) -> InfluenceEngine:
         """Influence matrices of the surface within ``reach`` (m) of the top, on a ``mesh_size`` mesh;
         kept in the cache, where every study and process on the same design and mesh finds them (one
-        process computes them while the others wait for the entry)."""
+        process computes them while the others wait for the entry). A build stopped part way keeps the
+        back-substitutions it finished, and the next one resumes from them."""
         if not use_cache:
             return cls(design=design, influence=_influence(design, mesh_size, reach, curvature_points, progress))
         key = artefact_key({"design": design.spec, "mesh_size": mesh_size, "reach": reach,
@@ -54,8 +56,10 @@ class InfluenceEngine:
             with computing(path):
                 entry = read_entry(path, key, _KIND)  # stored meanwhile by a process this one waited for
                 if entry is None:
-                    influence = _influence(design, mesh_size, reach, curvature_points, progress)
-                    write_entry(path, key, _KIND, {}, {name: getattr(influence, name) for name in _ARRAYS})
+                    pieces = EntryPieces(path, key, _KIND)
+                    influence = _influence(design, mesh_size, reach, curvature_points, progress, pieces)
+                    if write_entry(path, key, _KIND, {}, {name: getattr(influence, name) for name in _ARRAYS}):
+                        pieces.clear()
                     return cls(design=design, influence=influence)
         return cls(design=design, influence=SurfaceInfluence(**{name: entry[1][name] for name in _ARRAYS}))
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from softtip._core.cache import EntryPieces
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.contact.active_set import ACTIVE_SET_MEASURE, exact_contact_step
 from softtip.mechanics.contact.load import LoadCase, load_path, require_nodal_friction, touch_offset
@@ -44,13 +45,16 @@ class SurfaceInfluence:
     magnet_centers: np.ndarray  # (M, 3) m
 
     @classmethod
-    def build(cls, body: BodyModel, lowest_z: float, progress: Progress = SILENT) -> "SurfaceInfluence":
-        """Influence of unit forces on the body's outer nodes at or above ``lowest_z`` (m)."""
+    def build(cls, body: BodyModel, lowest_z: float, progress: Progress = SILENT,
+              pieces: EntryPieces | None = None) -> "SurfaceInfluence":
+        """Influence of unit forces on the body's outer nodes at or above ``lowest_z`` (m); ``pieces``: where
+        the back-substitutions' finished blocks are kept (:meth:`BodyModel.unit_load_responses`)."""
         candidates, dofs = contact_candidates(body)
         keep = (body.space.nodes[candidates, 2] >= lowest_z) & (dofs >= 0).all(axis=1)
         solver = SPDSolver()
         solver.factorize(body.stiffness)
-        compliance, magnets = body.unit_load_responses(solver, dofs[keep].ravel(), progress=progress)
+        compliance, magnets = body.unit_load_responses(solver, dofs[keep].ravel(), progress=progress,
+                                                         pieces=pieces)
         return cls(nodes=body.space.nodes[candidates[keep]], node_ids=candidates[keep], compliance=compliance,
                    magnets=magnets, magnet_centers=body.magnet_centers.copy())
 

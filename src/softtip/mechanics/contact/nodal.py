@@ -154,7 +154,7 @@ class _ActiveSetSystem:
 
 def solve_linear_contact(body: BodyModel, load: LoadCase, *, penalty: float = 1e4, normal_steps: int | None = None,
                          tangential_steps: int = 4, max_iterations: int = 30, solver: SPDSolver | None = None,
-                         report_unconverged: bool = False) -> ContactResult:
+                         report_unconverged: bool = False, progress: Progress = SILENT) -> ContactResult:
     """Small-strain contact; gaps are linearised about the undeformed body. ``max_iterations``
     caps the active-set iterations of each load step; a step that reaches it raises
     :class:`ContactNotConverged`, or with ``report_unconverged`` the result says
@@ -185,41 +185,43 @@ def solve_linear_contact(body: BodyModel, load: LoadCase, *, penalty: float = 1e
     nodal_force = np.zeros_like(x)
     previous_frame = touch.copy()
     active = np.zeros(len(candidates), dtype=bool)
-    for travel in path:
-        frame = touch + travel
-        gap = load.indenter.vertical_gap(x - frame)[0]
-        active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
-        if stick:  # nodes held by the indenter travel with it, even past the edge of its footprint
-            gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
-        else:  # without friction, nodes the indenter has moved off are free
-            active &= np.isfinite(gap)
-        iteration = ActiveSetIteration(active)
-        for _ in range(max_iterations):
+    with progress.task("contact load steps", total=len(path)) as task:
+        for travel in path:
+            frame = touch + travel
+            gap = load.indenter.vertical_gap(x - frame)[0]
+            active |= gap + np.einsum("ij,ij->i", normal, u_candidates) < 0
+            if stick:  # nodes held by the indenter travel with it, even past the edge of its footprint
+                gap = np.where(active, load.indenter.vertical_gap(x - frame, extend=True)[0], gap)
+            else:  # without friction, nodes the indenter has moved off are free
+                active &= np.isfinite(gap)
+            iteration = ActiveSetIteration(active)
+            for _ in range(max_iterations):
+                if stick:
+                    # contact nodes follow the indenter tangentially; the normal gap closes
+                    held = anchors.targets(candidates[active], x[active] + u_candidates[active], previous_frame)
+                    target = held + (frame - previous_frame) - x[active]
+                    target -= np.einsum("ij,ij->i", target, normal[active])[:, None] * normal[active]
+                    target -= gap[active, None] * normal[active]
+                    rhs_nodal = epsilon * target
+                else:
+                    rhs_nodal = -epsilon * gap[active, None] * normal[active]
+                rhs_nodal = np.where(cand_dofs[active] >= 0, rhs_nodal, 0.0)
+                unknowns = system.solve(active, _scatter(body.size, cand_dofs[active], rhs_nodal))
+                u_now = _gather(unknowns, cand_dofs)
+                nodal_force = np.zeros_like(x)  # force of the indenter on each candidate node
+                nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
+                pressure = np.einsum("ij,ij->i", nodal_force, normal)
+                linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
+                if iteration.update(pressure, linear_gap, load.tolerance):
+                    break
+                active = iteration.active
+            log.step(iteration.outcome)
+            u_candidates = u_now
             if stick:
-                # contact nodes follow the indenter tangentially; the normal gap closes
-                held = anchors.targets(candidates[active], x[active] + u_candidates[active], previous_frame)
-                target = held + (frame - previous_frame) - x[active]
-                target -= np.einsum("ij,ij->i", target, normal[active])[:, None] * normal[active]
-                target -= gap[active, None] * normal[active]
-                rhs_nodal = epsilon * target
-            else:
-                rhs_nodal = -epsilon * gap[active, None] * normal[active]
-            rhs_nodal = np.where(cand_dofs[active] >= 0, rhs_nodal, 0.0)
-            unknowns = system.solve(active, _scatter(body.size, cand_dofs[active], rhs_nodal))
-            u_now = _gather(unknowns, cand_dofs)
-            nodal_force = np.zeros_like(x)  # force of the indenter on each candidate node
-            nodal_force[active] = rhs_nodal - np.einsum("nij,nj->ni", blocks[active], u_now[active])
-            pressure = np.einsum("ij,ij->i", nodal_force, normal)
-            linear_gap = gap + np.einsum("ij,ij->i", normal, u_now)
-            if iteration.update(pressure, linear_gap, load.tolerance):
-                break
-            active = iteration.active
-        log.step(iteration.outcome)
-        u_candidates = u_now
-        if stick:
-            anchors.keep_only(candidates[active])
-            anchors.targets(candidates[active], x[active] + u_now[active], frame)
-        previous_frame = frame
+                anchors.keep_only(candidates[active])
+                anchors.targets(candidates[active], x[active] + u_now[active], frame)
+            previous_frame = frame
+            task.advance(note=f"{iteration.iterations} active-set iterations")
     t_total = time.perf_counter() - t0
     return ContactResult(
         unknowns=unknowns, magnet_poses=body.magnet_poses(unknowns), force=-nodal_force.sum(axis=0),

@@ -1,16 +1,16 @@
 """The main job, end to end on the built-in simulated sensor: twin -> calibration -> live estimates.
 
-1. the 3-axis force calibration protocol runs on the twin (cylindrical-D): a dataset of trials;
-2. a 3-10-3 Levenberg-Marquardt network is fitted on its calibration trials (rests included), scored
-   on its validation trials and saved as a softtip model file;
-3. an emulated fingertip replays the same motions from the twin over a pseudo-terminal in the
+1. twin: the 3-axis force calibration protocol runs on the twin (cylindrical-D): a dataset of trials;
+2. calibration: a 3-10-3 Levenberg-Marquardt network is fitted on its calibration trials (rests
+   included), scored on its validation trials and saved as a softtip model file;
+3. live: an emulated fingertip replays the same motions from the twin over a pseudo-terminal in the
    firmware's protocol; the live pipeline (driver -> baseline -> the saved model) estimates the
    force frame by frame, and the estimates are scored against the twin's true force.
 """
 
 from __future__ import annotations
 
-import functools
+import contextlib
 
 import numpy as np
 
@@ -18,17 +18,14 @@ from softtip._core.progress import SILENT, Progress
 from softtip.realtime.session import run_live
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.systems.hall_fingertip.force_model import FORCES, calibrate_force_model, force_errors, phase_errors
-from softtip.systems.hall_fingertip.live import cached_scenario
-from softtip.systems.hall_fingertip.scenarios import pushing_scenario
-
-DEMO_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
+from softtip.systems.hall_fingertip.live import live_pushes
 
 
 def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, dashboard: bool = True,
                   record: str | None = None, progress: Progress = SILENT) -> dict:
     model_path, calibration, protocol = calibrate_force_model(seed, progress, reuse=True)
-    scenario = cached_scenario(protocol, "demo-push", functools.partial(pushing_scenario, speed_mm_s=DEMO_SPEED_MM_S),
-                               progress)
+    with progress.task("live: the twin's pushes the emulated fingertip replays (kept in the cache)"):
+        scenario = live_pushes(protocol, progress)  # the push scenario's: the next command finds it cached
     frames = []
 
     def collect(frame) -> None:
@@ -36,9 +33,12 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
             frames.append((frame.device_time_s, np.array(frame.estimates[:3])))
 
     settings = protocol.design.chip_settings
-    summary = run_live("emulator", [model_path], live_sinks(dashboard=dashboard, record=record), duration_s,
-                       rate_hz=rate_hz, chips=1, settings=settings, callbacks=[collect],
-                       emulator_source=scenario)
+    # the dashboard takes the terminal while it streams; without it, the stream is a stage of its own
+    with contextlib.nullcontext() if dashboard else progress.task(f"live: {duration_s:g} s of the emulated "
+                                                                   "fingertip through the saved model"):
+        summary = run_live("emulator", [model_path], live_sinks(dashboard=dashboard, record=record), duration_s,
+                           rate_hz=rate_hz, chips=1, settings=settings, callbacks=[collect],
+                           emulator_source=scenario)
     live = {}
     if frames:
         times = np.array([t for t, _ in frames])

@@ -48,8 +48,11 @@ def calibrate_force_model(seed: int, progress: Progress = SILENT, reuse: bool = 
     path, key = trained_model_path(protocol, "demo-force"), protocol_key(protocol)
     cached = read_file_entry(path, key, "demo-force", load_model) if reuse else None
     if cached is not None:
-        return path, {"validation": cached[1].extra["validation"], "cached": True}, protocol
-    dataset, timings = run_protocol(protocol, progress)
+        with progress.task("twin and calibration: the force network of an earlier run, read from the cache"):
+            return path, {"validation": cached[1].extra["validation"], "cached": True}, protocol
+    trials = int(protocol.parameters.calibration_trials) + int(protocol.parameters.validation_trials)
+    with progress.task(f"twin: the 3-axis force calibration on {protocol.design.name}, 3 motions x {trials} trials"):
+        dataset, timings = run_protocol(protocol, progress)
     X = dataset.X()
     y = np.column_stack([dataset.column(k) for k in FORCES])
     calibration, validation = by_role(dataset)

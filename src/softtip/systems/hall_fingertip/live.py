@@ -3,6 +3,8 @@ on two, each with the models trained on its protocol - computed once and kept in
 
 from __future__ import annotations
 
+import functools
+
 from softtip._core.cache import read_entry, write_entry
 from softtip._core.progress import SILENT, Progress
 from softtip.lab import Protocol, load_protocol
@@ -14,26 +16,36 @@ from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
 
 def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
-    """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed)``)
-    and cached."""
+    """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed,
+    progress=progress)``) and cached."""
     path, key, kind = trained_model_path(protocol, f"scenario-{name}"), protocol_key(protocol), f"{name} scenario"
     entry = read_entry(path, key, kind)
     if entry is not None:
         arrays = entry[1]
         return TwinScenario(times_s=arrays["times_s"], field_uT=arrays["field_uT"], force_N=arrays["force_N"])
     with progress.task(f"computing the twin's {name} scenario (kept in the cache)"):
-        scenario = compute(protocol, protocol.seed)
+        scenario = compute(protocol, protocol.seed, progress=progress)
     write_entry(path, key, kind, {},
                 {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
     return scenario
 
 
+PUSH_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
+
+
+def live_pushes(protocol: Protocol, progress: Progress = SILENT) -> TwinScenario:
+    """The force-calibration motions of ``protocol`` at :data:`PUSH_SPEED_MM_S`, in a loop: what the main
+    demo streams and the ``push`` scenario plays, one cache entry for both."""
+    return cached_scenario(protocol, "push", functools.partial(pushing_scenario, speed_mm_s=PUSH_SPEED_MM_S),
+                           progress)
+
+
 def push_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
-    """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop, with the
-    3-axis force network trained on the force-calibration protocol."""
+    """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop (the main
+    demo's), with the 3-axis force network trained on the force-calibration protocol."""
     protocol = load_protocol("force3")
     check(len(protocol.design.sensor_positions), None)
-    scenario = cached_scenario(protocol, "push", pushing_scenario, progress)
+    scenario = live_pushes(protocol, progress)
     with progress.task("the force network trained on the twin (kept in the cache)"):
         model = calibrate_force_model(protocol.seed, progress, reuse=True)[0]
     return LiveScenario("the twin's pushes and shears on one fingertip", "emulator", (model,),

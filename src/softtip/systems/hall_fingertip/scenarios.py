@@ -9,19 +9,15 @@ It loops, and keeps the true force so live estimates can be scored against it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM, UT_PER_T
-from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
-from softtip.systems.hall_fingertip.experiments import material_prony
-from softtip.lab.protocols import Protocol
-from softtip.systems.hall_fingertip.protocols import fingertip_for
-from softtip.systems.hall_fingertip.realism import FabricatedUnit
-from softtip.mechanics.contact import LoadCase
-from softtip.mechanics.indenters import Board
-from softtip.mechanics.poses import MagnetPoses
-from softtip.mechanics.viscoelastic import qlv_response
+
+if TYPE_CHECKING:
+    from softtip.lab.protocols import Protocol
 
 
 @dataclass(frozen=True)
@@ -57,13 +53,24 @@ def _out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.nd
 
 
 def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = None, rate_hz: float = 200.0,
-                     rest_s: float = 2.0) -> TwinScenario:
+                     rest_s: float = 2.0, progress: Progress = SILENT) -> TwinScenario:
     """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
     each followed by a release and a rest, on one fabricated unit of the protocol's design, at the
     protocol's speed unless ``speed_mm_s`` is given; the force is what a reference sensor reads
     (the material's relaxation included)."""
+    # the twin's mechanics are imported here, not with the module: a cached scenario is replayed (and
+    # unpickled in the emulator's process) without them, which takes seconds off a warm start
+    from softtip.mechanics.contact import LoadCase
+    from softtip.mechanics.indenters import Board
+    from softtip.mechanics.poses import MagnetPoses
+    from softtip.mechanics.viscoelastic import qlv_response
+    from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
+    from softtip.systems.hall_fingertip.experiments import material_prony
+    from softtip.systems.hall_fingertip.protocols import fingertip_for
+    from softtip.systems.hall_fingertip.realism import FabricatedUnit
+
     p = protocol.parameters
-    fingertip = fingertip_for(protocol.design, p)
+    fingertip = fingertip_for(protocol.design, p, progress)
     rng = np.random.default_rng(seed)
     unit = FabricatedUnit(protocol.design, protocol.realism, rng)  # its exact field: the emulator adds the noise
     speed = (p.speed_mm_s if speed_mm_s is None else speed_mm_s) * MM
@@ -96,7 +103,7 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
 
 
 def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, speed_mm_s: float = 2.0,
-                       rest_s: float = 1.0) -> TwinScenario:
+                       rest_s: float = 1.0, progress: Progress = SILENT) -> TwinScenario:
     """The inverter lid lowered into its body and lifted again, once per case - seated, left clip on
     the rim, right clip on the rim - read by the two fingertips' four chips (the inverter protocol's
     world). ``force_N`` holds the contact force on part B along its normal in the z column."""
@@ -110,12 +117,14 @@ def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, sp
     pose = top - travelled_s * speed
     segments_t, fields, forces = [], [], []
     clock = 0.0
-    for case in CASES:
-        world = InsertionWorld(quiet, case, np.random.default_rng(seed))
-        for height in pose:
-            fields.append(world.absolute_uT(float(height)).reshape(-1, 3))
-            forces.append([0.0, 0.0, world.force])
-        segments_t.append(clock + times)
-        clock += times[-1] + 1 / rate_hz
+    with progress.task("the lid lowered and lifted in each case", total=len(CASES)) as task:
+        for case in CASES:
+            world = InsertionWorld(quiet, case, np.random.default_rng(seed))
+            for height in pose:
+                fields.append(world.absolute_uT(float(height)).reshape(-1, 3))
+                forces.append([0.0, 0.0, world.force])
+            segments_t.append(clock + times)
+            clock += times[-1] + 1 / rate_hz
+            task.advance(note=case)
     return TwinScenario(times_s=np.concatenate(segments_t), field_uT=np.array(fields), force_N=np.array(forces))
 
