@@ -17,7 +17,8 @@ from softtip.systems.hall_fingertip.realism import FabricatedUnit, Realism
 from softtip.systems.hall_fingertip.studies import HALF_BOARD_MM, METHODS
 from softtip.systems.hall_fingertip.tolerance import (ERRORS, FORCE, FORCES, JOINT, ORIENTATION, Effect, ToleranceStudy,
                                                       error_named, gent_modulus_MPa, interval, nominal_protocol,
-                                                      perturbations, STIFFNESS_TOLERANCE, tolerance_study)
+                                                      perturbations, plot_tolerance, STIFFNESS_TOLERANCE,
+                                                      tolerance_report, tolerance_study)
 
 
 @pytest.fixture(scope="module")
@@ -106,6 +107,8 @@ def test_interval_ranking_and_scatter_by_hand():
     report = study.to_dict()["estimates"][estimate]
     assert report["ranking"][0]["apart_from_next"] and not report["ranking"][1]["apart_from_next"]
     assert report["joint"]["degradation_mean"] == pytest.approx(0.55)
+    page = tolerance_report(study, plot_tolerance(study)).html()
+    assert page.index("1. large") < page.index("2. small") and page.count("data:image/png") == 1
 
 
 @pytest.mark.slow

@@ -306,9 +306,13 @@ def plot_tolerance(study: ToleranceStudy):
     seeds, the joint draw's below, and the nominal unit's scatter over seeds shaded."""
     from matplotlib.figure import Figure
 
-    columns = len(study.estimates)
-    figure = Figure(figsize=(4.6 * columns, 0.45 * len(study.effects) + 2.4), layout="constrained")
-    for ax, estimate in zip(np.atleast_1d(figure.subplots(1, columns)), study.estimates, strict=True):
+    columns = min(3, len(study.estimates))
+    rows = -(-len(study.estimates) // columns)
+    figure = Figure(figsize=(5.2 * columns, rows * (0.4 * len(study.effects) + 2.0) + 0.4), layout="constrained")
+    axes = np.ravel(figure.subplots(rows, columns, squeeze=False))
+    for ax in axes[len(study.estimates):]:
+        ax.set_axis_off()
+    for ax, estimate in zip(axes, study.estimates):
         ranked = study.ranking(estimate)
         joint = study.joint(estimate)
         means = np.array([r.mean for r in ranked] + [joint[0]])
@@ -326,8 +330,8 @@ def plot_tolerance(study: ToleranceStudy):
         ax.set_title(f"{estimate}\nnominal {np.mean(study.nominal[estimate]):.3g} ± {scatter:.2g} {unit}",
                      fontsize="medium")
     figure.suptitle(f"Tolerance sensitivity, design {study.design}, {len(study.seeds)} seeds: bars the mean "
-                    "degradation, whiskers its 95 % interval; red: outside the seed scatter, grey: inside; "
-                    "shaded: the nominal unit's sd over seeds", fontsize="small")
+                    "degradation, whiskers its 95 % interval;\nred: outside the seed scatter, grey: inside; "
+                    "shaded: the nominal unit's sd over seeds", fontsize="medium")
     return figure
 
 
@@ -373,6 +377,10 @@ def tolerance_report(study: ToleranceStudy, figure):
                   f"(pushing and 3-axis force); softtip fingertip tolerance", [
                       Section("Method", [__doc__.split("\n\n", 1)[1].replace("\n", " ")], [errors]),
                       Section("Which errors matter for each estimate", [
+                          "A negative degradation is an error that helps: on design D's four-fold symmetric unit "
+                          "a fabrication error, like the stage's offset, breaks the symmetry that makes a board at "
+                          "a and at a + 90° read alike. A small effect inside the seed scatter is not ranked "
+                          "apart from its neighbours; more seeds narrow the intervals.",
                           "The chip's axes in its package (a tilt or rotation of the Hall plate) are not a setting "
                           "of the twin and are not ranked here."], tables,
                           [Figure.of("Ranked degradation per estimate", "The longest red bar is the tolerance to "
