@@ -630,7 +630,8 @@ def test_count_every_case(inputs):
 # The tolerance command's own values: an error it does not know, a tolerance below zero or not a number,
 # an estimate it does not make.
 TOLERANCE_CASES = [["--error", "magnet-positon"], ["--tolerance", "magnetisation=-0.01"],
-                   ["--tolerance", "magnetisation=nan"], ["--tolerance", "stiffnes=0.1"], ["--estimate", "torque"]]
+                   ["--tolerance", "magnetisation=nan"], ["--tolerance", "stiffnes=0.1"], ["--estimate", "torque"],
+                   ["--tolerance", "stiffness=1.5"]]  # an elastomer 150 % softer
 
 
 @pytest.mark.parametrize("extra", TOLERANCE_CASES, ids=[" ".join(extra) for extra in TOLERANCE_CASES])

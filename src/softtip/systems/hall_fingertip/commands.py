@@ -159,7 +159,8 @@ def tolerance(
     tolerance, and all at once, on a coarse pushing and 3-axis force protocol, each run re-calibrated
     and validated; ranked with 95 % intervals over seeds."""
     from softtip.systems.hall_fingertip.tolerance import (ERROR_NAMES, ESTIMATES, FORCE as FORCE_PROTOCOL, PUSHING,
-                                                          plot_tolerance, tolerance_report, tolerance_study)
+                                                          check_tolerances, error_named, plot_tolerance, protocols_of,
+                                                          tolerance_report, tolerance_study)
 
     check_number(seed, "--seed", minimum=0)
     check_number(seeds, "--seeds", minimum=2, maximum=100)
@@ -193,8 +194,15 @@ def tolerance(
         unit = load_design(design)
     except (ValueError, OSError) as error:
         fail(f"--design {design}: {error}")
-    study = tolerance_study(unit, tuple(range(seed, seed + seeds)), tuple(errors or ERROR_NAMES), chosen_tolerances,
-                            tuple(e for e, (protocol, _) in ESTIMATES.items() if protocol in wanted), quick,
+    chosen = tuple(errors or ERROR_NAMES)
+    wanted_estimates = tuple(e for e, (protocol, _) in ESTIMATES.items() if protocol in wanted)
+    try:
+        check_tolerances(unit, tuple(map(error_named, chosen)),
+                         {name: error_named(name).tolerance for name in chosen} | chosen_tolerances,
+                         protocols_of(wanted_estimates), quick)
+    except ValueError as problem:
+        fail(f"--tolerance: {problem}")
+    study = tolerance_study(unit, tuple(range(seed, seed + seeds)), chosen, chosen_tolerances, wanted_estimates, quick,
                             progress_for(json_output))
     figure = plot_tolerance(study)
     if plot is not None:

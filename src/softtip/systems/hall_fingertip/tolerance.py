@@ -241,6 +241,23 @@ def nominal_protocol(name: str, design: Design, seed: int, quick: bool, errors: 
     return replace(protocol, realism=replace(protocol.realism, **spreads))
 
 
+def protocols_of(estimates: tuple[str, ...]) -> list[str]:
+    return [p for p in BOTH if any(ESTIMATES[e][0] == p for e in estimates)]
+
+
+def check_tolerances(design: Design, chosen: tuple[ToleranceError, ...], tolerances: dict[str, float],
+                     protocols: list[str], quick: bool) -> None:
+    """Refuse, before any run, a tolerance the realism table refuses (a modulus change of -1 or less)."""
+    for name in protocols:
+        realism = nominal_protocol(name, design, 0, quick, chosen).realism
+        for error in (e for e in chosen if name in e.protocols):
+            for value in perturbations(error, tolerances[error.name], getattr(realism, error.setting)).values():
+                try:
+                    replace(realism, **{error.setting: value})
+                except ValueError as problem:
+                    raise ValueError(f"tolerance of {error.name} = {tolerances[error.name]:g}: {problem}") from None
+
+
 def tolerance_study(design: Design, seeds: tuple[int, ...], errors: tuple[str, ...] = ERROR_NAMES,
                     tolerances: dict[str, float] | None = None, estimates: tuple[str, ...] = tuple(ESTIMATES),
                     quick: bool = False, progress: Progress = SILENT) -> ToleranceStudy:
@@ -257,8 +274,9 @@ def tolerance_study(design: Design, seeds: tuple[int, ...], errors: tuple[str, .
         error_named(name)
         if not np.isfinite(value) or value < 0:
             raise ValueError(f"tolerance of {name} = {value}: expected a finite number >= 0")
-    protocols = [p for p in BOTH if any(ESTIMATES[e][0] == p for e in estimates)]
+    protocols = protocols_of(estimates)
     acting = {p: tuple(e for e in chosen if p in e.protocols) for p in protocols}
+    check_tolerances(design, chosen, tolerances, protocols, quick)
     runs = {p: 2 + sum(1 if e.kind == "spread" else 2 for e in acting[p]) for p in protocols}
     nominal = {estimate: np.zeros(len(seeds)) for estimate in estimates}
     degradation: dict[str, dict[str, dict[str, np.ndarray]]] = {e.name: {} for e in chosen}
