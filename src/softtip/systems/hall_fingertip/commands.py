@@ -6,13 +6,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.table import Table
 
-from softtip._core.units import MM
-import numpy as np
-
 from softtip._core.files import save_figure
+from softtip._core.units import MM
 from softtip.cli.common import (FORCE, check_number, check_output, check_outputs, console, demo_report, fail,
                                 progress_for)
 
