@@ -360,6 +360,8 @@ def tolerance_report(study: ToleranceStudy, figure):
     from softtip.report.tables import Table
 
     data = study.to_dict()
+    protocols = {name: "; ".join(f"{key} {value}" for key, value in settings.items())
+                 for name, settings in (QUICK if study.quick else COARSE).items()}
     errors = Table("The candidate errors and their tolerances", "error", [e["name"] for e in data["errors"]],
                    ["realism setting", "kind", "tolerance", "acts in", "source"],
                    {**{(e["name"], "realism setting"): e["setting"] for e in data["errors"]},
@@ -394,7 +396,18 @@ def tolerance_report(study: ToleranceStudy, figure):
     return Report(f"Tolerance sensitivity of the Hall fingertip, design {study.design}",
                   f"seeds {', '.join(map(str, study.seeds))}; {'quick' if study.quick else 'coarse'} protocols "
                   f"(pushing and 3-axis force); softtip fingertip tolerance", [
-                      Section("Method", [__doc__.split("\n\n", 1)[1].replace("\n", " ")], [errors]),
+                      Section("Method", [
+                          "The nominal unit has every candidate error at its nominal value: the fabrication spreads "
+                          "at zero, the bench's offsets at the protocol's values, the per-trial scatter off; the "
+                          "sensors' noise and the magnets' temperature walk stay on. Each error then runs alone, "
+                          "and all of them at once (the spreads at their tolerance, each offset drawn uniformly "
+                          "within its tolerance, seeded).",
+                          f"Every run re-fits and validates each estimate on its protocol: pushing "
+                          f"({protocols[PUSHING]}; polynomial and network, as the pushing study) and 3-axis force "
+                          f"({protocols[FORCE]}; the published 3-10-3 network). The degradation is the run's "
+                          "validation error minus the nominal unit's for the same seed (the same trials, noise and "
+                          "draws); over the seeds, its mean and 95 % t-interval. An interval that holds zero is "
+                          "inside the seed scatter."], [errors]),
                       Section("Which errors matter for each estimate", [
                           "A negative degradation is an error that helps: on design D's four-fold symmetric unit "
                           "a fabrication error, like the stage's offset, breaks the symmetry that makes a board at "
