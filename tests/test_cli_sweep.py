@@ -350,7 +350,7 @@ def paths_of(command) -> list:
     return [param for param in command.params if hasattr(param, "type_descriptor") and annotation(param) is Path]
 
 
-SUFFIX = re.compile(r"\.(png|npz|parquet|csv|json|mcap|h)\b")
+SUFFIX = re.compile(r"\.(png|npz|parquet|csv|json|mcap|html|h)\b")
 
 
 # The file name ending of parameters whose help names none
@@ -625,3 +625,16 @@ def test_count_every_case(inputs):
     totals = count(inputs)
     for kind, verdicts in sorted(totals.items()):
         print(f"{kind:18s} " + ", ".join(f"{verdict} {n}" for verdict, n in sorted(verdicts.items())))
+
+
+# The tolerance command's own values: an error it does not know, a tolerance below zero or not a number,
+# an estimate it does not make.
+TOLERANCE_CASES = [["--error", "magnet-positon"], ["--tolerance", "magnetisation=-0.01"],
+                   ["--tolerance", "magnetisation=nan"], ["--tolerance", "stiffnes=0.1"], ["--estimate", "torque"],
+                   ["--tolerance", "stiffness=1.5"]]  # an elastomer 150 % softer
+
+
+@pytest.mark.parametrize("extra", TOLERANCE_CASES, ids=[" ".join(extra) for extra in TOLERANCE_CASES])
+def test_an_unknown_error_or_a_negative_tolerance_is_refused_in_one_line(inputs, extra):
+    verdict, said = outcome(["fingertip", "tolerance", *extra], extra, inputs)
+    assert verdict == "refused", f"softtip fingertip tolerance {' '.join(extra)}: {verdict}: {said}"

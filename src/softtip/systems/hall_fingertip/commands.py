@@ -1,16 +1,19 @@
 """The Hall fingertip's commands: ``softtip demo`` (the main job), ``softtip demo insertion`` and
-``softtip fingertip drift``."""
+``softtip fingertip drift`` and ``softtip fingertip tolerance``."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.table import Table
 
+from softtip._core.files import save_figure
 from softtip._core.units import MM
-from softtip.cli.common import FORCE, check_number, check_output, console, demo_report, fail, progress_for
+from softtip.cli.common import (FORCE, check_number, check_output, check_outputs, console, demo_report, fail,
+                                progress_for)
 
 app = typer.Typer(help="S1: the Hall-effect soft fingertip.", no_args_is_help=True)
 
@@ -134,3 +137,92 @@ def drift(
     for k, (gains, affine) in enumerate(zip(study.presses_rmse_N, study.affine_presses_rmse_N, strict=True)):
         curve.add_row(str(k), *(f"{v:.3f}" for v in (*gains, *affine)))
     console.print(curve)
+
+
+@app.command("tolerance")
+def tolerance(
+    design: str = typer.Option("cylindrical-D", "--design", help="A shipped design's name or a design TOML file."),
+    seed: int = typer.Option(1, "--seed", help="The first seed: units, trials and noise of seed, seed + 1, ..."),
+    seeds: int = typer.Option(3, "--seeds", help="How many seeds (at least 2: the interval needs a scatter)."),
+    errors: list[str] = typer.Option(None, "--error", help="An error to rank (repeatable; default all of them)."),
+    tolerances: list[str] = typer.Option(None, "--tolerance", help="NAME=VALUE: an error's tolerance other than "
+                                                                   "its default (repeatable)."),
+    estimates: list[str] = typer.Option(None, "--estimate", help="orientation or force (repeatable; default both)."),
+    quick: bool = typer.Option(False, "--quick", help="Fewer angles and trials: a smoke run for CI, not the study."),
+    report: Path = typer.Option(None, "--report", help="Write the HTML report here (.html)."),
+    plot: Path = typer.Option(None, "--plot", help="Save the ranked bar charts to this PNG."),
+    force: bool = FORCE,
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Which fabrication and bench errors degrade each estimate most: each error one at a time at ± its
+    tolerance, and all at once, on a coarse pushing and 3-axis force protocol, each run re-calibrated
+    and validated; ranked with 95 % intervals over seeds."""
+    from softtip.systems.hall_fingertip.tolerance import (ERROR_NAMES, ESTIMATES, FORCE as FORCE_PROTOCOL, PUSHING,
+                                                          check_tolerances, error_named, plot_tolerance, protocols_of,
+                                                          tolerance_report, tolerance_study)
+
+    check_number(seed, "--seed", minimum=0)
+    check_number(seeds, "--seeds", minimum=2, maximum=100)
+    for name in errors or ():
+        if name not in ERROR_NAMES:
+            fail(f"--error {name!r}: expected one of {', '.join(ERROR_NAMES)}")
+    chosen_tolerances = {}
+    for item in tolerances or ():
+        name, _, text = item.partition("=")
+        if name not in ERROR_NAMES:
+            fail(f"--tolerance {item!r}: expected NAME=VALUE with NAME one of {', '.join(ERROR_NAMES)}")
+        try:
+            value = float(text)
+        except ValueError:
+            fail(f"--tolerance {item!r}: expected NAME=VALUE with VALUE a number")
+        if not np.isfinite(value) or value < 0 or value > 100:
+            fail(f"--tolerance {item!r}: expected a tolerance between 0 and 100")
+        chosen_tolerances[name] = value
+    groups = {"orientation": PUSHING, "force": FORCE_PROTOCOL}
+    for name in estimates or ():
+        if name not in groups:
+            fail(f"--estimate {name!r}: expected orientation or force")
+    wanted = [groups[name] for name in estimates or groups]
+    check_outputs([("--report", report), ("--plot", plot)], force=force)
+    for option, path, suffix in (("--report", report, ".html"), ("--plot", plot, ".png")):
+        if path is not None and path.suffix.lower() != suffix:
+            fail(f"{option} {path}: expected a file name ending in {suffix}")
+    from softtip.design.model import load_design
+
+    try:
+        unit = load_design(design)
+    except (ValueError, OSError) as error:
+        fail(f"--design {design}: {error}")
+    chosen = tuple(errors or ERROR_NAMES)
+    wanted_estimates = tuple(e for e, (protocol, _) in ESTIMATES.items() if protocol in wanted)
+    try:
+        check_tolerances(unit, tuple(map(error_named, chosen)),
+                         {name: error_named(name).tolerance for name in chosen} | chosen_tolerances,
+                         protocols_of(wanted_estimates), quick)
+    except ValueError as problem:
+        fail(f"--tolerance: {problem}")
+    study = tolerance_study(unit, tuple(range(seed, seed + seeds)), chosen, chosen_tolerances, wanted_estimates, quick,
+                            progress_for(json_output))
+    figure = plot_tolerance(study)
+    if plot is not None:
+        save_figure(figure, plot, dpi=110)
+    if report is not None:
+        tolerance_report(study, figure).write(report)
+    if json_output:
+        print(json.dumps({**study.to_dict(), "report": None if report is None else str(report),
+                          "plot": None if plot is None else str(plot)}, indent=2))
+        return
+    for estimate, result in study.to_dict()["estimates"].items():
+        nominal, unit_name = result["nominal_error"], result["unit"]
+        table = Table(title=f"{estimate}: nominal validation error {nominal['mean']:.3g} ± "
+                            f"{nominal['sd_over_seeds']:.2g} {unit_name}; degradation by error, worst first")
+        for column in ("rank", "error", "worst run", f"degradation ({unit_name})", "95 % interval", "verdict"):
+            table.add_column(column, justify="right")
+        for r in result["ranking"]:
+            table.add_row(str(r["rank"]), r["error"], r["worst_run"], f"{r['degradation_mean']:+.3g}",
+                          f"{r['interval_95'][0]:+.3g} … {r['interval_95'][1]:+.3g}",
+                          "inside the seed scatter" if r["inside_seed_scatter"] else "degrades")
+        joint = result["joint"]
+        table.add_row("", "all at once", "", f"{joint['degradation_mean']:+.3g}",
+                      f"{joint['interval_low']:+.3g} … {joint['interval_high']:+.3g}", "")
+        console.print(table)
