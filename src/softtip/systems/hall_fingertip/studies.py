@@ -121,7 +121,7 @@ def _time_one_estimate_ms(model, x: np.ndarray, repeats: int = 200) -> float:
 
 # ---------------------------------------------------------------------------------------------- studies
 
-def _orientation_fits(dataset: Dataset, seed: int) -> tuple[np.ndarray, np.ndarray, dict]:
+def orientation_fits(dataset: Dataset, seed: int) -> tuple[np.ndarray, np.ndarray, dict]:
     """Both published methods fitted on the calibration trials, scored on the validation trials: the true
     angles and readings of the validation samples, and per method its model and estimates. Orientation is
     only defined once the board presses: samples 1 mm deep or more."""
@@ -182,7 +182,7 @@ def _bench_causes(protocol: Protocol, design, dataset: Dataset, seed: int, progr
     for row, changes in variants.items():
         changed = dataset if not changes else run_protocol(
             replace(protocol, design=design, realism=replace(realism, **changes)), progress)[0]
-        truth, _, fits = _orientation_fits(changed, seed)
+        truth, _, fits = orientation_fits(changed, seed)
         results[row] = {**{f"{method}_mean_abs_error_deg": metrics.mean_abs_error(truth, estimate)
                            for method, (_, estimate) in fits.items()}, **_stage_signature(changed)}
         values = [results[row][key] for key in ("polynomial_mean_abs_error_deg", "network_mean_abs_error_deg",
@@ -209,7 +209,7 @@ def pushing(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     for column, name in enumerate(("cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D")):
         design = load_design(name)
         dataset, timings = run_protocol(replace(protocol, design=design), progress)
-        truth, readings, fits = _orientation_fits(dataset, seed)
+        truth, readings, fits = orientation_fits(dataset, seed)
         letter = _design_letter(name)
         results[name] = {}
         for row, (method, (model, estimate)) in enumerate(fits.items()):

@@ -208,9 +208,9 @@ class ToleranceStudy:
 def orientation_errors(dataset, seed: int) -> dict[str, float]:
     """Mean orientation error (deg) of each published method on the validation trials."""
     from softtip import metrics
-    from softtip.systems.hall_fingertip.studies import _orientation_fits
+    from softtip.systems.hall_fingertip.studies import orientation_fits
 
-    truth, _, fits = _orientation_fits(dataset, seed)
+    truth, _, fits = orientation_fits(dataset, seed)
     return {f"orientation · {method}": metrics.mean_abs_error(truth, estimate) for method, (_, estimate) in fits.items()}
 
 
