@@ -162,7 +162,7 @@ def held(force, seconds=4.0, rate=100.0):
 
 @pytest.mark.parametrize("side", ["radial", "ulnar"])
 def test_tangential_load_bulges_less_on_the_side_the_force_points_to(side):
-    pad = FingerPad(prony=ELASTIC)
+    pad = FingerPad(prony=ELASTIC, lateral_drag=False)  # the bulge alone
     mount = ChipMount(side=side)
     bulge = {}
     for fx in (-1.0, 0.0, 1.0):
@@ -170,6 +170,20 @@ def test_tangential_load_bulges_less_on_the_side_the_force_points_to(side):
         bulge[fx] = pad_response(times, force, pad, mount).skin[-1, 2]
     towards, away = (1.0, -1.0) if side == "radial" else (-1.0, 1.0)
     assert bulge[towards] < bulge[0.0] < bulge[away]
+
+
+@pytest.mark.parametrize("side", ["radial", "ulnar"])
+def test_the_lateral_drag_moves_the_skin_under_the_chip_by_the_transmitted_bone_displacement(side):
+    # by hand: held Fx = 1 N on Fz = 2 N, no creep; u_x = Fx / (2/3 (b + m Fz)) = 1 / (2/3 x 3730 N/m) = 0.402 mm,
+    # of which 10 % reaches the skin under the chip, away from a chip on the side the force points to
+    times, force = held([1.0, 0.0, 2.0])
+    mount = ChipMount(side=side)
+    skin = {drag: pad_response(times, force, FingerPad(prony=ELASTIC, lateral_drag=drag), mount).skin[-1]
+            for drag in (False, True)}
+    expected = -SIDES[side] * 0.1 * 1.0 / (2 / 3 * (330.0 + 1700.0 * 2.0))
+    assert expected == pytest.approx(-SIDES[side] * 40.21e-6, rel=1e-3)
+    assert skin[True][2] - skin[False][2] == pytest.approx(expected, rel=1e-9)
+    np.testing.assert_array_equal(skin[True][:2], skin[False][:2])  # the distal and dorsal drag as before
 
 
 # ---------------------------------------------------------------------------------------------- slip, creep, ring

@@ -151,6 +151,17 @@ def test_the_side_sensor_carries_every_axis_of_the_table_force(shipped):
     assert realistic[1] > 0.5 and realistic[2] > 0.5
 
 
+def test_switching_the_placement_scatter_off_keeps_every_other_draw_and_shows_where_x_is_lost(shipped):
+    centred = run(realism=dataclasses.replace(WearableRealism(), placement_sd_mm=0.0))
+    # the same people, seatings and presses: the table reads what it read, the runs' preloads are identical
+    conditions, again = shipped.trial_conditions, centred.trial_conditions
+    np.testing.assert_array_equal(again["side_air_fz_N"], conditions["side_air_fz_N"])
+    for force in FORCES:
+        np.testing.assert_array_equal(centred.column(force), shipped.column(force))
+    # a linear map from the chip to Fx, in sample: measured 0.05 with the 1 mm placement scatter, 0.49 without
+    assert r_squared(shipped, 0)[0] < 0.1 and r_squared(centred, 0)[0] > 0.45
+
+
 @pytest.mark.parametrize("change, message", [
     ({"parameters": {"participants": 0}}, r"parameters.participants = 0: expected a positive integer"),
     ({"parameters": {"motions": ["palmar", "jumping"]}}, r"parameters.motions"),
@@ -161,6 +172,7 @@ def test_the_side_sensor_carries_every_axis_of_the_table_force(shipped):
     ({"parameters": {"trial_s": 4.0}}, r"parameters.trial_s = 4.0: expected at least 5 s"),
     ({"parameters": {"rate_hz": 0.1}}, r"parameters.trial_s: expected at least two samples at rate_hz = 0.1"),
     ({"parameters": {"rate": 10.0}}, r"parameters.rate: unknown key"),
+    ({"parameters": {"lateral_drag": 1}}, r"parameters.lateral_drag = 1: expected true or false"),
     ({"realism": {"noise": 1}}, r"realism.noise = 1: expected true or false"),
     ({"realism": {"magnetisation_sd": 0.1}}, r"realism.magnetisation_sd: unknown key"),
     ({"viscoelastic": {"g": [0.6, 0.6], "tau_s": [1.0, 2.0]}}, r"viscoelastic.g = \[0.6, 0.6\]: the weights sum"),

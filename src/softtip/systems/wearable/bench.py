@@ -89,6 +89,7 @@ class WearableParameters:
     pad_stiffening_per_mm: PositiveNumber = _PAD.stiffening * MM
     friction: PositiveNumber = _PAD.friction
     nail_fold_transmission: Fraction = _PAD.transmission
+    lateral_drag: Flag = _PAD.lateral_drag  # the pad's lateral displacement presses the chip too
     sensor_side: choice(*SIDES) = _MOUNT.side
     sensor_offset_mm: Real = _MOUNT.position_y / MM  # along the finger from the pad's contact point, distal > 0
     ring_preload_N: NonNegativeNumber = _MOUNT.preload
@@ -195,7 +196,8 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
                                    p.point_radius_mm * MM) for _, contact in trials])
     nominal = FingerPad(width=p.finger_width_mm * MM, stiffness=p.pad_stiffness_N_per_mm / MM,
                         stiffening=p.pad_stiffening_per_mm / MM, friction=p.friction,
-                        transmission=p.nail_fold_transmission, prony=bench.prony, shear_prony=bench.tangential)
+                        transmission=p.nail_fold_transmission, lateral_drag=p.lateral_drag, prony=bench.prony,
+                        shear_prony=bench.tangential)
     effort = Effort(press_peak=p.press_peak_N, rest=p.rest_N, dorsal_hold=p.dorsal_hold_N,
                     tilt_normal=p.tilt_normal_N, tangential_effort=p.tangential_effort,
                     friction_sense=p.friction, normal_coupling=p.normal_coupling,
@@ -207,14 +209,16 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
         for run in range(p.runs):
             mount = ChipMount(side=p.sensor_side,
                               position_y=(p.sensor_offset_mm + bench.scatter(realism.sensor_position_sd_mm)) * MM,
-                              preload=max(p.ring_preload_N * (1 + bench.scatter(realism.ring_preload_sd)), 0.0),
+                              # drawn even at 0, as the placement below
+                              preload=max(p.ring_preload_N * (1 + rng.normal() * realism.ring_preload_sd), 0.0),
                               tissue_prony=bench.nail_fold)
             noise = rng if realism.noise else None
             air = CHIP.acquire(np.array([0.0, 0.0, mount.preload]), noise).values[2]
             skew = rng.uniform(-1, 1) * realism.stream_skew_ms / 1000  # s
             intended = np.stack([intended_force(motion, times, p.trial_s, rng, effort) for motion, _ in trials],
                                 axis=1)
-            rest = bench.scatter(realism.placement_sd_mm * MM, (len(trials), 2))
+            # drawn even at 0 so that switching the placement scatter off leaves every other draw as it was
+            rest = rng.normal(0.0, 1.0, (len(trials), 2)) * realism.placement_sd_mm * MM
             yaw = np.radians(bench.scatter(realism.finger_yaw_sd_deg, len(trials)))
             twin = WearableTwin(finger, mount)
             response = twin.respond(times, intended, radii, rest, p.lean_share)

@@ -87,7 +87,10 @@ stiffness times the skin's tangential displacement, up to the chip face's own fr
 **Skin drag at the chip.** The pad's displacement relative to the bone at the contact (−u_x, −u_y,
 +δ upwards) reaches the skin under the chip, at the nail fold where the pulp's fibrous septa anchor
 the skin to the phalanx, reduced by a transmission factor (0.1, assumed): the chip's distal shear
-follows −u_y, its dorsal shear +δ; the lateral component is the bulge's.
+follows −u_y, its dorsal shear +δ, and (``lateral_drag``) its pressure −s u_x on side s on top of the
+bulge: a radial force drags the pulp away from a radial chip. The same factor for all three: without
+``lateral_drag`` the lateral component is the bulge's alone, and radial force reaches the chip only
+through the bulge's asymmetry, which placing the finger off-centre mimics.
 
 **Leaning.** A person making a tangential force tilts the finger; rotating the bone about the stuck
 contact by φ = u/h (h the height of the bone's centre above the contact) rolls the pressure centre
@@ -104,7 +107,7 @@ from typing import Optional
 
 import numpy as np
 
-from softtip._core.config import Fraction, NonNegativeNumber, PositiveNumber, Real, choice, instance, schema
+from softtip._core.config import Flag, Fraction, NonNegativeNumber, PositiveNumber, Real, choice, instance, schema
 from softtip.mechanics.plate_contact import exponential_depth, exponential_force
 from softtip.mechanics.viscoelastic import PronySeries, qlv_elastic_history, qlv_response
 
@@ -225,6 +228,7 @@ class FingerPad:
     stiffness, stiffening: b (N/m) and m (1/m) of the pulp's instantaneous force-depth law.
     friction: the pad's friction coefficient on the object.
     transmission: share of the pad's displacement at the contact that reaches the skin under the chip.
+    lateral_drag: the lateral share of that displacement presses the chip too (False: distal and dorsal only).
     prony: the tissue's reduced relaxation function.
     shear_prony: its relaxation under tangential load (None: ``prony``).
     """
@@ -234,6 +238,7 @@ class FingerPad:
     stiffening: PositiveNumber = 1700.0
     friction: PositiveNumber = 0.9
     transmission: Fraction = 0.1
+    lateral_drag: Flag = True
     prony: Relaxation = PAD_RELAXATION
     shear_prony: Optional[Relaxation] = None
 
@@ -359,8 +364,10 @@ def pad_response(times, intended, pad: FingerPad, mount: ChipMount, object_radii
     moment = -0.5 * (area * pad.pulp_thickness)[..., None] * shear
     outflow = lateral_outflow(volume, moment, centre, semi_axes, mount.position_y, SIDES[mount.side], pad.width,
                               pad.tip_y)
-    skin = np.stack([-pad.transmission * shear[..., 1], pad.transmission * depth, outflow / pad.bulge_height],
-                    axis=-1)
+    lateral = outflow / pad.bulge_height
+    if pad.lateral_drag:  # the chip's face normal points out of side s: the pulp dragged by −u_x meets it as −s u_x
+        lateral = lateral - SIDES[mount.side] * pad.transmission * shear[..., 0]
+    skin = np.stack([-pad.transmission * shear[..., 1], pad.transmission * depth, lateral], axis=-1)
     touching = force[..., 2] > 0
     return PadResponse(force=force, sliding=sliding, depth=depth, shear=shear,
                        centre=np.where(touching[..., None], centre, np.nan), volume=volume, skin=skin)

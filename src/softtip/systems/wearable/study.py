@@ -17,6 +17,7 @@ from dataclasses import replace
 
 from matplotlib.figure import Figure as PlotFigure
 import numpy as np
+from sklearn.preprocessing import PolynomialFeatures
 
 from softtip._core.progress import Progress
 from softtip.metrics import r2
@@ -116,9 +117,11 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     parts = _dynamics_parts(protocol, dataset, offline, seed, progress)
     results["dynamics_parts"] = {row: {"r2": {name: scores.tolist() for name, scores in r2.items()}}
                                  for row, r2 in parts.items()}
-    own = (protocol.viscoelastic.tangential_creep, protocol.viscoelastic.nail_fold)
+    held = _what_the_chip_holds(protocol, dataset, progress)
+    results["radial_force"] = {row: {degree: values.tolist() for degree, values in r2.items()}
+                               for row, r2 in held.items()}
     tables = [_offline_table(offline), _participant_table(results), _split_table(splits), _order_table(orders),
-              _dynamics_table(parts, own)]
+              _dynamics_table(parts, _own_parts(protocol)), _holds_table(held)]
     if extension:
         tables.append(_extension_table(extension))
     if centre:
@@ -135,9 +138,12 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
         "the twin, not a tuning, decides (see the S2 section of the README for why x shear is weak here)."])
 
 
-# the finger's dynamic parts (softtip.systems.wearable.fingerpad), each on or off: the [viscoelastic] switches
-DYNAMICS_PARTS = {"neither: one relaxation function": (False, False), "tangential creep only": (True, False),
-                  "nail fold only": (False, True), "both": (True, True)}
+# the finger's parts (softtip.systems.wearable.fingerpad), each on or off: the [viscoelastic] switches
+# tangential_creep and nail_fold, and [parameters] lateral_drag
+DYNAMICS_PARTS = {"neither: one relaxation function": (False, False, True),
+                  "tangential creep only": (True, False, True), "nail fold only": (False, True, True),
+                  "both": (True, True, True),
+                  "both, without the lateral drag": (True, True, False)}
 
 
 def _held_out_r2(dataset: Dataset, seed: int) -> dict[str, list]:
@@ -151,25 +157,67 @@ def _held_out_r2(dataset: Dataset, seed: int) -> dict[str, list]:
     return scores
 
 
+def _own_parts(protocol: Protocol) -> tuple[bool, bool, bool]:
+    return protocol.viscoelastic.tangential_creep, protocol.viscoelastic.nail_fold, protocol.parameters.lateral_drag
+
+
 def _dynamics_parts(protocol: Protocol, dataset: Dataset, offline, seed: int,
                     progress: Progress) -> dict[str, dict[str, np.ndarray]]:
-    """Mean R² per axis of both models with each of the finger's dynamic parts on or off: the protocol's
-    own setting is the study's run (``dataset``, ``offline``), every other one the same protocol and seed
+    """Mean R² per axis of both models with each of the finger's parts on or off: the protocol's own
+    setting is the study's run (``dataset``, ``offline``), every other one the same protocol and seed
     with only the switches changed, so the same people press the same way."""
     tissue = protocol.viscoelastic
-    own = (tissue.tangential_creep, tissue.nail_fold)
     parts = {}
-    with progress.task("wearable: the finger's dynamic parts, on and off", total=len(DYNAMICS_PARTS)) as task:
-        for row, (tangential, nail_fold) in DYNAMICS_PARTS.items():
-            if (tangential, nail_fold) == own:
+    with progress.task("wearable: the finger's parts, on and off", total=len(DYNAMICS_PARTS)) as task:
+        for row, (tangential, nail_fold, lateral_drag) in DYNAMICS_PARTS.items():
+            if (tangential, nail_fold, lateral_drag) == _own_parts(protocol):
                 scores = offline
             else:
-                changed = replace(protocol, viscoelastic=replace(tissue, tangential_creep=tangential,
-                                                                 nail_fold=nail_fold))
+                changed = replace(protocol.changed(lateral_drag=lateral_drag), viscoelastic=replace(
+                    tissue, tangential_creep=tangential, nail_fold=nail_fold))
                 scores = _held_out_r2(run_protocol(changed)[0], seed)
             parts[row] = {name: _mean(scores[name], "r2") for name in (TF, SS)}
             task.advance()
     return parts
+
+
+# what the chip's three readings hold of the table's force, the study's run beside the same protocol and seed
+# with one part changed: (the lateral drag switched, placement scatter kept, ring re-seating kept)
+HOLDS = {"this run": (False, True, True), "the lateral drag switched": (True, True, True),
+         "no placement scatter": (False, False, True),
+         "no placement scatter, no ring re-seating": (False, False, False)}
+
+
+def _static_r2(u: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
+    """R² per output of the least-squares polynomial map of ``degree`` from ``u`` to ``y``, in sample: what the
+    readings hold at best for a static map of that degree, with no validation loss."""
+    features = PolynomialFeatures(degree).fit_transform(u)
+    coefficients, *_ = np.linalg.lstsq(features, y, rcond=None)
+    return r2(y, features @ coefficients)
+
+
+def _what_the_chip_holds(protocol: Protocol, dataset: Dataset, progress: Progress) -> dict[str, dict[str, np.ndarray]]:
+    """Mean R² per axis (over participants, flat trials) of linear and cubic static maps from the chip's readings
+    to the table's forces, for each row of :data:`HOLDS`."""
+    held = {}
+    with progress.task("wearable: what the chip's readings hold", total=len(HOLDS)) as task:
+        for row, (switch_drag, placement, reseating) in HOLDS.items():
+            changed = protocol.changed(lateral_drag=protocol.parameters.lateral_drag != switch_drag)
+            realism = changed.realism
+            changed = replace(changed, realism=replace(
+                realism, placement_sd_mm=realism.placement_sd_mm if placement else 0.0,
+                ring_preload_sd=realism.ring_preload_sd if reseating else 0.0))
+            data = dataset if changed == protocol else run_protocol(changed)[0]
+            participant, flat = data.column("participant"), data.column("contact") == "flat"
+            scores = {"linear": [], "cubic": []}
+            for p in np.unique(participant):
+                recording = _recording(data, flat & (participant == p))
+                u, y = np.vstack([t.u for t in recording.trials]), np.vstack([t.y for t in recording.trials])
+                scores["linear"].append(_static_r2(u, y, 1))
+                scores["cubic"].append(_static_r2(u, y, 3))
+            held[row] = {degree: np.mean(values, axis=0) for degree, values in scores.items()}
+            task.advance()
+    return held
 
 
 def _finite_trials(dataset: Dataset, columns) -> np.ndarray:
@@ -213,7 +261,8 @@ def _offline_table(offline) -> Table:
         "the axes and participants. Look at which axis is weakest (published: y, distal/proximal shear)."),
         notes={f"{TF} · Fx": "Radial/ulnar shear moves the displaced volume sideways exactly as placing the finger "
                              "off-centre does; one chip on one side cannot tell them apart when the placement "
-                             "changes from trial to trial (README, S2).",
+                             "changes from trial to trial (README, S2; the table 'What the chip's readings "
+                             "hold of each force axis' measures it).",
                f"{SS} · mean": "Published: the state-space model lost 10-20 points of R². Both are linear models "
                                "of the same data here; the realised transfer function runs frame by frame with "
                                "no loss (see the per-participant table)."})
@@ -270,7 +319,7 @@ def _order_table(orders) -> Table:
                  caption="Mean over participants on held-out trials: look for where more poles stop helping.")
 
 
-def _dynamics_table(parts, own: tuple[bool, bool]) -> Table:
+def _dynamics_table(parts, own: tuple[bool, bool, bool]) -> Table:
     cells = {}
     for row, r2 in parts.items():
         for name, short in ((TF, "TF 6"), (SS, "SS 8")):
@@ -280,14 +329,37 @@ def _dynamics_table(parts, own: tuple[bool, bool]) -> Table:
     return Table("The finger's dynamics, part by part", "dynamic parts", list(parts), columns, cells, digits=3,
                  caption=(
                      "Mean over participants on held-out trials, the same people, presses and seed, only the "
-                     "[viscoelastic] switches changed. With one relaxation function the pad's creep under the "
-                     "person's force and the relaxation of the tissue under the chip cancel, so the chip follows "
-                     "the force with almost no dynamics (tests/test_fingerpad.py measures it); tangential creep "
+                     "[viscoelastic] switches (and [parameters] lateral_drag in the last row) changed. With one "
+                     "relaxation function the pad's creep under the person's force and the relaxation of the "
+                     "tissue under the chip cancel, so the chip follows the force with almost no dynamics "
+                     "(tests/test_fingerpad.py measures it); tangential creep "
                      "(Pataky et al. 2005) and the nail fold's own relaxation (skin, Wang et al. 2015) break that. "
                      "Neither makes a higher order pay here: the held-out error is dominated by what no linear "
-                     "time-invariant model of the chip's three forces can tell apart, not by dynamics."),
+                     "time-invariant model of the chip's three forces can tell apart, not by dynamics. The lateral "
+                     "drag (the pad's radial displacement pressing the chip) is no dynamics: it carries radial force "
+                     "to the chip directly (see the next table for what that leaves of Fx)."),
                  notes={row: "This run's own setting: the study's other tables are made with it."
                         for row in parts if DYNAMICS_PARTS[row] == own})
+
+
+def _holds_table(held) -> Table:
+    cells = {(row, f"{degree}: {axis} R²"): r2[degree][k] for row, r2 in held.items() for degree in r2
+             for k, axis in enumerate(AXES)}
+    columns = [f"{degree}: {axis} R²" for degree in ("linear", "cubic") for axis in AXES]
+    return Table("What the chip's readings hold of each force axis", "run", list(held), columns, cells, digits=3,
+                 caption=(
+                     "Static maps from the chip's three readings to the table's three forces, least squares on all of "
+                     "each participant's flat trials and scored on them (no held-out loss: an upper bound for a "
+                     "static map of that degree), mean over participants; the same protocol and seed, one part "
+                     "changed. Radial force reaches a chip on the side of the nail only as a change of its pressure, "
+                     "beside the far larger change that the normal force and the finger's placement on the object "
+                     "make there: the linear column is what a linear model can use, the cubic one what the laws' "
+                     "curvature hides from it."),
+                 notes={"no placement scatter": "Placing the finger a millimetre off-centre moves the bulge as a "
+                                                "radial force of about a newton does (README, S2).",
+                        "no placement scatter, no ring re-seating": "Re-seating the ring between runs changes the "
+                                                                    "chip's sensitivity: one map serves three "
+                                                                    "seatings."})
 
 
 def _extension_table(extension) -> Table:
