@@ -19,7 +19,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash
+from softtip._core.cache import artefact_key, cache_dir, code_hash, computing, read_file_entry, write_file_entry
 from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import NotRegistered, load, names, owner, provenance
@@ -174,11 +174,32 @@ def check_size(protocol: Protocol) -> None:
                                "--force runs it all the same")
 
 
-def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool = False) -> tuple[Dataset, dict]:
+def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool = False,
+                 reuse: bool = True) -> tuple[Dataset, dict]:
     """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage.
-    A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``."""
+    A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``.
+    The dataset is kept in the cache under :func:`protocol_key`: the same protocol run again (by another
+    study, or a second ``reproduce``) reads it (timed as ``cache_read_s``) unless ``reuse`` is False."""
     if not large:
         check_size(protocol)
+    if not reuse:
+        return _run_trials(protocol, progress)
+    path, key = trials_path(protocol), protocol_key(protocol)
+    start = time.perf_counter()
+    cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
+    if cached is None:
+        with computing(path):  # a process running the same protocol meanwhile: wait for its dataset
+            start = time.perf_counter()
+            cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
+            if cached is None:
+                dataset, timings = _run_trials(protocol, progress)
+                write_file_entry(path, key, _TRIALS_KIND, dataset.write)
+                return dataset, timings
+    return cached, {"cache_read_s": time.perf_counter() - start}
+
+
+def _run_trials(protocol: Protocol, progress: Progress) -> tuple[Dataset, dict]:
+    """The bench set up for ``protocol`` and its trials run on it: the dataset and the timings (s)."""
     timings = {}
     bench, recorded, stage = protocol.bench.setup(protocol, progress, timings)
     start = time.perf_counter()
@@ -189,6 +210,9 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
         dataset = protocol.bench.runners[protocol.name](bench, protocol.parameters, protocol.seed, record)
     timings["trials_s"] = time.perf_counter() - start
     return dataset, timings
+
+
+_TRIALS_KIND = "protocol trials"
 
 
 def protocol_key(protocol: Protocol) -> str:
@@ -205,3 +229,8 @@ def trained_model_path(protocol: Protocol, name: str, suffix: str = ".npz") -> P
     """Where an artefact made from ``protocol``'s trials (a trained model, a live scenario) is cached,
     under its :func:`protocol_key`."""
     return cache_dir() / "models" / f"{name}-{protocol_key(protocol)}{suffix}"
+
+
+def trials_path(protocol: Protocol) -> Path:
+    """Where the dataset of ``protocol``'s trials is cached (a Parquet file), under its :func:`protocol_key`."""
+    return cache_dir() / "trials" / f"{protocol.name}-{protocol_key(protocol)}.parquet"
