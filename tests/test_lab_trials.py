@@ -69,3 +69,23 @@ def test_a_protocol_run_again_reads_its_trials_from_the_cache(coarse_protocol):
     fresh, timings = run_protocol(protocol, reuse=False)
     assert "trials_s" in timings
     _same(first, fresh)
+
+
+def test_a_file_the_protocol_names_edited_under_its_name_makes_other_trials(tmp_path):
+    from softtip.lab.protocols import protocol_from_dict, protocol_key
+
+    finger = tmp_path / "mine.toml"
+    table = {"protocol": "haptics", "seed": 3, "fingertip_files": ["mine.toml"],
+             "parameters": {"trials": 4, "fs_levels": 5, "user_levels": 4, "fingertips": ["human 3 (10 mm)"],
+                            "variations": [], "curve_n_neighbours": [], "curve_weighting_powers": [],
+                            "curve_fs_levels": [], "curve_user_levels": []}}
+    finger.write_text('[fingertip]\nname = "mine"\nradius_mm = 10.0\n')
+    first = protocol_from_dict(table, "test.toml", tmp_path)
+    key = protocol_key(first)
+    ten, _ = run_protocol(first)
+    finger.write_text('[fingertip]\nname = "mine"\nradius_mm = 7.0\n')  # another finger, the same file name
+    second = protocol_from_dict(table, "test.toml", tmp_path)
+    assert protocol_key(second) != key
+    seven, timings = run_protocol(second)
+    assert "trials_s" in timings  # run, not read
+    assert not np.array_equal(seven.column("motor1_rad"), ten.column("motor1_rad"))

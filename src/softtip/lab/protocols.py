@@ -11,6 +11,7 @@ protocol, then the protocol's trials run on it.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, make_dataclass, replace
@@ -216,13 +217,15 @@ _TRIALS_KIND = "protocol trials"
 
 
 def protocol_key(protocol: Protocol) -> str:
-    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design, the source
-    of the whole of softtip (the trials run through nearly every subpackage) and the package of the
-    system that owns the protocol, its source and installed version (a lab's own, edited or upgraded,
+    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design, the content
+    of every file it names (a die, a table: edited under the same name, they make other trials), the
+    source of the whole of softtip (the trials run through nearly every subpackage) and the package of
+    the system that owns the protocol, its source and installed version (a lab's own, edited or upgraded,
     gets new artefacts)."""
     system = provenance(owner("protocol", protocol.name))
-    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec, "system": system},
-                        code_hash("softtip", system["package"]), length=16)
+    files = [[path.name, hashlib.sha256(path.read_bytes()).hexdigest()] for path in protocol.files]
+    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec, "files": files,
+                         "system": system}, code_hash("softtip", system["package"]), length=16)
 
 
 def trained_model_path(protocol: Protocol, name: str, suffix: str = ".npz") -> Path:
