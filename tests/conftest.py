@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import itertools
 import textwrap
 
@@ -25,10 +26,23 @@ SLOW_FIXTURES = {"test_footprint.py": {"coarse"}, "test_lab.py": {"coarse_rectan
                  "test_rom.py": {"coarse", "tiny_twin"}}
 
 
+# The files whose tests take longest (pytest --durations, one process): a default-size reduced twin
+# (test_rom.py, some 850 s), every study's report (about 270 s), a later session of a unit, the CLI's
+# sweep of bad values, mesh convergence, an insertion. pytest-xdist hands a worker one file at a time
+# in the order below (pyproject: --no-loadscope-reorder): longest first, so that none starts near the
+# end and runs on alone while the other workers idle; the rest by their number of tests, most first.
+LONGEST_FILES = ("test_rom.py", "test_report_browser.py", "test_drift.py", "test_cli_sweep.py", "test_mechanics.py",
+                 "test_insertion.py")
+
+
 def pytest_collection_modifyitems(items):
     for item in items:
         if SLOW_FIXTURES.get(item.path.name, set()) & set(item.fixturenames):
             item.add_marker(pytest.mark.slow)
+    tests_in = collections.Counter(item.path for item in items)
+    rank = {name: place for place, name in enumerate(LONGEST_FILES)}
+    # a stable sort: each file's tests keep their order
+    items.sort(key=lambda item: (rank.get(item.path.name, len(rank)), -tests_in[item.path], str(item.path)))
 
 
 # The fewest conditions that still exercise every part of a study (its default has hundreds of trials)

@@ -1,5 +1,6 @@
-"""``softtip bench studies``: the registered studies reproduced one after another and then in a pool of
-processes, in the same call, with the wall and CPU time of each run and the load average around them.
+"""``softtip bench studies``: the registered studies reproduced one after another (their trials too, in
+one process) and then in a pool of processes (the studies, and the trials within each, on every
+core), in the same call, with the wall and CPU time of each run and the load average around them.
 
 Both runs use the cache as it is (warm: what the studies compute themselves), or with ``cold`` each its
 own empty cache (the variable ``SOFTTIP_CACHE_DIR``, which the pool's processes inherit)."""
@@ -46,7 +47,9 @@ def _run(names: Sequence[str], seed: int, quick: bool, workers: int, cold: bool,
     load = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="softtip-bench-studies-") as directory, _empty_cache(cold):
         cpu, start = _cpu_s(), time.perf_counter()
-        reports = reproduce_studies(names, directory, seed=seed, quick=quick, workers=workers, progress=progress)
+        # the serial run is serial throughout: its trials too run in its one process
+        reports = reproduce_studies(names, directory, seed=seed, quick=quick, workers=workers, progress=progress,
+                                    trial_processes=1 if workers == 1 else None)
         wall = time.perf_counter() - start
         cpu = _cpu_s() - cpu
     return {"workers": workers, "wall_s": wall, "cpu_s": cpu,

@@ -11,6 +11,7 @@ protocol, then the protocol's trials run on it.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, make_dataclass, replace
@@ -19,7 +20,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash
+from softtip._core.cache import artefact_key, cache_dir, code_hash, computing, read_file_entry, write_file_entry
 from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import NotRegistered, load, names, owner, provenance
@@ -174,11 +175,32 @@ def check_size(protocol: Protocol) -> None:
                                "--force runs it all the same")
 
 
-def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool = False) -> tuple[Dataset, dict]:
+def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool = False,
+                 reuse: bool = True) -> tuple[Dataset, dict]:
     """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage.
-    A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``."""
+    A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``.
+    The dataset is kept in the cache under :func:`protocol_key`: the same protocol run again (by another
+    study, or a second ``reproduce``) reads it (timed as ``cache_read_s``) unless ``reuse`` is False."""
     if not large:
         check_size(protocol)
+    if not reuse:
+        return _run_trials(protocol, progress)
+    path, key = trials_path(protocol), protocol_key(protocol)
+    start = time.perf_counter()
+    cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
+    if cached is None:
+        with computing(path):  # a process running the same protocol meanwhile: wait for its dataset
+            start = time.perf_counter()
+            cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
+            if cached is None:
+                dataset, timings = _run_trials(protocol, progress)
+                write_file_entry(path, key, _TRIALS_KIND, dataset.write)
+                return dataset, timings
+    return cached, {"cache_read_s": time.perf_counter() - start}
+
+
+def _run_trials(protocol: Protocol, progress: Progress) -> tuple[Dataset, dict]:
+    """The bench set up for ``protocol`` and its trials run on it: the dataset and the timings (s)."""
     timings = {}
     bench, recorded, stage = protocol.bench.setup(protocol, progress, timings)
     start = time.perf_counter()
@@ -191,17 +213,27 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
     return dataset, timings
 
 
+_TRIALS_KIND = "protocol trials"
+
+
 def protocol_key(protocol: Protocol) -> str:
-    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design, the source
-    of the whole of softtip (the trials run through nearly every subpackage) and the package of the
-    system that owns the protocol, its source and installed version (a lab's own, edited or upgraded,
+    """The cache key of artefacts made from ``protocol``'s trials: the protocol, its design, the content
+    of every file it names (a die, a table: edited under the same name, they make other trials), the
+    source of the whole of softtip (the trials run through nearly every subpackage) and the package of
+    the system that owns the protocol, its source and installed version (a lab's own, edited or upgraded,
     gets new artefacts)."""
     system = provenance(owner("protocol", protocol.name))
-    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec, "system": system},
-                        code_hash("softtip", system["package"]), length=16)
+    files = [[path.name, hashlib.sha256(path.read_bytes()).hexdigest()] for path in protocol.files]
+    return artefact_key({"protocol": protocol.to_dict(), "design": protocol.design.spec, "files": files,
+                         "system": system}, code_hash("softtip", system["package"]), length=16)
 
 
 def trained_model_path(protocol: Protocol, name: str, suffix: str = ".npz") -> Path:
     """Where an artefact made from ``protocol``'s trials (a trained model, a live scenario) is cached,
     under its :func:`protocol_key`."""
     return cache_dir() / "models" / f"{name}-{protocol_key(protocol)}{suffix}"
+
+
+def trials_path(protocol: Protocol) -> Path:
+    """Where the dataset of ``protocol``'s trials is cached (a Parquet file), under its :func:`protocol_key`."""
+    return cache_dir() / "trials" / f"{protocol.name}-{protocol_key(protocol)}.parquet"

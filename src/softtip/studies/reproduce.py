@@ -31,6 +31,7 @@ from softtip._core.systems import study as registered_study
 from softtip._core.threads import single_threaded
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import shipped_protocol_path
+from softtip.lab.trials import processes_for_trials
 from softtip.published import OUTSIDE, published_procedure
 from softtip.report.document import Report, Section
 from softtip.report.index import index_report
@@ -193,11 +194,12 @@ def reproduce_study(name: str, seed: int = 1, quick: bool = False, protocol_path
 
 
 def reproduce_into(directory: str | Path, name: str, seed: int = 1, quick: bool = False,
-                   progress: Progress = SILENT, command: str | None = None) -> dict:
+                   progress: Progress = SILENT, command: str | None = None, trial_processes: int | None = None) -> dict:
     """Study ``name`` reproduced and its report written in ``directory``: the report's JSON (what the
     index reads), its ``report`` the HTML file's path. Native thread pools are kept to one thread: the
-    studies' fits are small and thin, and a pool of processes already takes every core."""
-    with single_threaded():
+    studies' fits are small and thin, and a pool of processes already takes every core. The protocols'
+    trials run in ``trial_processes`` processes (default one per core)."""
+    with single_threaded(), processes_for_trials(trial_processes or default_workers()):
         study = reproduce_study(name, seed=seed, quick=quick, progress=progress, command=command)
     path = study.write(directory)
     return study.to_json(str(path))
@@ -210,26 +212,31 @@ def default_workers() -> int:
 
 def reproduce_studies(names: Sequence[str], directory: str | Path, seed: int = 1, quick: bool = False,
                       workers: int = 1, progress: Progress = SILENT, command: str | None = None,
-                      finished: Callable[[str, dict], None] | None = None) -> dict[str, dict]:
+                      finished: Callable[[str, dict], None] | None = None,
+                      trial_processes: int | None = None) -> dict[str, dict]:
     """Studies ``names`` reproduced into ``directory``, serially (``workers`` = 1) or in a pool of
     ``workers`` processes; each report's JSON by name, in the order of ``names``. ``finished(name, json)``
     is called as each study ends (in the order they end). The workers are started afresh (not forked
     from this process, whose threads may hold locks), inherit the environment and so the cache, and
-    report nothing but the JSON: their progress is one bar here, a step per study."""
+    report nothing but the JSON: their progress is one bar here, a step per study. The protocols' trials
+    run in ``trial_processes`` processes (1: in the study's own; default: one per core, shared among the
+    pool's processes)."""
     if workers < 1:
         raise ValueError(f"workers = {workers}: expected at least 1")
     results = {}
     if workers == 1 or len(names) == 1:
         for name in names:
             with progress.task(f"reproducing {name}"):
-                results[name] = reproduce_into(directory, name, seed, quick, progress, command)
+                results[name] = reproduce_into(directory, name, seed, quick, progress, command, trial_processes)
             if finished:
                 finished(name, results[name])
     else:
         with (progress.task(f"reproducing {len(names)} studies in {min(workers, len(names))} processes",
                             total=len(names)) as task,
               ProcessPoolExecutor(min(workers, len(names)), mp_context=multiprocessing.get_context("spawn")) as pool):
-            running = {pool.submit(reproduce_into, directory, name, seed, quick, SILENT, command): name
+            # the pool's processes already share the cores: each runs its trials on its own share of them
+            shared = trial_processes or max(1, default_workers() // min(workers, len(names)))
+            running = {pool.submit(reproduce_into, directory, name, seed, quick, SILENT, command, shared): name
                        for name in names}
             try:
                 for future in as_completed(running):

@@ -12,7 +12,7 @@ Forces in labels are what a reference sensor under the fingertip measures: ``fz_
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -21,6 +21,7 @@ from softtip.data import Dataset, DatasetMetadata, TrialWriter, channel_columns
 from softtip.data.splits import CALIBRATION, VALIDATION
 from softtip._core.signals import hysteresis_percent
 from softtip.lab.bench import SeededBench
+from softtip.lab.trials import run_trials
 from softtip._core.units import MM
 from softtip.design.model import Design
 from softtip.systems.hall_fingertip.engine import HeldPart, interpolate_path, path_table
@@ -218,23 +219,27 @@ def grasp_two(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     plan = [(a, True, role) for a in p.trained_angles_deg
             for role in _roles(int(p.calibration_trials), int(p.validation_trials))]
     plan += [(a, False, VALIDATION) for a in p.untrained_angles_deg for _ in range(int(p.untrained_trials))]
-    for angle, trained, role in plan:
-        true_angle = angle + bench.scatter(realism.angle_sd_deg)
-        trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
+
+    def trial(angle: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        trial_bench = replace(bench, rng=rng)
+        true_angle = angle + trial_bench.scatter(realism.angle_sd_deg)
+        trial_speed = speed * (1 + trial_bench.scatter(realism.speed_sd))
         times = bench.times(p.pre_contact_s + depth / trial_speed + p.hold_s)
         profile = _push_profile(times, p.pre_contact_s, depth, trial_speed)
         readings, normal = [], []
         for pad, mirror in enumerate((0.0, 180.0)):
             load = LoadCase(TiltedPlate(tilt=math.radians(true_angle), angle=math.radians(mirror)), depth,
-                            position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)), friction="stick")
+                            position=tuple(trial_bench.scatter(realism.position_sd_mm * MM, 2)), friction="stick")
             table = path_table(bench.fingertip.press(load, normal_steps=4))
             poses, force = interpolate_path(table, profile, np.zeros((len(times), 2)))
-            readings.append(units[pad].record(poses, times, bench.rng))
+            readings.append(units[pad].record(poses, times, rng))
             normal.append(force)
-        grip = _force_labels(normal[0], times, bench.prony)["fz_N"]
-        writer.add({"time_s": times, **channel_columns(np.concatenate(readings, axis=1)),
-                    "angle_deg": np.full(len(times), float(angle)), "grip_force_N": grip},
-                   {"board_angle_deg": float(angle), "trained": trained, "role": role})
+        return times, np.concatenate(readings, axis=1), _force_labels(normal[0], times, bench.prony)["fz_N"]
+
+    done = run_trials(trial, [(angle, rng) for (angle, _, _), rng in zip(plan, bench.rng.spawn(len(plan)))])
+    for (angle, trained, role), (times, readings, grip) in zip(plan, done):
+        writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),
+                    "grip_force_N": grip}, {"board_angle_deg": float(angle), "trained": trained, "role": role})
     return writer.to_dataset()
 
 
@@ -262,22 +267,29 @@ def grasp_positions(bench: Bench, p: Parameters, seed: int, record: dict) -> Dat
              for x in grid[1::2] for y in grid[1::2] for a in p.angles_deg]
     depth = p.grasp_displacement_mm / 2 * MM
     speed = p.grasp_speed_mm_s / 2 * MM
-    for name, x, y, angle, thickness, role in plan:
+
+    def trial(x: float, y: float, angle: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        trial_bench = replace(bench, rng=rng)
         # the corner points into the pad: the board covers the quadrant beyond it
-        true_angle = angle + bench.scatter(realism.angle_sd_deg)
-        position = (x * MM + bench.scatter(realism.position_sd_mm * MM), y * MM + bench.scatter(realism.position_sd_mm * MM))
+        true_angle = angle + trial_bench.scatter(realism.angle_sd_deg)
+        position = (x * MM + trial_bench.scatter(realism.position_sd_mm * MM),
+                    y * MM + trial_bench.scatter(realism.position_sd_mm * MM))
         load = LoadCase(CornerPlate(angle=math.radians(true_angle)), depth, position=position, friction="stick")
         solution = bench.fingertip.press(load, normal_steps=1)
-        trial_speed = speed * (1 + bench.scatter(realism.speed_sd))
+        trial_speed = speed * (1 + trial_bench.scatter(realism.speed_sd))
         times = bench.times(p.pre_contact_s + depth / trial_speed + p.hold_s)
         profile = _push_profile(times, p.pre_contact_s, depth, trial_speed)
         # a flat face on a flat pad keeps its contact patch: the response grows in proportion to depth
         scale = (profile / depth)[:, None, None]
         poses = MagnetPoses.from_rigid(scale * solution.magnet_poses.rigid[None])
         force = scale[:, 0] * solution.force[None]
-        readings = unit.record(poses, times, bench.rng)
+        return times, unit.record(poses, times, rng), _force_labels(force, times, bench.prony)["fz_N"]
+
+    done = run_trials(trial, [(x, y, angle, rng) for (_, x, y, angle, _, _), rng
+                              in zip(plan, bench.rng.spawn(len(plan)))])
+    for (name, x, y, angle, thickness, role), (times, readings, grip) in zip(plan, done):
         writer.add({"time_s": times, **channel_columns(readings), "angle_deg": np.full(len(times), float(angle)),
-                    "grip_force_N": _force_labels(force, times, bench.prony)["fz_N"]},
+                    "grip_force_N": grip},
                    {"board_angle_deg": float(angle), "position_x_mm": float(x), "position_y_mm": float(y),
                     "thickness_mm": float(thickness), "set": name, "role": role})
     return writer.to_dataset()

@@ -1,0 +1,91 @@
+"""A protocol's trials in a pool of processes are the trials of one process, bit for bit, and a protocol
+run again reads its dataset from the cache instead of running its trials a second time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softtip.lab import load_protocol, run_protocol
+from softtip.lab.trials import POOL_FROM_TRIALS, processes_for_trials, run_trials
+
+
+def _same(a, b) -> None:
+    assert list(a.columns) == list(b.columns)
+    for name in a.columns:
+        assert a.columns[name].dtype == b.columns[name].dtype, name
+        np.testing.assert_array_equal(a.columns[name], b.columns[name], err_msg=name)
+
+
+# a few more trials than a pool takes (POOL_FROM_TRIALS), on coarse meshes: grasp-two 9 trials of two pads,
+# grasp-positions 13 on a 2 x 2 grid
+PROTOCOLS = {"grasp-two": ("cylindrical-D", """
+    trained_angles_deg = [0.0]
+    untrained_angles_deg = [10.0]
+    calibration_trials = 5
+    untrained_trials = 1
+"""), "grasp-positions": ("rectangular", """
+    positions_mm = [-3.0, 3.0]
+    angles_deg = [0.0]
+    calibration_trials = 1
+    validation_trials = 1
+    other_thicknesses_mm = [4.0]
+""")}
+
+
+@pytest.mark.parametrize("name", PROTOCOLS)
+def test_trials_run_by_a_pool_of_processes_are_the_serial_trials(coarse_protocol, name):
+    design, extra = PROTOCOLS[name]
+    protocol = load_protocol(coarse_protocol(name, design, extra=extra))
+    with processes_for_trials(1):
+        serial, _ = run_protocol(protocol, reuse=False)
+    with processes_for_trials(2):
+        pooled, _ = run_protocol(protocol, reuse=False)
+    assert len(serial.trials) >= POOL_FROM_TRIALS  # enough trials for the pool to run them
+    _same(serial, pooled)
+    # each trial draws from a stream of its own: no two trials of one condition read the same
+    first = [serial.X()[serial.groups == trial][-1] for trial in serial.trials[:2]]
+    assert not np.array_equal(*first)
+
+
+def test_a_pool_returns_every_trial_in_the_plans_order():
+    plans = [(k, k + 0.5) for k in range(3 * POOL_FROM_TRIALS)]
+    assert run_trials(np.hypot, plans, processes=2) == [np.hypot(*plan) for plan in plans]
+    with pytest.raises(ValueError, match="processes for trials = 0: expected at least 1"):
+        with processes_for_trials(0):
+            pass
+
+
+def test_a_protocol_run_again_reads_its_trials_from_the_cache(coarse_protocol):
+    protocol = load_protocol(coarse_protocol("haptics", ""))
+    first, timings = run_protocol(protocol)
+    again, read = run_protocol(protocol)
+    assert "trials_s" in timings and set(read) == {"cache_read_s"}
+    _same(first, again)
+    assert again.metadata == first.metadata
+    # another seed is another dataset, run afresh; so is any run told not to reuse
+    other, timings = run_protocol(protocol.changed(seed=protocol.seed + 1))
+    assert "trials_s" in timings and not np.array_equal(other.X(), first.X())
+    fresh, timings = run_protocol(protocol, reuse=False)
+    assert "trials_s" in timings
+    _same(first, fresh)
+
+
+def test_a_file_the_protocol_names_edited_under_its_name_makes_other_trials(tmp_path):
+    from softtip.lab.protocols import protocol_from_dict, protocol_key
+
+    finger = tmp_path / "mine.toml"
+    table = {"protocol": "haptics", "seed": 3, "fingertip_files": ["mine.toml"],
+             "parameters": {"trials": 4, "fs_levels": 5, "user_levels": 4, "fingertips": ["human 3 (10 mm)"],
+                            "variations": [], "curve_n_neighbours": [], "curve_weighting_powers": [],
+                            "curve_fs_levels": [], "curve_user_levels": []}}
+    finger.write_text('[fingertip]\nname = "mine"\nradius_mm = 10.0\n')
+    first = protocol_from_dict(table, "test.toml", tmp_path)
+    key = protocol_key(first)
+    ten, _ = run_protocol(first)
+    finger.write_text('[fingertip]\nname = "mine"\nradius_mm = 7.0\n')  # another finger, the same file name
+    second = protocol_from_dict(table, "test.toml", tmp_path)
+    assert protocol_key(second) != key
+    seven, timings = run_protocol(second)
+    assert "trials_s" in timings  # run, not read
+    assert not np.array_equal(seven.column("motor1_rad"), ten.column("motor1_rad"))
