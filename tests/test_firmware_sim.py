@@ -14,6 +14,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,11 +26,12 @@ from softtip.sensors import MLX90393Settings
 MISSING = toolchain_missing()
 pytestmark = [pytest.mark.skipif(MISSING is not None, reason=str(MISSING)), pytest.mark.slow]
 CHIPS = 2
+FIRMWARE = Path(__file__).resolve().parents[1] / "firmware"  # the checkout's: a wheel holds no sketch
 
 
 @pytest.fixture(scope="module")
 def simulator():
-    return build([CHIPS])
+    return build([CHIPS], FIRMWARE)
 
 
 @pytest.fixture(scope="module")
@@ -187,7 +189,7 @@ def test_fields_from_a_pipe(simulator, fields_uT, tmp_path):
 def test_bench_command_reports_every_chip_count(tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     result = subprocess.run([sys.executable, "-m", "softtip", "bench", "firmware", "--chips", str(CHIPS),
-                             "--seconds", "0.2", "--json"], capture_output=True, text=True, env=env, timeout=300)
+                             "--seconds", "0.2", "--firmware", str(FIRMWARE), "--json"], capture_output=True, text=True, env=env, timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
     report = json.loads(result.stdout)
     assert [s["chips"] for s in report["streams"]] == [1, 2]

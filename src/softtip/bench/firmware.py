@@ -551,11 +551,11 @@ def fault_answers(build: SimulatorBuild, chips: int, fields_uT: np.ndarray, hold
 
 
 def bench_firmware(chips: int = 4, seconds: float = 2.0, progress: Progress = SILENT,
-                   fields_uT: np.ndarray | None = None) -> dict:
+                   fields_uT: np.ndarray | None = None, firmware_dir: Path = FIRMWARE_DIR) -> dict:
     """Frames per second, losses and latency for 1..chips chips at the firmware's highest rate, the
     answers to each host command and bad input, and the stream under bus faults (``chips`` chips)."""
     counts = list(range(1, chips + 1))
-    simulator = build(counts, progress=progress)
+    simulator = build(counts, firmware_dir, progress=progress)
     load_before = os.getloadavg()
     fields = {n: press_fields(n) if fields_uT is None else fields_uT[:, :n] for n in counts}
     streams = []

@@ -112,6 +112,8 @@ def bench_firmware(
     seconds: float = typer.Option(2.0, "--seconds", help="Simulated seconds of streaming per chip count."),
     fields: Path = typer.Option(None, "--fields", help="Text file of fields fed to the chips: one row per "
                                 "conversion, x y z (µT) of each chip (default: the emulator's press cycles)."),
+    firmware: Path = typer.Option(None, "--firmware", help="The firmware folder of a softtip source checkout (its "
+                                  "Makefile and sketch; default: the checkout softtip runs from, else ./firmware)."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """The firmware's own AVR build run in simavr with an emulated TCA9548A and MLX90393s, streaming to
@@ -124,12 +126,15 @@ def bench_firmware(
     check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
     check_number(seconds, "--seconds", above=0, maximum=LONGEST_S, unit="s")
     fields_uT = None if fields is None else read_fields(check_input(fields, "--fields"), chips)
-    if not FIRMWARE_DIR.is_dir():
-        fail("bench firmware: the firmware sources are not installed with the package: run it from a source checkout")
+    if firmware is None:
+        firmware = FIRMWARE_DIR if FIRMWARE_DIR.is_dir() else Path("firmware")
+    if not (firmware / "Makefile").is_file():
+        fail(f"--firmware = {firmware}: expected the firmware folder of a softtip source checkout (its Makefile); "
+             "a wheel does not install the firmware's sources")
     missing = toolchain_missing()
     if missing is not None:
         fail(f"bench firmware: {missing}")
-    report = run(chips, seconds, progress=progress_for(json_output), fields_uT=fields_uT)
+    report = run(chips, seconds, progress=progress_for(json_output), fields_uT=fields_uT, firmware_dir=firmware)
     if json_output:
         print(json.dumps(report, indent=2))
         return
