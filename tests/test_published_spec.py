@@ -157,10 +157,12 @@ def test_the_s2_published_outcome_is_the_specifications():
     assert tf[1].is_number and tf[1].low == float(r)
     assert tf[2].high == float(rmse_worst) and tf[2].low == float("-inf")  # "≤ 7–10 %": at most the looser 10
     ss = [table.value("state space, order 8", c) for c in table.columns]
-    # "10–20 points lower" than 0.8–0.92: from 0.8 - 0.20 to 0.92 - 0.10
-    assert (ss[0].low, ss[0].high) == pytest.approx((float(r2_low) - int(drop_high) / 100,
-                                                     float(r2_high) - int(drop_low) / 100))
-    assert ss[1] is None  # the specification gives no r for the state-space model
+    # the publication's own state-space figures (R² 0.58–0.79, |r| 0.77–0.89), which the specification
+    # words only as "10–20 points lower" than the TF's 0.8–0.92: the upper ends 13 points apart, the
+    # lower 22 (the specification's "20" rounds it)
+    assert (ss[0].low, ss[0].high) == (0.58, 0.79) and (ss[1].low, ss[1].high) == (0.77, 0.89)
+    assert int(drop_low) <= round(100 * (float(r2_high) - ss[0].high)) <= int(drop_high)
+    assert round(100 * (float(r2_low) - ss[0].low)) == int(drop_high) + 2
     assert (ss[2].low, ss[2].high) == (float(ss_rmse_low), float(ss_rmse_high))
 
 

@@ -128,6 +128,8 @@ def bench_firmware(
     fields_uT = None if fields is None else read_fields(check_input(fields, "--fields"), chips)
     if firmware is None:
         firmware = FIRMWARE_DIR if FIRMWARE_DIR.is_dir() else Path("firmware")
+    if firmware.exists() and not firmware.is_dir():
+        fail(f"--firmware = {firmware}: expected a folder (the firmware folder of a softtip source checkout)")
     if not (firmware / "Makefile").is_file():
         fail(f"--firmware = {firmware}: expected the firmware folder of a softtip source checkout (its Makefile); "
              "a wheel does not install the firmware's sources")
