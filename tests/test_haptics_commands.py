@@ -298,14 +298,19 @@ def test_a_garbled_reply_is_counted_and_skipped():
         assert parse_reply(line) is None
 
 
+def render_on_the_model(seed, wanted, sinks):
+    """The FS table's rendering (7³) on the device model with the first test fingertip, of ``wanted(device,
+    rng)``, into ``sinks``."""
+    device = load_device()
+    rng = np.random.default_rng(seed)
+    return render_stream(device, fs_renderer(device, 7, rng),
+                         SimulatedDevice(device, TEST_FINGERTIPS[0], LOOP_RATE_HZ, rng), wanted(device, rng), sinks)
+
+
 @pytest.mark.realtime
 def test_each_ticks_measured_start_is_its_stamp_and_its_lateness_is_recorded(tmp_path):
-    device = load_device()
-    rng = np.random.default_rng(5)
     path = tmp_path / "timed.mcap"
-    summary = render_stream(device, fs_renderer(device, 7, rng), SimulatedDevice(device, TEST_FINGERTIPS[0],
-                                                                                  LOOP_RATE_HZ, rng),
-                            synthetic_sensation(device, 0.5, rng), [RecorderSink(path)])
+    summary = render_on_the_model(5, lambda device, rng: synthetic_sensation(device, 0.5, rng), [RecorderSink(path)])
     recording = read_recording(path)
     messages = recording.topics["/fingertip/estimates"]
     lateness = np.array([m.data for m in messages.decoded()])[:, 12]
@@ -333,12 +338,8 @@ class CtrlC(Sink):
 
 
 def test_ctrl_c_ends_an_endless_rendering_and_keeps_the_recording(tmp_path):
-    device = load_device()
-    rng = np.random.default_rng(6)
     path = tmp_path / "endless.mcap"
-    summary = render_stream(device, fs_renderer(device, 7, rng), SimulatedDevice(device, TEST_FINGERTIPS[0],
-                                                                                  LOOP_RATE_HZ, rng),
-                            synthetic_holds(device, rng), [RecorderSink(path), CtrlC(after=300)])
+    summary = render_on_the_model(6, synthetic_holds, [RecorderSink(path), CtrlC(after=300)])
     assert summary.interrupted and summary.ticks >= 300
     recording = read_recording(path)
     assert not recording.truncated and len(recording.topics["/fingertip/estimates"].data) == summary.ticks

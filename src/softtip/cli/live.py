@@ -122,8 +122,11 @@ def live(
 
         sinks = live_sinks(dashboard=not json_output, record=record, foxglove_port=foxglove, ros2=ros2)
         if foxglove is not None:
-            errors.print(f"Foxglove live view: open ws://localhost:{foxglove} (Open connection, Foxglove WebSocket)",
-                         markup=False, highlight=False, soft_wrap=True)
+            from softtip.realtime.sinks.foxglove import FoxgloveSink
+
+            for sink in sinks:
+                if isinstance(sink, FoxgloveSink):
+                    errors.print(sink.where_to_open(), markup=False, highlight=False, soft_wrap=True)
         summary = run_live(source, model, sinks, duration, rate_hz=rate or 50, chips=chips, settings=settings,
                            baseline_frames=frames, drift_time_constant_s=drift_tau, rest_s=rezero_at_rest,
                            rest_band=rest_band, emulator_source=emulator_source, callbacks=[note_first_frame])

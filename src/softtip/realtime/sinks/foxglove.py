@@ -154,10 +154,18 @@ class FoxgloveSink(Sink):
         """The topics at least one client subscribed to."""
         return [topic for topic, channel in self._channels.items() if channel in self._subscribed]
 
+    @property
+    def address(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def where_to_open(self) -> str:
+        """The line a command prints so that its user can open the view."""
+        return f"Foxglove live view: open {self.address} in Foxglove (Open connection, Foxglove WebSocket)"
+
     def report(self) -> dict:
         """Frames queued for the clients (those the rate allowed while a client was subscribed), sent
         and dropped for a slow client, and the messages sent."""
-        return {"foxglove": {"address": f"ws://{self.host}:{self.port}", "frames_queued": self.frames_queued,
+        return {"foxglove": {"address": self.address, "frames_queued": self.frames_queued,
                              "frames_sent": self.frames_sent, "frames_dropped_slow_client": self.frames_dropped,
                              "messages_sent": self.messages_sent}}
 

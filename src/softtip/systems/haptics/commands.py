@@ -330,8 +330,7 @@ def render(
             raise
         for sink in sinks:
             if isinstance(sink, FoxgloveSink):
-                errors.print(f"Foxglove live view: open ws://{sink.host}:{sink.port} in Foxglove (Open connection, "
-                             "Foxglove WebSocket)", highlight=False)
+                errors.print(sink.where_to_open(), markup=False, highlight=False, soft_wrap=True)
         if duration is None and sensation is None:
             errors.print("rendering until Ctrl-C", highlight=False)
         source = str(table_file) if table_file else f"simulated FS table, {fs_levels}³"
