@@ -218,15 +218,16 @@ class PublishedProcedure:
 
 
 def _procedure_value(value: Any, where: str) -> ProcedureValue:
+    # numbers kept as written (a count stays an integer in reports); differs() compares them as floats
     numbers = (int, float)
     if isinstance(value, bool) or isinstance(value, numbers):
-        return value if isinstance(value, bool) else float(value)
+        return value
     if isinstance(value, list) and value and all(isinstance(v, numbers) and not isinstance(v, bool) for v in value):
-        return tuple(float(v) for v in value)
+        return tuple(value)
     if isinstance(value, list) and value and all(
             isinstance(v, list) and len(v) == 2 and all(isinstance(c, numbers) and not isinstance(c, bool) for c in v)
             for v in value):
-        return tuple(tuple(float(c) for c in v) for v in value)
+        return tuple(tuple(v) for v in value)
     raise ConfigError(f"{where} = {value!r}: expected a number, true/false, a list of numbers or of [x, y] pairs")
 
 
