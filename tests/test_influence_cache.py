@@ -91,5 +91,8 @@ def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resume
     assert solved == [3, 4, 5]  # only the blocks the interrupted run had not finished
     assert not list((cache_dir() / "influence").glob("*.npz.pieces"))  # gone once the whole entry is stored
     whole = InfluenceEngine.build(design, 3.0 * MM, 4.5 * MM, curvature_points=3, use_cache=False)
-    assert np.allclose(resumed.influence.compliance, whole.influence.compliance, rtol=1e-10, atol=0)
-    assert np.allclose(resumed.influence.magnets, whole.influence.magnets, rtol=1e-10, atol=0)
+    # to round-off against each matrix's largest entry: the interrupted blocks were solved in another process,
+    # whose BLAS may sum in another order, so entries near zero may differ relatively more than 1e-10
+    for name in ("compliance", "magnets"):
+        resumed_matrix, whole_matrix = getattr(resumed.influence, name), getattr(whole.influence, name)
+        assert np.max(np.abs(resumed_matrix - whole_matrix)) <= 1e-10 * np.max(np.abs(whole_matrix))
