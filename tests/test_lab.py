@@ -85,7 +85,7 @@ def test_a_fabricated_unit_reads_the_datasheet_noise():
     still = MagnetPoses.at_rest(4, (4000,))
     times = np.arange(4000) / 20.0
     noisy = FabricatedUnit(design, Realism(drift_K_per_sqrt_s=0.0), rng).record(still, times, rng)
-    settings = design.sensor_settings
+    settings = design.chip_settings.values
     # each reading is the field plus the noise, rounded to the LSB (the first sample, the baseline
     # subtracted from all, is a constant offset of the rest)
     expected = np.sqrt(noise_rms_uT(settings) ** 2 + lsb_uT(settings) ** 2 / 12)

@@ -21,12 +21,12 @@ from typing import Any, Protocol, runtime_checkable
 import typer
 
 from softtip._core.channels import MAGNETIC, Reading
-from softtip._core.config import NonNegativeNumber, PositiveNumber, integer, schema
+from softtip._core.config import NonNegativeNumber, PositiveNumber, choice, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
 from softtip.data import DatasetMetadata, TrialWriter
-from softtip.design.model import (OWN_BODY_KINDS, BodyKind, BodyMaterial, DesignSpec, MagnetSizes, magnets_at,
-                                  ring_of_magnets)
+from softtip.design.model import (OWN_BODY_KINDS, BodyKind, BodyMaterial, DesignSpec, MagnetSizes, PoissonRatio,
+                                  magnets_at, ring_of_magnets)
 from softtip.data.splits import CALIBRATION, VALIDATION
 from softtip.hardware import PacedSource, Sample
 from softtip.hardware.drivers import OWN as OWN_DRIVERS
@@ -41,17 +41,19 @@ from softtip.published import published_table, published_tables
 from softtip.realtime.scenario import LiveScenario
 from softtip.report.document import Figure
 from softtip.report.tables import Table
+from softtip.sensors.contract import Acquisition
+from softtip.sensors.contract import Sensor as SensorModel
 from softtip.sensors.registry import ChipSettings, SensorKind
 from softtip.studies.outcome import Headline, StudyOutcome
 from softtip.studies.reproduce import quick_cuts, reproduce_study
 
 __all__ = [
-    "MAGNETIC", "SILENT", "Analysis", "BenchKind", "BodyKind", "BodyMaterial", "BodySolid", "ChipSettings",
-    "DatasetMetadata", "DesignSpec", "Device", "Driver", "Figure", "Headline", "LiveScenario", "MagnetSizes",
-    "NonNegativeNumber", "PacedSource", "PortRequest", "PositiveNumber", "PronySeries", "Reading", "RealismTable",
-    "Sample", "Scenario", "SeededBench", "SensorKind", "Study", "StudyOutcome", "System", "Table", "TrialWriter",
-    "check_system", "integer", "magnets_at", "protocol_file_schema", "published_table", "ring_of_magnets",
-    "run_protocol", "schema",
+    "MAGNETIC", "SILENT", "Acquisition", "Analysis", "BenchKind", "BodyKind", "BodyMaterial", "BodySolid",
+    "ChipSettings", "DatasetMetadata", "DesignSpec", "Device", "Driver", "Figure", "Headline", "LiveScenario",
+    "MagnetSizes", "NonNegativeNumber", "PacedSource", "PoissonRatio", "PortRequest", "PositiveNumber",
+    "PronySeries", "Reading", "RealismTable", "Sample", "Scenario", "SeededBench", "SensorKind", "SensorModel",
+    "Study", "StudyOutcome", "System", "Table", "TrialWriter", "check_system", "choice", "integer", "magnets_at",
+    "protocol_file_schema", "published_table", "ring_of_magnets", "run_protocol", "schema",
 ]
 
 ROLES = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it

@@ -167,7 +167,7 @@ def _mm(vector) -> list[float]:
 
 def result_json(result, twin, angle: float, thickness: float, radius: float, mesh_size: float, noise: bool) -> dict:
     design = result.design
-    saturated = twin.readout.sensor.saturated(result.reading_counts)
+    saturated = twin.readout.saturated(result.reading_counts)
     load = result.load
     return {
         "softtip": __version__,
@@ -191,7 +191,7 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
              "counts": [int(c) for c in result.reading_counts[j]], "saturated": bool(saturated[j].any())}
             for j in range(len(design.sensor_positions))],
         "noise": noise,
-        "sensor_model": sensor_summary(twin.readout.sensor),
+        "sensor_model": sensor_summary(twin.design.chip_settings),
         "force_N": [round(float(f), 6) for f in result.force],
         "contact": {"nodes": int(len(result.solution.contact_nodes)), "iterations": result.solution.iterations,
                     "factorizations": result.solution.factorizations},
@@ -201,13 +201,15 @@ def result_json(result, twin, angle: float, thickness: float, radius: float, mes
     }
 
 
-def sensor_summary(sensor) -> dict:
-    from softtip.sensors import conversion_time_s, lsb_uT, max_output_rate_hz, noise_rms_uT
-
-    settings = sensor.settings
-    return {"chip": type(sensor).__name__, "settings": settings.to_dict(),
-            "lsb_uT": [float(v) for v in lsb_uT(settings)], "noise_rms_uT": [float(v) for v in noise_rms_uT(settings)],
-            "conversion_time_ms": conversion_time_s(settings) * 1e3, "max_rate_hz": max_output_rate_hz(settings)}
+def sensor_summary(chips) -> dict:
+    """The design's chips as its registered sensor states them at their settings (None where it does not)."""
+    kind, settings = chips.kind, chips.values
+    seconds = None if kind.conversion_time is None else kind.conversion_time(settings)
+    return {"chip": kind.title or kind.name, "settings": chips.to_dict(),
+            "lsb_uT": [float(v) for v in kind.step(settings)],
+            "noise_rms_uT": None if kind.noise is None else [float(v) for v in kind.noise(settings)],
+            "conversion_time_ms": None if seconds is None else seconds * 1e3,
+            "max_rate_hz": None if seconds is None else 1.0 / seconds}
 
 
 def print_result(report: dict) -> None:
@@ -232,8 +234,10 @@ def print_result(report: dict) -> None:
     console.print(f"force on the indenter (N): Fx {force[0]:.4f}  Fy {force[1]:.4f}  Fz {force[2]:.4f}")
     console.print("timings (s): " + ", ".join(f"{k} {v:.3g}" for k, v in report["timings_s"].items()))
     chip = report["sensor_model"]
-    console.print(f"{chip['chip']}: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {_fmt(chip['noise_rms_uT'], 2)} µT RMS, "
-                  f"{chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
+    noise = "not stated" if chip["noise_rms_uT"] is None else f"{_fmt(chip['noise_rms_uT'], 2)} µT RMS"
+    timing = ("" if chip["conversion_time_ms"] is None else
+              f", {chip['conversion_time_ms']:.2f} ms per reading (≤ {chip['max_rate_hz']:.0f} Hz)")
+    console.print(f"{chip['chip']}: LSB {_fmt(chip['lsb_uT'], 3)} µT, noise {noise}{timing}")
     for key, label in (("plot", "section plot"), ("deformed_mesh", "deformed mesh")):
         if key in report:
             console.print(f"{label}: {report[key]}")

@@ -8,6 +8,10 @@ and the limit it breaks.
 Its ``kind`` names a :class:`BodyKind`: softtip's own are ``cylindrical`` and ``rectangular``; a
 system registers another (``System.bodies``: name -> ``"module:attribute"`` of a :class:`BodyKind`),
 which ``simulate``, ``optimize`` and the twin then build and mesh as they do softtip's own.
+
+Its ``[sensor]`` table names its chips (``chip``: a registered :class:`~softtip.sensors.registry.SensorKind`
+reading the flux density on x, y and z with an acquisition model, softtip's own MLX90393 when not given)
+and states their settings in that sensor's own schema, beside ``positions_mm``.
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
-from softtip._core.systems import beside_own, own_or_declared, systems
+from softtip._core.channels import MAGNETIC
+from softtip._core.systems import NotRegistered, beside_own, own_or_declared, systems
 from softtip._core.config import (
     ConfigError,
     NonNegativeNumber,
@@ -42,8 +47,11 @@ from softtip._core.config import (
 )
 from softtip._core.units import MM
 from softtip.sensors.mlx90393 import SENSOR as MLX90393_SENSOR
-from softtip.sensors.mlx90393 import MLX90393Settings
-from softtip.sensors.registry import ChipSettings
+from softtip.sensors.registry import ChipSettings, SensorKind
+
+# the chips a design without ``sensor.chip`` has: softtip's own, which every shipped design uses
+OWN_CHIPS = {MLX90393_SENSOR.name: MLX90393_SENSOR}
+DEFAULT_CHIP = MLX90393_SENSOR.name
 
 
 class DesignError(ConfigError):
@@ -89,12 +97,7 @@ class Design:
     height: float  # m, the top surface is the plane z = height (before the fillet)
     magnets: tuple[Magnet, ...]
     sensor_positions: np.ndarray  # (S, 3) m, the Hall sensors' sensitive points
-    sensor_settings: MLX90393Settings  # the chips' register settings, validated when the design is read
-
-    @property
-    def chip_settings(self) -> ChipSettings:
-        """Its chips as a live stream states them: the registered MLX90393 at the design's settings."""
-        return MLX90393_SENSOR.at(self.sensor_settings)
+    chip_settings: ChipSettings  # its chips: a registered sensor at its settings, validated when the design is read
 
     @property
     def geometry_key(self) -> dict:
@@ -183,10 +186,11 @@ class MagnetSizes:
 
 @schema
 class _Sensor:
-    """Where the sensors sit; the other keys are their register settings, which the sensor model
-    checks when the twin is built."""
+    """Where the sensors sit and what chip they are; the other keys are the chip's settings, which its
+    registered sensor's schema checks when the design is built."""
 
     positions_mm: Points | None = None
+    chip: Text = DEFAULT_CHIP
     readout: dict[str, Any] = field(default_factory=dict)
 
     @model_validator(mode="before")
@@ -194,8 +198,24 @@ class _Sensor:
     def _split(cls, table: Any) -> Any:
         if not isinstance(table, dict):
             return table
-        return {**({"positions_mm": table["positions_mm"]} if "positions_mm" in table else {}),
-                "readout": {k: v for k, v in table.items() if k != "positions_mm"}}
+        named = ("positions_mm", "chip")
+        return {**{key: table[key] for key in named if key in table},
+                "readout": {k: v for k, v in table.items() if k not in named}}
+
+
+def design_chip(name: str, source: str) -> SensorKind:
+    """The chip ``sensor.chip = name`` of the design ``source``: softtip's own or a registered sensor
+    that a twin can read the field with (the flux density on x, y and z, an acquisition model)."""
+    try:
+        kind = own_or_declared("sensor", name, OWN_CHIPS, SensorKind, "sensor")
+    except NotRegistered:
+        raise refused(f"expected a registered sensor ({', '.join(beside_own('sensor', OWN_CHIPS))})", source,
+                      "sensor", "chip", value=name, error=DesignError) from None
+    if kind.reading != MAGNETIC or kind.model is None:
+        raise refused(f"the {kind.title or kind.name} has no model of its reading of {MAGNETIC.quantity} on x, y "
+                      "and z: expected a sensor with one (SensorKind.model)", source, "sensor", "chip", value=name,
+                      error=DesignError)
+    return kind
 
 
 def _check_sensors_inside(positions: list, inside, problem: str) -> None:
@@ -387,13 +407,24 @@ def magnets_at(spec: DesignSpec, raw: dict, source: str, magnets_xy: list) -> De
     top, bottom = _below_the_top(magnets, spec.body.height_mm)
     center_z = (top + bottom) / 2 * MM
     polarization = magnets.polarization
+    chip = design_chip(spec.sensor.chip, source)
     return Design(
         name=spec.name or source, kind=spec.kind, spec=raw, material=spec.body.material,
         height=spec.body.height_mm * MM,
         magnets=tuple(Magnet(center=(x, y, center_z), diameter=magnets.diameter_mm * MM,
                              height=magnets.height_mm * MM, polarization=polarization) for x, y in magnets_xy),
         sensor_positions=np.asarray(spec.sensor_positions_mm, dtype=float) * MM,
-        sensor_settings=parse(MLX90393Settings, spec.sensor.readout, source, "sensor", error=DesignError))
+        chip_settings=chip.at(_chip_settings(chip, spec.sensor.readout, source)))
+
+
+def _chip_settings(chip: SensorKind, table: dict, source: str) -> Any:
+    """The design's chip settings in its sensor's schema: located key by key when the schema is softtip's."""
+    if hasattr(chip.settings, "__pydantic_validator__"):
+        return parse(chip.settings, table, source, "sensor", error=DesignError)
+    try:
+        return chip.settings_from(table)
+    except (TypeError, ValueError) as problem:
+        raise DesignError(f"{source}: sensor: {problem}") from None
 
 
 def ring_of_magnets(spec: DesignSpec, raw: dict, source: str) -> Design:

@@ -357,4 +357,4 @@ def _check_last_axis(name: str, array: np.ndarray) -> None:
 SENSOR = SensorKind("mlx90393", MAGNETIC, 3, MLX90393Settings, widest=MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3)),
                     full_scale=full_scale_uT, step=lsb_uT,
                     decode=lambda settings, words: MLX90393(settings).decode(words), raw_unit="counts", raw_bits=16,
-                    title="MLX90393", noise=noise_rms_uT)
+                    title="MLX90393", noise=noise_rms_uT, model=MLX90393, conversion_time=conversion_time_s)

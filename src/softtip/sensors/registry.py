@@ -18,6 +18,7 @@ import numpy as np
 
 from softtip._core.channels import Reading
 from softtip._core.systems import declared, known_readings, systems
+from softtip.sensors.contract import Sensor
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*")
 
@@ -34,7 +35,11 @@ class SensorKind:
     saturated), with ``raw_unit`` what a log calls those words ("counts") and ``raw_bits`` their width
     (a word is an integer 0 .. 2^raw_bits - 1); a chip that outputs values has none of the three;
     ``title``: how messages name it (its name when not given); ``noise(settings)``: its RMS noise per
-    axis in the reading's unit, when its datasheet states it (a recording's covariance, estimation bounds).
+    axis in the reading's unit, when its datasheet states it (a recording's covariance, estimation bounds);
+    ``model(settings)``: its acquisition at the settings, a :class:`~softtip.sensors.contract.Sensor`
+    whose ``acquire(true, rng)`` turns true values in SI units (..., axes) into what the chip reports
+    (noise, output step, clip), what a design's twin reads its field with; ``conversion_time(settings)``:
+    the seconds one reading of all its axes takes, when its datasheet states it.
     """
 
     name: str
@@ -49,6 +54,8 @@ class SensorKind:
     title: str | None = None
     noise: Callable[[Any], np.ndarray] | None = None
     raw_bits: int | None = None
+    model: Callable[[Any], Sensor] | None = None
+    conversion_time: Callable[[Any], float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):

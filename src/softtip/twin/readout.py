@@ -1,5 +1,6 @@
 """The sensing stage of a fingertip: the exact field of its posed magnets at its Hall sensors,
-read through the MLX90393 model, relative to the unloaded state.
+read through the model of the design's registered chip (its noise, output step and clip), relative to
+the unloaded state.
 
 The geometry is the design's (nominal) unless a fabricated unit's own magnet centres,
 polarisations and chip positions are given (a fabricated unit of a design).
@@ -13,14 +14,14 @@ from softtip._core.units import UT_PER_T
 from softtip.design.model import Design
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.poses import MagnetPoses
-from softtip.sensors import MLX90393
 
 
 class Readout:
     def __init__(self, design: Design, *, magnet_centers: np.ndarray | None = None,
                  polarizations: np.ndarray | None = None, sensor_positions: np.ndarray | None = None,
                  ambient_field: np.ndarray | None = None):
-        self.sensor = MLX90393(design.sensor_settings)
+        self.chips = design.chip_settings
+        self.sensor = self.chips.kind.model(self.chips.values)
         magnets = design.magnets
         self.design = design
         self.rest_positions = (np.array([m.center for m in magnets]) if magnet_centers is None
@@ -44,9 +45,15 @@ class Readout:
         """Noiseless change of flux density (N, S, 3) in T from the unloaded state."""
         return self.field(poses) - self.rest_field
 
+    def saturated(self, raw: np.ndarray) -> np.ndarray:
+        """Where the chips' raw output (..., 3), words or values as the chip sends them, is at its clip."""
+        kind, settings = self.chips.kind, self.chips.values
+        return kind.decode(settings, raw)[1] if kind.decode is not None else kind.saturated(raw, settings)
+
     def readings(self, poses: MagnetPoses, noise: bool = True,
                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Sensor readings for N pose sets: (change from rest in µT (N, S, 3), raw counts (N, S, 3)).
+        """Sensor readings for N pose sets: (change from rest in µT (N, S, 3), raw output (N, S, 3):
+        the chip's words, or its values if it sends values).
 
         Without noise the change is the exact field difference (no quantisation).
         """

@@ -1,7 +1,7 @@
 """The physics twin of a fingertip: design -> mechanics -> magnetics -> sensor, composed once.
 
-:class:`Twin` puts a readout (the exact field at the Hall sensors, read through the MLX90393
-model) after an engine (the body's answer to loads, :mod:`softtip.twin.engines`). Readings are
+:class:`Twin` puts a readout (the exact field at the Hall sensors, read through the model of the
+design's chip) after an engine (the body's answer to loads, :mod:`softtip.twin.engines`). Readings are
 changes from the unloaded state, per sensor and axis; with noise on, both the baseline and the
 loaded reading go through the sensor model like a real acquisition.
 """
@@ -36,7 +36,7 @@ class TwinResult:
     feature_displacements: np.ndarray  # (M, 3) m, centre of each magnet's top face
     field_change: np.ndarray  # (S, 3) T, noiseless change of flux density at each sensor
     reading_change_uT: np.ndarray  # (S, 3) what the sensors report (noisy if noise was on)
-    reading_counts: np.ndarray  # (S, 3) raw register words of the loaded reading
+    reading_counts: np.ndarray  # (S, 3) the chip's raw output (its words) of the loaded reading
     solution: Any = None  # the engine's solver result, where it has one
     timings: dict = field(default_factory=dict)
 

@@ -11,23 +11,22 @@ decodes with the same 0.098 mT per word, reads the 8-bit values from the high by
 
 from __future__ import annotations
 
-from typing import Literal
-
 import numpy as np
 
-from softtip.plugin import MAGNETIC, SensorKind, schema
+from softtip.plugin import MAGNETIC, Acquisition, SensorKind, choice, schema
 
 STEP_12_BIT_UT = 98.0  # data sheet: "resolution 98 µT/LSB"
 LINEAR_RANGE_UT = 130_000.0  # data sheet: linear field measurement up to ±130 mT
 UPDATE_RATE_HZ = {"fast": 3300.0, "low-power": 100.0, "ultra-low-power": 10.0}
+NOISE_UT = 100.0  # data sheet: magnetic noise 0.1 mT rms, typical
 
 
 @schema(section="sensor")
 class TLV493DSettings:
     """What a host sets: the power mode (its update rate) and the readout's bits per axis."""
 
-    mode: Literal["fast", "low-power", "ultra-low-power"] = "low-power"
-    bits: Literal[12, 8] = 12
+    mode: choice("fast", "low-power", "ultra-low-power") = "low-power"
+    bits: choice(12, 8) = 12
 
     @classmethod
     def from_dict(cls, table: dict) -> TLV493DSettings:
@@ -56,16 +55,32 @@ def full_scale_uT(settings: TLV493DSettings) -> np.ndarray:
     return step_uT(settings) * _word_limits(settings)[1]
 
 
+def noise_uT(settings: TLV493DSettings) -> np.ndarray:
+    """Its rms noise per axis (µT): the data sheet's typical figure, in every mode."""
+    return np.full(3, NOISE_UT)
+
+
+def update_time_s(settings: TLV493DSettings) -> float:
+    """The seconds between two readings in its power mode."""
+    return 1.0 / settings.rate_hz
+
+
+def signed_words(field_T: np.ndarray, settings: TLV493DSettings, rng: np.random.Generator | None,
+                 noise_uT: float) -> np.ndarray:
+    """The signed words (..., 3) the chip outputs for fields ``field_T`` (..., 3, tesla): the field plus white
+    noise of ``noise_uT`` rms (none without ``rng``), rounded to the output step and clipped at the words' ends."""
+    field_uT = np.asarray(field_T, dtype=np.float64) * 1e6
+    noisy = field_uT if rng is None else field_uT + rng.normal(0.0, noise_uT, field_uT.shape)
+    return np.clip(np.rint(noisy / step_uT(settings)), *_word_limits(settings)).astype(np.int64)
+
+
 def read_uT(field_T: np.ndarray, settings: TLV493DSettings, rng: np.random.Generator,
             noise_uT: float) -> tuple[np.ndarray, np.ndarray]:
-    """What the host reads of fields ``field_T`` (..., 3, tesla): (values in µT, saturated): the field plus
-    white noise of ``noise_uT`` rms, rounded to the output step and clipped at the words' ends."""
-    step = step_uT(settings)
+    """What the host reads of fields ``field_T`` (..., 3, tesla): (values in µT, saturated), with white noise
+    of ``noise_uT`` rms."""
+    words = signed_words(field_T, settings, rng, noise_uT)
     lowest, highest = _word_limits(settings)
-    field_uT = np.asarray(field_T, dtype=np.float64) * 1e6
-    words = np.rint((field_uT + rng.normal(0.0, noise_uT, field_uT.shape)) / step)
-    saturated = (words <= lowest) | (words >= highest)
-    return np.clip(words, lowest, highest) * step, saturated
+    return words * step_uT(settings), (words <= lowest) | (words >= highest)
 
 
 def decode(settings: TLV493DSettings, words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -82,5 +97,25 @@ def decode(settings: TLV493DSettings, words: np.ndarray) -> tuple[np.ndarray, np
     return signed * step_uT(settings), (signed <= lowest) | (signed >= highest)
 
 
+class TLV493D:
+    """One chip at its settings, as a design's twin reads the field with it (the sensor contract)."""
+
+    reading = MAGNETIC
+
+    def __init__(self, settings: TLV493DSettings) -> None:
+        self.settings = settings
+
+    def acquire(self, true: np.ndarray, rng: np.random.Generator | None = None) -> Acquisition:
+        """Fields ``true`` (..., 3, tesla) as the registers hold them (``raw``: words 0 .. 2^bits - 1, two's
+        complement) and as the host decodes them; with ``rng``, the data sheet's typical noise."""
+        words = signed_words(true, self.settings, rng, NOISE_UT) % (1 << self.settings.bits)
+        values, saturated = decode(self.settings, words)
+        return Acquisition(values=values, raw=words, saturated=saturated)
+
+    def to_dict(self) -> dict:
+        return self.settings.to_dict()
+
+
 SENSOR = SensorKind("tlv493d", MAGNETIC, 3, TLV493DSettings, widest=TLV493DSettings(), full_scale=full_scale_uT,
-                    step=step_uT, decode=decode, raw_unit="counts", raw_bits=12, title="TLV493D")
+                    step=step_uT, decode=decode, raw_unit="counts", raw_bits=12, title="TLV493D", noise=noise_uT,
+                    model=TLV493D, conversion_time=update_time_s)

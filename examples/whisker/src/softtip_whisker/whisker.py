@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from softtip.magnetics import magnet_field_at_sensors
 from softtip.mechanics.rod import half_space_rotational_stiffness
-from softtip.plugin import PositiveNumber, schema
+from softtip.plugin import PoissonRatio, PositiveNumber, schema
 
 MM = 1e-3
 
@@ -43,7 +43,7 @@ class Whisker:
     magnet_height_mm: PositiveNumber = 1.0
     polarization_T: PositiveNumber = 1.3
     rubber_modulus_MPa: PositiveNumber = 1.0
-    rubber_poisson: PositiveNumber = 0.49
+    rubber_poisson: PoissonRatio = 0.49
     layer_mm: PositiveNumber = 1.5
 
     @property

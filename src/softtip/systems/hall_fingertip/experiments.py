@@ -88,7 +88,7 @@ def cycle_hysteresis(fingertip: InfluenceEngine, prony: PronySeries, depth: floa
 
 def _metadata(bench: Bench, record: dict, seed: int, description: str, designs: dict | None = None) -> DatasetMetadata:
     return DatasetMetadata(description=description, design=designs or {"name": bench.design.name, **bench.design.spec},
-                           sensor_settings=bench.design.sensor_settings.to_dict(), protocol=record, seed=seed)
+                           sensor_settings=bench.design.chip_settings.to_dict(), protocol=record, seed=seed)
 
 
 def _roles(calibration: int, validation: int) -> list[str]:
