@@ -20,7 +20,8 @@ from typer.testing import CliRunner
 from softtip.cli.main import app
 from softtip.data import Dataset, DatasetError
 from softtip.data.csvload import read_columns
-from softtip.lab.importing import ImportMapping, import_logs, load_mapping
+from softtip.lab.importing import DeprecatedMappingKey, ImportMapping, import_logs, load_mapping
+from softtip.sensors.mlx90393 import MLX90393Settings
 
 ROOT = Path(__file__).parents[1]
 EXCERPT = Path(__file__).parent / "data" / "eflesh-excerpt"
@@ -470,3 +471,29 @@ def test_the_readme_walk_through_runs_as_written_and_scores_the_held_out_recordi
     within = Dataset.read(tmp_path / "within.parquet")
     assert len(within.trials) == 20 and list(within.trial_conditions["role"]).count("validation") == 4
     assert scores[1]["validation"]["fz_N"]["rmse"] <= 0.27  # the published figure of the authors' split
+
+
+def test_a_mapping_with_the_old_top_level_chip_settings_imports_as_before_with_one_warning(tmp_path):
+    # a lab's file from before the settings became a table in the sensor's schema
+    text = (EXCERPT / "import.toml").read_text()
+    old = tmp_path / "import.toml"
+    old.write_text(text.replace("settings = { gain_sel = 1, res_xyz = [2, 2, 2] }",
+                                "gain_sel = 1\nres_xyz = [2, 2, 2]"))
+    line = (f"{old}: sensor.gain_sel, sensor.res_xyz: deprecated; write sensor.settings = "
+            "{ gain_sel = 1, res_xyz = [2, 2, 2] }")
+    with pytest.warns(DeprecatedMappingKey) as warned:
+        mapping = load_mapping(old)
+    assert [str(w.message) for w in warned] == [line]
+    made = CliRunner().invoke(app, ["import", *map(str, RECORDINGS), "-m", str(old), "-o",
+                                    str(tmp_path / "old.parquet"), "--json"])
+    assert made.exit_code == 0, made.output
+    assert made.stderr.splitlines() == [f"warning: {line}"]
+    assert json.loads(made.stdout)["sensor_settings"]["res_xyz"] == [2, 2, 2]
+    assert mapping == load_mapping(EXCERPT / "import.toml")
+    assert mapping.sensor.chip_settings == MLX90393Settings(gain_sel=1, res_xyz=(2, 2, 2))
+    both = tmp_path / "both.toml"
+    both.write_text(text.replace("settings = { gain_sel = 1, res_xyz = [2, 2, 2] }",
+                                 "settings = { gain_sel = 1 }\ngain_sel = 1"))
+    with pytest.raises(DatasetError, match=r"both.toml: sensor.gain_sel: given beside sensor.settings; expected it "
+                                           r"in sensor.settings only$"):
+        load_mapping(both)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import re
+import warnings
 from pathlib import Path
 
 import typer
@@ -90,7 +91,7 @@ def import_logs(
     from softtip._core.config import read_toml
     from softtip.data import DatasetError
     from softtip.lab.importing import import_logs as read_logs
-    from softtip.lab.importing import log_files, mapping_from
+    from softtip.lab.importing import DeprecatedMappingKey, log_files, mapping_from
 
     if mapping is not None:
         check_input(mapping, "--mapping")
@@ -130,7 +131,11 @@ def import_logs(
              else {"seconds": baseline_seconds})
     source = ("the options" if mapping is None else str(mapping) if document == as_written
               else f"{mapping} with the options")
-    loaded = mapping_from(document, source)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DeprecatedMappingKey)
+        loaded = mapping_from(document, source)
+    for warning in caught:  # an old key still read: one line, not a traceback's location
+        errors.print(printable(f"warning: {warning.message}"), markup=False, highlight=False, soft_wrap=True)
     inputs = [*([] if mapping is None else [mapping]), *sources]
     inputs += [path for source in sources if source.is_dir()
                for files in log_files(source, loaded) for path in files or []]

@@ -10,7 +10,8 @@ A mapping, written once as a small TOML file, says how a rig's logs become trial
                                   # chip: a registered sensor (default: the one that reads in unit), or
                                   # "other": any 3-axis sensor, named and in its own unit
     settings = { gain_sel = 1, res_xyz = [2, 2, 2] }  # the chips' settings, in the registered sensor's
-                                  # schema (keys left out take its defaults): range checks follow them
+                                  # schema (keys left out take its defaults): range checks follow them;
+                                  # the old gain_sel, res_xyz, hallconf keys here read with a warning
     chips = [[2, 3, 4], [5, 6, 7]]  # each chip's columns, one per axis of its reading (x, y, z)
 
     [labels]                      # per-sample targets: in the sensor log, or a log of their own
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 import glob
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -311,7 +313,43 @@ def load_mapping(path: str | os.PathLike) -> ImportMapping:
 
 def mapping_from(document: Any, source: str) -> ImportMapping:
     """A mapping from its tables (a parsed file, edited by options), validated; ``source`` names it in errors."""
-    return parse(ImportMapping, document, source, error=DatasetError)
+    return parse(ImportMapping, _settings_moved(document, source), source, error=DatasetError)
+
+
+class DeprecatedMappingKey(FutureWarning):
+    """A key of an import mapping that softtip still reads, written another way now."""
+
+
+# the Hall chip's settings as a mapping's [sensor] table stated them before they became a table in the
+# registered sensor's schema (sensor.settings): a lab's existing files keep working, with a warning
+_OLD_SETTINGS = ("gain_sel", "res_xyz", "hallconf")
+
+
+def _settings_moved(document: Any, source: str) -> Any:
+    """``document`` with the old top-level chip settings of its [sensor] table moved into its settings table,
+    and one warning naming them; settings given both ways are refused."""
+    sensor = document.get("sensor") if isinstance(document, dict) else None
+    old = [key for key in _OLD_SETTINGS if isinstance(sensor, dict) and key in sensor]
+    if not old:
+        return document
+    settings = sensor.get("settings", {})
+    if not isinstance(settings, dict) or set(old) & set(settings):
+        twice = old[0] if not isinstance(settings, dict) else sorted(set(old) & set(settings))[0]
+        raise DatasetError(f"{source}: sensor.{twice}: given beside sensor.settings; expected it in sensor.settings "
+                           "only")
+    moved = {key: sensor[key] for key in old}
+    written = ", ".join(f"{key} = {_toml(value)}" for key, value in moved.items())
+    warnings.warn(f"{source}: sensor.{', sensor.'.join(old)}: deprecated; write sensor.settings = {{ {written} }}",
+                  DeprecatedMappingKey, stacklevel=3)
+    rest = {key: value for key, value in sensor.items() if key not in old}
+    return {**document, "sensor": {**rest, "settings": {**settings, **moved}}}
+
+
+def _toml(value: Any) -> str:
+    """A setting's value as TOML writes it (integers and lists of them, booleans)."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    return f"[{', '.join(map(_toml, value))}]" if isinstance(value, list) else repr(value)
 
 
 def stored_unit(name: str, unit: str) -> str:
