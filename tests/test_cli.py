@@ -153,8 +153,12 @@ def test_a_bad_design_file_gives_one_line(tmp_path):
 
 def test_designs_lists_the_shipped_designs():
     rows = json.loads(run("designs", "--json").stdout)
-    assert [r["name"] for r in rows] == ["cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D",
-                                         "rectangular"]
+    names = [r["name"] for r in rows]  # softtip's own among those of any system installed with it, by name
+    assert names == sorted(names) and {"cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D",
+                                       "rectangular"} <= set(names)
+    assert rows[names.index("cylindrical-A")] == {"name": "cylindrical-A", "kind": "cylindrical", "magnets": 4,
+                                                  "sensors": 1, "description": load_design("cylindrical-A").spec[
+                                                      "description"]}
 
 
 @pytest.mark.parametrize("command", [[], ["simulate"], ["designs"], ["demo"], ["demo", "insertion"], ["bench"],

@@ -36,7 +36,8 @@ def with_value(base: dict, dotted: str, value) -> dict:
 
 
 def test_the_published_designs_are_shipped():
-    assert set(shipped_designs()) == {"cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D", "rectangular"}
+    # softtip's own, beside those of any system installed with it
+    assert {"cylindrical-A", "cylindrical-B", "cylindrical-C", "cylindrical-D", "rectangular"} <= set(shipped_designs())
     published = {"A": (9.0, 5.5), "B": (10.0, 6.5), "C": (8.5, 4.5), "D": (10.0, 4.5)}
     for letter, (p1, p2) in published.items():
         design = load_design(f"cylindrical-{letter}")
