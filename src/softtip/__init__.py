@@ -2,7 +2,7 @@
 
 The flow of the package follows the sensing chain: ``design`` (geometry and
 materials) -> ``mechanics`` (mesh, finite elements, contact) -> ``magnetics``
-(exact field of the displaced magnets) -> ``sensors`` (MLX90393 model).
+(exact field of the displaced magnets) -> ``sensors`` (the chips' models, registered by name).
 ``twin`` composes them into the physics twin of a fingertip.
 """
 

@@ -2,7 +2,7 @@
 
 :class:`Twin` is an engine (how the body answers loads: full finite elements, exact contact on
 influence matrices, or the reduced-order networks) followed by a :class:`Readout` (the magnets'
-exact field at the Hall sensors, read through the MLX90393 model).
+exact field at the Hall sensors, read through the model of the design's registered chip).
 """
 
 from softtip.twin.engines import DEFAULT_MESH_SIZE, MODELS, Engine, FiniteElementEngine, Response
