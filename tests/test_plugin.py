@@ -81,3 +81,21 @@ def test_the_command_checks_a_system_and_refuses_a_name_no_system_has(tmp_path, 
     assert unknown.returncode == 2 and unknown.stderr.startswith(start) and len(unknown.stderr.splitlines()) == 1
     listed = unknown.stderr.strip().removeprefix(start).split(", ")  # softtip's own, then every installed one
     assert listed[:4] == ["hall-fingertip", "wearable", "haptics", "cilia"] and "springtip" in listed[4:]
+
+
+def test_the_contract_is_light_to_import_for_a_record_and_whole_when_used():
+    # a system's __init__ imports its record from softtip.plugin: that must not load the toolkit's stages
+    # (listing the systems stays light); each other name of the contract loads on first use
+    probe = ("import sys\n"
+             "from softtip.plugin import MAGNETIC, Reading, Study, System\n"
+             "light = sorted(m for m in ('numpy', 'pydantic', 'softtip.lab', 'softtip.design') if m in sys.modules)\n"
+             "import softtip.plugin as plugin\n"
+             "unresolved = [name for name in plugin.__all__ if getattr(plugin, name, None) is None]\n"
+             "print(light, unresolved, plugin.SensorModel.__module__, plugin.BenchKind.__module__)\n")
+    ran = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stdout.split() == ["[]", "[]", "softtip.sensors.contract", "softtip.lab.protocols"]
+    import softtip.plugin as plugin
+
+    with pytest.raises(AttributeError, match="module 'softtip.plugin' has no attribute 'Sensorkind'"):
+        plugin.Sensorkind

@@ -29,8 +29,7 @@ STIFFNESS_N_PER_MM = 2.5  # the spring's; the "publication" printed 2.4
 
 PACKAGE = {
     "__init__.py": '''
-        from softtip._core.channels import Reading
-        from softtip._core.systems import Study, System
+        from softtip.plugin import Reading, Study, System
 
         DISPLACEMENT = Reading("displacement", "mm", "x", "mm", prefix="d", infix="x", units={"mm": 1.0, "m": 1e3},
                                drift_threshold=0.01, baseline_step=1e-4, decimals=3, topic="displacement",

@@ -7,45 +7,59 @@ named here, by what the toolkit does with it: the interfaces below are the rules
 and :func:`check_system` (``softtip check-system NAME``) finds every one a system breaks, one line each,
 naming the file or the record's key and what was expected.
 
-Importing this module loads the toolkit's stages; a system's ``__init__`` imports only
-:class:`System`, :class:`Study` and :class:`Reading` (from here or the registry), so that listing the
-systems stays light.
+Importing this module is light: the record (:class:`System`, :class:`Study`) and the readings
+(:class:`Reading`, :data:`MAGNETIC`) come with it, so that a system's ``__init__`` imports them from here
+and listing the systems stays light; every other name loads the toolkit's stage it comes from when it
+is first used.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
-
-import typer
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from softtip._core.channels import MAGNETIC, Reading
-from softtip._core.config import NonNegativeNumber, PositiveNumber, choice, integer, schema
-from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import DEFAULT_USES, Study, System, failure_line, known_readings, load, systems
-from softtip.data import DatasetMetadata, TrialWriter
-from softtip.design.model import (OWN_BODY_KINDS, BodyKind, BodyMaterial, DesignSpec, MagnetSizes, PoissonRatio,
-                                  magnets_at, ring_of_magnets)
-from softtip.data.splits import CALIBRATION, VALIDATION
-from softtip.hardware import PacedSource, Sample
-from softtip.hardware.drivers import OWN as OWN_DRIVERS
-from softtip.hardware.drivers import Driver, PortRequest
-from softtip.lab import BenchKind, run_protocol
-from softtip.lab.bench import SeededBench
-from softtip.lab.protocols import Protocol as LabProtocol
-from softtip.lab.protocols import load_protocol, protocol_file_schema
-from softtip.mechanics.mesh import BodySolid
-from softtip.mechanics.viscoelastic import PronySeries
-from softtip.published import published_table, published_tables
-from softtip.realtime.scenario import LiveScenario
-from softtip.report.document import Figure
-from softtip.report.tables import Table
-from softtip.sensors.contract import Acquisition
-from softtip.sensors.contract import Sensor as SensorModel
-from softtip.sensors.registry import ChipSettings, SensorKind
-from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.studies.reproduce import quick_cuts, reproduce_study
+
+if TYPE_CHECKING:
+    from softtip._core.progress import Progress
+    from softtip.lab.protocols import Protocol as LabProtocol
+    from softtip.realtime.scenario import LiveScenario
+    from softtip.studies.outcome import StudyOutcome
+
+# every other name of the contract, by where it lives: imported on first use (PEP 562)
+_ELSEWHERE = {
+    "softtip._core.config": ("NonNegativeNumber", "PositiveNumber", "choice", "integer", "schema"),
+    "softtip._core.progress": ("SILENT",),
+    "softtip.data": ("DatasetMetadata", "TrialWriter"),
+    "softtip.design.model": ("BodyKind", "BodyMaterial", "DesignSpec", "MagnetSizes", "PoissonRatio", "magnets_at",
+                             "ring_of_magnets"),
+    "softtip.hardware": ("PacedSource", "Sample"),
+    "softtip.hardware.drivers": ("Driver", "PortRequest"),
+    "softtip.lab": ("BenchKind", "run_protocol"),
+    "softtip.lab.bench": ("SeededBench",),
+    "softtip.lab.protocols": ("protocol_file_schema",),
+    "softtip.mechanics.mesh": ("BodySolid",),
+    "softtip.mechanics.viscoelastic": ("PronySeries",),
+    "softtip.published": ("published_table",),
+    "softtip.realtime.scenario": ("LiveScenario",),
+    "softtip.report.document": ("Figure",),
+    "softtip.report.tables": ("Table",),
+    "softtip.sensors.contract": ("Acquisition",),
+    "softtip.sensors.registry": ("ChipSettings", "SensorKind"),
+    "softtip.studies.outcome": ("Headline", "StudyOutcome"),
+}
+_RENAMED = {"SensorModel": "softtip.sensors.contract:Sensor"}  # the sensor contract, named apart from SensorKind
+_REFERENCES = {**{name: f"{module}:{name}" for module, names in _ELSEWHERE.items() for name in names}, **_RENAMED}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _REFERENCES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = globals()[name] = load(_REFERENCES[name])
+    return value
+
 
 __all__ = [
     "MAGNETIC", "SILENT", "Acquisition", "Analysis", "BenchKind", "BodyKind", "BodyMaterial", "BodySolid",
@@ -56,7 +70,6 @@ __all__ = [
     "protocol_file_schema", "published_table", "ring_of_magnets", "run_protocol", "schema",
 ]
 
-ROLES = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it
 
 
 @runtime_checkable
@@ -89,6 +102,13 @@ class Scenario(Protocol):
 
 def _references(system: System) -> list[tuple[str, str, type | None]]:
     """Every ``"module:attribute"`` of the record: (its key in the record, the reference, what it must be)."""
+    import typer
+
+    from softtip.design.model import BodyKind
+    from softtip.hardware.drivers import Driver
+    from softtip.lab import BenchKind
+    from softtip.sensors.registry import SensorKind
+
     named = [(f"benches.{k}", v, BenchKind) for k, v in system.benches.items()]
     named += [(f"scenarios.{k}", v, None) for k, v in system.scenarios.items()]
     named += [(f"demos.{k}", v, None) for k, v in system.demos.items()]
@@ -101,11 +121,21 @@ def _references(system: System) -> list[tuple[str, str, type | None]]:
     return named + [("defaults.demo", system.defaults["demo"], None)] if "demo" in system.defaults else named
 
 
-def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -> list[str]:
+def check_system(name: str, progress: Progress | None = None, studies: bool = True) -> list[str]:
     """Every rule the registered system ``name`` breaks, one line each (none: it holds). Resolves every
     reference of its record, loads and runs each shipped protocol at its quick size and checks its
     dataset's roles, runs each live scenario and, with ``studies``, each
-    study's quick reproduction (its report)."""
+    study's quick reproduction (its report); ``progress`` shows that work (none: silent)."""
+    from softtip._core.progress import SILENT
+    from softtip.design.model import OWN_BODY_KINDS, BodyKind
+    from softtip.hardware.drivers import OWN as OWN_DRIVERS
+    from softtip.hardware.drivers import Driver
+    from softtip.published import published_tables
+    from softtip.sensors.registry import SensorKind
+    from softtip.studies.outcome import StudyOutcome
+    from softtip.studies.reproduce import reproduce_study
+
+    progress = SILENT if progress is None else progress
     system = systems().get(name)
     if system is None:
         raise ValueError(f"system {name!r}: expected one of {', '.join(systems())}")
@@ -154,6 +184,12 @@ def check_system(name: str, progress: Progress = SILENT, studies: bool = True) -
 
 
 def _check_protocol(system: System, record: str, name: str, bench: str, progress: Progress) -> list[str]:
+    from softtip.data.splits import CALIBRATION, VALIDATION
+    from softtip.lab import run_protocol
+    from softtip.lab.protocols import load_protocol
+    from softtip.studies.reproduce import quick_cuts
+
+    roles = (CALIBRATION, VALIDATION)  # what a trial's "role" condition may be: calibrate splits by it
     if bench not in system.benches:
         return [f"{record}: protocols.{name} = {bench!r}: expected one of its benches ({', '.join(system.benches)})"]
     path = Path(str(system.protocol_file(name)))
@@ -184,13 +220,16 @@ def _check_protocol(system: System, record: str, name: str, bench: str, progress
         dataset, _ = run_protocol(protocol.changed(**quick_cuts(protocol)), progress)
     except Exception as error:  # the runner is the plug-in's code: its failure is a finding
         return [f"{path}: its quick run failed ({failure_line(error)})"]
-    strangers = sorted(set(map(str, dataset.column("role"))) - set(ROLES)) if "role" in dataset.conditions else []
+    strangers = sorted(set(map(str, dataset.column("role"))) - set(roles)) if "role" in dataset.conditions else []
     if strangers:
-        broken.append(f"{path}: its dataset's role {strangers[0]!r}: expected {' or '.join(ROLES)}")
+        broken.append(f"{path}: its dataset's role {strangers[0]!r}: expected {' or '.join(roles)}")
     return broken
 
 
 def _check_scenario(record: str, name: str, scenario: Scenario, progress: Progress) -> list[str]:
+    from softtip.hardware import PacedSource
+    from softtip.realtime.scenario import LiveScenario
+
     asked = []
     try:
         stream = scenario(progress, lambda chips, rate_hz: asked.append((chips, rate_hz)))

@@ -4,7 +4,7 @@ own, installed as a package of its own (docs: the package's README).
 Importing this package loads only its registration record (:data:`SYSTEM`).
 """
 
-from softtip._core.systems import Study, System
+from softtip.plugin import Study, System
 
 SYSTEM = System(
     name="whisker",
