@@ -79,6 +79,20 @@ def test_the_host_reads_the_field_rounded_to_the_step_and_clipped_at_the_words()
     np.testing.assert_array_equal(saturated, [[False] * 3, [True, True, False]])
 
 
+def test_the_chips_model_gives_the_registers_words_and_the_data_sheets_noise():
+    chip = SENSOR.model(TLV493DSettings(mode="fast"))
+    field_T = np.array([[0.049e-3, -0.05e-3, 0.2e-3], [0.3, -0.3, 0.1302]])
+    read = chip.acquire(field_T)  # no noise without a random stream
+    # 0.5, -0.51 and 2.04 steps round to 0, -1 and 2; the words hold -1 as 4096 - 1 and clip at 2047 and -2048
+    np.testing.assert_array_equal(read.raw, [[0, 4095, 2], [2047, 2048, 1329]])
+    np.testing.assert_array_equal(read.values, [[0.0, -98.0, 196.0], [2047 * 98.0, -2048 * 98.0, 1329 * 98.0]])
+    np.testing.assert_array_equal(read.saturated, [[False] * 3, [True, True, False]])
+    steady = chip.acquire(np.full((40000, 3), 5e-3), np.random.default_rng(1)).values
+    # 0.1 mT rms noise, rounded to 98 µT steps: a spread of sqrt(100^2 + 98^2 / 12) = 104 µT, known to 0.35 %
+    np.testing.assert_allclose(steady.std(axis=0), np.hypot(100.0, 98.0 / np.sqrt(12)), rtol=5 / np.sqrt(80000))
+    assert SENSOR.conversion_time(TLV493DSettings(mode="fast")) == pytest.approx(1 / 3300.0)
+
+
 def test_the_settings_refuse_what_the_chip_has_not_in_one_line():
     with pytest.raises(ValueError, match=r"^sensor\.mode = 'turbo': .*fast.*low-power.*ultra-low-power"):
         TLV493DSettings.from_dict({"mode": "turbo"})
