@@ -58,8 +58,16 @@ def test_the_spring_holds_every_rule(install_spring):
      ["springtip (System 'springtip'): drivers.softtip = 'springtip.gauge:DRIVER': the Driver is named "
       "'spring-gauge', expected 'softtip'",
       "springtip (System 'springtip'): drivers.softtip: softtip's own is named so: expected another name"]),
+    ({"gauge.py": [('title="spring gauge")', 'title="spring gauge", model=lambda settings: settings)')]},
+     ["springtip (System 'springtip'): sensors.spring-gauge: its model failed to read zeros at its widest settings "
+      "(AttributeError: 'GaugeSettings' object has no attribute 'acquire')"]),
+    ({"gauge.py": [('title="spring gauge")', 'title="spring gauge", model=lambda settings: type("Model", (), '
+                                             '{"acquire": lambda self, true, rng=None: true})())')]},
+     ["springtip (System 'springtip'): sensors.spring-gauge: its model read ndarray: expected an Acquisition of 1 "
+      "values"]),
 ], ids=["a typo in a reference", "a realism key without its source", "a role of its own, a scenario unchecked",
-        "an analysis that fails", "a driver named as softtip's own"])
+        "an analysis that fails", "a driver named as softtip's own", "a sensor model that does not read",
+        "a sensor model that returns its input"])
 def test_each_broken_rule_is_one_line_naming_where(install_spring, tmp_path, edits, expected):
     install_spring(edits)
     protocol = tmp_path / "springtip" / "protocols" / "spring-push.toml"

@@ -154,6 +154,8 @@ def check_system(name: str, progress: Progress | None = None, studies: bool = Tr
                           f"{key.partition('.')[2]!r}")
         elif kind is None and not callable(target):
             broken.append(f"{record}: {key} = {reference!r}: expected a function, got {type(target).__name__}")
+        elif kind is SensorKind:
+            broken += _check_sensor_model(record, key, target)
     for what, names, own in (("drivers", system.drivers, OWN_DRIVERS), ("bodies", system.bodies, OWN_BODY_KINDS)):
         for key in sorted(set(names) & set(own)):
             broken.append(f"{record}: {what}.{key}: softtip's own is named so: expected another name")
@@ -224,6 +226,25 @@ def _check_protocol(system: System, record: str, name: str, bench: str, progress
     if strangers:
         broken.append(f"{path}: its dataset's role {strangers[0]!r}: expected {' or '.join(roles)}")
     return broken
+
+
+def _check_sensor_model(record: str, key: str, kind: Any) -> list[str]:
+    """A sensor's acquisition model, if it has one: at its widest settings, zero true values give an
+    :class:`Acquisition` of one value per axis."""
+    import numpy as np
+
+    from softtip.sensors.contract import Acquisition
+
+    if kind.model is None:
+        return []
+    try:
+        read = kind.model(kind.widest).acquire(np.zeros(kind.axes))
+    except Exception as error:  # the model is the plug-in's code: its failure is a finding
+        return [f"{record}: {key}: its model failed to read zeros at its widest settings ({failure_line(error)})"]
+    if not isinstance(read, Acquisition) or np.shape(read.values) != (kind.axes,):
+        return [f"{record}: {key}: its model read {type(read).__name__}: expected an Acquisition of {kind.axes} "
+                "values"]
+    return []
 
 
 def _check_scenario(record: str, name: str, scenario: Scenario, progress: Progress) -> list[str]:
