@@ -146,3 +146,31 @@ def test_a_chip_without_a_model_of_the_field_is_refused_as_a_designs(tmp_path, m
     with pytest.raises(DesignError, match=r"bare.toml: sensor.chip = 'bare-hall': the bare Hall chip has no model of "
                                           r"its reading of flux density on x, y and z"):
         load_design(path)
+
+
+@dataclasses.dataclass(frozen=True)
+class PlainSettings:
+    """A chip's settings as a plain dataclass, not a softtip schema: its own from_dict refuses in one line."""
+
+    gain: int = 1
+
+    @classmethod
+    def from_dict(cls, table):
+        if set(table) - {"gain"}:
+            raise ValueError(f"expected gain, got {sorted(table)}")
+        return cls(**table)
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+
+def test_a_chip_whose_settings_are_not_a_softtip_schema_reads_them_with_its_own_refusals(tmp_path, monkeypatch):
+    plain = dataclasses.replace(SENSOR, name="plain-hall", settings=PlainSettings, widest=PlainSettings())
+    monkeypatch.setitem(model.OWN_CHIPS, plain.name, plain)
+    text = shipped_design_path("cylindrical-A").read_text()
+    sensor = text[:text.index("[sensor]")] + '[sensor]\nchip = "plain-hall"\n'
+    (tmp_path / "plain.toml").write_text(sensor + "gain = 3\n")
+    assert load_design(tmp_path / "plain.toml").chip_settings.values == PlainSettings(gain=3)
+    (tmp_path / "mistaken.toml").write_text(sensor + "gian = 3\n")
+    with pytest.raises(DesignError, match=r"^\S*mistaken.toml: sensor: expected gain, got \['gian'\]$"):
+        load_design(tmp_path / "mistaken.toml")
