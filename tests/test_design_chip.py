@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import pickle
 import sys
 from pathlib import Path
 
@@ -117,6 +118,9 @@ def test_a_design_naming_no_chip_reads_through_the_mlx90393_as_before():
     baseline = chip.acquire(np.broadcast_to(readout.rest_field, loaded.shape), draws).values
     np.testing.assert_array_equal(change, read.values - baseline)
     np.testing.assert_array_equal(raw, read.raw)
+    # a design goes to another process whole, its chips with it (pickle is the pools' transport, not a file's)
+    sent = pickle.loads(pickle.dumps(design))
+    assert sent.chip_settings == design.chip_settings and sent.spec == design.spec
 
 
 @pytest.mark.parametrize("settings, message", [

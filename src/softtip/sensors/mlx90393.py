@@ -353,8 +353,13 @@ def _check_last_axis(name: str, array: np.ndarray) -> None:
         raise ValueError(f"{name} has shape {array.shape}: expected (..., 3) for x, y, z")
 
 
-# as the toolkit's checks know it (softtip.sensors.registry), declared by the systems that use it
+def decode_words(settings: MLX90393Settings, words: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Register words (..., 3) at ``settings`` as (field in uT, saturated), as a host decodes them."""
+    return MLX90393(settings).decode(words)
+
+
+# as the toolkit's checks know it (softtip.sensors.registry), declared by the systems that use it; its
+# functions are the module's (a design that holds it can be sent to another process)
 SENSOR = SensorKind("mlx90393", MAGNETIC, 3, MLX90393Settings, widest=MLX90393Settings(gain_sel=0, res_xyz=(3, 3, 3)),
-                    full_scale=full_scale_uT, step=lsb_uT,
-                    decode=lambda settings, words: MLX90393(settings).decode(words), raw_unit="counts", raw_bits=16,
+                    full_scale=full_scale_uT, step=lsb_uT, decode=decode_words, raw_unit="counts", raw_bits=16,
                     title="MLX90393", noise=noise_rms_uT, model=MLX90393, conversion_time=conversion_time_s)
