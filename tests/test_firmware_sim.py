@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softtip.bench.firmware import SimulatedBoard, build, command_answers, simulated_board, toolchain_missing
+from softtip.bench.firmware import (SimulatedBoard, build, command_answers, read_fields, simulated_board,
+                                    toolchain_missing, write_fields)
 from softtip.hardware.driver import FingertipDriver
 from softtip.sensors import MLX90393Settings
 
@@ -186,13 +187,20 @@ def test_fields_from_a_pipe(simulator, fields_uT, tmp_path):
                                    rtol=0, atol=1e-9)
 
 
-def test_bench_command_reports_every_chip_count(tmp_path):
+def softtip(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    result = subprocess.run([sys.executable, "-m", "softtip", "bench", "firmware", "--chips", str(CHIPS),
-                             "--seconds", "0.2", "--firmware", str(FIRMWARE), "--json"], capture_output=True, text=True, env=env, timeout=300)
+    return subprocess.run([sys.executable, "-m", "softtip", *args], capture_output=True, text=True, env=env,
+                          timeout=1800)
+
+
+def test_bench_command_reports_every_chip_count(fields_uT, tmp_path):
+    write_fields(tmp_path / "fields.txt", fields_uT)
+    result = softtip("bench", "firmware", "--chips", str(CHIPS), "--seconds", "0.2", "--firmware", str(FIRMWARE),
+                     "--fields", str(tmp_path / "fields.txt"), "--json")
     assert result.returncode == 0, result.stderr[-2000:]
     report = json.loads(result.stdout)
     assert [s["chips"] for s in report["streams"]] == [1, 2]
+    assert report["fields"] == {"source": f"the field file {tmp_path / 'fields.txt'}", "rows": 500, "chips": CHIPS}
     # No frame is shorter than the firmware's wait for chip 0's conversion (Table 8 at the default
     # settings, 2169 us, plus its 10 % margin: 2385.9 us) and the bus time at 400 kHz (PROTOCOL.md's
     # timeline): select + SM of chip 0 (147.5 us; 97.5 us without the select of a lone chip, whose
@@ -203,3 +211,39 @@ def test_bench_command_reports_every_chip_count(tmp_path):
         assert s["frames_per_s_bus_and_conversion_bound"] == pytest.approx(1e6 / shortest_us)
         assert 2 / 3 * 1e6 / shortest_us < s["frames_per_s"] < 1e6 / shortest_us
     assert all(a["ok"] for a in report["commands"])
+
+
+def test_the_twins_push_fields_are_fed_by_default_and_read_back_as_the_datasheet_quantises_them(simulator, tmp_path):
+    """The default fields are the fingertip twin's push scenario, as the live path caches it, sampled at
+    its own 200 Hz; streamed, each frame carries them quantised at 0.150 µT (X, Y) and 0.242 µT (Z) a count."""
+    from softtip.lab import load_protocol
+    from softtip.systems.hall_fingertip.live import live_pushes
+
+    exported = tmp_path / "twin.txt"
+    result = softtip("bench", "firmware", "--chips", str(CHIPS), "--export-fields", str(exported), "--json")
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads(result.stdout)
+    assert report["source"].startswith("the twin's push scenario (") and "chip k reads its chip k mod 1" in report["source"]
+    twin = live_pushes(load_protocol("force3"))  # the cache entry the command computed (design D: one chip)
+    fields = read_fields(exported, CHIPS)
+    # its three motions at 200 Hz (17 s), then its loop again: the scenario's time runs modulo its last
+    # sample's, so that sample reads as the first and the rows compared stop before it
+    loop = len(twin.times_s) - 1
+    assert len(fields) == 4000 and loop < 4000 and np.allclose(np.diff(twin.times_s), 1 / 200)
+    assert np.allclose(fields[:loop], np.repeat(twin.field_uT[:loop], CHIPS, axis=1), rtol=0, atol=1e-6)  # 6 decimals
+    moving = int(np.argmax(np.any(fields[:, 0] != fields[0, 0], axis=1)))  # the first row after the rest
+    with simulated_board(simulator, fields[moving - 20:]) as board:
+        with FingertipDriver(board.port, rate_hz=200, reply_timeout_s=3.0, boot_timeout_s=12.0) as driver:
+            driver.start()
+            board.wait_simulated(0.3)
+            samples = driver.drain()
+    assert len(samples) >= 45
+    for sample in samples:
+        np.testing.assert_allclose(sample.reading, by_hand(fields[moving - 20 + sample.seq], 0.150, 0.242),
+                                   rtol=0, atol=1e-9)
+    # by hand for the first frame: each word the field over the step, rounded, times the step (measured: the
+    # rest field -30.736492, 10.842272, 3726.321472 µT, words -205, 72, 15398, read -30.750, 10.800, 3726.316 µT)
+    first = fields[moving - 20 + samples[0].seq, 0]
+    words = [round(first[0] / 0.150), round(first[1] / 0.150), round(first[2] / 0.242)]
+    assert np.allclose(samples[0].reading[0], [words[0] * 0.150, words[1] * 0.150, words[2] * 0.242], atol=1e-9)
+    assert 1000 < abs(words[2]) < 32767  # the chip's axis field: thousands of counts, within the 16-bit word

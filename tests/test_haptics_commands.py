@@ -385,11 +385,6 @@ def test_foxglove_port_prints_the_address_to_open():
     assert f"ws://127.0.0.1:{port}" in result.stderr
 
 
-def test_a_method_that_collects_on_the_user_is_refused_with_a_real_device():
-    result = run("haptics", "render", "--port", "loop://", "--method", "A")
-    assert result.exit_code == 2 and "--method = 'A' with --port" in result.stderr
-
-
 def test_bench_loop_times_each_case_beside_its_baseline_with_the_load():
     result = runner.invoke(app, ["bench", "haptics-loop", "--seconds", "0.2", "--no-record", "--json"])
     assert result.exit_code == 0, result.output

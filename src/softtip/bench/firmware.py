@@ -10,6 +10,13 @@ is then the sum of a simulated part (conversion end to the frame's last bit, as 
 host part (bytes written to decoded), which holds whether or not the simulation keeps up with the
 wall clock (the simulation is paced never to run ahead of it; on a loaded machine it runs slower).
 Rates are in simulated time: what the firmware does on a real board.
+
+The chips are fed the twin's fields by default: the default live scenario's (``softtip live --emulate``'s,
+the fingertip twin's pushes and shears), computed once and cached as the live path caches them,
+sampled at :data:`FIELD_RATE_HZ` from its start, one row per conversion; a build with more chips than
+the scenario streams feeds chip k the scenario's chip k mod its count. ``--fields FILE`` feeds a
+file's rows instead, and ``--export-fields FILE`` writes the rows the bench would feed, in the
+simulator's format (:func:`write_fields`).
 """
 
 from __future__ import annotations
@@ -31,12 +38,14 @@ from pathlib import Path
 import numpy as np
 
 from softtip._core.cache import cache_dir
+from softtip._core.files import atomic_write
 from softtip._core.progress import SILENT, Progress
+from softtip._core.systems import default, load, owner
 from softtip.hardware.driver import FingertipDriver, Sample, open_serial
-from softtip.hardware.emulator_process import PressCycle
 from softtip.hardware.protocol import (CHIP_FAULTS, Ack, ChipStatus, Command, ErrorCode, ErrorReply, FrameDecoder,
                                        FrameType, Identity, configure_command, encode_frame, identify_command,
                                        set_rate_command, start_command, stop_command)
+from softtip.realtime.scenario import LiveScenario
 from softtip.sensors.mlx90393 import MLX90393, MLX90393Settings, conversion_time_s
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[3] / "firmware"
@@ -48,6 +57,7 @@ SOURCES = ("Makefile", "softtip_fingertip/softtip_fingertip.ino", "softtip_finge
 MAX_CHIPS = 8  # the sketch's SOFTTIP_CHIP_COUNT: 1 to 8
 MAX_RATE_HZ = 1000  # the firmware's highest rate: frames then follow back to back
 FIELD_ROWS = 4000  # rows of the field file, used in turn by the conversions (cycling)
+FIELD_RATE_HZ = 200.0  # a scenario's time between rows: the push scenario's own sampling, so rows are its samples
 REPLY_WAIT_S = 3.0  # wall time for a reply: the simulation may run several times slower than real time
 SIMULATED_WAIT_S = 0.05  # simulated time a dropped command is given to prove it has no reply
 # PROTOCOL.md's frame-period budget: bit periods at 400 kHz of a mux select, an SM and an XYZ RM
@@ -108,10 +118,47 @@ def build(chip_counts: list[int], firmware_dir: Path = FIRMWARE_DIR, progress: P
     return SimulatorBuild(harness, elves)
 
 
-def press_fields(chips: int, rows: int = FIELD_ROWS, rate_hz: float = 200.0, seed: int = 0) -> np.ndarray:
-    """(rows, chips, 3) µT: the emulator's press cycles sampled at rate_hz, one row per conversion."""
-    source = PressCycle(chips, seed=seed)
-    return np.stack([source(k / rate_hz) for k in range(rows)])
+@dataclass(frozen=True)
+class FedFields:
+    """What the emulated chips read, one row per conversion ((rows, chips, 3) µT), the chips' settings
+    (the source's, else the power-on ones) and what the rows come from, in words for the report."""
+
+    fields_uT: np.ndarray
+    settings: MLX90393Settings
+    source: str
+
+
+def scenario_fields(scenario: LiveScenario, chips: int, rows: int = FIELD_ROWS,
+                    rate_hz: float = FIELD_RATE_HZ) -> np.ndarray:
+    """(rows, chips, 3) µT: ``scenario``'s emulated fields at ``rate_hz`` from its start, chip k the
+    scenario's chip k mod its chips; a scenario that emulates no chips of its own is refused."""
+    if scenario.emulator_source is None:
+        raise ValueError(f"scenario {scenario.description!r}: streams from a source of its own, not emulated chips' "
+                         "fields, expected a scenario of the fingertip's emulator")
+    sampled = np.stack([np.asarray(scenario.emulator_source(k / rate_hz), dtype=float) for k in range(rows)])
+    return sampled[:, np.arange(chips) % scenario.chips]
+
+
+def twin_fields(chips: int, progress: Progress = SILENT, name: str | None = None) -> FedFields:
+    """The default live scenario's fields (``name``: another registered scenario), computed or read
+    from the cache as ``softtip live --emulate`` does, for a build of ``chips`` chips."""
+    name = default("scenario") if name is None else name
+    if name is None:
+        raise ValueError("bench firmware: no registered system offers a live scenario to take the fields from; "
+                         "give --fields FILE")
+    scenario = load(owner("scenario", name).scenarios[name])(progress)
+    if scenario.settings is None or not isinstance(scenario.settings.values, MLX90393Settings):
+        raise ValueError(f"scenario {name!r}: its chips are no MLX90393s, which the simulated board emulates; "
+                         "give --fields FILE")
+    fed = "" if chips <= scenario.chips else f"; chip k reads its chip k mod {scenario.chips}"
+    return FedFields(scenario_fields(scenario, chips), scenario.settings.values,
+                     f"the twin's {name} scenario ({scenario.description}: {scenario.chips} chip"
+                     f"{'s' * (scenario.chips > 1)}, sampled at {FIELD_RATE_HZ:g} Hz from its start{fed})")
+
+
+def file_fields(path: Path, chips: int) -> FedFields:
+    """A field file's rows (:func:`read_fields`), read by chips at their power-on settings."""
+    return FedFields(read_fields(path, chips), MLX90393Settings(), f"the field file {path}")
 
 
 def read_fields(path: Path, chips: int) -> np.ndarray:
@@ -128,8 +175,10 @@ def read_fields(path: Path, chips: int) -> np.ndarray:
 
 def write_fields(path: Path, fields_uT: np.ndarray) -> None:
     """The simulator's field file: one row per conversion, x y z of chip 0, then chip 1, ..."""
-    np.savetxt(path, fields_uT.reshape(len(fields_uT), -1), fmt="%.6f",
-               header="x y z (uT) of each chip, one row per conversion")
+    def write(stream) -> None:
+        np.savetxt(stream, fields_uT.reshape(len(fields_uT), -1), fmt="%.6f",
+                   header="x y z (uT) of each chip, one row per conversion")
+    atomic_write(path, write)
 
 
 @dataclass(frozen=True)
@@ -551,22 +600,24 @@ def fault_answers(build: SimulatorBuild, chips: int, fields_uT: np.ndarray, hold
 
 
 def bench_firmware(chips: int = 4, seconds: float = 2.0, progress: Progress = SILENT,
-                   fields_uT: np.ndarray | None = None, firmware_dir: Path = FIRMWARE_DIR) -> dict:
+                   fields: FedFields | None = None, firmware_dir: Path = FIRMWARE_DIR) -> dict:
     """Frames per second, losses and latency for 1..chips chips at the firmware's highest rate, the
-    answers to each host command and bad input, and the stream under bus faults (``chips`` chips)."""
+    answers to each host command and bad input, and the stream under bus faults (``chips`` chips),
+    the chips fed ``fields`` (default the twin's, :func:`twin_fields`)."""
     counts = list(range(1, chips + 1))
     simulator = build(counts, firmware_dir, progress=progress)
+    fields = twin_fields(chips, progress) if fields is None else fields
     load_before = os.getloadavg()
-    fields = {n: press_fields(n) if fields_uT is None else fields_uT[:, :n] for n in counts}
     streams = []
     with progress.task(f"streaming {seconds:g} s (simulated) per chip count", total=len(counts)) as task:
         for n in counts:
-            streams.append(stream(simulator, n, seconds, fields[n]))
+            streams.append(stream(simulator, n, seconds, fields.fields_uT[:, :n], fields.settings))
             task.advance(note=f"{n} chip{'s' * (n > 1)}: {streams[-1]['frames_per_s']:.0f} frames/s")
     with progress.task("host commands and bad input"):
-        commands = command_answers(simulator, chips, fields[chips])
+        commands = command_answers(simulator, chips, fields.fields_uT)
     with progress.task("bus faults"):
-        faults = fault_answers(simulator, chips, fields[chips])
-    return {"streams": streams, "commands": commands, "faults": faults,
+        faults = fault_answers(simulator, chips, fields.fields_uT)
+    return {"fields": {"source": fields.source, "rows": len(fields.fields_uT), "chips": chips},
+            "streams": streams, "commands": commands, "faults": faults,
             "load_average_before": list(load_before), "load_average_after": list(os.getloadavg()),
             "cpus": os.cpu_count()}

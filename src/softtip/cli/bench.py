@@ -107,39 +107,67 @@ def bench_live(
 
 
 
-def bench_firmware(
-    chips: int = typer.Option(4, "--chips", help="Chips of the largest build (each count from 1 is measured)."),
-    seconds: float = typer.Option(2.0, "--seconds", help="Simulated seconds of streaming per chip count."),
-    fields: Path = typer.Option(None, "--fields", help="Text file of fields fed to the chips: one row per "
-                                "conversion, x y z (µT) of each chip (default: the emulator's press cycles)."),
-    firmware: Path = typer.Option(None, "--firmware", help="The firmware folder of a softtip source checkout (its "
-                                  "Makefile and sketch; default: the checkout softtip runs from, else ./firmware)."),
-    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
-) -> None:
-    """The firmware's own AVR build run in simavr with an emulated TCA9548A and MLX90393s, streaming to
-    the host driver over a pseudo-terminal at 1,000,000 baud: frames per second per chip count, frames
-    lost or damaged, latency from conversion to decoded frame, the fields read back, and the firmware's
-    answer to each host command, to bad input and to bus faults."""
-    from softtip.bench.firmware import FIRMWARE_DIR, MAX_CHIPS, bench_firmware as run, read_fields, toolchain_missing
-    from softtip.cli.common import check_input
-
-    check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
-    check_number(seconds, "--seconds", above=0, maximum=LONGEST_S, unit="s")
-    fields_uT = None if fields is None else read_fields(check_input(fields, "--fields"), chips)
-    if firmware is None:
-        firmware = FIRMWARE_DIR if FIRMWARE_DIR.is_dir() else Path("firmware")
+def _check_firmware_folder(firmware: Path) -> None:
+    """``--firmware``'s folder, refused in one line unless it holds the firmware's Makefile."""
     if firmware.exists() and not firmware.is_dir():
         fail(f"--firmware = {firmware}: expected a folder (the firmware folder of a softtip source checkout)")
     if not (firmware / "Makefile").is_file():
         fail(f"--firmware = {firmware}: expected the firmware folder of a softtip source checkout (its Makefile); "
              "a wheel does not install the firmware's sources")
+
+
+def bench_firmware(
+    chips: int = typer.Option(4, "--chips", help="Chips of the largest build (each count from 1 is measured)."),
+    seconds: float = typer.Option(2.0, "--seconds", help="Simulated seconds of streaming per chip count."),
+    fields: Path = typer.Option(None, "--fields", help="Text file of fields fed to the chips: one row per "
+                                "conversion, x y z (µT) of each chip (default: the twin's, the default live "
+                                "scenario's, computed once and cached as live --emulate caches them)."),
+    export_fields: Path = typer.Option(None, "--export-fields", help="Write the fields the bench would feed its "
+                                       "--chips chips to this file, in --fields' format, and stop (no build, no "
+                                       "run)."),
+    firmware: Path = typer.Option(None, "--firmware", help="The firmware folder of a softtip source checkout (its "
+                                  "Makefile and sketch; default: the checkout softtip runs from, else ./firmware)."),
+    force: bool = FORCE,
+    json_output: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The firmware's own AVR build run in simavr with an emulated TCA9548A and MLX90393s, streaming to
+    the host driver over a pseudo-terminal at 1,000,000 baud: frames per second per chip count, frames
+    lost or damaged, latency from conversion to decoded frame, the fields read back, and the firmware's
+    answer to each host command, to bad input and to bus faults. The chips read the twin's fields
+    (the default live scenario's) unless --fields names a file."""
+    from softtip.bench.firmware import (FIRMWARE_DIR, MAX_CHIPS, bench_firmware as run, file_fields, toolchain_missing,
+                                        twin_fields, write_fields)
+    from softtip.cli.common import check_input
+
+    check_number(chips, "--chips", minimum=1, maximum=MAX_CHIPS)
+    check_number(seconds, "--seconds", above=0, maximum=LONGEST_S, unit="s")
+    fed = None if fields is None else file_fields(check_input(fields, "--fields"), chips)
+    if firmware is not None:  # checked when given, even when only exporting: a mistake is named, not ignored
+        _check_firmware_folder(firmware)
+    progress = progress_for(json_output)
+    if export_fields is not None:
+        check_output(export_fields, "--export-fields", [fields] if fields is not None else [], force=force)
+        fed = twin_fields(chips, progress) if fed is None else fed
+        write_fields(export_fields, fed.fields_uT)
+        written = {"export_fields": str(export_fields), "rows": len(fed.fields_uT), "chips": chips,
+                   "source": fed.source}
+        if json_output:
+            print(json.dumps(written, indent=2))
+        else:
+            console.print(f"{written['rows']} rows of {chips} chip{'s' * (chips > 1)}' fields written to "
+                          f"{export_fields}: {fed.source}", highlight=False, markup=False)
+        return
+    if firmware is None:
+        firmware = FIRMWARE_DIR if FIRMWARE_DIR.is_dir() else Path("firmware")
+        _check_firmware_folder(firmware)
     missing = toolchain_missing()
     if missing is not None:
         fail(f"bench firmware: {missing}")
-    report = run(chips, seconds, progress=progress_for(json_output), fields_uT=fields_uT, firmware_dir=firmware)
+    report = run(chips, seconds, progress=progress, fields=fed, firmware_dir=firmware)
     if json_output:
         print(json.dumps(report, indent=2))
         return
+    console.print(f"fields fed to the chips: {report['fields']['source']}", highlight=False, markup=False)
     console.print(f"load average {', '.join(f'{v:.2f}' for v in report['load_average_before'])} before, "
                   f"{', '.join(f'{v:.2f}' for v in report['load_average_after'])} after; {report['cpus']} CPUs")
     for s in report["streams"]:

@@ -19,6 +19,7 @@ collection, so its real collection time follows from the same procedure.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,7 @@ from softtip.systems.haptics.personalisation import in_device_axes, readings_ren
 from softtip.systems.haptics.rendering import CONTACT_THRESHOLD, FORCE
 
 NO_CONTACT, CONTACT, SATURATED = 0, 1, 2
+Drive = Callable[[np.ndarray], Collection]  # configurations (entries, 3, rad) driven on the user and read
 _NEIGHBOURS = 4  # driven configurations consulted about each candidate
 
 
@@ -58,10 +60,16 @@ def contact_states(collection: Collection, contact_threshold: float = CONTACT_TH
 def adaptive_user_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_inputs, fs_platform_wrenches,
                         settings: CollectionSettings, rng: np.random.Generator | None, budget: int = 64,
                         batch: int = 8, initial_levels: int = 3, candidate_levels: int = 13, n_neighbours: int = 8,
-                        contact_threshold: float = CONTACT_THRESHOLD) -> AdaptiveTable:
+                        contact_threshold: float = CONTACT_THRESHOLD, drive: Drive | None = None) -> AdaptiveTable:
     """Drive at most ``budget`` configurations on the user, ``batch`` at a time after a coarse
     ``initial_levels``³ grid, chosen among a ``candidate_levels``³ grid, aimed at the FS table's
-    entries (``fs_motor_inputs`` and their unsaturated DS readings ``fs_platform_wrenches``)."""
+    entries (``fs_motor_inputs`` and their unsaturated DS readings ``fs_platform_wrenches``);
+    ``drive``: how each batch is driven and read (a real device), else on the device model with
+    ``fingertip`` in it, read by ``settings`` and ``rng``."""
+    if drive is None:
+        def drive(motor_inputs: np.ndarray) -> Collection:
+            return sensed_contact(device, fingertip, motor_inputs, settings, rng)
+
     budget = checked(integer(1), "budget", budget)
     batch = checked(integer(1), "batch", batch)
     first = motor_grid(device, initial_levels)
@@ -71,7 +79,7 @@ def adaptive_user_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_input
     pool = motor_grid(device, candidate_levels)
     fs_readings = in_device_axes(device, fs_motor_inputs, fs_platform_wrenches)[:, FORCE]
     wanted = fs_readings[np.linalg.norm(fs_readings, axis=1) >= contact_threshold]
-    parts = [sensed_contact(device, fingertip, first, settings, rng)]
+    parts = [drive(first)]
     batches = [len(first)]
     while sum(batches) < budget:
         driven = np.vstack([part.motor_inputs for part in parts])
@@ -83,7 +91,7 @@ def adaptive_user_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_input
         chosen = np.vstack([aimed, filling])
         if not len(chosen):
             break  # every candidate has been driven
-        parts.append(sensed_contact(device, fingertip, chosen, settings, rng))
+        parts.append(drive(chosen))
         batches.append(len(chosen))
     motor = np.vstack([part.motor_inputs for part in parts])
     collection = Collection(motor, np.vstack([p.finger_wrenches for p in parts]),

@@ -217,15 +217,29 @@ def _table(table_file: Path | None, device, method: str):
     return table
 
 
-def _renderer(device, motor_inputs, finger_wrenches, platform_wrenches, method: str, finger, seed: int, progress):
-    """The renderer on an FS table (its arrays) for ``finger``, personalised by ``method``, and how many
-    entries the personalisation flagged."""
+def _renderer(device, motor_inputs, finger_wrenches, platform_wrenches, method: str, finger, seed: int, progress,
+              drive=None):
+    """The renderer on an FS table (its arrays) for ``finger``, personalised by ``method`` (the user's
+    data driven by ``drive``, else on the device model), and how many entries the personalisation flagged."""
     from softtip.systems.haptics.live import personalised_renderer
 
     with progress.task(f"haptics: the table personalised ({method})", total=1) as task:
-        made = personalised_renderer(device, method, finger, motor_inputs, finger_wrenches, platform_wrenches, seed)
+        made = personalised_renderer(device, method, finger, motor_inputs, finger_wrenches, platform_wrenches, seed,
+                                     drive=drive)
         task.advance()
     return made
+
+
+def _driven_on(servos, finger, paced: bool, progress):
+    """How the user's data are driven on a real device: each batch of configurations through
+    ``servos`` (a :class:`~.servos.SerialDevice`) with a progress bar of its own."""
+    from softtip.systems.haptics.collection import CollectionSettings
+
+    def drive(motor_inputs):
+        with progress.task(f"haptics: {len(motor_inputs)} configurations driven on the device and read back",
+                           total=len(motor_inputs)) as task:
+            return servos.collect(finger, motor_inputs, CollectionSettings(), paced, task)
+    return drive
 
 
 def _fs_table(device, fs_levels: int, rng: np.random.Generator, progress):
@@ -266,7 +280,9 @@ def render(
                                                                          "permits it."),
     port: str = typer.Option(None, "--port", help="Drive a real device: its controller's serial port (a device path "
                                                   "or a pyserial URL), in the line protocol of "
-                                                  "softtip.systems.haptics.servos; default the device model."),
+                                                  "softtip.systems.haptics.servos; default the device model. "
+                                                  "--method A, B+ and A+ drive the user's data on it first and read "
+                                                  "them from its wrench reports (W lines, version 2)."),
     baud: int = typer.Option(115_200, "--baud", help="--port's baud rate (8N1)."),
     force: bool = typer.Option(False, "--force", help="Overwrite --record's file."),
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
@@ -294,12 +310,9 @@ def render(
         synthetic_holds,
         synthetic_sensation,
     )
-    from softtip.systems.haptics.servos import SerialDevice, SimulatedDevice, check_baud
+    from softtip.systems.haptics.servos import NoWrenchReports, SerialDevice, SimulatedDevice, check_baud
 
     method = METHOD_ALIASES.get(method, method)
-    if port is not None and method in USER_DATA_METHODS:
-        fail(f"--method = {method!r} with --port: the user's data are collected on the device model, not on a real "
-             f"device; use --method standard or B with --port")
     finger = _fingertip(fingertip, "--fingertip")
     if ros2 and (problem := ros2_problem()) is not None:
         fail(f"--ros2: {problem}")
@@ -319,9 +332,16 @@ def render(
         try:
             sinks = live_sinks(dashboard=False, record=record, foxglove_port=foxglove_port, ros2=ros2)
             fs = table if table is not None else _fs_table(device, fs_levels, rng, progress)
-            renderer, out_of_reach = _renderer(
-                device, fs.motor_inputs, fs.wrenches if table is not None else fs.finger_wrenches,
-                fs.platform_wrenches, method, finger, seed, progress)
+            # with --port, A, B+ and A+ drive the user's data on the device and read its wrench reports
+            on_device = port is not None and method in USER_DATA_METHODS
+            try:
+                renderer, out_of_reach = _renderer(
+                    device, fs.motor_inputs, fs.wrenches if table is not None else fs.finger_wrenches,
+                    fs.platform_wrenches, method, finger, seed, progress,
+                    _driven_on(servos, finger, realtime, progress) if on_device else None)
+            except NoWrenchReports as problem:
+                fail(f"--method {method} with --port: {problem}; {method} reads the user's fingertip by the device's "
+                     "sensor (a device without one takes --method standard or B)")
             if wanted is None:
                 wanted = (synthetic_holds(device, rng, batch=1) if duration is None else
                           synthetic_sensation(device, duration, rng))
@@ -340,6 +360,8 @@ def render(
             paced=realtime, realtime=priority).to_dict()
     summary |= {"fingertip": finger.name, "method": method, "table": source,
                 "table_entries_flagged": out_of_reach, "device": port or "simulated",
+                "user_data_read_by": None if method not in USER_DATA_METHODS else "device" if on_device
+                else "device model",
                 "record": str(record) if record else None}
     if json_output:
         print(json.dumps(summary, indent=2))

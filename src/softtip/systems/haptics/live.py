@@ -49,6 +49,7 @@ from softtip.realtime.frames import FrameResult, StreamInfo
 from softtip.realtime.sinks.base import Sink
 from softtip.realtime.sinks.recorder import RecorderSink
 from softtip.systems.haptics import WANTED
+from softtip.systems.haptics.adaptive import Drive
 from softtip.systems.haptics.collection import Collection, CollectionSettings, motor_grid, sensed_contact
 from softtip.systems.haptics.device import DeviceSpec, load_device, quantised
 from softtip.systems.haptics.fingertips import FINGERTIP_SENSOR, TEST_FINGERTIPS, Fingertip
@@ -60,7 +61,7 @@ from softtip.systems.haptics.limits import (
     METHOD_ALIASES,
     SHORT_NAMES,
 )
-from softtip.systems.haptics.personalisation import personalise_geometric
+from softtip.systems.haptics.personalisation import personalise_geometric, press_configurations
 from softtip.systems.haptics.rendering import NearestNeighbourRenderer, Rendering
 from softtip.systems.haptics.servos import ServoDevice, SimulatedDevice
 from softtip.systems.haptics.study import (
@@ -431,13 +432,16 @@ def render_stream(device: DeviceSpec, renderer: NearestNeighbourRenderer, servos
 
 def personalised_renderer(device: DeviceSpec, method: str, fingertip: Fingertip, motor_inputs, finger_wrenches,
                           platform_wrenches, seed: int, settings: StudySettings = StudySettings(),
-                          collection: CollectionSettings = CollectionSettings()) -> tuple[NearestNeighbourRenderer, int]:
+                          collection: CollectionSettings = CollectionSettings(),
+                          drive: Drive | None = None) -> tuple[NearestNeighbourRenderer, int]:
     """The renderer on an FS table (its motor inputs, the FS's wrenches and the DS's, None if not read)
     personalised for ``fingertip`` by ``method`` (:data:`~.limits.SHORT_NAMES`) as the study does it, and how many
     entries the personalisation flagged (out of reach, or outside the user's table). A, B+ and A+
-    collect the user's data first, on the device model with ``fingertip`` in it, each on the study's
-    own stream at ``seed`` (:func:`~.study.collect_user_data`: the user table and the presses;
-    and A+'s adaptive table, as for the study's first fingertip)."""
+    collect the user's data first: with ``drive`` on a real device (``drive(motor_inputs)`` drives and
+    reads them, :meth:`~.servos.SerialDevice.collect`), only what the method needs (A the user table,
+    B+ the presses, A+ the adaptive table); without, on the device model with ``fingertip`` in it, each
+    on the study's own stream at ``seed`` (:func:`~.study.collect_user_data`: the user table and the
+    presses; and A+'s adaptive table, as for the study's first fingertip)."""
     method = METHOD_ALIASES.get(method, method)
     if method not in SHORT_NAMES:
         raise ValueError(f"method = {method!r}: expected one of {', '.join(SHORT_NAMES)}")
@@ -448,15 +452,21 @@ def personalised_renderer(device: DeviceSpec, method: str, fingertip: Fingertip,
         personal = Rendering(np.asarray(motor_inputs, dtype=float), np.zeros(len(motor_inputs), bool))
     elif method == "B":
         personal = personalise_geometric(device, motor_inputs, FINGERTIP_SENSOR.radius, fingertip.radius)
+    elif method == "A+":
+        personal = adaptive_table(device, fingertip, motor_inputs, platform_wrenches, settings, collection,
+                                  adaptive_stream(seed, 0), drive)[0]
     else:
-        user = collect_user_data(device, fingertip, settings, collection, seed, 0)
-        if method == "A":
-            personal = data_driven_table(device, motor_inputs, platform_wrenches, user.user_table, settings)
-        elif method == "B+":
-            personal = force_model_table(device, fingertip, motor_inputs, finger_wrenches, user.presses, settings)[0]
+        if drive is None:
+            user = collect_user_data(device, fingertip, settings, collection, seed, 0)
+            user_table, presses = user.user_table, user.presses
+        elif method == "A":
+            user_table = drive(motor_grid(device, settings.user_levels))
         else:
-            personal = adaptive_table(device, fingertip, motor_inputs, platform_wrenches, settings, collection,
-                                      adaptive_stream(seed, 0))[0]
+            presses = drive(press_configurations(device, fingertip.radius))
+        if method == "A":
+            personal = data_driven_table(device, motor_inputs, platform_wrenches, user_table, settings)
+        else:
+            personal = force_model_table(device, fingertip, motor_inputs, finger_wrenches, presses, settings)[0]
     renderer = NearestNeighbourRenderer(settings.n_neighbours, settings.contact_threshold, settings.weighting_power)
     return renderer.fit(finger_wrenches, personal.motor_inputs), int(personal.outside.sum())
 

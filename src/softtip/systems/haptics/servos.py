@@ -38,6 +38,18 @@ The host reads what arrived once a frame and never waits for it; a line it canno
 (``malformed_replies``) and skipped. A command line is at most :data:`LONGEST_LINE` bytes, so 50
 lines a second need at least :func:`least_baud` baud (10 bits a byte on the wire); a reply line is
 at most :data:`LONGEST_REPLY` bytes: 50 a second need 44,000 baud from the device.
+
+**The user's data driven on the device** (methods A, B+ and A+, :meth:`SerialDevice.collect`): before
+the render loop the host drives each configuration of the user's table, presses or adaptive table
+with ``F`` lines for ``hold_s`` of frames and averages the ``W`` replies of the hold's last
+``window_s`` (the procedure the device model follows, :mod:`.collection`); frame numbers run on from
+there into the loop. A device that sends no ``W`` line within :data:`WRENCH_WAIT_S` of the first
+command has no sensor to read the user by (:class:`NoWrenchReports`). The personalisations read the
+device-mounted sensor's wrench (the DS's, on the platform); the ``W`` lines carry the fingertip's,
+so the host turns each into its reaction on the platform, about the platform's centroid in its axes
+at the commanded configuration (:func:`~.fingertips.platform_wrench` on the kinematics' pose: the
+cables' give moves the platform along its normal only, which changes neither its axes nor, the
+contact being frictionless, the torque about its centroid).
 """
 
 from __future__ import annotations
@@ -46,17 +58,19 @@ import math
 import os
 import select
 import threading
+import time
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 import serial
 
+from softtip._core.progress import Task
 from softtip.hardware.driver import PortError, open_serial
-from softtip.sensors.wrench import read_wrenches
-from softtip.systems.haptics.collection import CollectionSettings
-from softtip.systems.haptics.device import DeviceSpec, servo_angles
-from softtip.systems.haptics.fingertips import Fingertip, loaded_contact
+from softtip.sensors.wrench import WrenchSensorSpec, read_wrenches
+from softtip.systems.haptics.collection import Collection, CollectionSettings
+from softtip.systems.haptics.device import DeviceSpec, forward_kinematics, quantised, servo_angles
+from softtip.systems.haptics.fingertips import Fingertip, loaded_contact, platform_wrench
 
 PROTOCOL_VERSION = 2
 DEFAULT_BAUD = 115_200
@@ -65,10 +79,15 @@ LONGEST_LINE = len(f"F {MAX_FRAMES - 1} 999.999 999.999 999.999\n")
 LONGEST_REPLY = len(f"W {MAX_FRAMES - 1}" + " -1.23457e-05" * 6 + "\n")
 WRENCH_REPLY = "W"
 BITS_PER_BYTE = 10  # start, 8 data bits, stop
+WRENCH_WAIT_S = 1.0  # a device's first wrench report comes a frame (20 ms) after its first command: 50 frames late
 
 
 class ServoLinkError(ValueError):
     """The serial device cannot be opened or stopped taking commands."""
+
+
+class NoWrenchReports(ServoLinkError):
+    """The device sent no wrench report: it has no sensor to read the user by."""
 
 
 @dataclass(frozen=True)
@@ -159,9 +178,11 @@ class SerialDevice:
                  baud_option: str = "baud"):
         rate = device.servo.command_rate_hz
         check_baud(baud, rate, baud_option)
-        self.option, self.port_name = port_option, port
+        self.device, self.option, self.port_name = device, port_option, port
         self.held = np.full(6, np.nan)  # the newest wrench report, held from the frame after it came
         self.replies = self.malformed = 0
+        self.reported_any = False  # whether any wrench report came, collections' included
+        self.first_loop_frame = 0  # the wire's frame number of the loop's frame 0: the collections' frames come first
         self._pending = b""
         try:
             self.port = open_serial(port, baud)
@@ -170,6 +191,9 @@ class SerialDevice:
         self._write(f"H {PROTOCOL_VERSION} {rate:g}\n")
 
     def send(self, frame: int, command: np.ndarray) -> None:
+        self._command(self.first_loop_frame + frame, command)
+
+    def _command(self, frame: int, command: np.ndarray) -> None:
         if not 0 <= frame < MAX_FRAMES:
             raise ServoLinkError(f"frame = {frame}: expected 0 to {MAX_FRAMES - 1} (the protocol's frame numbers)")
         degrees = np.degrees(command)
@@ -177,10 +201,96 @@ class SerialDevice:
 
     def frame(self, ticks: int) -> FrameResponse:
         wrench = np.tile(self.held, (ticks, 1))
-        reported = self._replies()
+        # a collection's late reports (frames before the loop's) are not the loop's
+        first = self.first_loop_frame
+        reported = [(frame - first, wrench) for frame, wrench in self._replies() if frame >= first]
+        self.replies += len(reported)
         if reported:
             self.held = reported[-1][1]
         return FrameResponse(np.full((ticks, 3), np.nan), wrench, np.zeros((ticks, 3), bool), reported)
+
+    def collect(self, fingertip: Fingertip, motor_inputs, settings: CollectionSettings, paced: bool = True,
+                task: Task | None = None) -> Collection:
+        """``motor_inputs`` (entries, 3, rad) driven on the device in order, each held ``settings.hold_s``
+        and read as the mean of the ``W`` reports over its last ``settings.window_s`` (whole frames);
+        ``paced``: a command every frame period, else each as soon as the report of the frame before
+        came (a device model answering at once). The fingertip's wrench as reported, its reaction on
+        the platform (``fingertip``'s geometry at the commanded pose, see the module's notes), the
+        entries whose reports reached the sensor's range, and the collection's measured time; ``task``
+        advances once per configuration. A device that sends no report within :data:`WRENCH_WAIT_S`
+        raises :class:`NoWrenchReports`."""
+        motor_inputs = np.asarray(motor_inputs, dtype=float).reshape(-1, 3)
+        commands = quantised(self.device, motor_inputs)  # the table keeps the inputs asked for, as the model's does
+        if not len(commands):
+            raise ValueError("motor_inputs: expected at least one configuration to drive")
+        rate = self.device.servo.command_rate_hz
+        hold = max(1, round(settings.hold_s * rate))
+        window = min(hold, max(1, round(settings.window_s * rate)))
+        first = self.first_loop_frame
+        sums, counts = np.zeros((len(commands), 6)), np.zeros(len(commands), int)
+        saturated = np.zeros(len(commands), bool)
+
+        def take(reports) -> None:
+            for frame, wrench in reports:
+                entry, k = divmod(frame - first, hold)
+                if 0 <= entry < len(commands) and k >= hold - window:
+                    sums[entry] += wrench
+                    counts[entry] += 1
+                    saturated[entry] |= at_range_end(wrench, settings.sensor)
+
+        started = period_start = time.monotonic()
+        for entry, command in enumerate(commands):
+            for k in range(hold):
+                frame = first + entry * hold + k
+                self._command(frame, command)
+                take(self._reports_until(frame - 1, paced, started, period_start + 1 / rate))
+                period_start += 1 / rate
+            if task is not None:
+                task.advance()
+        # the last window's reports: the device answers a frame when it ends, so the platform is released
+        # a frame at a time until they are in (a device model answers a frame at the next command)
+        frame, deadline = first + len(commands) * hold, time.monotonic() + WRENCH_WAIT_S
+        while counts[-1] < window and time.monotonic() < deadline:
+            self._command(frame, np.zeros(3))
+            take(self._reports_until(frame - 1, paced, started, period_start + 1 / rate))
+            period_start, frame = period_start + 1 / rate, frame + 1
+        self.first_loop_frame = frame
+        if not counts.all():
+            missing = int(np.flatnonzero(counts == 0)[0])
+            raise ServoLinkError(f"{self.option} = {self.port_name!r}: the device sent no wrench report over the "
+                                 f"last {window} frames of configuration {missing} (frames {first + missing * hold} "
+                                 f"to {first + (missing + 1) * hold - 1})")
+        finger = sums / counts[:, None]
+        pose = forward_kinematics(self.device, commands)
+        return Collection(motor_inputs, finger, platform_wrench(fingertip, self.device, pose, finger), saturated,
+                          time.monotonic() - started)
+
+    def _reports_until(self, frame: int, paced: bool, started: float,
+                       period_end: float) -> list[tuple[int, np.ndarray]]:
+        """The reports that arrived: paced, once the frame's period ``period_end`` (monotonic) is over;
+        unpaced, as soon as the report of ``frame`` came. None at all within :data:`WRENCH_WAIT_S` of
+        ``started`` raises :class:`NoWrenchReports`; an unpaced wait as long for ``frame``'s report,
+        :class:`ServoLinkError`."""
+        reports, waited_from = [], time.monotonic()
+        while True:
+            reports += self._replies()
+            now = time.monotonic()
+            if not self.reported_any and now - started > WRENCH_WAIT_S:
+                raise NoWrenchReports(
+                    f"the device sent no wrench report (a W line of protocol version {PROTOCOL_VERSION}) within "
+                    f"{WRENCH_WAIT_S:g} s of its first command: it has no sensor under the fingertip, or speaks "
+                    "version 1")
+            if paced:
+                if now >= period_end:
+                    return reports
+                time.sleep(min(period_end - now, 0.002))
+            else:
+                if frame < self.first_loop_frame or any(f >= frame for f, _ in reports):
+                    return reports
+                if now - waited_from > WRENCH_WAIT_S:
+                    raise ServoLinkError(f"{self.option} = {self.port_name!r}: the device sent no wrench report for "
+                                         f"frame {frame} within {WRENCH_WAIT_S:g} s")
+                time.sleep(0.0005)
 
     def _replies(self) -> list[tuple[int, np.ndarray]]:
         """The wrench reports that arrived since the last call, without waiting."""
@@ -200,7 +310,7 @@ class SerialDevice:
                 self.malformed += line.strip() != b""
             else:
                 reported.append(parsed)
-        self.replies += len(reported)
+        self.reported_any |= bool(reported)
         return reported
 
     def close(self) -> None:
@@ -219,6 +329,13 @@ class SerialDevice:
         except (serial.SerialException, OSError) as problem:
             raise ServoLinkError(f"{self.option} = {self.port_name!r}: the device stopped taking commands "
                                  f"({' '.join(str(problem).split())})") from None
+
+
+def at_range_end(wrench: np.ndarray, sensor: WrenchSensorSpec) -> bool:
+    """Whether a reported wrench (6,) reached ``sensor``'s range on any axis: it read its range's end."""
+    lowest = np.concatenate([sensor.force.lowest, sensor.torque.lowest])
+    highest = np.concatenate([sensor.force.highest, sensor.torque.highest])
+    return bool(np.any((wrench <= lowest) | (wrench >= highest)))
 
 
 def parse_reply(line: bytes) -> tuple[int, np.ndarray] | None:

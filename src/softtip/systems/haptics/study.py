@@ -30,7 +30,7 @@ from matplotlib.figure import Figure
 from softtip._core.config import NonNegativeNumber, PositiveNumber, checked, choice, integer, schema
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.plate_contact import contact_radius
-from softtip.systems.haptics.adaptive import AdaptiveTable, adaptive_user_table
+from softtip.systems.haptics.adaptive import AdaptiveTable, Drive, adaptive_user_table
 from softtip.systems.haptics.collection import (
     Collection,
     CollectionSettings,
@@ -376,12 +376,13 @@ def force_model_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_inputs,
 
 def adaptive_table(device: DeviceSpec, fingertip: Fingertip, fs_motor_inputs, fs_platform_wrenches,
                    settings: StudySettings, collection: CollectionSettings,
-                   rng: np.random.Generator | None) -> tuple[Rendering, AdaptiveTable]:
+                   rng: np.random.Generator | None, drive: Drive | None = None) -> tuple[Rendering, AdaptiveTable]:
     """Method A+: an adaptive user table of at most ``adaptive_budget`` configurations driven on
-    ``fingertip``, and the FS table personalised from it."""
+    ``fingertip`` (by ``drive``, else on the device model), and the FS table personalised from it."""
     adaptive = adaptive_user_table(device, fingertip, fs_motor_inputs, fs_platform_wrenches, collection, rng,
                                    settings.adaptive_budget, candidate_levels=settings.fs_levels,
-                                   n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold)
+                                   n_neighbours=settings.n_neighbours, contact_threshold=settings.contact_threshold,
+                                   drive=drive)
     usable = adaptive.collection.unsaturated()
     # A+ picks its configurations by the DS's forces in the device's axes (.adaptive), and renders by them
     return personalise_data_driven(device, fs_motor_inputs, fs_platform_wrenches, usable.motor_inputs,
