@@ -36,21 +36,31 @@ def demo(
                          json_output)
     if report is None:
         return
-    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator, every "
-                        "sample (rests included); at rest: the estimate's mean ± sd where no force acts")
-    for column in ("axis", "offline MAE (N)", "offline R²", "offline at rest (N)", "live MAE (N)", "live at rest (N)",
-                   "live MAE rest / loading / unloading (N)", "live peak |F| (N)"):
+    from softtip.systems.hall_fingertip.force_model import FORCES  # loaded with the demo already
+
+    speed = f"{report['live_speed_mm_s']:g} mm/s"
+    table = Table(title=f"force estimates: the calibration's held-out trials at the live stream's {speed} (offline) "
+                        "and live frames from the emulator, every sample; at rest: the estimate's mean ± sd where "
+                        "no force acts; by phase: rest / loading / unloading")
+    for column in ("axis", "offline MAE (N)", "offline at rest (N)", "offline by phase (N)", "offline R²",
+                   "live MAE (N)", "live at rest (N)", "live by phase (N)", "phase shares offline, live"):
         table.add_column(column, justify="right")
     nan = float("nan")
-    for axis, offline in report["calibration"]["validation"].items():
+
+    def by_phase(scores: dict, figure: str, form: str) -> str:
+        return "/".join(format(scores.get("by_phase", {}).get(f"{phase}_{figure}", nan), form)
+                        for phase in ("rest", "loading", "unloading"))
+
+    def cells(scores: dict) -> list[str]:
+        return [f"{scores.get('mean_abs_error_N', nan):.3f}",
+                f"{scores.get('rest_mean_N', nan):+.3f} ± {scores.get('rest_sd_N', nan):.3f}",
+                by_phase(scores, "mean_abs_error_N", ".3f")]
+
+    for axis in FORCES:
+        offline = report["calibration"]["validation"]["by_speed"].get(speed, {}).get(axis, {})
         live = report["live"].get(axis, {})
-        table.add_row(axis, f"{offline['mean_abs_error_N']:.3f}", f"{offline['r2']:.4f}",
-                      f"{offline['rest_mean_N']:+.3f} ± {offline['rest_sd_N']:.3f}",
-                      f"{live.get('mean_abs_error_N', nan):.3f}",
-                      f"{live.get('rest_mean_N', nan):+.3f} ± {live.get('rest_sd_N', nan):.3f}",
-                      " / ".join(f"{live.get('by_phase', {}).get(f'{phase}_mean_abs_error_N', nan):.3f}"
-                                 for phase in ("rest", "loading", "unloading")),
-                      f"{live.get('peak_true_N', nan):.2f}")
+        table.add_row(axis, *cells(offline), f"{offline.get('r2', nan):.4f}", *cells(live),
+                      f"{by_phase(offline, 'share', '.2f')}, {by_phase(live, 'share', '.2f')}")
     console.print(table)
     pipeline = report["pipeline"]
     console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "
