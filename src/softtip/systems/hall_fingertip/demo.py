@@ -41,12 +41,13 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
         summary = run_live("emulator", [model_path], live_sinks(dashboard=dashboard, record=record), duration_s,
                            rate_hz=rate_hz, chips=1, settings=settings, callbacks=[collect],
                            emulator_source=scenario)
-    live = {}
+    live, window = {}, []
     if frames:
         times = np.array([t for t, _ in frames])
         estimates = np.array([e for _, e in frames])
         truth = scenario.force(times)
         live = {k: {**axis_scores(truth[:, i], estimates[:, i]), "peak_true_N": float(np.abs(truth[:, i]).max())}
                 for i, k in enumerate(FORCES)}
+        window = [float(times[0]), float(times[-1])]  # which part of the scenario's loop the scores cover
     return {"model": str(model_path), "calibration": calibration, "live": live, "live_speed_mm_s": PUSH_SPEED_MM_S,
-            "estimated_frames": len(frames), "pipeline": summary}
+            "live_device_times_s": window, "estimated_frames": len(frames), "pipeline": summary}
