@@ -26,7 +26,6 @@ from softtip._core.units import MM
 from softtip.design.model import Design
 from softtip.systems.hall_fingertip.engine import HeldPart, interpolate_path, path_table
 from softtip.systems.hall_fingertip.realism import FabricatedUnit, Realism
-from softtip.systems.hall_fingertip.scenarios import out_and_back
 from softtip.mechanics.contact import LoadCase
 from softtip.mechanics.indenters import Board, CornerPlate, TiltedPlate
 from softtip.mechanics.poses import MagnetPoses
@@ -94,6 +93,13 @@ def _metadata(bench: Bench, record: dict, seed: int, description: str, designs: 
 
 def _roles(calibration: int, validation: int) -> list[str]:
     return [CALIBRATION] * calibration + [VALIDATION] * validation
+
+
+def out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times of a rest, a motion of ``travel_s`` seconds and its way back, and the time
+    travelled along the motion at each (0 at rest, ``travel_s`` at the far end)."""
+    times = np.arange(0.0, rest_s + 2 * travel_s, 1 / rate_hz)
+    return times, np.clip(np.minimum(times - rest_s, rest_s + 2 * travel_s - times), 0, travel_s)
 
 
 def _push_profile(times: np.ndarray, start: float, depth: float, speed: float, hold: float = 0.0,
