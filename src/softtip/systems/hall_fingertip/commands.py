@@ -62,6 +62,13 @@ def demo(
         table.add_row(axis, *cells(offline), f"{offline.get('r2', nan):.4f}", *cells(live),
                       f"{by_phase(offline, 'share', '.2f')}, {by_phase(live, 'share', '.2f')}")
     console.print(table)
+    if report["live_device_times_s"]:
+        (first, last), loop = report["live_device_times_s"], report["live_loop_s"]
+        whole = report["live_whole_loops"].get("fz_N")
+        console.print(f"live scores over device times {first:.1f}-{last:.1f} s of the stream's {loop:.1f} s loop of "
+                      "the three motions: what it covered twice weighs its phases"
+                      + (f"; over whole loops, Fz {whole['mean_abs_error_N']:.3f} N (rest/loading/unloading "
+                         f"{by_phase(whole, 'mean_abs_error_N', '.3f')} N)" if whole else ""), highlight=False)
     pipeline = report["pipeline"]
     console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "
                   f"{pipeline.get('lost_in_transit', 0)}", highlight=False)
