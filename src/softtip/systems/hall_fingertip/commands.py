@@ -26,10 +26,11 @@ def demo(
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration
-    runs on the physics twin), calibration (a network is fitted to it and saved), live (an emulated
-    fingertip streams the twin's pushes through the live pipeline, whose estimates are scored against
-    the twin's true force). It ends by naming the model it saved and the command to run it next."""
+    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration's
+    motions, pushed and released as the live stream plays them, run on the physics twin), calibration (a
+    network is fitted to them and saved), live (an emulated fingertip streams the twin's pushes through the
+    live pipeline, whose estimates are scored against the twin's true force, by phase as offline). It ends
+    by naming the model it saved and the command to run it next."""
     if context.invoked_subcommand is not None:
         return
     report = demo_report("softtip.systems.hall_fingertip.demo:run_main_demo", seed, duration, record, force,
