@@ -53,6 +53,13 @@ def test_the_held_out_scores_split_by_speed_by_hand():
     assert fast["r2"] == pytest.approx(1 - 0.32 / (14 / 3))
 
 
+def test_the_demo_calibrates_at_the_speed_its_live_stream_pushes():
+    from softtip.lab import load_protocol
+    from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S
+
+    assert load_protocol("force-cycles").parameters.speeds_mm_s == [PUSH_SPEED_MM_S]
+
+
 @pytest.fixture(scope="module")
 def coarse_cycles():
     """One quiet trial of each force cycle on a coarse twin of design D at 2 mm/s, relaxing and not."""
@@ -107,7 +114,7 @@ def test_a_force_cycle_goes_down_and_back_along_its_path_after_its_rest_in_the_a
     lone = [qlv_response(times, elastic[k], PronySeries((0.3,), (1.0,))) for k in (0, 2)]
     np.testing.assert_allclose(relaxing[0], np.maximum(lone[0], 0.0), atol=1e-9 * lone[0].max())
     np.testing.assert_array_equal(relaxing[3], relaxing[0])
-    assert (relaxing[2][41:50] < lone[1][41:50] - 0.01).all()
+    assert (relaxing[2][41:50] < lone[1][41:50] - 0.015).all()  # measured: 0.019-0.028 N less
 
 
 def replayed(scenario, model, settings, times: np.ndarray, seed: int) -> np.ndarray:

@@ -49,8 +49,8 @@ def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, da
         live = {k: {**axis_scores(truth[:, i], estimates[:, i]), "peak_true_N": float(np.abs(truth[:, i]).max())}
                 for i, k in enumerate(FORCES)}
         window = [float(times[0]), float(times[-1])]  # which part of the scenario's loop the scores cover
-        # a stream longer than its loop counts the motions it played twice twice; over whole loops it holds
-        # each motion once, as the held-out trials do
+        # a stream longer than its loop counts the loop's start twice; over whole loops each motion counts
+        # once, as in the held-out trials
         loops = np.floor((times[-1] - times[0]) / scenario.duration_s)
         covered = times < times[0] + loops * scenario.duration_s
         if loops:
