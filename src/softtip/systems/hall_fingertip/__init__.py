@@ -16,8 +16,8 @@ SYSTEM = System(
     label="S1",
     package=__name__,
     benches={"fingertip": "softtip.systems.hall_fingertip.protocols:BENCH"},
-    protocols=dict.fromkeys(("pushing", "force3", "hysteresis", "grasp-two", "grasp-positions", "contact-states",
-                             "inverter"), "fingertip"),
+    protocols=dict.fromkeys(("pushing", "force3", "force-cycles", "hysteresis", "grasp-two", "grasp-positions",
+                             "contact-states", "inverter"), "fingertip"),
     studies=(
         Study("pushing", "pushing", f"{_STUDIES}:pushing", "S1 §1: board orientation from one sensor, designs A-D, "
               "polynomial vs network"),

@@ -26,32 +26,50 @@ def demo(
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration
-    runs on the physics twin), calibration (a network is fitted to it and saved), live (an emulated
-    fingertip streams the twin's pushes through the live pipeline, whose estimates are scored against
-    the twin's true force). It ends by naming the model it saved and the command to run it next."""
+    """The main job on the built-in simulated sensor, in three steps: twin (the 3-axis force calibration's
+    motions, pushed and released as the live stream plays them, run on the physics twin), calibration (a
+    network is fitted to them and saved), live (an emulated fingertip streams the twin's pushes through the
+    live pipeline, whose estimates are scored against the twin's true force, by phase as offline). It ends
+    by naming the model it saved and the command to run it next."""
     if context.invoked_subcommand is not None:
         return
     report = demo_report("softtip.systems.hall_fingertip.demo:run_main_demo", seed, duration, record, force,
                          json_output)
     if report is None:
         return
-    table = Table(title="force estimates: validation trials (offline) and live frames from the emulator, every "
-                        "sample (rests included); at rest: the estimate's mean ± sd where no force acts")
-    for column in ("axis", "offline MAE (N)", "offline R²", "offline at rest (N)", "live MAE (N)", "live at rest (N)",
-                   "live MAE rest / loading / unloading (N)", "live peak |F| (N)"):
+    from softtip.systems.hall_fingertip.force_model import FORCES  # loaded with the demo already
+
+    speed = f"{report['live_speed_mm_s']:g} mm/s"
+    table = Table(title=f"force estimates: the calibration's held-out trials at the live stream's {speed} (offline) "
+                        "and live frames from the emulator, every sample; at rest: the estimate's mean ± sd where "
+                        "no force acts; by phase: rest / loading / unloading")
+    for column in ("axis", "offline MAE (N)", "offline at rest (N)", "offline by phase (N)", "offline R²",
+                   "live MAE (N)", "live at rest (N)", "live by phase (N)", "phase shares offline, live"):
         table.add_column(column, justify="right")
     nan = float("nan")
-    for axis, offline in report["calibration"]["validation"].items():
+
+    def by_phase(scores: dict, figure: str, form: str) -> str:
+        return "/".join(format(scores.get("by_phase", {}).get(f"{phase}_{figure}", nan), form)
+                        for phase in ("rest", "loading", "unloading"))
+
+    def cells(scores: dict) -> list[str]:
+        return [f"{scores.get('mean_abs_error_N', nan):.3f}",
+                f"{scores.get('rest_mean_N', nan):+.3f} ± {scores.get('rest_sd_N', nan):.3f}",
+                by_phase(scores, "mean_abs_error_N", ".3f")]
+
+    for axis in FORCES:
+        offline = report["calibration"]["validation"]["by_speed"].get(speed, {}).get(axis, {})
         live = report["live"].get(axis, {})
-        table.add_row(axis, f"{offline['mean_abs_error_N']:.3f}", f"{offline['r2']:.4f}",
-                      f"{offline['rest_mean_N']:+.3f} ± {offline['rest_sd_N']:.3f}",
-                      f"{live.get('mean_abs_error_N', nan):.3f}",
-                      f"{live.get('rest_mean_N', nan):+.3f} ± {live.get('rest_sd_N', nan):.3f}",
-                      " / ".join(f"{live.get('by_phase', {}).get(f'{phase}_mean_abs_error_N', nan):.3f}"
-                                 for phase in ("rest", "loading", "unloading")),
-                      f"{live.get('peak_true_N', nan):.2f}")
+        table.add_row(axis, *cells(offline), f"{offline.get('r2', nan):.4f}", *cells(live),
+                      f"{by_phase(offline, 'share', '.2f')}, {by_phase(live, 'share', '.2f')}")
     console.print(table)
+    if report["live_device_times_s"]:
+        (first, last), loop = report["live_device_times_s"], report["live_loop_s"]
+        whole = report["live_whole_loops"].get("fz_N")
+        console.print(f"live scores over device times {first:.1f}-{last:.1f} s of the stream's {loop:.1f} s loop of "
+                      "the three motions: what it covered twice weighs its phases"
+                      + (f"; over whole loops, Fz {whole['mean_abs_error_N']:.3f} N (rest/loading/unloading "
+                         f"{by_phase(whole, 'mean_abs_error_N', '.3f')} N)" if whole else ""), highlight=False)
     pipeline = report["pipeline"]
     console.print(f"{report['estimated_frames']} frames estimated live; lost frames: "
                   f"{pipeline.get('lost_in_transit', 0)}", highlight=False)

@@ -95,6 +95,13 @@ def _roles(calibration: int, validation: int) -> list[str]:
     return [CALIBRATION] * calibration + [VALIDATION] * validation
 
 
+def out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times of a rest, a motion of ``travel_s`` seconds and its way back, and the time
+    travelled along the motion at each (0 at rest, ``travel_s`` at the far end)."""
+    times = np.arange(0.0, rest_s + 2 * travel_s, 1 / rate_hz)
+    return times, np.clip(np.minimum(times - rest_s, rest_s + 2 * travel_s - times), 0, travel_s)
+
+
 def _push_profile(times: np.ndarray, start: float, depth: float, speed: float, hold: float = 0.0,
                   release_speed: float | None = None) -> np.ndarray:
     """Depth (m) over time: in the air until ``start``, down to ``depth`` at ``speed``, ``hold`` s, and
@@ -149,25 +156,34 @@ def pushing(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     return writer.to_dataset()
 
 
+def _force_motions(p: Parameters) -> dict[str, tuple[float, np.ndarray]]:
+    """The three-axis force calibration's motions: each one's depth (m) and shear (x, y in m)."""
+    return {"normal": (p.normal_depth_mm * MM, np.zeros(2)),
+            "shear-x": (p.shear_depth_mm * MM, np.array([p.shear_mm, 0.0]) * MM),
+            "shear-y": (p.shear_depth_mm * MM, np.array([0.0, p.shear_mm]) * MM)}
+
+
+def _force_trial(bench: Bench, p: Parameters, speed_mm_s: float, depth: float,
+                 shear: np.ndarray) -> tuple[float, np.ndarray]:
+    """One trial of a force motion with the bench's scatter: its speed (m/s) and its contact path's table."""
+    realism = bench.realism
+    trial_speed = speed_mm_s * MM * (1 + bench.scatter(realism.speed_sd))
+    load = LoadCase(Board(thickness=p.board_thickness_mm * MM,
+                          angle=math.radians(bench.scatter(realism.angle_sd_deg))), depth,
+                    tangential=tuple(shear), position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)),
+                    friction="stick")
+    return trial_speed, path_table(bench.fingertip.press(load, normal_steps=4, tangential_steps=8))
+
+
 def force3(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
     """S1 §1 three-axis force calibration: normal push; normal then shear along x; along y."""
     writer = TrialWriter(1, labels={"fx_N": "N", "fy_N": "N", "fz_N": "N"},
                          conditions={"motion": "1", "role": "1"},
                          metadata=_metadata(bench, record, seed, "3-axis force calibration"))
-    unit, realism = bench.unit(), bench.realism
-    motions = {"normal": (p.normal_depth_mm, (0.0, 0.0)),
-               "shear-x": (p.shear_depth_mm, (p.shear_mm, 0.0)),
-               "shear-y": (p.shear_depth_mm, (0.0, p.shear_mm))}
-    for name, (depth_mm, shear_mm) in motions.items():
+    unit = bench.unit()
+    for name, (depth, shear) in _force_motions(p).items():
         for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
-            depth = depth_mm * MM
-            shear = np.array(shear_mm) * MM
-            trial_speed = p.speed_mm_s * MM * (1 + bench.scatter(realism.speed_sd))
-            load = LoadCase(Board(thickness=p.board_thickness_mm * MM,
-                                  angle=math.radians(bench.scatter(realism.angle_sd_deg))), depth,
-                            tangential=tuple(shear), position=tuple(bench.scatter(realism.position_sd_mm * MM, 2)),
-                            friction="stick")
-            table = path_table(bench.fingertip.press(load, normal_steps=4, tangential_steps=8))
+            trial_speed, table = _force_trial(bench, p, p.speed_mm_s, depth, shear)
             start = p.pre_contact_s
             shear_time = np.linalg.norm(shear) / trial_speed
             times = bench.times(start + depth / trial_speed + shear_time)
@@ -178,6 +194,42 @@ def force3(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
             readings = unit.record(poses, times, bench.rng)
             writer.add({"time_s": times, **channel_columns(readings), **_force_labels(force, times, bench.prony)},
                        {"motion": name, "role": role})
+    return writer.to_dataset()
+
+
+def force_cycles(bench: Bench, p: Parameters, seed: int, record: dict) -> Dataset:
+    """The three-axis force calibration's motions as a live use plays them: at each speed, repetitions of
+    the three motions in turn from a rested pad, each trial ``pre_contact_s`` in the air, the normal push
+    (or the push then the shear) and back along the same path (the release). The readings are taken from
+    the mean of the ones in the air, as the live pipeline's baseline is; the force from the repetition's
+    whole history, as a stream's is: the material still relaxes from the previous press (its time
+    constant is longer than the rest in the air)."""
+    writer = TrialWriter(1, labels={"fx_N": "N", "fy_N": "N", "fz_N": "N"},
+                         conditions={"motion": "1", "speed_mm_s": "mm/s", "role": "1"},
+                         metadata=_metadata(bench, record, seed, "3-axis force load/unload cycles"))
+    unit = bench.unit()
+    for speed_mm_s in p.speeds_mm_s:
+        for role in _roles(int(p.calibration_trials), int(p.validation_trials)):
+            trials = []  # each motion's times, readings and elastic force, in turn
+            for name, (depth, shear) in _force_motions(p).items():
+                trial_speed, table = _force_trial(bench, p, speed_mm_s, depth, shear)
+                reach = float(np.linalg.norm(shear))
+                times, travelled_s = out_and_back(bench.rate_hz, p.pre_contact_s, (depth + reach) / trial_speed)
+                along = travelled_s * trial_speed
+                direction = shear / max(reach, 1e-12)
+                poses, force = interpolate_path(table, np.minimum(along, depth),
+                                                np.clip(along - depth, 0, reach)[:, None] * direction[None])
+                readings = unit.record(poses, times, bench.rng)
+                trials.append((name, times, readings - readings[times < p.pre_contact_s].mean(axis=0), force))
+            starts = np.cumsum([0.0] + [times[-1] + 1 / bench.rate_hz for _, times, *_ in trials[:-1]])
+            labels = _force_labels(np.concatenate([force for *_, force in trials]),
+                                   np.concatenate([start + times for start, (_, times, *_) in zip(starts, trials)]),
+                                   bench.prony)
+            bounds = np.cumsum([0] + [len(times) for _, times, *_ in trials])
+            for (name, times, readings, _), first, last in zip(trials, bounds[:-1], bounds[1:]):
+                writer.add({"time_s": times, **channel_columns(readings),
+                            **{k: v[first:last] for k, v in labels.items()}},
+                           {"motion": name, "speed_mm_s": float(speed_mm_s), "role": role})
     return writer.to_dataset()
 
 

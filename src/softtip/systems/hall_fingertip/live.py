@@ -30,7 +30,7 @@ def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress =
     return scenario
 
 
-PUSH_SPEED_MM_S = 2.0  # faster than the calibration (0.5 mm/s): the three motions loop in about 17 s
+PUSH_SPEED_MM_S = 2.0  # the three motions loop in about 17 s; the force calibration pushes at this speed too
 
 
 def live_pushes(protocol: Protocol, progress: Progress = SILENT) -> TwinScenario:
@@ -42,8 +42,8 @@ def live_pushes(protocol: Protocol, progress: Progress = SILENT) -> TwinScenario
 
 def push_scenario(progress: Progress = SILENT, check: StreamCheck = accept_any_stream) -> LiveScenario:
     """One fingertip (design D): a normal push, a push then shear along x, along y, in a loop (the main
-    demo's), with the 3-axis force network trained on the force-calibration protocol."""
-    protocol = load_protocol("force3")
+    demo's), with the 3-axis force network trained on the force-calibration cycles."""
+    protocol = load_protocol("force-cycles")
     check(len(protocol.design.sensor_positions), None)
     scenario = live_pushes(protocol, progress)
     with progress.task("the force network trained on the twin (kept in the cache)"):

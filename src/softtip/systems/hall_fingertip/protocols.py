@@ -75,6 +75,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
                 "validation_trials": 5, "depth_mm": 3.0, "speed_mm_s": 1.0},
     "force3": {**GEN1, "calibration_trials": 10, "validation_trials": 5, "normal_depth_mm": 3.0,
                "shear_depth_mm": 2.0, "shear_mm": 2.0, "speed_mm_s": 0.5},
+    # force3's motions as the live use plays them: each released along its path after 2 s in the air
+    "force-cycles": {**GEN1, "pre_contact_s": 2.0, "calibration_trials": 10, "validation_trials": 5,
+                     "normal_depth_mm": 3.0, "shear_depth_mm": 2.0, "shear_mm": 2.0, "speeds_mm_s": [2.0]},
     # the thesis's test on generation 2 (1 mm/s, 3 s rest, 50 Hz; its board a 1.7 mm PCB), and two slower speeds
     "hysteresis": {**GEN2, "rate_hz": 50.0, "board_thickness_mm": 1.7, "speeds_mm_s": [0.25, 0.5, 1.0],
                    "trials": 10, "depth_mm": 3.0, "rest_s": 3.0},
@@ -100,9 +103,10 @@ DEFAULTS: dict[str, dict[str, Any]] = {
                  "seat_compliance_mm_per_N": 1.0, "rim_compliance_mm_per_N": 0.2},
 }
 PARAMETER_SCHEMAS: dict[str, type] = {name: _parameters_schema(defaults) for name, defaults in DEFAULTS.items()}
-RUNNERS = {"pushing": experiments.pushing, "force3": experiments.force3, "hysteresis": experiments.hysteresis,
-           "grasp-two": experiments.grasp_two, "grasp-positions": experiments.grasp_positions,
-           "contact-states": experiments.contact_states, "inverter": experiments.inverter}
+RUNNERS = {"pushing": experiments.pushing, "force3": experiments.force3, "force-cycles": experiments.force_cycles,
+           "hysteresis": experiments.hysteresis, "grasp-two": experiments.grasp_two,
+           "grasp-positions": experiments.grasp_positions, "contact-states": experiments.contact_states,
+           "inverter": experiments.inverter}
 
 
 _HYSTERESIS = published_table("hysteresis")

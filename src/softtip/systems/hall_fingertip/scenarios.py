@@ -45,13 +45,6 @@ class TwinScenario:
         return np.column_stack([np.interp(t, self.times_s, self.force_N[:, k]) for k in range(3)])
 
 
-def _out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sample times of a rest, a motion of ``travel_s`` seconds and its way back, and the time
-    travelled along the motion at each (0 at rest, ``travel_s`` at the far end)."""
-    times = np.arange(0.0, rest_s + 2 * travel_s, 1 / rate_hz)
-    return times, np.clip(np.minimum(times - rest_s, rest_s + 2 * travel_s - times), 0, travel_s)
-
-
 def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = None, rate_hz: float = 200.0,
                      rest_s: float = 2.0, progress: Progress = SILENT) -> TwinScenario:
     """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
@@ -65,7 +58,7 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     from softtip.mechanics.poses import MagnetPoses
     from softtip.mechanics.viscoelastic import qlv_response
     from softtip.systems.hall_fingertip.engine import interpolate_path, path_table
-    from softtip.systems.hall_fingertip.experiments import material_prony
+    from softtip.systems.hall_fingertip.experiments import material_prony, out_and_back
     from softtip.systems.hall_fingertip.protocols import fingertip_for
     from softtip.systems.hall_fingertip.realism import FabricatedUnit
 
@@ -84,7 +77,7 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
         table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
         reach = float(np.linalg.norm(shear))
         # air, down, shear, back along the same path, air
-        times, travelled_s = _out_and_back(rate_hz, rest_s, (depth + reach) / speed)
+        times, travelled_s = out_and_back(rate_hz, rest_s, (depth + reach) / speed)
         along = travelled_s * speed
         depth_now = np.minimum(along, depth)
         progress = np.clip(along - depth, 0, reach)
@@ -109,11 +102,12 @@ def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, sp
     world). ``force_N`` holds the contact force on part B along its normal in the z column."""
     from dataclasses import replace
 
+    from softtip.systems.hall_fingertip.experiments import out_and_back
     from softtip.systems.hall_fingertip.insertion_world import CASES, InsertionWorld
 
     quiet = replace(protocol, realism=replace(protocol.realism, noise=False))
     speed, top, bottom = speed_mm_s * MM, 2.0 * MM, -0.6 * MM
-    times, travelled_s = _out_and_back(rate_hz, rest_s, (top - bottom) / speed)
+    times, travelled_s = out_and_back(rate_hz, rest_s, (top - bottom) / speed)
     pose = top - travelled_s * speed
     segments_t, fields, forces = [], [], []
     clock = 0.0
