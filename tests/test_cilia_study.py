@@ -42,6 +42,12 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure(stage_names):
     assert study.moment_gap[0].fit.moment == pytest.approx(tip_load.moment, rel=0.05)
     budget = study.balance.budget
     assert 0 < budget.minimum_force[budget.best] and budget.force[budget.best] <= 26e-3
+    # by default the minimum force reads the composite's uniformly magnetised cones, at the steps around the
+    # equal dipoles' best (whose budget runs along the whole curve)
+    chain, cone = study.balance.chain_budget, study.balance.cone_budget
+    assert budget is cone and 3 <= cone.force.size <= 5 and chain.force.size > cone.force.size
+    assert np.any(np.isclose(cone.force, chain.force[chain.best], rtol=1e-9))
+    assert np.all((cone.force >= chain.force.min()) & (cone.force <= chain.force.max()))
     # a tilted die bends the pillars from the first newton (measured 446 µV at 5 mN on this 16-step plan against
     # 109 µV untilted, read off its first step at 11.7 mN: the area elements under the roots see the compression);
     # a plate that turns gives way, and a fixed one does not
@@ -62,5 +68,7 @@ def test_settings_are_validated_before_any_work():
         CiliaSettings(points=2)
     with pytest.raises(DieError, match=r"cilia.sensor = 'Z': expected one of X, Y"):
         CiliaSettings(sensor="Z")
+    with pytest.raises(DieError, match=r"cilia.magnetisation = 'dipoles': expected one of uniform, equal"):
+        CiliaSettings(magnetisation="dipoles")
     with pytest.raises(DieError, match="die file .*none.toml does not exist"):
         run_study(CiliaSettings(die="none.toml"), seed=0)

@@ -219,6 +219,7 @@ def test_the_protocol_records_the_brushings_and_the_study_reads_them_back_from_t
     ("rig_tilts_deg = [20.0]", r"rig_tilts_deg"),
     ("gap_causes = 1", r"gap_causes = 1: expected true or false"),
     ("balance_chain_count = 0", r"balance_chain_count = 0"),
+    ('magnetisation = "dipoles"', r"magnetisation = 'dipoles': expected one of uniform, equal"),
     ("brush_length_mm = 2.001", r"brush_length_mm = 2.001: expected a stroke longer than the pillars' spread"),
     ("truth_diameter_um = 700.0", r"parameters.truth_diameter_um = 700: pillars wider than they are high \(1000 um\)"),
     ("truth_moment_memu = 70.0", r"parameters.truth_moment_memu = 70: more than a pillar of solid NdFeB holds"),
