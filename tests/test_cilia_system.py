@@ -305,8 +305,9 @@ def test_quick_runs_a_coarse_protocol():
     results = report.outcome.results
     assert results["design_search"]["steps"] == 3 and results["roughness"]["recordings"] == 4 * (2 * 3 + 2)
     assert report.provenance["quick (smoke run)"] == "yes: fewer trials than the study, a coarse protocol"
-    # measured 44 s of CPU (146 s wall at a load average of 9 on two cores): the meanders' 25 µm area
-    # elements over four squares each, the balance test's 40 dipoles read three ways, the continuous cones' check
+    # measured 55 s of CPU (softtip reproduce cilia --quick; 13.5 min wall at a load average of 22 on two cores):
+    # the meanders' 25 µm area elements over four squares each, the balance test's 40 dipoles read three ways
+    # and its minimum force's steps as cones, the continuous cones' check
     assert cpu < 60
 
 

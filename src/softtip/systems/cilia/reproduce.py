@@ -567,9 +567,10 @@ def _notes(study: CiliaStudy) -> list[str]:
         "how much the fitted moment depends on it.",
         f"The balance test's chain ({study.settings.balance_chain_count} equal dipoles a pillar) converges in its "
         "dipoles, but to a line magnet along the centre line, where the pillars' roots are 320 µm wide and 10 µm "
-        "over the sensors. Their continuous reference (stacks of uniformly magnetised cylinders) cannot read the "
-        "buckled and lying roots, whose first cylinders then cross the sensing plane; so the balance-mode voltages "
-        "past the buckling (the range's signal, the minimum force's slope) are not settled.",
+        "over the sensors. The minimum force reads the pillars as what the composite is "
+        f"(magnetisation = {study.settings.magnetisation}; uniform: each a uniformly magnetised cone integrated over "
+        "its volume in cells, the part of a turned root below the die's surface left out) at the steps around the "
+        "chain's best; the balance curve, its range and the figures are read with the chain.",
     ]
     if study.fit.at_bound:
         notes.append("softtip's own fit ended on a bound: the curve does not hold that parameter.")
