@@ -72,3 +72,16 @@ def test_settings_are_validated_before_any_work():
         CiliaSettings(magnetisation="dipoles")
     with pytest.raises(DieError, match="die file .*none.toml does not exist"):
         run_study(CiliaSettings(die="none.toml"), seed=0)
+
+
+@pytest.mark.slow
+def test_the_published_chains_equal_dipoles_read_the_minimum_force_when_asked():
+    settings = CiliaSettings(points=12, trials=2, depths_um=(10.0,), meander_scales=(1.1,), gap_causes=False,
+                             rig_tilts_deg=(), rig_plate_stiffnesses_uNm=(), magnetisation="equal")
+    balance = run_study(settings, seed=1).balance
+    budget, cone = balance.budget, balance.cone_budget
+    assert budget is balance.chain_budget and budget.force.size > cone.force.size
+    # the two readings differ at the same steps: the cones' slope there is not the line of dipoles'
+    shared = np.abs(budget.force[:, None] - cone.force[None, :]).argmin(axis=0)  # the cones' steps in the chain's
+    assert np.allclose(budget.force[shared], cone.force, rtol=1e-9)
+    assert not np.allclose(budget.slope[shared], cone.slope, rtol=0.1)
