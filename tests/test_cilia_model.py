@@ -10,6 +10,7 @@ import magpylib as magpy
 import numpy as np
 import pytest
 
+from softtip.magnetics.dipoles import Rectangles, rectangle_average_in_plane
 from softtip.mechanics.rod import PlateContact, lower_plate, touching_height
 from softtip.systems.cilia.layout import DieError, read_die
 from softtip.systems.cilia.model import BalancePlate, CiliaModel, element_fields, pillar_dipoles
@@ -197,3 +198,21 @@ def test_the_balance_tests_chain_converges_by_40_dipoles_not_at_the_published_10
     # measured: 40 within 4.3 % of the curve's largest change, 10 off by 120 %
     assert gaps[40] < 0.05
     assert gaps[10] > 0.5
+
+
+def test_the_curves_fields_summed_per_load_equal_each_element_taken_alone():
+    # the shared-corner kernel sums its corners over a load's dipoles before the elements gather them; each
+    # element alone takes the per-rectangle closed form, dipole by dipole (the kernel's other branch): every
+    # seventh element, over the whole of both meanders
+    forces = np.array([0.0, 2e-3, 14e-3, 26e-3])
+    dipoles = pillar_dipoles(DIE.pillars, MODEL.shapes(forces), 10)
+    for sensor in ("X", "Y"):
+        meander = DIE.meander(sensor)
+        summed = element_fields(meander, dipoles)
+        cells = meander.elements
+        alone = np.stack([rectangle_average_in_plane(Rectangles(cells.x[i:i + 1], cells.y[i:i + 1], cells.z),
+                                                     dipoles.positions, dipoles.moments, (meander.axis,))[:, 0, 0]
+                          for i in range(0, len(cells), 7)], axis=1)
+        summed = summed[:, ::7]
+        # measured: 1.2e-13 of the largest field at worst
+        assert np.max(np.abs(summed - alone)) <= 1e-12 * np.max(np.abs(alone))

@@ -42,6 +42,12 @@ def test_the_study_fits_the_twins_curve_and_reports_every_figure(stage_names):
     assert study.moment_gap[0].fit.moment == pytest.approx(tip_load.moment, rel=0.05)
     budget = study.balance.budget
     assert 0 < budget.minimum_force[budget.best] and budget.force[budget.best] <= 26e-3
+    # by default the minimum force reads the composite's uniformly magnetised cones, at the steps around the
+    # equal dipoles' best (whose budget runs along the whole curve)
+    chain, cone = study.balance.chain_budget, study.balance.cone_budget
+    assert budget is cone and 3 <= cone.force.size <= 5 and chain.force.size > cone.force.size
+    assert np.any(np.isclose(cone.force, chain.force[chain.best], rtol=1e-9))
+    assert np.all((cone.force >= chain.force.min()) & (cone.force <= chain.force.max()))
     # a tilted die bends the pillars from the first newton (measured 446 µV at 5 mN on this 16-step plan against
     # 109 µV untilted, read off its first step at 11.7 mN: the area elements under the roots see the compression);
     # a plate that turns gives way, and a fixed one does not
@@ -62,5 +68,20 @@ def test_settings_are_validated_before_any_work():
         CiliaSettings(points=2)
     with pytest.raises(DieError, match=r"cilia.sensor = 'Z': expected one of X, Y"):
         CiliaSettings(sensor="Z")
+    with pytest.raises(DieError, match=r"cilia.magnetisation = 'dipoles': expected one of uniform, equal"):
+        CiliaSettings(magnetisation="dipoles")
     with pytest.raises(DieError, match="die file .*none.toml does not exist"):
         run_study(CiliaSettings(die="none.toml"), seed=0)
+
+
+@pytest.mark.slow
+def test_the_published_chains_equal_dipoles_read_the_minimum_force_when_asked():
+    settings = CiliaSettings(points=12, trials=2, depths_um=(10.0,), meander_scales=(1.1,), gap_causes=False,
+                             rig_tilts_deg=(), rig_plate_stiffnesses_uNm=(), magnetisation="equal")
+    balance = run_study(settings, seed=1).balance
+    budget, cone = balance.budget, balance.cone_budget
+    assert budget is balance.chain_budget and budget.force.size > cone.force.size
+    # the two readings differ at the same steps: the cones' slope there is not the line of dipoles'
+    shared = np.abs(budget.force[:, None] - cone.force[None, :]).argmin(axis=0)  # the cones' steps in the chain's
+    assert np.allclose(budget.force[shared], cone.force, rtol=1e-9)
+    assert not np.allclose(budget.slope[shared], cone.slope, rtol=0.1)

@@ -32,6 +32,8 @@ from scipy.constants import mu_0
 _MU0_OVER_4PI = mu_0 / (4.0 * np.pi)
 # dipole–observer pairs per chunk of the rectangle kernel: keeps its temporaries near 10 MB
 _PAIRS_PER_CHUNK = 1 << 18
+# corners' primitives summed per batch at a time: keeps those sums near 16 MB
+_SUMMED_CORNERS = 1 << 21
 
 
 class DipoleError(ValueError):
@@ -171,10 +173,11 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
         raise DipoleError(f"axes = {axes!r}: expected in-plane axes among 0 (x) and 1 (y)")
     if np.any(positions[..., 2] == rectangles.z):
         raise DipoleError("positions: a dipole lies in the rectangles' plane")
+    per_batch = positions.shape[-2]
     flat_positions = positions.reshape(-1, 3)
     flat_moments = moments.reshape(-1, 3)
+    batches = int(np.prod(positions.shape[:-2]))
     count = len(rectangles)
-    out = np.zeros((flat_positions.shape[0], count, len(axes)))
     xs, x_index = np.unique(rectangles.x, return_inverse=True)
     ys, y_index = np.unique(rectangles.y, return_inverse=True)
     (x_low, x_high), (y_low, y_high) = x_index.reshape(-1, 2).T, y_index.reshape(-1, 2).T
@@ -182,54 +185,72 @@ def rectangle_average_in_plane(rectangles: Rectangles, positions: ArrayLike, mom
     # have far fewer distinct corners than 4 each: the potential's line integral is then taken once per corner
     corners = xs.size * ys.size
     if corners < 4 * count:
+        out = np.empty((batches, count, len(axes)))
         chunk = max(1, _PAIRS_PER_CHUNK // corners)
         # each element's four corners as flat indices into the (X, Y) grid of corners
         high_high, high_low = x_high * ys.size + y_high, x_high * ys.size + y_low
         low_high, low_low = x_low * ys.size + y_high, x_low * ys.size + y_low
+        # the corners' primitives are summed over each batch's dipoles before the elements gather them (the
+        # gather is linear): one gather per batch, not per dipole; batches are taken in groups that bound the sums
+        group = max(1, _SUMMED_CORNERS // corners)
+        summed = np.empty((min(group, batches), len(axes), corners))
         # the two (d, X, Y) buffers are made once: fresh ones per chunk cost the kernel page faults, not numbers
         distances = np.empty((min(chunk, flat_positions.shape[0]), xs.size, ys.size))
         primitives = np.empty_like(distances)
-        for start in range(0, flat_positions.shape[0], chunk):
-            p = flat_positions[start:start + chunk]  # (d, 3)
-            m = flat_moments[start:start + chunk]
-            # offsets to the corners' lines (d, X) and (d, Y), heights (d, 1): only the distance and the
-            # primitive itself are taken on the full (d, X, Y) grid, in place
-            dx, dy = xs[None, :] - p[:, 0:1], ys[None, :] - p[:, 1:2]
-            height = rectangles.z - p[:, 2:3]
-            height2 = height * height
-            root, primitive = distances[:p.shape[0]], primitives[:p.shape[0]]
-            np.add((dx * dx)[:, :, None], (dy * dy + height2)[:, None, :], out=root)
-            np.sqrt(root, out=root)  # (d, X, Y): each corner's distance
-            for column, axis in enumerate(axes):
-                # the primitive of ∫ φ d(along) at each corner (module notes), across = the edges across ``axis``
-                across, along = (dx, dy) if axis == 0 else (dy, dx)
-                slope = (m[:, axis:axis + 1] * across + m[:, 2:3] * height) / (across * across + height2)
-                if axis == 0:
-                    np.multiply(slope[:, :, None], along[:, None, :], out=primitive)
-                else:
-                    np.multiply(along[:, :, None], slope[:, None, :], out=primitive)
-                np.subtract(primitive, m[:, 1 - axis, None, None], out=primitive)
-                np.divide(primitive, root, out=primitive)
-                flat = primitive.reshape(primitive.shape[0], -1)
+        for first in range(0, batches, group):
+            last = min(first + group, batches)
+            sums = summed[:last - first]
+            sums.fill(0.0)
+            for start in range(first * per_batch, last * per_batch, chunk):
+                stop = min(start + chunk, last * per_batch)
+                p = flat_positions[start:stop]  # (d, 3)
+                m = flat_moments[start:stop]
+                # the chunk's dipoles by batch: contiguous runs, each summed into its batch's row
+                owners = np.arange(start, stop) // per_batch
+                runs = np.flatnonzero(np.diff(owners, prepend=-1))
+                rows = owners[runs] - first
+                # offsets to the corners' lines (d, X) and (d, Y), heights (d, 1): only the distance and the
+                # primitive itself are taken on the full (d, X, Y) grid, in place
+                dx, dy = xs[None, :] - p[:, 0:1], ys[None, :] - p[:, 1:2]
+                height = rectangles.z - p[:, 2:3]
+                height2 = height * height
+                root, primitive = distances[:p.shape[0]], primitives[:p.shape[0]]
+                np.add((dx * dx)[:, :, None], (dy * dy + height2)[:, None, :], out=root)
+                np.sqrt(root, out=root)  # (d, X, Y): each corner's distance
+                for column, axis in enumerate(axes):
+                    # the primitive of ∫ φ d(along) at each corner (module notes), across = the edges across ``axis``
+                    across, along = (dx, dy) if axis == 0 else (dy, dx)
+                    slope = (m[:, axis:axis + 1] * across + m[:, 2:3] * height) / (across * across + height2)
+                    if axis == 0:
+                        np.multiply(slope[:, :, None], along[:, None, :], out=primitive)
+                    else:
+                        np.multiply(along[:, :, None], slope[:, None, :], out=primitive)
+                    np.subtract(primitive, m[:, 1 - axis, None, None], out=primitive)
+                    np.divide(primitive, root, out=primitive)
+                    sums[rows, column] += np.add.reduceat(primitive.reshape(primitive.shape[0], -1), runs, axis=0)
+            for column in range(len(axes)):
+                flat = sums[:, column]
 
                 def at(corner: NDArray) -> NDArray:  # np.take: twice as fast as indexing flat[:, corner]
                     return np.take(flat, corner, axis=1)
 
                 # either axis: (upper edge across − lower edge across) of (upper end − lower end) along it
-                out[start:start + chunk, :, column] = at(high_high) - at(high_low) - at(low_high) + at(low_low)
-    else:
-        chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
-        edges = (rectangles.x, rectangles.y)
-        for start in range(0, flat_positions.shape[0], chunk):
-            p = flat_positions[start:start + chunk, None, :]
-            m = flat_moments[start:start + chunk, None, :]
-            offsets = [edges[axis][None, :, :] - p[..., axis:axis + 1] for axis in (0, 1)]  # (d, R, 2) each
-            height = rectangles.z - p[..., 2:3]
-            for column, axis in enumerate(axes):
-                # B_axis: the potential along the two edges across ``axis``, integrated along the other
-                other = 1 - axis
-                along = _edge_integral(offsets[axis], offsets[other][..., 0:1], offsets[other][..., 1:2], height,
-                                       m[..., axis:axis + 1], m[..., other:other + 1], m[..., 2:3])
-                out[start:start + chunk, :, column] = along[..., 1] - along[..., 0]
+                out[first:last, :, column] = at(high_high) - at(high_low) - at(low_high) + at(low_low)
+        out *= -_MU0_OVER_4PI / rectangles.area[None, :, None]
+        return out.reshape(*positions.shape[:-2], count, len(axes))
+    out = np.zeros((flat_positions.shape[0], count, len(axes)))
+    chunk = max(1, _PAIRS_PER_CHUNK // max(count, 1))
+    edges = (rectangles.x, rectangles.y)
+    for start in range(0, flat_positions.shape[0], chunk):
+        p = flat_positions[start:start + chunk, None, :]
+        m = flat_moments[start:start + chunk, None, :]
+        offsets = [edges[axis][None, :, :] - p[..., axis:axis + 1] for axis in (0, 1)]  # (d, R, 2) each
+        height = rectangles.z - p[..., 2:3]
+        for column, axis in enumerate(axes):
+            # B_axis: the potential along the two edges across ``axis``, integrated along the other
+            other = 1 - axis
+            along = _edge_integral(offsets[axis], offsets[other][..., 0:1], offsets[other][..., 1:2], height,
+                                   m[..., axis:axis + 1], m[..., other:other + 1], m[..., 2:3])
+            out[start:start + chunk, :, column] = along[..., 1] - along[..., 0]
     out *= -_MU0_OVER_4PI / rectangles.area[None, :, None]
     return out.reshape(*positions.shape[:-1], count, len(axes)).sum(axis=-3)

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Callable
@@ -32,6 +33,9 @@ from softtip.systems.cilia.study import measure
 # run's wall time; on a shared machine the wall time is the load's), the wall time printed beside it
 CURVE_TARGET_S, FIT_TARGET_S, FE_TARGET_S = 0.3, 5.0, 120.0
 FE_MESH_SIZE = 60e-6  # m: ~8.7k unknowns; about 2.5 % too soft in bending at this size (test_pillar_fe_convergence)
+# N per pillar: the largest load step the FE curve takes, the default run's (26 mN in 6 loads of 2 steps, 5
+# pillars); Newton from the straight pillar does not converge in 30 iterations at 1.3 mN (2 loads of 2 steps)
+FE_STEP_N = 0.45e-3
 
 
 @dataclass(frozen=True)
@@ -74,7 +78,8 @@ def _fe_curve(model: CiliaModel, force_max: float, loads: int, repeats: int) -> 
     meander = model.die.meanders[0]
     start, start_cpu = time.perf_counter(), time.process_time()
     solid = PillarFE(rod, size=FE_MESH_SIZE, slices=model.chain_count)
-    solution = solid.solve(np.concatenate([[0.0], forces / model.pillar_count]), steps_per_force=2, tolerance=1e-7)
+    steps = max(2, math.ceil(force_max / loads / model.pillar_count / FE_STEP_N))
+    solution = solid.solve(np.concatenate([[0.0], forces / model.pillar_count]), steps_per_force=steps, tolerance=1e-7)
     points, tangents = solid.centreline(solution)
     volts = meander.readout.voltage(element_fields(meander, chain_dipoles(pillars, points, tangents)))
     fe_s = Timing(time.perf_counter() - start, time.process_time() - start_cpu)

@@ -15,8 +15,10 @@ Load modes (every pillar takes the same share of the force; the five are identic
 The field of each pillar is a chain of ``chain_count`` point dipoles at the midpoints of equal pieces of
 its deformed centre line, along the local tangent, each with 1/K of its moment (as published); the
 in-plane field along each sensor's axis is averaged exactly over every spin valve, which saturates on its
-own. Voltages are across a sensor at constant current; a curve's ``change`` is relative to zero force
-(the reading's initial value subtracted).
+own. The balance test may read each pillar instead as what the composite is, a uniformly magnetised cone,
+integrated over its volume in cells finest near the sensors (:func:`cone_cells`). Voltages are across a
+sensor at constant current; a curve's ``change`` is relative to zero force (the reading's initial value
+subtracted).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from softtip.mechanics.rod import (
 from softtip.systems.cilia.layout import Die, DieError, Meander, Pillars
 
 LoadMode = Literal["paper", "paper-follower"]
+BalanceMagnet = Literal["chain", "cone"]
 
 
 @dataclass(frozen=True)
@@ -165,6 +168,70 @@ def chain_dipoles(pillars: Pillars, points: NDArray, tangents: NDArray,
     return Dipoles(chain.positions.reshape(batch, -1, 3), chain.moments.reshape(batch, -1, 3))
 
 
+@dataclass(frozen=True)
+class ConeCells:
+    """How finely :func:`cone_cells` cuts each pillar: ``slices`` along it (their lengths growing from the
+    root as the ``grading`` power of the arc length), each slice's cross-section into cells about ``size``
+    times the slice's height over the sensing plane at rest (Gauss–Legendre rings × equal sectors): a cell
+    is a point dipole, which stands for its piece of magnet where the sensors are farther than its size."""
+
+    slices: int = 64
+    size: float = 1.0
+    grading: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.slices, int) and self.slices >= 1 and math.isfinite(self.size) and self.size > 0
+                and math.isfinite(self.grading) and 1.0 <= self.grading <= 4.0):
+            raise DieError(f"cone cells {self!r}: expected a positive integer of slices, a positive size and a "
+                           "grading from 1 to 4")
+
+
+def cone_cells(pillars: Pillars, shapes: RodShapes, depth: float, cells: ConeCells = ConeCells()) -> Dipoles:
+    """(B, P·C) the pillars bent to ``shapes`` as uniformly magnetised cones, their volume integrated cell by
+    cell: each cell of each slice's cross-section (a disc of the cone's local diameter, turned as the rod's
+    sections are) a dipole along the section's axis carrying the magnetisation times its volume; the sensing plane lies
+    ``depth`` (m) below the bases. A cell the bent root would carry below the die's surface (the bases'
+    plane) is left out: the magnet cannot go below its base."""
+    rod = pillars.rod
+    edges = np.linspace(0.0, 1.0, cells.slices + 1) ** cells.grading
+    middles, lengths = (edges[:-1] + edges[1:]) / 2, np.diff(edges) * rod.length
+    radii = (rod.base_diameter + (rod.tip_diameter - rod.base_diameter) * middles) / 2  # (K,)
+    sizes = cells.size * (middles * rod.length + depth)
+    owner, across, angle, volume = [], [], [], []
+    for index, (radius, size, length) in enumerate(zip(radii, sizes, lengths, strict=True)):
+        rings, sectors = max(1, math.ceil(radius / size)), max(4, math.ceil(2 * math.pi * radius / size))
+        nodes, weights = np.polynomial.legendre.leggauss(rings)
+        rho = radius * (1 + nodes) / 2
+        # each cell's volume: its ring's ∫ρ dρ by Gauss, its sector's angle, the slice's length
+        ring_volume = radius / 2 * weights * rho * (2 * math.pi / sectors) * length
+        phi = 2 * math.pi * (np.arange(sectors) + 0.5) / sectors
+        owner.append(np.full(rings * sectors, index))
+        across.append(np.repeat(rho, sectors))
+        angle.append(np.tile(phi, rings))
+        volume.append(np.repeat(ring_volume, sectors))
+    owner, across, angle, volume = (np.concatenate(v) for v in (owner, across, angle, volume))
+    points, _ = shapes.centreline(middles)  # (B, K, 2) in the bending plane (along, up)
+    # each section turns with the rod's segments, interpolated between their middles; at the base by the
+    # base's own turn (none when clamped: the bonded face stays flat on the die)
+    segments = shapes.angles.shape[1]
+    base = np.zeros(shapes.angles.shape[0]) if rod.base_stiffness is None else shapes.angles[:, 0]
+    where = np.concatenate([[0.0], (np.arange(segments) + 0.5) / segments])
+    turns = np.stack([np.interp(middles, where, np.concatenate([[b], row])) for b, row in zip(base, shapes.angles)])
+    points, turns = points[:, owner], turns[:, owner]  # (B, C, 2), (B, C)
+    tangents = np.stack([np.sin(turns), np.cos(turns)], axis=-1)
+    normals = np.stack([np.cos(turns), -np.sin(turns)], axis=-1)  # in the plane, across the tangent
+    in_plane = (across * np.cos(angle))[None, :, None] * normals
+    positions = np.concatenate([points[..., :1] + in_plane[..., :1],
+                                np.broadcast_to(across * np.sin(angle), points.shape[:-1])[..., None],
+                                points[..., 1:] + in_plane[..., 1:]], axis=-1)
+    directions = np.concatenate([tangents[..., :1], np.zeros_like(tangents[..., :1]), tangents[..., 1:]], axis=-1)
+    kept = positions[..., 2] >= 0.0
+    chain = chain_dipoles(replace(pillars, moment=1.0), positions, directions)  # the cells turned and placed
+    # chain_dipoles gave each cell 1/C: each carries instead the magnetisation times its own volume
+    scale = np.tile(pillars.moment * volume.size * volume / rod.volume * kept, (1, len(pillars.positions)))
+    return Dipoles(chain.positions, chain.moments * scale[..., None])
+
+
 def element_fields(meander: Meander, dipoles: Dipoles) -> NDArray[np.float64]:
     """(B, n) field (T) along the meander's sensing axis, averaged over each of its spin valves."""
     return rectangle_average_in_plane(meander.elements, dipoles.positions, dipoles.moments, (meander.axis,))[..., 0]
@@ -182,13 +249,18 @@ class CiliaModel:
     """The die's forward model. ``chain_count`` dipoles per pillar, carrying ``chain_shares`` of its moment
     (base first; None: equal shares, as published: a uniform magnetisation of a uniform pillar); ``mode``
     the paper's load reading; ``balance_chain_count`` the equal dipoles per pillar of the balance test (None:
-    ``chain_count``), whose buckled and lying roots need more than a tip-loaded pillar."""
+    ``chain_count``), whose buckled and lying roots need more than a tip-loaded pillar; ``balance_magnet`` how
+    the balance test reads the pillars: ``chain`` those dipoles, ``cone`` each pillar a uniformly magnetised
+    cone integrated over its volume in ``cells`` (:func:`cone_cells`: the moment by volume, the wide root
+    resolved near the sensors)."""
 
     die: Die
     chain_count: int = 10
     mode: LoadMode = "paper"
     chain_shares: tuple[float, ...] | None = None
     balance_chain_count: int | None = None
+    balance_magnet: BalanceMagnet = "chain"
+    cells: ConeCells = ConeCells()
 
     def __post_init__(self) -> None:
         if not isinstance(self.chain_count, int) or self.chain_count < 1:
@@ -199,6 +271,8 @@ class CiliaModel:
         if self.chain_shares is not None and (len(self.chain_shares) != self.chain_count
                                               or min(self.chain_shares) < 0 or abs(sum(self.chain_shares) - 1) > 1e-9):
             raise DieError(f"chain_shares: expected {self.chain_count} shares >= 0 summing to 1")
+        if self.balance_magnet not in ("chain", "cone"):
+            raise DieError(f"balance_magnet = {self.balance_magnet!r}: expected chain or cone")
         if self.mode not in ("paper", "paper-follower"):
             raise DieError(f"mode = {self.mode!r}: expected paper or paper-follower")
 
@@ -291,13 +365,19 @@ class CiliaModel:
         lying = np.all(np.stack([s.saturated for s in shapes], axis=1), axis=1)
         count, shares = ((self.chain_count, self.chain_shares) if self.balance_chain_count is None
                          else (self.balance_chain_count, None))
+
+        def magnets(pillars: Pillars, shapes: RodShapes) -> Dipoles:
+            if self.balance_magnet == "cone":
+                return cone_cells(pillars, shapes, self.die.depth, self.cells)
+            return pillar_dipoles(pillars, shapes, count, shares)
+
         curves = []
         for sensor in sensors:
             meander = self.die.meander(sensor)
-            fields = sum(element_fields(meander, pillar_dipoles(replace(pillars, positions=pillars.positions[p:p + 1]),
-                                                                shapes[p], count, shares))
+            fields = sum(element_fields(meander, magnets(replace(pillars, positions=pillars.positions[p:p + 1]),
+                                                         shapes[p]))
                          for p in range(lever.size))
-            rest = element_fields(meander, pillar_dipoles(pillars, standing, count, shares))
+            rest = element_fields(meander, magnets(pillars, standing))
             volts = self.volts(np.concatenate([rest, fields]), sensor)
             curves.append(BalanceCurve(sensor, force, volts[1:], volts[1:] - volts[0], lying, shapes[centre],
                                        gaps, rotation, np.stack([s.saturated for s in shapes], axis=1).sum(axis=1)))

@@ -210,20 +210,30 @@ def _range(study: CiliaStudy) -> Table:
 
 
 def _minimum_force_tables(study: CiliaStudy, depth: float) -> list[Table]:
-    budget, settings = study.balance.budget, study.settings
+    balance, settings = study.balance, study.settings
+    budget = balance.budget
     best = budget.best
+    uniform = settings.magnetisation == "uniform"
+    other = balance.chain_budget if uniform else balance.cone_budget
+    chain = balance.chain_budget
+    step = float(np.diff(chain.force)[max(0, chain.best - 1)])
+    read = (f"each pillar a uniformly magnetised cone (the composite; magnetisation = uniform), at the "
+            f"{balance.cone_budget.force.size} steps around the equal dipoles' best" if uniform
+            else "the equal dipoles of the published chain (a non-uniform material; magnetisation = equal)")
     shares = budget.shares(best)
     published = paper_table(published_table("cilia-minimum-force"),
                             {("X", "minimum force"): budget.minimum_force[best] / UN},
                             caption=f"Three standard deviations of the force the balance test reads, where along "
                                     f"its curve (0–{settings.force_max_mN:g} mN) it is smallest: at "
-                                    f"{budget.force[best] / MN:.1f} mN. Causes switched on: "
+                                    f"{budget.force[best] / MN:.1f} mN, read with {read}. Causes switched on: "
                                     f"{', '.join(budget.parts)}.",
-                            notes={"X": f"Not established: the plate's {100 * shares.get('plate', 0.0):.0f} % "
-                                        "of the variance follows a chosen scatter, and the slope it divides by "
-                                        f"is {_slope_ratio(study, study.balance.volume_chain):.3g} times as large "
-                                        "from a uniformly magnetised cone as from the line magnet it is read "
-                                        "with; no continuous reference holds there (the causes' notes)."})
+                            notes={"X": f"{'With equal dipoles' if uniform else 'As uniformly magnetised cones'}: "
+                                        f"{other.minimum_force[other.best] / UN:.0f} µN at "
+                                        f"{other.force[other.best] / MN:.1f} mN. Either way the test resolves its "
+                                        "smallest force just before the pillars lie, where the force barely rises "
+                                        f"({step / MN:.2f} mN a step) while they swing; along the rest of the curve "
+                                        f"the equal dipoles resolve {np.median(chain.minimum_force) / MN:.1f} mN "
+                                        "(median). The root's reading: the causes' notes."})
     rows = list(BUDGET_PARTS)
     columns = ["σ (µN)", "share of the variance (%)", "3σ alone (µN)"]
     cells = {}
@@ -254,30 +264,33 @@ def _minimum_force_tables(study: CiliaStudy, depth: float) -> list[Table]:
 
 
 def _slope_ratio(study: CiliaStudy, other: BalanceCurve) -> float:
-    """The slope of ``other`` (the balance test read with another magnet) over the one the force budget divides
-    by, where the minimum force is smallest."""
-    budget, curve = study.balance.budget, study.balance.curve
+    """The slope of ``other`` (the balance test read with another chain) over the equal dipoles' slope, where
+    their budget is smallest."""
+    budget, curve = study.balance.chain_budget, study.balance.curve
     rows = np.searchsorted(curve.force, budget.force)
     return float(np.gradient(other.change[rows], budget.force)[budget.best] / budget.slope[budget.best])
 
 
 def _chain_note(study: CiliaStudy, depth: float) -> str:
-    """How the slope the budget divides by moves with the pillars' magnet (the balance test's voltage), and how
-    far the continuous reference's root dips, in numbers: why the minimum force is not established."""
+    """How the slope the budget divides by moves with the pillars' magnet, and how far the root turns, in
+    numbers: why the chains are not the composite's magnet there, and what the cones leave out."""
     balance = study.balance
-    budget, curve = balance.budget, balance.curve
+    chain, cone, curve = balance.chain_budget, balance.cone_budget, balance.curve
     count = study.settings.balance_chain_count
     rod = curve.shapes.rod
-    row = int(np.searchsorted(curve.force, budget.force[budget.best]))
+    row = int(np.searchsorted(curve.force, chain.force[chain.best]))
     turn = abs(float(curve.shapes.angles[row, 0]))  # the root's first section
     dip = rod.base_diameter / 2 * math.sin(turn)
-    return (f"The slope the budget divides by, at {budget.force[budget.best] / MN:.1f} mN: with {CHAIN_CHECK * count} "
-            f"equal dipoles a pillar {_slope_ratio(study, balance.finer_chain):.3f} times the {count}-dipole one (a "
-            f"line magnet, converged); with the {count} dipoles carrying their slices' volume (a uniformly "
-            f"magnetised cone) {_slope_ratio(study, balance.volume_chain):.3g} times. Every voltage-side share "
-            f"scales inversely. The pillars as stacked cylinders cannot settle it: there the root's first section "
-            f"has turned {math.degrees(turn):.0f}°, its rim {dip / UM:.0f} µm under the base, and the sensing plane "
-            f"lies {depth / UM:g} µm under it.")
+    at = int(np.argmin(np.abs(cone.force - chain.force[chain.best])))
+    return (f"The slope at {chain.force[chain.best] / MN:.1f} mN: with {CHAIN_CHECK * count} equal dipoles a pillar "
+            f"{_slope_ratio(study, balance.finer_chain):.3f} times the {count}-dipole one (a line magnet, converged); "
+            f"the same {count} dipoles carrying their slices' volume {_slope_ratio(study, balance.volume_chain):.3g} "
+            f"times; the pillars as uniformly magnetised cones, their volume integrated in cells "
+            f"{cone.slope[at] / chain.slope[chain.best]:.3g} times (cells of twice their height over the sensing "
+            f"plane: a line of dipoles stands for a root {rod.base_diameter / UM:.0f} µm wide {depth / UM:g} µm over "
+            f"the sensors only where the sensors are far). The root's base has turned {math.degrees(turn):.0f}° on "
+            f"the half-space film the die declares, which would carry its rim {dip / UM:.0f} µm under the base; the "
+            "cones' cells below the die's surface are left out (the magnet cannot go below its base).")
 
 
 def _settled(budget: ForceBudget, sigma: float) -> float:
@@ -529,12 +542,17 @@ def _in(value: float | None, unit: float) -> float | None:
 
 
 def _budget_of(study: CiliaStudy) -> dict:
-    budget = study.balance.budget
-    best = budget.best
-    return {"at_mN": budget.force[best] / MN, "minimum_force_uN": budget.minimum_force[best] / UN,
-            "sigma_uN": {name: float(budget.part(name)[best]) / UN for name in BUDGET_PARTS},
-            "shares": budget.shares(best), "parts": list(budget.parts),
-            "plate_uN_per_mrad": float(budget.plate_per_radian[best]) * 1e-3 / UN}
+    def summary(budget: ForceBudget) -> dict:
+        best = budget.best
+        return {"at_mN": budget.force[best] / MN, "minimum_force_uN": budget.minimum_force[best] / UN,
+                "sigma_uN": {name: float(budget.part(name)[best]) / UN for name in BUDGET_PARTS},
+                "shares": budget.shares(best), "parts": list(budget.parts),
+                "plate_uN_per_mrad": float(budget.plate_per_radian[best]) * 1e-3 / UN,
+                "slope_mV_per_mN": float(budget.slope[best]) * 1e3 * MN}
+
+    balance = study.balance
+    return {**summary(balance.budget), "magnetisation": study.settings.magnetisation,
+            "uniform_cones": summary(balance.cone_budget), "equal_dipoles": summary(balance.chain_budget)}
 
 
 def _notes(study: CiliaStudy) -> list[str]:
@@ -549,9 +567,10 @@ def _notes(study: CiliaStudy) -> list[str]:
         "how much the fitted moment depends on it.",
         f"The balance test's chain ({study.settings.balance_chain_count} equal dipoles a pillar) converges in its "
         "dipoles, but to a line magnet along the centre line, where the pillars' roots are 320 µm wide and 10 µm "
-        "over the sensors. Their continuous reference (stacks of uniformly magnetised cylinders) cannot read the "
-        "buckled and lying roots, whose first cylinders then cross the sensing plane; so the balance-mode voltages "
-        "past the buckling (the range's signal, the minimum force's slope) are not settled.",
+        "over the sensors. The minimum force reads the pillars as what the composite is "
+        f"(magnetisation = {study.settings.magnetisation}; uniform: each a uniformly magnetised cone integrated over "
+        "its volume in cells, the part of a turned root below the die's surface left out) at the steps around the "
+        "chain's best; the balance curve, its range and the figures are read with the chain.",
     ]
     if study.fit.at_bound:
         notes.append("softtip's own fit ended on a bound: the curve does not hold that parameter.")
