@@ -26,13 +26,17 @@ SLOW_FIXTURES = {"test_footprint.py": {"coarse"}, "test_lab.py": {"coarse_rectan
                  "test_rom.py": {"coarse", "tiny_twin"}}
 
 
-# The files whose tests take longest (pytest --durations, one process): a default-size reduced twin
-# (test_rom.py, some 850 s), every study's report (about 270 s), a later session of a unit, the CLI's
-# sweep of bad values, mesh convergence, an insertion. pytest-xdist hands a worker one file at a time
-# in the order below (pyproject: --no-loadscope-reorder): longest first, so that none starts near the
-# end and runs on alone while the other workers idle; the rest by their number of tests, most first.
-LONGEST_FILES = ("test_rom.py", "test_report_browser.py", "test_drift.py", "test_cli_sweep.py", "test_mechanics.py",
-                 "test_insertion.py")
+# The files whose tests take longest (pytest --durations): the reduced twin of the default size (some
+# 850 s in one process, a file of its own), every study's report in a browser (about 270 s), two studies
+# reproduced serially and in a pool, the S4 system's study runs, the CLI's sweep of bad values, the
+# wearable's study, a later session of a unit, the demo, the firmware in simavr, then test_rom.py's
+# smaller twins, pooled trials and the tolerance ranking. pytest-xdist hands a worker one file at a time
+# in the order below (pyproject: --no-loadscope-reorder): longest first, so that none starts near the end
+# and runs on alone while the other workers idle; the rest by their number of tests, most first.
+LONGEST_FILES = ("test_rom_default_size.py", "test_report_browser.py", "test_reproduce_parallel.py",
+                 "test_cilia_system.py", "test_cli_sweep.py", "test_wearable_study.py", "test_drift.py",
+                 "test_fingertip_demo.py", "test_firmware_sim.py", "test_rom.py", "test_lab_trials.py",
+                 "test_fingertip_tolerance.py", "test_studies.py", "test_insertion.py", "test_mechanics.py")
 
 
 def pytest_collection_modifyitems(items):
