@@ -336,13 +336,15 @@ def _dynamics_table(parts, own: tuple[bool, bool, bool, bool]) -> Table:
                      "Mean over participants on held-out trials, the same people, presses and seed, only the "
                      "[viscoelastic] switches (and [parameters] lateral_drag and dip_joint in the last two rows) "
                      "changed. With one relaxation function the pad's creep under the person's force and the "
-                     "relaxation of the tissue under the chip cancel, so the chip follows the force with almost no dynamics "
-                     "(tests/test_fingerpad.py measures it); tangential creep "
+                     "relaxation of the tissue under the chip cancel, so the chip follows the force with almost no "
+                     "dynamics (tests/test_fingerpad.py measures it); tangential creep "
                      "(Pataky et al. 2005) and the nail fold's own relaxation (skin, Wang et al. 2015) break that. "
                      "Neither makes a higher order pay here: the held-out error is dominated by what no linear "
                      "time-invariant model of the chip's three forces can tell apart, not by dynamics. The lateral "
                      "drag (the pad's radial displacement pressing the chip) is no dynamics: it carries radial force "
-                     "to the chip directly (see the next table for what that leaves of Fx)."),
+                     "to the chip directly (see the next table for what that leaves of Fx). Nor is the last joint's "
+                     "lateral compliance (Minamikawa et al. 1993, elastic): it moves the nail against the chip under "
+                     "radial force whatever the placement, through the nail fold's relaxation."),
                  notes={row: "This run's own setting: the study's other tables are made with it."
                         for row in parts if DYNAMICS_PARTS[row] == own})
 
@@ -360,7 +362,9 @@ def _holds_table(held) -> Table:
                      "beside the far larger change that the normal force and the finger's placement on the object "
                      "make there: the linear column is what a linear model can use, the cubic one what the laws' "
                      "curvature hides from it."),
-                 notes={"no placement scatter": "Placing the finger a millimetre off-centre moves the bulge as a "
+                 notes={"the last joint switched": "The last joint turns sideways under radial force and moves the "
+                                                  "nail against the chip, whatever the placement (README, S2).",
+                        "no placement scatter": "Placing the finger a millimetre off-centre moves the bulge as a "
                                                 "radial force of about a newton does (README, S2).",
                         "no placement scatter, no ring re-seating": "Re-seating the ring between runs changes the "
                                                                     "chip's sensitivity: one map serves three "
