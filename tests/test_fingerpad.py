@@ -1,6 +1,7 @@
 """The finger pad under a 3-axis fingertip force (S2's wearable twin) against independent references.
 
-References: the cited exponential force-depth law evaluated by hand at its cited points; the Winkler
+References: the cited exponential force-depth law evaluated by hand at its cited points; the last joint's
+cited turn under its cited moment, and the nail's displacement from it by hand; the Winkler
 pressure integrated numerically over the pad's contact on a grid; the overlap of pad and object
 integrated on a grid; the thin layer's potential (the strip's Green's function, from the complex
 logarithm) differentiated numerically at the free tip; finite differences; a source moved by hand;
@@ -17,9 +18,10 @@ from scipy.integrate import quad
 
 from softtip._core.config import ConfigError
 from softtip._core.units import MM
-from softtip.systems.wearable.fingerpad import (SIDES, ChipMount, FingerPad, chip_forces, contact_points, exponential_force,
-                                         indentation_volume, lateral_outflow, pad_response, shape_radii,
-                                         side_outflow, winkler_pressure)
+from softtip.systems.wearable.fingerpad import (DIP_LATERAL_STIFFNESS, SIDES, ChipMount, FingerPad, chip_forces,
+                                                contact_points, exponential_force, indentation_volume,
+                                                lateral_outflow, pad_response, shape_radii, side_outflow,
+                                                winkler_pressure)
 from softtip.mechanics.viscoelastic import PronySeries
 ELASTIC = PronySeries((), ())  # no relaxation: the instantaneous laws alone
 PAD = FingerPad()
@@ -162,7 +164,7 @@ def held(force, seconds=4.0, rate=100.0):
 
 @pytest.mark.parametrize("side", ["radial", "ulnar"])
 def test_tangential_load_bulges_less_on_the_side_the_force_points_to(side):
-    pad = FingerPad(prony=ELASTIC, lateral_drag=False)  # the bulge alone
+    pad = FingerPad(prony=ELASTIC, lateral_drag=False, joint_stiffness=None)  # the bulge alone
     mount = ChipMount(side=side)
     bulge = {}
     for fx in (-1.0, 0.0, 1.0):
@@ -184,6 +186,69 @@ def test_the_lateral_drag_moves_the_skin_under_the_chip_by_the_transmitted_bone_
     assert expected == pytest.approx(-SIDES[side] * 40.21e-6, rel=1e-3)
     assert skin[True][2] - skin[False][2] == pytest.approx(expected, rel=1e-9)
     np.testing.assert_array_equal(skin[True][:2], skin[False][:2])  # the distal and dorsal drag as before
+
+
+def test_the_joints_stiffness_is_the_cited_turn_under_the_cited_moment():
+    # Minamikawa et al. (1993): 30 N·cm of lateral stress turned the middle joint by 5° on average
+    assert math.degrees(0.3 / DIP_LATERAL_STIFFNESS) == pytest.approx(5.0, abs=0.01)
+
+
+@pytest.mark.parametrize("side", ["radial", "ulnar"])
+def test_the_last_joint_turns_the_nail_against_the_chip_by_the_moment_over_its_stiffness(side):
+    # by hand: Fx = 1 N at the contact 12 mm distal of the joint turns it by 0.012 N·m / 3.44 N·m/rad = 3.49 mrad;
+    # the nail 9 mm distal of the joint (the chip 3 mm behind the contact) moves 31.4 µm ulnarly, the tip pushed back
+    times, force = held([1.0, 0.0, 2.0])
+    mount = ChipMount(side=side)
+    skin = {stiffness: pad_response(times, force, FingerPad(prony=ELASTIC, joint_stiffness=stiffness), mount).skin[-1]
+            for stiffness in (None, 3.44)}
+    assert skin[3.44][2] - skin[None][2] == pytest.approx(SIDES[side] * -31.395e-6, rel=1e-4)
+    np.testing.assert_array_equal(skin[3.44][:2], skin[None][:2])  # the distal and dorsal skin as before
+
+
+def test_placed_off_centre_the_finger_turns_its_last_joint_under_a_distal_force_too():
+    # by hand: placed 1 mm radially, Fy = 0.8 N has the moment −0.001 x 0.8 N·m about the joint: the nail moves
+    # 0.0008 / 3.44 x 9 mm = 2.09 µm radially, towards a radial chip
+    times, force = held([0.0, 0.8, 2.0])
+    skin = {stiffness: pad_response(times, force, FingerPad(prony=ELASTIC, joint_stiffness=stiffness), ChipMount(),
+                                    rest_centre=(1 * MM, 0.0)).skin[-1, 2] for stiffness in (None, 3.44)}
+    assert skin[3.44] - skin[None] == pytest.approx(2.093e-6, rel=1e-3)
+
+
+def test_a_chip_behind_the_last_joint_is_not_moved_by_it():
+    times, force = held([1.0, 0.5, 2.0])
+    mount = ChipMount(position_y=-13 * MM)  # on the middle phalanx, 1 mm proximal of the joint
+    skin = {stiffness: pad_response(times, force, FingerPad(prony=ELASTIC, joint_stiffness=stiffness), mount).skin
+            for stiffness in (None, 3.44)}
+    np.testing.assert_array_equal(skin[3.44], skin[None])
+
+
+def test_a_radial_step_through_the_last_joint_relaxes_at_the_chip_by_the_nail_folds_function():
+    # a press held, then Fx stepped on: the joint moves the nail at once (no creep of its ligaments), the chip's
+    # tissue, displaced, relaxes by Fung's G(t) = g_inf + g e^{-t/τ} of the exponential law's step, by hand
+    g, tau = 0.6, 0.2
+    ramp = 1e-5
+    times = np.concatenate([np.linspace(0.0, 1.0, 101), 1.0 + ramp + np.linspace(0, 2.0, 201)])
+    force = np.zeros((len(times), 3))
+    force[:, 2] = 2.0
+    force[101:, 0] = 1.0
+    mount = ChipMount(preload=0.5, tissue_prony=PronySeries((g,), (tau,)))
+    pressure, skin = {}, {}
+    for stiffness in (None, 3.44):
+        pad = FingerPad(prony=ELASTIC, lateral_drag=False, joint_stiffness=stiffness)
+        skin[stiffness] = pad_response(times, force, pad, mount).skin[:, 2]
+        pressure[stiffness] = chip_forces(times, pad_response(times, force, pad, mount).skin, pad, mount)[:, 2]
+    face = mount.face_area * PAD.edge_pressure * PAD.stiffening
+    seated = np.log1p(PAD.stiffening * 0.5 / (1 - g) / face) / PAD.stiffening
+
+    def elastic(indentation):
+        return face / PAD.stiffening * np.expm1(PAD.stiffening * (seated + indentation))
+
+    step = elastic(skin[3.44][-1]) - elastic(skin[None][-1])  # the bulge is held: only the joint's part steps
+    assert skin[3.44][-1] - skin[None][-1] == pytest.approx(-31.395e-6, rel=1e-4)
+    since = times[101:] - times[101]
+    np.testing.assert_allclose(pressure[3.44][101:] - pressure[None][101:],
+                               step * ((1 - g) + g * np.exp(-since / tau)), rtol=1e-4)
+    np.testing.assert_allclose(pressure[3.44][:101], pressure[None][:101])
 
 
 # ---------------------------------------------------------------------------------------------- slip, creep, ring

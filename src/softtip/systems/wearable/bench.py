@@ -42,8 +42,9 @@ from softtip.lab.bench import SeededBench
 from softtip.lab.protocols import BenchKind, Protocol, Size, protocol_file_schema
 from softtip.systems.wearable.human_force import MINIMUM_TRIAL_S, MOTIONS, Effort, intended_force
 from softtip.systems.wearable.realism import REALISM_SOURCES, WearableRealism
-from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, NAIL_FOLD_RELAXATION, PAD_RELAXATION, SIDES,
-                                                TANGENTIAL_RELAXATION, ChipMount, FingerPad, scaled, shape_radii)
+from softtip.systems.wearable.fingerpad import (CONTACT_SHAPES, DIP_LATERAL_STIFFNESS, NAIL_FOLD_RELAXATION,
+                                                PAD_RELAXATION, SIDES, TANGENTIAL_RELAXATION, ChipMount, FingerPad,
+                                                scaled, shape_radii)
 from softtip.mechanics.viscoelastic import PronySeries
 from softtip.systems.wearable.chip import CHIP, TABLE_SENSOR
 from softtip.systems.wearable.twin import WearableTwin
@@ -90,6 +91,8 @@ class WearableParameters:
     friction: PositiveNumber = _PAD.friction
     nail_fold_transmission: Fraction = _PAD.transmission
     lateral_drag: Flag = _PAD.lateral_drag  # the pad's lateral displacement presses the chip too
+    dip_joint: Flag = True  # the last joint turns sideways under radial force, moving the nail against the chip
+    dip_lateral_stiffness_Nm_per_rad: PositiveNumber = DIP_LATERAL_STIFFNESS
     sensor_side: choice(*SIDES) = _MOUNT.side
     sensor_offset_mm: Real = _MOUNT.position_y / MM  # along the finger from the pad's contact point, distal > 0
     ring_preload_N: NonNegativeNumber = _MOUNT.preload
@@ -196,7 +199,8 @@ def wearable(bench: WearableBench, p: WearableParameters, seed: int, record: dic
                                    p.point_radius_mm * MM) for _, contact in trials])
     nominal = FingerPad(width=p.finger_width_mm * MM, stiffness=p.pad_stiffness_N_per_mm / MM,
                         stiffening=p.pad_stiffening_per_mm / MM, friction=p.friction,
-                        transmission=p.nail_fold_transmission, lateral_drag=p.lateral_drag, prony=bench.prony,
+                        transmission=p.nail_fold_transmission, lateral_drag=p.lateral_drag,
+                        joint_stiffness=p.dip_lateral_stiffness_Nm_per_rad if p.dip_joint else None, prony=bench.prony,
                         shear_prony=bench.tangential)
     effort = Effort(press_peak=p.press_peak_N, rest=p.rest_N, dorsal_hold=p.dorsal_hold_N,
                     tilt_normal=p.tilt_normal_N, tangential_effort=p.tangential_effort,

@@ -92,6 +92,29 @@ bulge: a radial force drags the pulp away from a radial chip. The same factor fo
 ``lateral_drag`` the lateral component is the bulge's alone, and radial force reaches the chip only
 through the bulge's asymmetry, which placing the finger off-centre mimics.
 
+**The last joint's lateral compliance** (``joint_stiffness``). The ring is clamped across the
+distal interphalangeal (DIP) joint: it holds on the middle phalanx, and the chip presses the side
+of the nail, on the distal phalanx. No muscle turns the DIP sideways: its collateral ligaments carry
+the moment M = r_y F_x − r_x F_y of the object's reaction about the joint (r the contact from the
+joint: r_y along the finger, r_x the placement across it), so the distal phalanx turns by
+θ = M/k and the nail's side at the chip, a lever L_s distal of the joint, moves by −θ L_s radially
+(the fingertip is pushed back against the force). The tissue between the ring's chip and the nail
+is compressed by that much more (s θ L_s less on side s): a path from radial force to the chip's
+pressure beside the bulge, nearly independent of where the finger is placed, through the nail
+fold's own relaxation. k = 0.3 N·m per 5° = 3.44 N·m/rad: lateral stress of 30 N·cm turned the
+*middle* joint (PIP) of twelve cadaver index fingers by 5° on average (15° at most; Minamikawa,
+Horii, Amadio, Cooney, Linscheid & An, J. Hand Surg. 18A:198, 1993). No value for the last joint
+was available to us, and that one was measured with the muscles unloaded, which they found to leave
+the joint far laxer than loaded ones; the DIP is described as the more stable of the two (its short
+lever and its adherent soft tissue): the value is the compliant end of what is plausible for a
+pressing finger. The ligaments' creep is not modelled (no value). The joint lies 12 mm proximal of the pad's contact for
+a 15 mm fingertip (assumed: the pad's centre about midway along an index distal segment of
+22-25 mm); a chip proximal of the joint is on the middle phalanx and is not moved. The joint's
+flexion is not modelled: pressing, its moment is carried by the flexor tendon under the person's
+control, whose stiffness no source here gives (passive flexion stiffness, 0.05 N·cm/° at the PIP,
+Dionysian et al., J. Hand Surg. 30A:573, 2005, is that of relaxed muscles). The distal phalanx's
+inertia is left out: a few grams at a centimetre put its resonance with k near 400 Hz.
+
 **Leaning.** A person making a tangential force tilts the finger; rotating the bone about the stuck
 contact by φ = u/h (h the height of the bone's centre above the contact) rolls the pressure centre
 by R φ. ``lean`` is the share of the shear made that way (0 for a pure translation).
@@ -122,6 +145,8 @@ PAD_RELAXATION = PronySeries(g=(0.25, 0.15, 0.2), tau=(0.004, 0.07, 1.4))
 TANGENTIAL_RELAXATION = PronySeries(g=(0.25, 0.25), tau=(1.18, 11.8))
 # Wang et al. (2015): skin in compression, one term of about 0.2 s relaxing to 0.28-0.47 (0.4 kept)
 NAIL_FOLD_RELAXATION = PronySeries(g=(0.6,), tau=(0.2,))
+# Minamikawa et al. (1993): 30 N·cm turned the PIP of cadaver index fingers by 5° on average (no DIP value)
+DIP_LATERAL_STIFFNESS = 3.44  # N·m/rad: 0.3 N·m / 5° (0.0873 rad)
 # the contact's quadrature: 4 radial Gauss points x 8 angles on the unit disk
 _RADII, _RADIAL_WEIGHTS = np.polynomial.legendre.leggauss(4)
 _RADII, _RADIAL_WEIGHTS = (_RADII + 1) / 2, _RADIAL_WEIGHTS / 2
@@ -229,6 +254,7 @@ class FingerPad:
     friction: the pad's friction coefficient on the object.
     transmission: share of the pad's displacement at the contact that reaches the skin under the chip.
     lateral_drag: the lateral share of that displacement presses the chip too (False: distal and dorsal only).
+    joint_stiffness: the last joint's lateral (radial/ulnar) angular stiffness (N·m/rad; None: a rigid joint).
     prony: the tissue's reduced relaxation function.
     shear_prony: its relaxation under tangential load (None: ``prony``).
     """
@@ -239,6 +265,7 @@ class FingerPad:
     friction: PositiveNumber = 0.9
     transmission: Fraction = 0.1
     lateral_drag: Flag = True
+    joint_stiffness: Optional[PositiveNumber] = DIP_LATERAL_STIFFNESS
     prony: Relaxation = PAD_RELAXATION
     shear_prony: Optional[Relaxation] = None
 
@@ -247,8 +274,8 @@ class FingerPad:
         return self.prony if self.shear_prony is None else self.shear_prony
 
     # lengths as shares of the breadth (assumed, for a 15 mm index fingertip): the pad's radii of
-    # curvature 7.5 and 12 mm, its distal free edge 9 mm ahead of the contact, a pulp 4 mm thick under
-    # the bone whose sides bulge over 5 mm, the bone's centre 6 mm above the contact
+    # curvature 7.5 and 12 mm, its distal free edge 9 mm ahead of the contact, the last joint 12 mm behind
+    # it, a pulp 4 mm thick under the bone whose sides bulge over 5 mm, the bone's centre 6 mm above the contact
     @property
     def radius_x(self) -> float:
         return self.width / 2
@@ -260,6 +287,11 @@ class FingerPad:
     @property
     def tip_y(self) -> float:
         return 0.6 * self.width
+
+    @property
+    def joint_y(self) -> float:
+        """Where the last joint lies along the finger from the pad's contact point (m, proximal < 0)."""
+        return -0.8 * self.width
 
     @property
     def pulp_thickness(self) -> float:
@@ -367,10 +399,21 @@ def pad_response(times, intended, pad: FingerPad, mount: ChipMount, object_radii
     lateral = outflow / pad.bulge_height
     if pad.lateral_drag:  # the chip's face normal points out of side s: the pulp dragged by −u_x meets it as −s u_x
         lateral = lateral - SIDES[mount.side] * pad.transmission * shear[..., 0]
+    if pad.joint_stiffness is not None:
+        lateral = lateral + SIDES[mount.side] * nail_deflection(force, centre, pad, mount)
     skin = np.stack([-pad.transmission * shear[..., 1], pad.transmission * depth, lateral], axis=-1)
     touching = force[..., 2] > 0
     return PadResponse(force=force, sliding=sliding, depth=depth, shear=shear,
                        centre=np.where(touching[..., None], centre, np.nan), volume=volume, skin=skin)
+
+
+def nail_deflection(force, centre, pad: FingerPad, mount: ChipMount):
+    """The nail's radial displacement (m, ...) at the chip as the last joint turns under the ``force`` on the
+    object (..., 3) applied at ``centre`` on the pad (..., 2): −θ L_s with θ = (r_y F_x − r_x F_y)/k the
+    joint's turn (r the contact from the joint) and L_s the chip's lever from the joint (none proximal of it)."""
+    force, centre = np.asarray(force, dtype=float), np.asarray(centre, dtype=float)
+    moment = (centre[..., 1] - pad.joint_y) * force[..., 0] - centre[..., 0] * force[..., 1]
+    return -moment / pad.joint_stiffness * max(mount.position_y - pad.joint_y, 0.0)
 
 
 def chip_forces(times, skin, pad: FingerPad, mount: ChipMount) -> np.ndarray:

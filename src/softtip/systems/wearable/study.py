@@ -139,11 +139,12 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
 
 
 # the finger's parts (softtip.systems.wearable.fingerpad), each on or off: the [viscoelastic] switches
-# tangential_creep and nail_fold, and [parameters] lateral_drag
-DYNAMICS_PARTS = {"neither: one relaxation function": (False, False, True),
-                  "tangential creep only": (True, False, True), "nail fold only": (False, True, True),
-                  "both": (True, True, True),
-                  "both, without the lateral drag": (True, True, False)}
+# tangential_creep and nail_fold, and [parameters] lateral_drag and dip_joint
+DYNAMICS_PARTS = {"neither: one relaxation function": (False, False, True, True),
+                  "tangential creep only": (True, False, True, True), "nail fold only": (False, True, True, True),
+                  "both": (True, True, True, True),
+                  "both, without the lateral drag": (True, True, False, True),
+                  "both, without the last joint": (True, True, True, False)}
 
 
 def _held_out_r2(dataset: Dataset, seed: int) -> dict[str, list]:
@@ -157,8 +158,9 @@ def _held_out_r2(dataset: Dataset, seed: int) -> dict[str, list]:
     return scores
 
 
-def _own_parts(protocol: Protocol) -> tuple[bool, bool, bool]:
-    return protocol.viscoelastic.tangential_creep, protocol.viscoelastic.nail_fold, protocol.parameters.lateral_drag
+def _own_parts(protocol: Protocol) -> tuple[bool, bool, bool, bool]:
+    return (protocol.viscoelastic.tangential_creep, protocol.viscoelastic.nail_fold, protocol.parameters.lateral_drag,
+            protocol.parameters.dip_joint)
 
 
 def _dynamics_parts(protocol: Protocol, dataset: Dataset, offline, seed: int,
@@ -169,12 +171,12 @@ def _dynamics_parts(protocol: Protocol, dataset: Dataset, offline, seed: int,
     tissue = protocol.viscoelastic
     parts = {}
     with progress.task("wearable: the finger's parts, on and off", total=len(DYNAMICS_PARTS)) as task:
-        for row, (tangential, nail_fold, lateral_drag) in DYNAMICS_PARTS.items():
-            if (tangential, nail_fold, lateral_drag) == _own_parts(protocol):
+        for row, (tangential, nail_fold, lateral_drag, dip_joint) in DYNAMICS_PARTS.items():
+            if (tangential, nail_fold, lateral_drag, dip_joint) == _own_parts(protocol):
                 scores = offline
             else:
-                changed = replace(protocol.changed(lateral_drag=lateral_drag), viscoelastic=replace(
-                    tissue, tangential_creep=tangential, nail_fold=nail_fold))
+                changed = replace(protocol.changed(lateral_drag=lateral_drag, dip_joint=dip_joint),
+                                  viscoelastic=replace(tissue, tangential_creep=tangential, nail_fold=nail_fold))
                 scores = _held_out_r2(run_protocol(changed)[0], seed)
             parts[row] = {name: _mean(scores[name], "r2") for name in (TF, SS)}
             task.advance()
@@ -182,10 +184,12 @@ def _dynamics_parts(protocol: Protocol, dataset: Dataset, offline, seed: int,
 
 
 # what the chip's three readings hold of the table's force, the study's run beside the same protocol and seed
-# with one part changed: (the lateral drag switched, placement scatter kept, ring re-seating kept)
-HOLDS = {"this run": (False, True, True), "the lateral drag switched": (True, True, True),
-         "no placement scatter": (False, False, True),
-         "no placement scatter, no ring re-seating": (False, False, False)}
+# with one part changed: (the lateral drag switched, the last joint switched, placement scatter kept, ring
+# re-seating kept)
+HOLDS = {"this run": (False, False, True, True), "the lateral drag switched": (True, False, True, True),
+         "the last joint switched": (False, True, True, True),
+         "no placement scatter": (False, False, False, True),
+         "no placement scatter, no ring re-seating": (False, False, False, False)}
 
 
 def _static_r2(u: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
@@ -201,8 +205,9 @@ def _what_the_chip_holds(protocol: Protocol, dataset: Dataset, progress: Progres
     to the table's forces, for each row of :data:`HOLDS`."""
     held = {}
     with progress.task("wearable: what the chip's readings hold", total=len(HOLDS)) as task:
-        for row, (switch_drag, placement, reseating) in HOLDS.items():
-            changed = protocol.changed(lateral_drag=protocol.parameters.lateral_drag != switch_drag)
+        for row, (switch_drag, switch_joint, placement, reseating) in HOLDS.items():
+            changed = protocol.changed(lateral_drag=protocol.parameters.lateral_drag != switch_drag,
+                                       dip_joint=protocol.parameters.dip_joint != switch_joint)
             realism = changed.realism
             changed = replace(changed, realism=replace(
                 realism, placement_sd_mm=realism.placement_sd_mm if placement else 0.0,
@@ -319,7 +324,7 @@ def _order_table(orders) -> Table:
                  caption="Mean over participants on held-out trials: look for where more poles stop helping.")
 
 
-def _dynamics_table(parts, own: tuple[bool, bool, bool]) -> Table:
+def _dynamics_table(parts, own: tuple[bool, bool, bool, bool]) -> Table:
     cells = {}
     for row, r2 in parts.items():
         for name, short in ((TF, "TF 6"), (SS, "SS 8")):
@@ -329,15 +334,17 @@ def _dynamics_table(parts, own: tuple[bool, bool, bool]) -> Table:
     return Table("The finger's dynamics, part by part", "dynamic parts", list(parts), columns, cells, digits=3,
                  caption=(
                      "Mean over participants on held-out trials, the same people, presses and seed, only the "
-                     "[viscoelastic] switches (and [parameters] lateral_drag in the last row) changed. With one "
-                     "relaxation function the pad's creep under the person's force and the relaxation of the "
-                     "tissue under the chip cancel, so the chip follows the force with almost no dynamics "
-                     "(tests/test_fingerpad.py measures it); tangential creep "
+                     "[viscoelastic] switches (and [parameters] lateral_drag and dip_joint in the last two rows) "
+                     "changed. With one relaxation function the pad's creep under the person's force and the "
+                     "relaxation of the tissue under the chip cancel, so the chip follows the force with almost no "
+                     "dynamics (tests/test_fingerpad.py measures it); tangential creep "
                      "(Pataky et al. 2005) and the nail fold's own relaxation (skin, Wang et al. 2015) break that. "
                      "Neither makes a higher order pay here: the held-out error is dominated by what no linear "
                      "time-invariant model of the chip's three forces can tell apart, not by dynamics. The lateral "
                      "drag (the pad's radial displacement pressing the chip) is no dynamics: it carries radial force "
-                     "to the chip directly (see the next table for what that leaves of Fx)."),
+                     "to the chip directly (see the next table for what that leaves of Fx). Nor is the last joint's "
+                     "lateral compliance (Minamikawa et al. 1993, elastic): it moves the nail against the chip under "
+                     "radial force whatever the placement, through the nail fold's relaxation."),
                  notes={row: "This run's own setting: the study's other tables are made with it."
                         for row in parts if DYNAMICS_PARTS[row] == own})
 
@@ -355,7 +362,9 @@ def _holds_table(held) -> Table:
                      "beside the far larger change that the normal force and the finger's placement on the object "
                      "make there: the linear column is what a linear model can use, the cubic one what the laws' "
                      "curvature hides from it."),
-                 notes={"no placement scatter": "Placing the finger a millimetre off-centre moves the bulge as a "
+                 notes={"the last joint switched": "The last joint turns sideways under radial force and moves the "
+                                                  "nail against the chip, whatever the placement (README, S2).",
+                        "no placement scatter": "Placing the finger a millimetre off-centre moves the bulge as a "
                                                 "radial force of about a newton does (README, S2).",
                         "no placement scatter, no ring re-seating": "Re-seating the ring between runs changes the "
                                                                     "chip's sensitivity: one map serves three "
