@@ -17,6 +17,7 @@ from softtip._core.progress import SILENT, Progress
 from softtip._core.units import MM, UT_PER_T
 
 if TYPE_CHECKING:
+    from softtip._core.cache import EntryPieces
     from softtip.lab.protocols import Protocol
 
 
@@ -53,11 +54,12 @@ def _out_and_back(rate_hz: float, rest_s: float, travel_s: float) -> tuple[np.nd
 
 
 def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = None, rate_hz: float = 200.0,
-                     rest_s: float = 2.0, progress: Progress = SILENT) -> TwinScenario:
+                     rest_s: float = 2.0, progress: Progress = SILENT, pieces: EntryPieces | None = None) -> TwinScenario:
     """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
     each followed by a release and a rest, on one fabricated unit of the protocol's design, at the
     protocol's speed unless ``speed_mm_s`` is given; the force is what a reference sensor reads
-    (the material's relaxation included)."""
+    (the material's relaxation included). ``pieces``: where each finished motion is kept, and read back
+    instead of computed again (a run stopped part way resumes)."""
     # the twin's mechanics are imported here, not with the module: a cached scenario is replayed (and
     # unpickled in the emulator's process) without them, which takes seconds off a warm start
     from softtip.mechanics.contact import LoadCase
@@ -76,24 +78,31 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     speed = (p.speed_mm_s if speed_mm_s is None else speed_mm_s) * MM
     segments_t, segments_rigid, segments_force = [], [], []
     clock = 0.0
-    for depth_mm, shear_mm in ((p.normal_depth_mm, (0.0, 0.0)), (p.shear_depth_mm, (p.shear_mm, 0.0)),
-                               (p.shear_depth_mm, (0.0, p.shear_mm))):
-        depth, shear = depth_mm * MM, np.array(shear_mm) * MM
-        load = LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=0.0), depth, tangential=tuple(shear),
-                        friction="stick")
-        table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
-        reach = float(np.linalg.norm(shear))
-        # air, down, shear, back along the same path, air
-        times, travelled_s = _out_and_back(rate_hz, rest_s, (depth + reach) / speed)
-        along = travelled_s * speed
-        depth_now = np.minimum(along, depth)
-        progress = np.clip(along - depth, 0, reach)
-        direction = shear / max(reach, 1e-12)
-        poses, force = interpolate_path(table, depth_now, progress[:, None] * direction[None])
-        segments_t.append(clock + times)
-        segments_rigid.append(poses.rigid)
-        segments_force.append(np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]]))
-        clock += times[-1] + 1 / rate_hz
+    motions = ((p.normal_depth_mm, (0.0, 0.0)), (p.shear_depth_mm, (p.shear_mm, 0.0)), (p.shear_depth_mm, (0.0, p.shear_mm)))
+    with progress.task("the pushes: normal, then shear along x, along y", total=len(motions)) as task:
+        for index, (depth_mm, shear_mm) in enumerate(motions):
+            kept = pieces.read(index) if pieces is not None else None
+            if kept is None:
+                depth, shear = depth_mm * MM, np.array(shear_mm) * MM
+                load = LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=0.0), depth, tangential=tuple(shear),
+                                friction="stick")
+                table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
+                reach = float(np.linalg.norm(shear))
+                # air, down, shear, back along the same path, air
+                times, travelled_s = _out_and_back(rate_hz, rest_s, (depth + reach) / speed)
+                along = travelled_s * speed
+                sheared = np.clip(along - depth, 0, reach)
+                poses, force = interpolate_path(table, np.minimum(along, depth),
+                                                sheared[:, None] * (shear / max(reach, 1e-12))[None])
+                kept = {"times_s": times, "rigid": poses.rigid,
+                        "force_N": np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]])}
+                if pieces is not None:
+                    pieces.write(index, kept)
+            segments_t.append(clock + kept["times_s"])
+            segments_rigid.append(kept["rigid"])
+            segments_force.append(kept["force_N"])
+            clock += kept["times_s"][-1] + 1 / rate_hz
+            task.advance()
     poses, times = MagnetPoses.from_rigid(np.concatenate(segments_rigid)), np.concatenate(segments_t)
     v = protocol.viscoelastic
     prony = material_prony(fingertip, v.hysteresis_percent, v.depth_mm * MM, v.speed_mm_s * MM, v.rest_s)
@@ -103,10 +112,11 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
 
 
 def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, speed_mm_s: float = 2.0,
-                       rest_s: float = 1.0, progress: Progress = SILENT) -> TwinScenario:
+                       rest_s: float = 1.0, progress: Progress = SILENT, pieces: EntryPieces | None = None) -> TwinScenario:
     """The inverter lid lowered into its body and lifted again, once per case - seated, left clip on
     the rim, right clip on the rim - read by the two fingertips' four chips (the inverter protocol's
-    world). ``force_N`` holds the contact force on part B along its normal in the z column."""
+    world). ``force_N`` holds the contact force on part B along its normal in the z column. ``pieces``:
+    where each finished case is kept, and read back instead of computed again."""
     from dataclasses import replace
 
     from softtip.systems.hall_fingertip.insertion_world import CASES, InsertionWorld
@@ -118,13 +128,21 @@ def insertion_scenario(protocol: Protocol, seed: int, rate_hz: float = 100.0, sp
     segments_t, fields, forces = [], [], []
     clock = 0.0
     with progress.task("the lid lowered and lifted in each case", total=len(CASES)) as task:
-        for case in CASES:
-            world = InsertionWorld(quiet, case, np.random.default_rng(seed))
-            for height in pose:
-                fields.append(world.absolute_uT(float(height)).reshape(-1, 3))
-                forces.append([0.0, 0.0, world.force])
+        for index, case in enumerate(CASES):
+            kept = pieces.read(index) if pieces is not None else None
+            if kept is None:
+                world = InsertionWorld(quiet, case, np.random.default_rng(seed))
+                case_fields, case_forces = [], []
+                for height in pose:
+                    case_fields.append(world.absolute_uT(float(height)).reshape(-1, 3))
+                    case_forces.append([0.0, 0.0, world.force])  # the force of the pose just solved
+                kept = {"field_uT": np.array(case_fields), "force_N": np.array(case_forces)}
+                if pieces is not None:
+                    pieces.write(index, kept)
+            fields.append(kept["field_uT"])
+            forces.append(kept["force_N"])
             segments_t.append(clock + times)
             clock += times[-1] + 1 / rate_hz
             task.advance(note=case)
-    return TwinScenario(times_s=np.concatenate(segments_t), field_uT=np.array(fields), force_N=np.array(forces))
-
+    return TwinScenario(times_s=np.concatenate(segments_t), field_uT=np.concatenate(fields),
+                        force_N=np.concatenate(forces))
