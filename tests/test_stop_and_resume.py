@@ -18,8 +18,8 @@ from softtip._core.cache import EntryPieces, cache_dir
 
 HANG_GUARD_S = 900.0
 
-# The twin's push scenario computed in a process of its own, stopped by SIGTERM (as the command line takes
-# it: like Ctrl-C) once its first motion is finished.
+# The twin's push scenario computed in a process of its own (its motions by two processes it forks), stopped
+# by SIGTERM (as the command line takes it: like Ctrl-C) once its first motion is finished.
 INTERRUPTED_SCENARIO = """
 import os, signal, sys
 from softtip._core.progress import Progress, Task
@@ -52,8 +52,9 @@ def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_r
     stopped = subprocess.run([sys.executable, "-c", INTERRUPTED_SCENARIO, str(path)], capture_output=True,
                              text=True, timeout=HANG_GUARD_S)
     assert stopped.returncode != 0 and "KeyboardInterrupt: SIGTERM" in stopped.stderr
-    kept = list((cache_dir() / "models").glob("scenario-push-*.pieces/*.npz"))
-    assert [piece.name for piece in kept] == ["0.npz"]
+    # the first motion finished, and the one the other process was computing if it was stored first
+    kept = {int(piece.stem) for piece in (cache_dir() / "models").glob("scenario-push-*.pieces/*.npz")}
+    assert 1 <= len(kept) <= 2
     computed = tmp_path / "computed"  # each motion written, so computed in this run
     write = EntryPieces.write
 
@@ -65,7 +66,8 @@ def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_r
     monkeypatch.setattr(EntryPieces, "write", write_and_log)
     protocol = load_protocol(path)
     resumed = live_pushes(protocol)
-    assert computed.read_text().split() == ["1", "2"]  # the normal push was read back, not computed again
+    # the finished motions were read back, not computed again
+    assert sorted(map(int, computed.read_text().split())) == sorted({0, 1, 2} - kept)
     assert not list((cache_dir() / "models").glob("scenario-push-*.pieces"))  # gone with the whole entry stored
     whole = pushing_scenario(protocol, protocol.seed, speed_mm_s=PUSH_SPEED_MM_S)
     assert np.array_equal(resumed.times_s, whole.times_s)

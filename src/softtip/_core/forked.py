@@ -4,8 +4,8 @@ The processes are forked after the expensive set-up (a factorised matrix, a twin
 without copying or sending it; each writes its results into arrays in memory shared with this process
 (:func:`shared_zeros`, allocated before the fork) and reports each finished piece by its number, so this
 process shows progress and keeps a finished piece as soon as it is done. Ctrl-C or SIGTERM here stops
-the workers (they ignore Ctrl-C themselves, so a terminal's Ctrl-C reaches this process alone), and a
-worker whose parent is gone stops after its current piece.
+the workers (they ignore the Ctrl-C a terminal sends them too: this process ends them), and a worker
+whose parent is gone stops after its current piece.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import multiprocessing
 import multiprocessing.connection
 import os
 import signal
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

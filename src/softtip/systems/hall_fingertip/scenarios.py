@@ -58,10 +58,12 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     """The force-calibration motions in a loop - a normal push, a push then shear along x, along y -
     each followed by a release and a rest, on one fabricated unit of the protocol's design, at the
     protocol's speed unless ``speed_mm_s`` is given; the force is what a reference sensor reads
-    (the material's relaxation included). ``pieces``: where each finished motion is kept, and read back
-    instead of computed again (a run stopped part way resumes)."""
+    (the material's relaxation included). The motions are computed side by side, one process per core;
+    ``pieces``: where each finished motion is kept, and read back instead of computed again (a run stopped
+    part way resumes)."""
     # the twin's mechanics are imported here, not with the module: a cached scenario is replayed (and
     # unpickled in the emulator's process) without them, which takes seconds off a warm start
+    from softtip._core.forked import shared_zeros, solve_in_processes
     from softtip.mechanics.contact import LoadCase
     from softtip.mechanics.indenters import Board
     from softtip.mechanics.poses import MagnetPoses
@@ -76,37 +78,46 @@ def pushing_scenario(protocol: Protocol, seed: int, speed_mm_s: float | None = N
     rng = np.random.default_rng(seed)
     unit = FabricatedUnit(protocol.design, protocol.realism, rng)  # its exact field: the emulator adds the noise
     speed = (p.speed_mm_s if speed_mm_s is None else speed_mm_s) * MM
-    segments_t, segments_rigid, segments_force = [], [], []
-    clock = 0.0
-    motions = ((p.normal_depth_mm, (0.0, 0.0)), (p.shear_depth_mm, (p.shear_mm, 0.0)), (p.shear_depth_mm, (0.0, p.shear_mm)))
+    motions = [(depth_mm * MM, np.array(shear_mm) * MM) for depth_mm, shear_mm in (
+        (p.normal_depth_mm, (0.0, 0.0)), (p.shear_depth_mm, (p.shear_mm, 0.0)), (p.shear_depth_mm, (0.0, p.shear_mm)))]
+    # air, down, shear, back along the same path, air
+    paths = [_out_and_back(rate_hz, rest_s, (depth + float(np.linalg.norm(shear))) / speed) for depth, shear in motions]
+    magnets = len(fingertip.influence.magnet_centers)
+    # in memory the processes that compute the motions side by side share with this one
+    segments = [{"times_s": times, "rigid": shared_zeros((len(times), magnets, 6)),
+                 "force_N": shared_zeros((len(times), 3))} for times, _ in paths]
+
+    def push(index: int) -> None:  # in this process or a forked one
+        (depth, shear), (_, travelled_s) = motions[index], paths[index]
+        load = LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=0.0), depth, tangential=tuple(shear),
+                        friction="stick")
+        table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
+        reach = float(np.linalg.norm(shear))
+        along = travelled_s * speed
+        sheared = np.clip(along - depth, 0, reach)
+        poses, force = interpolate_path(table, np.minimum(along, depth),
+                                        sheared[:, None] * (shear / max(reach, 1e-12))[None])
+        segments[index]["rigid"][:] = poses.rigid
+        segments[index]["force_N"][:] = np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]])
+        if pieces is not None:
+            pieces.write(index, segments[index])
+
     with progress.task("the pushes: normal, then shear along x, along y", total=len(motions)) as task:
-        for index, (depth_mm, shear_mm) in enumerate(motions):
+        to_compute = []
+        for index in range(len(motions)):
             kept = pieces.read(index) if pieces is not None else None
             if kept is None:
-                depth, shear = depth_mm * MM, np.array(shear_mm) * MM
-                load = LoadCase(Board(thickness=p.board_thickness_mm * MM, angle=0.0), depth, tangential=tuple(shear),
-                                friction="stick")
-                table = path_table(fingertip.press(load, normal_steps=4, tangential_steps=8))
-                reach = float(np.linalg.norm(shear))
-                # air, down, shear, back along the same path, air
-                times, travelled_s = _out_and_back(rate_hz, rest_s, (depth + reach) / speed)
-                along = travelled_s * speed
-                sheared = np.clip(along - depth, 0, reach)
-                poses, force = interpolate_path(table, np.minimum(along, depth),
-                                                sheared[:, None] * (shear / max(reach, 1e-12))[None])
-                kept = {"times_s": times, "rigid": poses.rigid,
-                        "force_N": np.column_stack([-force[:, 0], -force[:, 1], force[:, 2]])}
-                if pieces is not None:
-                    pieces.write(index, kept)
-            segments_t.append(clock + kept["times_s"])
-            segments_rigid.append(kept["rigid"])
-            segments_force.append(kept["force_N"])
-            clock += kept["times_s"][-1] + 1 / rate_hz
-            task.advance()
-    poses, times = MagnetPoses.from_rigid(np.concatenate(segments_rigid)), np.concatenate(segments_t)
+                to_compute.append(index)
+            else:
+                segments[index] = kept
+                task.advance()
+        solve_in_processes(push, to_compute, lambda index: task.advance())
+    starts = np.cumsum([0.0] + [segment["times_s"][-1] + 1 / rate_hz for segment in segments[:-1]])
+    times = np.concatenate([start + segment["times_s"] for start, segment in zip(starts, segments)])
+    poses = MagnetPoses.from_rigid(np.concatenate([segment["rigid"] for segment in segments]))
     v = protocol.viscoelastic
     prony = material_prony(fingertip, v.hysteresis_percent, v.depth_mm * MM, v.speed_mm_s * MM, v.rest_s)
-    force = qlv_response(times, np.concatenate(segments_force), prony)
+    force = qlv_response(times, np.concatenate([segment["force_N"] for segment in segments]), prony)
     force[:, 2] = np.maximum(force[:, 2], 0.0)  # a contact does not pull
     return TwinScenario(times_s=times, field_uT=unit.field(poses) * UT_PER_T, force_N=force)
 
