@@ -73,7 +73,7 @@ InfluenceEngine.build(load_design("cylindrical-D"), 3.0 * MM, 4.5 * MM, curvatur
 """
 
 
-@pytest.mark.slow  # three factorisations and nine blocks of back-substitutions: 88 s under a load average of 15-20
+@pytest.mark.slow  # three factorisations and nine blocks of back-substitutions: 9 s at a load average of 3, 88 s at 15-20
 def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resumes_from_them(monkeypatch, tmp_path):
     """1,299 surface unknowns: six blocks of back-substitutions; Ctrl-C after the third."""
     from softtip._core.cache import EntryPieces
@@ -105,7 +105,7 @@ def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resume
         assert np.max(np.abs(resumed_matrix - whole_matrix)) <= 1e-10 * np.max(np.abs(whole_matrix))
 
 
-@pytest.mark.slow  # a coarse fingertip factorised twice (PARDISO, SuperLU), 150 unit loads twice: 27 s under a load average of 15-20
+# a coarse fingertip factorised twice (PARDISO, SuperLU), 150 unit loads twice: 2.1 s at a load average of 3
 def test_blocks_solved_by_two_forked_processes_equal_the_serial_solve_and_scipys():
     """The back-substitutions of 150 surface unknowns in five blocks: by two processes forked after the
     factorisation, as in this process, and (three of them) by SciPy's sparse solver on the stiffness."""

@@ -41,7 +41,7 @@ live_pushes(load_protocol(sys.argv[1]), StopAfterTheFirstMotion())
 """
 
 
-@pytest.mark.slow  # the coarse fingertip's influence matrices, then the scenario twice: 40 s under a load average of 17
+@pytest.mark.slow  # the coarse fingertip's influence matrices, then the scenario twice: 22 s at a load average of 3
 def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_run_computes_the_rest(
         coarse_protocol, monkeypatch, tmp_path):
     from softtip.lab import load_protocol
@@ -76,7 +76,7 @@ def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_r
         assert np.max(np.abs(resumed_array - whole_array)) <= 1e-10 * np.max(np.abs(whole_array))
 
 
-@pytest.mark.slow  # the renderer's table and a loop until its recording holds 20 kB: 53 s under a load average of 20
+# the renderer's table and a loop until its recording holds 20 kB: 5.9 s at a load average of 3 (53 s at 20)
 def test_sigterm_ends_an_endless_rendering_as_ctrl_c_does_and_keeps_the_recording(tmp_path):
     """``haptics render`` without --duration runs until stopped; a launch system stops it with SIGTERM."""
     from softtip.realtime.recording.reader import read_recording
