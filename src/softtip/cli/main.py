@@ -14,6 +14,7 @@ import warnings
 import typer
 
 from softtip import __version__
+from softtip._core.stopping import stop_as_ctrl_c
 from softtip._core.systems import SystemSkipped, default, load, systems
 from softtip._core.user import chosen_system
 from softtip.cli.common import Deferred, Toolkit, console, errors, printable
@@ -86,6 +87,7 @@ app = typer.Typer(help="softtip: fingertip tactile sensing, from design to real-
 
 @app.callback(invoke_without_command=True)
 def main(version: bool = typer.Option(False, "--version", help="Print the version and exit.")) -> None:
+    stop_as_ctrl_c()  # a launch system's SIGTERM keeps finished work and closes recordings, as Ctrl-C does
     if version:
         console.print(f"softtip {__version__}")
         raise typer.Exit()

@@ -21,6 +21,7 @@ import scipy.sparse as sp
 
 from softtip.design.model import Design, Material
 from softtip._core.cache import EntryPieces
+from softtip._core.forked import shared_zeros, solve_in_processes
 from softtip._core.progress import SILENT, Progress
 from softtip.mechanics.mesh import TetMesh
 from softtip.mechanics.poses import MagnetPoses
@@ -246,30 +247,45 @@ class BodyModel:
         return MagnetPoses.from_rigid(unknowns[self.n_free:].reshape(-1, 6).copy())
 
     def unit_load_responses(self, solver, columns: np.ndarray, block: int = 240, progress: Progress = SILENT,
-                            pieces: EntryPieces | None = None) -> tuple[np.ndarray, np.ndarray]:
+                            pieces: EntryPieces | None = None,
+                            processes: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Responses to a unit force on each of the unknowns ``columns``, by back-substitution in
         blocks with ``solver`` (an :class:`~softtip.mechanics.linsolve.SPDSolver` holding the
         factorised stiffness): at the same unknowns (len, len) - a compliance - and at the magnets'
         rigid coordinates (6M, len). ``pieces``: where each finished block is kept, and read back
-        instead of solved again (a run stopped part way resumes)."""
+        instead of solved again (a run stopped part way resumes). The blocks are independent: ``processes``
+        (default one per core) forked after the factorisation share its factor and solve them side by side."""
         rigid = np.arange(self.n_free, self.size)
-        at_columns = np.empty((len(columns), len(columns)))
-        at_magnets = np.empty((len(rigid), len(columns)))
+        blocks = [slice(start, min(start + block, len(columns))) for start in range(0, len(columns), block)]
+        at_columns = shared_zeros((len(columns), len(columns)))
+        at_magnets = shared_zeros((len(rigid), len(columns)))
+
+        def keep(index: int, arrays: dict[str, np.ndarray]) -> None:
+            at_columns[:, blocks[index]] = arrays["at_columns"]
+            at_magnets[:, blocks[index]] = arrays["at_magnets"]
+
+        def solve(index: int) -> None:  # in this process or a forked one: the arrays are shared
+            chunk = columns[blocks[index]]
+            unit = np.zeros((self.size, len(chunk)))
+            unit[chunk, np.arange(len(chunk))] = 1.0
+            solved = solver.solve(unit)
+            arrays = {"at_columns": solved[columns], "at_magnets": solved[rigid]}
+            if pieces is not None:
+                pieces.write(index, arrays)
+            keep(index, arrays)
+
         with progress.task("unit load responses", total=len(columns)) as task:
-            for index, start in enumerate(range(0, len(columns), block)):
-                chunk = columns[start:start + block]
+            to_solve = []
+            for index, columns_of_block in enumerate(blocks):
                 kept = pieces.read(index) if pieces is not None else None
                 if kept is None:
-                    unit = np.zeros((self.size, len(chunk)))
-                    unit[chunk, np.arange(len(chunk))] = 1.0
-                    solved = solver.solve(unit)
-                    kept = {"at_columns": solved[columns], "at_magnets": solved[rigid]}
-                    if pieces is not None:
-                        pieces.write(index, kept)
-                at_columns[:, start:start + len(chunk)] = kept["at_columns"]
-                at_magnets[:, start:start + len(chunk)] = kept["at_magnets"]
-                task.advance(len(chunk))
-        return 0.5 * (at_columns + at_columns.T), at_magnets  # symmetric up to round-off
+                    to_solve.append(index)
+                else:
+                    keep(index, kept)
+                    task.advance(columns_of_block.stop - columns_of_block.start)
+            solve_in_processes(solve, to_solve, lambda index: task.advance(blocks[index].stop - blocks[index].start),
+                               processes)
+        return 0.5 * (at_columns + at_columns.T), np.array(at_magnets)  # symmetric up to round-off
 
     def hyperelastic_energy(self, unknowns: np.ndarray) -> float:
         """Neo-Hookean strain energy at ``unknowns`` (inf if an element inverts)."""

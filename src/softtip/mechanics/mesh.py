@@ -21,6 +21,7 @@ from types import ModuleType
 import numpy as np
 
 from softtip._core.cache import artefact_key, cache_dir, code_hash, read_entry, write_entry
+from softtip._core.stopping import stop_handlers_kept
 from softtip._core.systems import load
 from softtip._core.units import MM
 from softtip.design.model import Design, body_kind
@@ -36,7 +37,8 @@ def gmsh_session(model: str) -> Iterator[ModuleType]:
     import gmsh
 
     with _GMSH_LOCK:
-        gmsh.initialize(interruptible=False)
+        with stop_handlers_kept():
+            gmsh.initialize(interruptible=False)
         try:
             gmsh.option.setNumber("General.Terminal", 0)
             gmsh.model.add(model)

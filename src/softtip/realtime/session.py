@@ -17,6 +17,7 @@ from typing import Self
 
 import numpy as np
 
+from softtip._core.stopping import STOP_SIGNALS, interrupt
 from softtip.hardware import EmulatorLog, EmulatorProcess, FaultPlan, PressCycle, Sample, ThreadedSource
 from softtip.hardware.drivers import FirmwareStream, PortRequest, firmware_settings
 from softtip.realtime.baseline import Baseline
@@ -27,9 +28,6 @@ from softtip.realtime.sinks.base import Sink
 from softtip.sensors.registry import ChipSettings
 
 EMULATOR = "emulator"
-# Signals that end a live session as Ctrl-C does, closing its sinks (a recording gets its summary):
-# SIGTERM (kill, a service manager stopping it) and SIGHUP (its terminal closed).
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class LiveSession:
@@ -174,7 +172,7 @@ def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path
                           baseline=baseline, free_states=free_states, callbacks=callbacks,
                           emulator_source=emulator_source)
     in_main_thread = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGUSR1")
-    stopping = {number: signal.signal(number, _interrupt) for number in STOP_SIGNALS} if in_main_thread else {}
+    stopping = {number: signal.signal(number, interrupt) for number in STOP_SIGNALS} if in_main_thread else {}
     try:
         with session:
             if in_main_thread:
@@ -190,8 +188,3 @@ def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path
         for number, handler in stopping.items():
             signal.signal(number, handler)
     return session.summary()
-
-
-def _interrupt(number: int, _frame) -> None:
-    """A stop signal ends the session as Ctrl-C does."""
-    raise KeyboardInterrupt(signal.Signals(number).name)

@@ -23,11 +23,14 @@ from softtip.systems.hall_fingertip.force_model import FORCES, axis_scores, cali
 from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S, live_pushes
 
 
-def run_main_demo(seed: int = 1, duration_s: float = 20.0, rate_hz: int = 50, dashboard: bool = True,
+def run_main_demo(seed: int = 1, duration_s: float | None = None, rate_hz: int = 50, dashboard: bool = True,
                   record: str | None = None, progress: Progress = SILENT) -> dict:
+    """The three steps; ``duration_s``: seconds of live streaming, by default one loop of the twin's three
+    motions (about 17 s), each with its rest, loading and release."""
     model_path, calibration, protocol = calibrate_force_model(seed, progress, reuse=True)
     with progress.task("live: the twin's pushes the emulated fingertip replays (kept in the cache)"):
         scenario = live_pushes(protocol, progress)  # the push scenario's: the next command finds it cached
+    duration_s = scenario.duration_s if duration_s is None else duration_s
     frames = []
 
     def collect(frame) -> None:

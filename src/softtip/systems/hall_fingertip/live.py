@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import functools
 
-from softtip._core.cache import read_entry, write_entry
+from softtip._core.cache import EntryPieces, read_entry, write_entry
 from softtip._core.progress import SILENT, Progress
 from softtip.lab import Protocol, load_protocol
 from softtip.lab.protocols import protocol_key, trained_model_path
@@ -17,16 +17,19 @@ from softtip.systems.hall_fingertip.scenarios import pushing_scenario
 
 def cached_scenario(protocol: Protocol, name: str, compute, progress: Progress = SILENT) -> TwinScenario:
     """The twin's scenario ``name`` of ``protocol``, from the cache or computed (``compute(protocol, seed,
-    progress=progress)``) and cached."""
+    progress=progress, pieces=pieces)``) and cached; a computation stopped part way (Ctrl-C, SIGTERM) keeps
+    the pieces it finished, and the next one computes only the rest."""
     path, key, kind = trained_model_path(protocol, f"scenario-{name}"), protocol_key(protocol), f"{name} scenario"
     entry = read_entry(path, key, kind)
     if entry is not None:
         arrays = entry[1]
         return TwinScenario(times_s=arrays["times_s"], field_uT=arrays["field_uT"], force_N=arrays["force_N"])
+    pieces = EntryPieces(path, key, kind)  # its finished motions, kept if it is stopped part way
     with progress.task(f"computing the twin's {name} scenario (kept in the cache)"):
-        scenario = compute(protocol, protocol.seed, progress=progress)
-    write_entry(path, key, kind, {},
-                {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N})
+        scenario = compute(protocol, protocol.seed, progress=progress, pieces=pieces)
+    if write_entry(path, key, kind, {},
+                   {"times_s": scenario.times_s, "field_uT": scenario.field_uT, "force_N": scenario.force_N}):
+        pieces.clear()
     return scenario
 
 

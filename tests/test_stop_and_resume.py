@@ -1,0 +1,103 @@
+"""Work stopped part way, by Ctrl-C or by the SIGTERM a robot's launch system sends, keeps what it finished
+and the next run does only the rest: the twin's live scenarios motion by motion; a rendering or a live
+stream ends as on Ctrl-C, its recording closed and readable."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from softtip._core.cache import EntryPieces, cache_dir
+
+HANG_GUARD_S = 900.0
+
+# The twin's push scenario computed in a process of its own (its motions by two processes it forks), stopped
+# by SIGTERM (as the command line takes it: like Ctrl-C) once its first motion is finished.
+INTERRUPTED_SCENARIO = """
+import os, signal, sys
+from softtip._core.progress import Progress, Task
+from softtip._core.stopping import stop_as_ctrl_c
+from softtip.lab import load_protocol
+from softtip.systems.hall_fingertip.live import live_pushes
+
+stop_as_ctrl_c()
+
+class StopAfterTheFirstMotion(Progress):
+    def task(self, description, total=None):
+        class Motions(Task):
+            def advance(self, steps=1, note=None):
+                if description.startswith("the pushes"):
+                    os.kill(os.getpid(), signal.SIGTERM)
+        return Motions()
+
+live_pushes(load_protocol(sys.argv[1]), StopAfterTheFirstMotion())
+"""
+
+
+@pytest.mark.slow  # the coarse fingertip's influence matrices, then the scenario twice: 22 s at a load average of 3
+def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_run_computes_the_rest(
+        coarse_protocol, monkeypatch, tmp_path):
+    from softtip.lab import load_protocol
+    from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S, live_pushes
+    from softtip.systems.hall_fingertip.scenarios import pushing_scenario
+
+    path = coarse_protocol("force3", "cylindrical-D")
+    stopped = subprocess.run([sys.executable, "-c", INTERRUPTED_SCENARIO, str(path)], capture_output=True,
+                             text=True, timeout=HANG_GUARD_S)
+    assert stopped.returncode != 0 and "KeyboardInterrupt: SIGTERM" in stopped.stderr
+    # the first motion finished, and the one the other process was computing if it was stored first
+    kept = {int(piece.stem) for piece in (cache_dir() / "models").glob("scenario-push-*.pieces/*.npz")}
+    assert 1 <= len(kept) <= 2
+    computed = tmp_path / "computed"  # each motion written, so computed in this run
+    write = EntryPieces.write
+
+    def write_and_log(self, index, arrays):
+        with open(computed, "a") as log:
+            log.write(f"{index}\n")
+        write(self, index, arrays)
+
+    monkeypatch.setattr(EntryPieces, "write", write_and_log)
+    protocol = load_protocol(path)
+    resumed = live_pushes(protocol)
+    # the finished motions were read back, not computed again
+    assert sorted(map(int, computed.read_text().split())) == sorted({0, 1, 2} - kept)
+    assert not list((cache_dir() / "models").glob("scenario-push-*.pieces"))  # gone with the whole entry stored
+    whole = pushing_scenario(protocol, protocol.seed, speed_mm_s=PUSH_SPEED_MM_S)
+    assert np.array_equal(resumed.times_s, whole.times_s)
+    for name in ("field_uT", "force_N"):  # the first motion came from another process: equal to round-off
+        resumed_array, whole_array = getattr(resumed, name), getattr(whole, name)
+        assert np.max(np.abs(resumed_array - whole_array)) <= 1e-10 * np.max(np.abs(whole_array))
+
+
+# the renderer's table and a loop until its recording holds 20 kB: 5.9 s at a load average of 3 (53 s at 20)
+def test_sigterm_ends_an_endless_rendering_as_ctrl_c_does_and_keeps_the_recording(tmp_path):
+    """``haptics render`` without --duration runs until stopped; a launch system stops it with SIGTERM."""
+    from softtip.realtime.recording.reader import read_recording
+
+    path = tmp_path / "endless.mcap"
+    child = subprocess.Popen([sys.executable, "-m", "softtip", "haptics", "render", "--fs-levels", "5", "--record",
+                              str(path), "--fast", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        deadline = time.monotonic() + HANG_GUARD_S
+        while (not path.exists() or path.stat().st_size < 20_000) and time.monotonic() < deadline:
+            assert child.poll() is None, child.stderr.read()
+            time.sleep(0.05)
+        child.send_signal(signal.SIGTERM)
+        stdout, stderr = child.communicate(timeout=HANG_GUARD_S)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    assert child.returncode == 0, stderr
+    summary = json.loads(stdout)
+    assert summary["interrupted"] and summary["ticks"] > 0
+    recording = read_recording(path)  # closed with its summary: every tick the loop ran is in it
+    assert not recording.truncated and len(recording.topics["/fingertip/estimates"].data) == summary["ticks"]
