@@ -27,6 +27,8 @@ from softtip.realtime.pipeline import Pipeline
 from softtip.realtime.sinks.base import Sink
 from softtip.sensors.registry import ChipSettings
 
+BASELINE_FRAMES = 50  # the frames a stream's baseline averages before it estimates
+
 EMULATOR = "emulator"
 
 
@@ -150,7 +152,7 @@ class LiveSession:
 
 def run_live(source_spec: str | ThreadedSource, model_paths: Sequence[str | Path] = (), sinks: Sequence[Sink] = (),
              duration_s: float | None = None, *, rate_hz: int = 50, chips: int | None = None,
-             settings: ChipSettings | None = None, baseline_frames: int = 50,
+             settings: ChipSettings | None = None, baseline_frames: int = BASELINE_FRAMES,
              drift_time_constant_s: float | None = None, drift_threshold: float | None = None,
              rest_s: float | None = None, rest_band: float | None = None,
              free_states: Sequence[str] = (), callbacks: Sequence[Callable[[FrameResult], None]] = (),

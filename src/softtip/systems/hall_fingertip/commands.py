@@ -21,8 +21,8 @@ app = typer.Typer(help="S1: the Hall-effect soft fingertip.", no_args_is_help=Tr
 def demo(
     context: typer.Context,
     seed: int = typer.Option(1, "--seed", help="Seed of the experiments, the fabricated unit and the training."),
-    duration: float = typer.Option(None, "--duration", help="Seconds of live streaming (default: one loop of the "
-                                                            "twin's three motions, about 17 s)."),
+    duration: float = typer.Option(None, "--duration", help="Seconds of live streaming (default: the baseline's "
+                                                            "second, then one loop of the twin's three motions, about 17 s)."),
     record: Path = typer.Option(None, "--record", help="Also record the live stream to this MCAP file."),
     force: bool = FORCE,
     json_output: bool = typer.Option(False, "--json", help="Print JSON."),

@@ -17,7 +17,7 @@ import contextlib
 import numpy as np
 
 from softtip._core.progress import SILENT, Progress
-from softtip.realtime.session import run_live
+from softtip.realtime.session import BASELINE_FRAMES, run_live
 from softtip.realtime.sinks.factory import live_sinks
 from softtip.systems.hall_fingertip.force_model import FORCES, axis_scores, calibrate_force_model
 from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S, live_pushes
@@ -26,11 +26,12 @@ from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S, live_pushes
 def run_main_demo(seed: int = 1, duration_s: float | None = None, rate_hz: int = 50, dashboard: bool = True,
                   record: str | None = None, progress: Progress = SILENT) -> dict:
     """The three steps; ``duration_s``: seconds of live streaming, by default one loop of the twin's three
-    motions (about 17 s), each with its rest, loading and release."""
+    motions (about 17 s) after the baseline's second, each with its rest, loading and release."""
     model_path, calibration, protocol = calibrate_force_model(seed, progress, reuse=True)
     with progress.task("live: the twin's pushes the emulated fingertip replays (kept in the cache)"):
         scenario = live_pushes(protocol, progress)  # the push scenario's: the next command finds it cached
-    duration_s = scenario.duration_s if duration_s is None else duration_s
+    if duration_s is None:  # the baseline's frames estimate nothing; a few frames more for the stream's start
+        duration_s = scenario.duration_s + (BASELINE_FRAMES + 5) / rate_hz
     frames = []
 
     def collect(frame) -> None:
@@ -54,7 +55,8 @@ def run_main_demo(seed: int = 1, duration_s: float | None = None, rate_hz: int =
         window = [float(times[0]), float(times[-1])]  # which part of the scenario's loop the scores cover
         # a stream longer than its loop counts the loop's start twice; over whole loops each motion counts
         # once, as in the held-out trials
-        loops = np.floor((times[-1] - times[0]) / scenario.duration_s)
+        # each frame stands for one period: half a period of slack against the device clock's rounding
+        loops = np.floor((times[-1] - times[0] + 1.5 / rate_hz) / scenario.duration_s)
         covered = times < times[0] + loops * scenario.duration_s
         if loops:
             whole_loops = {k: axis_scores(truth[covered, i], estimates[covered, i]) for i, k in enumerate(FORCES)}
