@@ -1,0 +1,121 @@
+"""Identified models kept in the cache: a fit read back is the fit made afresh to the last bit, another
+setting or other data is another fit, a run stopped part way keeps what it finished, and the wearable
+study's fits made side by side in the trials' pool are the serial run's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softtip.bench.sysid import force_like
+from softtip.lab.trials import processes_for_trials
+from softtip.sysid import StateSpaceModel, TransferFunctionModel, fitted
+from softtip.systems.wearable.study import _identify_side_by_side
+from softtip._core.progress import SILENT
+
+
+@pytest.fixture(scope="module")
+def split():
+    return force_like(estimation_trials=4, validation_trials=2, noise=0.01, seed=3)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(folder))
+    return folder
+
+
+def _same_fit(first, second, validation) -> None:
+    """The two fits' discrete systems, trends and delays, and their simulation and scores of ``validation``, bit for bit."""
+    assert type(first) is type(second) and first.get_params() == second.get_params()
+    for name in ("A", "B", "C", "D"):
+        np.testing.assert_array_equal(getattr(first.system_, name), getattr(second.system_, name))
+    np.testing.assert_array_equal(first.trend_.output_offset, second.trend_.output_offset)
+    assert first.delays_ == second.delays_ and first.data_ == second.data_
+    np.testing.assert_array_equal(np.vstack(first.simulate(validation)), np.vstack(second.simulate(validation)))
+    first_scores, second_scores = first.evaluate(validation), second.evaluate(validation)
+    for metric in first_scores.METRICS:
+        np.testing.assert_array_equal(first_scores.values[metric], second_scores.values[metric])
+
+
+def _counted_fits(monkeypatch, fail_at: int | None = None) -> list:
+    """Counts the fits made in this process (and raises Ctrl-C's exception at fit number ``fail_at``)."""
+    made = []
+    for kind in (StateSpaceModel, TransferFunctionModel):
+        original = kind.fit
+
+        def counting(self, recording, original=original):
+            made.append(self)
+            if fail_at is not None and len(made) == fail_at:
+                raise KeyboardInterrupt
+            return original(self, recording)
+
+        monkeypatch.setattr(kind, "fit", counting)
+    return made
+
+
+@pytest.mark.parametrize("model", [TransferFunctionModel(4, estimate_covariance=False),
+                                   StateSpaceModel(6, estimate_covariance=False)], ids=["tf4", "ss6"])
+def test_a_fit_read_from_the_cache_is_the_fit_made_afresh_bit_for_bit(cache, split, monkeypatch, model):
+    estimation, validation = split
+    afresh = type(model)(**model.get_params()).fit(estimation)
+    first = fitted(model, estimation)
+    assert not hasattr(model, "system_")  # the estimator given stays unfitted, as scikit-learn's clone leaves it
+    assert len(list((cache / "sysid").glob("*.npz"))) == 1
+    made = _counted_fits(monkeypatch)
+    again = fitted(model, estimation)
+    assert made == []  # read, not fitted
+    _same_fit(afresh, first, validation)
+    _same_fit(afresh, again, validation)
+
+
+def test_another_setting_or_other_data_is_another_fit(cache, split, monkeypatch):
+    estimation, validation = split
+    fitted(StateSpaceModel(3), estimation)
+    made = _counted_fits(monkeypatch)
+    fitted(StateSpaceModel(4), estimation)
+    fitted(StateSpaceModel(3, detrend="mean"), estimation)
+    fitted(StateSpaceModel(3), estimation.select(range(3)))  # one trial fewer
+    fitted(StateSpaceModel(3), estimation.with_trials(estimation.trials, source="another source"))
+    assert len(made) == 4
+    assert len(list((cache / "sysid").glob("*.npz"))) == 5
+
+
+def _order_fits(estimation):
+    """Nine small fits, enough for the pool (POOL_FROM_TRIALS): state space of orders 1-7, transfer functions 1-2."""
+    return ([(StateSpaceModel(order, estimate_covariance=False), estimation) for order in range(1, 8)]
+            + [(TransferFunctionModel(order, estimate_covariance=False), estimation) for order in range(1, 3)])
+
+
+def test_a_stopped_run_keeps_the_fits_it_finished(cache, split, monkeypatch):
+    estimation, _ = split
+    fits = _order_fits(estimation)
+    with processes_for_trials(1), pytest.raises(KeyboardInterrupt):
+        _counted_fits(monkeypatch, fail_at=4)
+        _identify_side_by_side(fits, SILENT)
+    monkeypatch.undo()
+    monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(cache))
+    assert len(list((cache / "sysid").glob("*.npz"))) == 3
+    made = _counted_fits(monkeypatch)
+    with processes_for_trials(1):
+        _identify_side_by_side(fits, SILENT)
+    assert len(made) == len(fits) - 3
+
+
+def test_fits_made_side_by_side_are_the_serial_ones(tmp_path, split, monkeypatch):
+    estimation, validation = split
+    fits = _order_fits(estimation)
+    models = {}
+    for processes in (1, 2):
+        monkeypatch.setenv("SOFTTIP_CACHE_DIR", str(tmp_path / f"processes-{processes}"))
+        with processes_for_trials(processes):
+            _identify_side_by_side(fits + fits[:2], SILENT)  # a fit asked for twice is stored once
+        assert len(list((tmp_path / f"processes-{processes}" / "sysid").glob("*.npz"))) == len(fits)
+        made = _counted_fits(monkeypatch)
+        models[processes] = [fitted(model, recording) for model, recording in fits]
+        assert made == []  # every fit was stored by the run
+        monkeypatch.undo()
+    for serial, pooled in zip(models[1], models[2], strict=True):
+        _same_fit(serial, pooled, validation)
+
