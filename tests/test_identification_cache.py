@@ -1,13 +1,15 @@
-"""Identified models kept in the cache: a fit read back is the fit made afresh to the last bit, another
-setting or other data is another fit, a run stopped part way keeps what it finished, and the wearable
-study's fits made side by side in the trials' pool are the serial run's."""
+"""Fitted models kept in the cache (identified systems, calibration networks): a fit read back is the fit
+made afresh to the last bit, another setting or other data is another fit, a run stopped part way keeps
+what it finished, and the wearable study's fits made side by side in the trials' pool are the serial run's."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from softtip import calibration
 from softtip.bench.sysid import force_like
+from softtip.calibration import LMNetwork, ModelFileError, PolynomialFit, SoftmaxClassifier
 from softtip.lab.trials import processes_for_trials
 from softtip.sysid import StateSpaceModel, TransferFunctionModel, fitted
 from softtip.systems.wearable.study import _identify_side_by_side
@@ -119,3 +121,47 @@ def test_fits_made_side_by_side_are_the_serial_ones(tmp_path, split, monkeypatch
     for serial, pooled in zip(models[1], models[2], strict=True):
         _same_fit(serial, pooled, validation)
 
+
+def _readings(seed: int = 0):
+    """Three channels and a smooth two-output target of them, in six trials; a class label per sample."""
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1, 1, size=(240, 3))
+    y = np.column_stack([np.tanh(X[:, 0] + 0.5 * X[:, 1]), X[:, 2] ** 2]) + 0.01 * rng.normal(size=(240, 2))
+    labels = np.where(X[:, 0] > 0.3, "edge", np.where(X[:, 1] > 0, "point-a", "point-b")).astype(object)
+    return X, y, labels, np.repeat(np.arange(6), 40)
+
+
+@pytest.mark.parametrize("make, target", [(lambda: LMNetwork((5,), random_state=2, max_epochs=30), "forces"),
+                                          (lambda: SoftmaxClassifier((5,), random_state=2, max_epochs=30), "labels"),
+                                          (lambda: PolynomialFit(), "forces")], ids=["network", "classifier", "polynomial"])
+def test_a_calibration_model_read_from_the_cache_predicts_as_the_fit_made_afresh(cache, monkeypatch, make, target):
+    X, y, labels, groups = _readings()
+    y = labels if target == "labels" else y
+    afresh = make().fit(X, y, groups=groups)
+    first = calibration.fitted(make(), X, y, groups=groups)
+    made, original = [], type(afresh).fit
+    monkeypatch.setattr(type(afresh), "fit", lambda self, *args, **kwargs: made.append(self) or original(self, *args, **kwargs))
+    again = calibration.fitted(make(), X, y, groups=groups)
+    assert made == [] and len(list((cache / "calibration").glob("*.npz"))) == 1
+    probe = np.random.default_rng(5).uniform(-1.2, 1.2, size=(50, 3))
+    for model in (first, again):
+        np.testing.assert_array_equal(model.predict(probe), afresh.predict(probe))
+        if target == "labels":
+            np.testing.assert_array_equal(model.predict_proba(probe), afresh.predict_proba(probe))
+    if hasattr(afresh, "stop_reason_"):  # what training reported travels with the fit
+        assert (again.stop_reason_, again.best_epoch_) == (afresh.stop_reason_, afresh.best_epoch_)
+    # another seed (degree) or other groups: another fit
+    other = make()
+    other.set_params(**({"degree": 2} if isinstance(other, PolynomialFit) else {"random_state": 3}))
+    calibration.fitted(other, X, y, groups=groups)
+    calibration.fitted(make(), X, y, groups=groups[::-1].copy())
+    assert len(made) == 2
+
+
+def test_a_calibration_model_seeded_by_a_generator_is_fitted_every_time(cache):
+    X, y, _, groups = _readings()
+    calibration.fitted(LMNetwork((3,), random_state=np.random.default_rng(1), max_epochs=5), X, y, groups=groups)
+    assert not (cache / "calibration").exists()
+    with pytest.raises(ModelFileError, match="cannot keep a StandardScaler in the cache"):
+        from sklearn.preprocessing import StandardScaler
+        calibration.fitted(StandardScaler(), X, y)
