@@ -4,6 +4,10 @@ what it finished, and the wearable study's fits made side by side in the trials'
 
 from __future__ import annotations
 
+import ast
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -165,3 +169,19 @@ def test_a_calibration_model_seeded_by_a_generator_is_fitted_every_time(cache):
     with pytest.raises(ModelFileError, match="cannot keep a StandardScaler in the cache"):
         from sklearn.preprocessing import StandardScaler
         calibration.fitted(StandardScaler(), X, y)
+
+
+def test_one_blas_thread_holds_for_scipys_own_openblas_loaded_after_the_first_limit():
+    # scipy's OpenBLAS is a library of its own, loaded with scipy.linalg: a limit set before then must reach it
+    script = """
+import numpy
+from threadpoolctl import threadpool_info
+from softtip._core.threads import single_threaded_blas
+with single_threaded_blas():
+    pass
+import scipy.linalg
+with single_threaded_blas():
+    print(sorted((pool["filepath"], pool["num_threads"]) for pool in threadpool_info() if pool["user_api"] == "blas"))
+"""
+    pools = ast.literal_eval(subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout)
+    assert len(pools) >= 2 and {threads for _, threads in pools} == {1}  # numpy's OpenBLAS and scipy's
