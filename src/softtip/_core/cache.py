@@ -36,6 +36,7 @@ from softtip._core.user import user_folder
 ENTRY_FORMAT, ENTRY_VERSION = "softtip-cache-entry", 1
 CACHE_VARIABLE = "SOFTTIP_CACHE_DIR"  # the environment variable that chooses the cache's folder
 Loaded = TypeVar("Loaded")
+Made = TypeVar("Made")
 
 
 class CacheEntryError(ValueError):
@@ -226,3 +227,20 @@ def write_file_entry(path: Path, key: str, kind: str, save: Callable[[Path], obj
     save(path)
     write_entry(_entry_of_file(path), key, kind, {"file_sha256": _sha256(path)}, {})
     return path
+
+
+def stored_or_made(path: Path, key: str, kind: str, load: Callable[[Path], Loaded], make: Callable[[], Made],
+                   save: Callable[[Made, Path], object]) -> tuple[Loaded | Made, bool]:
+    """The cached file ``path`` made for ``key``, read by ``load``; or, on a miss, ``make()`` stored there by
+    ``save(made, path)``; and whether it was read. A process making the same entry meanwhile is waited for
+    (:func:`computing`) and its entry read, so two processes never make one entry twice."""
+    found = read_file_entry(path, key, kind, load)
+    if found is not None:
+        return found, True
+    with computing(path):
+        found = read_file_entry(path, key, kind, load)
+        if found is not None:
+            return found, True
+        made = make()
+        write_file_entry(path, key, kind, lambda target: save(made, target))
+        return made, False

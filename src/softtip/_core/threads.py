@@ -39,6 +39,11 @@ class BackgroundThread:
 
 @functools.cache
 def _blas_controller() -> ThreadpoolController:
+    """The native thread pools, found once. scipy brings its own OpenBLAS, loaded with ``scipy.linalg``: a
+    controller made before that import would leave it on every core (where the identifications' least
+    squares run), so it is loaded first."""
+    import scipy.linalg  # noqa: F401 (loads scipy's OpenBLAS, for the controller to find)
+
     return ThreadpoolController()
 
 

@@ -12,12 +12,13 @@ All three are scikit-learn estimators with an unchecked ``predict_one`` for real
 (whole trials, or time blocks of every trial when there are few, different trials), warns of a
 validation set outside the calibration range, cross-validates by trial and scores scikit-learn
 baselines beside softtip's models. :mod:`softtip.metrics` holds the papers' metrics; :func:`save_model` and
-:func:`load_model` store fitted models as ``.npz`` + JSON, never pickle.
+:func:`load_model` store fitted models as ``.npz`` + JSON, never pickle; :func:`fitted` keeps a fit in
+the cache as such a file.
 """
 
 from softtip.calibration.classifier import SoftmaxClassifier
 from softtip.calibration.network import LMNetwork
-from softtip.calibration.persistence import ModelFileError, ModelMetadata, load_model, save_model
+from softtip.calibration.persistence import ModelFileError, ModelMetadata, fitted, load_model, save_model
 from softtip.calibration.polynomial import PolynomialFit
 
 __all__ = [
@@ -26,6 +27,7 @@ __all__ = [
     "ModelMetadata",
     "PolynomialFit",
     "SoftmaxClassifier",
+    "fitted",
     "load_model",
     "save_model",
 ]

@@ -21,11 +21,13 @@ Saved: :class:`LMNetwork`, :class:`SoftmaxClassifier`, :class:`PolynomialFit`, a
 scikit-learn ``Pipeline`` of ``StandardScaler``/``MinMaxScaler`` steps ending in one of them.
 Parameters that are not JSON (a numpy Generator as ``random_state``) are saved as null:
 they only shape training, not the fitted model. Every refusal raises
-:class:`ModelFileError` with one line naming the file.
+:class:`ModelFileError` with one line naming the file. :func:`fitted` keeps a fit in the cache as such
+a file, so the same fit is made once.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Sequence
@@ -33,11 +35,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy
+import sklearn
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, StandardScaler
 
 from softtip import __version__
-from softtip._core.archive import ModelFileError, canonical_json, read_archive, write_archive
+from softtip._core.archive import ModelFileError, canonical_json, hash_arrays, read_archive, write_archive
+from softtip._core.cache import artefact_key, cache_dir, code_hash, stored_or_made
 from softtip.calibration import checks
 from softtip.calibration.classifier import SoftmaxClassifier
 from softtip.calibration.network import LMNetwork
@@ -331,3 +336,36 @@ def load_model(path: str | os.PathLike):
 
 def _sub(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
     return {name.removeprefix(prefix): array for name, array in arrays.items() if name.startswith(prefix)}
+
+
+def fitted(estimator, X, y, **fit_params):
+    """``estimator`` (an :class:`LMNetwork`, :class:`SoftmaxClassifier` or :class:`PolynomialFit`) fitted on
+    ``X``, ``y`` and the arrays ``fit_params`` (``groups``), or the same fit made earlier, read from the
+    cache: a model file keyed by the estimator's class and ``get_params()`` (its seed among them), the
+    checksum of the training arrays, the code of the fit and numpy's, scipy's and scikit-learn's
+    versions. A file read predicts as the fit made afresh, to the last bit. ``estimator`` itself is left
+    unfitted. One seeded by a random generator object (not a number) draws anew at each fit, so it is
+    fitted every time."""
+    params = estimator.get_params()
+    fit = lambda: type(estimator)(**params).fit(X, y, **fit_params)  # noqa: E731
+    if type(estimator).__name__ not in MODELS:
+        raise ModelFileError(f"cannot keep a {type(estimator).__name__} in the cache: expected one of {', '.join(MODELS)}")
+    if not isinstance(params.get("random_state"), int | None):
+        return fit()
+    training = {"X": X, "y": y} | {f"fit/{name}": value for name, value in fit_params.items()}
+    digest = hashlib.sha256()
+    # labels as text: an object array's bytes are pointers, not its values
+    hash_arrays(digest, {name: np.asarray(value).astype(str) if np.asarray(value).dtype == object else np.asarray(value)
+                         for name, value in training.items()})
+    inputs = {"class": type(estimator).__name__, "params": params, "training": digest.hexdigest(),
+              "versions": [np.__version__, scipy.__version__, sklearn.__version__]}
+    key = artefact_key(inputs, code_hash("softtip.calibration", "softtip._core", "softtip.metrics"))
+    path = cache_dir() / "calibration" / f"{type(estimator).__name__}-{key}.npz"
+    return stored_or_made(path, key, "calibration model", lambda target: load_model(target)[0], fit, _save_unnamed)[0]
+
+
+def _save_unnamed(model, path: Path) -> None:
+    """A model file of ``model`` whose channels and targets are only numbered: a cached fit is keyed by its
+    training arrays, not by what they were named."""
+    save_model(path, model, input_channels=[f"x{k}" for k in range(model.n_features_in_)], input_units="1",
+               target_names=[f"y{k}" for k in range(_output_count(model))], target_units="1")

@@ -20,7 +20,7 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash, computing, read_file_entry, write_file_entry
+from softtip._core.cache import artefact_key, cache_dir, code_hash, stored_or_made
 from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import NotRegistered, load, names, owner, provenance
@@ -185,18 +185,11 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
         check_size(protocol)
     if not reuse:
         return _run_trials(protocol, progress)
-    path, key = trials_path(protocol), protocol_key(protocol)
     start = time.perf_counter()
-    cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
-    if cached is None:
-        with computing(path):  # a process running the same protocol meanwhile: wait for its dataset
-            start = time.perf_counter()
-            cached = read_file_entry(path, key, _TRIALS_KIND, Dataset.read)
-            if cached is None:
-                dataset, timings = _run_trials(protocol, progress)
-                write_file_entry(path, key, _TRIALS_KIND, dataset.write)
-                return dataset, timings
-    return cached, {"cache_read_s": time.perf_counter() - start}
+    (dataset, timings), read = stored_or_made(
+        trials_path(protocol), protocol_key(protocol), _TRIALS_KIND, lambda path: (Dataset.read(path), {}),
+        lambda: _run_trials(protocol, progress), lambda made, path: made[0].write(path))
+    return dataset, {"cache_read_s": time.perf_counter() - start} if read else timings
 
 
 def _run_trials(protocol: Protocol, progress: Progress) -> tuple[Dataset, dict]:

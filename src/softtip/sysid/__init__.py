@@ -24,7 +24,8 @@ force sensor's (side-sensor forces in, table-sensor forces out, at 10 Hz):
   function; :mod:`~softtip.sysid.residuals`: residual whiteness and input-independence tests;
 - :mod:`~softtip.sysid.models`: :class:`StateSpaceModel` and :class:`TransferFunctionModel`
   (``fit``/``simulate``/``predict``/``score``), order-selection tables with AIC and BIC;
-- :mod:`~softtip.sysid.files`: :func:`save_model` / :func:`load_model` (npz + JSON).
+- :mod:`~softtip.sysid.files`: :func:`save_model` / :func:`load_model` (npz + JSON), and :func:`fitted`:
+  a fit kept in the cache as such a file.
 """
 
 from importlib import import_module
@@ -34,7 +35,7 @@ from typing import TYPE_CHECKING
 # costs nothing, and a command pays for the stages it uses (scikit-learn, scipy) when it uses them
 _HOMES = {
     "estimate_delays": "delays",
-    "load_model": "files", "save_model": "files",
+    "fitted": "files", "load_model": "files", "save_model": "files",
     "MEASURED": "metrics", "FullScale": "metrics", "Scores": "metrics", "fit_percent": "metrics", "rated": "metrics",
     "score_outputs": "metrics",
     "StateSpaceModel": "models", "TransferFunctionModel": "models", "information_criteria": "models",
@@ -52,7 +53,7 @@ _HOMES = {
 
 if TYPE_CHECKING:
     from softtip.sysid.delays import estimate_delays
-    from softtip.sysid.files import load_model, save_model
+    from softtip.sysid.files import fitted, load_model, save_model
     from softtip.sysid.metrics import MEASURED, FullScale, Scores, fit_percent, rated, score_outputs
     from softtip.sysid.models import (
         StateSpaceModel,
@@ -98,6 +99,7 @@ __all__ = [
     "estimate_initial_state",
     "estimate_trend",
     "fit_percent",
+    "fitted",
     "information_criteria",
     "load_model",
     "order_table",

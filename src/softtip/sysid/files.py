@@ -16,6 +16,7 @@ of a state-space model or the coefficients of a transfer function (``tf/numerato
     sha256          the checksum of all of it
 
 :func:`load_model` checks all of it and refuses a bad file with one :class:`ModelFileError` line.
+:func:`fitted` keeps each fit in the cache as such a file, so the same fit is made once.
 """
 
 from __future__ import annotations
@@ -23,10 +24,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+import scipy
+
 from softtip import __version__
 from softtip._core.archive import read_archive, write_archive
 from softtip._core.archive import ModelFileError
+from softtip._core.cache import artefact_key, cache_dir, code_hash, stored_or_made
 from softtip.sysid.models import KINDS, IdentifiedModel
+from softtip.sysid.recording import Recording
 from softtip.sysid.statespace import IdentificationError
 
 FORMAT = "softtip-sysid-model"
@@ -70,3 +76,18 @@ def load_model(path: str | os.PathLike) -> IdentifiedModel:
     except ValueError as problem:
         raise ModelFileError(f"{path}: inconsistent model: {problem}") from None
     return model
+
+
+def fitted(model: IdentifiedModel, recording: Recording) -> IdentifiedModel:
+    """``model`` fitted on ``recording``, or the same fit made earlier, read from the cache: a model file
+    keyed by the recording (its names, units and the checksum of its arrays), the model's kind and
+    ``get_params()``, the code of the fit and numpy's and scipy's versions. A file read is the fit made
+    afresh to the last bit (``fit_seconds_`` aside, the time the first fit took). ``model`` itself is
+    left unfitted."""
+    inputs = {"kind": type(model).__name__, "params": model.get_params(), "data": recording.describe(),
+              "numpy": np.__version__, "scipy": scipy.__version__}
+    key = artefact_key(inputs, code_hash("softtip.sysid", "softtip._core", "softtip.metrics"))
+    path = cache_dir() / "sysid" / f"{type(model).__name__}-{key}.npz"
+    return stored_or_made(path, key, "identified model", load_model,
+                          lambda: type(model)(**model.get_params()).fit(recording),
+                          lambda made, target: save_model(target, made))[0]

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure as PlotFigure
 import numpy as np
 
 from softtip._core.progress import Progress
-from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier
+from softtip.calibration import LMNetwork, PolynomialFit, SoftmaxClassifier, fitted
 from softtip import metrics
 from softtip.data import Dataset
 from softtip.design.model import load_design
@@ -131,7 +131,7 @@ def orientation_fits(dataset: Dataset, seed: int) -> tuple[np.ndarray, np.ndarra
     X, y = dataset.X(), dataset.column("angle_deg")
     fits = {}
     for method, model in (("polynomial", PolynomialFit()), ("network", LMNetwork((10,), random_state=seed))):
-        model.fit(X[train], y[train], groups=dataset.groups[train])
+        model = fitted(model, X[train], y[train], groups=dataset.groups[train])
         fits[method] = (model, model.predict(X[test]))
     return y[test], X[test], fits
 
@@ -290,7 +290,7 @@ def force3(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     cells = {}
     for row, (method, model) in enumerate((("polynomial", PolynomialFit()),
                                            ("network", LMNetwork((10,), random_state=seed)))):
-        model.fit(X[train], y[train], groups=dataset.groups[train])
+        model = fitted(model, X[train], y[train], groups=dataset.groups[train])
         estimate = model.predict(X[test])
         results[method] = {}
         for k, axis in enumerate(FORCE_AXES):
@@ -450,7 +450,7 @@ def grasp_two(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome
     letter = _design_letter(protocol.design.name)
     figure = PlotFigure(figsize=(6, 4.5))
     ax = figure.subplots()
-    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    model = fitted(LMNetwork((20,), random_state=seed), X[train], y[train], groups=dataset.groups[train])
     cells = {}
     for name, mask in (("trained", gripped & trained & validation),
                        ("untrained", gripped & ~trained)):
@@ -491,7 +491,7 @@ def grasp_positions(protocol: Protocol, seed: int, progress: Progress) -> StudyO
     sets = dataset.column("set")
     calibration, validation = by_role(dataset)
     train = gripped & (sets == "trained") & calibration
-    model = LMNetwork((20,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    model = fitted(LMNetwork((20,), random_state=seed), X[train], y[train], groups=dataset.groups[train])
     results = {"timings_s": timings}
     tables = []
     figure = PlotFigure(figsize=(11, 4.5))
@@ -570,8 +570,8 @@ def contact_states(protocol: Protocol, seed: int, progress: Progress) -> StudyOu
     calibration, validation = by_role(dataset)
     classes = np.array(["point-a", "point-b", "edge"])
     train = touching & (sets == "trained") & calibration
-    model = SoftmaxClassifier((10,), random_state=seed).fit(X[train], dataset.column("state")[train],
-                                                            groups=dataset.groups[train])
+    model = fitted(SoftmaxClassifier((10,), random_state=seed), X[train], dataset.column("state")[train],
+                   groups=dataset.groups[train])
     results = {"timings_s": timings}
     published = published_table("contact-states")
     cells, confusions, per_phi = {}, [], {}
@@ -641,10 +641,10 @@ def inverter_models(dataset: Dataset, seed: int):
     window = ((nominal == 0) | ((nominal == 1) & (force >= 0.3) & (force <= 0.5))
               | ((nominal >= 2) & (force >= 0.6) & (force <= 0.8)))
     train = calibration & window
-    classifier = SoftmaxClassifier((10, 10, 10, 10), random_state=seed).fit(X[train], state[train],
-                                                                            groups=dataset.groups[train])
-    regressor = LMNetwork((10, 10, 10, 10), random_state=seed).fit(X[calibration], force[calibration],
-                                                                   groups=dataset.groups[calibration])
+    classifier = fitted(SoftmaxClassifier((10, 10, 10, 10), random_state=seed), X[train], state[train],
+                        groups=dataset.groups[train])
+    regressor = fitted(LMNetwork((10, 10, 10, 10), random_state=seed), X[calibration], force[calibration],
+                       groups=dataset.groups[calibration])
     return classifier, regressor
 
 

@@ -217,7 +217,7 @@ def orientation_errors(dataset, seed: int) -> dict[str, float]:
 def force_errors(dataset, seed: int) -> dict[str, float]:
     """Mean absolute error (N) per axis of the published network on the validation trials, in contact."""
     from softtip import metrics
-    from softtip.calibration import LMNetwork
+    from softtip.calibration import LMNetwork, fitted
     from softtip.data.splits import by_role
 
     X = dataset.X()
@@ -225,7 +225,7 @@ def force_errors(dataset, seed: int) -> dict[str, float]:
     contact = np.abs(y).max(axis=1) > CONTACT_N
     calibration, validation = by_role(dataset)
     train, test = contact & calibration, contact & validation
-    model = LMNetwork((10,), random_state=seed).fit(X[train], y[train], groups=dataset.groups[train])
+    model = fitted(LMNetwork((10,), random_state=seed), X[train], y[train], groups=dataset.groups[train])
     errors = metrics.mean_abs_error(y[test], model.predict(X[test]))
     return dict(zip(FORCES, np.atleast_1d(errors).tolist(), strict=True))
 

@@ -23,11 +23,13 @@ from softtip._core.progress import Progress
 from softtip.metrics import r2
 from softtip.data import Dataset, LeakageWarning
 from softtip.lab import Protocol, run_protocol
+from softtip.lab.trials import run_trials
 from softtip.published import published_table
 from softtip.report.document import Figure
 from softtip.report.tables import Table, paper_table
 from softtip.studies.outcome import Headline, StudyOutcome
-from softtip.sysid.models import KINDS, StateSpaceModel, TransferFunctionModel
+from softtip.sysid.files import fitted
+from softtip.sysid.models import KINDS, IdentifiedModel, StateSpaceModel, TransferFunctionModel
 from softtip.sysid.recording import Recording
 from softtip.sysid.splits import split_by_sample, split_by_time, split_by_trial
 
@@ -60,6 +62,54 @@ def _recording(dataset: Dataset, rows: np.ndarray, outputs=OUTPUTS) -> Recording
     return Recording.from_dataset(dataset.select(rows=rows), INPUTS, outputs, source="wearable")
 
 
+def _order_model(kind: str, order: int) -> IdentifiedModel:
+    return KINDS[kind](order, estimate_covariance=False)
+
+
+def _extension_model() -> TransferFunctionModel:
+    """Fitted on all of a participant's flat trials, scored on the other contacts."""
+    return TransferFunctionModel(6, estimate_covariance=False)
+
+
+def _centre_split(dataset: Dataset, p: int, seed: int) -> tuple[Recording, Recording] | None:
+    """Participant ``p``'s flat trials with a centre of force throughout, split by trial; None if there are none."""
+    rows = (dataset.column("contact") == "flat") & (dataset.column("participant") == p) & _finite_trials(dataset, CENTRE)
+    return split_by_trial(_recording(dataset, rows, OUTPUTS + CENTRE), 0.8, seed=seed) if rows.any() else None
+
+
+def _study_fits(dataset: Dataset, seed: int) -> list[tuple[IdentifiedModel, Recording]]:
+    """Every (model, estimation data) the study's identification fits on ``dataset``."""
+    participant, contact = dataset.column("participant"), dataset.column("contact")
+    fits = []
+    for p in np.unique(participant):
+        recording = _recording(dataset, (contact == "flat") & (participant == p))
+        estimations = [_split(recording, split, seed)[0] for split in SPLITS]
+        fits += [(model, estimation) for estimation in estimations for model in _models().values()]
+        fits += [(_order_model(kind, order), estimations[1]) for kind, values in (("tf", TF_ORDERS), ("ss", SS_ORDERS))
+                 for order in values]
+        if (np.isin(contact, EXTENSION_CONTACTS) & (participant == p)).any():
+            fits.append((_extension_model(), recording))
+        located = _centre_split(dataset, int(p), seed)
+        if located is not None:
+            fits.append((StateSpaceModel(8, estimate_covariance=False), located[0]))
+    return fits
+
+
+def _store_fit(model: IdentifiedModel, recording: Recording) -> None:
+    fitted(model, recording)
+
+
+def _identify_side_by_side(fits: list[tuple[IdentifiedModel, Recording]], progress: Progress) -> None:
+    """Makes the ``fits`` not in the cache yet, each in a process of the trials' pool (one per core, BLAS on
+    one thread), each stored in the cache as it ends: a run stopped part way keeps the fits it finished,
+    and the study then reads every fit, as a serial run would have made it."""
+    # one process per fit: two processes making one fit at once would leave one of them waiting for the other
+    distinct = list({(type(model), repr(model.get_params()), recording.sha256): (model, recording)
+                     for model, recording in fits}.values())
+    with progress.task(f"wearable: {len(distinct)} identifications side by side"):
+        run_trials(_store_fit, distinct)
+
+
 def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     dataset, timings = run_protocol(protocol, progress)
     participant, contact = dataset.column("participant"), dataset.column("contact")
@@ -68,8 +118,11 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
     results = {"timings_s": timings, "full_scale": "measured range (max - min) of each axis in the validation data",
                "participants": {}}
     offline, splits, orders, extension, centre = {}, {}, {}, {}, {}
-    started = time.perf_counter()
     example = None
+    datasets = _dynamics_datasets(protocol, dataset, progress)
+    started = time.perf_counter()
+    _identify_side_by_side(_study_fits(dataset, seed) + [
+        fit for data in datasets.values() if data is not dataset for fit in _held_out_fits(data, seed)], progress)
     with progress.task("wearable: identification per participant", total=len(participants)) as task:
         for p in participants:
             recording = _recording(dataset, flat & (participant == p))
@@ -78,7 +131,7 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
                 estimation, validation = _split(recording, split, seed)
                 entry["splits"][split] = {}
                 for name, model in _models().items():
-                    model.fit(estimation)
+                    model = fitted(model, estimation)
                     scores = model.evaluate(validation)
                     entry["splits"][split][name] = scores.to_dict()
                     if split == SPLITS[1]:
@@ -91,30 +144,28 @@ def wearable(protocol: Protocol, seed: int, progress: Progress) -> StudyOutcome:
             estimation, validation = split_by_trial(recording, 0.8, seed=seed)
             for kind, values in (("tf", TF_ORDERS), ("ss", SS_ORDERS)):
                 for order in values:
-                    model = KINDS[kind](order, estimate_covariance=False)
-                    scores = model.fit(estimation).evaluate(validation)
+                    scores = fitted(_order_model(kind, order), estimation).evaluate(validation)
                     entry["orders"][f"{kind}{order}"] = {"r2_mean": scores.mean("r2"),
                                                          "rmse_fs_percent_mean": scores.mean("rmse_fs_percent")}
                     orders.setdefault((kind, order), []).append(scores)
             others = np.isin(contact, EXTENSION_CONTACTS) & (participant == p)
             if others.any():
-                model = TransferFunctionModel(6, estimate_covariance=False).fit(recording)
+                model = fitted(_extension_model(), recording)
                 for shape in EXTENSION_CONTACTS:
                     rows = (contact == shape) & (participant == p)
                     if rows.any():
                         scores = model.evaluate(_recording(dataset, rows))
                         extension.setdefault(shape, []).append(scores)
                         entry.setdefault("contacts", {})[shape] = scores.to_dict()
-            centre_rows = flat & (participant == p) & _finite_trials(dataset, CENTRE)
-            if centre_rows.any():
-                located = _recording(dataset, centre_rows, OUTPUTS + CENTRE)
-                estimation, validation = split_by_trial(located, 0.8, seed=seed)
-                scores = StateSpaceModel(8, estimate_covariance=False).fit(estimation).evaluate(validation)
+            located = _centre_split(dataset, p, seed)
+            if located is not None:
+                estimation, validation = located
+                scores = fitted(StateSpaceModel(8, estimate_covariance=False), estimation).evaluate(validation)
                 centre.setdefault("state space, order 8", []).append(scores)
                 entry["centre_of_force"] = scores.to_dict()
             task.advance()
     results["identification_s"] = time.perf_counter() - started
-    parts = _dynamics_parts(protocol, dataset, offline, seed, progress)
+    parts = _dynamics_parts(datasets, dataset, offline, seed)
     results["dynamics_parts"] = {row: {"r2": {name: scores.tolist() for name, scores in r2.items()}}
                                  for row, r2 in parts.items()}
     held = _what_the_chip_holds(protocol, dataset, progress)
@@ -147,14 +198,24 @@ DYNAMICS_PARTS = {"neither: one relaxation function": (False, False, True, True)
                   "both, without the last joint": (True, True, True, False)}
 
 
+def _by_trial(dataset: Dataset, seed: int) -> list[tuple[Recording, Recording]]:
+    """Each participant's flat trials split by trial (estimation, validation)."""
+    participant, flat = dataset.column("participant"), dataset.column("contact") == "flat"
+    return [split_by_trial(_recording(dataset, flat & (participant == p)), 0.8, seed=seed)
+            for p in np.unique(participant)]
+
+
+def _held_out_fits(dataset: Dataset, seed: int) -> list[tuple[IdentifiedModel, Recording]]:
+    """The fits :func:`_held_out_r2` makes."""
+    return [(model, estimation) for estimation, _ in _by_trial(dataset, seed) for model in _models().values()]
+
+
 def _held_out_r2(dataset: Dataset, seed: int) -> dict[str, list]:
     """Each participant's held-out-trial scores of the two published models on flat contact."""
-    participant, flat = dataset.column("participant"), dataset.column("contact") == "flat"
     scores = {}
-    for p in np.unique(participant):
-        estimation, validation = split_by_trial(_recording(dataset, flat & (participant == p)), 0.8, seed=seed)
+    for estimation, validation in _by_trial(dataset, seed):
         for name, model in _models().items():
-            scores.setdefault(name, []).append(model.fit(estimation).evaluate(validation))
+            scores.setdefault(name, []).append(fitted(model, estimation).evaluate(validation))
     return scores
 
 
@@ -163,23 +224,30 @@ def _own_parts(protocol: Protocol) -> tuple[bool, bool, bool, bool]:
             protocol.parameters.dip_joint)
 
 
-def _dynamics_parts(protocol: Protocol, dataset: Dataset, offline, seed: int,
-                    progress: Progress) -> dict[str, dict[str, np.ndarray]]:
-    """Mean R² per axis of both models with each of the finger's parts on or off: the protocol's own
-    setting is the study's run (``dataset``, ``offline``), every other one the same protocol and seed
-    with only the switches changed, so the same people press the same way."""
-    tissue = protocol.viscoelastic
-    parts = {}
+def _dynamics_datasets(protocol: Protocol, dataset: Dataset, progress: Progress) -> dict[str, Dataset]:
+    """Each row of :data:`DYNAMICS_PARTS`'s dataset: the study's run (``dataset``) for the protocol's own
+    setting, every other one the same protocol and seed with only the switches changed, so the same people
+    press the same way."""
+    datasets = {}
     with progress.task("wearable: the finger's parts, on and off", total=len(DYNAMICS_PARTS)) as task:
         for row, (tangential, nail_fold, lateral_drag, dip_joint) in DYNAMICS_PARTS.items():
             if (tangential, nail_fold, lateral_drag, dip_joint) == _own_parts(protocol):
-                scores = offline
+                datasets[row] = dataset
             else:
-                changed = replace(protocol.changed(lateral_drag=lateral_drag, dip_joint=dip_joint),
-                                  viscoelastic=replace(tissue, tangential_creep=tangential, nail_fold=nail_fold))
-                scores = _held_out_r2(run_protocol(changed)[0], seed)
-            parts[row] = {name: _mean(scores[name], "r2") for name in (TF, SS)}
+                datasets[row] = run_protocol(replace(
+                    protocol.changed(lateral_drag=lateral_drag, dip_joint=dip_joint),
+                    viscoelastic=replace(protocol.viscoelastic, tangential_creep=tangential, nail_fold=nail_fold)))[0]
             task.advance()
+    return datasets
+
+
+def _dynamics_parts(datasets: dict[str, Dataset], dataset: Dataset, offline, seed: int) -> dict[str, dict[str, np.ndarray]]:
+    """Mean R² per axis of both models with each of the finger's parts on or off (``datasets``, from
+    :func:`_dynamics_datasets`): the study's own run (``dataset``) scored as ``offline``."""
+    parts = {}
+    for row, data in datasets.items():
+        scores = offline if data is dataset else _held_out_r2(data, seed)
+        parts[row] = {name: _mean(scores[name], "r2") for name in (TF, SS)}
     return parts
 
 
