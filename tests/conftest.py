@@ -120,3 +120,20 @@ class StageNames(Progress):
 def stage_names() -> type[StageNames]:
     """Makes a progress that records the names of the stages a job runs."""
     return StageNames
+
+
+@pytest.fixture
+def written_pieces(tmp_path, monkeypatch):
+    """From here on, every cache piece written (:class:`softtip._core.cache.EntryPieces`) is logged, by this
+    process or one it forks; returns what reads the log: the pieces' indices, sorted."""
+    from softtip._core.cache import EntryPieces
+
+    log, write = tmp_path / "written-pieces", EntryPieces.write
+
+    def write_and_log(self, index, arrays):
+        with open(log, "a") as file:
+            file.write(f"{index}\n")
+        write(self, index, arrays)
+
+    monkeypatch.setattr(EntryPieces, "write", write_and_log)
+    return lambda: sorted(map(int, log.read_text().split())) if log.exists() else []

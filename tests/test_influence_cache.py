@@ -75,28 +75,18 @@ InfluenceEngine.build(load_design("cylindrical-D"), 3.0 * MM, 4.5 * MM, curvatur
 
 
 @pytest.mark.slow  # three factorisations and nine blocks of back-substitutions: 9 s at a load average of 3, 88 s at 15-20
-def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resumes_from_them(monkeypatch, tmp_path):
+def test_a_build_stopped_by_ctrl_c_keeps_its_finished_blocks_and_the_next_resumes_from_them(written_pieces):
     """1,299 surface unknowns: six blocks of back-substitutions; Ctrl-C after the third."""
-    from softtip._core.cache import EntryPieces
-
     interrupted = subprocess.run([sys.executable, "-c", INTERRUPTED_BUILD, "3"], capture_output=True, text=True)
     assert interrupted.returncode != 0 and "KeyboardInterrupt" in interrupted.stderr
     kept = list((cache_dir() / "influence").glob("*.npz.pieces/*.npz"))
     assert len(kept) in (3, 4)  # and the block the other process was finishing, if it was stored first
-    solved = tmp_path / "solved"  # each block written, by whichever process solved it
-    write = EntryPieces.write
-
-    def write_and_log(self, index, arrays):
-        with open(solved, "a") as log:
-            log.write(f"{index}\n")
-        write(self, index, arrays)
-
-    monkeypatch.setattr(EntryPieces, "write", write_and_log)
+    solved = written_pieces  # the blocks written in this test's process, by whichever process solved them
     design = load_design("cylindrical-D")
     resumed = InfluenceEngine.build(design, 3.0 * MM, 4.5 * MM, curvature_points=3)
     kept_blocks = {int(path.stem) for path in kept}
     # only the blocks the interrupted run had not finished, each once
-    assert sorted(map(int, solved.read_text().split())) == sorted(set(range(6)) - kept_blocks)
+    assert solved() == sorted(set(range(6)) - kept_blocks)
     assert not list((cache_dir() / "influence").glob("*.npz.pieces"))  # gone once the whole entry is stored
     whole = InfluenceEngine.build(design, 3.0 * MM, 4.5 * MM, curvature_points=3, use_cache=False)
     # to round-off against each matrix's largest entry: the interrupted blocks were solved in another process,

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from softtip._core.cache import EntryPieces, cache_dir
+from softtip._core.cache import cache_dir
 
 HANG_GUARD_S = 900.0
 
@@ -43,7 +43,7 @@ live_pushes(load_protocol(sys.argv[1]), StopAfterTheFirstMotion())
 
 @pytest.mark.slow  # the coarse fingertip's influence matrices, then the scenario twice: 22 s at a load average of 3
 def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_run_computes_the_rest(
-        coarse_protocol, monkeypatch, tmp_path):
+        coarse_protocol, written_pieces):
     from softtip.lab import load_protocol
     from softtip.systems.hall_fingertip.live import PUSH_SPEED_MM_S, live_pushes
     from softtip.systems.hall_fingertip.scenarios import pushing_scenario
@@ -55,19 +55,11 @@ def test_a_scenario_stopped_by_sigterm_keeps_its_finished_motions_and_the_next_r
     # the first motion finished, and the one the other process was computing if it was stored first
     kept = {int(piece.stem) for piece in (cache_dir() / "models").glob("scenario-push-*.pieces/*.npz")}
     assert 1 <= len(kept) <= 2
-    computed = tmp_path / "computed"  # each motion written, so computed in this run
-    write = EntryPieces.write
-
-    def write_and_log(self, index, arrays):
-        with open(computed, "a") as log:
-            log.write(f"{index}\n")
-        write(self, index, arrays)
-
-    monkeypatch.setattr(EntryPieces, "write", write_and_log)
+    computed = written_pieces  # the motions written in this test's process, so computed in this run
     protocol = load_protocol(path)
     resumed = live_pushes(protocol)
     # the finished motions were read back, not computed again
-    assert sorted(map(int, computed.read_text().split())) == sorted({0, 1, 2} - kept)
+    assert computed() == sorted({0, 1, 2} - kept)
     assert not list((cache_dir() / "models").glob("scenario-push-*.pieces"))  # gone with the whole entry stored
     whole = pushing_scenario(protocol, protocol.seed, speed_mm_s=PUSH_SPEED_MM_S)
     assert np.array_equal(resumed.times_s, whole.times_s)
