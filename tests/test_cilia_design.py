@@ -104,10 +104,13 @@ def test_every_search_ends_in_a_local_minimum_of_the_grid_found_by_brute_force()
         here = next(p for p in feasible if PillarDesign.of(p) == design)
         return [PillarDesign.of(p) for p in feasible if sum(p[k] != here[k] for k in here) == 1]
 
-    minima = {d for d, f in figures.items() if math.isfinite(f) and all(figures[n] >= f for n in neighbours(d))}
-    # measured: 103, 103, 104, 135, 135, 312, 312 and 526 µN; the grid's best is one of them (the five seeds
-    # end on 104 or 135 µN, after 4 to 11 evaluations of the descent)
-    assert len(minima) == 8
+    # a neighbour no better than round-off (1e-6) does not count: designs that mirror each other have the same
+    # figure, equal or 3e-9 apart depending on the order the field kernel sums in
+    minima = {d for d, f in figures.items()
+              if math.isfinite(f) and all(figures[n] >= f * (1 - 1e-6) for n in neighbours(d))}
+    # measured: 103, 104, 135, 312 and 526 µN, each twice (a design and its mirror image); the grid's best is
+    # one of them (the five seeds end on 104 or 135 µN, after 4 to 11 evaluations of the descent)
+    assert len(minima) == 10
     for seed in range(5):
         found = search_designs(DIE, (13e-3,), steps=2, budget=8, points=9, seed=seed, descend=True)
         assert found.candidates - sum(found.refused.values()) == 62
