@@ -1,5 +1,6 @@
-"""A protocol's trials in a pool of processes are the trials of one process, bit for bit, and a protocol
-run again reads its dataset from the cache instead of running its trials a second time."""
+"""A protocol's trials in a pool of processes are the trials of one process, bit for bit, a trial kept in
+the cache is read back instead of run again, and a protocol run again reads its dataset from the cache
+instead of running its trials a second time."""
 
 from __future__ import annotations
 
@@ -93,3 +94,36 @@ def test_a_file_the_protocol_names_edited_under_its_name_makes_other_trials(tmp_
     seven, timings = run_protocol(second)
     assert "trials_s" in timings  # run, not read
     assert not np.array_equal(seven.column("motor1_rad"), ten.column("motor1_rad"))
+
+
+def _spread(low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+    return np.linspace(low, high, 5), np.arange(3, dtype=np.int32) + int(low)
+
+
+def test_kept_trials_are_numbered_across_a_runs_calls_and_read_back_instead_of_run(tmp_path):
+    from softtip._core.cache import EntryPieces
+    from softtip.lab.trials import trials_kept_in
+
+    pieces = EntryPieces(tmp_path / "dataset.parquet", "key", "protocol trials")
+    first, second = [(k, k + 0.5) for k in range(3)], [(10.0 + k, 11.0) for k in range(2)]
+    with trials_kept_in(pieces):
+        made = run_trials(_spread, first, processes=1), run_trials(_spread, second, processes=1)
+    assert sorted(int(piece.stem) for piece in pieces.folder.glob("*.npz")) == [0, 1, 2, 3, 4]
+    (pieces.folder / "1.npz").unlink()  # as if the run had stopped before its second trial ended
+    calls = []
+
+    def counted(low, high):
+        calls.append(low)
+        return _spread(low, high)
+
+    with trials_kept_in(pieces):
+        again = run_trials(counted, first, processes=1), run_trials(counted, second, processes=1)
+    assert calls == [1]  # only the missing trial ran
+    for made_trials, again_trials in zip(made, again, strict=True):
+        for made_trial, again_trial in zip(made_trials, again_trials, strict=True):
+            for made_array, again_array in zip(made_trial, again_trial, strict=True):
+                assert made_array.dtype == again_array.dtype
+                np.testing.assert_array_equal(made_array, again_array)
+    others = EntryPieces(tmp_path / "other.parquet", "key", "protocol trials")
+    with trials_kept_in(others), pytest.raises(TypeError, match="a kept trial returned float: expected a tuple"):
+        run_trials(lambda low, high: low + high, [(20.0, 1.0)], processes=1)
