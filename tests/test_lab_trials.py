@@ -4,6 +4,11 @@ instead of running its trials a second time."""
 
 from __future__ import annotations
 
+import os
+import signal
+import time
+from concurrent.futures.process import BrokenProcessPool
+
 import numpy as np
 import pytest
 
@@ -127,3 +132,45 @@ def test_kept_trials_are_numbered_across_a_runs_calls_and_read_back_instead_of_r
     others = EntryPieces(tmp_path / "other.parquet", "key", "protocol trials")
     with trials_kept_in(others), pytest.raises(TypeError, match="a kept trial returned float: expected a tuple"):
         run_trials(lambda low, high: low + high, [(20.0, 1.0)], processes=1)
+
+
+def _started_then_asleep(log: str, seconds: float) -> None:
+    with open(log, "a") as file:
+        file.write(f"{os.getpid()}\n")
+    time.sleep(seconds)
+
+
+def _fails_on_two(k: int) -> int:
+    if k == 2:
+        raise ValueError("trial 2 failed")
+    return k
+
+
+def _ends_its_process(k: int) -> int:
+    os._exit(3)
+
+
+def test_a_stop_ends_the_pool_at_once_and_a_failed_trial_or_worker_is_raised(tmp_path):
+    """A stop (Ctrl-C, or SIGTERM as the commands take it) neither waits for the queued trials nor for those
+    under way: their processes are ended."""
+    log = tmp_path / "workers"
+    previous = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt("SIGTERM")))
+    signal.setitimer(signal.ITIMER_REAL, 0.5)
+    start = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_trials(_started_then_asleep, [(str(log), 10.0)] * POOL_FROM_TRIALS, processes=2)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    # 0.55 s measured at a load average of 4 (0.5 s of it before the stop); each trial sleeps 10 s
+    assert time.monotonic() - start < 2.0
+    workers = [int(pid) for pid in log.read_text().split()]  # the processes of the trials under way
+    assert 1 <= len(workers) <= 2
+    for pid in workers:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    with pytest.raises(ValueError, match="trial 2 failed"):
+        run_trials(_fails_on_two, [(k,) for k in range(POOL_FROM_TRIALS)], processes=2)
+    with pytest.raises(BrokenProcessPool):
+        run_trials(_ends_its_process, [(k,) for k in range(POOL_FROM_TRIALS)], processes=2)

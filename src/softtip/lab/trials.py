@@ -20,6 +20,7 @@ import multiprocessing
 import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
@@ -107,15 +108,23 @@ def _run(trial: Callable[..., Any], plans: Sequence[tuple], todo: list[int], pro
                 finished(index, trial(*plans[index]))
         return
     _FORKED.update(trial=trial, plans=plans)
-    context = multiprocessing.get_context("fork")
+    pool = ProcessPoolExecutor(min(processes, len(todo)), mp_context=multiprocessing.get_context("fork"),
+                               initializer=_work_in_pool)
+    ended = False
     try:
-        # leaving the block ends the pool's processes (Pool.terminate), whatever they were doing
-        with context.Pool(min(processes, len(todo)), initializer=_work_in_pool) as pool:
-            for index, result in pool.imap_unordered(_run_forked, todo,
-                                                     chunksize=max(1, len(todo) // (8 * processes))):
-                finished(index, result)
+        for done in as_completed([pool.submit(_run_forked, index) for index in todo]):
+            finished(*done.result())
+        ended = True
     finally:
         _FORKED.clear()
+        # the executor offers no public way to end its workers before Python 3.14 (terminate_workers)
+        workers = list(pool._processes.values())
+        pool.shutdown(wait=ended, cancel_futures=True)
+        if not ended:  # stopped, or a trial failed: the trials under way are not waited for
+            for worker in workers:
+                worker.terminate()
+            for worker in workers:
+                worker.join()
 
 
 def run_trials(trial: Callable[..., Any], plans: Sequence[tuple], processes: int | None = None) -> list:
