@@ -1,7 +1,13 @@
-"""A protocol's trials in a pool of processes are the trials of one process, bit for bit, and a protocol
-run again reads its dataset from the cache instead of running its trials a second time."""
+"""A protocol's trials in a pool of processes are the trials of one process, bit for bit, a trial kept in
+the cache is read back instead of run again, and a protocol run again reads its dataset from the cache
+instead of running its trials a second time."""
 
 from __future__ import annotations
+
+import os
+import signal
+import time
+from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
 import pytest
@@ -93,3 +99,78 @@ def test_a_file_the_protocol_names_edited_under_its_name_makes_other_trials(tmp_
     seven, timings = run_protocol(second)
     assert "trials_s" in timings  # run, not read
     assert not np.array_equal(seven.column("motor1_rad"), ten.column("motor1_rad"))
+
+
+def _spread(low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+    return np.linspace(low, high, 5), np.arange(3, dtype=np.int32) + int(low)
+
+
+def test_kept_trials_are_numbered_across_a_runs_calls_and_read_back_instead_of_run(tmp_path):
+    from softtip._core.cache import EntryPieces
+    from softtip.lab.trials import trials_kept_in
+
+    pieces = EntryPieces(tmp_path / "dataset.parquet", "key", "protocol trials")
+    first, second = [(k, k + 0.5) for k in range(3)], [(10.0 + k, 11.0) for k in range(2)]
+    with trials_kept_in(pieces):
+        made = run_trials(_spread, first, processes=1), run_trials(_spread, second, processes=1)
+    assert sorted(int(piece.stem) for piece in pieces.folder.glob("*.npz")) == [0, 1, 2, 3, 4]
+    (pieces.folder / "1.npz").unlink()  # as if the run had stopped before its second trial ended
+    calls = []
+
+    def counted(low, high):
+        calls.append(low)
+        return _spread(low, high)
+
+    with trials_kept_in(pieces):
+        again = run_trials(counted, first, processes=1), run_trials(counted, second, processes=1)
+    assert calls == [1]  # only the missing trial ran
+    for made_trials, again_trials in zip(made, again, strict=True):
+        for made_trial, again_trial in zip(made_trials, again_trials, strict=True):
+            for made_array, again_array in zip(made_trial, again_trial, strict=True):
+                assert made_array.dtype == again_array.dtype
+                np.testing.assert_array_equal(made_array, again_array)
+    others = EntryPieces(tmp_path / "other.parquet", "key", "protocol trials")
+    with trials_kept_in(others), pytest.raises(TypeError, match="a kept trial returned float: expected a tuple"):
+        run_trials(lambda low, high: low + high, [(20.0, 1.0)], processes=1)
+
+
+def _started_then_asleep(log: str, seconds: float) -> None:
+    with open(log, "a") as file:
+        file.write(f"{os.getpid()}\n")
+    time.sleep(seconds)
+
+
+def _fails_on_two(k: int) -> int:
+    if k == 2:
+        raise ValueError("trial 2 failed")
+    return k
+
+
+def _ends_its_process(k: int) -> int:
+    os._exit(3)
+
+
+def test_a_stop_ends_the_pool_at_once_and_a_failed_trial_or_worker_is_raised(tmp_path):
+    """A stop (Ctrl-C, or SIGTERM as the commands take it) neither waits for the queued trials nor for those
+    under way: their processes are ended."""
+    log = tmp_path / "workers"
+    previous = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt("SIGTERM")))
+    signal.setitimer(signal.ITIMER_REAL, 0.5)
+    start = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_trials(_started_then_asleep, [(str(log), 10.0)] * POOL_FROM_TRIALS, processes=2)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    # 0.55 s measured at a load average of 4 (0.5 s of it before the stop); each trial sleeps 10 s
+    assert time.monotonic() - start < 2.0
+    workers = [int(pid) for pid in log.read_text().split()]  # the processes of the trials under way
+    assert 1 <= len(workers) <= 2
+    for pid in workers:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    with pytest.raises(ValueError, match="trial 2 failed"):
+        run_trials(_fails_on_two, [(k,) for k in range(POOL_FROM_TRIALS)], processes=2)
+    with pytest.raises(BrokenProcessPool):
+        run_trials(_ends_its_process, [(k,) for k in range(POOL_FROM_TRIALS)], processes=2)

@@ -1,5 +1,6 @@
 """Work stopped part way, by Ctrl-C or by the SIGTERM a robot's launch system sends, keeps what it finished
-and the next run does only the rest: the twin's live scenarios motion by motion; a rendering or a live
+and the next run does only the rest: the twin's live scenarios motion by motion, a protocol's trials trial by
+trial (its pool ended at once); a rendering or a live
 stream ends as on Ctrl-C, its recording closed and readable."""
 
 from __future__ import annotations
@@ -93,3 +94,85 @@ def test_sigterm_ends_an_endless_rendering_as_ctrl_c_does_and_keeps_the_recordin
     assert summary["interrupted"] and summary["ticks"] > 0
     recording = read_recording(path)  # closed with its summary: every tick the loop ran is in it
     assert not recording.truncated and len(recording.topics["/fingertip/estimates"].data) == summary["ticks"]
+
+
+# A protocol's trials run by a pool of two processes in a process of their own, stopped by SIGTERM once the
+# third trial is kept; every trial a worker starts is logged (the file named by the second argument).
+INTERRUPTED_TRIALS = """
+import os, signal, sys
+from softtip._core.cache import EntryPieces
+from softtip._core.stopping import stop_as_ctrl_c
+from softtip.lab import load_protocol, run_protocol, trials
+
+stop_as_ctrl_c()
+run, write = trials._run_forked, EntryPieces.write
+
+def logged(index):
+    with open(sys.argv[2], "a") as file:
+        file.write(f"{index}\\n")
+    return run(index)
+
+def write_then_stop(self, index, arrays):
+    write(self, index, arrays)
+    if self.kind == "protocol trials piece" and len(list(self.folder.glob("*.npz"))) == 3:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+trials._run_forked, EntryPieces.write = logged, write_then_stop
+with trials.processes_for_trials(2):
+    run_protocol(load_protocol(sys.argv[1]))
+"""
+
+
+@pytest.mark.slow  # the coarse fingertip's influence matrices, then 13 trials three times: 20 s alone at a load average of 4.4, 38 s
+# beside two other test files at 6
+def test_trials_stopped_by_sigterm_keep_the_finished_ones_and_the_next_run_runs_the_rest(
+        coarse_protocol, written_pieces, tmp_path):
+    from softtip.lab import load_protocol, run_protocol
+    from softtip.lab.protocols import trials_path
+    from softtip.lab.trials import processes_for_trials
+
+    path = coarse_protocol("grasp-positions", "rectangular", extra="""
+        positions_mm = [-3.0, 3.0]
+        angles_deg = [0.0]
+        calibration_trials = 1
+        validation_trials = 1
+        other_thicknesses_mm = [4.0]
+    """)
+    started = tmp_path / "started-trials"
+    stopped = subprocess.run([sys.executable, "-c", INTERRUPTED_TRIALS, str(path), str(started)],
+                             capture_output=True, text=True, timeout=HANG_GUARD_S)
+    assert stopped.returncode != 0 and "KeyboardInterrupt: SIGTERM" in stopped.stderr
+    protocol = load_protocol(path)
+    pieces = trials_path(protocol).with_name(trials_path(protocol).name + ".pieces")
+    kept = {int(piece.stem) for piece in pieces.glob("*.npz")}
+    assert len(kept) == 3
+    # the pool ended with the parent: the trials still queued were never started
+    assert len(started.read_text().split()) < 13
+    with processes_for_trials(2):
+        resumed, _ = run_protocol(protocol)
+    assert len(resumed.trials) == 13
+    assert written_pieces() == sorted(set(range(13)) - kept)  # only the missing trials were run
+    assert not pieces.exists()  # gone with the whole dataset stored
+    with processes_for_trials(1):
+        whole, _ = run_protocol(protocol, reuse=False)
+    assert list(resumed.columns) == list(whole.columns)
+    for name in whole.columns:
+        assert resumed.columns[name].dtype == whole.columns[name].dtype, name
+        np.testing.assert_array_equal(resumed.columns[name], whole.columns[name], err_msg=name)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="the kernel's view of the signals is Linux's")
+def test_gmsh_leaves_sigpipe_ignored_so_a_pool_ended_on_a_stop_cannot_end_this_process():
+    """gmsh makes SIGPIPE end the process; ending a pool's workers on Ctrl-C then broke its pipe and ended the
+    process before it could keep what it finished."""
+    from softtip.mechanics.mesh import gmsh_session
+
+    def sigpipe_ignored() -> bool:  # as the kernel has it, not Python's record of the handler
+        with open("/proc/self/status") as status:
+            ignored = next(line for line in status if line.startswith("SigIgn:")).split()[1]
+        return bool(int(ignored, 16) >> (signal.SIGPIPE - 1) & 1)
+
+    assert sigpipe_ignored()
+    with gmsh_session("signals"):
+        assert sigpipe_ignored()
+    assert sigpipe_ignored()

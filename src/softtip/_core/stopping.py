@@ -28,8 +28,11 @@ def stop_as_ctrl_c() -> None:
 @contextlib.contextmanager
 def stop_handlers_kept() -> Iterator[None]:
     """Puts back this process's handlers of the stop signals after a library that resets them (gmsh sets
-    SIGTERM back to ending the process at once, which would lose what Ctrl-C keeps)."""
-    handlers = {number: signal.getsignal(number) for number in STOP_SIGNALS}
+    SIGTERM back to ending the process at once, which would lose what Ctrl-C keeps), and of SIGPIPE (gmsh
+    makes it end the process, where Python ignores it: a pool's pipe to a worker ended on Ctrl-C would
+    then end this process before it keeps its pieces)."""
+    kept = STOP_SIGNALS + ((signal.SIGPIPE,) if hasattr(signal, "SIGPIPE") else ())
+    handlers = {number: signal.getsignal(number) for number in kept}
     try:
         yield
     finally:

@@ -20,11 +20,12 @@ from typing import Any
 
 from threadpoolctl import threadpool_limits
 
-from softtip._core.cache import artefact_key, cache_dir, code_hash, stored_or_made
+from softtip._core.cache import EntryPieces, artefact_key, cache_dir, code_hash, stored_or_made
 from softtip._core.config import Text, integer, parse, read_toml, refused, schema
 from softtip._core.progress import SILENT, Progress
 from softtip._core.systems import NotRegistered, load, names, owner, provenance
 from softtip.data import Dataset
+from softtip.lab.trials import trials_kept_in
 
 ProtocolName = Text  # the registry knows the names: protocol_from_dict refuses any other
 
@@ -180,15 +181,26 @@ def run_protocol(protocol: Protocol, progress: Progress = SILENT, *, large: bool
     """Run one experiment; returns its dataset and timings (s). ``progress`` gets a task per stage.
     A protocol above its bench's size limit (:func:`check_size`) is refused before any work unless ``large``.
     The dataset is kept in the cache under :func:`protocol_key`: the same protocol run again (by another
-    study, or a second ``reproduce``) reads it (timed as ``cache_read_s``) unless ``reuse`` is False."""
+    study, or a second ``reproduce``) reads it (timed as ``cache_read_s``) unless ``reuse`` is False.
+    While it runs, each trial of a protocol whose trials draw from streams of their own
+    (:func:`softtip.lab.trials.run_trials`) is kept as a piece of that entry: a run stopped part way keeps
+    them and the next runs only the rest; the pieces go once the whole dataset is stored."""
     if not large:
         check_size(protocol)
     if not reuse:
         return _run_trials(protocol, progress)
     start = time.perf_counter()
-    (dataset, timings), read = stored_or_made(
-        trials_path(protocol), protocol_key(protocol), _TRIALS_KIND, lambda path: (Dataset.read(path), {}),
-        lambda: _run_trials(protocol, progress), lambda made, path: made[0].write(path))
+    path, key = trials_path(protocol), protocol_key(protocol)
+    pieces = EntryPieces(path, key, _TRIALS_KIND)
+
+    def make() -> tuple[Dataset, dict]:
+        with trials_kept_in(pieces):
+            return _run_trials(protocol, progress)
+
+    (dataset, timings), read = stored_or_made(path, key, _TRIALS_KIND, lambda path: (Dataset.read(path), {}), make,
+                                              lambda made, path: made[0].write(path))
+    if not read:
+        pieces.clear()
     return dataset, {"cache_read_s": time.perf_counter() - start} if read else timings
 
 
