@@ -602,36 +602,44 @@ def test_dashboard_shows_the_changes_estimates_state_and_counters():
         assert expected in text
 
 
-def test_foxglove_live_view_serves_the_frames_to_a_websocket_client():
+def foxglove_received(sink, wanted: dict[str, int], sent) -> tuple[dict, dict[int, bytes]]:
+    """A foxglove.websocket.v1 client of ``sink``: subscribes to ``wanted`` (topic -> subscription id), has
+    the sink write ``sent`` and returns the advertised channels by topic and each subscription's message."""
     import websockets
-
-    sink = FoxgloveSink(port=0, max_rate_hz=None)
-    sink.open(stream_info(target_names=("Fz",), classes=None))
-    field = np.array([[10.0, -20.0, 30.0], [1.0, 2.0, 3.0]])
-    sent = frame(9, 1_700_000_000_123_456_789, field, np.zeros((2, 3)), 1, np.array([0.75]), None)
 
     async def client():
         async with websockets.connect(f"ws://127.0.0.1:{sink.port}", subprotocols=["foxglove.websocket.v1"]) as ws:
             assert json.loads(await ws.recv())["op"] == "serverInfo"
             channels = {c["topic"]: c for c in json.loads(await ws.recv())["channels"]}
-            wanted = {"/fingertip/chip1/field": 1, "/fingertip/wrench": 2, "/fingertip/field_change": 3}
             await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
                 {"id": sub, "channelId": channels[topic]["id"]} for topic, sub in wanted.items()]}))
-            while len(sink.subscribed_topics) < 3:
+            while len(sink.subscribed_topics) < len(wanted):
                 await asyncio.sleep(0.01)
             sink.write(sent)
             received = {}
-            while len(received) < 3:
+            while len(received) < len(wanted):
                 data = await asyncio.wait_for(ws.recv(), 5)
-                opcode, subscription, timestamp = struct.unpack_from("<BIQ", data)
-                assert opcode == 1 and timestamp == sent.stamp_ns
-                received[subscription] = json.loads(data[13:])
+                received[struct.unpack_from("<BIQ", data)[1]] = data
             return channels, received
 
     try:
-        channels, received = asyncio.run(client())
+        return asyncio.run(client())
     finally:
         sink.close()
+
+
+def test_foxglove_live_view_serves_the_frames_to_a_websocket_client():
+    sink = FoxgloveSink(port=0, max_rate_hz=None)
+    sink.open(stream_info(target_names=("Fz",), classes=None))
+    field = np.array([[10.0, -20.0, 30.0], [1.0, 2.0, 3.0]])
+    sent = frame(9, 1_700_000_000_123_456_789, field, np.zeros((2, 3)), 1, np.array([0.75]), None)
+    channels, messages = foxglove_received(
+        sink, {"/fingertip/chip1/field": 1, "/fingertip/wrench": 2, "/fingertip/field_change": 3}, sent)
+    received = {}
+    for subscription, data in messages.items():
+        opcode, _, timestamp = struct.unpack_from("<BIQ", data)
+        assert opcode == 1 and timestamp == sent.stamp_ns
+        received[subscription] = json.loads(data[13:])
     assert channels["/fingertip/chip1/field"]["schemaName"] == "sensor_msgs/msg/MagneticField"
     assert "/fingertip/contact_state" not in channels
     vector = received[1]["magnetic_field"]
@@ -642,34 +650,13 @@ def test_foxglove_live_view_serves_the_frames_to_a_websocket_client():
 
 
 def test_foxglove_places_a_one_axis_chips_reading_in_the_messages_z_leaving_x_and_y_empty():
-    import websockets
-
     one_axis = dataclasses.replace(MAGNETIC, axes=("z",))
     sink = FoxgloveSink(port=0, max_rate_hz=None)
     sink.open(dataclasses.replace(stream_info(target_names=("Fz",), classes=None), reading=one_axis))
     field = np.array([[30.0], [3.0]])
     sent = frame(2, 1_700_000_000_000_000_000, field, np.zeros((2, 1)), 1, np.array([0.5]), None)
-
-    async def client():
-        async with websockets.connect(f"ws://127.0.0.1:{sink.port}", subprotocols=["foxglove.websocket.v1"]) as ws:
-            await ws.recv()
-            channels = {c["topic"]: c for c in json.loads(await ws.recv())["channels"]}
-            wanted = {"/fingertip/chip1/field": 1, "/fingertip/field_change": 2}
-            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": sub, "channelId": channels[topic]["id"]} for topic, sub in wanted.items()]}))
-            while len(sink.subscribed_topics) < 2:
-                await asyncio.sleep(0.01)
-            sink.write(sent)
-            received = {}
-            while len(received) < 2:
-                data = await asyncio.wait_for(ws.recv(), 5)
-                received[struct.unpack_from("<BIQ", data)[1]] = json.loads(data[13:])
-            return received
-
-    try:
-        received = asyncio.run(client())
-    finally:
-        sink.close()
+    _, messages = foxglove_received(sink, {"/fingertip/chip1/field": 1, "/fingertip/field_change": 2}, sent)
+    received = {subscription: json.loads(data[13:]) for subscription, data in messages.items()}
     assert received[1]["magnetic_field"] == {"x": None, "y": None, "z": 3e-6}
     assert received[2]["chips"] == [{"x": None, "y": None, "z": 30.0}, {"x": None, "y": None, "z": 3.0}]
 

@@ -14,11 +14,11 @@ import mmap
 import multiprocessing
 import multiprocessing.connection
 import os
-import signal
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from softtip._core.stopping import as_forked_worker
 from softtip._core.threads import single_threaded_blas
 
 _NUMBER = 8  # bytes of a piece's number on the pipe
@@ -36,8 +36,7 @@ def default_processes() -> int:
 
 
 def _work_on(solve: Callable[[int], None], pieces: Sequence[int], next_piece, report, parent: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops its workers on Ctrl-C
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # and a handler it installed must not outlive the fork
+    as_forked_worker()
     with single_threaded_blas():
         while os.getppid() == parent:
             with next_piece.get_lock():

@@ -40,3 +40,10 @@ def stop_handlers_kept() -> Iterator[None]:
             for number, handler in handlers.items():
                 if handler is not None:
                     signal.signal(number, handler)
+
+
+def as_forked_worker() -> None:
+    """In a process forked to work for this one: Ctrl-C reaches the terminal's whole group, but the parent
+    stops its workers itself, and a stop handler it installed must not outlive the fork."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
-import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextvars import ContextVar
@@ -29,6 +28,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from softtip._core.cache import EntryPieces
+from softtip._core.stopping import as_forked_worker
 
 _PROCESSES: ContextVar[int | None] = ContextVar("trial_processes", default=None)
 # what the forked processes inherit: the trial's function and its plans (a closure cannot be sent to them)
@@ -89,11 +89,6 @@ def _of_piece(arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, ...]:
     return tuple(arrays[str(position)] for position in range(len(arrays)))
 
 
-def _work_in_pool() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends its pool on Ctrl-C
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # and a handler it installed must not outlive the fork
-
-
 def _run_forked(index: int) -> tuple[int, Any]:
     with threadpool_limits(limits=1):
         return index, _FORKED["trial"](*_FORKED["plans"][index])
@@ -109,7 +104,7 @@ def _run(trial: Callable[..., Any], plans: Sequence[tuple], todo: list[int], pro
         return
     _FORKED.update(trial=trial, plans=plans)
     pool = ProcessPoolExecutor(min(processes, len(todo)), mp_context=multiprocessing.get_context("fork"),
-                               initializer=_work_in_pool)
+                               initializer=as_forked_worker)
     ended = False
     try:
         for done in as_completed([pool.submit(_run_forked, index) for index in todo]):

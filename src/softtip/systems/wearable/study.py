@@ -392,13 +392,17 @@ def _order_table(orders) -> Table:
                  caption="Mean over participants on held-out trials: look for where more poles stop helping.")
 
 
+def _per_axis_r2(rows: dict, groups: dict[str, str]) -> tuple[dict, list[str]]:
+    """A table's cells and columns of R² per axis: ``rows`` maps each row to its per-axis R² by group,
+    ``groups`` each group to its column label."""
+    columns = [f"{label}: {axis} R²" for label in groups.values() for axis in AXES]
+    cells = {(row, f"{label}: {axis} R²"): r2[group][k] for row, r2 in rows.items()
+             for group, label in groups.items() for k, axis in enumerate(AXES)}
+    return cells, columns
+
+
 def _dynamics_table(parts, own: tuple[bool, bool, bool, bool]) -> Table:
-    cells = {}
-    for row, r2 in parts.items():
-        for name, short in ((TF, "TF 6"), (SS, "SS 8")):
-            for k, axis in enumerate(AXES):
-                cells[(row, f"{short}: {axis} R²")] = r2[name][k]
-    columns = [f"{short}: {axis} R²" for short in ("TF 6", "SS 8") for axis in AXES]
+    cells, columns = _per_axis_r2(parts, {TF: "TF 6", SS: "SS 8"})
     return Table("The finger's dynamics, part by part", "dynamic parts", list(parts), columns, cells, digits=3,
                  caption=(
                      "Mean over participants on held-out trials, the same people, presses and seed, only the "
@@ -418,9 +422,7 @@ def _dynamics_table(parts, own: tuple[bool, bool, bool, bool]) -> Table:
 
 
 def _holds_table(held) -> Table:
-    cells = {(row, f"{degree}: {axis} R²"): r2[degree][k] for row, r2 in held.items() for degree in r2
-             for k, axis in enumerate(AXES)}
-    columns = [f"{degree}: {axis} R²" for degree in ("linear", "cubic") for axis in AXES]
+    cells, columns = _per_axis_r2(held, {"linear": "linear", "cubic": "cubic"})
     return Table("What the chip's readings hold of each force axis", "run", list(held), columns, cells, digits=3,
                  caption=(
                      "Static maps from the chip's three readings to the table's three forces, least squares on all of "
